@@ -1,0 +1,2 @@
+//! audio: the 72-tone acoustic messaging codec.
+//! (Being built: see issue "Acoustic messaging".)

@@ -1,0 +1,2 @@
+//! netsim: a deterministic network simulator in virtual time.
+//! (Being built: see issue "netsim".)
