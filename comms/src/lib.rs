@@ -8,6 +8,7 @@ pub mod literal;
 mod pattern;
 mod time;
 mod value;
+pub mod wire;
 
 pub use blackboard::{Applied, Blackboard, Entry, SetError};
 pub use config::{load_config, parse_config, ConfigEntry, ConfigError, LineError};
