@@ -6,6 +6,9 @@ mod config;
 mod key;
 pub mod literal;
 mod pattern;
+mod replica;
+mod stats;
+mod talk;
 mod time;
 mod value;
 pub mod wire;
@@ -15,5 +18,8 @@ pub use config::{load_config, parse_config, ConfigEntry, ConfigError, LineError}
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
+pub use replica::{ConfigInvalid, Destination, Event, PostError, Replica, ReplicaConfig, Transmit};
+pub use stats::{DropReason, PeerInfo, Stats};
+pub use talk::TalkLimits;
 pub use time::Instant;
 pub use value::{UnknownType, Value, ValueType};
