@@ -58,8 +58,11 @@ fn phi(x: f64) -> f64 {
     0.5 * (1.0 + if z >= 0.0 { erf } else { -erf })
 }
 
+/// A CDF of a delay in milliseconds.
+type Cdf = Box<dyn Fn(f64) -> f64>;
+
 /// Kolmogorov–Smirnov distance between samples and a CDF that may have an atom at 0
-/// (`cdf_below_zero_atom` is F just below 0; the clipped normal puts mass there).
+/// (the clipped normal puts the mass of negative delays there).
 fn ks_distance(mut samples_ms: Vec<f64>, cdf: impl Fn(f64) -> f64, atom_at_zero: bool) -> f64 {
     samples_ms.sort_by(f64::total_cmp);
     let n = samples_ms.len() as f64;
@@ -93,7 +96,7 @@ fn ks_critical(n: usize) -> f64 {
 fn delivered_delays_follow_the_configured_distribution_with_loss_and_bursts_on() {
     let latency_ms = 50.0;
     let jitter_ms = 20.0;
-    let cases: [(JitterDist, Box<dyn Fn(f64) -> f64>, bool); 3] = [
+    let cases: [(JitterDist, Cdf, bool); 3] = [
         (
             JitterDist::Uniform,
             Box::new(move |x| ((x - (latency_ms - jitter_ms)) / (2.0 * jitter_ms)).clamp(0.0, 1.0)),
