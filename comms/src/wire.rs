@@ -365,11 +365,38 @@ impl<'k> FrameWriter<'k> {
     }
 }
 
-/// Encoded size of one item (what it adds to a frame's body).
+/// Encoded size of one item (what it adds to a frame's body), computed without encoding.
 pub fn item_len(item: ItemRef<'_>) -> usize {
-    let mut sink = Vec::new();
-    let _ = bincode::encode_into_std_write(item, &mut sink, config());
-    sink.len()
+    let str_len = |s: &str| varint_len(s.len() as u64) + s.len();
+    // Every variant index is below 251: one byte.
+    1 + match item {
+        ItemRef::Update {
+            path,
+            value,
+            version,
+            age_us,
+        } => str_len(path) + value_len(value) + varint_len(version) + varint_len(age_us),
+        ItemRef::Talk { queue, seq, value } => str_len(queue) + varint_len(seq) + value_len(value),
+        ItemRef::TalkHead { queue, first, last } => {
+            str_len(queue) + varint_len(first) + varint_len(last)
+        }
+        ItemRef::Nack {
+            queue, first, last, ..
+        } => 1 + str_len(queue) + varint_len(first) + varint_len(last),
+    }
+}
+
+/// Encoded size of a value.
+pub fn value_len(value: &Value) -> usize {
+    1 + match value {
+        // Signed integers are zigzag-encoded before the varint.
+        Value::Int(v) => varint_len(((v << 1) ^ (v >> 63)) as u64),
+        Value::Float(_) => 8,
+        Value::Bool(_) => 1,
+        Value::String(s) => varint_len(s.len() as u64) + s.len(),
+        Value::Floats(v) => varint_len(v.len() as u64) + 4 * v.len(),
+        Value::Bytes(b) => varint_len(b.len() as u64) + b.len(),
+    }
 }
 
 /// Encodes a whole frame with no size budget (tests, tools, benches).
@@ -988,6 +1015,13 @@ mod tests {
             let key = keyed.then_some(&key);
             let bytes = encode_frame(&frame, key);
             prop_assert_eq!(decode_frame(&bytes, frame.team, key), Ok(frame));
+        }
+
+        #[test]
+        fn computed_item_sizes_match_the_encoder(item in any_item()) {
+            let mut sink = Vec::new();
+            bincode::encode_into_std_write(item.as_ref(), &mut sink, config()).unwrap();
+            prop_assert_eq!(item_len(item.as_ref()), sink.len());
         }
 
         #[test]
