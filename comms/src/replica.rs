@@ -618,7 +618,7 @@ impl Replica {
                     }
                 }
                 Delivery::GivenUp { first, last } => {
-                    stats.talk_given_up += last - first + 1;
+                    stats.talk_given_up = stats.talk_given_up.saturating_add(last - first + 1);
                     Event::TalkGivenUp {
                         queue: queue.to_owned(),
                         from,
@@ -1374,5 +1374,36 @@ mod tests {
         assert_eq!(with(|_| {}), None);
         let cfg = ReplicaConfig::new(1, 7).with_refresh_period(Duration::from_millis(50));
         assert_eq!(cfg.departed_after, Duration::from_millis(150));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_well_formed_frame_from_a_teammate_is_handled_without_panic(
+            frames in proptest::collection::vec(crate::wire::tests::any_frame(), 1..6),
+            later_ms in 0u64..5_000,
+        ) {
+            let mut r = robot(9, 99);
+            for (i, mut f) in frames.into_iter().enumerate() {
+                f.team = 7;
+                if i % 2 == 0 {
+                    // Half of them name this robot in their NACKs.
+                    for item in &mut f.items {
+                        if let Item::Nack { target, .. } = item {
+                            *target = 9;
+                        }
+                    }
+                }
+                r.handle_datagram(t(i as u64), addr(), &wire::encode_frame(&f, None));
+            }
+            r.post(t(10), "*.talk.q", Value::Int(1)).unwrap();
+            for now in [t(20), t(40), t(1_100), t(later_ms + 1_100)] {
+                r.handle_timeout(now);
+                while r.poll_transmit().is_some() {}
+                while r.poll_event().is_some() {}
+            }
+            let s = r.stats();
+            let expected = s.drops(DropReason::RobotIdConflict) + s.drops(DropReason::RetiredIncarnation);
+            proptest::prop_assert_eq!(s.drops_total(), expected, "well-formed frames decode");
+        }
     }
 }
