@@ -252,10 +252,9 @@ impl GlobalModel {
         let in_order = at == self.pending.len();
         self.pending.insert(at, *obs);
         if in_order {
-            if let Some(head) = self.head {
-                if let Ok((next, _)) = update(&model, &head, obs, None) {
-                    self.head = Some(next);
-                }
+            // `prior` is the head predicted to this observation's time: update it directly.
+            if let Ok((next, _)) = update(&model, &prior, obs, None) {
+                self.head = Some(next);
             }
         } else {
             self.head = self.replay(f64::INFINITY);

@@ -386,7 +386,7 @@ impl LocalWorldModel {
             ),
         };
         let ball = if flags & FLAG_BALL != 0 {
-            let rho: Vec<i8> = b[27..33].iter().map(|&x| x as i8).collect();
+            let rho: [i8; 6] = std::array::from_fn(|k| b[27 + k] as i8);
             let corr = corr_matrix::<4>(&rho);
             if corr.cholesky().is_none() {
                 return Err(DecodeError::NotPositiveDefinite { field: "ball" });
