@@ -1,0 +1,569 @@
+//! Should-I-go arbitration (ISocRob-2000 §3.2.2, eq. 19) and CMUnited-97's team modes.
+//!
+//! Pure logic, no I/O and no clock: every robot posts its cost `h` for going to the ball
+//! (with whether it is going now) to `*.var.machine.heuristic`, reads everyone's copies
+//! from its blackboard, and decides on its own. The decision is a function of what the
+//! robot has heard, so robots that have heard the same agree; the only disagreement left
+//! is the network's delay, which the hysteresis margin keeps to the rare real handovers.
+//!
+//! The seed's heuristic, with units (metres):
+//!
+//! ```text
+//! h = d_ball + k1 · f_other    if the ball is seen (f_ball = 1)
+//! h = 1000                     otherwise
+//! ```
+//!
+//! `d_ball` is the robot's distance to the ball in metres, `f_other` is 1 when it is facing
+//! the opponent goal, and `k1 < 0` (metres) is how much facing the goal is worth: with
+//! `k1 = -0.5`, facing the goal is as good as being half a metre closer.
+
+use std::time::Duration;
+
+/// The blackboard key each robot publishes its cost on (`*` scope: replicated).
+pub const HEURISTIC_KEY: &str = "*.var.machine.heuristic";
+/// The pattern that matches every robot's copy of [`HEURISTIC_KEY`].
+pub const HEURISTIC_PATTERN: &str = "+.var.machine.heuristic";
+
+/// Configuration keys (`local.var.machine.config.*`) and their defaults.
+pub mod config_keys {
+    /// `k1` of eq. (19), metres, must be negative.
+    pub const K1_M: &str = "local.var.machine.config.k1_m";
+    /// Cost posted when the ball is not seen (the seed's 1000).
+    pub const NO_BALL_COST: &str = "local.var.machine.config.no_ball_cost";
+    /// Hysteresis margin, metres.
+    pub const HYSTERESIS_M: &str = "local.var.machine.config.hysteresis_m";
+    /// Staleness limit, milliseconds.
+    pub const STALE_MS: &str = "local.var.machine.config.stale_ms";
+    /// Listening time after a (re)start, milliseconds.
+    pub const LISTEN_MS: &str = "local.var.machine.config.listen_ms";
+    /// Role: `"goalkeeper"` never competes; anything else does.
+    pub const ROLE: &str = "local.var.machine.config.role";
+}
+
+/// The parameters of arbitration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArbitrationParams {
+    /// Reward for facing the opponent goal, metres (k1 < 0).
+    pub k1_m: f64,
+    /// Cost when the ball is not seen.
+    pub no_ball_cost: f64,
+    /// A robot already going keeps going unless beaten by more than this, metres.
+    pub hysteresis_m: f64,
+    /// Values older than this (receiver-side age) do not count.
+    pub stale_after: Duration,
+    /// A robot that (re)starts listens this long before it may go.
+    pub listen_for: Duration,
+}
+
+impl Default for ArbitrationParams {
+    fn default() -> Self {
+        Self {
+            k1_m: -0.5,
+            no_ball_cost: 1000.0,
+            hysteresis_m: 0.3,
+            // Three refresh periods of the default 100 ms.
+            stale_after: Duration::from_millis(300),
+            // One refresh period: by then every teammate has re-sent its cost once.
+            listen_for: Duration::from_millis(100),
+        }
+    }
+}
+
+/// What one robot knows of the ball for eq. (19).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallView {
+    /// Distance from the robot to the ball, metres.
+    pub distance_m: f64,
+    /// Whether the robot faces the opponent goal (the seed's `front_found_other_goal()`).
+    pub facing_opponent_goal: bool,
+}
+
+/// Eq. (19): the cost of going to the ball.
+pub fn heuristic(params: &ArbitrationParams, ball: Option<BallView>) -> f64 {
+    match ball {
+        Some(b) => {
+            let f_other = if b.facing_opponent_goal { 1.0 } else { 0.0 };
+            b.distance_m + params.k1_m * f_other
+        }
+        None => params.no_ball_cost,
+    }
+}
+
+/// The value posted on [`HEURISTIC_KEY`]: `[h, going]` as a float vector, so that a
+/// relay client reads it as `floats [h, 0|1]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Posted {
+    /// The cost, eq. (19).
+    pub h: f64,
+    /// Whether this robot is going to the ball now.
+    pub going: bool,
+}
+
+impl Posted {
+    /// As the float vector stored on the blackboard.
+    pub fn to_floats(self) -> Vec<f32> {
+        vec![self.h as f32, if self.going { 1.0 } else { 0.0 }]
+    }
+
+    /// From a float vector; `None` when it is not of this shape (a bad value from a
+    /// client must not decide anything).
+    pub fn from_floats(v: &[f32]) -> Option<Self> {
+        match v {
+            [h, going] if h.is_finite() && going.is_finite() => Some(Self {
+                h: f64::from(*h),
+                going: *going >= 0.5,
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// One robot's posted cost as this robot sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    /// The robot id (1–254).
+    pub robot: u8,
+    /// What it posted.
+    pub posted: Posted,
+    /// Age on this robot's clock (receiver-side timestamp).
+    pub age: Duration,
+}
+
+/// Who goes to the ball, as decided from one robot's view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// The robot that should go, if any candidate is fresh.
+    pub goer: Option<u8>,
+    /// Its effective cost (after the hysteresis bonus).
+    pub goer_cost: f64,
+}
+
+impl Decision {
+    /// The seed's `should_I_go()` for robot `me`.
+    pub fn should_go(&self, me: u8) -> bool {
+        self.goer == Some(me)
+    }
+}
+
+/// Decide who goes: the fresh, eligible candidate with the lowest effective cost, ties
+/// to the lower robot id. A robot that says it is going has its cost lowered by the
+/// hysteresis margin, so it keeps going unless beaten by more than the margin. Every
+/// robot computes the same function of the same data, so robots that have heard the same
+/// values agree.
+///
+/// Not counted: values older than [`ArbitrationParams::stale_after`] (receiver-side age),
+/// non-finite costs, and costs at or above [`ArbitrationParams::no_ball_cost`]. That last
+/// rule is huddle's reading of the seed: a robot that does not see the ball has nothing to
+/// approach (it searches instead), so when nobody sees the ball nobody goes, rather than
+/// the lowest id "going" to a ball it cannot see and then fighting the robot that first
+/// spots it.
+///
+/// `candidates` should include the deciding robot itself (its current `h`, its current
+/// `going`, age zero).
+pub fn decide(params: &ArbitrationParams, candidates: &[Candidate]) -> Decision {
+    let mut best: Option<(f64, u8)> = None;
+    for c in candidates {
+        let h = c.posted.h;
+        if c.age > params.stale_after || !h.is_finite() || h >= params.no_ball_cost {
+            continue;
+        }
+        let cost = if c.posted.going {
+            h - params.hysteresis_m
+        } else {
+            h
+        };
+        let better = match best {
+            None => true,
+            Some((bc, br)) => cost < bc || (cost == bc && c.robot < br),
+        };
+        if better {
+            best = Some((cost, c.robot));
+        }
+    }
+    Decision {
+        goer: best.map(|(_, r)| r),
+        goer_cost: best.map_or(f64::INFINITY, |(c, _)| c),
+    }
+}
+
+/// One robot's side of the arbitration: the state `decide` needs between ticks (whether
+/// this robot is going, how long it has been listening).
+///
+/// A robot that has just started (or restarted) has an empty blackboard: it would think
+/// itself alone and claim the ball while the team's goer is still going. So it listens
+/// first: for [`ArbitrationParams::listen_for`] after start it posts its cost but never
+/// goes. Everyone else already counts its cost, so if it is the best robot, the current
+/// goer yields to it as soon as the listening robot claims.
+#[derive(Debug, Clone)]
+pub struct Arbiter {
+    me: u8,
+    goalkeeper: bool,
+    params: ArbitrationParams,
+    listening_left: Duration,
+    going: bool,
+}
+
+impl Arbiter {
+    /// A robot `me` that starts now. A goalkeeper never competes.
+    pub fn new(me: u8, goalkeeper: bool, params: ArbitrationParams) -> Self {
+        Self {
+            me,
+            goalkeeper,
+            params,
+            listening_left: params.listen_for,
+            going: false,
+        }
+    }
+
+    /// This robot's id.
+    pub fn me(&self) -> u8 {
+        self.me
+    }
+
+    /// The parameters in force.
+    pub fn params(&self) -> &ArbitrationParams {
+        &self.params
+    }
+
+    /// Replace the parameters (e.g. after the configuration keys changed).
+    pub fn set_params(&mut self, params: ArbitrationParams) {
+        self.params = params;
+    }
+
+    /// Whether this robot decided to go at its last tick.
+    pub fn going(&self) -> bool {
+        self.going
+    }
+
+    /// Whether this robot is still listening after its start.
+    pub fn listening(&self) -> bool {
+        !self.listening_left.is_zero()
+    }
+
+    /// One control tick, `dt` after the previous one: this robot's cost `h` now and the
+    /// teammates' copies it has heard (its own copy among them is ignored). Returns the
+    /// team decision as seen from here and what to post on [`HEURISTIC_KEY`].
+    ///
+    /// A goalkeeper posts the no-ball cost so that no teammate counts it; a listening
+    /// robot posts its real cost with `going = false`.
+    pub fn tick(&mut self, dt: Duration, h: f64, heard: &[Candidate]) -> (Decision, Posted) {
+        self.listening_left = self.listening_left.saturating_sub(dt);
+        let own_h = if self.goalkeeper {
+            self.params.no_ball_cost
+        } else {
+            h
+        };
+        let mut all: Vec<Candidate> = heard
+            .iter()
+            .filter(|c| c.robot != self.me)
+            .copied()
+            .collect();
+        all.push(Candidate {
+            robot: self.me,
+            posted: Posted {
+                h: own_h,
+                going: self.going,
+            },
+            age: Duration::ZERO,
+        });
+        let decision = decide(&self.params, &all);
+        self.going = !self.goalkeeper && !self.listening() && decision.should_go(self.me);
+        (
+            decision,
+            Posted {
+                h: own_h,
+                going: self.going,
+            },
+        )
+    }
+}
+
+/// CMUnited-97's team modes (§3.2): the goer is active, the robot it intends to pass
+/// to is auxiliary, the rest hold their formation positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Mode {
+    /// Going to the ball: passes or shoots.
+    Active,
+    /// The intended receiver of the active robot's pass.
+    Auxiliary,
+    /// Holding its formation position, facing the ball.
+    Inactive,
+    /// The goalkeeper: never competes for the ball.
+    Goaltend,
+}
+
+/// The key the active robot announces its intended receiver on (`Int`, 0 = shooting).
+pub const PASS_TO_KEY: &str = "*.var.machine.pass_to";
+
+/// The mode of robot `me`, given the decision and the active robot's announced receiver.
+pub fn mode(me: u8, goalkeeper: bool, decision: &Decision, pass_to: Option<u8>) -> Mode {
+    if goalkeeper {
+        Mode::Goaltend
+    } else if decision.should_go(me) {
+        Mode::Active
+    } else if pass_to == Some(me) && decision.goer.is_some() {
+        Mode::Auxiliary
+    } else {
+        Mode::Inactive
+    }
+}
+
+/// A point on the field, metres (field frame).
+pub type Point = (f64, f64);
+
+/// The constants of the obstruction-free-index (cmunited-97-perception §3.2.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PassParams {
+    /// Opponents farther than this from the segment do not count, metres.
+    pub min_dist_m: f64,
+    /// Distances along the segment are capped here, metres: beyond it an opponent has
+    /// time to block anyway.
+    pub max_denominator_m: f64,
+}
+
+impl Default for PassParams {
+    fn default() -> Self {
+        Self {
+            min_dist_m: 1.0,
+            max_denominator_m: 3.0,
+        }
+    }
+}
+
+/// The obstruction-free-index of the segment from `origin` (where the ball is kicked)
+/// to `target`: 1 for a clear path, smaller the closer opponents stand to the line and
+/// the farther they are from the origin along it.
+pub fn obstruction_free_index(
+    params: &PassParams,
+    origin: Point,
+    target: Point,
+    opponents: &[Point],
+) -> f64 {
+    let (dx, dy) = (target.0 - origin.0, target.1 - origin.1);
+    let len = (dx * dx + dy * dy).sqrt();
+    let mut index = 1.0;
+    for &(ox, oy) in opponents {
+        let (rx, ry) = (ox - origin.0, oy - origin.1);
+        // y: distance along the segment from its origin (clamped to the segment);
+        // x: distance from the opponent to the segment.
+        let (x, y) = if len > 0.0 {
+            let along = ((rx * dx + ry * dy) / len).clamp(0.0, len);
+            let (px, py) = (origin.0 + dx * along / len, origin.1 + dy * along / len);
+            (((ox - px).powi(2) + (oy - py).powi(2)).sqrt(), along)
+        } else {
+            ((rx * rx + ry * ry).sqrt(), 0.0)
+        };
+        if x < params.min_dist_m && x < y {
+            index *= x / params.max_denominator_m.min(y);
+        }
+    }
+    index
+}
+
+/// What the active robot does with the ball.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Play {
+    /// Shoot at the goal; the value is the shot's obstruction-free-index.
+    Shoot { value: f64 },
+    /// Pass to a teammate; the value is the product of the two segments' indices.
+    Pass { to: u8, value: f64 },
+}
+
+/// Choose pass or shot (cmunited-97-perception §3.2.2): the shot is worth the index of
+/// ball→goal; a pass to receiver r is worth index(ball→r) · index(r→goal). The maximum
+/// wins; ties prefer the shot (no second kick to get wrong).
+pub fn choose_play(
+    params: &PassParams,
+    ball: Point,
+    goal: Point,
+    receivers: &[(u8, Point)],
+    opponents: &[Point],
+) -> Play {
+    let shot = obstruction_free_index(params, ball, goal, opponents);
+    let mut play = Play::Shoot { value: shot };
+    let mut best = shot;
+    for &(id, at) in receivers {
+        let value = obstruction_free_index(params, ball, at, opponents)
+            * obstruction_free_index(params, at, goal, opponents);
+        if value > best {
+            best = value;
+            play = Play::Pass { to: id, value };
+        }
+    }
+    play
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fresh(robot: u8, h: f64, going: bool) -> Candidate {
+        Candidate {
+            robot,
+            posted: Posted { h, going },
+            age: Duration::from_millis(20),
+        }
+    }
+
+    #[test]
+    fn the_seeds_example_the_robot_facing_the_goal_goes() {
+        // Robots 1 and 2 are both 2 m from the ball; only robot 2 faces the opponent goal.
+        let p = ArbitrationParams::default();
+        let h1 = heuristic(
+            &p,
+            Some(BallView {
+                distance_m: 2.0,
+                facing_opponent_goal: false,
+            }),
+        );
+        let h2 = heuristic(
+            &p,
+            Some(BallView {
+                distance_m: 2.0,
+                facing_opponent_goal: true,
+            }),
+        );
+        let d = decide(&p, &[fresh(1, h1, false), fresh(2, h2, false)]);
+        assert!(d.should_go(2), "robot 2 faces the goal and must go: {d:?}");
+        assert!(!d.should_go(1), "robot 1 must stand still: {d:?}");
+    }
+
+    #[test]
+    fn a_robot_that_does_not_see_the_ball_posts_the_seeds_1000() {
+        assert_eq!(heuristic(&ArbitrationParams::default(), None), 1000.0);
+    }
+
+    #[test]
+    fn ties_go_to_the_lower_robot_id_whatever_the_order_heard() {
+        let p = ArbitrationParams::default();
+        let a = decide(&p, &[fresh(3, 1.0, false), fresh(2, 1.0, false)]);
+        let b = decide(&p, &[fresh(2, 1.0, false), fresh(3, 1.0, false)]);
+        assert_eq!(a.goer, Some(2));
+        assert_eq!(b.goer, Some(2));
+    }
+
+    #[test]
+    fn stale_values_do_not_count() {
+        let p = ArbitrationParams::default();
+        let mut dead = fresh(1, 0.1, true);
+        dead.age = p.stale_after + Duration::from_millis(1);
+        let d = decide(&p, &[dead, fresh(2, 3.0, false)]);
+        assert_eq!(d.goer, Some(2), "a silent robot's old cost must not win");
+    }
+
+    #[test]
+    fn the_current_goer_keeps_going_unless_beaten_by_more_than_the_margin() {
+        let p = ArbitrationParams {
+            hysteresis_m: 0.3,
+            ..Default::default()
+        };
+        // Robot 2 is going at 2.0 m; robot 1 is 0.2 m closer: not enough to take over.
+        let d = decide(&p, &[fresh(1, 1.8, false), fresh(2, 2.0, true)]);
+        assert_eq!(d.goer, Some(2), "a 0.2 m edge is inside the 0.3 m margin");
+        // 0.4 m closer: robot 1 takes over.
+        let d = decide(&p, &[fresh(1, 1.6, false), fresh(2, 2.0, true)]);
+        assert_eq!(d.goer, Some(1), "a 0.4 m edge beats the 0.3 m margin");
+    }
+
+    #[test]
+    fn malformed_posted_values_are_ignored() {
+        assert_eq!(Posted::from_floats(&[1.0]), None);
+        assert_eq!(Posted::from_floats(&[f32::NAN, 1.0]), None);
+        let p = Posted {
+            h: 2.5,
+            going: true,
+        };
+        assert_eq!(Posted::from_floats(&p.to_floats()), Some(p));
+    }
+
+    #[test]
+    fn modes_follow_the_decision() {
+        let p = ArbitrationParams::default();
+        let d = decide(
+            &p,
+            &[
+                fresh(1, 1.0, false),
+                fresh(2, 2.0, false),
+                fresh(3, 3.0, false),
+            ],
+        );
+        assert_eq!(mode(1, false, &d, Some(3)), Mode::Active);
+        assert_eq!(mode(3, false, &d, Some(3)), Mode::Auxiliary);
+        assert_eq!(mode(2, false, &d, Some(3)), Mode::Inactive);
+        assert_eq!(mode(4, true, &d, Some(3)), Mode::Goaltend);
+    }
+
+    #[test]
+    fn an_opponent_on_the_line_far_from_the_ball_blocks_more_than_one_near_it() {
+        let pp = PassParams::default();
+        let clear = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[]);
+        assert_eq!(clear, 1.0);
+        let near = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(0.5, 0.2)]);
+        let far = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(3.0, 0.2)]);
+        // near: x=0.2, y=0.5 → 0.2/0.5 = 0.4; far: x=0.2, y=3 → 0.2/3.
+        assert!((near - 0.4).abs() < 1e-12, "near index {near}");
+        assert!((far - 0.2 / 3.0).abs() < 1e-12, "far index {far}");
+        let off = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(2.0, 1.5)]);
+        assert_eq!(off, 1.0, "an opponent beyond min-dist does not count");
+    }
+
+    #[test]
+    fn a_blocked_shot_becomes_a_pass_to_the_open_teammate() {
+        let pp = PassParams::default();
+        let goal = (4.5, 0.0);
+        // A defender stands on the shooting line; teammate 3 is open on the wing.
+        let opponents = [(3.0, 0.1)];
+        let play = choose_play(&pp, (0.0, 0.0), goal, &[(3, (2.0, 2.5))], &opponents);
+        assert!(matches!(play, Play::Pass { to: 3, .. }), "{play:?}");
+        // With the line clear, the robot shoots.
+        let play = choose_play(&pp, (0.0, 0.0), goal, &[(3, (2.0, 2.5))], &[]);
+        assert!(matches!(play, Play::Shoot { .. }), "{play:?}");
+    }
+
+    #[test]
+    fn nobody_goes_when_nobody_sees_the_ball() {
+        let p = ArbitrationParams::default();
+        let d = decide(&p, &[fresh(1, 1000.0, true), fresh(2, 1000.0, false)]);
+        assert_eq!(d.goer, None, "no robot sees the ball: {d:?}");
+    }
+
+    #[test]
+    fn a_restarted_robot_listens_before_it_claims_the_ball() {
+        let p = ArbitrationParams::default();
+        let mut a = Arbiter::new(3, false, p);
+        // Robot 3 is the best placed, but it has just started and heard nobody yet.
+        let (d, posted) = a.tick(Duration::from_millis(40), 0.5, &[]);
+        assert!(d.should_go(3), "its view says it is best: {d:?}");
+        assert!(
+            !posted.going && !a.going(),
+            "but it must not go while listening"
+        );
+        // After the listening time it hears robot 1 going at 2 m and takes over.
+        let heard = [fresh(1, 2.0, true)];
+        let (_, posted) = a.tick(Duration::from_millis(80), 0.5, &heard);
+        assert!(
+            posted.going,
+            "listening is over and 0.5 m beats 2.0 m - margin"
+        );
+    }
+
+    #[test]
+    fn a_goalkeeper_never_competes() {
+        let p = ArbitrationParams::default();
+        let mut gk = Arbiter::new(
+            1,
+            true,
+            ArbitrationParams {
+                listen_for: Duration::ZERO,
+                ..p
+            },
+        );
+        let (d, posted) = gk.tick(Duration::from_millis(40), 0.1, &[fresh(2, 3.0, false)]);
+        assert_eq!(d.goer, Some(2), "the field player goes: {d:?}");
+        assert!(!posted.going);
+        assert_eq!(
+            posted.h, p.no_ball_cost,
+            "teammates must never count the keeper"
+        );
+    }
+}
