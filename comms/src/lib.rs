@@ -1,4 +1,20 @@
-//! comms: huddle's blackboard, its wire format and the sans-IO replication core, talk
-//! queues, arbitration, the relay line protocol and the tokio/socket2 driver.
-//! (Being built: see issue "The blackboard and its replication core".)
+//! comms: huddle's blackboard, its wire format and the sans-IO replication core.
+//! (lib.rs essay: being written.)
+
 pub mod arbitration;
+mod blackboard;
+mod config;
+mod key;
+pub mod literal;
+mod pattern;
+mod time;
+mod value;
+pub mod wire;
+
+pub use blackboard::{Applied, Blackboard, Entry, SetError};
+pub use config::{load_config, parse_config, ConfigEntry, ConfigError, LineError};
+pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
+pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
+pub use pattern::{Pattern, PatternError};
+pub use time::Instant;
+pub use value::{UnknownType, Value, ValueType};
