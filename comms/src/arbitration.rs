@@ -19,6 +19,10 @@
 
 use std::time::Duration;
 
+use thiserror::Error;
+
+use crate::{Blackboard, Instant, Key, Pattern, Scope, Value};
+
 /// The blackboard key each robot publishes its cost on (`*` scope: replicated).
 pub const HEURISTIC_KEY: &str = "*.var.machine.heuristic";
 /// The pattern that matches every robot's copy of [`HEURISTIC_KEY`].
@@ -275,6 +279,133 @@ impl Arbiter {
                 going: self.going,
             },
         )
+    }
+}
+
+/// Every robot's posted `[h, going]` on `board`, aged at `now` by the blackboard's
+/// receiver-side stamps. Values of the wrong shape (a client wrote garbage) are skipped:
+/// they must not decide anything.
+pub fn heard(board: &Blackboard, now: Instant) -> Vec<Candidate> {
+    let pattern = heuristic_pattern();
+    board
+        .iter(&pattern)
+        .filter_map(|(key, entry)| {
+            let Scope::Robot(robot) = key.scope() else {
+                return None;
+            };
+            let Value::Floats(v) = &entry.value else {
+                return None;
+            };
+            Some(Candidate {
+                robot,
+                posted: Posted::from_floats(v)?,
+                age: entry.age(now),
+            })
+        })
+        .collect()
+}
+
+fn heuristic_pattern() -> Pattern {
+    Pattern::parse(HEURISTIC_PATTERN).expect("HEURISTIC_PATTERN is a valid pattern")
+}
+
+/// The key to write `[h, going]` to (`*.var.machine.heuristic`).
+pub fn heuristic_key() -> Key {
+    Key::parse(HEURISTIC_KEY).expect("HEURISTIC_KEY is a valid key")
+}
+
+impl From<Posted> for Value {
+    fn from(p: Posted) -> Value {
+        Value::Floats(p.to_floats())
+    }
+}
+
+/// Why the configuration keys do not make valid parameters.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ParamsError {
+    /// A numeric key holds something that is not an int or a float.
+    #[error("{key} must be a number, found {found}")]
+    NotANumber {
+        /// The configuration key.
+        key: &'static str,
+        /// The value found, as text.
+        found: String,
+    },
+    /// A key is out of its range (the seed requires k1 < 0; margins and times ≥ 0).
+    #[error("{key} = {value} is out of range: {rule}")]
+    OutOfRange {
+        /// The configuration key.
+        key: &'static str,
+        /// The value found.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// The role is not a string.
+    #[error("{ROLE_KEY} must be a string such as \"goalkeeper\", found {0}")]
+    BadRole(String),
+}
+
+const ROLE_KEY: &str = config_keys::ROLE;
+
+fn number(board: &Blackboard, key: &'static str) -> Result<Option<f64>, ParamsError> {
+    let k = Key::parse(key).expect("configuration keys are valid");
+    match board.get(&k).map(|e| &e.value) {
+        None => Ok(None),
+        Some(Value::Float(x)) => Ok(Some(*x)),
+        Some(Value::Int(i)) => Ok(Some(*i as f64)),
+        Some(other) => Err(ParamsError::NotANumber {
+            key,
+            found: format!("{other:?}"),
+        }),
+    }
+}
+
+fn check(key: &'static str, value: f64, ok: bool, rule: &'static str) -> Result<f64, ParamsError> {
+    if ok && value.is_finite() {
+        Ok(value)
+    } else {
+        Err(ParamsError::OutOfRange { key, value, rule })
+    }
+}
+
+impl ArbitrationParams {
+    /// The parameters from `local.var.machine.config.*` on `board` (the seed's
+    /// configuration files end up there), each missing key taken from `defaults`.
+    pub fn from_blackboard(
+        board: &Blackboard,
+        defaults: ArbitrationParams,
+    ) -> Result<Self, ParamsError> {
+        use config_keys::*;
+        let mut p = defaults;
+        if let Some(v) = number(board, K1_M)? {
+            p.k1_m = check(K1_M, v, v < 0.0, "the seed requires k1 < 0")?;
+        }
+        if let Some(v) = number(board, NO_BALL_COST)? {
+            p.no_ball_cost = check(NO_BALL_COST, v, v > 0.0, "must be positive")?;
+        }
+        if let Some(v) = number(board, HYSTERESIS_M)? {
+            p.hysteresis_m = check(HYSTERESIS_M, v, v >= 0.0, "must be >= 0")?;
+        }
+        if let Some(v) = number(board, STALE_MS)? {
+            p.stale_after =
+                Duration::from_secs_f64(check(STALE_MS, v, v > 0.0, "must be > 0")? / 1000.0);
+        }
+        if let Some(v) = number(board, LISTEN_MS)? {
+            p.listen_for =
+                Duration::from_secs_f64(check(LISTEN_MS, v, v >= 0.0, "must be >= 0")? / 1000.0);
+        }
+        Ok(p)
+    }
+}
+
+/// Whether `local.var.machine.config.role` names the goalkeeper (who never competes).
+pub fn is_goalkeeper(board: &Blackboard) -> Result<bool, ParamsError> {
+    let k = Key::parse(ROLE_KEY).expect("configuration keys are valid");
+    match board.get(&k).map(|e| &e.value) {
+        None => Ok(false),
+        Some(Value::String(s)) => Ok(s.eq_ignore_ascii_case("goalkeeper")),
+        Some(other) => Err(ParamsError::BadRole(format!("{other:?}"))),
     }
 }
 
@@ -564,6 +695,80 @@ mod tests {
         assert_eq!(
             posted.h, p.no_ball_cost,
             "teammates must never count the keeper"
+        );
+    }
+
+    #[test]
+    fn costs_are_read_from_the_blackboard_with_receiver_side_ages() {
+        let mut board = Blackboard::new(2);
+        let t0 = Instant::from_micros(1_000_000);
+        board
+            .set(
+                t0,
+                &heuristic_key(),
+                Posted {
+                    h: 1.5,
+                    going: true,
+                }
+                .into(),
+            )
+            .unwrap();
+        // A teammate's copy that claims to be a float, not [h, going]: ignored.
+        board
+            .set(
+                t0,
+                &Key::parse("*.var.machine.other").unwrap(),
+                Value::Float(0.0),
+            )
+            .unwrap();
+        let later = Instant::from_micros(1_250_000);
+        let got = heard(&board, later);
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(got[0].robot, 2);
+        assert_eq!(
+            got[0].posted,
+            Posted {
+                h: 1.5,
+                going: true
+            }
+        );
+        assert_eq!(got[0].age, Duration::from_millis(250));
+    }
+
+    #[test]
+    fn parameters_come_from_the_configuration_keys_and_bad_ones_are_refused() {
+        let mut board = Blackboard::new(1);
+        let t = Instant::ZERO;
+        let set = |b: &mut Blackboard, k: &str, v: Value| {
+            b.set(t, &Key::parse(k).unwrap(), v).unwrap();
+        };
+        set(&mut board, config_keys::K1_M, Value::Float(-0.8));
+        set(&mut board, config_keys::STALE_MS, Value::Int(450));
+        set(
+            &mut board,
+            config_keys::ROLE,
+            Value::String("goalkeeper".into()),
+        );
+        let p = ArbitrationParams::from_blackboard(&board, ArbitrationParams::default()).unwrap();
+        assert_eq!(p.k1_m, -0.8);
+        assert_eq!(p.stale_after, Duration::from_millis(450));
+        assert_eq!(
+            p.hysteresis_m,
+            ArbitrationParams::default().hysteresis_m,
+            "default kept"
+        );
+        assert!(is_goalkeeper(&board).unwrap());
+        set(&mut board, config_keys::K1_M, Value::Float(0.5));
+        let err = ArbitrationParams::from_blackboard(&board, ArbitrationParams::default());
+        assert!(
+            matches!(err, Err(ParamsError::OutOfRange { .. })),
+            "k1 >= 0 breaks the seed: {err:?}"
+        );
+        set(&mut board, config_keys::K1_M, Value::String("far".into()));
+        let err = ArbitrationParams::from_blackboard(&board, ArbitrationParams::default());
+        assert!(
+            matches!(err, Err(ParamsError::NotANumber { .. })),
+            "{err:?}"
         );
     }
 }
