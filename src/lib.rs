@@ -4,3 +4,5 @@
 //! codec in `audio` and the network model in `netsim`; this crate adds no protocol logic.
 
 pub mod field;
+pub mod harness;
+pub mod sim;
