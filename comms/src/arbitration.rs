@@ -17,6 +17,7 @@
 //! the opponent goal, and `k1 < 0` (metres) is how much facing the goal is worth: with
 //! `k1 = -0.5`, facing the goal is as good as being half a metre closer.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use thiserror::Error;
@@ -38,6 +39,10 @@ pub mod config_keys {
     pub const HYSTERESIS_M: &str = "local.var.machine.config.hysteresis_m";
     /// Staleness limit, milliseconds.
     pub const STALE_MS: &str = "local.var.machine.config.stale_ms";
+    /// Tie band between two claims, metres.
+    pub const TIE_M: &str = "local.var.machine.config.tie_m";
+    /// Expected one-way latency of the team network, milliseconds.
+    pub const LATENCY_MS: &str = "local.var.machine.config.latency_ms";
     /// Listening time after a (re)start, milliseconds.
     pub const LISTEN_MS: &str = "local.var.machine.config.listen_ms";
     /// Role: `"goalkeeper"` never competes; anything else does.
@@ -53,10 +58,24 @@ pub struct ArbitrationParams {
     pub no_ball_cost: f64,
     /// A robot already going keeps going unless beaten by more than this, metres.
     pub hysteresis_m: f64,
+    /// Two robots that both claim the ball with costs within this band are a tie, won by
+    /// the lower id, metres. Why: each robot sees its own cost now and the other's one
+    /// latency late; two robots racing to the ball from equal distances each see
+    /// themselves ahead, and without the band both would keep going as long as the race
+    /// lasts.
+    pub tie_m: f64,
     /// Values older than this (receiver-side age) do not count.
     pub stale_after: Duration,
     /// A robot that (re)starts listens this long before it may go.
     pub listen_for: Duration,
+    /// The team network's expected one-way latency. A robot hears its teammates' costs
+    /// about this late but knows its own at once, so near a handover each robot sees
+    /// itself ahead and the old and the new goer disagree for about one latency. With
+    /// compensation a robot decides on its **own cost as posted this long ago** (and its
+    /// own current claim), the same data its teammates decide on now: both ends of a
+    /// handover switch at about the same instant, at the price of reacting one latency
+    /// later. Zero: off (the seed's behaviour).
+    pub latency_compensation: Duration,
 }
 
 impl Default for ArbitrationParams {
@@ -64,11 +83,17 @@ impl Default for ArbitrationParams {
         Self {
             k1_m: -0.5,
             no_ball_cost: 1000.0,
-            hysteresis_m: 0.3,
+            // Five standard deviations of the difference of two robots' smoothed distance
+            // estimates at 2.5 m (camera: 2 cm + 5% of range, smoothed over ~4 frames),
+            // and no single flip of `f_other` (|k1| = 0.5 m) takes the ball by itself.
+            hysteresis_m: 0.5,
+            // About one latency of two robots approaching at top speed (1.5 m/s · 0.1 s).
+            tie_m: 0.15,
             // Three refresh periods of the default 100 ms.
             stale_after: Duration::from_millis(300),
             // One refresh period: by then every teammate has re-sent its cost once.
             listen_for: Duration::from_millis(100),
+            latency_compensation: Duration::ZERO,
         }
     }
 }
@@ -165,28 +190,43 @@ impl Decision {
 /// `candidates` should include the deciding robot itself (its current `h`, its current
 /// `going`, age zero).
 pub fn decide(params: &ArbitrationParams, candidates: &[Candidate]) -> Decision {
-    let mut best: Option<(f64, u8)> = None;
-    for c in candidates {
+    let counted = |c: &&Candidate| {
         let h = c.posted.h;
-        if c.age > params.stale_after || !h.is_finite() || h >= params.no_ball_cost {
-            continue;
-        }
-        let cost = if c.posted.going {
-            h - params.hysteresis_m
+        c.age <= params.stale_after && h.is_finite() && h < params.no_ball_cost
+    };
+    let cost = |c: &Candidate| {
+        if c.posted.going {
+            c.posted.h - params.hysteresis_m
         } else {
-            h
-        };
+            c.posted.h
+        }
+    };
+    let mut best: Option<(f64, u8, bool)> = None;
+    for c in candidates.iter().filter(counted) {
+        let k = cost(c);
         let better = match best {
             None => true,
-            Some((bc, br)) => cost < bc || (cost == bc && c.robot < br),
+            Some((bc, br, _)) => k < bc || (k == bc && c.robot < br),
         };
         if better {
-            best = Some((cost, c.robot));
+            best = Some((k, c.robot, c.posted.going));
+        }
+    }
+    // Two claims within the tie band: the lower id keeps the ball (see `tie_m`).
+    if let Some((bc, _, true)) = best {
+        for c in candidates.iter().filter(counted) {
+            let k = cost(c);
+            if c.posted.going
+                && k <= bc + params.tie_m
+                && best.is_some_and(|(_, br, _)| c.robot < br)
+            {
+                best = Some((k, c.robot, true));
+            }
         }
     }
     Decision {
-        goer: best.map(|(_, r)| r),
-        goer_cost: best.map_or(f64::INFINITY, |(c, _)| c),
+        goer: best.map(|(_, r, _)| r),
+        goer_cost: best.map_or(f64::INFINITY, |(c, _, _)| c),
     }
 }
 
@@ -205,6 +245,11 @@ pub struct Arbiter {
     params: ArbitrationParams,
     listening_left: Duration,
     going: bool,
+    /// Time since start (sum of the `dt`s).
+    clock: Duration,
+    /// What this robot posted lately, for comparing like with like (see
+    /// [`ArbitrationParams::latency_compensation`]).
+    history: VecDeque<(Duration, f64)>,
 }
 
 impl Arbiter {
@@ -216,6 +261,8 @@ impl Arbiter {
             params,
             listening_left: params.listen_for,
             going: false,
+            clock: Duration::ZERO,
+            history: VecDeque::new(),
         }
     }
 
@@ -252,10 +299,18 @@ impl Arbiter {
     /// robot posts its real cost with `going = false`.
     pub fn tick(&mut self, dt: Duration, h: f64, heard: &[Candidate]) -> (Decision, Posted) {
         self.listening_left = self.listening_left.saturating_sub(dt);
+        self.clock += dt;
         let own_h = if self.goalkeeper {
             self.params.no_ball_cost
         } else {
             h
+        };
+        // Own cost as the team sees it now; own claim as it stands (a robot knows what
+        // it decided, and a claim that flips back one latency later would make the goer
+        // oscillate with a period of about one latency).
+        let own = Posted {
+            h: self.own_cost_seen(own_h),
+            going: self.going,
         };
         let mut all: Vec<Candidate> = heard
             .iter()
@@ -264,21 +319,41 @@ impl Arbiter {
             .collect();
         all.push(Candidate {
             robot: self.me,
-            posted: Posted {
-                h: own_h,
-                going: self.going,
-            },
+            posted: own,
             age: Duration::ZERO,
         });
         let decision = decide(&self.params, &all);
         self.going = !self.goalkeeper && !self.listening() && decision.should_go(self.me);
-        (
-            decision,
-            Posted {
-                h: own_h,
-                going: self.going,
-            },
-        )
+        let posted = Posted {
+            h: own_h,
+            going: self.going,
+        };
+        if !self.params.latency_compensation.is_zero() {
+            self.history.push_back((self.clock, own_h));
+        }
+        (decision, posted)
+    }
+
+    /// This robot's own cost as its teammates see it now: what it posted one expected
+    /// latency ago (the no-ball cost before it had posted that long), or `now` without
+    /// compensation.
+    fn own_cost_seen(&mut self, now: f64) -> f64 {
+        let lag = self.params.latency_compensation;
+        if lag.is_zero() {
+            self.history.clear();
+            return now;
+        }
+        let Some(cut) = self.clock.checked_sub(lag) else {
+            return self.params.no_ball_cost;
+        };
+        // Keep the newest entry at or before the cut and everything after it.
+        while self.history.len() >= 2 && self.history[1].0 <= cut {
+            self.history.pop_front();
+        }
+        match self.history.front() {
+            Some(&(t, h)) if t <= cut => h,
+            _ => self.params.no_ball_cost,
+        }
     }
 }
 
@@ -387,9 +462,16 @@ impl ArbitrationParams {
         if let Some(v) = number(board, HYSTERESIS_M)? {
             p.hysteresis_m = check(HYSTERESIS_M, v, v >= 0.0, "must be >= 0")?;
         }
+        if let Some(v) = number(board, TIE_M)? {
+            p.tie_m = check(TIE_M, v, v >= 0.0, "must be >= 0")?;
+        }
         if let Some(v) = number(board, STALE_MS)? {
             p.stale_after =
                 Duration::from_secs_f64(check(STALE_MS, v, v > 0.0, "must be > 0")? / 1000.0);
+        }
+        if let Some(v) = number(board, LATENCY_MS)? {
+            p.latency_compensation =
+                Duration::from_secs_f64(check(LATENCY_MS, v, v >= 0.0, "must be >= 0")? / 1000.0);
         }
         if let Some(v) = number(board, LISTEN_MS)? {
             p.listen_for =
@@ -769,6 +851,86 @@ mod tests {
         assert!(
             matches!(err, Err(ParamsError::NotANumber { .. })),
             "{err:?}"
+        );
+    }
+
+    #[test]
+    fn two_robots_claiming_at_once_from_equal_distances_agree_on_the_lower_id() {
+        // Robots 1 and 2 race to the ball from 2 m; each hears the other 50 ms late, so
+        // each sees itself 7.5 cm ahead (1.5 m/s · 50 ms).
+        let p = ArbitrationParams::default();
+        let view_of_1 = decide(&p, &[fresh(1, 1.925, true), fresh(2, 2.0, true)]);
+        let view_of_2 = decide(&p, &[fresh(1, 2.0, true), fresh(2, 1.925, true)]);
+        assert_eq!(view_of_1.goer, Some(1));
+        assert_eq!(
+            view_of_2.goer,
+            Some(1),
+            "robot 2 must yield, or both keep going"
+        );
+        // Without the tie band both would go.
+        let no_band = ArbitrationParams { tie_m: 0.0, ..p };
+        assert_eq!(
+            decide(&no_band, &[fresh(1, 2.0, true), fresh(2, 1.925, true)]).goer,
+            Some(2)
+        );
+        // A claim better by more than the band still wins.
+        let d = decide(&p, &[fresh(1, 2.0, true), fresh(2, 1.7, true)]);
+        assert_eq!(d.goer, Some(2));
+    }
+
+    #[test]
+    fn with_latency_compensation_both_ends_of_a_handover_switch_together() {
+        // Robot 1 is going at 2.0 m; robot 2's cost drops to 1.0 m at once (it has just
+        // seen the ball close by). Latency 50 ms, ticks of 10 ms.
+        let p = ArbitrationParams {
+            listen_for: Duration::ZERO,
+            latency_compensation: Duration::from_millis(50),
+            ..Default::default()
+        };
+        let tick = Duration::from_millis(10);
+        let mut a1 = Arbiter::new(1, false, p);
+        let mut a2 = Arbiter::new(2, false, p);
+        // Both have been posting for a while: robot 1 going at 2.0, robot 2 at 3.0.
+        let mut sent1 = Vec::new();
+        let mut sent2 = Vec::new();
+        let mut switched = (None, None);
+        for k in 0..40usize {
+            let h2 = if k < 20 { 3.0 } else { 1.0 };
+            // Each hears the other's post from 5 ticks (50 ms) ago.
+            let heard = |sent: &Vec<Posted>, robot| -> Vec<Candidate> {
+                sent.len()
+                    .checked_sub(5)
+                    .map(|i| Candidate {
+                        robot,
+                        posted: sent[i],
+                        age: Duration::ZERO,
+                    })
+                    .into_iter()
+                    .collect()
+            };
+            let h1_heard = heard(&sent2, 2);
+            let h2_heard = heard(&sent1, 1);
+            let (_, p1) = a1.tick(tick, 2.0, &h1_heard);
+            let (_, p2) = a2.tick(tick, h2, &h2_heard);
+            sent1.push(p1);
+            sent2.push(p2);
+            if k >= 20 && !p1.going && switched.0.is_none() {
+                switched.0 = Some(k);
+            }
+            if k >= 20 && p2.going && switched.1.is_none() {
+                switched.1 = Some(k);
+            }
+        }
+        let (Some(stop), Some(start)) = switched else {
+            panic!("the handover never happened: {switched:?}");
+        };
+        assert!(
+            stop.abs_diff(start) <= 1,
+            "robot 1 stopped at tick {stop}, robot 2 started at {start}"
+        );
+        assert!(
+            start >= 24,
+            "robot 2 claims one latency after its cost dropped, at {start}"
         );
     }
 }

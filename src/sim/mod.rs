@@ -96,6 +96,13 @@ impl NetworkConfig {
         1.0 - (1.0 - link.mean_loss()) * (1.0 - uplink.mean_loss())
     }
 
+    /// The mean one-way delay a frame takes: the latency plus, with a beacon hold, half a
+    /// beacon interval on average.
+    pub fn expected_delay(&self) -> Duration {
+        let link = self.links().0;
+        link.latency + link.beacon.map_or(Duration::ZERO, |b| b / 2)
+    }
+
     /// The mean one-way latency, for the conflict bound.
     pub fn latency(&self) -> Duration {
         self.links().0.latency
@@ -122,6 +129,9 @@ pub struct SimConfig {
     /// Arbitration parameters.
     #[serde(skip)]
     pub arbitration: ArbitrationParams,
+    /// Set the arbitration's latency compensation to the network's expected delay (as a
+    /// team would configure `latency_ms` for its WLAN), unless it is set already.
+    pub compensate_latency: bool,
     /// The replicas' refresh period.
     #[serde(skip)]
     pub refresh_period: Duration,
@@ -142,6 +152,7 @@ impl Default for SimConfig {
             field: FieldConfig::default(),
             brain: BrainConfig::default(),
             arbitration: ArbitrationParams::default(),
+            compensate_latency: true,
             refresh_period: Duration::from_millis(100),
             physics_dt_s: 0.01,
             snapshot_every_s: 0.25,
@@ -277,13 +288,15 @@ impl Simulation {
             })
             .collect();
         let world = World::new(cfg.field, &starts, cfg.opponents, cfg.seed);
+        let mut params = cfg.arbitration;
+        if cfg.compensate_latency && params.latency_compensation.is_zero() {
+            params.latency_compensation = cfg.network.expected_delay();
+        }
         let robots = positions
             .iter()
             .zip(&starts)
             .enumerate()
-            .map(|(i, (&p, &pose))| {
-                Robot::new(crate::harness::robot_id(i), p, cfg.arbitration, pose)
-            })
+            .map(|(i, (&p, &pose))| Robot::new(crate::harness::robot_id(i), p, params, pose))
             .collect();
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
@@ -330,6 +343,15 @@ impl Simulation {
         self.harness.run_until(Time::from_secs_f64(t));
         for i in 0..self.robots.len() {
             if self.next_tick_s[i] > t + 1e-9 {
+                let Some(replica) = self.harness.replica(i) else {
+                    continue;
+                };
+                let now = self.harness.local_now(i);
+                if let Some((key, value)) = self.robots[i].redecide(t, replica.blackboard(), now) {
+                    self.harness
+                        .set(i, &key, value)
+                        .expect("robots only write their own valid keys");
+                }
                 continue;
             }
             self.next_tick_s[i] += self.cfg.brain.control_period_s;

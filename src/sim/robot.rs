@@ -10,7 +10,7 @@
 
 use comms::arbitration::{
     self, choose_play, heuristic, mode, Arbiter, ArbitrationParams, BallView, Decision, Mode,
-    PassParams, Play,
+    PassParams, Play, Posted,
 };
 use comms::{Blackboard, Instant, Key, Scope, Value};
 use serde::Serialize;
@@ -113,6 +113,7 @@ pub struct Robot {
     pub alive: bool,
     pass_to_posted: i64,
     kick_ready_at_s: f64,
+    decided_at_s: f64,
 }
 
 /// Everything a tick needs from outside the robot.
@@ -152,6 +153,7 @@ impl Robot {
             alive: true,
             pass_to_posted: 0,
             kick_ready_at_s: 0.0,
+            decided_at_s: 0.0,
         }
     }
 
@@ -197,10 +199,7 @@ impl Robot {
             facing_opponent_goal: facing,
         });
         self.h = heuristic(&params, view);
-        let heard = arbitration::heard(input.board, input.local_now);
-        let dt = Duration::from_secs_f64(cfg.control_period_s);
-        let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
-        self.decision = decision;
+        let (decision, posted) = self.decide(t, input.board, input.local_now);
         let pass_to = decision.goer.filter(|&g| g != self.id).and_then(|g| {
             let key = Key::new(Scope::Robot(g), comms::Kind::Var, pass_to_key().path()).ok()?;
             match input
@@ -231,6 +230,33 @@ impl Robot {
             writes.push((pass_to_key(), Value::Int(receiver)));
         }
         writes
+    }
+
+    /// Run the arbitration on the current cost and what the replica has heard.
+    fn decide(&mut self, t_s: f64, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
+        let heard = arbitration::heard(board, local_now);
+        let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
+        self.decided_at_s = t_s;
+        let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
+        self.decision = decision;
+        (decision, posted)
+    }
+
+    /// Between control ticks: decide again on the latest cost with whatever the replica
+    /// heard since (a robot reacts to a teammate's claim when it arrives, not at its next
+    /// camera frame). Returns the write to make if its claim changed.
+    pub fn redecide(
+        &mut self,
+        t_s: f64,
+        board: &Blackboard,
+        local_now: Instant,
+    ) -> Option<(Key, Value)> {
+        if !self.alive {
+            return None;
+        }
+        let was = self.arbiter.going();
+        let (_, posted) = self.decide(t_s, board, local_now);
+        (posted.going != was).then(|| (arbitration::heuristic_key(), Value::from(posted)))
     }
 
     fn update_ball(&mut self, cfg: &BrainConfig, t: f64) {
