@@ -161,11 +161,12 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
-    /// The longest conflict arbitration allows itself: one latency (the old goer has not
+    /// The longest conflict arbitration allows itself: one latency (the network's expected
+    /// one-way delay, a beacon hold included; the old goer has not
     /// heard the new one yet) plus two refresh periods (a lost update is repeated at the
     /// next refresh at the latest, and the old goer acts at its next control tick).
     pub fn conflict_bound(&self) -> Duration {
-        self.network.latency() + self.refresh_period * 2
+        self.network.expected_delay() + self.refresh_period * 2
     }
 }
 
@@ -432,7 +433,7 @@ impl Simulation {
             robots: self.cfg.robots,
             duration_s: simulated_s,
             preset: self.cfg.network.preset.name().to_string(),
-            loss_pct: 100.0 * self.cfg.network.mean_loss(),
+            loss_pct: round3(100.0 * self.cfg.network.mean_loss()),
             latency_ms: self.cfg.network.latency().as_secs_f64() * 1e3,
             jitter_ms: self.cfg.network.links().0.jitter.as_secs_f64() * 1e3,
             seed: self.cfg.seed,
@@ -501,7 +502,7 @@ pub struct Report {
     pub longest_conflict_ms: f64,
     /// When it started, seconds.
     pub longest_conflict_at_s: f64,
-    /// The bound it should stay under: latency + two refresh periods, ms.
+    /// The bound it should stay under: expected one-way delay + two refresh periods, ms.
     pub conflict_bound_ms: f64,
     /// Handovers (the lone goer changed).
     pub handovers: u64,
