@@ -67,6 +67,8 @@ pub const DYNAMIC_RANGE: f64 = 0.003_162;
 /// independent evidence.
 pub const SPRT_BOUND: f64 = 14.0;
 
+/// Power share of the first slot's level assumed for a continuing tone (−4.5 dB).
+const CONTINUATION_SHARE: f64 = 0.35;
 /// Largest evidence one tone in one window adds to the short/long test.
 const LLR_CLIP: f64 = 8.0;
 
@@ -814,9 +816,12 @@ impl Decoder {
                             // even where the per-window noise estimate jumps.
                             let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
                             let ended = t.level[k] * before * before;
-                            // Continuation modelled with an unknown phase at the slot edge:
-                            // powers add (the conservative case for a phase jump).
-                            let continued = t.level[k] * (before * before + after * after);
+                            // Continuation modelled conservatively: an unknown phase at the
+                            // slot edge (powers add) and the second frame up to 4.5 dB
+                            // quieter (another encoder may normalise each frame's peak).
+                            // A louder continuation only strengthens the evidence.
+                            let continued =
+                                t.level[k] * (before * before + CONTINUATION_SHARE * after * after);
                             // Clipped: at high SNR a small level mismatch (fades, a phase
                             // step, room echo) must not swamp the evidence of other windows.
                             llr += (ln_tone_likelihood(r, continued)

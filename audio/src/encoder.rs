@@ -164,10 +164,16 @@ impl Encoder {
         let fade_len =
             (self.config.fade_s * f64::from(self.config.sample_rate_hz)).round() as usize;
         let mut out = Vec::with_capacity(self.message_samples(message));
-        for frame in message.frames() {
-            let period = self.period(&frame);
-            let peak = period.iter().fold(0.0f32, |m, x| m.max(x.abs())).max(1e-9);
-            let gain = self.config.peak_level / peak;
+        let periods: Vec<Vec<f32>> = message.frames().iter().map(|f| self.period(f)).collect();
+        // One gain for the whole message, set by its peakiest frame, so a tone sounding in
+        // both frames of a long message keeps its level.
+        let peak = periods
+            .iter()
+            .flatten()
+            .fold(0.0f32, |m, x| m.max(x.abs()))
+            .max(1e-9);
+        let gain = self.config.peak_level / peak;
+        for period in &periods {
             for i in 0..frame_len {
                 // Absolute sample index keeps every tone's phase continuous across frames.
                 let n = out.len();

@@ -14,7 +14,7 @@
 //! basic → not a message, consecutive windows agree, once per transmission) and tells
 //! short from long. See the `decoder` module docs for the detector and its false-alarm
 //! reasoning. WAV files ([`read_wav`], [`write_wav_i16`]) and raw s16le PCM
-//! ([`S16leDecoder`], [`i16_to_s16le`]) are the I/O; `channel` holds the seeded noise and
+//! ([`S16leDecoder`], [`i16_to_s16le`]) are the I/O; [`channel`] holds the seeded noise and
 //! interference models `huddle audio eval` measures against.
 //!
 //! **What it is not.** Not a general data-over-sound modem (about 6 bits per second at
@@ -50,9 +50,11 @@
 //! ```
 
 mod analysis;
+pub mod channel;
 
 mod decoder;
 mod encoder;
+pub mod evaluation;
 mod pcm;
 mod significance;
 mod tones;
