@@ -2,3 +2,7 @@
 //! them: the harness that runs comms replicas over netsim, and the field simulator behind
 //! `huddle sim`. The protocol itself lives in `comms`, the filters in `fusion`, the tone
 //! codec in `audio` and the network model in `netsim`; this crate adds no protocol logic.
+
+pub mod field;
+pub mod harness;
+pub mod sim;

@@ -19,6 +19,8 @@ enum Command {
     Audio(cli::audio::AudioArgs),
     /// World-model tools: offline pose EKF replay.
     Fusion(cli::fusion::FusionArgs),
+    /// Simulate a match over a simulated network and report on arbitration (the default).
+    Sim(cli::sim::SimArgs),
 }
 
 fn main() -> Result<()> {
@@ -27,10 +29,8 @@ fn main() -> Result<()> {
     match cli.command {
         Some(Command::Audio(args)) => cli::audio::run(args),
         Some(Command::Fusion(args)) => cli::fusion::run(args),
-        None => {
-            use clap::CommandFactory;
-            Cli::command().print_help()?;
-            Ok(())
-        }
+        Some(Command::Sim(args)) => cli::sim::run(args),
+        // The README's main command: `cargo run --release` runs the built-in match.
+        None => cli::sim::run(cli::sim::SimArgs::default()),
     }
 }

@@ -98,6 +98,7 @@
 //! assert_eq!(plan, Some(("plan".into(), 1, 1, Value::from("pass to 2"))));
 //! ```
 
+pub mod arbitration;
 mod blackboard;
 mod config;
 mod key;

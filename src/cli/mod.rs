@@ -2,6 +2,7 @@
 
 pub mod audio;
 pub mod fusion;
+pub mod sim;
 
 /// Logs go to stderr, filtered by `RUST_LOG` (default `info`).
 pub fn init_tracing() {

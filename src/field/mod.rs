@@ -1,0 +1,445 @@
+//! The field simulator: a rectangle of carpet, a ball, our robots and a few opponents, in
+//! simulated time. It knows the truth (true poses, the true ball) and gives each robot
+//! only what its camera and wheels would: noisy sightings in the robot's frame and noisy
+//! odometry. What robots decide lives in [`behaviour`] and in `crate::sim`; the world only
+//! moves bodies, rolls the ball, resolves contacts and kicks, and counts goals.
+//!
+//! Not modelled: robots' shapes beyond a disc, occlusions, the ball leaving the ground.
+
+pub mod ball;
+pub mod behaviour;
+pub mod body;
+pub mod camera;
+pub mod geometry;
+
+use ball::{Ball, BallConfig};
+use body::{Body, Kinematics, MotionCommand, Odometry};
+use camera::{sight, standard_normal, CameraConfig, Frame};
+use geometry::{wrap_angle, Pose, Vec2};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// The field's size and the simulated physics.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FieldConfig {
+    /// Length between the goal lines, metres.
+    pub length_m: f64,
+    /// Width between the touch lines, metres.
+    pub width_m: f64,
+    /// Goal mouth width, metres.
+    pub goal_width_m: f64,
+    /// Carpet beyond the lines up to the boards, metres.
+    pub border_m: f64,
+    /// Our robots' bases.
+    pub kinematics: Kinematics,
+    /// Opponents' bases (slower: they are obstacles that chase the ball, not a team).
+    pub opponent_kinematics: Kinematics,
+    /// The ball.
+    pub ball: BallConfig,
+    /// Every robot's camera.
+    pub camera: CameraConfig,
+    /// Odometry noise: standard deviation as a fraction of the motion.
+    pub odometry_noise_frac: f64,
+    /// Speed of a kick, m/s.
+    pub kick_speed_mps: f64,
+    /// Standard deviation of a kick's direction, radians.
+    pub kick_noise_rad: f64,
+}
+
+impl Default for FieldConfig {
+    fn default() -> Self {
+        Self {
+            length_m: 9.0,
+            width_m: 6.0,
+            goal_width_m: 1.5,
+            border_m: 0.5,
+            kinematics: Kinematics::default(),
+            opponent_kinematics: Kinematics {
+                top_speed_mps: 0.6,
+                ..Kinematics::default()
+            },
+            ball: BallConfig::default(),
+            camera: CameraConfig::default(),
+            odometry_noise_frac: 0.05,
+            kick_speed_mps: 4.0,
+            kick_noise_rad: 0.08,
+        }
+    }
+}
+
+impl FieldConfig {
+    /// Centre of the opponent goal mouth.
+    pub fn opponent_goal(&self) -> Vec2 {
+        Vec2::new(self.length_m / 2.0, 0.0)
+    }
+
+    /// Centre of our own goal mouth.
+    pub fn own_goal(&self) -> Vec2 {
+        Vec2::new(-self.length_m / 2.0, 0.0)
+    }
+
+    /// Fixed landmarks a camera can recognise: the four goal posts, the four corners and
+    /// the two ends of the halfway line.
+    pub fn landmarks(&self) -> [Vec2; 10] {
+        let (hx, hy, gy) = (
+            self.length_m / 2.0,
+            self.width_m / 2.0,
+            self.goal_width_m / 2.0,
+        );
+        [
+            Vec2::new(hx, gy),
+            Vec2::new(hx, -gy),
+            Vec2::new(-hx, gy),
+            Vec2::new(-hx, -gy),
+            Vec2::new(hx, hy),
+            Vec2::new(hx, -hy),
+            Vec2::new(-hx, hy),
+            Vec2::new(-hx, -hy),
+            Vec2::new(0.0, hy),
+            Vec2::new(0.0, -hy),
+        ]
+    }
+}
+
+/// Which goal the ball went into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Goal {
+    /// Into the opponent goal: we scored.
+    For,
+    /// Into our goal.
+    Against,
+}
+
+/// The whole field's true state.
+#[derive(Debug, Clone)]
+pub struct World {
+    cfg: FieldConfig,
+    /// Our robots' bodies (index = robot id − 1).
+    pub robots: Vec<Body>,
+    /// Opponents' bodies.
+    pub opponents: Vec<Body>,
+    /// The ball.
+    pub ball: Ball,
+    /// Goals we scored.
+    pub goals_for: u32,
+    /// Goals scored against us.
+    pub goals_against: u32,
+    commands: Vec<MotionCommand>,
+    odometry: Vec<Odometry>,
+    /// One random stream per robot (camera, odometry) and one for the world, so that
+    /// adding a robot does not change what the others see.
+    robot_rngs: Vec<ChaCha8Rng>,
+    world_rng: ChaCha8Rng,
+}
+
+impl World {
+    /// A world with `robots` robots at `starts` (poses), `opponents` opponents spread over
+    /// the opponent half, and the ball at the centre spot; `seed` fixes all noise.
+    pub fn new(cfg: FieldConfig, starts: &[Pose], opponents: usize, seed: u64) -> Self {
+        let robots: Vec<Body> = starts
+            .iter()
+            .map(|&pose| Body {
+                pose,
+                velocity: Vec2::default(),
+            })
+            .collect();
+        let opponents = (0..opponents)
+            .map(|i| {
+                let y = (i as f64 + 0.5) / opponents as f64 - 0.5;
+                Body {
+                    pose: Pose {
+                        at: Vec2::new(cfg.length_m * 0.25, y * cfg.width_m * 0.8),
+                        theta_rad: std::f64::consts::PI,
+                    },
+                    velocity: Vec2::default(),
+                }
+            })
+            .collect();
+        let n = robots.len();
+        let mut world_rng = ChaCha8Rng::seed_from_u64(seed);
+        let robot_rngs = (0..n)
+            .map(|_| ChaCha8Rng::seed_from_u64(world_rng.random()))
+            .collect();
+        Self {
+            cfg,
+            robots,
+            opponents,
+            ball: Ball::default(),
+            goals_for: 0,
+            goals_against: 0,
+            commands: vec![MotionCommand::default(); n],
+            odometry: vec![Odometry::default(); n],
+            robot_rngs,
+            world_rng,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &FieldConfig {
+        &self.cfg
+    }
+
+    /// Set robot `i`'s motion command (kept until the next one).
+    pub fn command(&mut self, i: usize, cmd: MotionCommand) {
+        self.commands[i] = cmd;
+    }
+
+    /// Robot `i` tries to kick the ball toward `direction_rad`. It works only when the
+    /// ball touches the robot's front (within ±40° of its heading); returns whether it did.
+    pub fn kick(&mut self, i: usize, direction_rad: f64) -> bool {
+        let pose = self.robots[i].pose;
+        let rel = pose.to_local(self.ball.at);
+        let reach = self.cfg.kinematics.radius_m + self.cfg.ball.radius_m + 0.08;
+        if rel.norm() > reach || rel.angle().abs() > 40f64.to_radians() {
+            return false;
+        }
+        let noise = self.cfg.kick_noise_rad * standard_normal(&mut self.robot_rngs[i]);
+        self.ball.velocity = Vec2::from_angle(direction_rad + noise) * self.cfg.kick_speed_mps;
+        true
+    }
+
+    /// One camera frame of robot `i` (uses robot `i`'s noise stream only).
+    pub fn look(&mut self, i: usize) -> Frame {
+        let cam = self.cfg.camera;
+        let pose = self.robots[i].pose;
+        let rng = &mut self.robot_rngs[i];
+        let ball = sight(&cam, &pose, self.ball.at, cam.ball_range_m, rng);
+        let goal = self.cfg.opponent_goal();
+        let opponent_goal_in_view = camera::in_view(&cam, &pose, goal, cam.landmark_range_m)
+            && rng.random::<f64>() < cam.detect_prob;
+        let landmarks = self
+            .cfg
+            .landmarks()
+            .iter()
+            .enumerate()
+            .filter_map(|(k, &p)| sight(&cam, &pose, p, cam.landmark_range_m, rng).map(|s| (k, s)))
+            .collect();
+        let opponents = self
+            .opponents
+            .iter()
+            .filter_map(|o| sight(&cam, &pose, o.pose.at, cam.landmark_range_m, rng))
+            .collect();
+        Frame {
+            ball,
+            opponent_goal_in_view,
+            landmarks,
+            opponents,
+        }
+    }
+
+    /// Robot `i`'s noisy odometry since the previous call.
+    pub fn read_odometry(&mut self, i: usize) -> Odometry {
+        let o = std::mem::take(&mut self.odometry[i]);
+        let k = self.cfg.odometry_noise_frac;
+        let rng = &mut self.robot_rngs[i];
+        let d = o.forward_m.hypot(o.left_m);
+        Odometry {
+            forward_m: o.forward_m + k * d * standard_normal(rng),
+            left_m: o.left_m + k * d * standard_normal(rng),
+            turn_rad: o.turn_rad + k * (o.turn_rad.abs() + 0.2 * d) * standard_normal(rng),
+        }
+    }
+
+    /// Advance the world by `dt_s`: move robots and opponents, roll the ball, resolve
+    /// contacts, detect goals (the ball is put back on the centre spot).
+    pub fn step(&mut self, dt_s: f64) -> Option<Goal> {
+        let kin = self.cfg.kinematics;
+        for (i, body) in self.robots.iter_mut().enumerate() {
+            let o = body.step(&kin, &self.commands[i], dt_s);
+            self.odometry[i] = self.odometry[i].then(o);
+        }
+        let okin = self.cfg.opponent_kinematics;
+        for k in 0..self.opponents.len() {
+            let cmd = behaviour::opponent_command(
+                &self.cfg,
+                k,
+                &self.opponents[k],
+                &self.opponents,
+                &self.ball,
+            );
+            self.opponents[k].step(&okin, &cmd, dt_s);
+        }
+        let half_x = self.cfg.length_m / 2.0 + self.cfg.border_m;
+        let half_y = self.cfg.width_m / 2.0 + self.cfg.border_m;
+        let before = self.ball.at;
+        self.ball.step(&self.cfg.ball, dt_s, half_x, half_y);
+        self.resolve_contacts();
+        for b in self.robots.iter_mut().chain(self.opponents.iter_mut()) {
+            b.pose.at.x = b.pose.at.x.clamp(-half_x, half_x);
+            b.pose.at.y = b.pose.at.y.clamp(-half_y, half_y);
+        }
+        let goal = self.goal_crossed(before, self.ball.at);
+        if let Some(g) = goal {
+            match g {
+                Goal::For => self.goals_for += 1,
+                Goal::Against => self.goals_against += 1,
+            }
+            // Kick-off: the ball back near the centre spot, robots keep their places.
+            let jitter = Vec2::new(
+                0.3 * standard_normal(&mut self.world_rng),
+                0.3 * standard_normal(&mut self.world_rng),
+            );
+            self.ball = Ball {
+                at: jitter,
+                velocity: Vec2::default(),
+            };
+        }
+        goal
+    }
+
+    fn goal_crossed(&self, before: Vec2, after: Vec2) -> Option<Goal> {
+        let hx = self.cfg.length_m / 2.0;
+        let mouth = self.cfg.goal_width_m / 2.0;
+        if before.x < hx && after.x >= hx && after.y.abs() < mouth {
+            Some(Goal::For)
+        } else if before.x > -hx && after.x <= -hx && after.y.abs() < mouth {
+            Some(Goal::Against)
+        } else {
+            None
+        }
+    }
+
+    /// Bodies push the ball (it takes their approach speed) and push each other apart.
+    fn resolve_contacts(&mut self) {
+        let ball_r = self.cfg.ball.radius_m;
+        let (kr, okr) = (
+            self.cfg.kinematics.radius_m,
+            self.cfg.opponent_kinematics.radius_m,
+        );
+        let n = self.robots.len();
+        for k in 0..n + self.opponents.len() {
+            let (body, r) = if k < n {
+                (&self.robots[k], kr)
+            } else {
+                (&self.opponents[k - n], okr)
+            };
+            let rel = self.ball.at - body.pose.at;
+            let d = rel.norm();
+            if d < r + ball_r && d > 1e-9 {
+                let normal = rel * (1.0 / d);
+                self.ball.at = body.pose.at + normal * (r + ball_r);
+                let closing = (body.velocity - self.ball.velocity).dot(normal);
+                if closing > 0.0 {
+                    // A little faster than the body: the ball rolls off ahead of it.
+                    self.ball.velocity = self.ball.velocity + normal * (closing * 1.2);
+                }
+            }
+        }
+        let mut bodies: Vec<(bool, usize)> = (0..n).map(|i| (true, i)).collect();
+        bodies.extend((0..self.opponents.len()).map(|i| (false, i)));
+        for a in 0..bodies.len() {
+            for b in a + 1..bodies.len() {
+                let pa = self.body(bodies[a]).pose.at;
+                let pb = self.body(bodies[b]).pose.at;
+                let ra = if bodies[a].0 { kr } else { okr };
+                let rb = if bodies[b].0 { kr } else { okr };
+                let rel = pb - pa;
+                let d = rel.norm();
+                if d < ra + rb && d > 1e-9 {
+                    let push = rel * ((ra + rb - d) / d / 2.0);
+                    self.body_mut(bodies[a]).pose.at = pa - push;
+                    self.body_mut(bodies[b]).pose.at = pb + push;
+                }
+            }
+        }
+    }
+
+    fn body(&self, (ours, i): (bool, usize)) -> &Body {
+        if ours {
+            &self.robots[i]
+        } else {
+            &self.opponents[i]
+        }
+    }
+
+    fn body_mut(&mut self, (ours, i): (bool, usize)) -> &mut Body {
+        if ours {
+            &mut self.robots[i]
+        } else {
+            &mut self.opponents[i]
+        }
+    }
+
+    /// Whether `pose` would see the ball now, ignoring detection failures and noise.
+    pub fn ball_in_view(&self, pose: &Pose) -> bool {
+        camera::in_view(
+            &self.cfg.camera,
+            pose,
+            self.ball.at,
+            self.cfg.camera.ball_range_m,
+        )
+    }
+
+    /// Angle from a point to the opponent goal centre.
+    pub fn bearing_to_opponent_goal(&self, from: Vec2) -> f64 {
+        wrap_angle((self.cfg.opponent_goal() - from).angle())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ball_rolled_into_the_opponent_goal_counts_and_is_put_back() {
+        let mut w = World::new(FieldConfig::default(), &[], 0, 1);
+        w.ball = Ball {
+            at: Vec2::new(4.0, 0.2),
+            velocity: Vec2::new(3.0, 0.0),
+        };
+        let mut scored = None;
+        for _ in 0..100 {
+            if let Some(g) = w.step(0.01) {
+                scored = Some(g);
+                break;
+            }
+        }
+        assert_eq!(scored, Some(Goal::For));
+        assert_eq!(w.goals_for, 1);
+        assert!(
+            w.ball.at.norm() < 1.5,
+            "ball back near the centre: {:?}",
+            w.ball.at
+        );
+    }
+
+    #[test]
+    fn a_robot_driving_into_the_ball_pushes_it_ahead() {
+        let start = Pose {
+            at: Vec2::new(-1.0, 0.0),
+            theta_rad: 0.0,
+        };
+        let mut w = World::new(FieldConfig::default(), &[start], 0, 2);
+        w.command(
+            0,
+            MotionCommand {
+                velocity: Vec2::new(1.0, 0.0),
+                heading_rad: 0.0,
+            },
+        );
+        for _ in 0..300 {
+            w.step(0.01);
+        }
+        assert!(w.ball.at.x > w.robots[0].pose.at.x, "the ball stays ahead");
+        assert!(
+            w.ball.at.x > 1.0,
+            "and was carried forward: {:?}",
+            w.ball.at
+        );
+    }
+
+    #[test]
+    fn a_kick_only_works_when_the_ball_is_at_the_robots_front() {
+        let start = Pose {
+            at: Vec2::new(-0.27, 0.0),
+            theta_rad: 0.0,
+        };
+        let mut w = World::new(FieldConfig::default(), &[start], 0, 3);
+        assert!(w.kick(0, 0.0), "ball right in front");
+        assert!(w.ball.velocity.x > 3.0);
+        w.ball = Ball::default();
+        w.robots[0].pose.theta_rad = std::f64::consts::PI;
+        assert!(!w.kick(0, 0.0), "ball behind the robot");
+    }
+}
