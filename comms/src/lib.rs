@@ -6,6 +6,7 @@ mod config;
 mod key;
 pub mod literal;
 mod pattern;
+pub mod relay;
 mod time;
 mod value;
 pub mod wire;
