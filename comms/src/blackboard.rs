@@ -109,7 +109,6 @@ impl Blackboard {
         }
     }
 
-    #[allow(dead_code)] // used by the replica, next step
     pub(crate) fn set_incarnation(&mut self, incarnation: u64) {
         self.incarnation = incarnation;
     }
@@ -273,13 +272,11 @@ impl Blackboard {
     }
 
     /// The bindings this robot owns under `scope` (for the replica's refresh).
-    #[allow(dead_code)] // used by the replica, next step
     pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&String, &Entry)> {
         self.scopes.get(&scope).into_iter().flat_map(|s| s.iter())
     }
 
     /// One stored binding by scope and path.
-    #[allow(dead_code)] // used by the replica, next step
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
         self.scopes.get(&scope)?.get(path)
     }

@@ -7,6 +7,9 @@ mod key;
 pub mod literal;
 mod pattern;
 pub mod relay;
+mod replica;
+mod stats;
+mod talk;
 mod time;
 mod value;
 pub mod wire;
@@ -16,5 +19,8 @@ pub use config::{load_config, parse_config, ConfigEntry, ConfigError, LineError}
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
+pub use replica::{ConfigInvalid, Destination, Event, PostError, Replica, ReplicaConfig, Transmit};
+pub use stats::{DropReason, PeerInfo, Stats};
+pub use talk::TalkLimits;
 pub use time::Instant;
 pub use value::{UnknownType, Value, ValueType};

@@ -1,2 +1,139 @@
-//! fusion: geometry, pose and ball EKFs, local and global world models.
-//! (Being built: see issue "World models".)
+//! fusion: the world models of a robot-soccer team — pose EKF, ball EKF, each robot's local
+//! world model (LWM) and the global world model (GWM) it builds from its teammates' LWMs
+//! (tsinghua-2005 §4, eqs. (2)–(16); cmunited-97-perception §2.3).
+//!
+//! It is pure computation: no I/O, no clock, no randomness. Every time is an `f64` argument
+//! in seconds (`t_s`, `dt_s`) on the caller's clock; every filter step is a function of its
+//! inputs. It is *not* a localisation system (no particle filter, no landmark recognition,
+//! no data association beyond gating) and it does not send anything: the LWM encodes to
+//! bytes that the caller publishes (as `*.var.world.local`) and decodes what it receives.
+//!
+//! # Letters
+//! The textbook letters, used in code and docs alike:
+//!
+//! | letter | meaning |
+//! |---|---|
+//! | x, P | state mean and covariance |
+//! | F (the seed's A) | state transition Jacobian ∂f/∂x |
+//! | W | noise Jacobian ∂f/∂w (seed eq. (11)): rotates robot-frame odometry noise into the field frame |
+//! | Q | process noise covariance (per odometry event for the pose; integrated over `dt_s` for the ball) |
+//! | H | measurement Jacobian ∂h/∂x |
+//! | R | measurement noise covariance |
+//! | ν, S, K | innovation z − h(x), its covariance H P Hᵀ + R, the gain P Hᵀ S⁻¹ |
+//!
+//! Every update uses the Joseph form P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ, which stays
+//! symmetric and positive semi-definite where the seed's eq. (15) can drift.
+//!
+//! # Frames and the pose EKF
+//! Field frame fixed to the pitch; robot frame with +y forward and +x right (seed Fig. 6),
+//! θ counter-clockwise with θ = 0 facing field +y. Odometry (forward f, left l, turn Δθ)
+//! moves the pose by eq. (6): x' = x − f sin θ − l cos θ, y' = y + f cos θ − l sin θ,
+//! θ' = θ + Δθ; F is eq. (10); Q = diag(q_right, q_forward, q_θ) in the robot frame enters
+//! as W Q Wᵀ (eq. (12)). A landmark b seen at l in robot coordinates has
+//! h = Rot(θ)ᵀ (b − p) (eq. (8)); the innovation is exactly the bracket of eq. (14).
+//! Where the seed is ambiguous this crate decides, and says so:
+//! - eq. (6) applies the translation in the heading *before* the turn; we do the same;
+//! - the seed never writes H; ours is ∂(8)/∂(x, y, θ), see [`field_to_robot_pose_jacobian`];
+//! - eq. (13) carries a V R Vᵀ that it then sets to R; we use R (the sighting is already in
+//!   robot coordinates);
+//! - eq. (7) adds the noise as `Rot(θ)·(w_x, w_y, w_θ)`, so w_x is along the robot's +x
+//!   (right) and w_y along +y (forward): Q's first entry is *rightward* noise, not leftward;
+//! - eq. (15) is the short covariance form; we use Joseph (above);
+//! - θ is wrapped to (−π, π] after every step (the seed does not say).
+//!
+//! Range/bearing sightings are a second measurement model: bearing counter-clockwise from
+//! forward, `atan2(−l_x, l_y)`, innovation wrapped.
+//!
+//! # Ball EKF
+//! State (x, y, vx, vy) in the field frame, velocity decaying at `friction_per_s` with
+//! white acceleration noise; the exact discretisation is in [`BallModel`]'s module docs
+//! (see [`BallModel::transition`]). [`BallEstimate::predict_to`] predicts to any future time
+//! (the goalie's interception query). The seed's static model is [`BallModel::Static`].
+//! A sighting in robot coordinates becomes a field-frame position with
+//! R = Rot R_l Rotᵀ + J P_pose Jᵀ, J the Jacobian of the robot→field transform with respect
+//! to the pose ([`field_observation`]), so a poorly localised robot reports a wide ball.
+//!
+//! # Team ball: why it is built this way
+//! A teammate's ball *estimate* is not a measurement: it already contains everything that
+//! robot saw before, the process noise it shares with every other track of the same ball,
+//! and — if its GWM fed back — other robots' information. Fusing such estimates as if
+//! independent, message after message, counts the same sightings again and again (≈ 4×
+//! overconfident); covariance intersection avoids that by assuming the worst correlation and
+//! pays for it in accuracy (≈ 1.35× the RMSE of a centralized filter).
+//!
+//! huddle sends the *new information* instead. Each LWM message carries, besides the
+//! snapshot, one field-frame position measurement: the information-weighted combination
+//! Λ = Σ R_i⁻¹, z = Λ⁻¹ Σ R_i⁻¹ z_i of exactly the sightings the robot made since its previous
+//! message, stamped at their weighted mean time (see [`LocalModel::publish`]). Every sighting
+//! is therefore published once; a sequence number makes a re-sent or duplicated message a
+//! no-op ([`Ingest::Duplicate`]); the robot's own GWM takes its own messages the same way.
+//! The GWM runs one ball filter, the same model as the robots', over these measurements,
+//! each placed at its own time (reception time − receiver-side age − its offset in the
+//! message), kept re-orderable for `commit_lag_s` so late arrivals slot in by time. That
+//! is the centralized filter, minus lost messages and the batching within one publish
+//! period, so nothing is counted twice and the covariance stays honest.
+//!
+//! Gating: each measurement must pass a χ² gate against the team ball at its time. A robot
+//! whose measurements fail and none pass since *dissents*. One liar dissents alone and
+//! never moves the team ball. A real kick makes every robot that sees the ball dissent at
+//! once; when two or more dissenters' own ball tracks agree with each other, the team ball
+//! restarts from their fusion (their own tracks are built from their own sightings only, so
+//! this one-off product is not double counting). A lone dissenter may restart the ball only
+//! when no one has supported the team ball for `support_timeout_s`. When every teammate is
+//! silent, the team ball is the robot's own ([`TeamBallSource::OwnFallback`]).
+//!
+//! # The wire
+//! An LWM is [`LWM_WIRE_LEN`] = 48 bytes (mm, mrad-scale fixed point, σ on a log scale and
+//! correlations as i8), so it fits a 128-byte SPL message with room for a header. Quantising
+//! never shrinks a covariance: see [`LocalWorldModel::to_bytes`]. Decoding takes untrusted
+//! bytes and returns a [`DecodeError`], never panics.
+//!
+//! # Example
+//! One robot sees the ball, publishes; a teammate fuses it.
+//! ```
+//! use fusion::nalgebra::{Matrix2, Vector2, Vector3};
+//! use fusion::{BallSighting, GlobalConfig, GlobalModel, LocalConfig, LocalModel, Odometry, PoseEstimate};
+//!
+//! let start = PoseEstimate::new(0.0, -1.0, 0.0, Vector3::new(0.01, 0.01, 0.001));
+//! let mut lwm = LocalModel::new(LocalConfig::default(), start);
+//! lwm.odometry(&Odometry { forward_m: 0.1, left_m: 0.0, turn_rad: 0.0 });
+//! let seen = BallSighting { local: Vector2::new(0.0, 2.0), cov: Matrix2::identity() * 0.01 };
+//! lwm.ball_sighting(0.05, &seen);
+//! let bytes = lwm.publish(0.1).to_bytes().unwrap();
+//! assert!(bytes.len() <= 48);
+//!
+//! let mut gwm = GlobalModel::new(2, GlobalConfig::default());
+//! gwm.receive(1, &bytes, 0.15, 0.05).unwrap(); // robot 1's message, 50 ms old on arrival
+//! let team = gwm.team_ball(0.2).unwrap();
+//! assert!((team.estimate.position() - Vector2::new(0.0, 1.1)).norm() < 0.01);
+//! ```
+
+mod ball;
+mod confidence;
+mod geometry;
+mod global;
+mod kalman;
+mod local;
+mod pose;
+mod wire;
+
+pub use ball::{
+    field_observation, initial_estimate, update as ball_update, BallEstimate, BallFilter,
+    BallFilterConfig, BallModel, BallSighting, BallUpdate, CentralizedBall, FieldObservation,
+};
+pub use confidence::{pose_confidence, position_confidence, REFERENCE_RADIUS_M};
+pub use geometry::{
+    field_to_robot, field_to_robot_pose_jacobian, robot_to_field, robot_to_field_pose_jacobian,
+    rotation, wrap_angle,
+};
+pub use global::{
+    GlobalConfig, GlobalModel, GlobalStats, Ingest, TeamBall, TeamBallSource, Teammate,
+};
+pub use kalman::UpdateError;
+pub use local::{LocalConfig, LocalModel, LocalWorldModel};
+pub use nalgebra;
+pub use pose::{
+    predict as pose_predict, update_landmark, update_range_bearing, LandmarkSighting, Odometry,
+    PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting,
+};
+pub use wire::{DecodeError, EncodeError, LWM_WIRE_LEN};

@@ -1,0 +1,161 @@
+//! Counters a replica keeps about its traffic, and what it knows about its peers.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use crate::time::Instant;
+use crate::wire::DecodeError;
+
+/// Why a received datagram was not applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum DropReason {
+    /// Shorter than a header (or a tag).
+    TooShort,
+    /// Longer than the configured MTU.
+    Oversized,
+    /// Not a huddle frame.
+    BadMagic,
+    /// A format version this build does not speak.
+    UnknownVersion,
+    /// Another team's frame.
+    OtherTeam,
+    /// A team key is configured but the frame has no tag.
+    MissingTag,
+    /// The frame has a tag but no team key is configured.
+    UnexpectedTag,
+    /// Wrong tag: another key, or an altered frame.
+    BadTag,
+    /// Undecodable body, bad sender id or bad path.
+    Malformed,
+    /// With a team key: a frame seen before, or too old, from the current incarnation.
+    Replay,
+    /// From an incarnation of a robot that has since restarted.
+    RetiredIncarnation,
+    /// Carries this robot's id but another incarnation: two robots share an id.
+    RobotIdConflict,
+}
+
+impl DropReason {
+    /// Every reason, in stats order.
+    pub const ALL: [DropReason; 12] = [
+        DropReason::TooShort,
+        DropReason::Oversized,
+        DropReason::BadMagic,
+        DropReason::UnknownVersion,
+        DropReason::OtherTeam,
+        DropReason::MissingTag,
+        DropReason::UnexpectedTag,
+        DropReason::BadTag,
+        DropReason::Malformed,
+        DropReason::Replay,
+        DropReason::RetiredIncarnation,
+        DropReason::RobotIdConflict,
+    ];
+
+    /// The name used in `local.var.huddle.stats.drops.<name>`.
+    pub fn name(self) -> &'static str {
+        match self {
+            DropReason::TooShort => "too_short",
+            DropReason::Oversized => "oversized",
+            DropReason::BadMagic => "bad_magic",
+            DropReason::UnknownVersion => "unknown_version",
+            DropReason::OtherTeam => "other_team",
+            DropReason::MissingTag => "missing_tag",
+            DropReason::UnexpectedTag => "unexpected_tag",
+            DropReason::BadTag => "bad_tag",
+            DropReason::Malformed => "malformed",
+            DropReason::Replay => "replay",
+            DropReason::RetiredIncarnation => "retired_incarnation",
+            DropReason::RobotIdConflict => "robot_id_conflict",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+impl From<&DecodeError> for DropReason {
+    fn from(e: &DecodeError) -> DropReason {
+        match e {
+            DecodeError::TooShort => DropReason::TooShort,
+            DecodeError::Oversized => DropReason::Oversized,
+            DecodeError::BadMagic => DropReason::BadMagic,
+            DecodeError::UnknownVersion(_) => DropReason::UnknownVersion,
+            DecodeError::OtherTeam(_) => DropReason::OtherTeam,
+            DecodeError::MissingTag => DropReason::MissingTag,
+            DecodeError::UnexpectedTag => DropReason::UnexpectedTag,
+            DecodeError::BadTag => DropReason::BadTag,
+            DecodeError::Malformed(_) => DropReason::Malformed,
+        }
+    }
+}
+
+impl fmt::Display for DropReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Traffic counters of one replica.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Stats {
+    /// Datagrams handed to `handle_datagram`, good or bad.
+    pub frames_in: u64,
+    /// Their bytes.
+    pub bytes_in: u64,
+    /// Frames produced by `poll_transmit`.
+    pub frames_out: u64,
+    /// Their bytes.
+    pub bytes_out: u64,
+    /// This robot's own frames looped back by multicast (ignored, not dropped).
+    pub own_frames: u64,
+    /// Updates that changed or refreshed a stored value.
+    pub updates_applied: u64,
+    /// Updates older than the stored version (ignored).
+    pub updates_stale: u64,
+    /// Talk messages delivered.
+    pub talk_delivered: u64,
+    /// Talk messages given up.
+    pub talk_given_up: u64,
+    /// Talk messages re-sent on request.
+    pub talk_resent: u64,
+    /// NACK items sent.
+    pub nacks_sent: u64,
+    /// Talk items ignored because the sender has too many queues.
+    pub talk_queue_overflow: u64,
+    /// Last time each robot was heard (on this robot's clock).
+    pub last_heard: BTreeMap<u8, Instant>,
+    drops: [u64; DropReason::ALL.len()],
+}
+
+impl Stats {
+    /// Datagrams dropped for `reason`.
+    pub fn drops(&self, reason: DropReason) -> u64 {
+        self.drops[reason.index()]
+    }
+
+    /// Datagrams dropped for any reason.
+    pub fn drops_total(&self) -> u64 {
+        self.drops.iter().sum()
+    }
+
+    pub(crate) fn count_drop(&mut self, reason: DropReason) {
+        self.drops[reason.index()] += 1;
+    }
+}
+
+/// What this robot knows about a teammate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerInfo {
+    /// Its robot id.
+    pub robot: u8,
+    /// Its current incarnation.
+    pub incarnation: u64,
+    /// When a valid frame from it last arrived (this robot's clock).
+    pub last_heard: Instant,
+    /// Heard within the `departed_after` limit.
+    pub present: bool,
+    /// Valid frames received from it.
+    pub frames: u64,
+}

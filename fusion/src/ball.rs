@@ -1,0 +1,518 @@
+//! The ball EKF: position and velocity in the field frame with rolling friction
+//! (tsinghua-2005 §4.3; cmunited-97-perception §2.3 for prediction ahead in time).
+//!
+//! # Model
+//! State `(x, y, vx, vy)`. Between sightings the velocity decays exponentially,
+//! `dv/dt = −c v + w(t)`, with `c = friction_per_s` and `w` white acceleration noise of
+//! spectral density `q = accel_noise_m2_per_s3` on each axis. Its exact discretisation over
+//! `dt` (a = e^{−c dt}, g = (1 − a)/c, which is `dt` when c = 0) is
+//!
+//! ```text
+//! F = [1 0 g 0; 0 1 0 g; 0 0 a 0; 0 0 0 a]
+//! Q_pp = q/c³ (c dt − 2(1 − a) + (1 − a²)/2)
+//! Q_pv = q/c² ((1 − a) − (1 − a²)/2)
+//! Q_vv = q/(2c) (1 − a²)
+//! ```
+//! per axis (the cross-axis blocks are zero); for `c dt < 10⁻³` the series
+//! `q dt³ (1/3 − u/4 + 7u²/60)`, `q dt² (1/2 − u/2 + 7u²/24)`, `q dt (1 − u + 2u²/3)`
+//! (`u = c dt`) is used to avoid cancellation. A free-rolling ball therefore stops after
+//! travelling `v/c`.
+//!
+//! The seed's static model is [`BallModel::Static`]: the velocity is held at zero and the
+//! position drifts as a random walk.
+//!
+//! # Sightings
+//! A sighting is in robot coordinates. It is turned into a field-frame position
+//! measurement `z = p + Rot(θ) l` whose noise carries the robot's pose uncertainty:
+//! `R = Rot R_l Rotᵀ + J P_pose Jᵀ`, with `J = ∂z/∂(x, y, θ)`
+//! ([`crate::geometry::robot_to_field_pose_jacobian`]). The update is then linear,
+//! `H = [I₂ 0]`.
+
+use crate::geometry::{robot_to_field, robot_to_field_pose_jacobian, rotation};
+use crate::kalman::{self, UpdateError};
+use crate::pose::PoseEstimate;
+use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
+
+/// How the ball moves between sightings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BallModel {
+    /// Rolling with exponential velocity decay and white acceleration noise.
+    Rolling {
+        /// c: velocity decay rate (1/s). 0 means no friction.
+        friction_per_s: f64,
+        /// q: acceleration noise spectral density per axis (m²/s³).
+        accel_noise_m2_per_s3: f64,
+    },
+    /// The seed's static model: the ball stays where it is, up to a random walk of the given
+    /// spectral density (m²/s) per axis; the velocity is zero with zero variance.
+    Static {
+        /// Position random-walk spectral density (m²/s).
+        drift_m2_per_s: f64,
+    },
+}
+
+impl Default for BallModel {
+    fn default() -> Self {
+        BallModel::Rolling {
+            friction_per_s: 0.5,
+            accel_noise_m2_per_s3: 0.5,
+        }
+    }
+}
+
+impl BallModel {
+    /// F and Q over `dt_s` (negative `dt_s` is treated as 0).
+    #[allow(non_snake_case)]
+    pub fn transition(&self, dt_s: f64) -> (Matrix4<f64>, Matrix4<f64>) {
+        let dt = dt_s.max(0.0);
+        match *self {
+            BallModel::Rolling {
+                friction_per_s: c,
+                accel_noise_m2_per_s3: q,
+            } => {
+                let u = c * dt;
+                let (a, g, qpp, qpv, qvv) = if u < 1e-3 {
+                    (
+                        1.0 - u + u * u / 2.0,
+                        dt * (1.0 - u / 2.0 + u * u / 6.0),
+                        q * dt.powi(3) * (1.0 / 3.0 - u / 4.0 + 7.0 * u * u / 60.0),
+                        q * dt * dt * (0.5 - u / 2.0 + 7.0 * u * u / 24.0),
+                        q * dt * (1.0 - u + 2.0 * u * u / 3.0),
+                    )
+                } else {
+                    let e1 = -(-u).exp_m1(); // 1 − a
+                    let e2 = -(-2.0 * u).exp_m1(); // 1 − a²
+                    (
+                        1.0 - e1,
+                        e1 / c,
+                        q / c.powi(3) * (u - 2.0 * e1 + e2 / 2.0),
+                        q / (c * c) * (e1 - e2 / 2.0),
+                        q / (2.0 * c) * e2,
+                    )
+                };
+                let F = Matrix4::new(
+                    1.0, 0.0, g, 0.0, //
+                    0.0, 1.0, 0.0, g, //
+                    0.0, 0.0, a, 0.0, //
+                    0.0, 0.0, 0.0, a,
+                );
+                let Q = Matrix4::new(
+                    qpp, 0.0, qpv, 0.0, //
+                    0.0, qpp, 0.0, qpv, //
+                    qpv, 0.0, qvv, 0.0, //
+                    0.0, qpv, 0.0, qvv,
+                );
+                (F, Q)
+            }
+            BallModel::Static { drift_m2_per_s } => {
+                let mut F = Matrix4::zeros();
+                F[(0, 0)] = 1.0;
+                F[(1, 1)] = 1.0;
+                let mut Q = Matrix4::zeros();
+                Q[(0, 0)] = drift_m2_per_s * dt;
+                Q[(1, 1)] = drift_m2_per_s * dt;
+                (F, Q)
+            }
+        }
+    }
+
+    /// The velocity variance a fresh track starts with: none for the static model.
+    fn initial_velocity_var(&self, rolling_var: f64) -> f64 {
+        match self {
+            BallModel::Rolling { .. } => rolling_var,
+            BallModel::Static { .. } => 0.0,
+        }
+    }
+}
+
+/// A ball estimate at time `t_s`: mean (x, y, vx, vy) in m and m/s, covariance P.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallEstimate {
+    /// When the estimate holds (s, on the owner's clock).
+    pub t_s: f64,
+    /// (x, y, vx, vy).
+    pub mean: Vector4<f64>,
+    /// P, 4×4.
+    pub cov: Matrix4<f64>,
+}
+
+impl BallEstimate {
+    /// The position (x, y).
+    pub fn position(&self) -> Vector2<f64> {
+        Vector2::new(self.mean.x, self.mean.y)
+    }
+
+    /// The velocity (vx, vy).
+    pub fn velocity(&self) -> Vector2<f64> {
+        Vector2::new(self.mean.z, self.mean.w)
+    }
+
+    /// The 2×2 position block of P.
+    pub fn position_cov(&self) -> Matrix2<f64> {
+        self.cov.fixed_view::<2, 2>(0, 0).into_owned()
+    }
+
+    /// The estimate predicted to `t_s` (x⁻ = F x, P⁻ = F P Fᵀ + Q). Any future time works, so
+    /// this is also the interception query; a `t_s` before `self.t_s` returns `self`.
+    #[allow(non_snake_case)]
+    pub fn predict_to(&self, model: &BallModel, t_s: f64) -> BallEstimate {
+        if t_s <= self.t_s {
+            return *self;
+        }
+        let (F, Q) = model.transition(t_s - self.t_s);
+        let cov = F * self.cov * F.transpose() + Q;
+        BallEstimate {
+            t_s,
+            mean: F * self.mean,
+            cov: (cov + cov.transpose()) * 0.5,
+        }
+    }
+
+    /// Squared Mahalanobis distance between this estimate's position and `obs` (both at
+    /// `obs.t_s` after prediction), using S = P_pos + R.
+    pub fn position_mahalanobis_sq(
+        &self,
+        model: &BallModel,
+        obs: &FieldObservation,
+    ) -> Option<f64> {
+        let p = self.predict_to(model, obs.t_s);
+        kalman::mahalanobis_sq(
+            &(obs.position - p.position()),
+            &(p.position_cov() + obs.cov),
+        )
+    }
+}
+
+/// A ball sighting in robot coordinates (x right, y forward) with its noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallSighting {
+    /// Where the robot saw the ball.
+    pub local: Vector2<f64>,
+    /// R_l, the sighting's covariance in robot coordinates (m²).
+    pub cov: Matrix2<f64>,
+}
+
+/// A position measurement of the ball in the field frame, valid at `t_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldObservation {
+    /// When the ball was there.
+    pub t_s: f64,
+    /// z, field coordinates.
+    pub position: Vector2<f64>,
+    /// R, including the observer's pose uncertainty.
+    pub cov: Matrix2<f64>,
+}
+
+/// Turns a sighting by a robot at `pose` into a field-frame observation, carrying the pose
+/// covariance into R through the Jacobian of the robot→field transform.
+pub fn field_observation(
+    t_s: f64,
+    pose: &PoseEstimate,
+    sighting: &BallSighting,
+) -> FieldObservation {
+    let rot = rotation(pose.mean.z);
+    let j = robot_to_field_pose_jacobian(&pose.mean, &sighting.local);
+    let cov = rot * sighting.cov * rot.transpose() + j * pose.cov * j.transpose();
+    FieldObservation {
+        t_s,
+        position: robot_to_field(&pose.mean, &sighting.local),
+        cov: (cov + cov.transpose()) * 0.5,
+    }
+}
+
+/// Predicts `est` to the observation's time and applies it (H = [I₂ 0], Joseph form).
+/// Returns the new estimate and the observation's Mahalanobis².
+#[allow(non_snake_case)]
+pub fn update(
+    model: &BallModel,
+    est: &BallEstimate,
+    obs: &FieldObservation,
+    gate_chi2: Option<f64>,
+) -> Result<(BallEstimate, f64), UpdateError> {
+    let prior = est.predict_to(model, obs.t_s);
+    let H = Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+    let nu = obs.position - prior.position();
+    let u = kalman::update(&prior.mean, &prior.cov, &nu, &H, &obs.cov, gate_chi2)?;
+    Ok((
+        BallEstimate {
+            t_s: prior.t_s,
+            mean: u.mean,
+            cov: u.cov,
+        },
+        u.mahalanobis_sq,
+    ))
+}
+
+/// A fresh track from one observation: position from z, velocity zero with a wide variance.
+pub fn initial_estimate(
+    model: &BallModel,
+    obs: &FieldObservation,
+    velocity_var: f64,
+) -> BallEstimate {
+    let mut cov = Matrix4::zeros();
+    cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&obs.cov);
+    let vv = model.initial_velocity_var(velocity_var);
+    cov[(2, 2)] = vv;
+    cov[(3, 3)] = vv;
+    BallEstimate {
+        t_s: obs.t_s,
+        mean: Vector4::new(obs.position.x, obs.position.y, 0.0, 0.0),
+        cov,
+    }
+}
+
+/// Settings of a [`BallFilter`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallFilterConfig {
+    /// The motion model.
+    pub model: BallModel,
+    /// Velocity variance of a fresh track (m²/s²).
+    pub initial_velocity_var: f64,
+    /// χ² (2 dof) beyond which a sighting counts as an outlier and is not applied.
+    pub outlier_chi2: f64,
+    /// After this many consecutive outliers the track restarts from the latest one (a kick
+    /// the motion model could not follow).
+    pub reset_after_outliers: u32,
+}
+
+impl Default for BallFilterConfig {
+    fn default() -> Self {
+        BallFilterConfig {
+            model: BallModel::default(),
+            initial_velocity_var: 4.0,
+            outlier_chi2: 13.82,
+            reset_after_outliers: 2,
+        }
+    }
+}
+
+/// What one observation did to a [`BallFilter`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BallUpdate {
+    /// There was no track; it now starts here.
+    Initialised,
+    /// Applied; carries the Mahalanobis².
+    Updated(f64),
+    /// Not applied (Mahalanobis² beyond the outlier gate).
+    Outlier(f64),
+    /// Too many outliers in a row: the track restarted from this observation.
+    Restarted,
+    /// Not applied: non-finite or degenerate input.
+    Rejected(UpdateError),
+}
+
+/// A running ball EKF fed field-frame observations in time order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BallFilter {
+    /// Settings.
+    pub config: BallFilterConfig,
+    estimate: Option<BallEstimate>,
+    outliers_in_a_row: u32,
+}
+
+impl BallFilter {
+    /// A filter with no track yet.
+    pub fn new(config: BallFilterConfig) -> Self {
+        BallFilter {
+            config,
+            estimate: None,
+            outliers_in_a_row: 0,
+        }
+    }
+
+    /// The latest estimate (at the time of the last observation), if any.
+    pub fn estimate(&self) -> Option<&BallEstimate> {
+        self.estimate.as_ref()
+    }
+
+    /// The estimate predicted to `t_s`.
+    pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
+        self.estimate.map(|e| e.predict_to(&self.config.model, t_s))
+    }
+
+    /// Applies one observation (an observation older than the track is applied at the
+    /// track's time).
+    pub fn observe(&mut self, obs: &FieldObservation) -> BallUpdate {
+        if !obs
+            .position
+            .iter()
+            .chain(obs.cov.iter())
+            .all(|v| v.is_finite())
+            || !obs.t_s.is_finite()
+        {
+            return BallUpdate::Rejected(UpdateError::NonFinite);
+        }
+        let Some(est) = self.estimate else {
+            self.estimate = Some(initial_estimate(
+                &self.config.model,
+                obs,
+                self.config.initial_velocity_var,
+            ));
+            return BallUpdate::Initialised;
+        };
+        match update(
+            &self.config.model,
+            &est,
+            obs,
+            Some(self.config.outlier_chi2),
+        ) {
+            Ok((next, d2)) => {
+                self.estimate = Some(next);
+                self.outliers_in_a_row = 0;
+                BallUpdate::Updated(d2)
+            }
+            Err(UpdateError::Gated { mahalanobis_sq, .. }) => {
+                self.outliers_in_a_row += 1;
+                if self.outliers_in_a_row >= self.config.reset_after_outliers {
+                    self.outliers_in_a_row = 0;
+                    let mut fresh =
+                        initial_estimate(&self.config.model, obs, self.config.initial_velocity_var);
+                    fresh.t_s = fresh.t_s.max(est.t_s);
+                    self.estimate = Some(fresh);
+                    BallUpdate::Restarted
+                } else {
+                    BallUpdate::Outlier(mahalanobis_sq)
+                }
+            }
+            Err(e) => BallUpdate::Rejected(e),
+        }
+    }
+
+    /// Applies a sighting in robot coordinates made from `pose` at `t_s`.
+    pub fn sighting(
+        &mut self,
+        t_s: f64,
+        pose: &PoseEstimate,
+        sighting: &BallSighting,
+    ) -> BallUpdate {
+        self.observe(&field_observation(t_s, pose, sighting))
+    }
+}
+
+/// The reference a team's fusion is measured against: one ball filter, same model, fed every
+/// robot's raw sightings (each with that robot's pose estimate) at once, with no network.
+/// Feed sightings in time order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CentralizedBall {
+    filter: BallFilter,
+}
+
+impl CentralizedBall {
+    /// A centralized filter with the given settings.
+    pub fn new(config: BallFilterConfig) -> Self {
+        CentralizedBall {
+            filter: BallFilter::new(config),
+        }
+    }
+
+    /// Applies a sighting that a robot at `pose` made at `t_s`.
+    pub fn sighting(
+        &mut self,
+        t_s: f64,
+        pose: &PoseEstimate,
+        sighting: &BallSighting,
+    ) -> BallUpdate {
+        self.filter.sighting(t_s, pose, sighting)
+    }
+
+    /// The estimate predicted to `t_s`.
+    pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
+        self.filter.estimate_at(t_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transition_matches_the_continuous_model() {
+        let model = BallModel::Rolling {
+            friction_per_s: 0.8,
+            accel_noise_m2_per_s3: 0.3,
+        };
+        // Composition: two half steps equal one step (F and Q alike), on both sides of the
+        // series switch-over.
+        for dt in [1e-4, 3e-3, 0.1, 1.7] {
+            let (f1, q1) = model.transition(dt);
+            let (fh, qh) = model.transition(dt / 2.0);
+            let f2 = fh * fh;
+            let q2 = fh * qh * fh.transpose() + qh;
+            assert!((f1 - f2).abs().max() < 1e-12, "F at dt {dt}");
+            assert!(
+                (q1 - q2).abs().max() < 1e-12 * (1.0 + q1.abs().max()),
+                "Q at dt {dt}"
+            );
+        }
+        // A ball at 2 m/s with c = 0.8 stops 2.5 m further on.
+        let est = BallEstimate {
+            t_s: 0.0,
+            mean: Vector4::new(0.0, 0.0, 2.0, 0.0),
+            cov: Matrix4::zeros(),
+        };
+        let far = est.predict_to(&model, 100.0);
+        assert!(
+            (far.mean.x - 2.5).abs() < 1e-9 && far.mean.z.abs() < 1e-9,
+            "{}",
+            far.mean
+        );
+    }
+
+    #[test]
+    fn frictionless_noise_is_the_textbook_white_acceleration_q() {
+        let model = BallModel::Rolling {
+            friction_per_s: 0.0,
+            accel_noise_m2_per_s3: 2.0,
+        };
+        let (_, q) = model.transition(0.5);
+        assert!((q[(0, 0)] - 2.0 * 0.125 / 3.0).abs() < 1e-15);
+        assert!((q[(0, 2)] - 2.0 * 0.25 / 2.0).abs() < 1e-15);
+        assert!((q[(2, 2)] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn pose_uncertainty_widens_the_observation_across_the_line_of_sight() {
+        // Facing +y, the ball 3 m ahead; a heading σ of 0.1 rad adds (0.3 m)² sideways (x).
+        let mut pose = PoseEstimate::new(0.0, 0.0, 0.0, Vector3::new(0.0, 0.0, 0.01));
+        let s = BallSighting {
+            local: Vector2::new(0.0, 3.0),
+            cov: Matrix2::identity() * 1e-4,
+        };
+        let obs = field_observation(1.0, &pose, &s);
+        assert!((obs.position - Vector2::new(0.0, 3.0)).norm() < 1e-12);
+        assert!(
+            (obs.cov[(0, 0)] - (1e-4 + 0.09)).abs() < 1e-9,
+            "{}",
+            obs.cov
+        );
+        assert!((obs.cov[(1, 1)] - 1e-4).abs() < 1e-9);
+        pose.cov = Matrix3::zeros();
+        assert!(
+            (field_observation(1.0, &pose, &s).cov - Matrix2::identity() * 1e-4).norm() < 1e-12
+        );
+    }
+
+    #[test]
+    fn a_kick_restarts_the_track_after_two_outliers() {
+        let mut f = BallFilter::new(BallFilterConfig::default());
+        let r = Matrix2::identity() * 1e-3;
+        for k in 0..30 {
+            let obs = FieldObservation {
+                t_s: k as f64 * 0.03,
+                position: Vector2::new(1.0, 1.0),
+                cov: r,
+            };
+            f.observe(&obs);
+        }
+        let away = |t: f64| FieldObservation {
+            t_s: t,
+            position: Vector2::new(2.5, 1.0),
+            cov: r,
+        };
+        assert!(matches!(f.observe(&away(0.93)), BallUpdate::Outlier(_)));
+        assert_eq!(f.observe(&away(0.96)), BallUpdate::Restarted);
+        assert!((f.estimate().unwrap().position() - Vector2::new(2.5, 1.0)).norm() < 1e-12);
+    }
+
+    use nalgebra::{Matrix3, Vector3};
+}

@@ -1,0 +1,435 @@
+//! The global world model (GWM): teammates from their LWMs and the team ball, fused from
+//! every robot's published ball information (see the crate docs for why it is built this way).
+
+use crate::ball::{initial_estimate, update, BallEstimate, BallModel, FieldObservation};
+use crate::confidence::position_confidence;
+use crate::kalman;
+use crate::local::LocalWorldModel;
+use crate::pose::PoseEstimate;
+use crate::wire::DecodeError;
+use nalgebra::{Matrix4, Vector2};
+use std::collections::BTreeMap;
+
+/// Settings of a [`GlobalModel`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GlobalConfig {
+    /// The team ball's motion model (use the robots' own).
+    pub ball: BallModel,
+    /// Velocity variance of a track started from a bare observation (m²/s²).
+    pub initial_velocity_var: f64,
+    /// χ² (2 dof) gate of an observation against the team ball at the observation's time.
+    pub gate_chi2: f64,
+    /// Observations younger than this stay re-orderable, so late arrivals slot in by time.
+    pub commit_lag_s: f64,
+    /// A teammate not heard for this long is silent: it no longer counts as fresh, and when
+    /// every teammate is silent the team ball is the robot's own.
+    pub stale_after_s: f64,
+    /// How fast a silent teammate's confidence falls (per second).
+    pub confidence_decay_per_s: f64,
+    /// A robot whose observations were rejected within this window, with none accepted
+    /// since, dissents from the team ball.
+    pub dissent_window_s: f64,
+    /// With no accepted observation for this long, a single dissenter may restart the ball.
+    pub support_timeout_s: f64,
+}
+
+impl Default for GlobalConfig {
+    fn default() -> Self {
+        GlobalConfig {
+            ball: BallModel::default(),
+            initial_velocity_var: 4.0,
+            gate_chi2: 13.82,
+            commit_lag_s: 0.5,
+            stale_after_s: 1.0,
+            confidence_decay_per_s: 0.5,
+            dissent_window_s: 0.5,
+            support_timeout_s: 0.5,
+        }
+    }
+}
+
+/// What [`GlobalModel::ingest`] did with one LWM.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Ingest {
+    /// Same or older sequence number than one already taken: ignored (re-send, duplicate).
+    Duplicate,
+    /// Pose taken; the message carried no new ball information.
+    NoObservation,
+    /// There was no team ball: it starts from this robot's.
+    Started,
+    /// The ball observation passed the gate and is fused.
+    Accepted(f64),
+    /// The ball observation failed the gate (Mahalanobis² given) and is not fused.
+    Rejected(f64),
+    /// The ball observation is older than the committed team ball: too late to use.
+    Late,
+}
+
+/// Counters, for reports and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GlobalStats {
+    /// Observations fused.
+    pub accepted: u64,
+    /// Observations gated out.
+    pub rejected: u64,
+    /// Observations too late to use.
+    pub late: u64,
+    /// Messages ignored as duplicates or re-sends.
+    pub duplicates: u64,
+    /// Times the team ball restarted from a consensus of dissenting robots.
+    pub restarts: u64,
+}
+
+/// Where a [`TeamBall`] came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TeamBallSource {
+    /// The fused team track.
+    Fused,
+    /// No fresh teammate: the robot's own ball.
+    OwnFallback,
+}
+
+/// The team ball at a time, with its global ball confidence (GBC).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TeamBall {
+    /// The estimate, predicted to the time asked for.
+    pub estimate: BallEstimate,
+    /// Global ball confidence in [0, 1].
+    pub gbc: f64,
+    /// Fused or fallback.
+    pub source: TeamBallSource,
+}
+
+/// A teammate as the GWM sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Teammate {
+    /// Robot id.
+    pub id: u8,
+    /// Its last reported pose (it stays put while the robot is silent).
+    pub pose: PoseEstimate,
+    /// Its SLC, minus the constant-rate decay since its last message.
+    pub confidence: f64,
+    /// Seconds since its last message's snapshot time.
+    pub silent_for_s: f64,
+    /// Its last LWM.
+    pub lwm: LocalWorldModel,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RobotRecord {
+    lwm: LocalWorldModel,
+    received_t_s: f64,
+    last_rejected_t_s: Option<f64>,
+    last_accepted_t_s: Option<f64>,
+}
+
+/// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
+/// through [`GlobalModel::ingest`]) and ask for [`GlobalModel::team_ball`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct GlobalModel {
+    own_id: u8,
+    config: GlobalConfig,
+    robots: BTreeMap<u8, RobotRecord>,
+    committed: Option<BallEstimate>,
+    pending: Vec<FieldObservation>,
+    head: Option<BallEstimate>,
+    last_support_t_s: f64,
+    stats: GlobalStats,
+}
+
+fn seq_newer(a: u16, b: u16) -> bool {
+    (a.wrapping_sub(b) as i16) > 0
+}
+
+impl GlobalModel {
+    /// An empty GWM for robot `own_id`.
+    pub fn new(own_id: u8, config: GlobalConfig) -> Self {
+        GlobalModel {
+            own_id,
+            config,
+            robots: BTreeMap::new(),
+            committed: None,
+            pending: Vec::new(),
+            head: None,
+            last_support_t_s: f64::NEG_INFINITY,
+            stats: GlobalStats::default(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &GlobalConfig {
+        &self.config
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> GlobalStats {
+        self.stats
+    }
+
+    /// A teammate's message as received at `now_s`, `age_s` old by the receiver's reckoning
+    /// (its snapshot holds at `now_s − age_s`). Bytes from the network: errors, never panics.
+    pub fn receive(
+        &mut self,
+        robot: u8,
+        bytes: &[u8],
+        now_s: f64,
+        age_s: f64,
+    ) -> Result<Ingest, DecodeError> {
+        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s)?;
+        Ok(self.ingest(robot, &lwm, now_s))
+    }
+
+    /// One LWM (`lwm.t_s` on this robot's clock). Use this for the robot's own LWM each
+    /// time it publishes, and [`GlobalModel::receive`] for teammates.
+    pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
+        if let Some(rec) = self.robots.get(&robot) {
+            // A robot that was silent for a while may have restarted its counter.
+            let restarted = lwm.t_s - rec.lwm.t_s > self.config.stale_after_s;
+            if !seq_newer(lwm.seq, rec.lwm.seq) && !restarted {
+                self.stats.duplicates += 1;
+                return Ingest::Duplicate;
+            }
+        }
+        let rec = self.robots.entry(robot).or_insert(RobotRecord {
+            lwm: *lwm,
+            received_t_s: now_s,
+            last_rejected_t_s: None,
+            last_accepted_t_s: None,
+        });
+        rec.lwm = *lwm;
+        rec.received_t_s = now_s;
+
+        let result = match lwm.observation {
+            None => Ingest::NoObservation,
+            Some(obs) => self.observe(robot, &obs, lwm, now_s),
+        };
+        self.commit(now_s - self.config.commit_lag_s);
+        self.restart_on_consensus(now_s);
+        result
+    }
+
+    fn observe(
+        &mut self,
+        robot: u8,
+        obs: &FieldObservation,
+        lwm: &LocalWorldModel,
+        now_s: f64,
+    ) -> Ingest {
+        let model = self.config.ball;
+        let Some(committed) = self.committed else {
+            let start = lwm
+                .ball
+                .unwrap_or_else(|| initial_estimate(&model, obs, self.config.initial_velocity_var));
+            self.committed = Some(start);
+            self.head = Some(start);
+            self.pending.clear();
+            self.last_support_t_s = now_s;
+            if let Some(rec) = self.robots.get_mut(&robot) {
+                rec.last_accepted_t_s = Some(now_s);
+            }
+            return Ingest::Started;
+        };
+        if obs.t_s < committed.t_s {
+            self.stats.late += 1;
+            return Ingest::Late;
+        }
+        let Some(prior) = self.state_at(obs.t_s) else {
+            return Ingest::Late;
+        };
+        let Some(d2) = prior.position_mahalanobis_sq(&model, obs) else {
+            return Ingest::Late;
+        };
+        let rec = self.robots.get_mut(&robot).expect("record inserted above");
+        if d2 > self.config.gate_chi2 {
+            rec.last_rejected_t_s = Some(now_s);
+            self.stats.rejected += 1;
+            return Ingest::Rejected(d2);
+        }
+        rec.last_accepted_t_s = Some(now_s);
+        self.last_support_t_s = now_s;
+        self.stats.accepted += 1;
+        let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
+        let in_order = at == self.pending.len();
+        self.pending.insert(at, *obs);
+        if in_order {
+            if let Some(head) = self.head {
+                if let Ok((next, _)) = update(&model, &head, obs, None) {
+                    self.head = Some(next);
+                }
+            }
+        } else {
+            self.head = self.replay(f64::INFINITY);
+        }
+        Ingest::Accepted(d2)
+    }
+
+    /// committed + pending observations up to `t_s`, then predicted to `t_s`.
+    fn replay(&self, t_s: f64) -> Option<BallEstimate> {
+        let model = self.config.ball;
+        let mut state = self.committed?;
+        for obs in self.pending.iter().take_while(|p| p.t_s <= t_s) {
+            if let Ok((next, _)) = update(&model, &state, obs, None) {
+                state = next;
+            }
+        }
+        Some(if t_s.is_finite() {
+            state.predict_to(&model, t_s)
+        } else {
+            state
+        })
+    }
+
+    fn state_at(&self, t_s: f64) -> Option<BallEstimate> {
+        let head = self.head?;
+        if t_s >= head.t_s {
+            Some(head.predict_to(&self.config.ball, t_s))
+        } else {
+            self.replay(t_s)
+        }
+    }
+
+    fn commit(&mut self, before_t_s: f64) {
+        let model = self.config.ball;
+        let n = self.pending.partition_point(|p| p.t_s < before_t_s);
+        if n == 0 {
+            return;
+        }
+        let Some(mut state) = self.committed else {
+            return;
+        };
+        for obs in self.pending.drain(..n) {
+            if let Ok((next, _)) = update(&model, &state, &obs, None) {
+                state = next;
+            }
+        }
+        self.committed = Some(state);
+    }
+
+    /// One liar cannot move the team ball: its observations fail the gate and it dissents
+    /// alone. A real kick makes every robot that sees the ball dissent at once, and their
+    /// own tracks agree with each other: then the team ball restarts from them.
+    fn restart_on_consensus(&mut self, now_s: f64) {
+        let model = self.config.ball;
+        let window = self.config.dissent_window_s;
+        let dissenters: Vec<(u8, BallEstimate)> = self
+            .robots
+            .iter()
+            .filter(|(_, r)| {
+                r.last_rejected_t_s.is_some_and(|rej| {
+                    rej >= now_s - window && r.last_accepted_t_s.is_none_or(|acc| acc < rej)
+                })
+            })
+            .filter_map(|(&id, r)| r.lwm.ball.map(|b| (id, b.predict_to(&model, now_s))))
+            .collect();
+        if dissenters.is_empty() {
+            return;
+        }
+        let agree = |a: &BallEstimate, b: &BallEstimate| {
+            kalman::mahalanobis_sq(
+                &(a.position() - b.position()),
+                &(a.position_cov() + b.position_cov()),
+            )
+            .is_some_and(|d2| d2 <= self.config.gate_chi2)
+        };
+        let mut best: Vec<usize> = Vec::new();
+        for (i, (_, a)) in dissenters.iter().enumerate() {
+            let group: Vec<usize> = dissenters
+                .iter()
+                .enumerate()
+                .filter(|(j, (_, b))| *j == i || agree(a, b))
+                .map(|(j, _)| j)
+                .collect();
+            if group.len() > best.len() {
+                best = group;
+            }
+        }
+        let unsupported = now_s - self.last_support_t_s > self.config.support_timeout_s;
+        if best.len() < 2 && !unsupported {
+            return;
+        }
+        let mut fused = dissenters[best[0]].1;
+        for &j in &best[1..] {
+            fused = fuse_independent(&fused, &dissenters[j].1);
+        }
+        self.committed = Some(fused);
+        self.head = Some(fused);
+        self.pending.clear();
+        self.last_support_t_s = now_s;
+        self.stats.restarts += 1;
+        for &j in &best {
+            if let Some(rec) = self.robots.get_mut(&dissenters[j].0) {
+                rec.last_rejected_t_s = None;
+                rec.last_accepted_t_s = Some(now_s);
+            }
+        }
+    }
+
+    fn any_fresh_teammate(&self, now_s: f64) -> bool {
+        self.robots
+            .iter()
+            .any(|(&id, r)| id != self.own_id && now_s - r.lwm.t_s <= self.config.stale_after_s)
+    }
+
+    /// The team ball at `now_s`: the fused track, or the robot's own ball when every
+    /// teammate is silent. `None` before anyone has seen a ball.
+    pub fn team_ball(&self, now_s: f64) -> Option<TeamBall> {
+        let model = self.config.ball;
+        let (estimate, source) = if self.any_fresh_teammate(now_s) {
+            (self.state_at(now_s)?, TeamBallSource::Fused)
+        } else {
+            let own = self.robots.get(&self.own_id)?.lwm.ball?;
+            (own.predict_to(&model, now_s), TeamBallSource::OwnFallback)
+        };
+        Some(TeamBall {
+            gbc: position_confidence(&estimate.position_cov()),
+            estimate,
+            source,
+        })
+    }
+
+    /// Every other robot heard from, with its decayed confidence.
+    pub fn teammates(&self, now_s: f64) -> Vec<Teammate> {
+        self.robots
+            .iter()
+            .filter(|(&id, _)| id != self.own_id)
+            .map(|(&id, r)| {
+                let silent_for_s = (now_s - r.lwm.t_s).max(0.0);
+                Teammate {
+                    id,
+                    pose: r.lwm.pose,
+                    confidence: (r.lwm.slc - self.config.confidence_decay_per_s * silent_for_s)
+                        .max(0.0),
+                    silent_for_s,
+                    lwm: r.lwm,
+                }
+            })
+            .collect()
+    }
+
+    /// Where robot `id` last said the ball was, predicted to `now_s` (for displays).
+    pub fn robot_ball(&self, id: u8, now_s: f64) -> Option<Vector2<f64>> {
+        let b = self.robots.get(&id)?.lwm.ball?;
+        Some(b.predict_to(&self.config.ball, now_s).position())
+    }
+}
+
+/// The product of two independent Gaussian estimates of the same state at the same time.
+fn fuse_independent(a: &BallEstimate, b: &BallEstimate) -> BallEstimate {
+    // A static model has zero velocity variance; a whisker keeps S invertible.
+    let r = b.cov + Matrix4::identity() * 1e-12;
+    match kalman::update(
+        &a.mean,
+        &a.cov,
+        &(b.mean - a.mean),
+        &Matrix4::identity(),
+        &r,
+        None,
+    ) {
+        Ok(u) => BallEstimate {
+            t_s: a.t_s,
+            mean: u.mean,
+            cov: u.cov,
+        },
+        Err(_) => *a,
+    }
+}

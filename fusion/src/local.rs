@@ -1,0 +1,193 @@
+//! The local world model (LWM): one robot's pose and ball, from its own odometry and
+//! sightings only, and the message it publishes as `*.var.world.local`.
+
+use crate::ball::{
+    field_observation, BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate,
+    FieldObservation,
+};
+use crate::confidence::{pose_confidence, position_confidence};
+use crate::kalman::UpdateError;
+use crate::pose::{
+    LandmarkSighting, Odometry, PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting,
+};
+use nalgebra::{Matrix2, Vector2};
+
+/// What a robot publishes about itself: a snapshot of its LWM at `t_s`, plus the ball
+/// information it gathered since its previous message (see the crate docs on fusion).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalWorldModel {
+    /// When the snapshot holds. On the sender, its clock; after
+    /// [`LocalWorldModel::from_bytes`], the receiver's (reception time minus age).
+    pub t_s: f64,
+    /// Message counter, +1 per publish (wrapping), so that a re-sent or duplicated message
+    /// is not fused twice.
+    pub seq: u16,
+    /// The robot's pose and covariance.
+    pub pose: PoseEstimate,
+    /// The robot's own ball track at `t_s`, if it has one.
+    pub ball: Option<BallEstimate>,
+    /// Time since the robot last saw the ball (∞ if never).
+    pub ball_seen_age_s: f64,
+    /// Self-localisation confidence.
+    pub slc: f64,
+    /// Local ball confidence.
+    pub lbc: f64,
+    /// The robot's ball sightings since its previous message, combined into one field-frame
+    /// position measurement (information-weighted), valid at `observation.t_s ≤ t_s`.
+    pub observation: Option<FieldObservation>,
+}
+
+/// Settings of a [`LocalModel`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LocalConfig {
+    /// Q and R of the pose EKF.
+    pub pose_noise: PoseNoise,
+    /// Gate on landmark sightings (χ², 2 dof); `None` for no gate.
+    pub pose_gate_chi2: Option<f64>,
+    /// The ball filter.
+    pub ball: BallFilterConfig,
+}
+
+/// Sums of the sightings since the last publish, in information form.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Accumulator {
+    info: Matrix2<f64>,
+    info_vec: Vector2<f64>,
+    weight_time_s: f64,
+    weight: f64,
+}
+
+impl Accumulator {
+    const EMPTY: Accumulator = Accumulator {
+        info: Matrix2::new(0.0, 0.0, 0.0, 0.0),
+        info_vec: Vector2::new(0.0, 0.0),
+        weight_time_s: 0.0,
+        weight: 0.0,
+    };
+
+    fn add(&mut self, obs: &FieldObservation) {
+        if let Some(inv) = obs.cov.try_inverse() {
+            self.info += inv;
+            self.info_vec += inv * obs.position;
+            // The batch is stamped at the information-weighted mean time; over one publish
+            // period a ball's path is close to straight, so this is where the combined
+            // position belongs.
+            let w = inv.trace();
+            self.weight_time_s += w * obs.t_s;
+            self.weight += w;
+        }
+    }
+
+    fn take(&mut self) -> Option<FieldObservation> {
+        let acc = std::mem::replace(self, Accumulator::EMPTY);
+        if acc.weight <= 0.0 {
+            return None;
+        }
+        let cov = acc.info.try_inverse()?;
+        Some(FieldObservation {
+            t_s: acc.weight_time_s / acc.weight,
+            position: cov * acc.info_vec,
+            cov: (cov + cov.transpose()) * 0.5,
+        })
+    }
+}
+
+/// One robot's running LWM: the pose EKF, the ball EKF, and the batch of ball information
+/// waiting to be published. Feed it in time order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalModel {
+    pose: PoseFilter,
+    ball: BallFilter,
+    pending: Accumulator,
+    seq: u16,
+    last_seen_t_s: Option<f64>,
+}
+
+impl LocalModel {
+    /// An LWM starting at `initial_pose`, with no ball.
+    pub fn new(config: LocalConfig, initial_pose: PoseEstimate) -> Self {
+        LocalModel {
+            pose: PoseFilter::new(initial_pose, config.pose_noise, config.pose_gate_chi2),
+            ball: BallFilter::new(config.ball),
+            pending: Accumulator::EMPTY,
+            seq: 0,
+            last_seen_t_s: None,
+        }
+    }
+
+    /// One odometry event.
+    pub fn odometry(&mut self, odo: &Odometry) {
+        self.pose.odometry(odo);
+    }
+
+    /// A landmark sighting in robot coordinates; its Mahalanobis² if applied.
+    pub fn landmark(&mut self, sighting: &LandmarkSighting) -> Result<f64, UpdateError> {
+        self.pose.landmark(sighting)
+    }
+
+    /// A range/bearing landmark sighting; its Mahalanobis² if applied.
+    pub fn range_bearing(&mut self, sighting: &RangeBearingSighting) -> Result<f64, UpdateError> {
+        self.pose.range_bearing(sighting)
+    }
+
+    /// A ball sighting in robot coordinates at `t_s`, made from the current pose estimate.
+    pub fn ball_sighting(&mut self, t_s: f64, sighting: &BallSighting) -> BallUpdate {
+        let obs = field_observation(t_s, &self.pose.estimate, sighting);
+        let result = self.ball.observe(&obs);
+        match result {
+            BallUpdate::Initialised | BallUpdate::Updated(_) => self.pending.add(&obs),
+            // The track restarted on a ball that moved: what was batched describes where
+            // it no longer is.
+            BallUpdate::Restarted => {
+                self.pending = Accumulator::EMPTY;
+                self.pending.add(&obs);
+            }
+            BallUpdate::Outlier(_) | BallUpdate::Rejected(_) => {}
+        }
+        if !matches!(result, BallUpdate::Rejected(_)) {
+            self.last_seen_t_s = Some(t_s);
+        }
+        result
+    }
+
+    /// The current pose estimate.
+    pub fn pose(&self) -> &PoseEstimate {
+        &self.pose.estimate
+    }
+
+    /// Replaces the pose estimate (e.g. after a global relocalisation).
+    pub fn set_pose(&mut self, pose: PoseEstimate) {
+        self.pose.estimate = pose;
+    }
+
+    /// The robot's own ball predicted to `t_s`.
+    pub fn ball_at(&self, t_s: f64) -> Option<BallEstimate> {
+        self.ball.estimate_at(t_s)
+    }
+
+    /// The LWM at `t_s` without consuming the pending ball information.
+    pub fn snapshot(&self, t_s: f64) -> LocalWorldModel {
+        let ball = self.ball_at(t_s);
+        LocalWorldModel {
+            t_s,
+            seq: self.seq,
+            pose: self.pose.estimate,
+            ball,
+            ball_seen_age_s: self
+                .last_seen_t_s
+                .map_or(f64::INFINITY, |t| (t_s - t).max(0.0)),
+            slc: pose_confidence(&self.pose.estimate.cov),
+            lbc: ball.map_or(0.0, |b| position_confidence(&b.position_cov())),
+            observation: None,
+        }
+    }
+
+    /// The message to publish at `t_s`: the snapshot plus every ball sighting batched since
+    /// the previous publish, which this hands over (so it is published exactly once).
+    pub fn publish(&mut self, t_s: f64) -> LocalWorldModel {
+        self.seq = self.seq.wrapping_add(1);
+        let mut lwm = self.snapshot(t_s);
+        lwm.observation = self.pending.take();
+        lwm
+    }
+}
