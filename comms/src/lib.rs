@@ -3,6 +3,7 @@
 
 mod blackboard;
 mod config;
+pub mod driver;
 mod key;
 pub mod literal;
 mod pattern;

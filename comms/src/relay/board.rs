@@ -5,6 +5,7 @@
 use crate::blackboard::{Blackboard, Entry, SetError};
 use crate::key::Key;
 use crate::pattern::Pattern;
+use crate::replica::{PostError, Replica};
 use crate::time::Instant;
 use crate::value::Value;
 
@@ -67,5 +68,48 @@ impl Board for Blackboard {
             code: ErrCode::Unavailable,
             text: format!("{key}: a bare blackboard has no talk queues"),
         })
+    }
+}
+
+impl From<PostError> for Rejected {
+    fn from(e: PostError) -> Rejected {
+        let code = match e {
+            PostError::Key(_) => ErrCode::BadKey,
+            PostError::NotOwnQueue(_) => ErrCode::WrongKind,
+            PostError::TooLarge { .. } => ErrCode::TooLarge,
+            PostError::TooManyQueues(_) => ErrCode::TooMany,
+        };
+        Rejected {
+            code,
+            text: e.to_string(),
+        }
+    }
+}
+
+/// The daemon's board: writes go through the replica, so they are published and follow
+/// the same rules as the library's.
+impl Board for Replica {
+    fn robot_id(&self) -> u8 {
+        Replica::robot_id(self)
+    }
+
+    fn get(&self, key: &Key) -> Option<&Entry> {
+        self.blackboard().get(key)
+    }
+
+    fn visit(&self, pattern: &Pattern, f: &mut dyn FnMut(&Key, &Entry)) {
+        for (key, entry) in self.iter(pattern) {
+            f(&key, entry);
+        }
+    }
+
+    fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        self.set_key(now, key, value).map_err(Rejected::from)
+    }
+
+    fn post(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        Replica::post(self, now, &key.to_string(), value)
+            .map(|_| ())
+            .map_err(Rejected::from)
     }
 }

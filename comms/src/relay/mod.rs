@@ -36,9 +36,11 @@
 mod board;
 mod command;
 mod error;
+mod server;
 mod session;
 
 pub use board::Board;
 pub use command::{Command, Rejected, MAX_REFRESH_MS};
 pub use error::ErrCode;
+pub use server::serve;
 pub use session::{CloseReason, Session, SessionLimits, SessionState, PROTOCOL_VERSION};
