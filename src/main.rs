@@ -19,6 +19,16 @@ enum Command {
     Audio(cli::audio::AudioArgs),
     /// World-model tools: offline pose EKF replay.
     Fusion(cli::fusion::FusionArgs),
+    /// Run one robot's replica on the team's multicast group, with the relay port.
+    Daemon(cli::daemon::DaemonArgs),
+    /// Read a key through a daemon's relay.
+    Get(cli::clients::GetArgs),
+    /// Write a key (or post to a talk queue) through a daemon's relay.
+    Set(cli::clients::SetArgs),
+    /// Live table of the keys matching patterns (the seed's Monitor).
+    Watch(cli::clients::WatchArgs),
+    /// A daemon's counters: frames, drops by reason, peers.
+    Stats(cli::clients::StatsArgs),
 }
 
 fn main() -> Result<()> {
@@ -27,6 +37,11 @@ fn main() -> Result<()> {
     match cli.command {
         Some(Command::Audio(args)) => cli::audio::run(args),
         Some(Command::Fusion(args)) => cli::fusion::run(args),
+        Some(Command::Daemon(args)) => cli::daemon::run(args),
+        Some(Command::Get(args)) => cli::clients::get(args),
+        Some(Command::Set(args)) => cli::clients::set(args),
+        Some(Command::Watch(args)) => cli::clients::watch(args),
+        Some(Command::Stats(args)) => cli::clients::stats(args),
         None => {
             use clap::CommandFactory;
             Cli::command().print_help()?;

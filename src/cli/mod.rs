@@ -1,6 +1,8 @@
 //! One module per subcommand; each owns its clap arguments and its `run`.
 
 pub mod audio;
+pub mod clients;
+pub mod daemon;
 pub mod fusion;
 
 /// Logs go to stderr, filtered by `RUST_LOG` (default `info`).
