@@ -29,6 +29,8 @@ enum Command {
     Watch(cli::clients::WatchArgs),
     /// A daemon's counters: frames, drops by reason, peers.
     Stats(cli::clients::StatsArgs),
+    /// Measurements: `huddle bench comms`.
+    Bench(cli::bench::BenchArgs),
 }
 
 fn main() -> Result<()> {
@@ -42,6 +44,7 @@ fn main() -> Result<()> {
         Some(Command::Set(args)) => cli::clients::set(args),
         Some(Command::Watch(args)) => cli::clients::watch(args),
         Some(Command::Stats(args)) => cli::clients::stats(args),
+        Some(Command::Bench(args)) => cli::bench::run(args),
         None => {
             use clap::CommandFactory;
             Cli::command().print_help()?;

@@ -165,6 +165,20 @@ impl Handle {
         Ok(())
     }
 
+    /// Several writes sent together: the replica packs them into as few frames as the
+    /// MTU allows, sent when `f` returns (a single [`Handle::set`] sends at once, which
+    /// is best for latency and worst for throughput).
+    pub fn batch<R>(&self, f: impl FnOnce(&mut Batch<'_>) -> R) -> R {
+        let mut inner = self.inner.borrow_mut();
+        let now = inner.clock.now();
+        let result = f(&mut Batch {
+            inner: &mut inner,
+            now,
+        });
+        inner.pump();
+        result
+    }
+
     /// Posts a message to this robot's `*.talk.<queue>`; returns its sequence number.
     pub fn post(&self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
         let mut inner = self.inner.borrow_mut();
@@ -227,5 +241,23 @@ impl Handle {
 
     pub(crate) fn inner(&self) -> &Rc<RefCell<Inner>> {
         &self.inner
+    }
+}
+
+/// Writes collected by [`Handle::batch`].
+pub struct Batch<'a> {
+    inner: &'a mut Inner,
+    now: Instant,
+}
+
+impl Batch<'_> {
+    /// As [`Handle::set`], sent when the batch ends.
+    pub fn set(&mut self, key: &str, value: impl Into<Value>) -> Result<(), SetError> {
+        self.inner.replica.set(self.now, key, value.into())
+    }
+
+    /// As [`Handle::post`], sent when the batch ends.
+    pub fn post(&mut self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
+        self.inner.replica.post(self.now, key, value.into())
     }
 }

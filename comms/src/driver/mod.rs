@@ -51,7 +51,7 @@ use crate::replica::{ConfigInvalid, Event, Replica, ReplicaConfig};
 use crate::time::Instant;
 use crate::value::Value;
 
-pub use handle::{DriverStats, Handle, Notice, Subscription};
+pub use handle::{Batch, DriverStats, Handle, Notice, Subscription};
 pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
 
 use handle::SubQueue;
