@@ -7,7 +7,7 @@
 //! copy with the newest timestamp. `talk` messages are not stored; they are delivered as
 //! events by the replica.
 
-use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
 use thiserror::Error;
@@ -86,14 +86,21 @@ pub enum Applied {
     Stale,
 }
 
+/// A stored entry and whether a change event for it is queued (so an undrained queue
+/// holds each key at most once and stays bounded by the number of keys).
+#[derive(Clone, Debug)]
+struct Slot {
+    entry: Entry,
+    change_queued: bool,
+}
+
 /// The set of bindings.
 #[derive(Clone, Debug)]
 pub struct Blackboard {
     robot_id: u8,
     incarnation: u64,
-    scopes: BTreeMap<Scope, BTreeMap<String, Entry>>,
+    scopes: BTreeMap<Scope, BTreeMap<String, Slot>>,
     changes: VecDeque<Key>,
-    pending: HashSet<Key>,
 }
 
 impl Blackboard {
@@ -105,7 +112,6 @@ impl Blackboard {
             incarnation: 0,
             scopes: BTreeMap::new(),
             changes: VecDeque::new(),
-            pending: HashSet::new(),
         }
     }
 
@@ -125,15 +131,18 @@ impl Blackboard {
     pub fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<Key, SetError> {
         let scope = self.storage_scope(key)?;
         let (robot_id, incarnation) = (self.robot_id, self.incarnation);
-        let slot = self.scopes.entry(scope).or_default();
-        let changed = match slot.get_mut(key.path()) {
-            Some(e) => {
+        let slots = self.scopes.entry(scope).or_default();
+        let queue = match slots.get_mut(key.path()) {
+            Some(slot) => {
+                let e = &mut slot.entry;
                 let changed = !e.value.same_as(&value);
                 e.value = value;
                 e.version += 1;
                 e.stamp = now;
                 e.incarnation = incarnation;
-                changed
+                let queue = changed && !slot.change_queued;
+                slot.change_queued |= changed;
+                queue
             }
             None => {
                 let entry = Entry {
@@ -143,7 +152,11 @@ impl Blackboard {
                     incarnation,
                     stamp: now,
                 };
-                slot.insert(key.path().to_owned(), entry);
+                let slot = Slot {
+                    entry,
+                    change_queued: true,
+                };
+                slots.insert(key.path().to_owned(), slot);
                 true
             }
         };
@@ -152,8 +165,8 @@ impl Blackboard {
         } else {
             key.with_scope(scope)
         };
-        if changed {
-            self.push_change(&stored);
+        if queue {
+            self.changes.push_back(stored.clone());
         }
         Ok(stored)
     }
@@ -189,52 +202,49 @@ impl Blackboard {
         version: u64,
         stamp: Instant,
     ) -> Applied {
-        let slot = self.scopes.entry(Scope::Robot(owner)).or_default();
-        let outcome = match slot.get_mut(path.as_str()) {
-            Some(e) if e.incarnation == incarnation && version < e.version => Applied::Stale,
-            Some(e) if e.incarnation == incarnation && version == e.version => {
-                e.stamp = e.stamp.min(stamp);
-                Applied::Refreshed
-            }
-            Some(e) => {
-                let changed = !e.value.same_as(&value);
-                *e = Entry {
-                    value,
-                    owner,
-                    version,
-                    incarnation,
-                    stamp,
-                };
-                if changed {
-                    Applied::Changed
+        let slots = self.scopes.entry(Scope::Robot(owner)).or_default();
+        let fresh = Entry {
+            value,
+            owner,
+            version,
+            incarnation,
+            stamp,
+        };
+        let (outcome, queue) = match slots.get_mut(path.as_str()) {
+            Some(slot) => {
+                let e = &mut slot.entry;
+                if e.incarnation == incarnation && version < e.version {
+                    (Applied::Stale, false)
+                } else if e.incarnation == incarnation && version == e.version {
+                    e.stamp = e.stamp.min(stamp);
+                    (Applied::Refreshed, false)
                 } else {
-                    Applied::Refreshed
+                    let changed = !e.value.same_as(&fresh.value);
+                    *e = fresh;
+                    let queue = changed && !slot.change_queued;
+                    slot.change_queued |= changed;
+                    let outcome = if changed {
+                        Applied::Changed
+                    } else {
+                        Applied::Refreshed
+                    };
+                    (outcome, queue)
                 }
             }
             None => {
-                let entry = Entry {
-                    value,
-                    owner,
-                    version,
-                    incarnation,
-                    stamp,
+                let slot = Slot {
+                    entry: fresh,
+                    change_queued: true,
                 };
-                slot.insert(path.clone(), entry);
-                Applied::Inserted
+                slots.insert(path.clone(), slot);
+                (Applied::Inserted, true)
             }
         };
-        if matches!(outcome, Applied::Inserted | Applied::Changed) {
+        if queue {
             let key = Key::from_valid_parts(Scope::Robot(owner), Kind::Var, path);
-            self.push_change(&key);
+            self.changes.push_back(key);
         }
         outcome
-    }
-
-    fn push_change(&mut self, key: &Key) {
-        // One pending event per key: an undrained queue stays bounded by the key count.
-        if self.pending.insert(key.clone()) {
-            self.changes.push_back(key.clone());
-        }
     }
 
     /// The binding for `key`: `local.var.x`, `n.var.x`, or for `*.var.x` the copy with
@@ -247,12 +257,12 @@ impl Blackboard {
             Scope::Global => self
                 .scopes
                 .range(Scope::Robot(1)..=Scope::Robot(254))
-                .filter_map(|(_, slot)| slot.get(key.path()))
+                .filter_map(|(_, slots)| slots.get(key.path()).map(|s| &s.entry))
                 .fold(None, |best: Option<&Entry>, e| match best {
                     Some(b) if b.stamp >= e.stamp => Some(b),
                     _ => Some(e),
                 }),
-            scope => self.scopes.get(&scope)?.get(key.path()),
+            scope => self.scopes.get(&scope)?.get(key.path()).map(|s| &s.entry),
         }
     }
 
@@ -264,21 +274,30 @@ impl Blackboard {
     /// Every stored binding whose key matches `pattern`, in key order (local first,
     /// then by robot id, then by path). Keys come out as stored (`n.var.x`, never `*`).
     pub fn iter<'a>(&'a self, pattern: &'a Pattern) -> impl Iterator<Item = (Key, &'a Entry)> + 'a {
-        self.scopes.iter().flat_map(move |(scope, slot)| {
-            slot.iter()
+        self.scopes.iter().flat_map(move |(scope, slots)| {
+            slots
+                .iter()
                 .filter(move |(path, _)| pattern.matches_parts(*scope, Kind::Var, path))
-                .map(move |(path, e)| (Key::from_valid_parts(*scope, Kind::Var, path.clone()), e))
+                .map(move |(path, s)| {
+                    (
+                        Key::from_valid_parts(*scope, Kind::Var, path.clone()),
+                        &s.entry,
+                    )
+                })
         })
     }
 
     /// The bindings this robot owns under `scope` (for the replica's refresh).
     pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&String, &Entry)> {
-        self.scopes.get(&scope).into_iter().flat_map(|s| s.iter())
+        self.scopes
+            .get(&scope)
+            .into_iter()
+            .flat_map(|s| s.iter().map(|(p, s)| (p, &s.entry)))
     }
 
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
-        self.scopes.get(&scope)?.get(path)
+        self.scopes.get(&scope)?.get(path).map(|s| &s.entry)
     }
 
     /// Number of stored bindings.
@@ -295,7 +314,13 @@ impl Blackboard {
     /// first. Changes are coalesced: a key appears at most once until drained.
     pub fn poll_change(&mut self) -> Option<Key> {
         let key = self.changes.pop_front()?;
-        self.pending.remove(&key);
+        if let Some(slot) = self
+            .scopes
+            .get_mut(&key.scope())
+            .and_then(|s| s.get_mut(key.path()))
+        {
+            slot.change_queued = false;
+        }
         Some(key)
     }
 }

@@ -1,5 +1,102 @@
-//! comms: huddle's blackboard, its wire format and the sans-IO replication core.
-//! (lib.rs essay: being written.)
+//! comms: huddle's blackboard and the sans-IO protocol that replicates it across a team.
+//!
+//! **What it is.** A [`Blackboard`] of symbol → value bindings after ISocRob's
+//! `hal-blackboard` (isocrob-2000 §3.1): dot-separated [`Key`]s whose first level is
+//! `local` (this robot only), `*` (global) or a robot id, whose second level is `var` (a
+//! value) or `talk` (a message queue); typed [`Value`]s; every entry stamped on **this**
+//! robot's clock. A [`Replica`] owns a blackboard and keeps the team's copies in step over
+//! one lossy multicast group: writing `*.var.x` on robot n publishes it, and every robot
+//! (n too) reads it as `n.var.x`; reading `*.var.x` gives the newest copy. Around it: the
+//! value [literal] syntax and type names shared with the relay protocol and config files,
+//! MQTT-style [`Pattern`]s (`+.var.machine.heuristic`, `2.var.#`), `config.dat` loading
+//! ([`load_config`]) and the frame format ([`wire`]).
+//!
+//! **What it is not.** No sockets, threads, clocks or randomness: the replica is a state
+//! machine in the quinn / str0m style. Time comes in as [`Instant`] (microseconds on the
+//! robot's monotonic clock, read by the driver), the incarnation number comes from the
+//! driver's RNG, and datagrams go in and out as byte slices. The tokio/socket2 driver, the
+//! daemon and the relay TCP server are built on top of this crate, elsewhere; netsim runs
+//! the very same machine in virtual time.
+//!
+//! # The run loop
+//!
+//! After **every** input (`handle_datagram`, `handle_timeout`, `set`, `post`), drain
+//! [`Replica::poll_transmit`] (send each payload to the team group) and
+//! [`Replica::poll_event`] until both return `None`, then sleep until
+//! [`Replica::poll_timeout`] or the next datagram, whichever comes first, and call
+//! [`Replica::handle_timeout`] when the deadline passes. Changes made by one input go out
+//! together in as few frames as fit the MTU; ages in a frame are measured to the latest
+//! `now` any input carried, so draining at once keeps them exact.
+//!
+//! # What goes over the wire
+//!
+//! A frame (see [`wire`]) carries a 14-byte header (magic, version, flags, team, sender,
+//! incarnation), a sequence number and items: updates `(path, value, version, age)`, talk
+//! messages, talk heads and NACKs, and optionally a 16-byte truncated HMAC-SHA256 tag. The
+//! receiver stamps an update at *reception time − reported age* on its own clock, so no
+//! clocks are compared and a re-sent old value never looks fresh. Versions count per
+//! (owner, key) within an owner's incarnation: older updates never overwrite newer ones,
+//! and a new incarnation (a restart) is accepted at once while the old one's late frames
+//! are dropped. Every own global value is re-sent each `refresh_period` (default 100 ms),
+//! which repairs losses and is the heartbeat; a robot silent for `departed_after`
+//! (default 300 ms) is reported departed. A 40-byte world model under
+//! `*.var.world.local` travels in a 77-byte frame, 93 bytes with a tag.
+//!
+//! `talk` queues (`*.talk.q`) deliver each message to every teammate exactly once and in
+//! order despite loss, duplication and reordering: per-queue sequence numbers, gap
+//! detection, NACK-driven repair from a bounded retention buffer, and an explicit
+//! [`Event::TalkGivenUp`] when a message cannot be recovered (never silent loss).
+//!
+//! # Panic policy
+//!
+//! Nothing received from the network, read from a file or typed by a user panics:
+//! malformed datagrams become counted drops ([`Stats`], [`DropReason`], mirrored into
+//! `local.var.huddle.stats.*` at each refresh), bad keys, literals and config lines become
+//! typed errors. `comms/fuzz` holds a cargo-fuzz target for frame decoding:
+//! `cd comms/fuzz && cargo +nightly fuzz run decode_frame` (needs `cargo install
+//! cargo-fuzz`; not run in CI).
+//!
+//! # Example
+//!
+//! Two robots, joined by a loop that hands every frame to the other one:
+//!
+//! ```
+//! use std::net::SocketAddr;
+//! use std::time::Duration;
+//! use comms::{Event, Instant, Replica, ReplicaConfig, Value};
+//!
+//! let t0 = Instant::from_micros(0);
+//! let mut robot1 = Replica::new(ReplicaConfig::new(1, 7), 0x1111, t0).unwrap();
+//! let mut robot2 = Replica::new(ReplicaConfig::new(2, 7), 0x2222, t0).unwrap();
+//! let from = SocketAddr::from(([127, 0, 0, 1], 2000));
+//!
+//! // Robot 1 publishes its cost to reach the ball and posts a plan to its talk queue.
+//! robot1.set(t0, "*.var.machine.heuristic", Value::Float(2.5)).unwrap();
+//! robot1.set(t0, "local.var.debug", Value::from("never leaves robot 1")).unwrap();
+//! robot1.post(t0, "*.talk.plan", Value::from("pass to 2")).unwrap();
+//!
+//! // 3 ms later the frames arrive at robot 2.
+//! let t1 = t0 + Duration::from_millis(3);
+//! while let Some(transmit) = robot1.poll_transmit() {
+//!     robot2.handle_datagram(t1, from, &transmit.payload);
+//! }
+//!
+//! let cost = robot2.get("1.var.machine.heuristic").unwrap().expect("replicated");
+//! assert_eq!(cost.value, Value::Float(2.5));
+//! assert_eq!(cost.owner, 1);
+//! assert_eq!(cost.age(t1), Duration::ZERO, "stamped at reception minus the sender's age");
+//! assert!(robot2.get("1.var.debug").unwrap().is_none());
+//! // `*` reads the newest copy of any owner.
+//! assert_eq!(robot2.get("*.var.machine.heuristic").unwrap().unwrap().owner, 1);
+//!
+//! let mut plan = None;
+//! while let Some(event) = robot2.poll_event() {
+//!     if let Event::TalkDelivered { queue, from, seq, value } = event {
+//!         plan = Some((queue, from, seq, value));
+//!     }
+//! }
+//! assert_eq!(plan, Some(("plan".into(), 1, 1, Value::from("pass to 2"))));
+//! ```
 
 mod blackboard;
 mod config;

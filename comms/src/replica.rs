@@ -14,7 +14,9 @@ use crate::stats::{DropReason, PeerInfo, Stats};
 use crate::talk::{Delivery, Inbox, Outbox, TalkLimits};
 use crate::time::{duration_to_micros, Instant};
 use crate::value::Value;
-use crate::wire::{self, FrameWriter, Item, ItemRef, TeamKey, HEADER_LEN, MIN_MTU, TAG_LEN};
+use crate::wire::{
+    self, FrameWriter, Item, ItemRef, TeamKey, HEADER_LEN, MAX_FRAME_LEN, MIN_MTU, TAG_LEN,
+};
 
 /// How many of a peer's past incarnations are remembered (their late frames are dropped).
 const RETIRED_INCARNATIONS: usize = 8;
@@ -30,7 +32,7 @@ pub struct ReplicaConfig {
     /// Every own global value is re-sent this often (default 100 ms), repairing losses;
     /// it is also the heartbeat period.
     pub refresh_period: Duration,
-    /// Largest frame sent and accepted, in bytes (default 1200; at least 64).
+    /// Largest frame sent and accepted, in bytes (default 1200; 64..=65507).
     pub mtu: usize,
     /// A peer silent this long is reported departed (default 3 refresh periods).
     pub departed_after: Duration,
@@ -75,8 +77,8 @@ pub enum ConfigInvalid {
     /// `robot_id` outside 1..=254.
     #[error("robot id {0} is outside 1..=254")]
     RobotId(u8),
-    /// `mtu` below [`wire::MIN_MTU`].
-    #[error("mtu {0} is below the minimum of {MIN_MTU} bytes")]
+    /// `mtu` outside [`wire::MIN_MTU`]..=[`wire::MAX_FRAME_LEN`].
+    #[error("mtu {0} is outside {MIN_MTU}..={MAX_FRAME_LEN} bytes")]
     Mtu(usize),
     /// A zero refresh period or departure limit.
     #[error("refresh period and departure limit must be positive")]
@@ -261,7 +263,7 @@ impl Replica {
         if !ROBOT_IDS.contains(&config.robot_id) {
             return Err(ConfigInvalid::RobotId(config.robot_id));
         }
-        if config.mtu < MIN_MTU {
+        if !(MIN_MTU..=MAX_FRAME_LEN).contains(&config.mtu) {
             return Err(ConfigInvalid::Mtu(config.mtu));
         }
         if config.refresh_period.is_zero() || config.departed_after.is_zero() {
@@ -616,7 +618,7 @@ impl Replica {
                     }
                 }
                 Delivery::GivenUp { first, last } => {
-                    stats.talk_given_up += last - first + 1;
+                    stats.talk_given_up = stats.talk_given_up.saturating_add(last - first + 1);
                     Event::TalkGivenUp {
                         queue: queue.to_owned(),
                         from,
@@ -1309,5 +1311,99 @@ mod tests {
             .collect();
         assert_eq!(seqs, [4, 5]);
         assert_eq!(b.stats().talk_given_up, 3);
+    }
+
+    #[test]
+    fn a_restart_gives_up_the_old_queues_holes_and_starts_the_new_queue_at_one() {
+        let (mut a, mut b) = (robot(1, 11), robot(2, 22));
+        let mut sent = Vec::new();
+        for i in 1..=3 {
+            a.post(t(0), "*.talk.q", Value::Int(i)).unwrap();
+            sent.push(frames(&mut a));
+        }
+        deliver(t(1), &sent[0], &mut b);
+        deliver(t(1), &sent[2], &mut b); // 2 is lost, then robot 1 reboots
+        events(&mut b);
+        let mut a2 = robot(1, 12);
+        a2.post(t(50), "*.talk.q", Value::Int(100)).unwrap();
+        deliver(t(51), &frames(&mut a2), &mut b);
+        let talk: Vec<Event> = events(&mut b)
+            .into_iter()
+            .filter(|e| matches!(e, Event::TalkDelivered { .. } | Event::TalkGivenUp { .. }))
+            .collect();
+        let delivered = |seq, v| Event::TalkDelivered {
+            queue: "q".into(),
+            from: 1,
+            seq,
+            value: Value::Int(v),
+        };
+        assert_eq!(
+            talk,
+            [
+                Event::TalkGivenUp {
+                    queue: "q".into(),
+                    from: 1,
+                    first: 2,
+                    last: 2
+                },
+                delivered(3, 3),
+                delivered(1, 100),
+            ],
+            "the old incarnation's gap is reported, its tail delivered, the new queue starts at 1"
+        );
+    }
+
+    #[test]
+    fn configurations_that_cannot_work_are_refused() {
+        let with = |f: fn(&mut ReplicaConfig)| {
+            let mut cfg = ReplicaConfig::new(1, 7);
+            f(&mut cfg);
+            Replica::new(cfg, 1, t(0)).err()
+        };
+        assert_eq!(with(|c| c.mtu = 63), Some(ConfigInvalid::Mtu(63)));
+        assert_eq!(with(|c| c.mtu = 70_000), Some(ConfigInvalid::Mtu(70_000)));
+        assert_eq!(
+            with(|c| c.refresh_period = Duration::ZERO),
+            Some(ConfigInvalid::Period)
+        );
+        assert_eq!(with(|c| c.talk.window = 0), Some(ConfigInvalid::TalkLimits));
+        assert_eq!(
+            with(|c| c.robot_id = 255),
+            Some(ConfigInvalid::RobotId(255))
+        );
+        assert_eq!(with(|_| {}), None);
+        let cfg = ReplicaConfig::new(1, 7).with_refresh_period(Duration::from_millis(50));
+        assert_eq!(cfg.departed_after, Duration::from_millis(150));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_well_formed_frame_from_a_teammate_is_handled_without_panic(
+            frames in proptest::collection::vec(crate::wire::tests::any_frame(), 1..6),
+            later_ms in 0u64..5_000,
+        ) {
+            let mut r = robot(9, 99);
+            for (i, mut f) in frames.into_iter().enumerate() {
+                f.team = 7;
+                if i % 2 == 0 {
+                    // Half of them name this robot in their NACKs.
+                    for item in &mut f.items {
+                        if let Item::Nack { target, .. } = item {
+                            *target = 9;
+                        }
+                    }
+                }
+                r.handle_datagram(t(i as u64), addr(), &wire::encode_frame(&f, None));
+            }
+            r.post(t(10), "*.talk.q", Value::Int(1)).unwrap();
+            for now in [t(20), t(40), t(1_100), t(later_ms + 1_100)] {
+                r.handle_timeout(now);
+                while r.poll_transmit().is_some() {}
+                while r.poll_event().is_some() {}
+            }
+            let s = r.stats();
+            let expected = s.drops(DropReason::RobotIdConflict) + s.drops(DropReason::RetiredIncarnation);
+            proptest::prop_assert_eq!(s.drops_total(), expected, "well-formed frames decode");
+        }
     }
 }

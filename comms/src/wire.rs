@@ -55,6 +55,10 @@ pub const MAX_FRAME_LEN: usize = 65_507;
 /// a tag, with room for small items.
 pub const MIN_MTU: usize = 64;
 
+/// Largest talk sequence number accepted (2^62): far beyond any real queue, and it keeps
+/// the receivers' `seq + 1` arithmetic free of overflow whatever a frame claims.
+pub const MAX_TALK_SEQ: u64 = 1 << 62;
+
 const FLAG_TAGGED: u8 = 1;
 
 fn config() -> impl bincode::config::Config {
@@ -365,11 +369,38 @@ impl<'k> FrameWriter<'k> {
     }
 }
 
-/// Encoded size of one item (what it adds to a frame's body).
+/// Encoded size of one item (what it adds to a frame's body), computed without encoding.
 pub fn item_len(item: ItemRef<'_>) -> usize {
-    let mut sink = Vec::new();
-    let _ = bincode::encode_into_std_write(item, &mut sink, config());
-    sink.len()
+    let str_len = |s: &str| varint_len(s.len() as u64) + s.len();
+    // Every variant index is below 251: one byte.
+    1 + match item {
+        ItemRef::Update {
+            path,
+            value,
+            version,
+            age_us,
+        } => str_len(path) + value_len(value) + varint_len(version) + varint_len(age_us),
+        ItemRef::Talk { queue, seq, value } => str_len(queue) + varint_len(seq) + value_len(value),
+        ItemRef::TalkHead { queue, first, last } => {
+            str_len(queue) + varint_len(first) + varint_len(last)
+        }
+        ItemRef::Nack {
+            queue, first, last, ..
+        } => 1 + str_len(queue) + varint_len(first) + varint_len(last),
+    }
+}
+
+/// Encoded size of a value.
+pub fn value_len(value: &Value) -> usize {
+    1 + match value {
+        // Signed integers are zigzag-encoded before the varint.
+        Value::Int(v) => varint_len(((v << 1) ^ (v >> 63)) as u64),
+        Value::Float(_) => 8,
+        Value::Bool(_) => 1,
+        Value::String(s) => varint_len(s.len() as u64) + s.len(),
+        Value::Floats(v) => varint_len(v.len() as u64) + 4 * v.len(),
+        Value::Bytes(b) => varint_len(b.len() as u64) + b.len(),
+    }
 }
 
 /// Encodes a whole frame with no size budget (tests, tools, benches).
@@ -463,14 +494,14 @@ fn validate_item(item: &Item) -> Result<(), DecodeError> {
         Item::Update { path, .. } => validate_path(path).map_err(bad_path),
         Item::Talk { queue, seq, .. } => {
             validate_path(queue).map_err(bad_path)?;
-            if *seq == 0 {
-                return Err(DecodeError::Malformed("talk seq 0".into()));
+            if *seq == 0 || *seq > MAX_TALK_SEQ {
+                return Err(DecodeError::Malformed(format!("talk seq {seq}")));
             }
             Ok(())
         }
         Item::TalkHead { queue, first, last } => {
             validate_path(queue).map_err(bad_path)?;
-            if *first == 0 || *first > last.saturating_add(1) {
+            if *first == 0 || *first > last.saturating_add(1) || *last > MAX_TALK_SEQ {
                 return Err(DecodeError::Malformed(format!("talk head {first}..{last}")));
             }
             Ok(())
@@ -482,7 +513,7 @@ fn validate_item(item: &Item) -> Result<(), DecodeError> {
             last,
         } => {
             validate_path(queue).map_err(bad_path)?;
-            if !ROBOT_IDS.contains(target) || *first == 0 || first > last {
+            if !ROBOT_IDS.contains(target) || *first == 0 || first > last || *last > MAX_TALK_SEQ {
                 return Err(DecodeError::Malformed(format!(
                     "nack {target} {first}..{last}"
                 )));
@@ -623,7 +654,7 @@ impl<Ctx> Decode<Ctx> for Item {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use proptest::prelude::*;
 
@@ -931,7 +962,7 @@ mod tests {
         "[a-z0-9_-]{1,8}(\\.[a-z0-9_-]{1,8}){0,2}"
     }
 
-    fn any_item() -> impl Strategy<Value = Item> {
+    pub(crate) fn any_item() -> impl Strategy<Value = Item> {
         prop_oneof![
             (any_path(), any_value(), any::<u64>(), any::<u64>()).prop_map(
                 |(path, value, version, age_us)| Item::Update {
@@ -941,19 +972,16 @@ mod tests {
                     age_us
                 }
             ),
-            (any_path(), 1..u64::MAX, any_value()).prop_map(|(queue, seq, value)| Item::Talk {
-                queue,
-                seq,
-                value
-            }),
-            (any_path(), 1..u64::MAX / 2, 0..1000u64).prop_map(|(queue, first, n)| {
+            (any_path(), 1..=MAX_TALK_SEQ, any_value())
+                .prop_map(|(queue, seq, value)| Item::Talk { queue, seq, value }),
+            (any_path(), 1..MAX_TALK_SEQ / 2, 0..1000u64).prop_map(|(queue, first, n)| {
                 Item::TalkHead {
                     queue,
                     first,
                     last: first - 1 + n,
                 }
             }),
-            (1..=254u8, any_path(), 1..u64::MAX / 2, 0..1000u64).prop_map(
+            (1..=254u8, any_path(), 1..MAX_TALK_SEQ / 2, 0..1000u64).prop_map(
                 |(target, queue, first, n)| Item::Nack {
                     target,
                     queue,
@@ -964,7 +992,7 @@ mod tests {
         ]
     }
 
-    fn any_frame() -> impl Strategy<Value = Frame> {
+    pub(crate) fn any_frame() -> impl Strategy<Value = Frame> {
         (
             any::<u8>(),
             1..=254u8,
@@ -988,6 +1016,13 @@ mod tests {
             let key = keyed.then_some(&key);
             let bytes = encode_frame(&frame, key);
             prop_assert_eq!(decode_frame(&bytes, frame.team, key), Ok(frame));
+        }
+
+        #[test]
+        fn computed_item_sizes_match_the_encoder(item in any_item()) {
+            let mut sink = Vec::new();
+            bincode::encode_into_std_write(item.as_ref(), &mut sink, config()).unwrap();
+            prop_assert_eq!(item_len(item.as_ref()), sink.len());
         }
 
         #[test]

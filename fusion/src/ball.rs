@@ -210,9 +210,28 @@ pub fn field_observation(
     pose: &PoseEstimate,
     sighting: &BallSighting,
 ) -> FieldObservation {
+    field_observation_shared(t_s, pose, sighting, 1.0)
+}
+
+/// [`field_observation`] with the pose term counted `pose_error_sharing` times:
+/// `R = Rot R_l Rotᵀ + k J P_pose Jᵀ`.
+///
+/// A robot's pose error is not white: it is the same for every sighting the robot makes
+/// until landmarks correct it. A filter that adds `J P Jᵀ` to each of N such sightings
+/// lets their average shrink the pose error N-fold, which it does not do. Counting it
+/// k times, with k the number of sightings a robot makes within its pose error's
+/// correlation time, makes those k sightings together carry it exactly once
+/// (`(R_l + k P)/k = R_l/k + P`). See [`BallFilterConfig::pose_error_sharing`].
+pub fn field_observation_shared(
+    t_s: f64,
+    pose: &PoseEstimate,
+    sighting: &BallSighting,
+    pose_error_sharing: f64,
+) -> FieldObservation {
     let rot = rotation(pose.mean.z);
     let j = robot_to_field_pose_jacobian(&pose.mean, &sighting.local);
-    let cov = rot * sighting.cov * rot.transpose() + j * pose.cov * j.transpose();
+    let k = pose_error_sharing.max(1.0);
+    let cov = rot * sighting.cov * rot.transpose() + j * pose.cov * j.transpose() * k;
     FieldObservation {
         t_s,
         position: robot_to_field(&pose.mean, &sighting.local),
@@ -273,6 +292,10 @@ pub struct BallFilterConfig {
     /// After this many consecutive outliers the track restarts from the latest one (a kick
     /// the motion model could not follow).
     pub reset_after_outliers: u32,
+    /// k of [`field_observation_shared`]: how many consecutive sightings of one robot share
+    /// one pose error (about camera rate × detection rate × the time landmarks take to
+    /// renew the pose). 1 treats pose errors as white, which is overconfident.
+    pub pose_error_sharing: f64,
 }
 
 impl Default for BallFilterConfig {
@@ -280,8 +303,9 @@ impl Default for BallFilterConfig {
         BallFilterConfig {
             model: BallModel::default(),
             initial_velocity_var: 4.0,
-            outlier_chi2: 13.82,
+            outlier_chi2: 9.21,
             reset_after_outliers: 2,
+            pose_error_sharing: 10.0,
         }
     }
 }
@@ -385,7 +409,12 @@ impl BallFilter {
         pose: &PoseEstimate,
         sighting: &BallSighting,
     ) -> BallUpdate {
-        self.observe(&field_observation(t_s, pose, sighting))
+        self.observe(&field_observation_shared(
+            t_s,
+            pose,
+            sighting,
+            self.config.pose_error_sharing,
+        ))
     }
 }
 

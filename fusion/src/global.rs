@@ -38,7 +38,7 @@ impl Default for GlobalConfig {
         GlobalConfig {
             ball: BallModel::default(),
             initial_velocity_var: 4.0,
-            gate_chi2: 13.82,
+            gate_chi2: 9.21,
             commit_lag_s: 0.5,
             stale_after_s: 1.0,
             confidence_decay_per_s: 0.5,
@@ -252,10 +252,9 @@ impl GlobalModel {
         let in_order = at == self.pending.len();
         self.pending.insert(at, *obs);
         if in_order {
-            if let Some(head) = self.head {
-                if let Ok((next, _)) = update(&model, &head, obs, None) {
-                    self.head = Some(next);
-                }
+            // `prior` is the head predicted to this observation's time: update it directly.
+            if let Ok((next, _)) = update(&model, &prior, obs, None) {
+                self.head = Some(next);
             }
         } else {
             self.head = self.replay(f64::INFINITY);
@@ -371,13 +370,18 @@ impl GlobalModel {
     }
 
     /// The team ball at `now_s`: the fused track, or the robot's own ball when every
-    /// teammate is silent. `None` before anyone has seen a ball.
-    pub fn team_ball(&self, now_s: f64) -> Option<TeamBall> {
+    /// teammate is silent. `own_ball` is the robot's freshest own ball
+    /// ([`crate::LocalModel::ball_at`]); without it the fallback uses the own LWM last
+    /// ingested. `None` before anyone has seen a ball.
+    pub fn team_ball(&self, now_s: f64, own_ball: Option<&BallEstimate>) -> Option<TeamBall> {
         let model = self.config.ball;
         let (estimate, source) = if self.any_fresh_teammate(now_s) {
             (self.state_at(now_s)?, TeamBallSource::Fused)
         } else {
-            let own = self.robots.get(&self.own_id)?.lwm.ball?;
+            let own = match own_ball {
+                Some(b) => *b,
+                None => self.robots.get(&self.own_id)?.lwm.ball?,
+            };
             (own.predict_to(&model, now_s), TeamBallSource::OwnFallback)
         };
         Some(TeamBall {

@@ -104,7 +104,7 @@
 //!
 //! let mut gwm = GlobalModel::new(2, GlobalConfig::default());
 //! gwm.receive(1, &bytes, 0.15, 0.05).unwrap(); // robot 1's message, 50 ms old on arrival
-//! let team = gwm.team_ball(0.2).unwrap();
+//! let team = gwm.team_ball(0.2, None).unwrap();
 //! assert!((team.estimate.position() - Vector2::new(0.0, 1.1)).norm() < 0.01);
 //! ```
 
@@ -118,8 +118,9 @@ mod pose;
 mod wire;
 
 pub use ball::{
-    field_observation, initial_estimate, update as ball_update, BallEstimate, BallFilter,
-    BallFilterConfig, BallModel, BallSighting, BallUpdate, CentralizedBall, FieldObservation,
+    field_observation, field_observation_shared, initial_estimate, update as ball_update,
+    BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate,
+    CentralizedBall, FieldObservation,
 };
 pub use confidence::{pose_confidence, position_confidence, REFERENCE_RADIUS_M};
 pub use geometry::{

@@ -2,7 +2,7 @@
 //! sightings only, and the message it publishes as `*.var.world.local`.
 
 use crate::ball::{
-    field_observation, BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate,
+    field_observation_shared, BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate,
     FieldObservation,
 };
 use crate::confidence::{pose_confidence, position_confidence};
@@ -132,7 +132,12 @@ impl LocalModel {
 
     /// A ball sighting in robot coordinates at `t_s`, made from the current pose estimate.
     pub fn ball_sighting(&mut self, t_s: f64, sighting: &BallSighting) -> BallUpdate {
-        let obs = field_observation(t_s, &self.pose.estimate, sighting);
+        let obs = field_observation_shared(
+            t_s,
+            &self.pose.estimate,
+            sighting,
+            self.ball.config.pose_error_sharing,
+        );
         let result = self.ball.observe(&obs);
         match result {
             BallUpdate::Initialised | BallUpdate::Updated(_) => self.pending.add(&obs),

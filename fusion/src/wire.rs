@@ -119,6 +119,13 @@ impl SigmaCode {
     };
 
     fn decode(&self, code: u32) -> f64 {
+        if self.max_code == 255 {
+            // The u8 scale is decoded 7 times per message: a table saves the exp().
+            static TABLE: std::sync::OnceLock<[f64; 256]> = std::sync::OnceLock::new();
+            let table = TABLE
+                .get_or_init(|| std::array::from_fn(|q| SIGMA8_MIN * (ln_k8() * q as f64).exp()));
+            return table[(code as usize).min(255)];
+        }
         self.min * (self.ln_k * code as f64).exp()
     }
 
@@ -386,7 +393,7 @@ impl LocalWorldModel {
             ),
         };
         let ball = if flags & FLAG_BALL != 0 {
-            let rho: Vec<i8> = b[27..33].iter().map(|&x| x as i8).collect();
+            let rho: [i8; 6] = std::array::from_fn(|k| b[27 + k] as i8);
             let corr = corr_matrix::<4>(&rho);
             if corr.cholesky().is_none() {
                 return Err(DecodeError::NotPositiveDefinite { field: "ball" });

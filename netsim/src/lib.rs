@@ -9,8 +9,11 @@
 //! link never changes what happens on another.
 //!
 //! It is **not** a packet-level model of 802.11 or IP: there are no retransmissions,
-//! fragmentation or congestion control, and a payload is delivered as given. It never
-//! reads a clock, sleeps, or opens a socket. It depends on nothing else in huddle.
+//! fragmentation or congestion control, and a payload is delivered as given (bandwidth
+//! counts payload bytes only). Each one-way link has its own queue: the air is not a
+//! medium shared between links, so a multicast to four receivers is serialised four times
+//! in parallel. It never reads a clock, sleeps, or opens a socket. It depends on nothing
+//! else in huddle.
 //!
 //! # Pieces
 //!

@@ -257,6 +257,8 @@ impl SimBuilder {
             links: Vec::new(),
             groups: Vec::new(),
             queue: BinaryHeap::new(),
+            slots: Vec::new(),
+            free_slots: Vec::new(),
             order: 0,
             next_tx: 0,
             cut: HashSet::new(),
@@ -301,11 +303,12 @@ enum Event {
     Act(Action),
 }
 
+/// A queue entry; the event itself waits in `Sim::slots` so that heap moves stay small.
 struct Scheduled {
     at: Time,
     /// Insertion order: events at the same time run first-in first-out.
     order: u64,
-    event: Event,
+    slot: usize,
 }
 
 impl PartialEq for Scheduled {
@@ -344,6 +347,9 @@ pub struct Sim {
     /// Members of each group, sorted, by group index (id − 1).
     groups: Vec<Vec<NodeId>>,
     queue: BinaryHeap<Scheduled>,
+    /// Events by slot; `None` slots are listed in `free_slots` for reuse.
+    slots: Vec<Option<Event>>,
+    free_slots: Vec<usize>,
     order: u64,
     next_tx: u64,
     /// One-way cuts `(from, to)`.
@@ -782,7 +788,9 @@ impl Sim {
     /// Runs the next queued event, moving time to it; returns its time, or `None` (and
     /// time stays put) if nothing is queued.
     pub fn step(&mut self) -> Option<Time> {
-        let Scheduled { at, event, .. } = self.queue.pop()?;
+        let Scheduled { at, slot, .. } = self.queue.pop()?;
+        let event = self.slots[slot].take().expect("queued slots hold an event");
+        self.free_slots.push(slot);
         self.now = at;
         match event {
             Event::Arrive(arrival) => self.arrive(arrival),
@@ -810,10 +818,20 @@ impl Sim {
 
     fn schedule(&mut self, at: Time, event: Event) {
         self.order += 1;
+        let slot = match self.free_slots.pop() {
+            Some(slot) => {
+                self.slots[slot] = Some(event);
+                slot
+            }
+            None => {
+                self.slots.push(Some(event));
+                self.slots.len() - 1
+            }
+        };
         self.queue.push(Scheduled {
             at,
             order: self.order,
-            event,
+            slot,
         });
     }
 

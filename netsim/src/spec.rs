@@ -435,4 +435,32 @@ mod tests {
             "delay: `fast` is not a duration like 50ms, 200us, 1.5s"
         );
     }
+
+    proptest::proptest! {
+        #[test]
+        fn any_string_parses_or_fails_cleanly(spec in "[a-z=,%.0-9µ -]{0,60}") {
+            let _ = spec.parse::<LinkConfig>();
+        }
+
+        #[test]
+        fn any_valid_config_prints_and_parses_back(
+            latency_us in 0u64..1_000_000,
+            jitter_ns in 0u64..100_000_000,
+            loss in 0.0f64..=1.0,
+            dup in 0.0f64..=1.0,
+            rate_bps in proptest::option::of(1u64..10_000_000_000),
+            queue in 1usize..10_000,
+        ) {
+            let c = LinkConfig {
+                latency: Duration::from_micros(latency_us),
+                jitter: Duration::from_nanos(jitter_ns),
+                loss,
+                duplicate: dup,
+                rate_bps,
+                queue_limit: queue,
+                ..LinkConfig::default()
+            };
+            proptest::prop_assert_eq!(c.to_string().parse::<LinkConfig>(), Ok(c));
+        }
+    }
 }

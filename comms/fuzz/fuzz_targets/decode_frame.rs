@@ -19,8 +19,8 @@ fuzz_target!(|data: &[u8]| {
     let key = TeamKey::new(b"fuzz");
     let _ = decode_frame(data, team, Some(&key));
 
-    let mut replica = Replica::new(ReplicaConfig::new(1, team), 1, Instant::ZERO)
-        .expect("valid config");
+    let mut replica =
+        Replica::new(ReplicaConfig::new(1, team), 1, Instant::ZERO).expect("valid config");
     let from = SocketAddr::from(([127, 0, 0, 1], 2000));
     replica.handle_datagram(Instant::from_micros(1_000), from, data);
     replica.handle_timeout(Instant::from_micros(2_000_000));

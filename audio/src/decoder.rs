@@ -1,0 +1,997 @@
+//! The streaming decoder: a sans-IO detector you push samples into and poll messages out of.
+//!
+//! # How it decides
+//!
+//! 1. **Analysis** (`analysis`): Hann windows of about 1/8 of a tone (64–128 ms), half
+//!    overlapping, zero-padded FFT; the power of each of the 72 tones at each candidate
+//!    frequency scale.
+//! 2. **Noise floor** ([`NoiseFloor`]): per window, the level is the median over the 72
+//!    tones (a message lights at most 12 of them) divided by the spectral shape; the shape
+//!    (pink noise, a microphone's response) is a slow, outlier-gated average per tone,
+//!    frozen on the tones of a message being tracked. Powers are divided by level × shape,
+//!    so under noise each is ≈ Exp(1).
+//! 3. **Integration**: the normalised powers of the last `n` windows that fit in one tone
+//!    duration are summed per tone and scale (the energy detector matched to the tone
+//!    length). Under noise each sum is ≈ Gamma(n, 1).
+//! 4. **Detection**: for each scale, the best sender basic and the best data basic (sums
+//!    of their three tones); the frame hypothesis energy (six tones) must exceed the
+//!    Gamma(6n) quantile for a per-window false-alarm probability of [`P_FRAME`] after a
+//!    union bound over the 63 hypotheses and all scales.
+//! 5. **The seed's rules**, on the integrated sums at the chosen scale: a tone is present
+//!    when its sum exceeds the Gamma(n) quantile at [`P_TONE`] and is not merely leakage
+//!    from a much louder neighbour; a basic is present when ≥ 2 of its 3 tones are; the
+//!    frame is valid only with exactly one sender basic and exactly one data basic.
+//!    Two consecutive windows must give the same valid frame before it is accepted.
+//! 6. **Timing and re-decision**: once accepted, the onset is located on the per-window
+//!    energy of the frame's six tones (a step-change estimate refined by the Hann-window
+//!    share of the edge window); the frame is re-decided with the rules on exactly the
+//!    windows inside `[onset, onset + T]`.
+//! 7. **Short or long**: a sequential probability ratio test on the sender's tones just
+//!    after the slot end, with the tone level measured in the slot: sender stops → a
+//!    short message; sender continues → a second slot is decided the same way and the
+//!    sender must then stop → a long message. A frame that keeps sounding past two slots
+//!    is not a message (and is ignored until it stops).
+//! 8. **Once per transmission**: after a decision the integration restarts after the
+//!    transmission's end.
+//!
+//! # False alarms
+//!
+//! A false message needs, in the same window and the next, the six-tone energy above a
+//! threshold at 1e-12 per window (union-bounded), ≥ 2 of 3 tones of exactly one sender
+//! basic and of exactly one data basic at 3e-3 per tone (≈ 567 · (3e-3)⁴ ≈ 5e-8 of noise
+//! windows), then the same rules again on the aligned slot, then a clean stop. Over
+//! Gaussian noise that is far below one per 10 hours (≈ 560 000 windows at 64 ms); what
+//! remains are structured sounds, which `huddle audio eval` measures.
+
+use std::collections::VecDeque;
+
+use crate::analysis::{Analyzer, Geometry};
+use crate::significance::{
+    gamma_upper_quantile, hann_area_inverse, hann_share_inside, ln_tone_likelihood,
+};
+use crate::tones::{basic_tones, Frame, Message, Sender, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
+
+/// Per-tone false-alarm probability of "present" on one slot's integrated sum.
+pub const P_TONE: f64 = 3e-3;
+/// Per-window false-alarm probability of the frame-energy detector (before the rules).
+pub const P_FRAME: f64 = 1e-12;
+/// A tone is leakage, not present, when its excess is below this share of an adjacent
+/// tone's excess (−20 dB; Hann leakage at 3 bins is about −31 dB).
+pub const NEIGHBOUR_LEAKAGE: f64 = 0.01;
+/// A tone more than 25 dB below the loudest tone is not present: window sidelobes two or
+/// more tones away, and a loudspeaker's harmonic and intermodulation products, sit lower
+/// than that; a real tone that weak would be lost anyway (and the 2-of-3 vote covers one).
+pub const DYNAMIC_RANGE: f64 = 0.003_162;
+/// Bound of the short/long sequential test (log-likelihood ratio). Half-overlapping
+/// windows count their evidence about twice, so this is about ±7 (1 in 1000) in
+/// independent evidence.
+pub const SPRT_BOUND: f64 = 14.0;
+
+/// Power share of the first slot's level assumed for a continuing tone (−4.5 dB).
+const CONTINUATION_SHARE: f64 = 0.35;
+/// Largest evidence one tone in one window adds to the short/long test.
+const LLR_CLIP: f64 = 8.0;
+
+/// How to decode.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecoderConfig {
+    /// Input sample rate, Hz (8000 … 192000).
+    pub sample_rate_hz: u32,
+    /// Duration of one frame (short message), seconds, as the senders use it.
+    pub tone_duration_s: f64,
+    /// Largest relative frequency error tolerated between sender and receiver clocks.
+    pub max_frequency_error: f64,
+}
+
+impl Default for DecoderConfig {
+    fn default() -> Self {
+        DecoderConfig {
+            sample_rate_hz: 16_000,
+            tone_duration_s: 1.0,
+            max_frequency_error: 0.006,
+        }
+    }
+}
+
+/// Why a decoder configuration is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecoderConfigError {
+    /// The rate must be 8000 … 192000 Hz: below 8 kHz the top tone is above Nyquist.
+    #[error("sample rate {0} Hz unsupported (8000..=192000)")]
+    SampleRate(u32),
+    /// The tone duration must be 0.02 … 5 s.
+    #[error("tone duration {0} s unsupported (0.02..=5)")]
+    ToneDuration(f64),
+    /// The tolerated frequency error must be 0 … 2%.
+    #[error("frequency error {0} unsupported (0..=0.02)")]
+    FrequencyError(f64),
+}
+
+/// A decoded message.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Detection {
+    /// What was said.
+    pub message: Message,
+    /// When it began, seconds from the first sample pushed.
+    pub start_s: f64,
+    /// When it ended (estimated), seconds from the first sample pushed.
+    pub end_s: f64,
+    /// How much audio had been pushed when it was decided, seconds: `decided_at_s - end_s`
+    /// is the reporting delay.
+    pub decided_at_s: f64,
+    /// Sender's frequency scale relative to the plan (1.003 = 0.3% sharp).
+    pub frequency_scale: f64,
+    /// Estimated signal-to-noise ratio per tone in one analysis window, dB.
+    pub tone_snr_db: f64,
+}
+
+/// The noise floor: a per-window level times a slowly learnt per-tone shape.
+#[derive(Clone, Debug)]
+struct NoiseFloor {
+    shape: [f64; TONE_COUNT],
+    level: f64,
+    updates: u64,
+    /// Lowest level used (see [`QUIETEST_NOISE_BITS`]).
+    minimum: f64,
+}
+
+/// Powers above this multiple of the floor do not update the shape (a signal, not noise).
+const SHAPE_GATE: f64 = 4.0;
+/// Slowest shape adaptation rate per window (time constant 256 windows, 16–33 s).
+const SHAPE_RATE: f64 = 1.0 / 256.0;
+/// The quietest noise assumed: quantisation noise of a 20-bit recording. Without it a
+/// synthetic, noise-free signal would be normalised by FFT round-off, which jumps by
+/// orders of magnitude from window to window.
+const QUIETEST_NOISE_BITS: i32 = 20;
+
+impl NoiseFloor {
+    fn new(window_len: usize) -> Self {
+        let step = 2f64.powi(1 - QUIETEST_NOISE_BITS);
+        // Quantisation noise variance step²/12 through a Hann window (Σw² = 3L/8).
+        let minimum = step * step / 12.0 * 0.375 * window_len as f64;
+        NoiseFloor {
+            shape: [1.0; TONE_COUNT],
+            level: 0.0,
+            updates: 0,
+            minimum,
+        }
+    }
+
+    /// Updates from the nominal-scale powers of one window; returns the level.
+    fn update(&mut self, nominal: &[f32], frozen: &[bool; TONE_COUNT]) -> f64 {
+        let mut ratios = [0.0f64; TONE_COUNT];
+        for (k, r) in ratios.iter_mut().enumerate() {
+            *r = f64::from(nominal[k]) / self.shape[k];
+        }
+        let mid = TONE_COUNT / 2;
+        let (_, median, _) = ratios.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        // Median of Exp(1) is ln 2.
+        let measured = *median / std::f64::consts::LN_2;
+        let instant = measured.max(self.minimum);
+        self.level = if self.level <= 0.0 {
+            instant
+        } else {
+            // Light smoothing in the log domain: the median of 72 exponentials is ±17%.
+            (0.7 * self.level.ln() + 0.3 * instant.ln()).exp()
+        };
+        if measured < 2.0 * self.minimum {
+            // (Near-)digital silence says nothing about the noise's shape.
+            return self.level;
+        }
+        // E[X | X < 4] for X ~ Exp(1): undoes the gate's bias.
+        let gate_mean =
+            (1.0 - (1.0 + SHAPE_GATE) * (-SHAPE_GATE).exp()) / (1.0 - (-SHAPE_GATE).exp());
+        let rate = SHAPE_RATE.max(1.0 / (self.updates as f64 + 8.0));
+        for k in 0..TONE_COUNT {
+            if frozen[k] {
+                continue;
+            }
+            let x = f64::from(nominal[k]) / (self.level * self.shape[k]);
+            if x < SHAPE_GATE {
+                self.shape[k] *= 1.0 + rate * (x / gate_mean - 1.0);
+                self.shape[k] = self.shape[k].clamp(1e-6, 1e6);
+            }
+        }
+        self.updates += 1;
+        self.level
+    }
+}
+
+/// One analysed window kept for look-back.
+#[derive(Clone, Debug)]
+struct WindowRecord {
+    index: u64,
+    start: u64,
+    /// Noise level this window was normalised by.
+    level: f64,
+    /// Normalised powers `[j * 72 + k]`.
+    r: Vec<f32>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stage {
+    /// Waiting for the windows of the first slot.
+    Slot1,
+    /// Sequential test after slot `slot` (1 or 2) ends at `slot_end`.
+    EndTest {
+        slot: u8,
+        slot_end: f64,
+        llr: f64,
+        next_index: u64,
+    },
+    /// Waiting for the windows of the second slot.
+    Slot2,
+}
+
+#[derive(Clone, Debug)]
+struct Tracking {
+    sender: Sender,
+    data: [u8; 2],
+    scale: usize,
+    onset: f64,
+    stage: Stage,
+    /// Per-window excess power of each tone measured in the last decided slot.
+    level: [f64; TONE_COUNT],
+    /// Tones present in the last decided slot.
+    present: [bool; TONE_COUNT],
+    /// Noise level during the last decided slot.
+    noise: f64,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    frame: Frame,
+    count: u32,
+}
+
+/// The streaming decoder. Push samples in any block size with [`Decoder::push_f32`] or
+/// [`Decoder::push_i16`]; after each push, drain [`Decoder::poll_message`] until `None`.
+/// At the end of a stream call [`Decoder::finish`] and drain again.
+///
+/// No input panics it: non-finite samples count as 0, silence is handled, and the
+/// state's size is bounded by the configuration.
+pub struct Decoder {
+    config: DecoderConfig,
+    analyzer: Analyzer,
+    geometry: Geometry,
+    noise: NoiseFloor,
+    history: VecDeque<WindowRecord>,
+    history_cap: usize,
+    windows_seen: u64,
+    /// Per-tone sums over the integration windows, `[j * 72 + k]`.
+    sliding: Vec<f64>,
+    /// Index of the oldest window in `sliding`, and how many are summed.
+    sliding_first: u64,
+    sliding_count: usize,
+    /// Windows starting before this sample belong to a finished transmission.
+    floor: u64,
+    run: Option<Run>,
+    tracking: Option<Tracking>,
+    /// A frame that kept sounding too long: ignored until it stops.
+    blocked: Option<(Frame, usize, f64, u32)>,
+    output: VecDeque<Detection>,
+    scratch_powers: Vec<f32>,
+    eof: bool,
+}
+
+impl std::fmt::Debug for Decoder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Decoder")
+            .field("config", &self.config)
+            .field("window_len", &self.geometry.window_len)
+            .field("windows_seen", &self.windows_seen)
+            .finish()
+    }
+}
+
+impl Decoder {
+    /// A decoder for `config`.
+    pub fn new(config: DecoderConfig) -> Result<Decoder, DecoderConfigError> {
+        if !(8_000..=192_000).contains(&config.sample_rate_hz) {
+            return Err(DecoderConfigError::SampleRate(config.sample_rate_hz));
+        }
+        if !(0.02..=5.0).contains(&config.tone_duration_s) {
+            return Err(DecoderConfigError::ToneDuration(config.tone_duration_s));
+        }
+        if !(0.0..=0.02).contains(&config.max_frequency_error) {
+            return Err(DecoderConfigError::FrequencyError(
+                config.max_frequency_error,
+            ));
+        }
+        let geometry = Geometry::new(
+            config.sample_rate_hz,
+            config.tone_duration_s,
+            config.max_frequency_error,
+        );
+        let per_slot = (geometry.slot_samples / geometry.hop as f64).ceil() as usize + 2;
+        let history_cap = 3 * geometry.slot_windows + 3 * per_slot + 16;
+        Ok(Decoder {
+            analyzer: Analyzer::new(geometry.clone()),
+            sliding: vec![0.0; geometry.scale_count() * TONE_COUNT],
+            scratch_powers: vec![0.0; geometry.scale_count() * TONE_COUNT],
+            noise: NoiseFloor::new(geometry.window_len),
+            geometry,
+            config,
+            history: VecDeque::with_capacity(history_cap),
+            history_cap,
+            windows_seen: 0,
+            sliding_first: 0,
+            sliding_count: 0,
+            floor: 0,
+            run: None,
+            tracking: None,
+            blocked: None,
+            output: VecDeque::new(),
+            eof: false,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DecoderConfig {
+        &self.config
+    }
+
+    /// Analysis window length in samples (the time resolution of detection).
+    pub fn window_len(&self) -> usize {
+        self.geometry.window_len
+    }
+
+    /// Samples pushed so far.
+    pub fn samples_pushed(&self) -> u64 {
+        self.analyzer.samples_pushed()
+    }
+
+    /// Pushes f32 samples (full scale ±1; any level works, the detector is relative).
+    pub fn push_f32(&mut self, samples: &[f32]) {
+        self.analyzer.push(samples.iter().copied());
+        self.drain_windows();
+    }
+
+    /// Pushes 16-bit samples.
+    pub fn push_i16(&mut self, samples: &[i16]) {
+        self.analyzer
+            .push(samples.iter().map(|&s| crate::pcm::i16_to_f32(s)));
+        self.drain_windows();
+    }
+
+    /// The next decoded message, in order of decision.
+    pub fn poll_message(&mut self) -> Option<Detection> {
+        self.output.pop_front()
+    }
+
+    /// Ends the stream: a transmission whose slots are complete is decided on the evidence
+    /// so far (a stream ending right after a message reports it). Pushing after this
+    /// continues the stream.
+    pub fn finish(&mut self) {
+        self.eof = true;
+        self.advance_tracking();
+        if self.tracking.is_some() {
+            // Slots not complete: not a message.
+            self.tracking = None;
+        }
+        self.eof = false;
+    }
+
+    fn rate(&self) -> f64 {
+        f64::from(self.geometry.rate_hz)
+    }
+
+    fn drain_windows(&mut self) {
+        while let Some(start) = self.analyzer.next_window() {
+            self.scratch_powers.copy_from_slice(self.analyzer.powers());
+            self.on_window(start);
+        }
+    }
+
+    fn on_window(&mut self, start: u64) {
+        let scales = self.geometry.scale_count();
+        let nominal = self.geometry.nominal_scale();
+        let mut frozen = [false; TONE_COUNT];
+        if let Some(t) = &self.tracking {
+            for k in (Frame {
+                sender: t.sender,
+                data: t.data[0],
+            })
+            .tones()
+            {
+                frozen[k] = true;
+            }
+            for k in (Frame {
+                sender: t.sender,
+                data: t.data[1],
+            })
+            .tones()
+            {
+                frozen[k] = true;
+            }
+        }
+        let powers = std::mem::take(&mut self.scratch_powers);
+        let level = self.noise.update(
+            &powers[nominal * TONE_COUNT..(nominal + 1) * TONE_COUNT],
+            &frozen,
+        );
+        let mut r = if self.history.len() >= self.history_cap {
+            let mut old = self.history.pop_front().map(|w| w.r).unwrap_or_default();
+            old.resize(scales * TONE_COUNT, 0.0);
+            old
+        } else {
+            vec![0.0; scales * TONE_COUNT]
+        };
+        for j in 0..scales {
+            for k in 0..TONE_COUNT {
+                let i = j * TONE_COUNT + k;
+                r[i] = (f64::from(powers[i]) / (level * self.noise.shape[k])) as f32;
+            }
+        }
+        self.scratch_powers = powers;
+        let index = self.windows_seen;
+        self.windows_seen += 1;
+        self.history.push_back(WindowRecord {
+            index,
+            start,
+            level,
+            r,
+        });
+        if start >= self.floor {
+            self.add_to_sliding(index);
+        }
+        self.update_blocked();
+        if self.tracking.is_some() {
+            self.advance_tracking();
+        } else {
+            self.detect();
+        }
+    }
+
+    fn position(&self, index: u64) -> Option<usize> {
+        let first = self.history.front()?.index;
+        let pos = index.checked_sub(first)? as usize;
+        (pos < self.history.len()).then_some(pos)
+    }
+
+    fn record(&self, index: u64) -> Option<&WindowRecord> {
+        self.position(index).map(|p| &self.history[p])
+    }
+
+    fn add_to_sliding(&mut self, index: u64) {
+        let Some(pos) = self.position(index) else {
+            return;
+        };
+        if self.sliding_count == 0 {
+            self.sliding_first = index;
+        }
+        for (s, &x) in self.sliding.iter_mut().zip(&self.history[pos].r) {
+            *s += f64::from(x);
+        }
+        self.sliding_count += 1;
+        if self.sliding_count > self.geometry.slot_windows {
+            if let Some(old) = self.position(self.sliding_first) {
+                for (s, &x) in self.sliding.iter_mut().zip(&self.history[old].r) {
+                    *s -= f64::from(x);
+                }
+            }
+            self.sliding_first += 1;
+            self.sliding_count -= 1;
+        }
+    }
+
+    /// Restarts integration from the windows starting at or after `floor`.
+    fn reset_sliding(&mut self, floor: u64) {
+        self.floor = floor;
+        self.sliding.iter_mut().for_each(|s| *s = 0.0);
+        self.sliding_count = 0;
+        let indices: Vec<u64> = self
+            .history
+            .iter()
+            .filter(|w| w.start >= floor)
+            .map(|w| w.index)
+            .collect();
+        let keep = indices.len().saturating_sub(self.geometry.slot_windows);
+        for &i in &indices[keep..] {
+            self.add_to_sliding(i);
+        }
+        self.run = None;
+    }
+
+    /// Per-window excess of `tones` at `scale` in window `rec`.
+    fn excess(rec: &WindowRecord, scale: usize, tones: &[usize]) -> f64 {
+        tones
+            .iter()
+            .map(|&k| f64::from(rec.r[scale * TONE_COUNT + k]) - 1.0)
+            .sum()
+    }
+
+    fn update_blocked(&mut self) {
+        let Some((frame, scale, level, quiet)) = self.blocked else {
+            return;
+        };
+        let Some(rec) = self.history.back() else {
+            return;
+        };
+        let x = Self::excess(rec, scale, &frame.tones());
+        let quiet = if x < 0.25 * level { quiet + 1 } else { 0 };
+        self.blocked = if quiet >= 2 {
+            None
+        } else {
+            Some((frame, scale, level, quiet))
+        };
+    }
+
+    /// The rules on integrated sums `sums` (72 tones) of `count` windows.
+    fn apply_rules(sums: &[f64], count: usize) -> (Option<Frame>, [bool; TONE_COUNT]) {
+        let n = count.max(1) as f64;
+        let threshold = gamma_upper_quantile(n, P_TONE);
+        let mut present = [false; TONE_COUNT];
+        let loudest = sums.iter().fold(0.0f64, |m, &s| m.max(s - n));
+        for k in 0..TONE_COUNT {
+            let excess = sums[k] - n;
+            let left = if k > 0 { sums[k - 1] - n } else { 0.0 };
+            let right = if k + 1 < TONE_COUNT {
+                sums[k + 1] - n
+            } else {
+                0.0
+            };
+            present[k] = sums[k] >= threshold
+                && excess >= NEIGHBOUR_LEAKAGE * left.max(right)
+                && excess >= DYNAMIC_RANGE * loudest;
+        }
+        let mut senders = Vec::new();
+        let mut data = Vec::new();
+        for b in 0..BASIC_COUNT {
+            let votes = basic_tones(b).iter().filter(|&&k| present[k]).count();
+            if votes >= 2 {
+                if b < SENDER_COUNT {
+                    senders.push(b);
+                } else {
+                    data.push(b);
+                }
+            }
+        }
+        let frame = match (senders.as_slice(), data.as_slice()) {
+            (&[s], &[d]) => Sender::from_index(s as u8).map(|sender| Frame {
+                sender,
+                data: (d - SENDER_COUNT) as u8,
+            }),
+            _ => None,
+        };
+        (frame, present)
+    }
+
+    fn detect(&mut self) {
+        let count = self.sliding_count;
+        if count == 0 {
+            self.run = None;
+            return;
+        }
+        let scales = self.geometry.scale_count();
+        let mut best = (f64::NEG_INFINITY, 0usize);
+        for j in 0..scales {
+            let s = &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT];
+            let basic = |b: usize| -> f64 { basic_tones(b).iter().map(|&k| s[k]).sum() };
+            let sender = (0..SENDER_COUNT)
+                .map(basic)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let data = (SENDER_COUNT..BASIC_COUNT)
+                .map(basic)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if sender + data > best.0 {
+                best = (sender + data, j);
+            }
+        }
+        let hypotheses = (SENDER_COUNT * (BASIC_COUNT - SENDER_COUNT) * scales) as f64;
+        let threshold = gamma_upper_quantile(6.0 * count as f64, P_FRAME / hypotheses);
+        if best.0 < threshold {
+            self.run = None;
+            return;
+        }
+        let j = best.1;
+        let (frame, _) =
+            Self::apply_rules(&self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT], count);
+        let Some(frame) = frame else {
+            self.run = None;
+            return;
+        };
+        if matches!(self.blocked, Some((b, ..)) if b == frame) {
+            self.run = None;
+            return;
+        }
+        let run = match self.run {
+            Some(r) if r.frame == frame => Run {
+                frame,
+                count: r.count + 1,
+            },
+            _ => Run { frame, count: 1 },
+        };
+        self.run = Some(run);
+        if run.count >= 2 {
+            self.start_tracking(frame, j);
+        }
+    }
+
+    /// Locates the onset of `frame` at `scale` in the windows since the floor.
+    fn estimate_onset(&self, frame: Frame, scale: usize) -> Option<f64> {
+        let tones = frame.tones();
+        let window_len = self.geometry.window_len as f64;
+        let lookback = 3 * self.geometry.slot_windows + 4;
+        let candidates: Vec<(u64, u64, f64)> = self
+            .history
+            .iter()
+            .rev()
+            .take(lookback)
+            .filter(|w| w.start >= self.floor)
+            .map(|w| (w.index, w.start, Self::excess(w, scale, &tones)))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
+        if candidates.is_empty() {
+            return None;
+        }
+        // Step-change estimate: the start maximising the standardised sum to now.
+        let mut best = (f64::NEG_INFINITY, 0usize);
+        let mut tail = 0.0;
+        for i in (0..candidates.len()).rev() {
+            tail += candidates[i].2;
+            let score = tail / ((candidates.len() - i) as f64).sqrt();
+            if score > best.0 {
+                best = (score, i);
+            }
+        }
+        let w0 = best.1;
+        let plateau_end = (w0 + self.geometry.slot_windows).min(candidates.len());
+        // The edge refinement compares raw (level-scaled) excess powers, so a jump of the
+        // per-window noise estimate at the edge does not bias it.
+        let plateau = candidates[w0..plateau_end]
+            .iter()
+            .filter_map(|c| self.record(c.0))
+            .map(|w| Self::excess(w, scale, &tones) * w.level)
+            .sum::<f64>()
+            / (plateau_end - w0) as f64;
+        let mut onset = candidates[w0].1 as f64;
+        if plateau > 0.0 {
+            // Refine with the edge window whose share of the tone is nearest one half:
+            // its excess is (Hann area after the onset)² of the plateau.
+            let first_index = candidates[w0].0;
+            let mut best_q = f64::INFINITY;
+            for idx in first_index.saturating_sub(2)..=first_index + 1 {
+                let Some(rec) = self.record(idx) else {
+                    continue;
+                };
+                let q = (Self::excess(rec, scale, &tones) * rec.level / plateau).clamp(0.0, 1.0);
+                if q > 0.05 && q < 0.95 && (q - 0.5).abs() < best_q {
+                    best_q = (q - 0.5).abs();
+                    let y = hann_area_inverse(1.0 - q.sqrt());
+                    onset = rec.start as f64 + y * window_len;
+                }
+            }
+        }
+        Some(onset.max(self.floor as f64))
+    }
+
+    fn start_tracking(&mut self, frame: Frame, scale: usize) {
+        let Some(onset) = self.estimate_onset(frame, scale) else {
+            return;
+        };
+        self.tracking = Some(Tracking {
+            sender: frame.sender,
+            data: [frame.data, frame.data],
+            scale,
+            onset,
+            stage: Stage::Slot1,
+            level: [0.0; TONE_COUNT],
+            present: [false; TONE_COUNT],
+            noise: 1.0,
+        });
+        self.advance_tracking();
+    }
+
+    fn latest_window_end(&self) -> f64 {
+        self.history
+            .back()
+            .map(|w| (w.start + self.geometry.window_len as u64) as f64)
+            .unwrap_or(0.0)
+    }
+
+    /// Integrates the windows lying (≥ 90% of their Hann area) inside `[a, b)`; returns the
+    /// sums at `scale`, the window count and the per-window excess of each tone.
+    fn integrate_slot(
+        &self,
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> Option<([f64; TONE_COUNT], usize, [f64; TONE_COUNT], f64)> {
+        let window_len = self.geometry.window_len as f64;
+        let mut sums = [0.0; TONE_COUNT];
+        let mut energy_share = 0.0;
+        let mut count = 0;
+        let mut best_partial: Option<(f64, &WindowRecord)> = None;
+        let mut log_level = 0.0;
+        for w in &self.history {
+            let share = hann_share_inside(w.start as f64, window_len, a, b);
+            if share >= 0.9 {
+                log_level += w.level.ln();
+                for (k, s) in sums.iter_mut().enumerate() {
+                    *s += f64::from(w.r[scale * TONE_COUNT + k]);
+                }
+                energy_share += share * share;
+                count += 1;
+            } else if share >= 0.5 && best_partial.is_none_or(|(s, _)| share > s) {
+                best_partial = Some((share, w));
+            }
+        }
+        if count == 0 {
+            // Tones shorter than a window: use the window holding most of the tone.
+            let (share, w) = best_partial?;
+            for (k, s) in sums.iter_mut().enumerate() {
+                *s = f64::from(w.r[scale * TONE_COUNT + k]);
+            }
+            energy_share = share * share;
+            count = 1;
+            log_level = w.level.ln();
+        }
+        let mut level = [0.0; TONE_COUNT];
+        for k in 0..TONE_COUNT {
+            level[k] = ((sums[k] - count as f64) / energy_share).max(0.0);
+        }
+        Some((sums, count, level, (log_level / count as f64).exp()))
+    }
+
+    fn advance_tracking(&mut self) {
+        loop {
+            let Some(t) = self.tracking.clone() else {
+                return;
+            };
+            let slot_len = self.geometry.slot_samples;
+            let quarter = 0.25 * self.geometry.window_len as f64;
+            match t.stage {
+                Stage::Slot1 | Stage::Slot2 => {
+                    let first = t.stage == Stage::Slot1;
+                    let a = if first { t.onset } else { t.onset + slot_len };
+                    let b = a + slot_len;
+                    if self.latest_window_end() < b + quarter && !self.eof {
+                        return;
+                    }
+                    let decided =
+                        self.integrate_slot(t.scale, a, b)
+                            .and_then(|(sums, n, level, noise)| {
+                                let (frame, present) = Self::apply_rules(&sums, n);
+                                frame
+                                    .filter(|f| f.sender == t.sender)
+                                    .map(|f| (f, present, level, noise))
+                            });
+                    let Some((frame, present, level, noise)) = decided else {
+                        self.end_transmission(b, false);
+                        return;
+                    };
+                    let mut next = t.clone();
+                    next.data[if first { 0 } else { 1 }] = frame.data;
+                    if first {
+                        next.data[1] = frame.data;
+                    }
+                    next.level = level;
+                    next.present = present;
+                    next.noise = noise;
+                    let next_index = self.history.front().map(|w| w.index).unwrap_or(0);
+                    next.stage = Stage::EndTest {
+                        slot: if first { 1 } else { 2 },
+                        slot_end: b,
+                        llr: 0.0,
+                        next_index,
+                    };
+                    self.tracking = Some(next);
+                }
+                Stage::EndTest {
+                    slot,
+                    slot_end,
+                    mut llr,
+                    mut next_index,
+                } => {
+                    let window_len = self.geometry.window_len as f64;
+                    let slot_start = slot_end - slot_len;
+                    let mut verdict = None;
+                    let sender_tones = basic_tones(t.sender.index() as usize);
+                    for w in &self.history {
+                        if w.index < next_index {
+                            continue;
+                        }
+                        next_index = w.index + 1;
+                        let start = w.start as f64;
+                        if start + window_len <= slot_end {
+                            continue;
+                        }
+                        let before = hann_share_inside(start, window_len, slot_start, slot_end);
+                        // Windows still mostly inside the slot are left out: their expected
+                        // power depends on the exact slot end, which is only known to a
+                        // fraction of a window.
+                        if before > 0.3 {
+                            continue;
+                        }
+                        let after =
+                            hann_share_inside(start, window_len, slot_end, slot_end + slot_len);
+                        for &k in &sender_tones {
+                            if !t.present[k] || t.level[k] <= 0.0 {
+                                continue;
+                            }
+                            // Same normalisation as the slot, so levels compare directly
+                            // even where the per-window noise estimate jumps.
+                            let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                            let ended = t.level[k] * before * before;
+                            // Continuation modelled conservatively: an unknown phase at the
+                            // slot edge (powers add) and the second frame up to 4.5 dB
+                            // quieter (another encoder may normalise each frame's peak).
+                            // A louder continuation only strengthens the evidence.
+                            let continued =
+                                t.level[k] * (before * before + CONTINUATION_SHARE * after * after);
+                            // Clipped: at high SNR a small level mismatch (fades, a phase
+                            // step, room echo) must not swamp the evidence of other windows.
+                            llr += (ln_tone_likelihood(r, continued)
+                                - ln_tone_likelihood(r, ended))
+                            .clamp(-LLR_CLIP, LLR_CLIP);
+                        }
+                        if llr >= SPRT_BOUND {
+                            verdict = Some(true);
+                        } else if llr <= -SPRT_BOUND {
+                            verdict = Some(false);
+                        } else if start + window_len >= slot_end + slot_len {
+                            verdict = Some(llr > 0.0);
+                        }
+                        if verdict.is_some() {
+                            break;
+                        }
+                    }
+                    if verdict.is_none() && self.eof {
+                        verdict = Some(llr > 0.0);
+                    }
+                    let Some(continues) = verdict else {
+                        if let Some(tr) = self.tracking.as_mut() {
+                            tr.stage = Stage::EndTest {
+                                slot,
+                                slot_end,
+                                llr,
+                                next_index,
+                            };
+                        }
+                        return;
+                    };
+                    match (slot, continues) {
+                        (1, false) => {
+                            let message = Message::Short {
+                                sender: t.sender,
+                                data: t.data[0],
+                            };
+                            self.report(&t, message, slot_end);
+                            self.end_transmission(slot_end, false);
+                        }
+                        (1, true) => {
+                            if let Some(tr) = self.tracking.as_mut() {
+                                tr.stage = Stage::Slot2;
+                            }
+                        }
+                        (_, false) => {
+                            let value = 21 * u16::from(t.data[0]) + u16::from(t.data[1]);
+                            let message = Message::Long {
+                                sender: t.sender,
+                                value,
+                            };
+                            self.report(&t, message, slot_end);
+                            self.end_transmission(slot_end, false);
+                        }
+                        (_, true) => {
+                            self.end_transmission(slot_end, true);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn report(&mut self, t: &Tracking, message: Message, end: f64) {
+        let rate = self.rate();
+        let mut levels: Vec<f64> = (0..TONE_COUNT)
+            .filter(|&k| t.present[k])
+            .map(|k| t.level[k])
+            .collect();
+        levels.sort_by(|a, b| a.total_cmp(b));
+        let median = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
+        self.output.push_back(Detection {
+            message,
+            start_s: t.onset / rate,
+            end_s: end / rate,
+            decided_at_s: self.latest_window_end() / rate,
+            frequency_scale: 1.0 + self.geometry.scales[t.scale],
+            tone_snr_db: 10.0 * median.max(1e-12).log10(),
+        });
+    }
+
+    /// Closes the tracked transmission at `end`; `too_long` blocks its frame until it stops.
+    fn end_transmission(&mut self, end: f64, too_long: bool) {
+        if let Some(t) = self.tracking.take() {
+            if too_long {
+                let frame = Frame {
+                    sender: t.sender,
+                    data: t.data[1],
+                };
+                let tones = frame.tones();
+                let level: f64 = tones.iter().map(|&k| t.level[k]).sum();
+                self.blocked = Some((frame, t.scale, level, 0));
+            }
+        }
+        self.reset_sliding(end.max(0.0).floor() as u64);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::encoder::{Encoder, EncoderConfig};
+
+    fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
+        let mut d = Decoder::new(config).unwrap();
+        let mut out = Vec::new();
+        for chunk in samples.chunks(block.max(1)) {
+            d.push_f32(chunk);
+            while let Some(m) = d.poll_message() {
+                out.push(m);
+            }
+        }
+        d.finish();
+        while let Some(m) = d.poll_message() {
+            out.push(m);
+        }
+        out
+    }
+
+    #[test]
+    fn clean_short_message_decodes_once_with_its_start_time() {
+        let enc = Encoder::new(EncoderConfig::default()).unwrap();
+        let msg = Message::short(Sender::LeftAttacker, 17).unwrap();
+        let mut x = vec![0.0f32; 8_000];
+        x.extend(enc.encode_f32(&msg));
+        x.extend(vec![0.0f32; 16_000]);
+        let got = decode_all(DecoderConfig::default(), &x, 333);
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(got[0].message, msg);
+        assert!(
+            (got[0].start_s - 0.5).abs() < 0.03,
+            "start {}",
+            got[0].start_s
+        );
+        assert!(
+            got[0].decided_at_s - 1.5 < 0.2,
+            "decided at {}",
+            got[0].decided_at_s
+        );
+    }
+
+    #[test]
+    fn clean_long_message_decodes_as_one_long() {
+        let enc = Encoder::new(EncoderConfig::default()).unwrap();
+        for value in [0u16, 21 * 4 + 4, 440, 123] {
+            let msg = Message::long(Sender::Goalkeeper, value).unwrap();
+            let mut x = vec![0.0f32; 4_000];
+            x.extend(enc.encode_f32(&msg));
+            x.extend(vec![0.0f32; 16_000]);
+            let got = decode_all(DecoderConfig::default(), &x, 1024);
+            assert_eq!(
+                got.iter().map(|d| d.message).collect::<Vec<_>>(),
+                vec![msg],
+                "value {value}"
+            );
+        }
+    }
+
+    #[test]
+    fn two_senders_at_once_is_not_a_message() {
+        let enc = Encoder::new(EncoderConfig::default()).unwrap();
+        let a = enc.encode_f32(&Message::short(Sender::Goalkeeper, 3).unwrap());
+        let b = enc.encode_f32(&Message::short(Sender::RightAttacker, 3).unwrap());
+        let mut x = vec![0.0f32; 4_000];
+        x.extend(a.iter().zip(&b).map(|(p, q)| p + q));
+        x.extend(vec![0.0f32; 16_000]);
+        let got = decode_all(DecoderConfig::default(), &x, 500);
+        assert!(
+            got.is_empty(),
+            "two sender basics must be rejected: {got:?}"
+        );
+    }
+}
