@@ -270,7 +270,7 @@ fn percentile(v: &[f64], p: f64) -> f64 {
 
 fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) {
     println!(
-        "{label:>8} {snr_db:>7.1} {:>9.1} {:>7} {:>9.2}% {:>8.2}% {:>6} {:>9.0} {:>9.0}",
+        "{label:>6} {snr_db:>6.1} {:>8.1} {:>6} {:>8.2}% {:>6.2}% {:>5} {:>7.0} {:>7.0} {:>7.0}",
         es_n0_db(snr_db, tone_s),
         out.sent,
         100.0 * out.correct_share(),
@@ -278,6 +278,7 @@ fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) {
         out.spurious,
         1000.0 * percentile(&out.delays_s, 0.5),
         1000.0 * percentile(&out.delays_s, 0.95),
+        1000.0 * percentile(&out.start_errors_s, 0.95),
     );
 }
 
@@ -289,9 +290,19 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     println!();
     println!("1 s tones, short messages, white noise:");
     println!(
-        "{:>8} {:>7} {:>9} {:>7} {:>10} {:>9} {:>6} {:>9} {:>9}",
-        "", "SNR dB", "Es/N0 dB", "sent", "correct", "wrong", "extra", "delay p50", "p95 (ms)"
+        "{:>6} {:>6} {:>8} {:>6} {:>9} {:>7} {:>5} {:>7} {:>7} {:>7}",
+        "",
+        "SNR dB",
+        "Es/N0 dB",
+        "sent",
+        "correct",
+        "wrong",
+        "extra",
+        "delay50",
+        "delay95",
+        "t0err95"
     );
+    println!("{:>70}", "(ms)     (ms)    (ms)");
     let trial = |snr_db: f64, tone_s: f64, n: usize, long_share: f64, s: u64| {
         run_snr_trial(&SnrTrial {
             seed: s,
