@@ -192,6 +192,9 @@ pub(crate) struct Inner {
     pub(crate) io: IoStats,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Notify>,
+    /// Notices handed to subscribers and relay sessions so far: tells the receive loop
+    /// that a task is now waiting to run.
+    handed_up: u64,
 }
 
 impl Inner {
@@ -257,7 +260,7 @@ impl Inner {
                         if slot.session.wants_changes() {
                             let before = slot.session.pending_output().len();
                             slot.session.handle_change(now, &key, &self.replica);
-                            wake_if_changed(slot, before);
+                            self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
                     }
                     let entry = self.replica.blackboard().get(&key);
@@ -266,7 +269,8 @@ impl Inner {
                             key: key.clone(),
                             entry: entry.clone(),
                         };
-                        deliver(&mut self.subscribers, |p| p.matches(&key), notice);
+                        self.handed_up +=
+                            deliver(&mut self.subscribers, |p| p.matches(&key), notice);
                     }
                 }
                 Event::TalkDelivered {
@@ -278,7 +282,7 @@ impl Inner {
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
                         slot.session.handle_talk(from, &queue, &value);
-                        wake_if_changed(slot, before);
+                        self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
                     let notice = || Notice::Talk {
                         from,
@@ -289,7 +293,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    deliver(&mut self.subscribers, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::TalkGivenUp {
                     queue,
@@ -307,7 +311,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    deliver(&mut self.subscribers, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::PeerJoined { robot, incarnation } => {
                     tracing::info!(
@@ -390,19 +394,24 @@ impl Inner {
     }
 }
 
-fn wake_if_changed(slot: &mut SessionSlot, before: usize) {
+/// Wakes the session's connection if it has something new to write; returns whether.
+fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
     let after = slot.session.pending_output().len();
-    if after != before || slot.session.is_finished() {
+    let wake = after != before || slot.session.is_finished();
+    if wake {
         slot.notify.notify_one();
     }
+    wake
 }
 
 /// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
+/// Returns how many got it.
 fn deliver(
     subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
     matches: impl Fn(&crate::Pattern) -> bool,
     notice: impl Fn() -> Notice,
-) {
+) -> u64 {
+    let mut handed = 0;
     subscribers.retain(|weak| {
         let Some(sub) = weak.upgrade() else {
             return false;
@@ -410,9 +419,11 @@ fn deliver(
         let mut sub = sub.borrow_mut();
         if matches(&sub.pattern) {
             sub.push(notice());
+            handed += 1;
         }
         true
     });
+    handed
 }
 
 /// The driver: owns the socket and the replica; run it with [`Driver::run`].
@@ -459,6 +470,7 @@ impl Driver {
                 ..IoStats::default()
             },
             wake: wake.clone(),
+            handed_up: 0,
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
@@ -519,7 +531,12 @@ impl Driver {
                 () = &mut shutdown => return Ok(()),
                 ready = self.socket.readable() => {
                     ready.map_err(DriverError::Io)?;
-                    self.receive_batch(&mut buf)?;
+                    if self.receive_batch(&mut buf)? {
+                        // A subscriber or relay session has a notice: let it run (and
+                        // answer) before this task reads on, so the read that finds the
+                        // socket empty is not on the critical path of a reply.
+                        tokio::task::yield_now().await;
+                    }
                 }
                 () = &mut sleep => self.inner.borrow_mut().handle_timeout(),
                 ready = self.socket.writable(), if backlog => {
@@ -531,14 +548,21 @@ impl Driver {
         }
     }
 
-    fn receive_batch(&self, buf: &mut [u8]) -> Result<(), DriverError> {
+    /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
+    /// or one of them gave a waiting task something to do; returns whether that happened.
+    fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
+        let handed_before = inner.handed_up;
         for _ in 0..RECV_BATCH {
             match self.socket.try_recv_from(buf) {
                 Ok((n, from)) => {
                     inner.io.datagrams_received += 1;
                     let now = inner.clock.now();
                     inner.replica.handle_datagram(now, from, &buf[..n]);
+                    inner.pump();
+                    if inner.handed_up != handed_before {
+                        return Ok(true);
+                    }
                 }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                 // An ICMP error from an earlier unicast send to a `--peer` that is down
@@ -548,7 +572,7 @@ impl Driver {
             }
         }
         inner.pump();
-        Ok(())
+        Ok(false)
     }
 }
 
