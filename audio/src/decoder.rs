@@ -34,6 +34,10 @@
 //!    is not a message (and is ignored until it stops).
 //!    The test looks half a slot past the end, so two messages from one robot need more
 //!    than half a tone of silence between them (closer frames *are* a long message).
+//!    Each slot must also sound through: both of its halves carry a fair share of the
+//!    frame's energy (a foreign burst shorter than a slot does not).
+//!    And a slot where a tone outside the frame is about as loud as the frame's own is
+//!    someone else's multi-tone signal that happens to contain our two basics.
 //!    Symmetrically, a first frame whose sender was already sounding just before it is the
 //!    second half of a long message whose first half was missed, and is dropped.
 //! 8. **Once per transmission**: after a decision the integration restarts after the
@@ -82,6 +86,13 @@ pub const DYNAMIC_RANGE: f64 = 0.003_162;
 /// independent evidence.
 pub const SPRT_BOUND: f64 = 14.0;
 
+/// Least share of its even-spread energy each half of a slot must hold (see
+/// `sounds_through_slot`). At −13 dB a real frame's half-slot excess is about 6 standard
+/// deviations above this.
+const MIN_HALF_SHARE: f64 = 0.3;
+/// A present tone outside the frame at this share of the frame's median tone level
+/// makes the slot someone else's signal (see `has_stray_tone`).
+const STRAY_SHARE: f64 = 0.7;
 /// How far after a slot's end (in slots) the short/long test looks. A long message's
 /// second frame follows with no gap, so its evidence is in the first windows; looking
 /// further would mistake the same robot's next message for a continuation.
@@ -787,6 +798,10 @@ impl Decoder {
                                     .filter(|f| f.sender == t.sender)
                                     .map(|f| (f, present, level, noise))
                             });
+                    let decided = decided.filter(|(frame, present, level, _)| {
+                        self.sounds_through_slot(*frame, present, t.scale, a, b)
+                            && !Self::has_stray_tone(*frame, present, level)
+                    });
                     let Some((frame, present, level, noise)) = decided else {
                         self.end_transmission(b, false);
                         return;
@@ -958,6 +973,63 @@ impl Decoder {
                 }
             }
         }
+    }
+
+    /// Whether the frame's tones sound through the whole slot: the excess power of its
+    /// present tones in each half of the slot must be at least [`MIN_HALF_SHARE`] of what
+    /// an even spread would give. A burst of foreign tones shorter than a slot, or a sweep
+    /// crossing a tone, piles its energy into part of the slot; a message does not.
+    fn sounds_through_slot(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let mid = 0.5 * (a + b);
+        let tones: Vec<usize> = frame.tones().into_iter().filter(|&k| present[k]).collect();
+        let mut halves = [(0.0f64, 0usize); 2];
+        for w in &self.history {
+            let start = w.start as f64;
+            if hann_share_inside(start, window_len, a, b) < 0.9 {
+                continue;
+            }
+            let half = usize::from(start + 0.5 * window_len >= mid);
+            halves[half].0 += Self::excess(w, scale, &tones);
+            halves[half].1 += 1;
+        }
+        let total: f64 = halves.iter().map(|h| h.0).sum();
+        let count: usize = halves.iter().map(|h| h.1).sum();
+        if halves.iter().any(|h| h.1 == 0) || total <= 0.0 {
+            // Too few windows to split (tones about as short as a window): no verdict.
+            return true;
+        }
+        halves
+            .iter()
+            .all(|h| h.0 >= MIN_HALF_SHARE * total * h.1 as f64 / count as f64)
+    }
+
+    /// Whether a tone outside the frame sounds about as loud as the frame's own tones
+    /// ([`STRAY_SHARE`] of their median excess): the mark of someone else's multi-tone
+    /// signal that happens to contain our two basics, not of noise (at −13 dB a noise tone
+    /// gets there about once in 20 000 slots) nor of leakage (ruled out by the neighbour
+    /// and dynamic-range tests already).
+    fn has_stray_tone(
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        level: &[f64; TONE_COUNT],
+    ) -> bool {
+        let own = frame.tones();
+        let mut levels: Vec<f64> = own
+            .iter()
+            .filter(|&&k| present[k])
+            .map(|&k| level[k])
+            .collect();
+        levels.sort_by(|a, b| a.total_cmp(b));
+        let median = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
+        (0..TONE_COUNT).any(|k| present[k] && !own.contains(&k) && level[k] >= STRAY_SHARE * median)
     }
 
     /// Whether the sender's tones were sounding just before the onset (the mirror of the
