@@ -46,7 +46,7 @@ fn network_only(seed: u64) -> u64 {
         .expect("preset is valid");
     let robots = sim.add_nodes(ROBOTS);
     let team = sim.add_group(&robots).expect("robots exist");
-    let mut sent = vec![0u32; ROBOTS];
+    let mut sent = [0u32; ROBOTS];
     let frame = vec![0xA5u8; FRAME_BYTES];
     let mut received = 0u64;
     loop {
@@ -75,7 +75,7 @@ fn replicas(seed: u64) -> u64 {
     let mut h = Harness::new(ROBOTS, net, ReplicaConfig::new(1, 7), seed).expect("valid");
     h.keep_events(false);
     let pose = Key::parse("*.var.pose").expect("valid key");
-    let mut sent = vec![0u32; ROBOTS];
+    let mut sent = [0u32; ROBOTS];
     loop {
         let (k, due) = (0..ROBOTS)
             .map(|k| (k, send_time(k, sent[k])))
