@@ -16,7 +16,8 @@
 //! 4. **Detection**: for each scale, the best sender basic and the best data basic (sums
 //!    of their three tones); the frame hypothesis energy (six tones) must exceed the
 //!    Gamma(6n) quantile for a per-window false-alarm probability of [`P_FRAME`] after a
-//!    union bound over the 63 hypotheses and all scales.
+//!    union bound over the 63 hypotheses and all scales. This is a coarse gate; the rules
+//!    below carry most of the false-alarm protection.
 //! 5. **The seed's rules**, on the integrated sums at the chosen scale: a tone is present
 //!    when its sum exceeds the Gamma(n) quantile at [`P_TONE`] and is not merely leakage
 //!    from a much louder neighbour; a basic is present when ≥ 2 of its 3 tones are; the
@@ -36,12 +37,16 @@
 //!
 //! # False alarms
 //!
-//! A false message needs, in the same window and the next, the six-tone energy above a
-//! threshold at 1e-12 per window (union-bounded), ≥ 2 of 3 tones of exactly one sender
-//! basic and of exactly one data basic at 3e-3 per tone (≈ 567 · (3e-3)⁴ ≈ 5e-8 of noise
-//! windows), then the same rules again on the aligned slot, then a clean stop. Over
-//! Gaussian noise that is far below one per 10 hours (≈ 560 000 windows at 64 ms); what
-//! remains are structured sounds, which `huddle audio eval` measures.
+//! A false message needs, in two consecutive windows, the six-tone energy above a
+//! threshold at 1e-6 per window (union-bounded over hypotheses and scales) *and* ≥ 2 of 3
+//! tones of exactly one sender basic and of exactly one data basic at [`P_TONE`] = 3e-3
+//! per tone: 3 · 3p² · 21 · 3p² ≈ 567 p⁴ ≈ 5e-8 of noise windows, a union bound of about
+//! 1e-6 over the frequency scales; then the rules again on the aligned slot
+//! ([`P_TONE_CONFIRM`]), then the sender stopping cleanly. Consecutive windows share 13 of
+//! 14 windows' energy, so the second window adds little independence: the bound is about
+//! 1e-6 per window, i.e. ≲ 0.6 per 10 hours of Gaussian noise (≈ 560 000 windows at
+//! 64 ms) before the slot re-decision, which removes most of what remains. What is left
+//! are structured sounds, which `huddle audio eval` measures.
 
 use std::collections::VecDeque;
 
@@ -53,8 +58,12 @@ use crate::tones::{basic_tones, Frame, Message, Sender, BASIC_COUNT, SENDER_COUN
 
 /// Per-tone false-alarm probability of "present" on one slot's integrated sum.
 pub const P_TONE: f64 = 3e-3;
+/// Per-tone false-alarm probability of "present" when re-deciding an accepted frame on its
+/// aligned slot: a frame is already there, so the threshold trades a missed tone against
+/// an extra basic (21 · 3 · p² ≈ 0.6% of frames refused) rather than against noise alone.
+pub const P_TONE_CONFIRM: f64 = 1e-2;
 /// Per-window false-alarm probability of the frame-energy detector (before the rules).
-pub const P_FRAME: f64 = 1e-12;
+pub const P_FRAME: f64 = 1e-6;
 /// A tone is leakage, not present, when its excess is below this share of an adjacent
 /// tone's excess (−20 dB; Hann leakage at 3 bins is about −31 dB).
 pub const NEIGHBOUR_LEAKAGE: f64 = 0.01;
@@ -67,8 +76,15 @@ pub const DYNAMIC_RANGE: f64 = 0.003_162;
 /// independent evidence.
 pub const SPRT_BOUND: f64 = 14.0;
 
-/// Power share of the first slot's level assumed for a continuing tone (−4.5 dB).
-const CONTINUATION_SHARE: f64 = 0.35;
+/// How far after a slot's end (in slots) the short/long test looks. A long message's
+/// second frame follows with no gap, so its evidence is in the first windows; looking
+/// further would mistake the same robot's next message for a continuation.
+const SPRT_HORIZON: f64 = 0.4;
+/// Largest share of a window's Hann area before the slot end for it to count as "after"
+/// in the short/long test (a window starting 1/8 window before the end).
+const MAX_SHARE_BEFORE_END: f64 = 0.02;
+/// Power share of the first slot's level assumed for a continuing tone (−2.2 dB).
+const CONTINUATION_SHARE: f64 = 0.6;
 /// Largest evidence one tone in one window adds to the short/long test.
 const LLR_CLIP: f64 = 8.0;
 
@@ -518,9 +534,9 @@ impl Decoder {
     }
 
     /// The rules on integrated sums `sums` (72 tones) of `count` windows.
-    fn apply_rules(sums: &[f64], count: usize) -> (Option<Frame>, [bool; TONE_COUNT]) {
+    fn apply_rules(sums: &[f64], count: usize, p_tone: f64) -> (Option<Frame>, [bool; TONE_COUNT]) {
         let n = count.max(1) as f64;
-        let threshold = gamma_upper_quantile(n, P_TONE);
+        let threshold = gamma_upper_quantile(n, p_tone);
         let mut present = [false; TONE_COUNT];
         let loudest = sums.iter().fold(0.0f64, |m, &s| m.max(s - n));
         for k in 0..TONE_COUNT {
@@ -585,8 +601,11 @@ impl Decoder {
             return;
         }
         let j = best.1;
-        let (frame, _) =
-            Self::apply_rules(&self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT], count);
+        let (frame, _) = Self::apply_rules(
+            &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
+            count,
+            P_TONE,
+        );
         let Some(frame) = frame else {
             self.run = None;
             return;
@@ -754,7 +773,7 @@ impl Decoder {
                     let decided =
                         self.integrate_slot(t.scale, a, b)
                             .and_then(|(sums, n, level, noise)| {
-                                let (frame, present) = Self::apply_rules(&sums, n);
+                                let (frame, present) = Self::apply_rules(&sums, n, P_TONE_CONFIRM);
                                 frame
                                     .filter(|f| f.sender == t.sender)
                                     .map(|f| (f, present, level, noise))
@@ -800,10 +819,11 @@ impl Decoder {
                             continue;
                         }
                         let before = hann_share_inside(start, window_len, slot_start, slot_end);
-                        // Windows still mostly inside the slot are left out: their expected
-                        // power depends on the exact slot end, which is only known to a
-                        // fraction of a window.
-                        if before > 0.3 {
+                        // Only windows (almost) wholly after the estimated slot end: the
+                        // power of a window straddling the end depends on the exact end,
+                        // known only to some tens of milliseconds, and at high SNR that
+                        // mismatch alone would decide the test.
+                        if before > MAX_SHARE_BEFORE_END {
                             continue;
                         }
                         let after =
@@ -817,7 +837,7 @@ impl Decoder {
                             let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
                             let ended = t.level[k] * before * before;
                             // Continuation modelled conservatively: an unknown phase at the
-                            // slot edge (powers add) and the second frame up to 4.5 dB
+                            // slot edge (powers add) and the second frame up to 2.2 dB
                             // quieter (another encoder may normalise each frame's peak).
                             // A louder continuation only strengthens the evidence.
                             let continued =
@@ -832,15 +852,17 @@ impl Decoder {
                             verdict = Some(true);
                         } else if llr <= -SPRT_BOUND {
                             verdict = Some(false);
-                        } else if start + window_len >= slot_end + slot_len {
-                            verdict = Some(llr > 0.0);
+                        } else if start + window_len >= slot_end + SPRT_HORIZON * slot_len {
+                            // Out of time: a long message continues with no gap, so its
+                            // evidence comes early and strong; a weak lean is a stop.
+                            verdict = Some(llr > SPRT_BOUND / 3.0);
                         }
                         if verdict.is_some() {
                             break;
                         }
                     }
                     if verdict.is_none() && self.eof {
-                        verdict = Some(llr > 0.0);
+                        verdict = Some(llr > SPRT_BOUND / 3.0);
                     }
                     let Some(continues) = verdict else {
                         if let Some(tr) = self.tracking.as_mut() {

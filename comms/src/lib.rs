@@ -104,9 +104,11 @@
 pub mod arbitration;
 mod blackboard;
 mod config;
+pub mod driver;
 mod key;
 pub mod literal;
 mod pattern;
+pub mod relay;
 mod replica;
 mod stats;
 mod talk;

@@ -1,6 +1,9 @@
 //! One module per subcommand; each owns its clap arguments and its `run`.
 
 pub mod audio;
+pub mod bench;
+pub mod clients;
+pub mod daemon;
 pub mod fusion;
 pub mod sim;
 

@@ -1,0 +1,568 @@
+//! The real driver: the sans-IO [`Replica`] over a tokio + socket2 multicast UDP
+//! socket, with its timers, relay sessions and in-process subscribers.
+//!
+//! One task owns everything (socket, replica, timers, watchers) and everything runs on
+//! one thread: a hand-off between threads costs a full wake-up, several times the
+//! loopback round trip (see DESIGN.md, *Performance notes*). So the driver and its
+//! [`Handle`]s are `!Send`: run them on a current-thread runtime or inside a
+//! [`tokio::task::LocalSet`]. The handle works synchronously on the shared state: a
+//! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
+//!
+//! The run loop is str0m's: wait for a datagram, a deadline or a wake-up; feed it in;
+//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions and
+//! subscribers) until the replica has nothing more to say.
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
+//! use comms::driver::{Driver, DriverConfig};
+//! use comms::ReplicaConfig;
+//!
+//! let mut config = DriverConfig::new(ReplicaConfig::new(1, 0));
+//! config.socket.group = "239.255.42.1:47000".parse()?;
+//! let driver = Driver::bind(config)?; // inside a current-thread runtime / LocalSet
+//! let handle = driver.handle();
+//! let mut balls = handle.subscribe("+.var.ball.#")?;
+//! tokio::task::spawn_local(driver.run(std::future::pending()));
+//! handle.set("*.var.ball.dist", 1.5)?;
+//! while let Some(notice) = balls.next().await {
+//!     println!("{notice:?}");
+//! }
+//! # Ok(()) }
+//! ```
+
+mod handle;
+mod socket;
+
+use std::cell::RefCell;
+use std::collections::{BTreeMap, VecDeque};
+use std::future::Future;
+use std::io;
+use std::net::SocketAddr;
+use std::rc::{Rc, Weak};
+
+use thiserror::Error;
+use tokio::net::UdpSocket;
+use tokio::sync::Notify;
+
+use crate::blackboard::SetError;
+use crate::key::{Key, Kind, Scope};
+use crate::relay::{Session, SessionLimits};
+use crate::replica::{ConfigInvalid, Event, Replica, ReplicaConfig};
+use crate::time::Instant;
+use crate::value::Value;
+
+pub use handle::{Batch, DriverStats, Handle, Notice, Subscription};
+pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
+
+use handle::SubQueue;
+
+/// Frames kept while the kernel's send buffer is full; beyond this they are dropped
+/// (and counted): the periodic refresh repairs values, NACKs repair talk.
+const SEND_BACKLOG_FRAMES: usize = 1024;
+/// Datagrams handled per wake-up before the loop looks at timers and wake-ups again.
+const RECV_BATCH: usize = 256;
+
+/// Everything the driver needs to start.
+#[derive(Clone, Debug)]
+pub struct DriverConfig {
+    /// The replica's settings (robot and team id, refresh period, MTU, key, talk).
+    pub replica: ReplicaConfig,
+    /// The multicast socket.
+    pub socket: SocketConfig,
+    /// Teammates that also get every frame by unicast (WLAN access points often drop
+    /// or delay multicast). Duplicates are harmless. Note: on one host, unicast to a port
+    /// shared by several replicas reaches only one of them.
+    pub peers: Vec<SocketAddr>,
+    /// Values set before the first frame goes out (`config.dat`, `config-<id>.dat`).
+    pub start_values: Vec<(Key, Value)>,
+    /// Notices an in-process subscriber may leave unread before the oldest are dropped
+    /// (it then gets [`Notice::Lagged`]).
+    pub subscriber_backlog: usize,
+    /// Limits of each relay session.
+    pub session_limits: SessionLimits,
+    /// The incarnation; `None`: a random one (it must differ between starts).
+    pub incarnation: Option<u64>,
+}
+
+impl DriverConfig {
+    /// Defaults around `replica`: the seed's group `224.0.0.1:2000` on loopback, TTL 1,
+    /// a 4 MiB receive buffer, no peers.
+    pub fn new(replica: ReplicaConfig) -> DriverConfig {
+        DriverConfig {
+            replica,
+            socket: SocketConfig::default(),
+            peers: Vec::new(),
+            start_values: Vec::new(),
+            subscriber_backlog: 4096,
+            session_limits: SessionLimits::default(),
+            incarnation: None,
+        }
+    }
+}
+
+/// Why the driver could not start.
+#[derive(Debug, Error)]
+pub enum DriverError {
+    /// The multicast socket could not be set up.
+    #[error(transparent)]
+    Socket(#[from] SocketError),
+    /// The replica configuration is invalid.
+    #[error("invalid replica configuration: {0}")]
+    Replica(#[from] ConfigInvalid),
+    /// A start value was refused (e.g. a config line sets another robot's key).
+    #[error("start value {key}: {source}")]
+    StartValue {
+        /// The key.
+        key: String,
+        /// Why.
+        source: SetError,
+    },
+    /// Registering the socket with tokio failed (no runtime?).
+    #[error("cannot register the socket with tokio: {0}")]
+    Runtime(io::Error),
+    /// Receiving or waiting on the socket failed for good.
+    #[error("socket error: {0}")]
+    Io(io::Error),
+}
+
+/// The monotonic clock the driver hands to the replica: microseconds since the driver
+/// started.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Clock {
+    origin: std::time::Instant,
+}
+
+impl Clock {
+    // The driver is the one place in comms that reads the clock: it is the I/O layer
+    // that hands `now` to the sans-IO replica.
+    #[allow(clippy::disallowed_methods)]
+    fn new() -> Clock {
+        Clock {
+            origin: std::time::Instant::now(),
+        }
+    }
+
+    pub(crate) fn now(&self) -> Instant {
+        let us = self.origin.elapsed().as_micros();
+        Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
+    }
+
+    fn to_tokio(self, t: Instant) -> tokio::time::Instant {
+        let at = self.origin + std::time::Duration::from_micros(t.as_micros());
+        tokio::time::Instant::from_std(at)
+    }
+}
+
+/// A relay session and how to wake its connection.
+pub(crate) struct SessionSlot {
+    pub(crate) session: Session,
+    pub(crate) notify: Rc<Notify>,
+}
+
+/// Counters of the I/O layer itself (the replica counts the protocol).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct IoStats {
+    /// `SO_RCVBUF` granted by the kernel.
+    pub recv_buffer_bytes: usize,
+    /// Datagrams sent (to the group and to peers).
+    pub datagrams_sent: u64,
+    /// Datagrams received.
+    pub datagrams_received: u64,
+    /// Sends that failed with an error other than a full buffer.
+    pub send_errors: u64,
+    /// Frames dropped because the send backlog was full.
+    pub send_backlog_drops: u64,
+    /// Relay clients cut off for not reading.
+    pub relay_cutoffs: u64,
+}
+
+/// The state shared by the driver task, its handles and the relay connections.
+pub(crate) struct Inner {
+    pub(crate) clock: Clock,
+    pub(crate) replica: Replica,
+    socket: Rc<UdpSocket>,
+    group: SocketAddr,
+    peers: Vec<SocketAddr>,
+    backlog: VecDeque<(Vec<u8>, SocketAddr)>,
+    subscribers: Vec<Weak<RefCell<SubQueue>>>,
+    pub(crate) subscriber_backlog: usize,
+    pub(crate) sessions: BTreeMap<u64, SessionSlot>,
+    next_session: u64,
+    pub(crate) session_limits: SessionLimits,
+    pub(crate) io: IoStats,
+    /// Wakes the driver task when deadlines or the backlog changed from outside it.
+    pub(crate) wake: Rc<Notify>,
+}
+
+impl Inner {
+    /// Drains the replica: frames to the socket, events to sessions and subscribers.
+    pub(crate) fn pump(&mut self) {
+        while let Some(transmit) = self.replica.poll_transmit() {
+            // `--impair SPEC` (netsim's impairment model on a real socket) will sit here,
+            // between the replica and the socket: delay, drop, duplicate, reorder.
+            let payload = transmit.payload;
+            let group = self.group;
+            for i in 0..self.peers.len() {
+                let peer = self.peers[i];
+                self.send(&payload, peer);
+            }
+            self.send(&payload, group);
+        }
+        self.dispatch_events();
+    }
+
+    fn send(&mut self, payload: &[u8], to: SocketAddr) {
+        if !self.backlog.is_empty() {
+            return self.enqueue(payload.to_vec(), to);
+        }
+        match self.socket.try_send_to(payload, to) {
+            Ok(_) => self.io.datagrams_sent += 1,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                self.enqueue(payload.to_vec(), to);
+                self.wake.notify_one();
+            }
+            Err(e) => {
+                self.io.send_errors += 1;
+                tracing::debug!(%to, error = %e, "send failed");
+            }
+        }
+    }
+
+    fn enqueue(&mut self, payload: Vec<u8>, to: SocketAddr) {
+        if self.backlog.len() >= SEND_BACKLOG_FRAMES {
+            self.io.send_backlog_drops += 1;
+        } else {
+            self.backlog.push_back((payload, to));
+        }
+    }
+
+    /// Sends what the backlog holds until the kernel refuses again.
+    fn flush_backlog(&mut self) {
+        while let Some((payload, to)) = self.backlog.front() {
+            match self.socket.try_send_to(payload, *to) {
+                Ok(_) => self.io.datagrams_sent += 1,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return,
+                Err(_) => self.io.send_errors += 1,
+            }
+            self.backlog.pop_front();
+        }
+    }
+
+    fn dispatch_events(&mut self) {
+        let now = self.clock.now();
+        while let Some(event) = self.replica.poll_event() {
+            match event {
+                Event::ValueChanged { key } => {
+                    for slot in self.sessions.values_mut() {
+                        if slot.session.wants_changes() {
+                            let before = slot.session.pending_output().len();
+                            slot.session.handle_change(now, &key, &self.replica);
+                            wake_if_changed(slot, before);
+                        }
+                    }
+                    let entry = self.replica.blackboard().get(&key);
+                    if let Some(entry) = entry {
+                        let notice = || Notice::Changed {
+                            key: key.clone(),
+                            entry: entry.clone(),
+                        };
+                        deliver(&mut self.subscribers, |p| p.matches(&key), notice);
+                    }
+                }
+                Event::TalkDelivered {
+                    queue,
+                    from,
+                    seq,
+                    value,
+                } => {
+                    for slot in self.sessions.values_mut() {
+                        let before = slot.session.pending_output().len();
+                        slot.session.handle_talk(from, &queue, &value);
+                        wake_if_changed(slot, before);
+                    }
+                    let notice = || Notice::Talk {
+                        from,
+                        queue: queue.clone(),
+                        seq,
+                        value: value.clone(),
+                    };
+                    let matches = |p: &crate::Pattern| {
+                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
+                    };
+                    deliver(&mut self.subscribers, matches, notice);
+                }
+                Event::TalkGivenUp {
+                    queue,
+                    from,
+                    first,
+                    last,
+                } => {
+                    tracing::warn!(from, %queue, first, last, "talk messages given up");
+                    let notice = || Notice::TalkLost {
+                        from,
+                        queue: queue.clone(),
+                        first,
+                        last,
+                    };
+                    let matches = |p: &crate::Pattern| {
+                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
+                    };
+                    deliver(&mut self.subscribers, matches, notice);
+                }
+                Event::PeerJoined { robot, incarnation } => {
+                    tracing::info!(
+                        robot,
+                        incarnation = format_args!("{incarnation:016x}"),
+                        "peer joined"
+                    )
+                }
+                Event::PeerRestarted {
+                    robot,
+                    new_incarnation,
+                    ..
+                } => tracing::info!(
+                    robot,
+                    incarnation = format_args!("{new_incarnation:016x}"),
+                    "peer restarted"
+                ),
+                Event::PeerDeparted { robot } => tracing::info!(robot, "peer departed"),
+                Event::FrameDropped { from, reason } => {
+                    tracing::debug!(%from, %reason, "datagram dropped")
+                }
+            }
+        }
+    }
+
+    /// The earliest deadline of the replica and the relay sessions.
+    fn next_deadline(&self) -> Option<Instant> {
+        let sessions = self
+            .sessions
+            .values()
+            .filter_map(|s| s.session.poll_timeout());
+        self.replica
+            .poll_timeout()
+            .into_iter()
+            .chain(sessions)
+            .min()
+    }
+
+    fn handle_timeout(&mut self) {
+        let now = self.clock.now();
+        self.replica.handle_timeout(now);
+        for slot in self.sessions.values_mut() {
+            if slot.session.poll_timeout().is_some_and(|t| t <= now) {
+                let before = slot.session.pending_output().len();
+                slot.session.handle_timeout(now, &self.replica);
+                wake_if_changed(slot, before);
+            }
+        }
+        self.pump();
+    }
+
+    /// A new relay session: its id and the notifier its connection waits on.
+    pub(crate) fn open_session(&mut self) -> (u64, Rc<Notify>) {
+        let id = self.next_session;
+        self.next_session += 1;
+        let notify = Rc::new(Notify::new());
+        let session = Session::new(self.replica.robot_id(), self.session_limits.clone());
+        self.sessions.insert(
+            id,
+            SessionSlot {
+                session,
+                notify: notify.clone(),
+            },
+        );
+        (id, notify)
+    }
+
+    /// Feeds a relay client's bytes to its session; writes go through the replica.
+    pub(crate) fn session_input(&mut self, id: u64, bytes: &[u8]) {
+        let now = self.clock.now();
+        let Some(slot) = self.sessions.get_mut(&id) else {
+            return;
+        };
+        let timer_before = slot.session.poll_timeout();
+        slot.session.handle_input(now, bytes, &mut self.replica);
+        if slot.session.poll_timeout() != timer_before {
+            self.wake.notify_one();
+        }
+        self.pump();
+    }
+}
+
+fn wake_if_changed(slot: &mut SessionSlot, before: usize) {
+    let after = slot.session.pending_output().len();
+    if after != before || slot.session.is_finished() {
+        slot.notify.notify_one();
+    }
+}
+
+/// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
+fn deliver(
+    subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
+    matches: impl Fn(&crate::Pattern) -> bool,
+    notice: impl Fn() -> Notice,
+) {
+    subscribers.retain(|weak| {
+        let Some(sub) = weak.upgrade() else {
+            return false;
+        };
+        let mut sub = sub.borrow_mut();
+        if matches(&sub.pattern) {
+            sub.push(notice());
+        }
+        true
+    });
+}
+
+/// The driver: owns the socket and the replica; run it with [`Driver::run`].
+pub struct Driver {
+    inner: Rc<RefCell<Inner>>,
+    socket: Rc<UdpSocket>,
+    wake: Rc<Notify>,
+}
+
+impl Driver {
+    /// Opens the socket, joins the group and starts the replica with the start values.
+    /// Call it inside a tokio runtime (the socket registers with its reactor).
+    pub fn bind(config: DriverConfig) -> Result<Driver, DriverError> {
+        let opened = open_multicast(&config.socket)?;
+        let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
+        let clock = Clock::new();
+        let incarnation = config.incarnation.unwrap_or_else(random_incarnation);
+        let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
+        for (key, value) in config.start_values {
+            replica
+                .set_key(clock.now(), &key, value)
+                .map_err(|source| DriverError::StartValue {
+                    key: key.to_string(),
+                    source,
+                })?;
+        }
+        // Start values are this robot's business, not changes anyone waits for.
+        while replica.poll_event().is_some() {}
+        let wake = Rc::new(Notify::new());
+        let inner = Inner {
+            clock,
+            replica,
+            socket: socket.clone(),
+            group: config.socket.group.into(),
+            peers: config.peers,
+            backlog: VecDeque::new(),
+            subscribers: Vec::new(),
+            subscriber_backlog: config.subscriber_backlog.max(1),
+            sessions: BTreeMap::new(),
+            next_session: 0,
+            session_limits: config.session_limits,
+            io: IoStats {
+                recv_buffer_bytes: opened.recv_buffer_granted,
+                ..IoStats::default()
+            },
+            wake: wake.clone(),
+        };
+        tracing::info!(
+            robot = inner.replica.robot_id(),
+            group = %config.socket.group,
+            iface = %config.socket.iface,
+            recv_buffer_bytes = opened.recv_buffer_granted,
+            requested = config.socket.recv_buffer_bytes,
+            "multicast socket ready"
+        );
+        Ok(Driver {
+            inner: Rc::new(RefCell::new(inner)),
+            socket,
+            wake,
+        })
+    }
+
+    /// A handle for reading, writing and subscribing from tasks on this thread.
+    pub fn handle(&self) -> Handle {
+        Handle::new(self.inner.clone())
+    }
+
+    /// Runs until `shutdown` completes: receives datagrams, runs timers, sends. On
+    /// return, subscriptions end (their `next` gives `None`).
+    pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), DriverError> {
+        let result = self.run_loop(shutdown).await;
+        let mut inner = self.inner.borrow_mut();
+        for weak in inner.subscribers.drain(..) {
+            if let Some(sub) = weak.upgrade() {
+                sub.borrow_mut().close();
+            }
+        }
+        for slot in inner.sessions.values() {
+            slot.notify.notify_one();
+        }
+        result
+    }
+
+    async fn run_loop(&self, shutdown: impl Future<Output = ()>) -> Result<(), DriverError> {
+        tokio::pin!(shutdown);
+        let clock = self.inner.borrow().clock;
+        // The first frame (heartbeat, start values) goes out at once.
+        self.inner.borrow_mut().pump();
+        let far = || tokio::time::Instant::now() + std::time::Duration::from_secs(3600);
+        let sleep = tokio::time::sleep_until(far());
+        tokio::pin!(sleep);
+        let mut buf = vec![0u8; 65_536];
+        loop {
+            let (deadline, backlog) = {
+                let inner = self.inner.borrow();
+                (inner.next_deadline(), !inner.backlog.is_empty())
+            };
+            let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
+            if sleep.deadline() != at {
+                sleep.as_mut().reset(at);
+            }
+            tokio::select! {
+                biased;
+                () = &mut shutdown => return Ok(()),
+                ready = self.socket.readable() => {
+                    ready.map_err(DriverError::Io)?;
+                    self.receive_batch(&mut buf)?;
+                }
+                () = &mut sleep => self.inner.borrow_mut().handle_timeout(),
+                ready = self.socket.writable(), if backlog => {
+                    ready.map_err(DriverError::Io)?;
+                    self.inner.borrow_mut().flush_backlog();
+                }
+                () = self.wake.notified() => {}
+            }
+        }
+    }
+
+    fn receive_batch(&self, buf: &mut [u8]) -> Result<(), DriverError> {
+        let mut inner = self.inner.borrow_mut();
+        for _ in 0..RECV_BATCH {
+            match self.socket.try_recv_from(buf) {
+                Ok((n, from)) => {
+                    inner.io.datagrams_received += 1;
+                    let now = inner.clock.now();
+                    inner.replica.handle_datagram(now, from, &buf[..n]);
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                // An ICMP error from an earlier unicast send to a `--peer` that is down
+                // surfaces here on Linux; it is no reason to stop.
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                Err(e) => return Err(DriverError::Io(e)),
+            }
+        }
+        inner.pump();
+        Ok(())
+    }
+}
+
+/// A random incarnation without a RNG dependency: std's per-process random hash keys
+/// mixed with the wall clock and the process id.
+#[allow(clippy::disallowed_methods)] // I/O layer: a seed from the outside world
+fn random_incarnation() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    let wall = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or_default();
+    h.write_u128(wall);
+    h.write_u32(std::process::id());
+    h.finish()
+}

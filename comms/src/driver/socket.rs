@@ -1,0 +1,252 @@
+//! The multicast UDP socket, set up with socket2 the way a team on one WLAN (or one
+//! laptop) needs it.
+
+use std::io;
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+
+use socket2::{Domain, Protocol, Socket, Type};
+use thiserror::Error;
+
+/// How the socket is opened.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SocketConfig {
+    /// Multicast group and port (the seed's `224.0.0.1:2000` by default).
+    pub group: SocketAddrV4,
+    /// The interface's IPv4 address: `IP_MULTICAST_IF` and the membership. Default
+    /// `127.0.0.1`, so nothing leaves the machine unless an interface is named.
+    pub iface: Ipv4Addr,
+    /// Multicast TTL (default 1: never routed off the link).
+    pub ttl: u32,
+    /// `SO_RCVBUF` to ask for (default 4 MiB: bursts overflow the usual 208 KiB).
+    pub recv_buffer_bytes: usize,
+}
+
+impl Default for SocketConfig {
+    fn default() -> SocketConfig {
+        SocketConfig {
+            group: SocketAddrV4::new(Ipv4Addr::new(224, 0, 0, 1), 2000),
+            iface: Ipv4Addr::LOCALHOST,
+            ttl: 1,
+            recv_buffer_bytes: 4 << 20,
+        }
+    }
+}
+
+/// Why the multicast socket could not be set up.
+#[derive(Debug, Error)]
+pub enum SocketError {
+    /// The group address is not an IPv4 multicast address.
+    #[error("{0} is not an IPv4 multicast address (224.0.0.0/4)")]
+    NotMulticast(Ipv4Addr),
+    /// Creating, configuring or binding the socket failed.
+    #[error("cannot open a UDP socket on port {port}: {source}")]
+    Open {
+        /// The port.
+        port: u16,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// `IP_ADD_MEMBERSHIP` failed (no such interface, no multicast route...).
+    #[error("cannot join multicast group {group} on interface {iface}: {source}")]
+    Join {
+        /// The group.
+        group: Ipv4Addr,
+        /// The interface address.
+        iface: Ipv4Addr,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// `IP_MULTICAST_IF`, TTL or loop could not be set.
+    #[error("cannot send multicast through interface {iface}: {source}")]
+    Interface {
+        /// The interface address.
+        iface: Ipv4Addr,
+        /// The OS error.
+        source: io::Error,
+    },
+}
+
+/// Why an `--iface` argument names no usable interface.
+#[derive(Debug, Error)]
+pub enum IfaceError {
+    /// No interface of that name exists.
+    #[error("no network interface named {0:?}")]
+    NoSuchInterface(String),
+    /// The interface exists but has no IPv4 address.
+    #[error("interface {0:?} has no IPv4 address")]
+    NoIpv4(String),
+    /// Listing the interfaces failed.
+    #[error("cannot list network interfaces: {0}")]
+    List(io::Error),
+}
+
+/// Resolves an interface given as an IPv4 address (`127.0.0.1`) or a name (`lo`,
+/// `wlan0`) to its first IPv4 address.
+pub fn resolve_iface(name_or_addr: &str) -> Result<Ipv4Addr, IfaceError> {
+    if let Ok(addr) = name_or_addr.parse::<Ipv4Addr>() {
+        return Ok(addr);
+    }
+    let mut known = false;
+    for (name, addr) in interface_addresses().map_err(IfaceError::List)? {
+        if name == name_or_addr {
+            known = true;
+            if let Some(v4) = addr {
+                return Ok(v4);
+            }
+        }
+    }
+    Err(if known {
+        IfaceError::NoIpv4(name_or_addr.to_owned())
+    } else {
+        IfaceError::NoSuchInterface(name_or_addr.to_owned())
+    })
+}
+
+/// Every (interface name, IPv4 address if the entry is one) pair, from `getifaddrs`.
+fn interface_addresses() -> io::Result<Vec<(String, Option<Ipv4Addr>)>> {
+    let mut head: *mut libc::ifaddrs = std::ptr::null_mut();
+    // SAFETY: getifaddrs fills `head` with a list we free below with freeifaddrs.
+    if unsafe { libc::getifaddrs(&mut head) } != 0 {
+        return Err(io::Error::last_os_error());
+    }
+    let mut out = Vec::new();
+    let mut cur = head;
+    while !cur.is_null() {
+        // SAFETY: `cur` is a node of the list getifaddrs returned, not yet freed; its
+        // name is a NUL-terminated string and `ifa_addr`, when set, points to a sockaddr
+        // whose family says how long it is.
+        unsafe {
+            let ifa = &*cur;
+            let name = std::ffi::CStr::from_ptr(ifa.ifa_name)
+                .to_string_lossy()
+                .into_owned();
+            let mut v4 = None;
+            if !ifa.ifa_addr.is_null() && i32::from((*ifa.ifa_addr).sa_family) == libc::AF_INET {
+                let sin = &*(ifa.ifa_addr as *const libc::sockaddr_in);
+                v4 = Some(Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)));
+            }
+            out.push((name, v4));
+            cur = ifa.ifa_next;
+        }
+    }
+    // SAFETY: `head` came from getifaddrs and is freed once.
+    unsafe { libc::freeifaddrs(head) };
+    Ok(out)
+}
+
+/// The socket as opened, with what the kernel granted.
+#[derive(Debug)]
+pub struct Opened {
+    /// Non-blocking, bound to `0.0.0.0:<group port>` (so teammates' `--peer` unicast
+    /// arrives too), member of the group on the interface.
+    pub socket: std::net::UdpSocket,
+    /// `SO_RCVBUF` as the kernel reports it (Linux doubles the request and caps it at
+    /// `net.core.rmem_max`).
+    pub recv_buffer_granted: usize,
+}
+
+/// Opens the multicast socket: `SO_REUSEADDR` + `SO_REUSEPORT` (several replicas may
+/// share the port on one host: only the sender id in a frame tells them apart), a large
+/// receive buffer, bind, join, `IP_MULTICAST_IF`, TTL, loop on.
+pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
+    let group = *cfg.group.ip();
+    if !group.is_multicast() {
+        return Err(SocketError::NotMulticast(group));
+    }
+    let port = cfg.group.port();
+    let open = |source| SocketError::Open { port, source };
+    let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).map_err(open)?;
+    socket.set_reuse_address(true).map_err(open)?;
+    socket.set_reuse_port(true).map_err(open)?;
+    // A refusal here is not fatal: report what we got instead.
+    let _ = socket.set_recv_buffer_size(cfg.recv_buffer_bytes);
+    let recv_buffer_granted = socket.recv_buffer_size().map_err(open)?;
+    let bind: SocketAddr = SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, port).into();
+    socket.bind(&bind.into()).map_err(open)?;
+    socket
+        .join_multicast_v4(&group, &cfg.iface)
+        .map_err(|source| SocketError::Join {
+            group,
+            iface: cfg.iface,
+            source,
+        })?;
+    let iface = |source| SocketError::Interface {
+        iface: cfg.iface,
+        source,
+    };
+    socket.set_multicast_if_v4(&cfg.iface).map_err(iface)?;
+    socket.set_multicast_ttl_v4(cfg.ttl).map_err(iface)?;
+    socket.set_multicast_loop_v4(true).map_err(iface)?;
+    socket.set_nonblocking(true).map_err(open)?;
+    Ok(Opened {
+        socket: socket.into(),
+        recv_buffer_granted,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interfaces_resolve_by_address_and_by_name() {
+        assert_eq!(resolve_iface("127.0.0.1").unwrap(), Ipv4Addr::LOCALHOST);
+        assert_eq!(
+            resolve_iface("lo").unwrap(),
+            Ipv4Addr::LOCALHOST,
+            "the loopback interface is named lo on Linux"
+        );
+        assert!(matches!(
+            resolve_iface("no-such-if0"),
+            Err(IfaceError::NoSuchInterface(_))
+        ));
+    }
+
+    #[test]
+    fn a_unicast_group_and_a_foreign_interface_are_clear_errors() {
+        let cfg = SocketConfig {
+            group: "127.0.0.1:47110".parse().unwrap(),
+            ..SocketConfig::default()
+        };
+        assert!(matches!(
+            open_multicast(&cfg),
+            Err(SocketError::NotMulticast(_))
+        ));
+        // 192.0.2.1 (TEST-NET-1) is no interface of this machine: the join fails.
+        let cfg = SocketConfig {
+            group: "239.255.71.10:47110".parse().unwrap(),
+            iface: Ipv4Addr::new(192, 0, 2, 1),
+            ..SocketConfig::default()
+        };
+        assert!(matches!(
+            open_multicast(&cfg),
+            Err(SocketError::Join { .. })
+        ));
+    }
+
+    #[test]
+    fn two_sockets_share_a_port_and_hear_each_other_on_loopback() {
+        let cfg = SocketConfig {
+            group: "239.255.71.11:47111".parse().unwrap(),
+            ..SocketConfig::default()
+        };
+        let a = open_multicast(&cfg).unwrap();
+        let b = open_multicast(&cfg).unwrap();
+        assert!(
+            a.recv_buffer_granted >= 256 * 1024,
+            "asked for 4 MiB, got {}",
+            a.recv_buffer_granted
+        );
+        a.socket.send_to(b"hello", cfg.group).unwrap();
+        let mut buf = [0u8; 16];
+        for s in [&b.socket, &a.socket] {
+            s.set_nonblocking(false).unwrap();
+            s.set_read_timeout(Some(std::time::Duration::from_secs(2)))
+                .unwrap();
+            let (n, _) = s
+                .recv_from(&mut buf)
+                .expect("multicast loop delivers to both");
+            assert_eq!(&buf[..n], b"hello");
+        }
+    }
+}

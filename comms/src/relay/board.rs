@@ -1,0 +1,115 @@
+//! What a relay session needs from the robot's blackboard: read, iterate, write, post.
+//! A bare [`Blackboard`] serves (without talk queues); the daemon plugs in its
+//! [`crate::Replica`], so writes through the relay follow exactly the library's rules.
+
+use crate::blackboard::{Blackboard, Entry, SetError};
+use crate::key::Key;
+use crate::pattern::Pattern;
+use crate::replica::{PostError, Replica};
+use crate::time::Instant;
+use crate::value::Value;
+
+use super::command::Rejected;
+use super::error::ErrCode;
+
+/// The blackboard as a relay session sees it.
+pub trait Board {
+    /// This robot's id (for the greeting).
+    fn robot_id(&self) -> u8;
+    /// The binding for `key` (`*.var.x`: the newest copy of any owner).
+    fn get(&self, key: &Key) -> Option<&Entry>;
+    /// Calls `f` for every stored binding matching `pattern`, in key order, keys as
+    /// stored (`n.var.x`, never `*`).
+    fn visit(&self, pattern: &Pattern, f: &mut dyn FnMut(&Key, &Entry));
+    /// Writes a `var` key with the library's rules.
+    fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
+    /// Posts a message to an own `talk` queue.
+    fn post(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
+}
+
+impl From<SetError> for Rejected {
+    fn from(e: SetError) -> Rejected {
+        let code = match e {
+            SetError::Key(_) => ErrCode::BadKey,
+            SetError::TalkKey(_) => ErrCode::WrongKind,
+            SetError::NotOwner { .. } => ErrCode::NotOwner,
+            SetError::TooLarge { .. } => ErrCode::TooLarge,
+        };
+        Rejected {
+            code,
+            text: e.to_string(),
+        }
+    }
+}
+
+impl Board for Blackboard {
+    fn robot_id(&self) -> u8 {
+        Blackboard::robot_id(self)
+    }
+
+    fn get(&self, key: &Key) -> Option<&Entry> {
+        Blackboard::get(self, key)
+    }
+
+    fn visit(&self, pattern: &Pattern, f: &mut dyn FnMut(&Key, &Entry)) {
+        for (key, entry) in self.iter(pattern) {
+            f(&key, entry);
+        }
+    }
+
+    fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        Blackboard::set(self, now, key, value)
+            .map(|_| ())
+            .map_err(Rejected::from)
+    }
+
+    fn post(&mut self, _now: Instant, key: &Key, _value: Value) -> Result<(), Rejected> {
+        Err(Rejected {
+            code: ErrCode::Unavailable,
+            text: format!("{key}: a bare blackboard has no talk queues"),
+        })
+    }
+}
+
+impl From<PostError> for Rejected {
+    fn from(e: PostError) -> Rejected {
+        let code = match e {
+            PostError::Key(_) => ErrCode::BadKey,
+            PostError::NotOwnQueue(_) => ErrCode::WrongKind,
+            PostError::TooLarge { .. } => ErrCode::TooLarge,
+            PostError::TooManyQueues(_) => ErrCode::TooMany,
+        };
+        Rejected {
+            code,
+            text: e.to_string(),
+        }
+    }
+}
+
+/// The daemon's board: writes go through the replica, so they are published and follow
+/// the same rules as the library's.
+impl Board for Replica {
+    fn robot_id(&self) -> u8 {
+        Replica::robot_id(self)
+    }
+
+    fn get(&self, key: &Key) -> Option<&Entry> {
+        self.blackboard().get(key)
+    }
+
+    fn visit(&self, pattern: &Pattern, f: &mut dyn FnMut(&Key, &Entry)) {
+        for (key, entry) in self.iter(pattern) {
+            f(&key, entry);
+        }
+    }
+
+    fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        self.set_key(now, key, value).map_err(Rejected::from)
+    }
+
+    fn post(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        Replica::post(self, now, &key.to_string(), value)
+            .map(|_| ())
+            .map_err(Rejected::from)
+    }
+}

@@ -1,0 +1,81 @@
+//! The relay's `ERR` codes.
+
+use std::fmt;
+
+/// The code in an `ERR code text` line. Codes are stable; the text is for people.
+///
+/// | code | meaning |
+/// |------|---------|
+/// | 400 | unknown command word |
+/// | 401 | wrong number of arguments |
+/// | 402 | line longer than the limit (4 KiB): the whole line is discarded |
+/// | 403 | line is not UTF-8 text |
+/// | 404 | `GETV`: no value bound to the key; `DELW`: pattern not watched |
+/// | 410 | malformed key |
+/// | 411 | malformed watch pattern |
+/// | 412 | malformed value literal |
+/// | 413 | `REFR` period is not whole milliseconds in 0..=3600000 |
+/// | 420 | write refused: the key belongs to another robot |
+/// | 421 | write refused: wrong kind of key (a talk queue has no value to get or set; only own queues can be posted to) |
+/// | 422 | write refused: the value does not fit in one frame |
+/// | 429 | too many watch patterns, or too many talk queues |
+/// | 503 | not available here (e.g. posting without a replica) |
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ErrCode {
+    /// 400
+    UnknownCommand,
+    /// 401
+    Usage,
+    /// 402
+    LineTooLong,
+    /// 403
+    NotText,
+    /// 404
+    NotFound,
+    /// 410
+    BadKey,
+    /// 411
+    BadPattern,
+    /// 412
+    BadValue,
+    /// 413
+    BadPeriod,
+    /// 420
+    NotOwner,
+    /// 421
+    WrongKind,
+    /// 422
+    TooLarge,
+    /// 429
+    TooMany,
+    /// 503
+    Unavailable,
+}
+
+impl ErrCode {
+    /// The number sent on the wire.
+    pub fn number(self) -> u16 {
+        match self {
+            ErrCode::UnknownCommand => 400,
+            ErrCode::Usage => 401,
+            ErrCode::LineTooLong => 402,
+            ErrCode::NotText => 403,
+            ErrCode::NotFound => 404,
+            ErrCode::BadKey => 410,
+            ErrCode::BadPattern => 411,
+            ErrCode::BadValue => 412,
+            ErrCode::BadPeriod => 413,
+            ErrCode::NotOwner => 420,
+            ErrCode::WrongKind => 421,
+            ErrCode::TooLarge => 422,
+            ErrCode::TooMany => 429,
+            ErrCode::Unavailable => 503,
+        }
+    }
+}
+
+impl fmt::Display for ErrCode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.number())
+    }
+}

@@ -1,0 +1,46 @@
+//! The relay: a line protocol over TCP through which any program (Python, C++, a person
+//! with `nc`) reads, writes and watches a robot's blackboard (isocrob-2000 §3.2.6).
+//!
+//! One command per line, ASCII (UTF-8 inside string values), `\n` or `\r\n`; command
+//! words are case-insensitive. Watch patterns use MQTT-style wildcards (`+` one level,
+//! `#` the rest), because `*` is already a scope.
+//!
+//! ```text
+//! on connect       -> HUDDLE <version> robot <id>
+//! GETV key         -> VAL key type value age_ms      | ERR code text
+//! SETV key value   -> OK                             | ERR code text
+//! ADDW pattern     -> OK      DELW pattern -> OK     CLRW -> OK
+//! LSTW             -> WATCH pattern (one per line), then END
+//! REFR ms          -> OK   then every ms: UPD key type value age_ms for each watched key
+//!                          (REFR 0: push each change as it happens)
+//! QUIT             -> BYE, connection closed
+//! ```
+//!
+//! Details the grammar leaves open, as this implementation settles them:
+//! - `type` is `int|float|bool|string|floats|bytes`; values use the literal syntax of
+//!   [`crate::literal`] (strings double-quoted with escapes; floats parse back to the
+//!   same bits). `age_ms` is whole milliseconds since the value was set, on this robot's
+//!   clock.
+//! - Replies name keys as stored: `GETV *.var.x` answers `VAL 3.var.x ...` when robot 3's
+//!   copy is the newest, so the owner is always visible.
+//! - `REFR` (any period) first pushes every watched binding once, so a client starts from
+//!   the current state; with `REFR 0`, `ADDW` does the same for the new pattern.
+//!   Bindings matched by several patterns are pushed once.
+//! - `SETV` on an own `talk` queue (`*.talk.q`) posts a message. Messages of watched
+//!   queues arrive as `UPD n.talk.q type value 0`, as delivered, whatever `REFR` says.
+//! - `SETV` follows the library's rules: another robot's `n.var.x` gives `ERR 420`.
+//! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
+//! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
+//!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).
+
+mod board;
+mod command;
+mod error;
+mod server;
+mod session;
+
+pub use board::Board;
+pub use command::{Command, Rejected, MAX_REFRESH_MS};
+pub use error::ErrCode;
+pub use server::serve;
+pub use session::{CloseReason, Session, SessionLimits, SessionState, PROTOCOL_VERSION};

@@ -1,0 +1,449 @@
+//! `huddle bench comms`: the daemon's costs measured on loopback multicast, in one run.
+//!
+//! (a) raw UDP multicast ping-pong between two threads (std blocking sockets), and
+//! (b) ping-pong through two replicas over the real driver, each on its own thread and
+//! current-thread runtime (set on A → visible on B → B sets a reply → visible on A):
+//! p50/p99 of each and their ratio; (c) sustained updates/s from A to B with the loss
+//! rate; (d) resident memory of a spawned daemon holding 10,000 keys.
+//! Everything sends on loopback only (IP_MULTICAST_IF 127.0.0.1, TTL 1).
+
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use comms::driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
+use comms::{ReplicaConfig, Value};
+use serde::Serialize;
+
+use super::clients::RelayClient;
+
+/// `huddle bench ...`
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub what: BenchWhat,
+}
+
+/// What to measure.
+#[derive(Subcommand, Debug)]
+pub enum BenchWhat {
+    /// Latency, throughput and memory of the multicast driver and daemon.
+    Comms(CommsArgs),
+}
+
+/// `huddle bench comms`
+#[derive(Args, Debug)]
+pub struct CommsArgs {
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Ping-pong round trips per measurement (after 10% warm-up).
+    #[arg(long, default_value_t = 5000)]
+    pub rounds: usize,
+    /// Updates sent A → B in the throughput run.
+    #[arg(long, default_value_t = 2_000_000)]
+    pub updates: u64,
+    /// First of the four UDP ports used (each test its own group and port).
+    #[arg(long, default_value_t = 38900)]
+    pub port: u16,
+}
+
+/// The figures, as `--json` prints them.
+#[derive(Serialize, Debug)]
+pub struct CommsReport {
+    pub raw_p50_us: f64,
+    pub raw_p99_us: f64,
+    pub huddle_p50_us: f64,
+    pub huddle_p99_us: f64,
+    pub p50_ratio: f64,
+    pub p99_ratio: f64,
+    pub updates_per_s: f64,
+    pub update_loss: f64,
+    pub frames_sent: u64,
+    pub frames_received: u64,
+    pub rss_mb_10k_keys: f64,
+    pub recv_buffer_bytes: usize,
+    pub build: &'static str,
+}
+
+fn group(port: u16, last: u8) -> SocketAddrV4 {
+    SocketAddrV4::new(Ipv4Addr::new(239, 255, 39, last), port)
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[i]
+}
+
+/// p50 and p99 in microseconds of round trips, warm-up dropped.
+fn summarize(mut rtts_us: Vec<f64>) -> (f64, f64) {
+    let warm = rtts_us.len() / 10;
+    let mut v = rtts_us.split_off(warm);
+    v.sort_by(|a, b| a.total_cmp(b));
+    (percentile(&v, 0.5), percentile(&v, 0.99))
+}
+
+/// (a): two threads, blocking sockets on one group and port; each skips its own echoes.
+fn raw_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
+    let cfg = SocketConfig {
+        group: g,
+        ..SocketConfig::default()
+    };
+    let open = || -> Result<UdpSocket> {
+        let s = open_multicast(&cfg)?.socket;
+        s.set_nonblocking(false)?;
+        s.set_read_timeout(Some(Duration::from_secs(2)))?;
+        Ok(s)
+    };
+    let (a, b) = (open()?, open()?);
+    let to: SocketAddr = g.into();
+    let ponger = std::thread::spawn(move || -> Result<()> {
+        let mut buf = [0u8; 64];
+        loop {
+            let (n, _) = b.recv_from(&mut buf)?;
+            match buf[0] {
+                b'P' => {
+                    buf[0] = b'R';
+                    b.send_to(&buf[..n], to)?;
+                }
+                b'Q' => return Ok(()),
+                _ => {} // its own reply, looped back
+            }
+        }
+    });
+    let mut rtts = Vec::with_capacity(rounds);
+    let mut buf = [0u8; 64];
+    for i in 0..rounds as u64 {
+        let mut msg = [0u8; 9];
+        msg[0] = b'P';
+        msg[1..].copy_from_slice(&i.to_le_bytes());
+        let t0 = Instant::now();
+        a.send_to(&msg, to)?;
+        loop {
+            let (n, _) = a.recv_from(&mut buf).context("raw ping-pong: no reply")?;
+            if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
+                break;
+            }
+        }
+        rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+    }
+    a.send_to(b"Q", to)?;
+    ponger.join().expect("ponger thread")?;
+    Ok(rtts)
+}
+
+/// Runs `f` with a driver for robot `id` on its own thread and current-thread runtime;
+/// the driver stops when `f` returns.
+fn on_driver_thread<T: Send + 'static, F, Fut>(
+    id: u8,
+    g: SocketAddrV4,
+    refresh: Duration,
+    f: F,
+) -> std::thread::JoinHandle<Result<T>>
+where
+    F: FnOnce(Handle) -> Fut + Send + 'static,
+    Fut: std::future::Future<Output = Result<T>>,
+{
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        let local = tokio::task::LocalSet::new();
+        local.block_on(&rt, async move {
+            let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0).with_refresh_period(refresh));
+            cfg.socket.group = g;
+            let driver = Driver::bind(cfg)?;
+            let handle = driver.handle();
+            let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+            let run = tokio::task::spawn_local(driver.run(async move {
+                let _ = stop_rx.await;
+            }));
+            let out = f(handle).await;
+            let _ = stop_tx.send(());
+            run.await??;
+            out
+        })
+    })
+}
+
+async fn next_value(sub: &mut comms::driver::Subscription) -> Result<Value> {
+    loop {
+        match sub.next().await {
+            Some(Notice::Changed { entry, .. }) => return Ok(entry.value),
+            Some(_) => {}
+            None => bail!("driver stopped"),
+        }
+    }
+}
+
+/// (b): ping on robot 1, pong on robot 2, each on its own thread.
+fn huddle_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
+    let ready = Arc::new(AtomicBool::new(false));
+    let done = Arc::new(AtomicBool::new(false));
+    let (r2, d2) = (ready.clone(), done.clone());
+    let refresh = Duration::from_millis(100);
+    let ponger = on_driver_thread(2, g, refresh, move |h| async move {
+        let mut pings = h.subscribe("1.var.bench.ping")?;
+        r2.store(true, Ordering::Release);
+        while !d2.load(Ordering::Acquire) {
+            let wait = tokio::time::timeout(Duration::from_millis(200), next_value(&mut pings));
+            if let Ok(v) = wait.await {
+                h.set("*.var.bench.pong", v?)?;
+            }
+        }
+        Ok(())
+    });
+    let pinger = on_driver_thread(1, g, refresh, move |h| async move {
+        while !ready.load(Ordering::Acquire) {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        let mut pongs = h.subscribe("2.var.bench.pong")?;
+        let mut rtts = Vec::with_capacity(rounds);
+        for i in 0..rounds as i64 {
+            let t0 = Instant::now();
+            h.set("*.var.bench.ping", i)?;
+            let reply = tokio::time::timeout(Duration::from_secs(2), async {
+                loop {
+                    if next_value(&mut pongs).await? == Value::Int(i) {
+                        return Ok::<_, anyhow::Error>(());
+                    }
+                }
+            });
+            reply
+                .await
+                .context("huddle ping-pong: no reply within 2 s")??;
+            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+        }
+        done.store(true, Ordering::Release);
+        Ok(rtts)
+    });
+    let rtts = pinger.join().expect("pinger thread")?;
+    ponger.join().expect("ponger thread")?;
+    Ok(rtts)
+}
+
+struct Throughput {
+    updates_per_s: f64,
+    loss: f64,
+    frames_sent: u64,
+    frames_received: u64,
+    recv_buffer_bytes: usize,
+}
+
+/// (c): robot 1 writes `updates` values over 1,000 keys in batches; robot 2 counts what it
+/// applies. The writer keeps at most a window of updates ahead of the reader (as a real
+/// producer paced by its control loop would be), so the figure is what B sustains.
+fn throughput(g: SocketAddrV4, updates: u64) -> Result<Throughput> {
+    const KEYS: u64 = 1000;
+    const WINDOW: u64 = 40_000;
+    let applied = Arc::new(AtomicU64::new(0));
+    let frames_from_a = Arc::new(AtomicU64::new(0));
+    let done = Arc::new(AtomicBool::new(false));
+    let ready = Arc::new(AtomicBool::new(false));
+    let (ap, ff, dn, rd) = (
+        applied.clone(),
+        frames_from_a.clone(),
+        done.clone(),
+        ready.clone(),
+    );
+    // A long refresh period: the figure is changed values, not periodic re-sends.
+    let refresh = Duration::from_secs(5);
+    let reader = on_driver_thread(2, g, refresh, move |h| async move {
+        rd.store(true, Ordering::Release);
+        loop {
+            let s = h.stats();
+            ap.store(s.replica.updates_applied, Ordering::Release);
+            let from_a = s
+                .peers
+                .iter()
+                .find(|p| p.robot == 1)
+                .map_or(0, |p| p.frames);
+            ff.store(from_a, Ordering::Release);
+            if dn.load(Ordering::Acquire) {
+                return Ok(s.io.recv_buffer_bytes);
+            }
+            tokio::time::sleep(Duration::from_micros(500)).await;
+        }
+    });
+    let writer = on_driver_thread(1, g, refresh, move |h| async move {
+        while !ready.load(Ordering::Acquire) {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        let keys: Vec<String> = (0..KEYS).map(|k| format!("*.var.bench.k{k}")).collect();
+        let base = applied.load(Ordering::Acquire);
+        let t0 = Instant::now();
+        let mut sent = 0u64;
+        while sent < updates {
+            while sent - (applied.load(Ordering::Acquire) - base).min(sent) > WINDOW {
+                tokio::task::yield_now().await;
+            }
+            h.batch(|b| {
+                for key in &keys {
+                    b.set(key, sent as i64)?;
+                    sent += 1;
+                }
+                Ok::<_, comms::SetError>(())
+            })?;
+            // Let the driver task read our own looped-back frames.
+            tokio::task::yield_now().await;
+        }
+        // Wait until B has everything, or gives up.
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while applied.load(Ordering::Acquire) - base < sent && Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_micros(200)).await;
+        }
+        let elapsed = t0.elapsed().as_secs_f64();
+        let got = applied.load(Ordering::Acquire) - base;
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let frames_sent = h.stats().replica.frames_out;
+        Ok((got as f64 / elapsed, frames_sent))
+    });
+    let (updates_per_s, frames_sent) = writer.join().expect("writer thread")?;
+    std::thread::sleep(Duration::from_millis(20));
+    let frames_received = frames_from_a.load(Ordering::Acquire);
+    done.store(true, Ordering::Release);
+    let recv_buffer_bytes = reader.join().expect("reader thread")?;
+    let loss = 1.0 - (frames_received as f64 / frames_sent.max(1) as f64);
+    Ok(Throughput {
+        updates_per_s,
+        loss: loss.max(0.0),
+        frames_sent,
+        frames_received,
+        recv_buffer_bytes,
+    })
+}
+
+/// (d): spawn `huddle daemon`, write 10,000 global keys through its relay, read VmRSS.
+fn rss_with_10k_keys(g: SocketAddrV4, relay_port: u16) -> Result<f64> {
+    let dir = std::env::temp_dir().join(format!("huddle-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let relay: SocketAddr = format!("127.0.0.1:{relay_port}").parse()?;
+    let mut child = std::process::Command::new(std::env::current_exe()?)
+        .args([
+            "daemon",
+            "--id",
+            "9",
+            "--group",
+            &g.to_string(),
+            "--iface",
+            "127.0.0.1",
+        ])
+        .args(["--relay", &relay.to_string()])
+        .arg("--config-dir")
+        .arg(&dir)
+        .env("RUST_LOG", "warn")
+        .spawn()
+        .context("spawn huddle daemon")?;
+    let result = (|| -> Result<f64> {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let mut client = loop {
+            match RelayClient::connect(relay) {
+                Ok(c) => break c,
+                Err(_) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(20))
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        for chunk in 0..100 {
+            let mut batch = String::new();
+            for k in 0..100 {
+                batch += &format!("SETV *.var.bench.key{:05} {}\n", chunk * 100 + k, k);
+            }
+            client.send(batch.trim_end())?;
+            for _ in 0..100 {
+                let answer = client.line()?;
+                if answer != "OK" {
+                    bail!("daemon refused a key: {answer}");
+                }
+            }
+        }
+        // Let a few refresh periods pass with all keys on the wire.
+        std::thread::sleep(Duration::from_millis(500));
+        let status = std::fs::read_to_string(format!("/proc/{}/status", child.id()))?;
+        let kb: f64 = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .context("no VmRSS in /proc/<pid>/status")?;
+        Ok(kb / 1024.0)
+    })();
+    let _ = child.kill();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+/// `huddle bench comms`
+pub fn run(args: BenchArgs) -> Result<()> {
+    let BenchWhat::Comms(args) = args.what;
+    let say = |s: &str| {
+        if !args.json {
+            eprintln!("{s}");
+        }
+    };
+    say("raw multicast ping-pong...");
+    let (raw_p50, raw_p99) = summarize(raw_ping_pong(group(args.port, 1), args.rounds)?);
+    say("huddle ping-pong through two replicas...");
+    let (h_p50, h_p99) = summarize(huddle_ping_pong(group(args.port + 1, 2), args.rounds)?);
+    say("sustained updates A -> B...");
+    let tp = throughput(group(args.port + 2, 3), args.updates)?;
+    say("daemon resident memory with 10,000 keys...");
+    let rss = rss_with_10k_keys(group(args.port + 3, 4), args.port + 4)?;
+    let report = CommsReport {
+        raw_p50_us: raw_p50,
+        raw_p99_us: raw_p99,
+        huddle_p50_us: h_p50,
+        huddle_p99_us: h_p99,
+        p50_ratio: h_p50 / raw_p50,
+        p99_ratio: h_p99 / raw_p99,
+        updates_per_s: tp.updates_per_s,
+        update_loss: tp.loss,
+        frames_sent: tp.frames_sent,
+        frames_received: tp.frames_received,
+        rss_mb_10k_keys: rss,
+        recv_buffer_bytes: tp.recv_buffer_bytes,
+        build: if cfg!(debug_assertions) {
+            "debug"
+        } else {
+            "release"
+        },
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        let r = &report;
+        println!(
+            "loopback multicast ping-pong ({} round trips, {} build)",
+            args.rounds, r.build
+        );
+        println!(
+            "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",
+            r.raw_p50_us, r.raw_p99_us
+        );
+        println!(
+            "  huddle replicas   p50 {:7.1} us   p99 {:7.1} us",
+            r.huddle_p50_us, r.huddle_p99_us
+        );
+        println!(
+            "  ratio             p50 {:7.2}      p99 {:7.2}   (target p50 <= 1.5)",
+            r.p50_ratio, r.p99_ratio
+        );
+        println!(
+            "sustained A -> B    {:.0} updates/s, frame loss {:.4}% ({} of {} frames)   (target >= 500000, no loss)",
+            r.updates_per_s,
+            r.update_loss * 100.0,
+            r.frames_sent - r.frames_received.min(r.frames_sent),
+            r.frames_sent
+        );
+        println!("  receive buffer granted {} bytes", r.recv_buffer_bytes);
+        println!(
+            "daemon RSS with 10,000 keys: {:.1} MB   (target <= 20)",
+            r.rss_mb_10k_keys
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,152 @@
+//! `huddle daemon`: one robot's replica on the team's multicast group, with the relay
+//! port for programs in any language (isocrob-2000's Proxy and Relay μAgents).
+
+use std::net::{SocketAddr, SocketAddrV4};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use comms::driver::{resolve_iface, Driver, DriverConfig};
+use comms::ReplicaConfig;
+
+/// Arguments of `huddle daemon`.
+#[derive(Args, Debug, Clone)]
+pub struct DaemonArgs {
+    /// This robot's id, 1..=254 (default: the ROBOT_ID environment variable).
+    #[arg(long)]
+    pub id: Option<u8>,
+    /// Team id: frames of other teams are dropped.
+    #[arg(long, default_value_t = 0)]
+    pub team: u8,
+    /// Multicast group and port (the seed's default; teams use their own, e.g. 239.x).
+    #[arg(long, default_value = "224.0.0.1:2000")]
+    pub group: SocketAddrV4,
+    /// Interface, by name (wlan0) or IPv4 address: membership and IP_MULTICAST_IF.
+    /// Loopback by default, so nothing leaves this machine unless asked.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub iface: String,
+    /// Also send every frame by unicast to this teammate (repeatable).
+    #[arg(long = "peer")]
+    pub peers: Vec<SocketAddr>,
+    /// Relay listening address; any other than loopback must be given explicitly.
+    #[arg(long, default_value = "127.0.0.1:2001")]
+    pub relay: SocketAddr,
+    /// Directory of config.dat and config-<id>.dat.
+    #[arg(long, default_value = ".")]
+    pub config_dir: PathBuf,
+    /// Team key file: frames are tagged with HMAC-SHA256 under its contents (trailing
+    /// whitespace ignored); untagged or badly tagged frames are dropped.
+    #[arg(long)]
+    pub key_file: Option<PathBuf>,
+    /// Refresh period of every global value, in milliseconds.
+    #[arg(long, default_value_t = 100)]
+    pub refresh: u64,
+    /// Multicast TTL.
+    #[arg(long, default_value_t = 1)]
+    pub ttl: u32,
+    // `--impair SPEC` (netsim's impairment model on this daemon's socket) belongs here;
+    // it plugs in where comms::driver sends (see `Inner::pump`).
+}
+
+/// Builds the driver configuration from the arguments: robot id, config files, key.
+pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
+    let id = match args.id {
+        Some(id) => id,
+        None => {
+            let raw = std::env::var("ROBOT_ID")
+                .map_err(|_| anyhow!("no robot id: pass --id N or set ROBOT_ID"))?;
+            raw.trim()
+                .parse()
+                .with_context(|| format!("ROBOT_ID={raw:?} is not a robot id 1..=254"))?
+        }
+    };
+    if !comms::ROBOT_IDS.contains(&id) {
+        bail!("robot id {id} is outside 1..=254");
+    }
+    if args.refresh == 0 {
+        bail!("--refresh must be at least 1 ms");
+    }
+    let mut replica =
+        ReplicaConfig::new(id, args.team).with_refresh_period(Duration::from_millis(args.refresh));
+    if let Some(file) = &args.key_file {
+        let bytes = std::fs::read(file)
+            .with_context(|| format!("cannot read key file {}", file.display()))?;
+        let key = bytes.trim_ascii_end();
+        if key.is_empty() {
+            bail!("key file {} is empty", file.display());
+        }
+        replica = replica.with_team_key(key.to_vec());
+    }
+    let entries = comms::load_config(&args.config_dir, id)?;
+    let mut config = DriverConfig::new(replica);
+    config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
+    config.socket.group = args.group;
+    config.socket.iface = resolve_iface(&args.iface)?;
+    config.socket.ttl = args.ttl;
+    config.peers = args.peers.clone();
+    Ok(config)
+}
+
+/// Runs the daemon until SIGINT or SIGTERM.
+pub fn run(args: DaemonArgs) -> Result<()> {
+    let config = driver_config(&args)?;
+    // One thread for socket, replica, timers and relay clients (DESIGN.md,
+    // *Performance notes*).
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let local = tokio::task::LocalSet::new();
+    local.block_on(&runtime, async move {
+        let relay = std::net::TcpListener::bind(args.relay).map_err(|e| {
+            anyhow!(
+                "cannot open the relay port {}: {e}{}",
+                args.relay,
+                if e.kind() == std::io::ErrorKind::AddrInUse {
+                    " (is another daemon using it? pick another with --relay)"
+                } else {
+                    ""
+                }
+            )
+        })?;
+        relay.set_nonblocking(true)?;
+        let relay = tokio::net::TcpListener::from_std(relay)?;
+        let driver = Driver::bind(config)?;
+        let handle = driver.handle();
+        tracing::info!(
+            robot = handle.robot_id(),
+            relay = %args.relay,
+            "huddle daemon running"
+        );
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+        let mut relay_stop = stop_rx.clone();
+        tokio::task::spawn_local(comms::relay::serve(relay, handle, async move {
+            let _ = relay_stop.wait_for(|s| *s).await;
+        }));
+        let signals = async move {
+            shutdown_signal().await;
+            let _ = stop_tx.send(true);
+        };
+        driver.run(signals).await?;
+        tracing::info!("huddle daemon stopped");
+        drop(stop_rx);
+        Ok(())
+    })
+}
+
+/// SIGINT (Ctrl-C) or SIGTERM.
+async fn shutdown_signal() {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut term = match signal(SignalKind::terminate()) {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::warn!(error = %e, "cannot watch SIGTERM; Ctrl-C still works");
+            let _ = tokio::signal::ctrl_c().await;
+            return;
+        }
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT: shutting down"),
+        _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    }
+}

@@ -1,0 +1,161 @@
+//! Shared by the daemon and relay tests: spawn the built `huddle daemon` on loopback
+//! multicast, and talk raw relay bytes to it.
+#![allow(dead_code)] // each test file uses a different part
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running daemon, killed when dropped.
+pub struct Daemon {
+    pub child: Child,
+    pub relay: SocketAddr,
+}
+
+impl Daemon {
+    /// Starts robot `id` on `group` (always on the loopback interface) with its relay on
+    /// `relay_port`, and waits until the relay answers.
+    pub fn start(
+        id: u8,
+        group: &str,
+        relay_port: u16,
+        extra: &[&str],
+        config_dir: &Path,
+    ) -> Daemon {
+        let relay: SocketAddr = format!("127.0.0.1:{relay_port}").parse().unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_huddle"))
+            .args(["daemon", "--id", &id.to_string(), "--group", group])
+            .args(["--iface", "127.0.0.1", "--relay", &relay.to_string()])
+            .arg("--config-dir")
+            .arg(config_dir)
+            .args(extra)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("spawn huddle daemon");
+        let mut d = Daemon { child, relay };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            if let Ok(Some(status)) = d.child.try_wait() {
+                panic!("daemon {id} exited at start: {status}");
+            }
+            if TcpStream::connect(relay).is_ok() {
+                return d;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "daemon {id}'s relay never came up"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    pub fn client(&self) -> Client {
+        Client::connect(self.relay)
+    }
+
+    /// SIGKILL, as a crash.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// A raw relay connection: bytes out, lines in.
+pub struct Client {
+    pub reader: BufReader<TcpStream>,
+    pub writer: TcpStream,
+    pub greeting: String,
+}
+
+impl Client {
+    pub fn connect(addr: SocketAddr) -> Client {
+        let stream = TcpStream::connect(addr).expect("connect to relay");
+        stream
+            .set_read_timeout(Some(Duration::from_secs(5)))
+            .unwrap();
+        let writer = stream.try_clone().unwrap();
+        let mut c = Client {
+            reader: BufReader::new(stream),
+            writer,
+            greeting: String::new(),
+        };
+        c.greeting = c.line();
+        c
+    }
+
+    pub fn send_raw(&mut self, bytes: &[u8]) {
+        self.writer.write_all(bytes).expect("write to relay");
+    }
+
+    /// One line, terminator stripped; panics on timeout or EOF.
+    pub fn line(&mut self) -> String {
+        let mut s = String::new();
+        let n = self.reader.read_line(&mut s).expect("read from relay");
+        assert!(n > 0, "relay closed the connection");
+        s.trim_end_matches(['\r', '\n']).to_owned()
+    }
+
+    /// Sends `line` and returns the one-line answer.
+    pub fn ask(&mut self, line: &str) -> String {
+        self.send_raw(format!("{line}\n").as_bytes());
+        self.line()
+    }
+
+    /// `GETV` until the answer satisfies `ok`, or panic after `within`.
+    pub fn wait_for(&mut self, key: &str, within: Duration, ok: impl Fn(&str) -> bool) -> String {
+        let deadline = Instant::now() + within;
+        loop {
+            let answer = self.ask(&format!("GETV {key}"));
+            if ok(&answer) {
+                return answer;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{key}: still {answer:?} after {within:?}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Everything until EOF or reset, with a bound on how long to read.
+    pub fn drain_to_end(&mut self, within: Duration) -> (usize, bool) {
+        let deadline = Instant::now() + within;
+        let mut total = 0;
+        let mut buf = vec![0u8; 64 * 1024];
+        self.reader
+            .get_ref()
+            .set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        while Instant::now() < deadline {
+            match self.reader.read(&mut buf) {
+                Ok(0) => return (total, true),
+                Ok(n) => total += n,
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(_) => return (total, true),
+            }
+        }
+        (total, false)
+    }
+}
+
+/// `VAL key type value age_ms` → (key, type, value, age_ms).
+pub fn parse_val(line: &str) -> Option<(String, String, String, u64)> {
+    let rest = line
+        .strip_prefix("VAL ")
+        .or_else(|| line.strip_prefix("UPD "))?;
+    let (key, rest) = rest.split_once(' ')?;
+    let (ty, rest) = rest.split_once(' ')?;
+    let (value, age) = rest.rsplit_once(' ')?;
+    Some((key.into(), ty.into(), value.into(), age.parse().ok()?))
+}
