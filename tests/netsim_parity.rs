@@ -175,13 +175,13 @@ fn through_real_drivers() -> (Vec<Board>, Vec<Talk>) {
             .iter_mut()
             .map(|s| {
                 std::iter::from_fn(|| s.try_next())
-                    .filter_map(|n| match n {
+                    .map(|n| match n {
                         Notice::Talk {
                             from,
                             queue,
                             seq,
                             value,
-                        } => Some((from, queue, seq, value)),
+                        } => (from, queue, seq, value),
                         other => panic!("unexpected notice on a talk subscription: {other:?}"),
                     })
                     .collect()
