@@ -12,6 +12,11 @@
 //! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions and
 //! subscribers) until the replica has nothing more to say.
 //!
+//! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
+//! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
+//! model): lost datagrams are never sent, the others wait in a queue released by the
+//! same timer as the replica's deadlines.
+//!
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
 //! use comms::driver::{Driver, DriverConfig};
