@@ -32,6 +32,10 @@
 //!    short message; sender continues → a second slot is decided the same way and the
 //!    sender must then stop → a long message. A frame that keeps sounding past two slots
 //!    is not a message (and is ignored until it stops).
+//!    The test looks half a slot past the end, so two messages from one robot need more
+//!    than half a tone of silence between them (closer frames *are* a long message).
+//!    Symmetrically, a first frame whose sender was already sounding just before it is the
+//!    second half of a long message whose first half was missed, and is dropped.
 //! 8. **Once per transmission**: after a decision the integration restarts after the
 //!    transmission's end.
 //!
@@ -54,7 +58,9 @@ use crate::analysis::{Analyzer, Geometry};
 use crate::significance::{
     gamma_upper_quantile, hann_area_inverse, hann_share_inside, ln_tone_likelihood,
 };
-use crate::tones::{basic_tones, Frame, Message, Sender, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
+use crate::tones::{
+    basic_tones, Frame, Message, Sender, BASIC_COUNT, DATA_VALUES, SENDER_COUNT, TONE_COUNT,
+};
 
 /// Per-tone false-alarm probability of "present" on one slot's integrated sum.
 pub const P_TONE: f64 = 3e-3;
@@ -79,7 +85,7 @@ pub const SPRT_BOUND: f64 = 14.0;
 /// How far after a slot's end (in slots) the short/long test looks. A long message's
 /// second frame follows with no gap, so its evidence is in the first windows; looking
 /// further would mistake the same robot's next message for a continuation.
-const SPRT_HORIZON: f64 = 0.4;
+const SPRT_HORIZON: f64 = 0.5;
 /// Largest share of a window's Hann area before the slot end for it to count as "after"
 /// in the short/long test (a window starting 1/8 window before the end).
 const MAX_SHARE_BEFORE_END: f64 = 0.02;
@@ -232,7 +238,10 @@ enum Stage {
     EndTest {
         slot: u8,
         slot_end: f64,
+        /// Evidence that the sender's tones continue.
         llr: f64,
+        /// Evidence that each data basic sounds after the slot (a second frame's data).
+        data_llr: [f64; DATA_VALUES as usize],
         next_index: u64,
     },
     /// Waiting for the windows of the second slot.
@@ -790,11 +799,19 @@ impl Decoder {
                     next.level = level;
                     next.present = present;
                     next.noise = noise;
+                    if first && self.sender_sounded_before(&next) {
+                        // The sender was already sounding: this is the second frame of a
+                        // long message whose first frame was missed. Reporting it as a
+                        // short would be a wrong message; missing it is the lesser harm.
+                        self.end_transmission(b, false);
+                        return;
+                    }
                     let next_index = self.history.front().map(|w| w.index).unwrap_or(0);
                     next.stage = Stage::EndTest {
                         slot: if first { 1 } else { 2 },
                         slot_end: b,
                         llr: 0.0,
+                        data_llr: [0.0; DATA_VALUES as usize],
                         next_index,
                     };
                     self.tracking = Some(next);
@@ -803,9 +820,18 @@ impl Decoder {
                     slot,
                     slot_end,
                     mut llr,
+                    mut data_llr,
                     mut next_index,
                 } => {
                     let window_len = self.geometry.window_len as f64;
+                    let current_data = t.data[usize::from(slot.clamp(1, 2) - 1)];
+                    // Typical tone level of the slot, for data tones it did not contain.
+                    let mut levels: Vec<f64> = (0..TONE_COUNT)
+                        .filter(|&k| t.present[k] && t.level[k] > 0.0)
+                        .map(|k| t.level[k])
+                        .collect();
+                    levels.sort_by(|a, b| a.total_cmp(b));
+                    let typical = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
                     let slot_start = slot_end - slot_len;
                     let mut verdict = None;
                     let sender_tones = basic_tones(t.sender.index() as usize);
@@ -848,21 +874,47 @@ impl Decoder {
                                 - ln_tone_likelihood(r, ended))
                             .clamp(-LLR_CLIP, LLR_CLIP);
                         }
-                        if llr >= SPRT_BOUND {
+                        // A second frame also sounds one data basic, which one unknown:
+                        // its evidence enters as the best of the 21 (a generalised
+                        // likelihood ratio), doubling what the sender alone gives.
+                        for (d, acc) in data_llr.iter_mut().enumerate() {
+                            let same = d as u8 == current_data;
+                            for k in basic_tones(SENDER_COUNT + d) {
+                                let level = if same && t.present[k] {
+                                    t.level[k]
+                                } else {
+                                    typical
+                                };
+                                if level <= 0.0 {
+                                    continue;
+                                }
+                                let r =
+                                    f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                                let ended = if same { level * before * before } else { 0.0 };
+                                let continued = ended + CONTINUATION_SHARE * level * after * after;
+                                *acc += (ln_tone_likelihood(r, continued)
+                                    - ln_tone_likelihood(r, ended))
+                                .clamp(-LLR_CLIP, LLR_CLIP);
+                            }
+                        }
+                        let best_data = data_llr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                        let evidence = llr + best_data;
+                        if evidence >= SPRT_BOUND {
                             verdict = Some(true);
-                        } else if llr <= -SPRT_BOUND {
+                        } else if evidence <= -SPRT_BOUND {
                             verdict = Some(false);
                         } else if start + window_len >= slot_end + SPRT_HORIZON * slot_len {
                             // Out of time: a long message continues with no gap, so its
                             // evidence comes early and strong; a weak lean is a stop.
-                            verdict = Some(llr > SPRT_BOUND / 3.0);
+                            verdict = Some(evidence > SPRT_BOUND / 3.0);
                         }
                         if verdict.is_some() {
                             break;
                         }
                     }
                     if verdict.is_none() && self.eof {
-                        verdict = Some(llr > SPRT_BOUND / 3.0);
+                        let best_data = data_llr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                        verdict = Some(llr + best_data > SPRT_BOUND / 3.0);
                     }
                     let Some(continues) = verdict else {
                         if let Some(tr) = self.tracking.as_mut() {
@@ -870,6 +922,7 @@ impl Decoder {
                                 slot,
                                 slot_end,
                                 llr,
+                                data_llr,
                                 next_index,
                             };
                         }
@@ -905,6 +958,38 @@ impl Decoder {
                 }
             }
         }
+    }
+
+    /// Whether the sender's tones were sounding just before the onset (the mirror of the
+    /// end test): log-likelihood of "sounding at the measured level" against "silent" on
+    /// the windows (almost) wholly before the onset, within [`SPRT_HORIZON`] slots.
+    fn sender_sounded_before(&self, t: &Tracking) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        let onset = t.onset;
+        let mut llr = 0.0;
+        for w in &self.history {
+            let start = w.start as f64;
+            if start + window_len < onset - SPRT_HORIZON * slot_len {
+                continue;
+            }
+            let after = hann_share_inside(start, window_len, onset, onset + slot_len);
+            if after > MAX_SHARE_BEFORE_END {
+                break;
+            }
+            let before = hann_share_inside(start, window_len, onset - slot_len, onset);
+            for k in basic_tones(t.sender.index() as usize) {
+                if !t.present[k] || t.level[k] <= 0.0 {
+                    continue;
+                }
+                let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                let silent = t.level[k] * after * after;
+                let sounding = t.level[k] * (after * after + CONTINUATION_SHARE * before * before);
+                llr += (ln_tone_likelihood(r, sounding) - ln_tone_likelihood(r, silent))
+                    .clamp(-LLR_CLIP, LLR_CLIP);
+            }
+        }
+        llr > SPRT_BOUND / 3.0
     }
 
     fn report(&mut self, t: &Tracking, message: Message, end: f64) {

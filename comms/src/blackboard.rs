@@ -7,7 +7,7 @@
 //! copy with the newest timestamp. `talk` messages are not stored; they are delivered as
 //! events by the replica.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::Duration;
 
 use thiserror::Error;
@@ -86,12 +86,26 @@ pub enum Applied {
     Stale,
 }
 
-/// A stored entry and whether a change event for it is queued (so an undrained queue
-/// holds each key at most once and stays bounded by the number of keys).
+/// A stored binding, its key as stored, and whether a change event for it is queued (so an
+/// undrained queue holds each binding at most once and stays bounded by their number).
 #[derive(Clone, Debug)]
 struct Slot {
+    key: Key,
     entry: Entry,
     change_queued: bool,
+}
+
+/// Where a binding lives in [`Blackboard::slots`]. Bindings are never removed, so an id
+/// stays valid for the blackboard's life.
+pub(crate) type SlotId = u32;
+
+/// The bindings of one scope, found two ways: by hash for the per-update lookups of the
+/// hot path (a B-tree walk compares the path against a dozen or more stored paths, and
+/// paths of one robot often share long prefixes), and in key order for iteration.
+#[derive(Clone, Debug, Default)]
+struct ScopeIndex {
+    by_path: HashMap<String, SlotId>,
+    ordered: BTreeMap<String, SlotId>,
 }
 
 /// The set of bindings.
@@ -99,8 +113,9 @@ struct Slot {
 pub struct Blackboard {
     robot_id: u8,
     incarnation: u64,
-    scopes: BTreeMap<Scope, BTreeMap<String, Slot>>,
-    changes: VecDeque<Key>,
+    slots: Vec<Slot>,
+    scopes: BTreeMap<Scope, ScopeIndex>,
+    changes: VecDeque<SlotId>,
 }
 
 impl Blackboard {
@@ -110,6 +125,7 @@ impl Blackboard {
         Blackboard {
             robot_id,
             incarnation: 0,
+            slots: Vec::new(),
             scopes: BTreeMap::new(),
             changes: VecDeque::new(),
         }
@@ -124,51 +140,64 @@ impl Blackboard {
         self.robot_id
     }
 
+    fn find(&self, scope: Scope, path: &str) -> Option<SlotId> {
+        self.scopes.get(&scope)?.by_path.get(path).copied()
+    }
+
+    fn insert(&mut self, scope: Scope, path: &str, entry: Entry) -> SlotId {
+        let id = SlotId::try_from(self.slots.len()).expect("fewer than 2^32 bindings");
+        self.slots.push(Slot {
+            key: Key::from_valid_parts(scope, Kind::Var, path.to_owned()),
+            entry,
+            change_queued: true,
+        });
+        let index = self.scopes.entry(scope).or_default();
+        index.by_path.insert(path.to_owned(), id);
+        index.ordered.insert(path.to_owned(), id);
+        self.changes.push_back(id);
+        id
+    }
+
     /// Writes a value at `now`. `local.var.x` stays here; `*.var.x` and
     /// `<own id>.var.x` set this robot's own copy (returned: the key it is stored under).
     /// Every write bumps the version, even with an unchanged value, so freshness
     /// propagates; a change event is queued only when the value differs.
     pub fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<Key, SetError> {
+        let id = self.write(now, key, value)?;
+        Ok(self.slots[id as usize].key.clone())
+    }
+
+    /// [`Blackboard::set`] without building the stored key: the binding's slot.
+    pub(crate) fn write(
+        &mut self,
+        now: Instant,
+        key: &Key,
+        value: Value,
+    ) -> Result<SlotId, SetError> {
         let scope = self.storage_scope(key)?;
         let (robot_id, incarnation) = (self.robot_id, self.incarnation);
-        let slots = self.scopes.entry(scope).or_default();
-        let queue = match slots.get_mut(key.path()) {
-            Some(slot) => {
-                let e = &mut slot.entry;
-                let changed = !e.value.same_as(&value);
-                e.value = value;
-                e.version += 1;
-                e.stamp = now;
-                e.incarnation = incarnation;
-                let queue = changed && !slot.change_queued;
-                slot.change_queued |= changed;
-                queue
-            }
-            None => {
-                let entry = Entry {
-                    value,
-                    owner: robot_id,
-                    version: 1,
-                    incarnation,
-                    stamp: now,
-                };
-                let slot = Slot {
-                    entry,
-                    change_queued: true,
-                };
-                slots.insert(key.path().to_owned(), slot);
-                true
-            }
+        let Some(id) = self.find(scope, key.path()) else {
+            let entry = Entry {
+                value,
+                owner: robot_id,
+                version: 1,
+                incarnation,
+                stamp: now,
+            };
+            return Ok(self.insert(scope, key.path(), entry));
         };
-        let stored = if scope == key.scope() {
-            key.clone()
-        } else {
-            key.with_scope(scope)
-        };
-        if queue {
-            self.changes.push_back(stored.clone());
+        let slot = &mut self.slots[id as usize];
+        let e = &mut slot.entry;
+        let changed = !e.value.same_as(&value);
+        e.value = value;
+        e.version += 1;
+        e.stamp = now;
+        e.incarnation = incarnation;
+        if changed && !slot.change_queued {
+            slot.change_queued = true;
+            self.changes.push_back(id);
         }
-        Ok(stored)
+        Ok(id)
     }
 
     /// Where a write of `key` goes, or why it may not be written here.
@@ -202,7 +231,21 @@ impl Blackboard {
         version: u64,
         stamp: Instant,
     ) -> Applied {
-        let slots = self.scopes.entry(Scope::Robot(owner)).or_default();
+        self.apply_remote_path(owner, incarnation, &path, value, version, stamp)
+    }
+
+    /// [`Blackboard::apply_remote`] with a borrowed path: the receive path allocates
+    /// nothing for a key already held.
+    pub(crate) fn apply_remote_path(
+        &mut self,
+        owner: u8,
+        incarnation: u64,
+        path: &str,
+        value: Value,
+        version: u64,
+        stamp: Instant,
+    ) -> Applied {
+        let scope = Scope::Robot(owner);
         let fresh = Entry {
             value,
             owner,
@@ -210,41 +253,29 @@ impl Blackboard {
             incarnation,
             stamp,
         };
-        let (outcome, queue) = match slots.get_mut(path.as_str()) {
-            Some(slot) => {
-                let e = &mut slot.entry;
-                if e.incarnation == incarnation && version < e.version {
-                    (Applied::Stale, false)
-                } else if e.incarnation == incarnation && version == e.version {
-                    e.stamp = e.stamp.min(stamp);
-                    (Applied::Refreshed, false)
-                } else {
-                    let changed = !e.value.same_as(&fresh.value);
-                    *e = fresh;
-                    let queue = changed && !slot.change_queued;
-                    slot.change_queued |= changed;
-                    let outcome = if changed {
-                        Applied::Changed
-                    } else {
-                        Applied::Refreshed
-                    };
-                    (outcome, queue)
-                }
-            }
-            None => {
-                let slot = Slot {
-                    entry: fresh,
-                    change_queued: true,
-                };
-                slots.insert(path.clone(), slot);
-                (Applied::Inserted, true)
-            }
+        let Some(id) = self.find(scope, path) else {
+            self.insert(scope, path, fresh);
+            return Applied::Inserted;
         };
-        if queue {
-            let key = Key::from_valid_parts(Scope::Robot(owner), Kind::Var, path);
-            self.changes.push_back(key);
+        let slot = &mut self.slots[id as usize];
+        let e = &mut slot.entry;
+        if e.incarnation == incarnation && version < e.version {
+            return Applied::Stale;
         }
-        outcome
+        if e.incarnation == incarnation && version == e.version {
+            e.stamp = e.stamp.min(stamp);
+            return Applied::Refreshed;
+        }
+        let changed = !e.value.same_as(&fresh.value);
+        *e = fresh;
+        if !changed {
+            return Applied::Refreshed;
+        }
+        if !slot.change_queued {
+            slot.change_queued = true;
+            self.changes.push_back(id);
+        }
+        Applied::Changed
     }
 
     /// The binding for `key`: `local.var.x`, `n.var.x`, or for `*.var.x` the copy with
@@ -257,12 +288,13 @@ impl Blackboard {
             Scope::Global => self
                 .scopes
                 .range(Scope::Robot(1)..=Scope::Robot(254))
-                .filter_map(|(_, slots)| slots.get(key.path()).map(|s| &s.entry))
+                .filter_map(|(_, index)| index.by_path.get(key.path()))
+                .map(|&id| &self.slots[id as usize].entry)
                 .fold(None, |best: Option<&Entry>, e| match best {
                     Some(b) if b.stamp >= e.stamp => Some(b),
                     _ => Some(e),
                 }),
-            scope => self.scopes.get(&scope)?.get(key.path()).map(|s| &s.entry),
+            scope => self.get_stored(scope, key.path()),
         }
     }
 
@@ -274,35 +306,38 @@ impl Blackboard {
     /// Every stored binding whose key matches `pattern`, in key order (local first,
     /// then by robot id, then by path). Keys come out as stored (`n.var.x`, never `*`).
     pub fn iter<'a>(&'a self, pattern: &'a Pattern) -> impl Iterator<Item = (Key, &'a Entry)> + 'a {
-        self.scopes.iter().flat_map(move |(scope, slots)| {
-            slots
+        self.scopes.iter().flat_map(move |(scope, index)| {
+            index
+                .ordered
                 .iter()
                 .filter(move |(path, _)| pattern.matches_parts(*scope, Kind::Var, path))
-                .map(move |(path, s)| {
-                    (
-                        Key::from_valid_parts(*scope, Kind::Var, path.clone()),
-                        &s.entry,
-                    )
+                .map(move |(_, &id)| {
+                    let slot = &self.slots[id as usize];
+                    (slot.key.clone(), &slot.entry)
                 })
         })
     }
 
-    /// The bindings this robot owns under `scope` (for the replica's refresh).
+    /// The bindings this robot owns under `scope` (for the replica's refresh), in path
+    /// order.
     pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&String, &Entry)> {
-        self.scopes
-            .get(&scope)
-            .into_iter()
-            .flat_map(|s| s.iter().map(|(p, s)| (p, &s.entry)))
+        self.scopes.get(&scope).into_iter().flat_map(move |index| {
+            index
+                .ordered
+                .iter()
+                .map(move |(p, &id)| (p, &self.slots[id as usize].entry))
+        })
     }
 
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
-        self.scopes.get(&scope)?.get(path).map(|s| &s.entry)
+        self.find(scope, path)
+            .map(|id| &self.slots[id as usize].entry)
     }
 
     /// Number of stored bindings.
     pub fn len(&self) -> usize {
-        self.scopes.values().map(BTreeMap::len).sum()
+        self.slots.len()
     }
 
     /// Whether nothing is stored.
@@ -313,15 +348,10 @@ impl Blackboard {
     /// The next key whose value changed (inserted or set to a different value), oldest
     /// first. Changes are coalesced: a key appears at most once until drained.
     pub fn poll_change(&mut self) -> Option<Key> {
-        let key = self.changes.pop_front()?;
-        if let Some(slot) = self
-            .scopes
-            .get_mut(&key.scope())
-            .and_then(|s| s.get_mut(key.path()))
-        {
-            slot.change_queued = false;
-        }
-        Some(key)
+        let id = self.changes.pop_front()?;
+        let slot = &mut self.slots[id as usize];
+        slot.change_queued = false;
+        Some(slot.key.clone())
     }
 }
 

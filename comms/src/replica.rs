@@ -356,7 +356,7 @@ impl Replica {
                 });
             }
         }
-        self.board.set(now, key, value)?;
+        self.board.write(now, key, value)?;
         if global {
             self.dirty.insert(key.path().to_owned());
         }
@@ -447,6 +447,15 @@ impl Replica {
         if bytes.len() > self.cfg.mtu {
             return self.drop_frame(from, DropReason::Oversized);
         }
+        // Our own frame, looped back by the kernel (every frame we send comes back): the
+        // plain header names its sender, so it is skipped before the body is decoded or
+        // the tag checked. A forged copy of our own header is ignored the same way, which
+        // is all a checked one would get.
+        if wire::peek_origin(bytes, self.cfg.team_id) == Some((self.cfg.robot_id, self.incarnation))
+        {
+            self.stats.own_frames += 1;
+            return;
+        }
         let frame = match wire::decode_frame(bytes, self.cfg.team_id, self.key.as_ref()) {
             Ok(frame) => frame,
             Err(e) => return self.drop_frame(from, DropReason::from(&e)),
@@ -472,10 +481,10 @@ impl Replica {
                     age_us,
                 } => {
                     let stamp = now.saturating_sub(Duration::from_micros(age_us));
-                    match self.board.apply_remote(
+                    match self.board.apply_remote_path(
                         sender,
                         frame.incarnation,
-                        path,
+                        &path,
                         value,
                         version,
                         stamp,

@@ -419,6 +419,19 @@ pub fn encode_frame(frame: &Frame, key: Option<&TeamKey>) -> Vec<u8> {
     w.finish()
 }
 
+/// The sender id and incarnation of what looks like a frame of `team`, read from the
+/// plain header alone (magic, version and team checked; nothing else, no tag). Only for
+/// recognising one's own looped-back frames cheaply: never trust it for anything else.
+pub fn peek_origin(bytes: &[u8], team: u8) -> Option<(u8, u64)> {
+    let header = bytes.get(..HEADER_LEN)?;
+    if header[..2] != MAGIC || header[2] != VERSION || header[4] != team {
+        return None;
+    }
+    let mut incarnation = [0u8; 8];
+    incarnation.copy_from_slice(&header[6..14]);
+    Some((header[5], u64::from_le_bytes(incarnation)))
+}
+
 /// Decodes and validates a frame addressed to `team`; with `key`, it must carry a valid
 /// tag, and without one it must carry none. Safe on untrusted input.
 pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Frame, DecodeError> {

@@ -40,9 +40,14 @@ pub struct CommsArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Ping-pong round trips per measurement (after 10% warm-up).
+    /// Ping-pong round trips per measurement, split into interleaved blocks of raw,
+    /// bare tokio and huddle (each block after its own warm-up).
     #[arg(long, default_value_t = 5000)]
     pub rounds: usize,
+    /// CPU pinning of the two ends of every ping-pong (the same for all three): `none`,
+    /// `same` (both ends on CPU 0) or `split` (pinger on CPU 0, ponger on CPU 1).
+    #[arg(long, default_value = "none")]
+    pub pin: Pin,
     /// Updates sent A → B in the throughput run.
     #[arg(long, default_value_t = 2_000_000)]
     pub updates: u64,
@@ -51,16 +56,59 @@ pub struct CommsArgs {
     pub port: u16,
 }
 
+/// Where the two ends of a ping-pong run.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pin {
+    /// Wherever the scheduler puts them.
+    None,
+    /// Both on CPU 0.
+    Same,
+    /// Pinger on CPU 0, ponger on CPU 1.
+    Split,
+}
+
+impl Pin {
+    /// Pins the calling thread as end `end` (0: pinger, 1: ponger). Best effort: a
+    /// refusal leaves the thread unpinned.
+    fn apply(self, end: usize) {
+        let cpu = match self {
+            Pin::None => return,
+            Pin::Same => 0,
+            Pin::Split => end,
+        };
+        // Linux's cpu_set_t: a bit mask of 1024 CPUs.
+        let mut mask = [0u64; 16];
+        mask[cpu / 64] |= 1 << (cpu % 64);
+        extern "C" {
+            fn sched_setaffinity(pid: i32, size: usize, mask: *const u64) -> i32;
+        }
+        // SAFETY: `mask` is a valid 128-byte CPU set that the call only reads; pid 0 is
+        // the calling thread.
+        let rc = unsafe { sched_setaffinity(0, std::mem::size_of_val(&mask), mask.as_ptr()) };
+        if rc != 0 {
+            tracing::warn!(cpu, "cannot pin the thread; it runs unpinned");
+        }
+    }
+}
+
 /// The figures, as `--json` prints them.
 #[derive(Serialize, Debug)]
 pub struct CommsReport {
     pub raw_p50_us: f64,
     pub raw_p99_us: f64,
+    pub tokio_p50_us: f64,
+    pub tokio_p99_us: f64,
     pub huddle_p50_us: f64,
     pub huddle_p99_us: f64,
     pub p50_ratio: f64,
     pub p99_ratio: f64,
+    pub tokio_p50_ratio: f64,
+    pub pin: Pin,
     pub updates_per_s: f64,
+    pub updates_sent: u64,
+    pub updates_applied: u64,
+    pub frame_loss: f64,
     pub update_loss: f64,
     pub frames_sent: u64,
     pub frames_received: u64,
@@ -78,16 +126,18 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i]
 }
 
-/// p50 and p99 in microseconds of round trips, warm-up dropped.
-fn summarize(mut rtts_us: Vec<f64>) -> (f64, f64) {
-    let warm = rtts_us.len() / 10;
-    let mut v = rtts_us.split_off(warm);
+/// p50 and p99 in microseconds of round trips.
+fn summarize(mut v: Vec<f64>) -> (f64, f64) {
     v.sort_by(|a, b| a.total_cmp(b));
     (percentile(&v, 0.5), percentile(&v, 0.99))
 }
 
+/// Round trips not recorded at the start of every block (caches, branch predictors,
+/// the scheduler's idea of the threads).
+const WARM_UP_ROUNDS: usize = 200;
+
 /// (a): two threads, blocking sockets on one group and port; each skips its own echoes.
-fn raw_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
+fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
     let cfg = SocketConfig {
         group: g,
         ..SocketConfig::default()
@@ -101,6 +151,7 @@ fn raw_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
     let (a, b) = (open()?, open()?);
     let to: SocketAddr = g.into();
     let ponger = std::thread::spawn(move || -> Result<()> {
+        pin.apply(1);
         let mut buf = [0u8; 64];
         loop {
             let (n, _) = b.recv_from(&mut buf)?;
@@ -114,23 +165,104 @@ fn raw_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
             }
         }
     });
-    let mut rtts = Vec::with_capacity(rounds);
-    let mut buf = [0u8; 64];
-    for i in 0..rounds as u64 {
-        let mut msg = [0u8; 9];
-        msg[0] = b'P';
-        msg[1..].copy_from_slice(&i.to_le_bytes());
-        let t0 = Instant::now();
-        a.send_to(&msg, to)?;
+    // The pinger runs on a thread of its own too, as in the other two measurements.
+    let pinger = std::thread::spawn(move || -> Result<Vec<f64>> {
+        pin.apply(0);
+        let mut rtts = Vec::with_capacity(rounds);
+        let mut buf = [0u8; 64];
+        for i in 0..(WARM_UP_ROUNDS + rounds) as u64 {
+            let mut msg = [0u8; 9];
+            msg[0] = b'P';
+            msg[1..].copy_from_slice(&i.to_le_bytes());
+            let t0 = Instant::now();
+            a.send_to(&msg, to)?;
+            loop {
+                let (n, _) = a.recv_from(&mut buf).context("raw ping-pong: no reply")?;
+                if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
+                    break;
+                }
+            }
+            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+        }
+        a.send_to(b"Q", to)?;
+        Ok(rtts.split_off(WARM_UP_ROUNDS))
+    });
+    let rtts = pinger.join().expect("pinger thread")?;
+    ponger.join().expect("ponger thread")?;
+    Ok(rtts)
+}
+
+/// Runs `f` on its own thread (pinned as `end`) inside a current-thread runtime and
+/// LocalSet, as the driver runs.
+fn on_runtime_thread<T: Send + 'static, F, Fut>(
+    pin: Pin,
+    end: usize,
+    f: F,
+) -> std::thread::JoinHandle<Result<T>>
+where
+    F: FnOnce() -> Fut + Send + 'static,
+    Fut: std::future::Future<Output = Result<T>>,
+{
+    std::thread::spawn(move || {
+        pin.apply(end);
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        tokio::task::LocalSet::new().block_on(&rt, f())
+    })
+}
+
+/// (a'): the raw ping-pong over tokio sockets, same socket options, threads and runtime
+/// set-up as the replicas: the floor that "the cost of tokio" sets for (b).
+fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
+    let cfg = SocketConfig {
+        group: g,
+        ..SocketConfig::default()
+    };
+    let (a, b) = (open_multicast(&cfg)?.socket, open_multicast(&cfg)?.socket);
+    let to: SocketAddr = g.into();
+    let ponger = on_runtime_thread(pin, 1, move || async move {
+        let b = tokio::net::UdpSocket::from_std(b)?;
+        let mut buf = [0u8; 64];
         loop {
-            let (n, _) = a.recv_from(&mut buf).context("raw ping-pong: no reply")?;
-            if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
-                break;
+            let (n, _) = b.recv_from(&mut buf).await?;
+            match buf[0] {
+                b'P' => {
+                    buf[0] = b'R';
+                    b.send_to(&buf[..n], to).await?;
+                }
+                b'Q' => return Ok(()),
+                _ => {}
             }
         }
-        rtts.push(t0.elapsed().as_secs_f64() * 1e6);
-    }
-    a.send_to(b"Q", to)?;
+    });
+    let pinger = on_runtime_thread(pin, 0, move || async move {
+        let a = tokio::net::UdpSocket::from_std(a)?;
+        let mut rtts = Vec::with_capacity(rounds);
+        let mut buf = [0u8; 64];
+        for i in 0..(WARM_UP_ROUNDS + rounds) as u64 {
+            let mut msg = [0u8; 9];
+            msg[0] = b'P';
+            msg[1..].copy_from_slice(&i.to_le_bytes());
+            let t0 = Instant::now();
+            a.send_to(&msg, to).await?;
+            let reply = tokio::time::timeout(Duration::from_secs(2), async {
+                loop {
+                    let (n, _) = a.recv_from(&mut buf).await?;
+                    if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
+                        return Ok::<_, std::io::Error>(());
+                    }
+                }
+            });
+            reply
+                .await
+                .context("tokio ping-pong: no reply within 2 s")??;
+            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+        }
+        a.send_to(b"Q", to).await?;
+        Ok(rtts.split_off(WARM_UP_ROUNDS))
+    });
+    let rtts = pinger.join().expect("pinger thread")?;
     ponger.join().expect("ponger thread")?;
     Ok(rtts)
 }
@@ -141,6 +273,7 @@ fn on_driver_thread<T: Send + 'static, F, Fut>(
     id: u8,
     g: SocketAddrV4,
     refresh: Duration,
+    pin: Pin,
     f: F,
 ) -> std::thread::JoinHandle<Result<T>>
 where
@@ -148,6 +281,7 @@ where
     Fut: std::future::Future<Output = Result<T>>,
 {
     std::thread::spawn(move || {
+        pin.apply(usize::from(id) - 1);
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()?;
@@ -180,12 +314,12 @@ async fn next_value(sub: &mut comms::driver::Subscription) -> Result<Value> {
 }
 
 /// (b): ping on robot 1, pong on robot 2, each on its own thread.
-fn huddle_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
+fn huddle_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
     let ready = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
     let (r2, d2) = (ready.clone(), done.clone());
     let refresh = Duration::from_millis(100);
-    let ponger = on_driver_thread(2, g, refresh, move |h| async move {
+    let ponger = on_driver_thread(2, g, refresh, pin, move |h| async move {
         let mut pings = h.subscribe("1.var.bench.ping")?;
         r2.store(true, Ordering::Release);
         while !d2.load(Ordering::Acquire) {
@@ -196,13 +330,13 @@ fn huddle_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
         }
         Ok(())
     });
-    let pinger = on_driver_thread(1, g, refresh, move |h| async move {
+    let pinger = on_driver_thread(1, g, refresh, pin, move |h| async move {
         while !ready.load(Ordering::Acquire) {
             tokio::time::sleep(Duration::from_millis(1)).await;
         }
         let mut pongs = h.subscribe("2.var.bench.pong")?;
         let mut rtts = Vec::with_capacity(rounds);
-        for i in 0..rounds as i64 {
+        for i in 0..(WARM_UP_ROUNDS + rounds) as i64 {
             let t0 = Instant::now();
             h.set("*.var.bench.ping", i)?;
             let reply = tokio::time::timeout(Duration::from_secs(2), async {
@@ -218,7 +352,7 @@ fn huddle_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
             rtts.push(t0.elapsed().as_secs_f64() * 1e6);
         }
         done.store(true, Ordering::Release);
-        Ok(rtts)
+        Ok(rtts.split_off(WARM_UP_ROUNDS))
     });
     let rtts = pinger.join().expect("pinger thread")?;
     ponger.join().expect("ponger thread")?;
@@ -227,7 +361,8 @@ fn huddle_ping_pong(g: SocketAddrV4, rounds: usize) -> Result<Vec<f64>> {
 
 struct Throughput {
     updates_per_s: f64,
-    loss: f64,
+    updates_sent: u64,
+    updates_applied: u64,
     frames_sent: u64,
     frames_received: u64,
     recv_buffer_bytes: usize,
@@ -236,23 +371,18 @@ struct Throughput {
 /// (c): robot 1 writes `updates` values over 1,000 keys in batches; robot 2 counts what it
 /// applies. The writer keeps at most a window of updates ahead of the reader (as a real
 /// producer paced by its control loop would be), so the figure is what B sustains.
-fn throughput(g: SocketAddrV4, updates: u64) -> Result<Throughput> {
+/// Frames are counted from the moment both ends hear each other (a frame sent before B
+/// joined the group is no loss).
+fn throughput(g: SocketAddrV4, updates: u64, pin: Pin) -> Result<Throughput> {
     const KEYS: u64 = 1000;
     const WINDOW: u64 = 40_000;
     let applied = Arc::new(AtomicU64::new(0));
     let frames_from_a = Arc::new(AtomicU64::new(0));
     let done = Arc::new(AtomicBool::new(false));
-    let ready = Arc::new(AtomicBool::new(false));
-    let (ap, ff, dn, rd) = (
-        applied.clone(),
-        frames_from_a.clone(),
-        done.clone(),
-        ready.clone(),
-    );
+    let (ap, ff, dn) = (applied.clone(), frames_from_a.clone(), done.clone());
     // A long refresh period: the figure is changed values, not periodic re-sends.
     let refresh = Duration::from_secs(5);
-    let reader = on_driver_thread(2, g, refresh, move |h| async move {
-        rd.store(true, Ordering::Release);
+    let reader = on_driver_thread(2, g, refresh, pin, move |h| async move {
         loop {
             let s = h.stats();
             ap.store(s.replica.updates_applied, Ordering::Release);
@@ -268,17 +398,29 @@ fn throughput(g: SocketAddrV4, updates: u64) -> Result<Throughput> {
             tokio::time::sleep(Duration::from_micros(500)).await;
         }
     });
-    let writer = on_driver_thread(1, g, refresh, move |h| async move {
-        while !ready.load(Ordering::Acquire) {
-            tokio::time::sleep(Duration::from_millis(1)).await;
+    let writer = on_driver_thread(1, g, refresh, pin, move |h| async move {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while frames_from_a.load(Ordering::Acquire) == 0 {
+            if Instant::now() > deadline {
+                bail!("throughput: robot 2 never heard robot 1");
+            }
+            h.set("*.var.bench.hello", 1)?;
+            tokio::time::sleep(Duration::from_millis(2)).await;
         }
+        // Nothing is sent now: let B's counters settle, then take the baselines.
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let (frames_base, received_base) = (
+            h.stats().replica.frames_out,
+            frames_from_a.load(Ordering::Acquire),
+        );
         let keys: Vec<String> = (0..KEYS).map(|k| format!("*.var.bench.k{k}")).collect();
         let base = applied.load(Ordering::Acquire);
         let t0 = Instant::now();
         let mut sent = 0u64;
         while sent < updates {
+            // Wait without spinning: a spinning writer would take CPU from the reader.
             while sent - (applied.load(Ordering::Acquire) - base).min(sent) > WINDOW {
-                tokio::task::yield_now().await;
+                tokio::time::sleep(Duration::from_micros(500)).await;
             }
             h.batch(|b| {
                 for key in &keys {
@@ -298,21 +440,23 @@ fn throughput(g: SocketAddrV4, updates: u64) -> Result<Throughput> {
         let elapsed = t0.elapsed().as_secs_f64();
         let got = applied.load(Ordering::Acquire) - base;
         tokio::time::sleep(Duration::from_millis(50)).await;
-        let frames_sent = h.stats().replica.frames_out;
-        Ok((got as f64 / elapsed, frames_sent))
+        let frames_sent = h.stats().replica.frames_out - frames_base;
+        let frames_received = frames_from_a.load(Ordering::Acquire) - received_base;
+        Ok(Throughput {
+            updates_per_s: got as f64 / elapsed,
+            updates_sent: sent,
+            updates_applied: got,
+            frames_sent,
+            frames_received,
+            recv_buffer_bytes: 0,
+        })
     });
-    let (updates_per_s, frames_sent) = writer.join().expect("writer thread")?;
-    std::thread::sleep(Duration::from_millis(20));
-    let frames_received = frames_from_a.load(Ordering::Acquire);
+    let tp = writer.join().expect("writer thread");
     done.store(true, Ordering::Release);
     let recv_buffer_bytes = reader.join().expect("reader thread")?;
-    let loss = 1.0 - (frames_received as f64 / frames_sent.max(1) as f64);
     Ok(Throughput {
-        updates_per_s,
-        loss: loss.max(0.0),
-        frames_sent,
-        frames_received,
         recv_buffer_bytes,
+        ..tp?
     })
 }
 
@@ -385,23 +529,47 @@ pub fn run(args: BenchArgs) -> Result<()> {
             eprintln!("{s}");
         }
     };
-    say("raw multicast ping-pong...");
-    let (raw_p50, raw_p99) = summarize(raw_ping_pong(group(args.port, 1), args.rounds)?);
-    say("huddle ping-pong through two replicas...");
-    let (h_p50, h_p99) = summarize(huddle_ping_pong(group(args.port + 1, 2), args.rounds)?);
+    // The three ping-pongs in interleaved blocks, so that load from other processes on
+    // this shared machine falls on all three alike.
+    const BLOCKS: usize = 5;
+    let per_block = args.rounds.div_ceil(BLOCKS);
+    let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());
+    for block in 0..BLOCKS {
+        say(&format!(
+            "ping-pong block {} of {BLOCKS}: raw, tokio, huddle...",
+            block + 1
+        ));
+        raw.extend(raw_ping_pong(group(args.port, 1), per_block, args.pin)?);
+        bare.extend(tokio_ping_pong(group(args.port, 1), per_block, args.pin)?);
+        hud.extend(huddle_ping_pong(
+            group(args.port + 1, 2),
+            per_block,
+            args.pin,
+        )?);
+    }
+    let (raw_p50, raw_p99) = summarize(raw);
+    let (tokio_p50, tokio_p99) = summarize(bare);
+    let (h_p50, h_p99) = summarize(hud);
     say("sustained updates A -> B...");
-    let tp = throughput(group(args.port + 2, 3), args.updates)?;
+    let tp = throughput(group(args.port + 2, 3), args.updates, args.pin)?;
     say("daemon resident memory with 10,000 keys...");
     let rss = rss_with_10k_keys(group(args.port + 3, 4), args.port + 4)?;
     let report = CommsReport {
         raw_p50_us: raw_p50,
         raw_p99_us: raw_p99,
+        tokio_p50_us: tokio_p50,
+        tokio_p99_us: tokio_p99,
         huddle_p50_us: h_p50,
         huddle_p99_us: h_p99,
         p50_ratio: h_p50 / raw_p50,
         p99_ratio: h_p99 / raw_p99,
+        tokio_p50_ratio: tokio_p50 / raw_p50,
+        pin: args.pin,
         updates_per_s: tp.updates_per_s,
-        update_loss: tp.loss,
+        updates_sent: tp.updates_sent,
+        updates_applied: tp.updates_applied,
+        update_loss: 1.0 - tp.updates_applied as f64 / tp.updates_sent.max(1) as f64,
+        frame_loss: (1.0 - tp.frames_received as f64 / tp.frames_sent.max(1) as f64).max(0.0),
         frames_sent: tp.frames_sent,
         frames_received: tp.frames_received,
         rss_mb_10k_keys: rss,
@@ -417,12 +585,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
     } else {
         let r = &report;
         println!(
-            "loopback multicast ping-pong ({} round trips, {} build)",
-            args.rounds, r.build
+            "loopback multicast ping-pong ({} round trips each, pinning {:?}, {} build)",
+            args.rounds, r.pin, r.build
         );
         println!(
             "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",
             r.raw_p50_us, r.raw_p99_us
+        );
+        println!(
+            "  bare tokio        p50 {:7.1} us   p99 {:7.1} us   (p50 {:.2}x raw: the cost of tokio)",
+            r.tokio_p50_us, r.tokio_p99_us, r.tokio_p50_ratio
         );
         println!(
             "  huddle replicas   p50 {:7.1} us   p99 {:7.1} us",
@@ -433,9 +605,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
             r.p50_ratio, r.p99_ratio
         );
         println!(
-            "sustained A -> B    {:.0} updates/s, frame loss {:.4}% ({} of {} frames)   (target >= 500000, no loss)",
+            "sustained A -> B    {:.0} updates/s, {} of {} updates applied, frame loss {:.4}% ({} of {} frames)   (target >= 500000, no loss)",
             r.updates_per_s,
-            r.update_loss * 100.0,
+            r.updates_applied,
+            r.updates_sent,
+            r.frame_loss * 100.0,
             r.frames_sent - r.frames_received.min(r.frames_sent),
             r.frames_sent
         );

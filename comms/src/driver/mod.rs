@@ -212,6 +212,9 @@ pub(crate) struct Inner {
     held: BinaryHeap<Held>,
     held_order: u64,
     copies: Vec<Instant>,
+    /// Notices handed to subscribers and relay sessions so far: tells the receive loop
+    /// that a task is now waiting to run.
+    handed_up: u64,
 }
 
 impl Inner {
@@ -319,7 +322,7 @@ impl Inner {
                         if slot.session.wants_changes() {
                             let before = slot.session.pending_output().len();
                             slot.session.handle_change(now, &key, &self.replica);
-                            wake_if_changed(slot, before);
+                            self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
                     }
                     let entry = self.replica.blackboard().get(&key);
@@ -328,7 +331,8 @@ impl Inner {
                             key: key.clone(),
                             entry: entry.clone(),
                         };
-                        deliver(&mut self.subscribers, |p| p.matches(&key), notice);
+                        self.handed_up +=
+                            deliver(&mut self.subscribers, |p| p.matches(&key), notice);
                     }
                 }
                 Event::TalkDelivered {
@@ -340,7 +344,7 @@ impl Inner {
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
                         slot.session.handle_talk(from, &queue, &value);
-                        wake_if_changed(slot, before);
+                        self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
                     let notice = || Notice::Talk {
                         from,
@@ -351,7 +355,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    deliver(&mut self.subscribers, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::TalkGivenUp {
                     queue,
@@ -369,7 +373,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    deliver(&mut self.subscribers, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::PeerJoined { robot, incarnation } => {
                     tracing::info!(
@@ -454,19 +458,24 @@ impl Inner {
     }
 }
 
-fn wake_if_changed(slot: &mut SessionSlot, before: usize) {
+/// Wakes the session's connection if it has something new to write; returns whether.
+fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
     let after = slot.session.pending_output().len();
-    if after != before || slot.session.is_finished() {
+    let wake = after != before || slot.session.is_finished();
+    if wake {
         slot.notify.notify_one();
     }
+    wake
 }
 
 /// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
+/// Returns how many got it.
 fn deliver(
     subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
     matches: impl Fn(&crate::Pattern) -> bool,
     notice: impl Fn() -> Notice,
-) {
+) -> u64 {
+    let mut handed = 0;
     subscribers.retain(|weak| {
         let Some(sub) = weak.upgrade() else {
             return false;
@@ -474,9 +483,11 @@ fn deliver(
         let mut sub = sub.borrow_mut();
         if matches(&sub.pattern) {
             sub.push(notice());
+            handed += 1;
         }
         true
     });
+    handed
 }
 
 /// The driver: owns the socket and the replica; run it with [`Driver::run`].
@@ -527,6 +538,7 @@ impl Driver {
             held: BinaryHeap::new(),
             held_order: 0,
             copies: Vec::new(),
+            handed_up: 0,
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
@@ -594,7 +606,12 @@ impl Driver {
                 () = &mut shutdown => return Ok(()),
                 ready = self.socket.readable() => {
                     ready.map_err(DriverError::Io)?;
-                    self.receive_batch(&mut buf)?;
+                    if self.receive_batch(&mut buf)? {
+                        // A subscriber or relay session has a notice: let it run (and
+                        // answer) before this task reads on, so the read that finds the
+                        // socket empty is not on the critical path of a reply.
+                        tokio::task::yield_now().await;
+                    }
                 }
                 () = &mut sleep => self.inner.borrow_mut().handle_timeout(),
                 ready = self.socket.writable(), if backlog => {
@@ -606,14 +623,21 @@ impl Driver {
         }
     }
 
-    fn receive_batch(&self, buf: &mut [u8]) -> Result<(), DriverError> {
+    /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
+    /// or one of them gave a waiting task something to do; returns whether that happened.
+    fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
+        let handed_before = inner.handed_up;
         for _ in 0..RECV_BATCH {
             match self.socket.try_recv_from(buf) {
                 Ok((n, from)) => {
                     inner.io.datagrams_received += 1;
                     let now = inner.clock.now();
                     inner.replica.handle_datagram(now, from, &buf[..n]);
+                    inner.pump();
+                    if inner.handed_up != handed_before {
+                        return Ok(true);
+                    }
                 }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                 // An ICMP error from an earlier unicast send to a `--peer` that is down
@@ -623,7 +647,7 @@ impl Driver {
             }
         }
         inner.pump();
-        Ok(())
+        Ok(false)
     }
 }
 
