@@ -5,4 +5,5 @@
 
 pub mod field;
 pub mod harness;
+pub mod impair;
 pub mod sim;

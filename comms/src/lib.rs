@@ -39,7 +39,10 @@
 //! and a new incarnation (a restart) is accepted at once while the old one's late frames
 //! are dropped. Every own global value is re-sent each `refresh_period` (default 100 ms),
 //! which repairs losses and is the heartbeat; a robot silent for `departed_after`
-//! (default 300 ms) is reported departed. A 40-byte world model under
+//! (default 300 ms) is reported departed. A robot heard for the first time, again after
+//! departing, or restarted gets an extra full refresh at once (unless one went out in
+//! the last quarter period), so a healed partition or a reboot does not wait for the
+//! schedule. A 40-byte world model under
 //! `*.var.world.local` travels in a 77-byte frame, 93 bytes with a tag.
 //!
 //! `talk` queues (`*.talk.q`) deliver each message to every teammate exactly once and in

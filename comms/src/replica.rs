@@ -238,6 +238,8 @@ pub struct Replica {
     now: Instant,
     seq: u64,
     next_refresh: Instant,
+    /// When the last full refresh (periodic, or for a joining peer) was queued.
+    last_full_refresh: Option<Instant>,
     heartbeat_due: bool,
     dirty: BTreeSet<String>,
     refresh_queue: VecDeque<String>,
@@ -283,6 +285,7 @@ impl Replica {
             now,
             seq: 0,
             next_refresh: now,
+            last_full_refresh: None,
             heartbeat_due: false,
             dirty: BTreeSet::new(),
             refresh_queue: VecDeque::new(),
@@ -526,6 +529,7 @@ impl Replica {
         seq: u64,
     ) -> Result<(), DropReason> {
         let keyed = self.key.is_some();
+        let mut joined = true;
         let peer = match self.peers.get_mut(&sender) {
             None => {
                 self.events.push_back(Event::PeerJoined {
@@ -572,7 +576,8 @@ impl Replica {
                 peer
             }
             Some(peer) => {
-                if !peer.present {
+                joined = !peer.present;
+                if joined {
                     peer.present = true;
                     self.events.push_back(Event::PeerJoined {
                         robot: sender,
@@ -588,7 +593,36 @@ impl Replica {
         peer.last_heard = now;
         peer.frames += 1;
         self.stats.last_heard.insert(sender, now);
+        if joined {
+            self.refresh_for_newcomer(now);
+        }
         Ok(())
+    }
+
+    /// A robot appeared, came back after departing, or restarted: it may have missed
+    /// (or lost) everything we own, so it gets a full refresh and our talk heads now
+    /// instead of up to a refresh period later. The periodic schedule is untouched, so
+    /// this is an extra copy, which on a lossy network is also an extra chance. At most
+    /// one per quarter period: a refresh that recent reaches the newcomer as well when
+    /// several robots come back at once (after a team-wide outage).
+    fn refresh_for_newcomer(&mut self, now: Instant) {
+        let quiet = self.cfg.refresh_period / 4;
+        if self.last_full_refresh.is_none_or(|t| t + quiet <= now) {
+            self.queue_full_refresh(now);
+        }
+    }
+
+    /// Queues every own global value and every own talk head, and a heartbeat.
+    fn queue_full_refresh(&mut self, now: Instant) {
+        let own = Scope::Robot(self.cfg.robot_id);
+        self.refresh_queue = self
+            .board
+            .scope_entries(own)
+            .map(|(p, _)| p.clone())
+            .collect();
+        self.heads_out.extend(self.outboxes.keys().cloned());
+        self.heartbeat_due = true;
+        self.last_full_refresh = Some(now);
     }
 
     fn inbox(&mut self, sender: u8, queue: &str) -> Option<&mut Inbox> {
@@ -667,14 +701,7 @@ impl Replica {
             if self.next_refresh <= now {
                 self.next_refresh = now + self.cfg.refresh_period;
             }
-            let own = Scope::Robot(self.cfg.robot_id);
-            self.refresh_queue = self
-                .board
-                .scope_entries(own)
-                .map(|(p, _)| p.clone())
-                .collect();
-            self.heads_out.extend(self.outboxes.keys().cloned());
-            self.heartbeat_due = true;
+            self.queue_full_refresh(now);
             self.mirror_stats(now);
         }
         let limits = self.cfg.talk.clone();
@@ -1047,6 +1074,42 @@ mod tests {
             robot: 1,
             incarnation: 11
         }));
+    }
+
+    #[test]
+    fn a_robot_that_reappears_gets_a_full_refresh_at_once() {
+        let (mut a, mut b) = (robot(1, 11), robot(2, 22));
+        b.set(t(0), "*.var.y", Value::Int(5)).unwrap();
+        b.handle_timeout(t(0));
+        frames(&mut b);
+        a.handle_timeout(t(0));
+        deliver(t(10), &frames(&mut a), &mut b);
+        assert!(
+            frames(&mut b).is_empty(),
+            "b's refresh of 10 ms ago serves a newcomer heard now: no extra copy"
+        );
+        b.handle_timeout(t(310));
+        assert!(events(&mut b).contains(&Event::PeerDeparted { robot: 1 }));
+        frames(&mut b); // the periodic refresh at 310 ms, lost while a is away
+        a.handle_timeout(t(340));
+        deliver(t(350), &frames(&mut a), &mut b);
+        let extra = frames(&mut b);
+        assert!(
+            !extra.is_empty(),
+            "a reappears at 350 ms: b re-sends what it owns now, not at 410 ms"
+        );
+        let mut c = robot(3, 33);
+        deliver(t(351), &extra, &mut c);
+        assert_eq!(
+            c.get("2.var.y").unwrap().map(|e| e.value.clone()),
+            Some(Value::Int(5)),
+            "the extra copy is a full refresh"
+        );
+        assert_eq!(
+            b.poll_timeout(),
+            Some(t(410)),
+            "the periodic schedule is unchanged"
+        );
     }
 
     #[test]

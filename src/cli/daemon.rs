@@ -9,6 +9,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use comms::driver::{resolve_iface, Driver, DriverConfig};
 use comms::ReplicaConfig;
+use huddle::impair::LinkImpairment;
 
 /// Arguments of `huddle daemon`.
 #[derive(Args, Debug, Clone)]
@@ -45,8 +46,30 @@ pub struct DaemonArgs {
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
-    // `--impair SPEC` (netsim's impairment model on this daemon's socket) belongs here;
-    // it plugs in where comms::driver sends (see `Inner::pump`).
+    /// Impair every outgoing datagram with netsim's link model, to rehearse a bad WLAN:
+    /// a netsim spec such as `loss=20%,delay=50ms,jitter=20ms` or `preset=competition`
+    /// (then refined: `preset=competition,loss=5%`). Outgoing only: with every robot
+    /// impaired, each direction is impaired once.
+    #[arg(long, value_name = "SPEC")]
+    pub impair: Option<String>,
+    /// Seed of the impairment's random draws (default: the robot id, so that robots
+    /// of one team lose different frames and a rerun draws the same fates).
+    #[arg(long, value_name = "N")]
+    pub impair_seed: Option<u64>,
+}
+
+/// The `--impair` model, if asked for, seeded by `--impair-seed` or the robot id.
+pub fn impairment(args: &DaemonArgs, robot_id: u8) -> Result<Option<LinkImpairment>> {
+    let Some(spec) = &args.impair else {
+        if args.impair_seed.is_some() {
+            bail!("--impair-seed needs --impair SPEC");
+        }
+        return Ok(None);
+    };
+    let config: netsim::LinkConfig = spec.parse().with_context(|| format!("--impair {spec:?}"))?;
+    let seed = args.impair_seed.unwrap_or(u64::from(robot_id));
+    let model = LinkImpairment::new(config, seed).with_context(|| format!("--impair {spec:?}"))?;
+    Ok(Some(model))
 }
 
 /// Builds the driver configuration from the arguments: robot id, config files, key.
@@ -91,6 +114,7 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
 /// Runs the daemon until SIGINT or SIGTERM.
 pub fn run(args: DaemonArgs) -> Result<()> {
     let config = driver_config(&args)?;
+    let impair = impairment(&args, config.replica.robot_id)?;
     // One thread for socket, replica, timers and relay clients (DESIGN.md,
     // *Performance notes*).
     let runtime = tokio::runtime::Builder::new_current_thread()
@@ -112,6 +136,13 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         relay.set_nonblocking(true)?;
         let relay = tokio::net::TcpListener::from_std(relay)?;
         let driver = Driver::bind(config)?;
+        if let Some(model) = impair {
+            tracing::warn!(
+                spec = %model.config(),
+                "--impair: outgoing datagrams pass through netsim's link model"
+            );
+            driver.set_impairment(Some(Box::new(model)));
+        }
         let handle = driver.handle();
         tracing::info!(
             robot = handle.robot_id(),

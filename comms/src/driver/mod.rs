@@ -12,6 +12,11 @@
 //! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions and
 //! subscribers) until the replica has nothing more to say.
 //!
+//! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
+//! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
+//! model): lost datagrams are never sent, the others wait in a queue released by the
+//! same timer as the replica's deadlines.
+//!
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
 //! use comms::driver::{Driver, DriverConfig};
@@ -31,10 +36,11 @@
 //! ```
 
 mod handle;
+mod impair;
 mod socket;
 
 use std::cell::RefCell;
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BinaryHeap, VecDeque};
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
@@ -52,15 +58,20 @@ use crate::time::Instant;
 use crate::value::Value;
 
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription};
+pub use impair::Impairment;
 pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
 
 use handle::SubQueue;
+use impair::Held;
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
 const SEND_BACKLOG_FRAMES: usize = 1024;
 /// Datagrams handled per wake-up before the loop looks at timers and wake-ups again.
 const RECV_BATCH: usize = 256;
+/// Copies an [`Impairment`] may hold back at once; beyond this they are dropped (and
+/// counted), so a model with huge delays cannot exhaust memory.
+const HELD_LIMIT: usize = 65_536;
 
 /// Everything the driver needs to start.
 #[derive(Clone, Debug)]
@@ -174,6 +185,10 @@ pub struct IoStats {
     pub send_backlog_drops: u64,
     /// Relay clients cut off for not reading.
     pub relay_cutoffs: u64,
+    /// Datagrams an [`Impairment`] lost (or that found its hold queue full).
+    pub impair_dropped: u64,
+    /// Extra copies an [`Impairment`] made (duplicates).
+    pub impair_duplicated: u64,
 }
 
 /// The state shared by the driver task, its handles and the relay connections.
@@ -192,6 +207,11 @@ pub(crate) struct Inner {
     pub(crate) io: IoStats,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Notify>,
+    /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
+    impairment: Option<Box<dyn Impairment>>,
+    held: BinaryHeap<Held>,
+    held_order: u64,
+    copies: Vec<Instant>,
     /// Notices handed to subscribers and relay sessions so far: tells the receive loop
     /// that a task is now waiting to run.
     handed_up: u64,
@@ -201,17 +221,59 @@ impl Inner {
     /// Drains the replica: frames to the socket, events to sessions and subscribers.
     pub(crate) fn pump(&mut self) {
         while let Some(transmit) = self.replica.poll_transmit() {
-            // `--impair SPEC` (netsim's impairment model on a real socket) will sit here,
-            // between the replica and the socket: delay, drop, duplicate, reorder.
             let payload = transmit.payload;
             let group = self.group;
             for i in 0..self.peers.len() {
                 let peer = self.peers[i];
-                self.send(&payload, peer);
+                self.emit(&payload, peer);
             }
-            self.send(&payload, group);
+            self.emit(&payload, group);
         }
         self.dispatch_events();
+    }
+
+    /// Sends now, or through the impairment: lost, or held for its copies' times.
+    fn emit(&mut self, payload: &[u8], to: SocketAddr) {
+        let Some(model) = self.impairment.as_mut() else {
+            return self.send(payload, to);
+        };
+        let now = self.clock.now();
+        let mut copies = std::mem::take(&mut self.copies);
+        copies.clear();
+        model.judge(now, to, payload.len(), &mut copies);
+        if copies.is_empty() {
+            self.io.impair_dropped += 1;
+        }
+        self.io.impair_duplicated += copies.len().saturating_sub(1) as u64;
+        let earliest = self.held.peek().map(|h| h.at);
+        let shared: Rc<[u8]> = Rc::from(payload);
+        for &at in &copies {
+            if self.held.len() >= HELD_LIMIT {
+                self.io.impair_dropped += 1;
+                continue;
+            }
+            self.held_order += 1;
+            self.held.push(Held {
+                at,
+                order: self.held_order,
+                payload: shared.clone(),
+                to,
+            });
+        }
+        self.copies = copies;
+        if self.held.peek().map(|h| h.at) != earliest {
+            // The driver task may be asleep until a later deadline.
+            self.wake.notify_one();
+        }
+    }
+
+    /// Sends every held copy whose time has come.
+    fn release_held(&mut self) {
+        let now = self.clock.now();
+        while self.held.peek().is_some_and(|h| h.at <= now) {
+            let Some(h) = self.held.pop() else { break };
+            self.send(&h.payload, h.to);
+        }
     }
 
     fn send(&mut self, payload: &[u8], to: SocketAddr) {
@@ -337,7 +399,7 @@ impl Inner {
         }
     }
 
-    /// The earliest deadline of the replica and the relay sessions.
+    /// The earliest deadline of the replica, the relay sessions and held copies.
     fn next_deadline(&self) -> Option<Instant> {
         let sessions = self
             .sessions
@@ -347,10 +409,12 @@ impl Inner {
             .poll_timeout()
             .into_iter()
             .chain(sessions)
+            .chain(self.held.peek().map(|h| h.at))
             .min()
     }
 
     fn handle_timeout(&mut self) {
+        self.release_held();
         let now = self.clock.now();
         self.replica.handle_timeout(now);
         for slot in self.sessions.values_mut() {
@@ -470,6 +534,10 @@ impl Driver {
                 ..IoStats::default()
             },
             wake: wake.clone(),
+            impairment: None,
+            held: BinaryHeap::new(),
+            held_order: 0,
+            copies: Vec::new(),
             handed_up: 0,
         };
         tracing::info!(
@@ -485,6 +553,13 @@ impl Driver {
             socket,
             wake,
         })
+    }
+
+    /// Passes every outgoing datagram through `impairment` from now on (`None`: send
+    /// directly again; copies already held still leave at their times). See
+    /// [`Impairment`] for why outgoing.
+    pub fn set_impairment(&self, impairment: Option<Box<dyn Impairment>>) {
+        self.inner.borrow_mut().impairment = impairment;
     }
 
     /// A handle for reading, writing and subscribing from tasks on this thread.
