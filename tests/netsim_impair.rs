@@ -183,13 +183,22 @@ fn impaired_daemon_traffic_on_loopback_matches_the_spec() {
         measured[1],
         measured[2]
     );
+    // The impairment must never release early, so the lower side is tight. A loaded
+    // machine only ever adds scheduling delay, and adds it to every frame alike, so the
+    // upper side allows for that and the spread (p90 − p10 = 32 ms for the uniform jitter)
+    // checks the shape independently of any constant shift.
     for (&(p, want), got) in expected.iter().zip(&measured) {
         assert!(
-            (got - want).abs() <= 4.0,
-            "p{:.0} delay {got:.1} ms, expected {want} ms ± 4 ms",
+            *got >= want - 2.0 && *got <= want + 15.0,
+            "p{:.0} delay {got:.1} ms, expected {want} ms (−2 ms / +15 ms for scheduling)",
             p * 100.0
         );
     }
+    let spread = measured[2] - measured[0];
+    assert!(
+        (spread - 32.0).abs() <= 4.0,
+        "p90 − p10 = {spread:.1} ms, expected 32 ms ± 4 ms for uniform jitter of ±20 ms"
+    );
 }
 
 #[test]
