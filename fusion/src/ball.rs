@@ -448,6 +448,11 @@ impl CentralizedBall {
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
         self.filter.estimate_at(t_s)
     }
+
+    /// Drops the track (the ball was put elsewhere by hand).
+    pub fn forget(&mut self) {
+        self.filter = BallFilter::new(self.filter.config);
+    }
 }
 
 #[cfg(test)]

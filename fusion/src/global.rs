@@ -31,6 +31,11 @@ pub struct GlobalConfig {
     pub dissent_window_s: f64,
     /// With no accepted observation for this long, a single dissenter may restart the ball.
     pub support_timeout_s: f64,
+    /// The network's mean one-way transit time (s), added to every received message's
+    /// age: a receiver-side age counts from the moment the frame left the sender, so
+    /// without this every teammate's information would be placed `transit_s` too late.
+    /// See the crate docs, *Time*.
+    pub transit_s: f64,
 }
 
 impl Default for GlobalConfig {
@@ -44,6 +49,7 @@ impl Default for GlobalConfig {
             confidence_decay_per_s: 0.5,
             dissent_window_s: 0.5,
             support_timeout_s: 0.5,
+            transit_s: 0.0,
         }
     }
 }
@@ -78,6 +84,8 @@ pub struct GlobalStats {
     pub duplicates: u64,
     /// Times the team ball restarted from a consensus of dissenting robots.
     pub restarts: u64,
+    /// Batches taken from the repeats in a later message (their own message was lost).
+    pub recovered: u64,
 }
 
 /// Where a [`TeamBall`] came from.
@@ -134,6 +142,8 @@ pub struct GlobalModel {
     pending: Vec<FieldObservation>,
     head: Option<BallEstimate>,
     last_support_t_s: f64,
+    /// Ball information from before this time is void (see [`GlobalModel::forget_ball`]).
+    forgotten_before_t_s: f64,
     stats: GlobalStats,
 }
 
@@ -152,6 +162,7 @@ impl GlobalModel {
             pending: Vec::new(),
             head: None,
             last_support_t_s: f64::NEG_INFINITY,
+            forgotten_before_t_s: f64::NEG_INFINITY,
             stats: GlobalStats::default(),
         }
     }
@@ -167,7 +178,8 @@ impl GlobalModel {
     }
 
     /// A teammate's message as received at `now_s`, `age_s` old by the receiver's reckoning
-    /// (its snapshot holds at `now_s − age_s`). Bytes from the network: errors, never panics.
+    /// (its snapshot holds at `now_s − age_s − transit_s`, see [`GlobalConfig::transit_s`]).
+    /// Bytes from the network: errors, never panics.
     pub fn receive(
         &mut self,
         robot: u8,
@@ -175,19 +187,25 @@ impl GlobalModel {
         now_s: f64,
         age_s: f64,
     ) -> Result<Ingest, DecodeError> {
-        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s)?;
+        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s - self.config.transit_s)?;
         Ok(self.ingest(robot, &lwm, now_s))
     }
 
     /// One LWM (`lwm.t_s` on this robot's clock). Use this for the robot's own LWM each
     /// time it publishes, and [`GlobalModel::receive`] for teammates.
     pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
+        // The last message taken from this robot: its repeats of batches after that one
+        // are new here (a message in between was lost).
+        let mut last_seq = None;
         if let Some(rec) = self.robots.get(&robot) {
             // A robot that was silent for a while may have restarted its counter.
             let restarted = lwm.t_s - rec.lwm.t_s > self.config.stale_after_s;
             if !seq_newer(lwm.seq, rec.lwm.seq) && !restarted {
                 self.stats.duplicates += 1;
                 return Ingest::Duplicate;
+            }
+            if !restarted {
+                last_seq = Some(rec.lwm.seq);
             }
         }
         let rec = self.robots.entry(robot).or_insert(RobotRecord {
@@ -199,6 +217,16 @@ impl GlobalModel {
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
 
+        // Oldest first, so that the filter sees them in time order.
+        for k in (0..2).rev() {
+            let seq = lwm.seq.wrapping_sub(k as u16 + 1);
+            if let (Some(obs), Some(last)) = (lwm.earlier[k], last_seq) {
+                if seq_newer(seq, last) {
+                    self.stats.recovered += 1;
+                    self.observe(robot, &obs, lwm, now_s);
+                }
+            }
+        }
         let result = match lwm.observation {
             None => Ingest::NoObservation,
             Some(obs) => self.observe(robot, &obs, lwm, now_s),
@@ -216,6 +244,10 @@ impl GlobalModel {
         now_s: f64,
     ) -> Ingest {
         let model = self.config.ball;
+        if obs.t_s < self.forgotten_before_t_s {
+            self.stats.late += 1;
+            return Ingest::Late;
+        }
         let Some(committed) = self.committed else {
             let start = lwm
                 .ball
@@ -360,6 +392,20 @@ impl GlobalModel {
                 rec.last_rejected_t_s = None;
                 rec.last_accepted_t_s = Some(now_s);
             }
+        }
+    }
+
+    /// Drops the team ball and every robot's ball as last reported, and ignores ball
+    /// information from before `t_s` still on its way: the ball was put somewhere else by
+    /// hand at `t_s` (a referee's kick-off). Teammates' poses are kept.
+    pub fn forget_ball(&mut self, t_s: f64) {
+        self.committed = None;
+        self.head = None;
+        self.pending.clear();
+        self.forgotten_before_t_s = t_s;
+        for rec in self.robots.values_mut() {
+            rec.lwm.ball = None;
+            rec.last_rejected_t_s = None;
         }
     }
 

@@ -82,11 +82,37 @@
 //! when no one has supported the team ball for `support_timeout_s`. When every teammate is
 //! silent, the team ball is the robot's own ([`TeamBallSource::OwnFallback`]).
 //!
+//! # Time
+//! A teammate's message is placed at *reception − receiver-side age − transit*. comms'
+//! receiver-side age counts from the moment the frame left the sender, so it leaves out
+//! the time on the air; on a competition WLAN whose access point holds multicast to the
+//! next 102.4 ms beacon that is ~100 ms on average, enough to place every teammate's
+//! sightings of a ball rolling at 2 m/s 0.2 m behind. [`GlobalConfig::transit_s`] adds the
+//! network's mean one-way delay, the same figure a team configures for its arbitration
+//! (`latency_ms`). Measuring it in-band (an NTP-like echo of a teammate's sequence number
+//! with its hold time) would make it self-calibrating; with a beacon hold the per-frame
+//! delay is uniform over the beacon interval anyway, so what remains after the mean is
+//! removed is zero-mean timing noise (σ ≈ 30 ms) that no echo could remove: the mean is
+//! what matters, and the team knows it.
+//!
+//! # Redundancy
+//! Each message repeats the batches of the two messages before it. A receiver's blackboard
+//! keeps only the newest copy of `*.var.world.local`, and a beacon hold delivers two or
+//! three of a teammate's 25 Hz messages at once, so without the repeats most batches would
+//! be overwritten before the GWM reads them; with them, a batch is lost only when three
+//! messages in a row are. The GWM takes each batch once, by sequence number.
+//!
+//! # Kick-offs
+//! When the ball is put back by hand the robots are told (the game controller):
+//! [`LocalModel::forget_ball`], [`GlobalModel::forget_ball`] drop every ball belief and
+//! every observation from before that moment still on its way.
+//!
 //! # The wire
-//! An LWM is [`LWM_WIRE_LEN`] = 48 bytes (mm, mrad-scale fixed point, σ on a log scale and
-//! correlations as i8), so it fits a 128-byte SPL message with room for a header. Quantising
-//! never shrinks a covariance: see [`LocalWorldModel::to_bytes`]. Decoding takes untrusted
-//! bytes and returns a [`DecodeError`], never panics.
+//! An LWM is [`LWM_WIRE_LEN`] = 70 bytes (mm, mrad-scale fixed point, σ on a log scale and
+//! correlations as i8), so it travels in a 107-byte comms frame, 123 with an HMAC tag:
+//! within a 128-byte SPL message. Quantising never shrinks a covariance: see
+//! [`LocalWorldModel::to_bytes`]. Decoding takes untrusted bytes and returns a
+//! [`DecodeError`], never panics.
 //!
 //! # Example
 //! One robot sees the ball, publishes; a teammate fuses it.
@@ -100,7 +126,7 @@
 //! let seen = BallSighting { local: Vector2::new(0.0, 2.0), cov: Matrix2::identity() * 0.01 };
 //! lwm.ball_sighting(0.05, &seen);
 //! let bytes = lwm.publish(0.1).to_bytes().unwrap();
-//! assert!(bytes.len() <= 48);
+//! assert_eq!(bytes.len(), fusion::LWM_WIRE_LEN); // 70: a 107-byte comms frame
 //!
 //! let mut gwm = GlobalModel::new(2, GlobalConfig::default());
 //! gwm.receive(1, &bytes, 0.15, 0.05).unwrap(); // robot 1's message, 50 ms old on arrival
