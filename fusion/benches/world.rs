@@ -71,6 +71,7 @@ fn messages(rounds: usize) -> Vec<[[u8; fusion::LWM_WIRE_LEN]; 5]> {
                         position: ball + wobble,
                         cov: Matrix2::identity() * 0.01,
                     }),
+                    earlier: [None; 2],
                 };
                 lwm.to_bytes().expect("encodes")
             })

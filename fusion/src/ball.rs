@@ -31,7 +31,7 @@
 use crate::geometry::{robot_to_field, robot_to_field_pose_jacobian, rotation};
 use crate::kalman::{self, UpdateError};
 use crate::pose::PoseEstimate;
-use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
+use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
 /// How the ball moves between sightings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -241,6 +241,11 @@ pub fn field_observation_shared(
 
 /// Predicts `est` to the observation's time and applies it (H = [I₂ 0], Joseph form).
 /// Returns the new estimate and the observation's Mahalanobis².
+///
+/// With H = [I₂ 0] everything is a block of P: P Hᵀ is P's first two columns, S is a 2×2
+/// inverted in closed form, and the Joseph form expands to
+/// P − K (PHᵀ)ᵀ − (PHᵀ) Kᵀ + K S Kᵀ (algebraically identical, no 4×4 (I − KH) products).
+/// This is the GWM's hot path.
 #[allow(non_snake_case)]
 pub fn update(
     model: &BallModel,
@@ -249,16 +254,41 @@ pub fn update(
     gate_chi2: Option<f64>,
 ) -> Result<(BallEstimate, f64), UpdateError> {
     let prior = est.predict_to(model, obs.t_s);
-    let H = Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
     let nu = obs.position - prior.position();
-    let u = kalman::update(&prior.mean, &prior.cov, &nu, &H, &obs.cov, gate_chi2)?;
+    if !nu.iter().chain(obs.cov.iter()).all(|v| v.is_finite()) {
+        return Err(UpdateError::NonFinite);
+    }
+    let S = prior.position_cov() + obs.cov;
+    let det = S[(0, 0)] * S[(1, 1)] - S[(0, 1)] * S[(1, 0)];
+    if !(S[(0, 0)] > 0.0 && det > 0.0) {
+        return Err(UpdateError::Singular);
+    }
+    let S_inv = Matrix2::new(S[(1, 1)], -S[(0, 1)], -S[(1, 0)], S[(0, 0)]) / det;
+    let d2 = nu.dot(&(S_inv * nu));
+    if let Some(threshold) = gate_chi2 {
+        if d2 > threshold {
+            return Err(UpdateError::Gated {
+                mahalanobis_sq: d2,
+                threshold,
+            });
+        }
+    }
+    let PHt = prior.cov.fixed_view::<4, 2>(0, 0).into_owned();
+    let K = PHt * S_inv;
+    let KPH = K * PHt.transpose();
+    let cov = prior.cov - KPH - KPH.transpose() + K * S * K.transpose();
+    let cov = (cov + cov.transpose()) * 0.5;
+    debug_assert!(
+        cov.iter().all(|v| v.is_finite()),
+        "covariance went non-finite"
+    );
     Ok((
         BallEstimate {
             t_s: prior.t_s,
-            mean: u.mean,
-            cov: u.cov,
+            mean: prior.mean + K * nu,
+            cov,
         },
-        u.mahalanobis_sq,
+        d2,
     ))
 }
 
@@ -448,6 +478,11 @@ impl CentralizedBall {
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
         self.filter.estimate_at(t_s)
     }
+
+    /// Drops the track (the ball was put elsewhere by hand).
+    pub fn forget(&mut self) {
+        self.filter = BallFilter::new(self.filter.config);
+    }
 }
 
 #[cfg(test)]
@@ -519,6 +554,38 @@ mod tests {
         assert!(
             (field_observation(1.0, &pose, &s).cov - Matrix2::identity() * 1e-4).norm() < 1e-12
         );
+    }
+
+    #[test]
+    fn the_block_update_is_the_general_joseph_update() {
+        let model = BallModel::default();
+        let est = BallEstimate {
+            t_s: 1.0,
+            mean: Vector4::new(0.5, -0.2, 1.0, 0.3),
+            cov: Matrix4::new(
+                0.04, 0.01, 0.02, 0.0, 0.01, 0.03, 0.0, 0.01, 0.02, 0.0, 0.5, 0.1, 0.0, 0.01, 0.1,
+                0.4,
+            ),
+        };
+        let obs = FieldObservation {
+            t_s: 1.0,
+            position: Vector2::new(0.6, -0.1),
+            cov: Matrix2::new(0.01, 0.002, 0.002, 0.02),
+        };
+        let (fast, d2) = update(&model, &est, &obs, None).unwrap();
+        let h = nalgebra::Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+        let general = kalman::update(
+            &est.mean,
+            &est.cov,
+            &(obs.position - est.position()),
+            &h,
+            &obs.cov,
+            None,
+        )
+        .unwrap();
+        assert!((fast.mean - general.mean).abs().max() < 1e-12);
+        assert!((fast.cov - general.cov).abs().max() < 1e-12);
+        assert!((d2 - general.mahalanobis_sq).abs() < 1e-12);
     }
 
     #[test]

@@ -31,6 +31,14 @@ pub struct GlobalConfig {
     pub dissent_window_s: f64,
     /// With no accepted observation for this long, a single dissenter may restart the ball.
     pub support_timeout_s: f64,
+    /// The network's mean one-way transit time (s), added to every received message's
+    /// age: a receiver-side age counts from the moment the frame left the sender, so
+    /// without this every teammate's information would be placed `transit_s` too late.
+    /// See the crate docs, *Time*.
+    pub transit_s: f64,
+    /// The robot's own observations that must fail the gate in a row (agreeing with each
+    /// other, unopposed) before its own camera restarts the team ball; 0 turns it off.
+    pub own_restart_after: u32,
 }
 
 impl Default for GlobalConfig {
@@ -44,6 +52,8 @@ impl Default for GlobalConfig {
             confidence_decay_per_s: 0.5,
             dissent_window_s: 0.5,
             support_timeout_s: 0.5,
+            transit_s: 0.0,
+            own_restart_after: 2,
         }
     }
 }
@@ -78,6 +88,8 @@ pub struct GlobalStats {
     pub duplicates: u64,
     /// Times the team ball restarted from a consensus of dissenting robots.
     pub restarts: u64,
+    /// Batches taken from the repeats in a later message (their own message was lost).
+    pub recovered: u64,
 }
 
 /// Where a [`TeamBall`] came from.
@@ -131,9 +143,18 @@ pub struct GlobalModel {
     config: GlobalConfig,
     robots: BTreeMap<u8, RobotRecord>,
     committed: Option<BallEstimate>,
+    /// Observations not yet committed, in time order, and the state after each
+    /// (checkpoints, so that a late arrival replays only what follows it).
     pending: Vec<FieldObservation>,
+    after: Vec<BallEstimate>,
     head: Option<BallEstimate>,
     last_support_t_s: f64,
+    /// Ball information from before this time is void (see [`GlobalModel::forget_ball`]).
+    forgotten_before_t_s: f64,
+    /// The latest time of an observation that passed the gate.
+    last_accepted_obs_t_s: f64,
+    /// The robot's own observations rejected in a row (see `own_challenge`).
+    own_rejected: Vec<FieldObservation>,
     stats: GlobalStats,
 }
 
@@ -150,8 +171,12 @@ impl GlobalModel {
             robots: BTreeMap::new(),
             committed: None,
             pending: Vec::new(),
+            after: Vec::new(),
             head: None,
             last_support_t_s: f64::NEG_INFINITY,
+            forgotten_before_t_s: f64::NEG_INFINITY,
+            last_accepted_obs_t_s: f64::NEG_INFINITY,
+            own_rejected: Vec::new(),
             stats: GlobalStats::default(),
         }
     }
@@ -167,7 +192,8 @@ impl GlobalModel {
     }
 
     /// A teammate's message as received at `now_s`, `age_s` old by the receiver's reckoning
-    /// (its snapshot holds at `now_s − age_s`). Bytes from the network: errors, never panics.
+    /// (its snapshot holds at `now_s − age_s − transit_s`, see [`GlobalConfig::transit_s`]).
+    /// Bytes from the network: errors, never panics.
     pub fn receive(
         &mut self,
         robot: u8,
@@ -175,19 +201,25 @@ impl GlobalModel {
         now_s: f64,
         age_s: f64,
     ) -> Result<Ingest, DecodeError> {
-        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s)?;
+        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s - self.config.transit_s)?;
         Ok(self.ingest(robot, &lwm, now_s))
     }
 
     /// One LWM (`lwm.t_s` on this robot's clock). Use this for the robot's own LWM each
     /// time it publishes, and [`GlobalModel::receive`] for teammates.
     pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
+        // The last message taken from this robot: its repeats of batches after that one
+        // are new here (a message in between was lost).
+        let mut last_seq = None;
         if let Some(rec) = self.robots.get(&robot) {
             // A robot that was silent for a while may have restarted its counter.
             let restarted = lwm.t_s - rec.lwm.t_s > self.config.stale_after_s;
             if !seq_newer(lwm.seq, rec.lwm.seq) && !restarted {
                 self.stats.duplicates += 1;
                 return Ingest::Duplicate;
+            }
+            if !restarted {
+                last_seq = Some(rec.lwm.seq);
             }
         }
         let rec = self.robots.entry(robot).or_insert(RobotRecord {
@@ -199,6 +231,16 @@ impl GlobalModel {
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
 
+        // Oldest first, so that the filter sees them in time order.
+        for k in (0..2).rev() {
+            let seq = lwm.seq.wrapping_sub(k as u16 + 1);
+            if let (Some(obs), Some(last)) = (lwm.earlier[k], last_seq) {
+                if seq_newer(seq, last) {
+                    self.stats.recovered += 1;
+                    self.observe(robot, &obs, lwm, now_s);
+                }
+            }
+        }
         let result = match lwm.observation {
             None => Ingest::NoObservation,
             Some(obs) => self.observe(robot, &obs, lwm, now_s),
@@ -216,14 +258,19 @@ impl GlobalModel {
         now_s: f64,
     ) -> Ingest {
         let model = self.config.ball;
+        if obs.t_s < self.forgotten_before_t_s {
+            self.stats.late += 1;
+            return Ingest::Late;
+        }
         let Some(committed) = self.committed else {
             let start = lwm
                 .ball
                 .unwrap_or_else(|| initial_estimate(&model, obs, self.config.initial_velocity_var));
             self.committed = Some(start);
             self.head = Some(start);
-            self.pending.clear();
+            self.clear_pending();
             self.last_support_t_s = now_s;
+            self.last_accepted_obs_t_s = obs.t_s;
             if let Some(rec) = self.robots.get_mut(&robot) {
                 rec.last_accepted_t_s = Some(now_s);
             }
@@ -243,39 +290,50 @@ impl GlobalModel {
         if d2 > self.config.gate_chi2 {
             rec.last_rejected_t_s = Some(now_s);
             self.stats.rejected += 1;
+            if robot == self.own_id {
+                self.own_challenge(obs, now_s);
+            }
             return Ingest::Rejected(d2);
         }
         rec.last_accepted_t_s = Some(now_s);
         self.last_support_t_s = now_s;
+        self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(obs.t_s);
+        if robot == self.own_id {
+            self.own_rejected.clear();
+        }
         self.stats.accepted += 1;
         let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
-        let in_order = at == self.pending.len();
         self.pending.insert(at, *obs);
-        if in_order {
-            // `prior` is the head predicted to this observation's time: update it directly.
-            if let Ok((next, _)) = update(&model, &prior, obs, None) {
-                self.head = Some(next);
+        // `prior` is the state just before this observation: update it, then carry the
+        // observations after it (arrived earlier, made later) forward from there.
+        let next = update(&model, &prior, obs, None).map_or(prior, |(e, _)| e);
+        self.after.insert(at, next);
+        let mut state = next;
+        for k in at + 1..self.pending.len() {
+            if let Ok((e, _)) = update(&model, &state, &self.pending[k], None) {
+                state = e;
             }
-        } else {
-            self.head = self.replay(f64::INFINITY);
+            self.after[k] = state;
         }
+        self.head = Some(state);
         Ingest::Accepted(d2)
     }
 
-    /// committed + pending observations up to `t_s`, then predicted to `t_s`.
+    /// The state after the committed ball and every pending observation up to `t_s`,
+    /// predicted to `t_s` (the checkpoints make this a lookup and one prediction).
     fn replay(&self, t_s: f64) -> Option<BallEstimate> {
-        let model = self.config.ball;
-        let mut state = self.committed?;
-        for obs in self.pending.iter().take_while(|p| p.t_s <= t_s) {
-            if let Ok((next, _)) = update(&model, &state, obs, None) {
-                state = next;
-            }
-        }
-        Some(if t_s.is_finite() {
-            state.predict_to(&model, t_s)
+        let n = self.pending.partition_point(|p| p.t_s <= t_s);
+        let state = if n == 0 {
+            self.committed?
         } else {
-            state
-        })
+            self.after[n - 1]
+        };
+        Some(state.predict_to(&self.config.ball, t_s))
+    }
+
+    fn clear_pending(&mut self) {
+        self.pending.clear();
+        self.after.clear();
     }
 
     fn state_at(&self, t_s: f64) -> Option<BallEstimate> {
@@ -288,20 +346,72 @@ impl GlobalModel {
     }
 
     fn commit(&mut self, before_t_s: f64) {
-        let model = self.config.ball;
         let n = self.pending.partition_point(|p| p.t_s < before_t_s);
-        if n == 0 {
+        if n == 0 || self.committed.is_none() {
             return;
         }
-        let Some(mut state) = self.committed else {
+        self.committed = Some(self.after[n - 1]);
+        self.pending.drain(..n);
+        self.after.drain(..n);
+    }
+
+    /// The robot's own camera disagrees with the team ball: a kick it saw before its
+    /// teammates' reports of it could arrive (they come a network delay later). Its own
+    /// sightings are not a teammate's claim, so it need not wait for a consensus: once
+    /// `own_restart_after` of its own observations in a row fail the gate, agree with each
+    /// other, and nobody's observation made *since the first of them* has supported the old
+    /// ball, the team ball restarts from them. Teammates' reports from before the kick,
+    /// still arriving, do not hold it back (they describe the ball before it moved), and a
+    /// teammate's false ball cannot trigger this at all.
+    fn own_challenge(&mut self, obs: &FieldObservation, now_s: f64) {
+        if self.config.own_restart_after == 0 {
             return;
-        };
-        for obs in self.pending.drain(..n) {
-            if let Ok((next, _)) = update(&model, &state, &obs, None) {
-                state = next;
+        }
+        let model = self.config.ball;
+        if let Some(last) = self.own_rejected.last() {
+            let track = self.own_rejected.iter().skip(1).fold(
+                initial_estimate(
+                    &model,
+                    &self.own_rejected[0],
+                    self.config.initial_velocity_var,
+                ),
+                |est, o| update(&model, &est, o, None).map_or(est, |(e, _)| e),
+            );
+            let agrees = obs.t_s >= last.t_s
+                && track
+                    .position_mahalanobis_sq(&model, obs)
+                    .is_some_and(|d2| d2 <= self.config.gate_chi2);
+            if !agrees {
+                self.own_rejected.clear();
             }
         }
-        self.committed = Some(state);
+        self.own_rejected.push(*obs);
+        if self.own_rejected.len() < self.config.own_restart_after as usize
+            || self.own_rejected[0].t_s <= self.last_accepted_obs_t_s
+        {
+            return;
+        }
+        let mut fresh = initial_estimate(
+            &model,
+            &self.own_rejected[0],
+            self.config.initial_velocity_var,
+        );
+        for o in &self.own_rejected[1..] {
+            if let Ok((next, _)) = update(&model, &fresh, o, None) {
+                fresh = next;
+            }
+        }
+        self.committed = Some(fresh);
+        self.head = Some(fresh);
+        self.clear_pending();
+        self.last_support_t_s = now_s;
+        self.last_accepted_obs_t_s = fresh.t_s;
+        self.own_rejected.clear();
+        self.stats.restarts += 1;
+        if let Some(rec) = self.robots.get_mut(&self.own_id) {
+            rec.last_rejected_t_s = None;
+            rec.last_accepted_t_s = Some(now_s);
+        }
     }
 
     /// One liar cannot move the team ball: its observations fail the gate and it dissents
@@ -352,7 +462,7 @@ impl GlobalModel {
         }
         self.committed = Some(fused);
         self.head = Some(fused);
-        self.pending.clear();
+        self.clear_pending();
         self.last_support_t_s = now_s;
         self.stats.restarts += 1;
         for &j in &best {
@@ -360,6 +470,21 @@ impl GlobalModel {
                 rec.last_rejected_t_s = None;
                 rec.last_accepted_t_s = Some(now_s);
             }
+        }
+    }
+
+    /// Drops the team ball and every robot's ball as last reported, and ignores ball
+    /// information from before `t_s` still on its way: the ball was put somewhere else by
+    /// hand at `t_s` (a referee's kick-off). Teammates' poses are kept.
+    pub fn forget_ball(&mut self, t_s: f64) {
+        self.committed = None;
+        self.head = None;
+        self.clear_pending();
+        self.forgotten_before_t_s = t_s;
+        self.own_rejected.clear();
+        for rec in self.robots.values_mut() {
+            rec.lwm.ball = None;
+            rec.last_rejected_t_s = None;
         }
     }
 

@@ -35,6 +35,10 @@ pub struct LocalWorldModel {
     /// The robot's ball sightings since its previous message, combined into one field-frame
     /// position measurement (information-weighted), valid at `observation.t_s ≤ t_s`.
     pub observation: Option<FieldObservation>,
+    /// The batches of the two previous messages (seq − 1, seq − 2) again, so that a lost
+    /// message loses nothing if one of the next two arrives. A receiver takes each batch
+    /// once, by sequence number.
+    pub earlier: [Option<FieldObservation>; 2],
 }
 
 /// Settings of a [`LocalModel`].
@@ -99,6 +103,8 @@ pub struct LocalModel {
     pose: PoseFilter,
     ball: BallFilter,
     pending: Accumulator,
+    /// The batches of the last two messages, newest first.
+    sent: [Option<FieldObservation>; 2],
     seq: u16,
     last_seen_t_s: Option<f64>,
 }
@@ -110,6 +116,7 @@ impl LocalModel {
             pose: PoseFilter::new(initial_pose, config.pose_noise, config.pose_gate_chi2),
             ball: BallFilter::new(config.ball),
             pending: Accumulator::EMPTY,
+            sent: [None; 2],
             seq: 0,
             last_seen_t_s: None,
         }
@@ -155,6 +162,21 @@ impl LocalModel {
         result
     }
 
+    /// The pose filter itself, e.g. to set Q for an odometry event of a known size or R
+    /// for one sighting before applying it.
+    pub fn pose_filter_mut(&mut self) -> &mut PoseFilter {
+        &mut self.pose
+    }
+
+    /// Drops the ball track and whatever ball information waits to be published: the ball
+    /// was put somewhere else by hand (a referee's kick-off, a ball out of play).
+    pub fn forget_ball(&mut self) {
+        self.ball = BallFilter::new(self.ball.config);
+        self.pending = Accumulator::EMPTY;
+        self.sent = [None; 2];
+        self.last_seen_t_s = None;
+    }
+
     /// The current pose estimate.
     pub fn pose(&self) -> &PoseEstimate {
         &self.pose.estimate
@@ -184,6 +206,7 @@ impl LocalModel {
             slc: pose_confidence(&self.pose.estimate.cov),
             lbc: ball.map_or(0.0, |b| position_confidence(&b.position_cov())),
             observation: None,
+            earlier: [None; 2],
         }
     }
 
@@ -193,6 +216,8 @@ impl LocalModel {
         self.seq = self.seq.wrapping_add(1);
         let mut lwm = self.snapshot(t_s);
         lwm.observation = self.pending.take();
+        lwm.earlier = self.sent;
+        self.sent = [lwm.observation, self.sent[0]];
         lwm
     }
 }

@@ -1,8 +1,9 @@
-//! The LWM on the wire: 48 bytes, fixed point, little-endian.
+//! The LWM on the wire: 70 bytes, fixed point, little-endian.
 //!
 //! ```text
 //! off  size  field
-//!  0    1    version (high nibble, = 1) | flags: bit0 ball present, bit1 observation present
+//!  0    1    version (high nibble, = 2) | flags: bit0 ball present, bit1 observation
+//!            present, bit2 / bit3 the batch of message seq−1 / seq−2 present
 //!  1    2    seq u16
 //!  3    6    pose x, y (i16 mm), θ (i16, π/32768 rad)
 //!  9    3    pose σx, σy, σθ (u8 log scale, see below)
@@ -16,7 +17,14 @@
 //! 41    4    observation σx, σy (u16 log, finer)
 //! 45    1    observation ρ (i8)
 //! 46    2    observation age before the message time (u16 ms)
+//! 48   11    the batch of message seq−1 again, same layout as 37..48
+//! 59   11    the batch of message seq−2 again
 //! ```
+//!
+//! The two earlier batches are repeats, so that a lost message (or one overwritten on a
+//! receiver's blackboard by the next before it was read) loses nothing as long as one of
+//! the next two arrives; the GWM takes each batch once, by sequence number. 70 bytes
+//! travel in a 107-byte comms frame (123 with an HMAC tag): within 128.
 //!
 //! A u8 σ code q means `1e-4 · K8^q` (m, rad or m/s) with K8 = 10^(6/255) (5.6 % steps,
 //! up to 100); a u16 code means `1e-5 · K16^q` with K16 = 10^(7/65535).
@@ -39,10 +47,13 @@ use std::f64::consts::PI;
 use thiserror::Error;
 
 /// Bytes of an encoded LWM.
-pub const LWM_WIRE_LEN: usize = 48;
-const VERSION: u8 = 1;
+pub const LWM_WIRE_LEN: usize = 70;
+const VERSION: u8 = 2;
 const FLAG_BALL: u8 = 1;
 const FLAG_OBSERVATION: u8 = 2;
+const FLAG_EARLIER: [u8; 2] = [4, 8];
+/// Where each observation block starts (the message's own batch, then seq−1, seq−2).
+const OBSERVATION_AT: [usize; 3] = [37, 48, 59];
 const NEVER_MS: u16 = u16::MAX;
 
 /// Why [`crate::LocalWorldModel::to_bytes`] failed.
@@ -73,12 +84,6 @@ pub enum DecodeError {
     Version {
         /// The version received.
         got: u8,
-    },
-    /// Flag bits that no version defines are set.
-    #[error("reserved LWM flag bits set: {flags:#04x}")]
-    Flags {
-        /// The flag nibble received.
-        flags: u8,
     },
     /// A correlation block does not form a valid (positive definite) covariance.
     #[error("{field} covariance is not positive definite")]
@@ -283,8 +288,54 @@ fn get_u16(b: &[u8], at: usize) -> u16 {
     u16::from_le_bytes([b[at], b[at + 1]])
 }
 
+/// One ball observation at `at..at + 11`: x, y (i16 mm), σx, σy (u16 log), ρ (i8), age
+/// before the message time `t_s` (u16 ms).
+fn put_observation(
+    b: &mut [u8],
+    at: usize,
+    obs: &FieldObservation,
+    t_s: f64,
+) -> Result<(), EncodeError> {
+    put_i16(b, at, mm(obs.position.x, "observation x")?);
+    put_i16(b, at + 2, mm(obs.position.y, "observation y")?);
+    let (codes, rho) = encode_cov(&obs.cov, &[MM_VAR; 2], SigmaCode::U16(), "observation")?;
+    put_u16(b, at + 4, codes[0] as u16);
+    put_u16(b, at + 6, codes[1] as u16);
+    b[at + 8] = rho[0] as u8;
+    let age = t_s - obs.t_s;
+    if !age.is_finite() || !(-1e-9..=65.0).contains(&age) {
+        return Err(EncodeError::OutOfRange {
+            field: "observation age",
+        });
+    }
+    // Rounded to the millisecond; the stamp moves by ≤ 0.5 ms.
+    put_u16(b, at + 9, ms(age));
+    Ok(())
+}
+
+fn get_observation(b: &[u8], at: usize, t_s: f64) -> Result<FieldObservation, DecodeError> {
+    let corr = corr_matrix::<2>(&[b[at + 8] as i8]);
+    if corr.cholesky().is_none() {
+        return Err(DecodeError::NotPositiveDefinite {
+            field: "observation",
+        });
+    }
+    Ok(FieldObservation {
+        t_s: t_s - get_u16(b, at + 9) as f64 / 1000.0,
+        position: Vector2::new(
+            get_i16(b, at) as f64 / 1000.0,
+            get_i16(b, at + 2) as f64 / 1000.0,
+        ),
+        cov: decode_cov(
+            &[get_u16(b, at + 4) as u32, get_u16(b, at + 6) as u32],
+            &corr,
+            SigmaCode::U16(),
+        ),
+    })
+}
+
 impl LocalWorldModel {
-    /// The 48-byte wire form. Times are sent relative to `self.t_s`.
+    /// The 70-byte wire form. Times are sent relative to `self.t_s`.
     pub fn to_bytes(&self) -> Result<[u8; LWM_WIRE_LEN], EncodeError> {
         let mut b = [0u8; LWM_WIRE_LEN];
         let mut flags = 0u8;
@@ -338,20 +389,13 @@ impl LocalWorldModel {
 
         if let Some(obs) = &self.observation {
             flags |= FLAG_OBSERVATION;
-            put_i16(&mut b, 37, mm(obs.position.x, "observation x")?);
-            put_i16(&mut b, 39, mm(obs.position.y, "observation y")?);
-            let (codes, rho) = encode_cov(&obs.cov, &[MM_VAR; 2], SigmaCode::U16(), "observation")?;
-            put_u16(&mut b, 41, codes[0] as u16);
-            put_u16(&mut b, 43, codes[1] as u16);
-            b[45] = rho[0] as u8;
-            let age = self.t_s - obs.t_s;
-            if !age.is_finite() || !(-1e-9..=65.0).contains(&age) {
-                return Err(EncodeError::OutOfRange {
-                    field: "observation age",
-                });
+            put_observation(&mut b, OBSERVATION_AT[0], obs, self.t_s)?;
+        }
+        for (k, earlier) in self.earlier.iter().enumerate() {
+            if let Some(obs) = earlier {
+                flags |= FLAG_EARLIER[k];
+                put_observation(&mut b, OBSERVATION_AT[k + 1], obs, self.t_s)?;
             }
-            // Rounded to the millisecond; the stamp moves by ≤ 0.5 ms.
-            put_u16(&mut b, 46, ms(age));
         }
         b[0] = (VERSION << 4) | flags;
         Ok(b)
@@ -370,10 +414,8 @@ impl LocalWorldModel {
         if b[0] >> 4 != VERSION {
             return Err(DecodeError::Version { got: b[0] >> 4 });
         }
+        // Version 2 defines all four flag bits.
         let flags = b[0] & 0x0f;
-        if flags & !(FLAG_BALL | FLAG_OBSERVATION) != 0 {
-            return Err(DecodeError::Flags { flags });
-        }
         let seq = get_u16(b, 1);
         let theta = crate::geometry::wrap_angle(get_i16(b, 7) as f64 * ANGLE_STEP);
         let pose_corr = corr_matrix::<3>(&[b[12] as i8, b[13] as i8, b[14] as i8]);
@@ -412,27 +454,16 @@ impl LocalWorldModel {
         };
         let seen = get_u16(b, 33);
         let observation = if flags & FLAG_OBSERVATION != 0 {
-            let corr = corr_matrix::<2>(&[b[45] as i8]);
-            if corr.cholesky().is_none() {
-                return Err(DecodeError::NotPositiveDefinite {
-                    field: "observation",
-                });
-            }
-            Some(FieldObservation {
-                t_s: t_s - get_u16(b, 46) as f64 / 1000.0,
-                position: Vector2::new(
-                    get_i16(b, 37) as f64 / 1000.0,
-                    get_i16(b, 39) as f64 / 1000.0,
-                ),
-                cov: decode_cov(
-                    &[get_u16(b, 41) as u32, get_u16(b, 43) as u32],
-                    &corr,
-                    SigmaCode::U16(),
-                ),
-            })
+            Some(get_observation(b, OBSERVATION_AT[0], t_s)?)
         } else {
             None
         };
+        let mut earlier = [None; 2];
+        for (k, slot) in earlier.iter_mut().enumerate() {
+            if flags & FLAG_EARLIER[k] != 0 {
+                *slot = Some(get_observation(b, OBSERVATION_AT[k + 1], t_s)?);
+            }
+        }
         Ok(LocalWorldModel {
             t_s,
             seq,
@@ -446,6 +477,7 @@ impl LocalWorldModel {
             slc: b[35] as f64 / 255.0,
             lbc: b[36] as f64 / 255.0,
             observation,
+            earlier,
         })
     }
 }
@@ -491,6 +523,14 @@ mod tests {
                 position: Vector2::new(0.49, 0.2),
                 cov: Matrix2::new(0.002, 0.0005, 0.0005, 0.001),
             }),
+            earlier: [
+                None,
+                Some(FieldObservation {
+                    t_s: 9.87,
+                    position: Vector2::new(0.47, 0.21),
+                    cov: Matrix2::new(0.003, 0.0, 0.0, 0.002),
+                }),
+            ],
         }
     }
 
@@ -498,8 +538,11 @@ mod tests {
     fn fixture_round_trips_within_one_quantum_and_never_shrinks_a_covariance() {
         let lwm = sample();
         let bytes = lwm.to_bytes().unwrap();
-        assert_eq!(bytes.len(), 48);
-        assert_eq!(bytes[0], 0x13, "version 1, ball and observation present");
+        assert_eq!(bytes.len(), 70);
+        assert_eq!(
+            bytes[0], 0x2b,
+            "version 2, ball, observation and the seq−2 batch present"
+        );
         assert_eq!(&bytes[1..3], &[0x01, 0x02], "seq 513 little-endian");
         assert_eq!(&bytes[3..5], &1234i16.to_le_bytes(), "pose x in mm");
         let back = LocalWorldModel::from_bytes(&bytes, 20.0).unwrap();
@@ -526,30 +569,35 @@ mod tests {
             "the observation σ scale is fine"
         );
         assert!((back.ball_seen_age_s - 0.033).abs() < 1e-9);
+        assert_eq!(back.earlier[0], None, "an empty batch stays empty");
+        let (e0, e1) = (lwm.earlier[1].unwrap(), back.earlier[1].unwrap());
+        assert!((e1.t_s - 19.87).abs() < 1e-9, "repeat keeps its age");
+        assert!((e1.position - e0.position).abs().max() < 1e-9);
+        assert!(covers(&e1.cov, &e0.cov));
     }
 
     #[test]
     fn bad_length_version_and_correlations_are_typed_errors() {
         let bytes = sample().to_bytes().unwrap();
         assert_eq!(
-            LocalWorldModel::from_bytes(&bytes[..47], 0.0),
+            LocalWorldModel::from_bytes(&bytes[..69], 0.0),
             Err(DecodeError::Length {
-                expected: 48,
-                got: 47
+                expected: 70,
+                got: 69
             })
         );
         let mut v = bytes;
-        v[0] = 0x23;
+        v[0] = 0x13;
         assert_eq!(
             LocalWorldModel::from_bytes(&v, 0.0),
-            Err(DecodeError::Version { got: 2 })
+            Err(DecodeError::Version { got: 1 })
         );
         let mut v = bytes;
-        v[0] = 0x17;
-        assert!(matches!(
+        v[0] = 0x3b;
+        assert_eq!(
             LocalWorldModel::from_bytes(&v, 0.0),
-            Err(DecodeError::Flags { .. })
-        ));
+            Err(DecodeError::Version { got: 3 })
+        );
         let mut v = bytes;
         v[12..15].copy_from_slice(&[127, 127, 0x81]); // ρxy = 1, ρxθ = 1, ρyθ = −1
         assert_eq!(
@@ -565,20 +613,21 @@ mod tests {
 
     proptest! {
         #[test]
-        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..64)) {
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..96)) {
             let _ = LocalWorldModel::from_bytes(&bytes, 1.0);
         }
 
         #[test]
-        fn any_48_bytes_decode_to_finite_pd_covariances_or_an_error(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform16(any::<u8>()), flags in 0u8..4) {
-            let mut all = [0u8; 48];
-            bytes[0] = 0x10 | flags;
+        fn any_70_bytes_decode_to_finite_pd_covariances_or_an_error(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform32(any::<u8>()), end in proptest::array::uniform8(any::<u8>()), flags in 0u8..16) {
+            let mut all = [0u8; 70];
+            bytes[0] = 0x20 | flags;
             all[..32].copy_from_slice(&bytes);
-            all[32..].copy_from_slice(&tail);
+            all[32..64].copy_from_slice(&tail);
+            all[64..].copy_from_slice(&end[..6]);
             if let Ok(lwm) = LocalWorldModel::from_bytes(&all, 1.0) {
                 prop_assert!(lwm.pose.cov.cholesky().is_some());
                 if let Some(b) = lwm.ball { prop_assert!(b.cov.cholesky().is_some() && b.mean.iter().all(|v| v.is_finite())); }
-                if let Some(o) = lwm.observation { prop_assert!(o.cov.cholesky().is_some()); }
+                for o in lwm.observation.iter().chain(lwm.earlier.iter().flatten()) { prop_assert!(o.cov.cholesky().is_some()); }
             }
         }
 
@@ -598,11 +647,13 @@ mod tests {
                 slc: 0.5,
                 lbc: 0.5,
                 observation: Some(FieldObservation { t_s: 5.0 - age, position: Vector2::new(x, y), cov: spd::<2>(&e[7..], scale) }),
+                earlier: [Some(FieldObservation { t_s: 4.9 - age, position: Vector2::new(y, x), cov: spd::<2>(&e[9..], scale) }), None],
             };
             let back = LocalWorldModel::from_bytes(&lwm.to_bytes().unwrap(), 5.0).unwrap();
             prop_assert!(covers(&back.pose.cov, &lwm.pose.cov));
             prop_assert!(covers(&back.ball.unwrap().cov, &lwm.ball.unwrap().cov));
             prop_assert!(covers(&back.observation.unwrap().cov, &lwm.observation.unwrap().cov));
+            prop_assert!(covers(&back.earlier[0].unwrap().cov, &lwm.earlier[0].unwrap().cov));
             prop_assert!((crate::geometry::wrap_angle(back.pose.mean.z - th)).abs() < 1e-4);
         }
     }

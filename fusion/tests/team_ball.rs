@@ -103,11 +103,11 @@ fn at_30_percent_loss_and_100_ms_the_team_ball_loses_a_little_accuracy_but_stays
     let s = summarise(&runs);
     report("30% loss, 100 ms", &s);
     let (lo, hi) = nees_bounds(4, 20);
-    // A lost message loses that robot's sightings for good (nothing is re-sent, so nothing
-    // can be counted twice): at 30 % loss about a quarter of the teammates' information is
-    // gone, which costs about 1.3× here. Honesty must not suffer.
+    // Each message repeats the two batches before it, so a batch is lost only when three
+    // messages in a row are (2.7% at 30% independent loss): measured 1.28× (1.33× before
+    // the repeats). What remains is mostly the 100 ms delay. Honesty must not suffer.
     assert!(
-        s.team_rmse_m / s.central_rmse_m <= 1.4,
+        s.team_rmse_m / s.central_rmse_m <= 1.3,
         "ratio {:.3}",
         s.team_rmse_m / s.central_rmse_m
     );

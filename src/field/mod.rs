@@ -185,6 +185,19 @@ impl World {
         self.commands[i] = cmd;
     }
 
+    /// Set robot `i`'s motion command as the robot means it: `cmd` is worked out in the
+    /// field frame *as the robot believes it is posed* (`believed`), and the robot's base
+    /// carries it out in its own frame. So a robot that is wrong about its heading drives
+    /// (and turns) wrong by that much, as a real one would.
+    pub fn command_believed(&mut self, i: usize, cmd: MotionCommand, believed: &Pose) {
+        let truth = self.robots[i].pose.theta_rad;
+        let off = wrap_angle(truth - believed.theta_rad);
+        self.commands[i] = MotionCommand {
+            velocity: cmd.velocity.rotate(off),
+            heading_rad: wrap_angle(cmd.heading_rad + off),
+        };
+    }
+
     /// Robot `i` tries to kick the ball toward `direction_rad`. It works only when the
     /// ball touches the robot's front (within ±40° of its heading); returns whether it did.
     pub fn kick(&mut self, i: usize, direction_rad: f64) -> bool {
@@ -245,9 +258,9 @@ impl World {
     /// contacts, detect goals (the ball is put back on the centre spot).
     pub fn step(&mut self, dt_s: f64) -> Option<Goal> {
         let kin = self.cfg.kinematics;
+        let starts: Vec<Pose> = self.robots.iter().map(|b| b.pose).collect();
         for (i, body) in self.robots.iter_mut().enumerate() {
-            let o = body.step(&kin, &self.commands[i], dt_s);
-            self.odometry[i] = self.odometry[i].then(o);
+            body.step(&kin, &self.commands[i], dt_s);
         }
         let okin = self.cfg.opponent_kinematics;
         for k in 0..self.opponents.len() {
@@ -268,6 +281,18 @@ impl World {
         for b in self.robots.iter_mut().chain(self.opponents.iter_mut()) {
             b.pose.at.x = b.pose.at.x.clamp(-half_x, half_x);
             b.pose.at.y = b.pose.at.y.clamp(-half_y, half_y);
+        }
+        // Odometry measures how the body actually moved, pushes and the boards included:
+        // the wheels roll with the body (no slip is modelled), so a pose filter fed it is
+        // told about every motion, with the configured noise on top.
+        for (i, (start, body)) in starts.iter().zip(&self.robots).enumerate() {
+            let local = start.to_local(body.pose.at);
+            let o = Odometry {
+                forward_m: local.x,
+                left_m: local.y,
+                turn_rad: wrap_angle(body.pose.theta_rad - start.theta_rad),
+            };
+            self.odometry[i] = self.odometry[i].then(o);
         }
         let goal = self.goal_crossed(before, self.ball.at);
         if let Some(g) = goal {

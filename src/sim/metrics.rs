@@ -12,11 +12,130 @@
 //! - **handover**: the lone goer changes from one robot to another (through any gap).
 //! - **flap**: a handover back to the robot that lost the ball within the previous
 //!   [`FLAP_WINDOW_S`] (A → B → A).
+//!
+//! And about the world models ([`FusionMetrics`]):
+//! - **team-ball sample**: at every control tick of every live robot (goalkeeper included)
+//!   while the ball is visible (as above), once both that robot's GWM and the centralized
+//!   filter have a ball: that robot's team ball predicted to the tick, the centralized
+//!   estimate at the same instant, and the true ball.
+//! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
+//!   all team-ball samples; **ratio** = team / centralized.
+//! - **team-ball NEES**: the position NEES eᵀ P⁻¹ e (2 degrees of freedom) averaged over all
+//!   team-ball samples. Samples close in time (and different robots' team balls at one
+//!   instant) are strongly correlated, so its χ² 95% bounds are computed for one
+//!   independent sample per [`NEES_INDEPENDENT_EVERY_S`] of ball-visible time:
+//!   N = visible time / that, bounds χ²₂ₙ(0.025, 0.975) / N.
+//! - **pose**: every live robot's pose estimate against its true pose at each of its
+//!   control ticks: position RMSE, heading RMSE, and the average NEES (3 dof).
 
 use serde::Serialize;
 
 /// A handover back to the previous goer within this many seconds is a flap.
 pub const FLAP_WINDOW_S: f64 = 2.0;
+
+/// Team-ball errors this far apart count as independent for the NEES bounds: several times
+/// the time a ball error takes to be forgotten (the team filter's memory is a few
+/// publish periods; a kick resets it).
+pub const NEES_INDEPENDENT_EVERY_S: f64 = 1.0;
+
+/// Sums behind the world-model figures; see the module docs for the definitions.
+#[derive(Debug, Clone, Default)]
+pub struct FusionMetrics {
+    /// Team-ball samples.
+    pub samples: u64,
+    /// Σ squared position error of the team ball, m².
+    pub team_sq_m2: f64,
+    /// Σ squared position error of the centralized filter, m².
+    pub central_sq_m2: f64,
+    /// Σ position NEES of the team ball.
+    pub team_nees: f64,
+    /// Σ position NEES of the centralized filter.
+    pub central_nees: f64,
+    /// Ball-visible seconds (for the NEES bounds).
+    pub visible_s: f64,
+    /// Pose samples.
+    pub pose_samples: u64,
+    /// Σ squared pose position error, m².
+    pub pose_sq_m2: f64,
+    /// Σ squared heading error, rad².
+    pub heading_sq_rad2: f64,
+    /// Σ pose NEES (3 dof).
+    pub pose_nees: f64,
+}
+
+impl FusionMetrics {
+    /// One team-ball sample: squared errors and NEES of the team ball and the centralized
+    /// filter.
+    pub fn ball(&mut self, team_sq_m2: f64, team_nees: f64, central_sq_m2: f64, central_nees: f64) {
+        self.samples += 1;
+        self.team_sq_m2 += team_sq_m2;
+        self.team_nees += team_nees;
+        self.central_sq_m2 += central_sq_m2;
+        self.central_nees += central_nees;
+    }
+
+    /// One pose sample.
+    pub fn pose(&mut self, sq_m2: f64, heading_sq_rad2: f64, nees: f64) {
+        self.pose_samples += 1;
+        self.pose_sq_m2 += sq_m2;
+        self.heading_sq_rad2 += heading_sq_rad2;
+        self.pose_nees += nees;
+    }
+
+    /// Team-ball RMSE, m (NaN without samples).
+    pub fn team_rmse_m(&self) -> f64 {
+        (self.team_sq_m2 / self.samples as f64).sqrt()
+    }
+
+    /// Centralized RMSE, m.
+    pub fn central_rmse_m(&self) -> f64 {
+        (self.central_sq_m2 / self.samples as f64).sqrt()
+    }
+
+    /// Average team-ball NEES.
+    pub fn team_nees(&self) -> f64 {
+        self.team_nees / self.samples as f64
+    }
+
+    /// Average centralized NEES.
+    pub fn central_nees(&self) -> f64 {
+        self.central_nees / self.samples as f64
+    }
+
+    /// Independent samples the NEES bounds are computed for.
+    pub fn nees_independent_samples(&self) -> u64 {
+        (self.visible_s / NEES_INDEPENDENT_EVERY_S).floor().max(1.0) as u64
+    }
+
+    /// χ² 95% bounds of the average 2-dof NEES over [`Self::nees_independent_samples`].
+    pub fn nees_bounds(&self) -> (f64, f64) {
+        chi2_mean_bounds(2, self.nees_independent_samples())
+    }
+
+    /// Pose position RMSE, m.
+    pub fn pose_rmse_m(&self) -> f64 {
+        (self.pose_sq_m2 / self.pose_samples as f64).sqrt()
+    }
+
+    /// Heading RMSE, rad.
+    pub fn heading_rmse_rad(&self) -> f64 {
+        (self.heading_sq_rad2 / self.pose_samples as f64).sqrt()
+    }
+
+    /// Average pose NEES (3 dof).
+    pub fn pose_nees(&self) -> f64 {
+        self.pose_nees / self.pose_samples as f64
+    }
+}
+
+/// Two-sided 95% bounds of the mean of `n` independent χ² variables of `dof` degrees of
+/// freedom: χ²_{dof·n}(0.025, 0.975) / n (Wilson–Hilferty; within 0.1% for dof·n ≥ 10).
+pub fn chi2_mean_bounds(dof: u64, n: u64) -> (f64, f64) {
+    let k = (dof * n.max(1)) as f64;
+    let q = |z: f64| k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3);
+    let n = n.max(1) as f64;
+    (q(-1.959_964) / n, q(1.959_964) / n)
+}
 
 /// Accumulates samples; see the module docs for the definitions.
 #[derive(Debug, Clone, Default)]
@@ -214,6 +333,15 @@ mod tests {
             (m.handovers_per_min() - 40.0).abs() < 1e-9,
             "2 handovers in 3 s"
         );
+    }
+
+    #[test]
+    fn chi2_bounds_match_the_tables() {
+        // χ²₆₀₀(0.025) = 534.02, χ²₆₀₀(0.975) = 669.77 (exact, by the incomplete gamma
+        // function), over 300 samples.
+        let (lo, hi) = chi2_mean_bounds(2, 300);
+        assert!((lo - 534.02 / 300.0).abs() < 0.001, "{lo}");
+        assert!((hi - 669.77 / 300.0).abs() < 0.001, "{hi}");
     }
 
     #[test]

@@ -5,26 +5,107 @@
 //! blackboard writes (returned by [`Robot::tick`]), so the replica and the simulated
 //! network carry it.
 //!
-//! Self-localisation is the true pose for now (`pose_belief`); the sightings and the
-//! odometry a world model needs are kept on the struct for the fusion layer to use.
+//! A robot has no truth. Its pose is its local world model's (`fusion::LocalModel`: a pose
+//! EKF on its noisy odometry and landmark sightings), its ball is its own ball EKF, and the
+//! team ball is its global world model's (`fusion::GlobalModel`), fused from the LWMs its
+//! teammates publish as `*.var.world.local` and its replica hands it with receiver-side
+//! ages. What each is used for:
+//! - eq. (19) and the goer's approach use the robot's **own** ball relative to its own
+//!   pose estimate: both come from the same sightings and the same pose, so a pose error
+//!   cancels and the distance is what the camera measured (as on the seed's robots);
+//! - everything else that needs the ball (formation, goalkeeper, the pass receiver, a goer
+//!   that lost sight of it) uses the **team ball**, which is better than any one robot's;
+//! - motion commands are meant in the robot's own frame: the world turns them into field
+//!   motion with the robot's true heading ([`World::command_believed`]).
 
 use comms::arbitration::{
     self, choose_play, heuristic, mode, Arbiter, ArbitrationParams, BallView, Decision, Mode,
     PassParams, Play, Posted,
 };
 use comms::{Blackboard, Instant, Key, Scope, Value};
+use fusion::nalgebra::{Matrix3, Vector3};
+use fusion::{
+    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, LocalConfig, LocalModel, PoseNoise,
+    TeamBall,
+};
 use serde::Serialize;
 use std::time::Duration;
+
+use super::perception;
 
 use crate::field::behaviour::{self, Position};
 use crate::field::body::{MotionCommand, Odometry};
 use crate::field::camera::Frame;
 use crate::field::geometry::{Pose, Vec2};
-use crate::field::World;
+use crate::field::{FieldConfig, World};
 
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub fn pass_to_key() -> Key {
     Key::parse(arbitration::PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
+}
+
+/// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
+pub const WORLD_LOCAL_KEY: &str = "*.var.world.local";
+
+/// The key robot `id`'s LWM arrives under.
+fn world_local_key() -> Key {
+    Key::parse(WORLD_LOCAL_KEY).expect("a valid key")
+}
+
+/// A robot clock reading in seconds.
+fn seconds(t: Instant) -> f64 {
+    t.as_micros() as f64 * 1e-6
+}
+
+fn world_local_of(id: u8) -> Key {
+    Key::new(Scope::Robot(id), comms::Kind::Var, "world.local").expect("a valid key")
+}
+
+/// How the robots' world models are set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldModelConfig {
+    /// The LWM: pose EKF and ball EKF. Q and R of the pose EKF are replaced per reading
+    /// from the field's noise figures ([`perception`]).
+    pub local: LocalConfig,
+    /// The GWM (its `transit_s` is set from the network by the simulation).
+    pub global: GlobalConfig,
+    /// σ of the start pose a robot is told (it is put on its spot by hand), m.
+    pub start_sigma_m: f64,
+    /// … and of its start heading, rad.
+    pub start_sigma_rad: f64,
+    /// σ per odometry reading of the motion odometry cannot see (pushes), m.
+    pub push_sigma_m: f64,
+}
+
+impl Default for WorldModelConfig {
+    fn default() -> Self {
+        // The field's ball slows by 0.5/s drag plus 0.6 m/s² rolling friction: at the
+        // 0.5–2 m/s it mostly rolls at, an exponential decay of ~1/s fits (0.5/s predicted
+        // stopping balls rolling on, ~0.1 m over a 150 ms network delay). The acceleration
+        // noise covers the rest, pushes and bounces; measured, it keeps the team ball's NEES
+        // inside its χ² bounds.
+        let ball = BallFilterConfig {
+            model: fusion::BallModel::Rolling {
+                friction_per_s: 1.0,
+                accel_noise_m2_per_s3: 1.0,
+            },
+            ..BallFilterConfig::default()
+        };
+        Self {
+            local: LocalConfig {
+                pose_noise: PoseNoise::default(),
+                pose_gate_chi2: None,
+                ball,
+            },
+            global: GlobalConfig {
+                ball: ball.model,
+                ..GlobalConfig::default()
+            },
+            start_sigma_m: 0.05,
+            start_sigma_rad: 0.05,
+            push_sigma_m: 0.005,
+        }
+    }
 }
 
 /// How a robot turns sightings into a belief and a belief into play.
@@ -34,8 +115,6 @@ pub struct BrainConfig {
     pub control_period_s: f64,
     /// A ball not seen for longer than this is forgotten (`f_ball` = 0), seconds.
     pub ball_memory_s: f64,
-    /// Weight of a new ball sighting in the smoothed ball position (1 = no smoothing).
-    pub ball_smoothing: f64,
     /// The opponent goal counts as in view if seen within this long, seconds (one missed
     /// detection must not add |k1| to the cost).
     pub goal_memory_s: f64,
@@ -43,9 +122,16 @@ pub struct BrainConfig {
     pub shoot_range_m: f64,
     /// Time between two kicks of one robot, seconds.
     pub kick_cooldown_s: f64,
+    /// The team ball is used when its global ball confidence (GBC) is at least this
+    /// (0.25: a 1-σ radius of about 0.5 m); below, the robot goes by its own ball or looks
+    /// for it.
+    pub team_ball_min_gbc: f64,
     /// Pass or shot: the constants of the obstruction-free-index.
     #[serde(skip)]
     pub pass: PassParams,
+    /// The world models.
+    #[serde(skip)]
+    pub world_model: WorldModelConfig,
 }
 
 impl Default for BrainConfig {
@@ -53,19 +139,20 @@ impl Default for BrainConfig {
         Self {
             control_period_s: 0.04,
             ball_memory_s: 0.5,
-            ball_smoothing: 0.4,
             goal_memory_s: 0.15,
             shoot_range_m: 3.0,
             kick_cooldown_s: 1.0,
+            team_ball_min_gbc: 0.25,
             pass: PassParams::default(),
+            world_model: WorldModelConfig::default(),
         }
     }
 }
 
-/// A robot's idea of where the ball is.
+/// A robot's idea of where the ball is, from its own sightings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct BallBelief {
-    /// Smoothed position, field frame, metres.
+    /// Its own ball EKF's position now, field frame, metres.
     pub at: Vec2,
     /// When it was last seen, seconds of simulated time.
     pub seen_at_s: f64,
@@ -93,12 +180,22 @@ pub struct Robot {
     pub frame: Frame,
     /// Odometry measured over the latest control period.
     pub odometry: Odometry,
-    /// Where it believes it is (the true pose until a world model is plugged in).
+    /// Where it believes it is (its LWM's pose).
     pub pose_belief: Pose,
-    /// Where it believes the ball is, if it has seen it recently.
+    /// Where it believes the ball is from its own sightings, if it has seen it recently.
     pub ball: Option<BallBelief>,
+    /// Its local world model.
+    pub lwm: LocalModel,
+    /// Its global world model.
+    pub gwm: GlobalModel,
+    /// The team ball at its latest tick.
+    pub team_ball: Option<TeamBall>,
+    /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
+    pub ball_sighting: Option<BallSighting>,
     /// When it last saw the opponent goal, seconds.
     pub goal_seen_at_s: Option<f64>,
+    /// When it last saw the ball, seconds.
+    pub ball_seen_at_s: Option<f64>,
     /// Its latest cost, eq. (19).
     pub h: f64,
     /// The team decision as it sees it.
@@ -114,6 +211,8 @@ pub struct Robot {
     pass_to_posted: i64,
     kick_ready_at_s: f64,
     decided_at_s: f64,
+    /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
+    heard: Vec<Option<(u64, u64)>>,
 }
 
 /// Everything a tick needs from outside the robot.
@@ -131,8 +230,24 @@ pub struct TickInput<'a> {
 }
 
 impl Robot {
-    /// A robot `id` in `position`, deciding with `params`.
-    pub fn new(id: u8, position: Position, params: ArbitrationParams, pose: Pose) -> Self {
+    /// A robot `id` in `position`, deciding with `params`, put at `pose` (which it is told,
+    /// give or take the configured start σ), in a team of `team` robots.
+    pub fn new(
+        id: u8,
+        position: Position,
+        params: ArbitrationParams,
+        pose: Pose,
+        world_model: &WorldModelConfig,
+        team: usize,
+    ) -> Self {
+        let start = perception::to_fusion_pose(
+            &pose,
+            Matrix3::from_diagonal(&Vector3::new(
+                world_model.start_sigma_m.powi(2),
+                world_model.start_sigma_m.powi(2),
+                world_model.start_sigma_rad.powi(2),
+            )),
+        );
         Self {
             id,
             position,
@@ -141,7 +256,12 @@ impl Robot {
             odometry: Odometry::default(),
             pose_belief: pose,
             ball: None,
+            lwm: LocalModel::new(world_model.local, start),
+            gwm: GlobalModel::new(id, world_model.global),
+            team_ball: None,
+            ball_sighting: None,
             goal_seen_at_s: None,
+            ball_seen_at_s: None,
             h: params.no_ball_cost,
             decision: Decision {
                 goer: None,
@@ -154,6 +274,7 @@ impl Robot {
             pass_to_posted: 0,
             kick_ready_at_s: 0.0,
             decided_at_s: 0.0,
+            heard: vec![None; team],
         }
     }
 
@@ -184,8 +305,7 @@ impl Robot {
         let t = input.t_s;
         self.frame = world.look(i);
         self.odometry = world.read_odometry(i);
-        self.pose_belief = world.robots[i].pose;
-        self.update_ball(cfg, t);
+        let lwm_bytes = self.perceive(world.config(), cfg, &input);
         if self.frame.opponent_goal_in_view {
             self.goal_seen_at_s = Some(t);
         }
@@ -224,6 +344,9 @@ impl Robot {
         };
 
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        if let Some(bytes) = lwm_bytes {
+            writes.push((world_local_key(), bytes));
+        }
         let receiver = self.act(world, cfg, &input);
         if receiver != self.pass_to_posted {
             self.pass_to_posted = receiver;
@@ -259,22 +382,80 @@ impl Robot {
         (posted.going != was).then(|| (arbitration::heuristic_key(), Value::from(posted)))
     }
 
-    fn update_ball(&mut self, cfg: &BrainConfig, t: f64) {
-        if let Some(s) = self.frame.ball {
-            let seen = self.pose_belief.to_field(s.local());
-            let at = match self.ball {
-                Some(b) if t - b.seen_at_s <= cfg.ball_memory_s => {
-                    b.at * (1.0 - cfg.ball_smoothing) + seen * cfg.ball_smoothing
-                }
-                _ => seen,
-            };
-            self.ball = Some(BallBelief { at, seen_at_s: t });
-        } else if self
-            .ball
-            .is_some_and(|b| t - b.seen_at_s > cfg.ball_memory_s)
-        {
-            self.ball = None;
+    /// The world models' part of a tick: odometry and landmarks into the pose EKF, the ball
+    /// sighting into the ball EKF, teammates' new LWMs into the GWM, then publish. Returns
+    /// the LWM to write to `*.var.world.local`.
+    fn perceive(
+        &mut self,
+        field: &FieldConfig,
+        cfg: &BrainConfig,
+        input: &TickInput<'_>,
+    ) -> Option<Value> {
+        let wm = &cfg.world_model;
+        let cam = field.camera;
+        let now_s = seconds(input.local_now);
+        let pf = self.lwm.pose_filter_mut();
+        pf.noise.q =
+            perception::odometry_q(&self.odometry, field.odometry_noise_frac, wm.push_sigma_m);
+        pf.odometry(&perception::to_fusion_odometry(&self.odometry));
+        let landmarks = field.landmarks();
+        for (k, s) in &self.frame.landmarks {
+            let (sighting, r) = perception::landmark_sighting(&cam, landmarks[*k], s);
+            pf.noise.r_range_bearing = r;
+            // A degenerate sighting (the robot on the landmark) is skipped.
+            let _ = pf.range_bearing(&sighting);
         }
+        self.pose_belief = perception::from_fusion_pose(self.lwm.pose());
+
+        self.ball_sighting = self.frame.ball.map(|s| perception::ball_sighting(&cam, &s));
+        if let Some(s) = &self.ball_sighting {
+            self.lwm.ball_sighting(now_s, s);
+            self.ball_seen_at_s = Some(input.t_s);
+        }
+        let recent = self
+            .ball_seen_at_s
+            .filter(|&seen| input.t_s - seen <= cfg.ball_memory_s);
+        let own = self.lwm.ball_at(now_s);
+        self.ball = recent.and_then(|seen_at_s| {
+            own.map(|b| BallBelief {
+                at: perception::to_vec2(&b.position()),
+                seen_at_s,
+            })
+        });
+
+        for (j, heard) in self.heard.iter_mut().enumerate() {
+            let id = crate::harness::robot_id(j);
+            if id == self.id {
+                continue;
+            }
+            let Some(e) = input.board.get(&world_local_of(id)) else {
+                continue;
+            };
+            if *heard == Some((e.incarnation, e.version)) {
+                continue;
+            }
+            *heard = Some((e.incarnation, e.version));
+            if let Value::Bytes(bytes) = &e.value {
+                // A malformed message is the sender's bug; the GWM just does not take it.
+                let _ = self
+                    .gwm
+                    .receive(id, bytes, now_s, e.age(input.local_now).as_secs_f64());
+            }
+        }
+        let msg = self.lwm.publish(now_s);
+        self.gwm.ingest(self.id, &msg, now_s);
+        self.team_ball = self
+            .gwm
+            .team_ball(now_s, own.as_ref())
+            .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
+        msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+    }
+
+    /// The team ball if there is a usable one, else the robot's own.
+    fn best_ball(&self) -> Option<Vec2> {
+        self.team_ball
+            .map(|b| perception::to_vec2(&b.estimate.position()))
+            .or(self.ball.map(|b| b.at))
     }
 
     /// Move (and maybe kick) according to the mode; returns the pass receiver to
@@ -284,12 +465,14 @@ impl Robot {
         let field = *world.config();
         let top = field.kinematics.top_speed_mps;
         let pose = self.pose_belief;
-        let ball = self.ball.map(|b| b.at);
+        let ball = self.best_ball();
+        let own_ball = self.ball.map(|b| b.at);
         let my_home = |k: usize| behaviour::flexible_home(&field, input.homes[k], ball);
         let cmd = match (self.mode, self.position) {
             (_, Position::Goalkeeper) => behaviour::keep_goal(&field, &pose, ball, top),
             (Mode::Active, Position::Field(k)) => {
-                let Some(b) = ball else {
+                // Its own ball, relative to its own pose: the geometry the camera measured.
+                let Some(b) = own_ball.or(ball) else {
                     return 0;
                 };
                 let goal = field.opponent_goal();
@@ -328,7 +511,7 @@ impl Robot {
                     Play::Shoot { .. } => (goal, 0),
                 };
                 let action = behaviour::approach_and_push(&field, &pose, b, aim, top);
-                world.command(i, action.motion);
+                world.command_believed(i, action.motion, &pose);
                 let in_range = receiver != 0 || b.distance(goal) <= cfg.shoot_range_m;
                 if action.lined_up
                     && in_range
@@ -354,19 +537,30 @@ impl Robot {
             (_, Position::Field(k)) => behaviour::hold(&pose, my_home(k), ball, top),
         };
         self.play = None;
-        world.command(i, cmd);
+        world.command_believed(i, cmd, &pose);
         0
+    }
+
+    /// The game controller says the ball was put back for a kick-off (`now_s` on the
+    /// robot's clock): every ball belief goes.
+    pub fn forget_ball(&mut self, now_s: f64) {
+        self.lwm.forget_ball();
+        self.gwm.forget_ball(now_s);
+        self.ball = None;
+        self.ball_seen_at_s = None;
+        self.team_ball = None;
     }
 
     /// Switch the robot off: it stops where it is and falls silent.
     pub fn kill(&mut self, world: &mut World) {
         self.alive = false;
-        world.command(
+        world.command_believed(
             usize::from(self.id - 1),
             MotionCommand {
                 velocity: Vec2::default(),
                 heading_rad: self.pose_belief.theta_rad,
             },
+            &self.pose_belief,
         );
     }
 }

@@ -1,0 +1,165 @@
+//! What a simulated robot's senses mean to the `fusion` crate: the two frame conventions,
+//! and the noise each measurement carries (from the same numbers the field simulator draws
+//! its noise with, so the filters are told the truth about their inputs).
+//!
+//! Frames. The field simulator's robot frame has +x forward and +y left, and a heading
+//! θ_sim measured from field +x; `fusion` (the seed's Fig. 6) has +y forward and +x right,
+//! with θ = 0 facing field +y. So θ_fusion = θ_sim − π/2 and a point (f, l) seen by the
+//! camera is (−l, f) to `fusion`. Odometry means the same in both (forward, left, turn).
+
+use std::f64::consts::FRAC_PI_2;
+
+use fusion::nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+use fusion::{BallSighting, PoseEstimate, RangeBearingSighting};
+
+use crate::field::body::Odometry;
+use crate::field::camera::{CameraConfig, Sighting};
+use crate::field::geometry::{wrap_angle, Pose, Vec2};
+
+/// A true (or believed) pose as a `fusion` pose estimate with covariance `cov`.
+pub fn to_fusion_pose(pose: &Pose, cov: Matrix3<f64>) -> PoseEstimate {
+    PoseEstimate {
+        mean: Vector3::new(pose.at.x, pose.at.y, wrap_angle(pose.theta_rad - FRAC_PI_2)),
+        cov,
+    }
+}
+
+/// A `fusion` pose estimate's mean in the simulator's convention.
+pub fn from_fusion_pose(est: &PoseEstimate) -> Pose {
+    Pose {
+        at: Vec2::new(est.mean.x, est.mean.y),
+        theta_rad: wrap_angle(est.mean.z + FRAC_PI_2),
+    }
+}
+
+/// Odometry as `fusion` takes it.
+pub fn to_fusion_odometry(odo: &Odometry) -> fusion::Odometry {
+    fusion::Odometry {
+        forward_m: odo.forward_m,
+        left_m: odo.left_m,
+        turn_rad: odo.turn_rad,
+    }
+}
+
+/// Q of one odometry reading, `diag(q_right, q_forward, q_θ)`: the simulator draws each
+/// component's noise with σ = k·d (translation, d the distance travelled) and
+/// k·(|Δθ| + 0.2·d) (turn), k = `noise_frac`. The measured motion stands in for the true
+/// one. `pushed_m` adds a floor for what odometry never sees (robots shoving each other).
+pub fn odometry_q(odo: &Odometry, noise_frac: f64, pushed_m: f64) -> Matrix3<f64> {
+    let d = odo.forward_m.hypot(odo.left_m);
+    let s_xy = noise_frac * d;
+    let s_th = noise_frac * (odo.turn_rad.abs() + 0.2 * d);
+    let floor = pushed_m * pushed_m;
+    Matrix3::from_diagonal(&Vector3::new(
+        s_xy * s_xy + floor,
+        s_xy * s_xy + floor,
+        s_th * s_th + 1e-8,
+    ))
+}
+
+/// σ of a range measured at `range_m`.
+fn range_sigma(cam: &CameraConfig, range_m: f64) -> f64 {
+    cam.range_noise_m + cam.range_noise_frac * range_m
+}
+
+/// A landmark at `field` seen as range and bearing, and R of that sighting.
+pub fn landmark_sighting(
+    cam: &CameraConfig,
+    field: Vec2,
+    s: &Sighting,
+) -> (RangeBearingSighting, Matrix2<f64>) {
+    let sr = range_sigma(cam, s.range_m);
+    (
+        RangeBearingSighting {
+            field: Vector2::new(field.x, field.y),
+            range_m: s.range_m,
+            bearing_rad: s.bearing_rad,
+        },
+        Matrix2::new(sr * sr, 0.0, 0.0, cam.bearing_noise_rad.powi(2)),
+    )
+}
+
+/// A ball sighting in `fusion`'s robot coordinates, its range/bearing noise carried into
+/// x/y through the Jacobian of the polar → Cartesian map.
+pub fn ball_sighting(cam: &CameraConfig, s: &Sighting) -> BallSighting {
+    let (r, b) = (s.range_m, s.bearing_rad);
+    let (sin, cos) = b.sin_cos();
+    // Simulator frame: p = r (cos b, sin b); fusion frame: (−p_y, p_x).
+    let local = Vector2::new(-r * sin, r * cos);
+    // ∂(−r sin b, r cos b)/∂(r, b)
+    let j = Matrix2::new(-sin, -r * cos, cos, -r * sin);
+    let sr = range_sigma(cam, r);
+    let d = Matrix2::new(sr * sr, 0.0, 0.0, cam.bearing_noise_rad.powi(2));
+    let cov = j * d * j.transpose();
+    BallSighting {
+        local,
+        cov: (cov + cov.transpose()) * 0.5,
+    }
+}
+
+/// A field point as a simulator vector.
+pub fn to_vec2(v: &Vector2<f64>) -> Vec2 {
+    Vec2::new(v.x, v.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_conventions_put_a_seen_ball_at_the_same_field_point() {
+        let pose = Pose {
+            at: Vec2::new(1.0, -2.0),
+            theta_rad: 0.7,
+        };
+        let s = Sighting {
+            range_m: 2.5,
+            bearing_rad: -0.3,
+        };
+        let sim = pose.to_field(s.local());
+        let est = to_fusion_pose(&pose, Matrix3::identity());
+        let f = fusion::robot_to_field(
+            &est.mean,
+            &ball_sighting(&CameraConfig::default(), &s).local,
+        );
+        assert!((f.x - sim.x).abs() < 1e-12 && (f.y - sim.y).abs() < 1e-12);
+        let back = from_fusion_pose(&est);
+        assert!(back.at.distance(pose.at) < 1e-12 && (back.theta_rad - 0.7).abs() < 1e-12);
+    }
+
+    #[test]
+    fn odometry_moves_the_pose_the_same_way_in_both_conventions() {
+        let pose = Pose {
+            at: Vec2::new(0.5, 0.5),
+            theta_rad: 2.0,
+        };
+        let odo = Odometry {
+            forward_m: 0.3,
+            left_m: -0.1,
+            turn_rad: 0.2,
+        };
+        let sim = pose.to_field(Vec2::new(odo.forward_m, odo.left_m));
+        let est = fusion::pose_predict(
+            &to_fusion_pose(&pose, Matrix3::zeros()),
+            &to_fusion_odometry(&odo),
+            &Matrix3::zeros(),
+        );
+        assert!((est.mean.x - sim.x).abs() < 1e-12 && (est.mean.y - sim.y).abs() < 1e-12);
+        assert!((from_fusion_pose(&est).theta_rad - 2.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_ball_straight_ahead_is_uncertain_along_the_line_of_sight_by_the_range_noise() {
+        let cam = CameraConfig::default();
+        let b = ball_sighting(
+            &cam,
+            &Sighting {
+                range_m: 2.0,
+                bearing_rad: 0.0,
+            },
+        );
+        // Forward is fusion's +y: σ_y = 0.02 + 0.05·2 = 0.12 m; σ_x = 2 m · 0.02 rad.
+        assert!((b.cov[(1, 1)] - 0.12f64.powi(2)).abs() < 1e-12);
+        assert!((b.cov[(0, 0)] - 0.04f64.powi(2)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,74 @@
+//! The world models inside `huddle sim`: five robots on the `competition` network (20%
+//! loss in bursts, 50 ± 20 ms, multicast held to 102.4 ms beacons), 90 s of play, seed 2.
+//! Every robot runs its pose EKF on its own noisy odometry and landmark sightings and its
+//! GWM from its teammates' LWMs over netsim; a centralized filter sees every sighting at
+//! once with no network. Definitions of the figures are in `huddle::sim::metrics`.
+//!
+//! Claims:
+//! - the team ball is honest: its average position NEES lies inside the χ² 95% bounds the
+//!   report states for its number of independent samples;
+//! - the team ball's RMSE stays within 2.1× the centralized filter's. The target
+//!   is 1.25× and is **not** met on this network: the centralized filter has no network
+//!   delay, while a teammate's sighting reaches the GWM ~100 ms (median; p99 ~180 ms) later,
+//!   and the ball is kicked at 4 m/s, bounced off the boards and shoved by robots within
+//!   that window. On a LAN (0.1 ms) the same code is at ~1.2× (see the crate docs of
+//!   `fusion`, *Measured in huddle sim*). The bound here guards what is achieved;
+//! - every robot's pose EKF is honest (average NEES within 1..=4 for 3 dof: it is
+//!   slightly conservative by design, the unmodelled-push floor) and accurate to < 6 cm.
+
+use huddle::sim::{Report, SimConfig, Simulation};
+
+fn competition(seed: u64, duration_s: f64) -> Report {
+    let cfg = SimConfig {
+        duration_s,
+        seed,
+        snapshot_every_s: 0.0,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::new(cfg).expect("defaults are valid");
+    sim.run(|_| {});
+    sim.report(0.0)
+}
+
+#[test]
+fn the_team_ball_on_the_competition_network_is_honest_and_near_the_centralized_filter() {
+    let r = competition(2, 90.0);
+    eprintln!(
+        "team ball RMSE {:.4} m, centralized {:.4} m, ratio {:.3}; NEES {:.3} in [{:.3}, {:.3}] ({} independent samples, {} robot ticks); pose RMSE {:.4} m, NEES {:.3}",
+        r.team_ball_rmse_m,
+        r.centralized_rmse_m,
+        r.rmse_ratio,
+        r.team_ball_nees,
+        r.team_ball_nees_bounds[0],
+        r.team_ball_nees_bounds[1],
+        r.team_ball_nees_samples,
+        r.team_ball_samples,
+        r.pose_rmse_m,
+        r.pose_nees
+    );
+    assert!(
+        r.team_ball_samples > 5_000,
+        "the ball must be in play and fused: {} samples",
+        r.team_ball_samples
+    );
+    let [lo, hi] = r.team_ball_nees_bounds;
+    assert!(
+        (lo..=hi).contains(&r.team_ball_nees),
+        "team-ball NEES {:.3} outside its χ² 95% bounds [{lo:.3}, {hi:.3}] for {} samples",
+        r.team_ball_nees,
+        r.team_ball_nees_samples
+    );
+    assert!(
+        r.rmse_ratio <= 2.1,
+        "team ball RMSE {:.4} m is {:.3}× the centralized {:.4} m",
+        r.team_ball_rmse_m,
+        r.rmse_ratio,
+        r.centralized_rmse_m
+    );
+    assert!(
+        (1.0..=4.0).contains(&r.pose_nees) && r.pose_rmse_m < 0.06,
+        "pose EKF: RMSE {:.4} m, NEES {:.3}",
+        r.pose_rmse_m,
+        r.pose_nees
+    );
+}
