@@ -51,10 +51,10 @@ use crate::replica::{ConfigInvalid, Event, Replica, ReplicaConfig};
 use crate::time::Instant;
 use crate::value::Value;
 
-pub use handle::{Batch, DriverStats, Handle, Notice, Subscription};
+pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
 
-use handle::SubQueue;
+use handle::{run_reactions, SubQueue, WatchSlot};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
@@ -185,6 +185,12 @@ pub(crate) struct Inner {
     peers: Vec<SocketAddr>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
     subscribers: Vec<Weak<RefCell<SubQueue>>>,
+    /// Reactions registered with [`Handle::watch`].
+    pub(crate) watches: Vec<Weak<WatchSlot>>,
+    /// Reactions due, run once the shared state is no longer borrowed.
+    pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
+    /// Reactions are running further up the stack.
+    pub(crate) reacting: bool,
     pub(crate) subscriber_backlog: usize,
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
     next_session: u64,
@@ -269,6 +275,12 @@ impl Inner {
                             key: key.clone(),
                             entry: entry.clone(),
                         };
+                        queue_reactions(
+                            &mut self.watches,
+                            &mut self.reactions,
+                            |p| p.matches(&key),
+                            notice,
+                        );
                         self.handed_up +=
                             deliver(&mut self.subscribers, |p| p.matches(&key), notice);
                     }
@@ -293,6 +305,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::TalkGivenUp {
@@ -311,6 +324,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::PeerJoined { robot, incarnation } => {
@@ -391,6 +405,10 @@ impl Inner {
             self.wake.notify_one();
         }
         self.pump();
+        if !self.reactions.is_empty() {
+            // The caller holds the shared state: the driver task runs them.
+            self.wake.notify_one();
+        }
     }
 }
 
@@ -402,6 +420,24 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
         slot.notify.notify_one();
     }
     wake
+}
+
+/// Queues a notice for every live watch whose pattern matches; forgets dropped ones.
+fn queue_reactions(
+    watches: &mut Vec<Weak<WatchSlot>>,
+    reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
+    matches: impl Fn(&crate::Pattern) -> bool,
+    notice: impl Fn() -> Notice,
+) {
+    watches.retain(|weak| {
+        let Some(watch) = weak.upgrade() else {
+            return false;
+        };
+        if matches(&watch.pattern) {
+            reactions.push_back((weak.clone(), notice()));
+        }
+        true
+    });
 }
 
 /// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
@@ -461,6 +497,9 @@ impl Driver {
             peers: config.peers,
             backlog: VecDeque::new(),
             subscribers: Vec::new(),
+            watches: Vec::new(),
+            reactions: VecDeque::new(),
+            reacting: false,
             subscriber_backlog: config.subscriber_backlog.max(1),
             sessions: BTreeMap::new(),
             next_session: 0,
@@ -531,25 +570,35 @@ impl Driver {
                 () = &mut shutdown => return Ok(()),
                 ready = self.socket.readable() => {
                     ready.map_err(DriverError::Io)?;
+                    let handed_before = self.inner.borrow().handed_up;
                     if self.receive_batch(&mut buf)? {
-                        // A subscriber or relay session has a notice: let it run (and
-                        // answer) before this task reads on, so the read that finds the
-                        // socket empty is not on the critical path of a reply.
-                        tokio::task::yield_now().await;
+                        // Watches react (and answer) right here, in this turn.
+                        run_reactions(&self.inner);
+                        if self.inner.borrow().handed_up != handed_before {
+                            // A subscriber or relay session has a notice: let it run
+                            // (and answer) before this task reads on, so the read that
+                            // finds the socket empty is not on the critical path of a
+                            // reply.
+                            tokio::task::yield_now().await;
+                        }
                     }
                 }
-                () = &mut sleep => self.inner.borrow_mut().handle_timeout(),
+                () = &mut sleep => {
+                    self.inner.borrow_mut().handle_timeout();
+                    run_reactions(&self.inner);
+                }
                 ready = self.socket.writable(), if backlog => {
                     ready.map_err(DriverError::Io)?;
                     self.inner.borrow_mut().flush_backlog();
                 }
-                () = self.wake.notified() => {}
+                () = self.wake.notified() => run_reactions(&self.inner),
             }
         }
     }
 
     /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
-    /// or one of them gave a waiting task something to do; returns whether that happened.
+    /// or one of them gave a waiting task or a watch something to do; returns whether
+    /// that happened.
     fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
         let handed_before = inner.handed_up;
@@ -560,7 +609,7 @@ impl Driver {
                     let now = inner.clock.now();
                     inner.replica.handle_datagram(now, from, &buf[..n]);
                     inner.pump();
-                    if inner.handed_up != handed_before {
+                    if inner.handed_up != handed_before || !inner.reactions.is_empty() {
                         return Ok(true);
                     }
                 }
@@ -572,7 +621,7 @@ impl Driver {
             }
         }
         inner.pump();
-        Ok(false)
+        Ok(inner.handed_up != handed_before || !inner.reactions.is_empty())
     }
 }
 
