@@ -258,16 +258,25 @@ impl Inner {
     }
 
     fn dispatch_events(&mut self) {
-        let now = self.clock.now();
+        // The clock is read only if a relay session needs it (not on every pump).
+        let clock = self.clock;
+        let mut now = None;
         while let Some(event) = self.replica.poll_event() {
             match event {
                 Event::ValueChanged { key } => {
                     for slot in self.sessions.values_mut() {
                         if slot.session.wants_changes() {
                             let before = slot.session.pending_output().len();
+                            let now = *now.get_or_insert_with(|| clock.now());
                             slot.session.handle_change(now, &key, &self.replica);
                             self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
+                    }
+                    // Most changes (this robot's own writes among them) have no
+                    // listener: skip the lookup and the copy for those.
+                    let matches = |p: &crate::Pattern| p.matches(&key);
+                    if !listened(&self.watches, &self.subscribers, matches) {
+                        continue;
                     }
                     let entry = self.replica.blackboard().get(&key);
                     if let Some(entry) = entry {
@@ -275,14 +284,8 @@ impl Inner {
                             key: key.clone(),
                             entry: entry.clone(),
                         };
-                        queue_reactions(
-                            &mut self.watches,
-                            &mut self.reactions,
-                            |p| p.matches(&key),
-                            notice,
-                        );
-                        self.handed_up +=
-                            deliver(&mut self.subscribers, |p| p.matches(&key), notice);
+                        queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
+                        self.handed_up += deliver(&mut self.subscribers, matches, notice);
                     }
                 }
                 Event::TalkDelivered {
@@ -420,6 +423,22 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
         slot.notify.notify_one();
     }
     wake
+}
+
+/// Whether a live watch or subscriber has a pattern that matches.
+fn listened(
+    watches: &[Weak<WatchSlot>],
+    subscribers: &[Weak<RefCell<SubQueue>>],
+    matches: impl Fn(&crate::Pattern) -> bool,
+) -> bool {
+    watches
+        .iter()
+        .filter_map(Weak::upgrade)
+        .any(|w| matches(&w.pattern))
+        || subscribers
+            .iter()
+            .filter_map(Weak::upgrade)
+            .any(|s| matches(&s.borrow().pattern))
 }
 
 /// Queues a notice for every live watch whose pattern matches; forgets dropped ones.
