@@ -33,12 +33,13 @@
 mod handle;
 mod socket;
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::rc::{Rc, Weak};
+use std::task::{Context, Poll, Waker};
 
 use thiserror::Error;
 use tokio::net::UdpSocket;
@@ -197,7 +198,7 @@ pub(crate) struct Inner {
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
-    pub(crate) wake: Rc<Notify>,
+    pub(crate) wake: Rc<Nudge>,
     /// Notices handed to subscribers and relay sessions so far: tells the receive loop
     /// that a task is now waiting to run.
     handed_up: u64,
@@ -481,11 +482,49 @@ fn deliver(
     handed
 }
 
+/// What ended a wait of the run loop.
+enum Cause {
+    Shutdown,
+    Readable,
+    Deadline,
+    Writable,
+    Nudged,
+}
+
+/// Wakes the driver task from its handles (deadlines or the backlog changed, reactions
+/// are due): a flag and one waker, all on one thread.
+#[derive(Default)]
+pub(crate) struct Nudge {
+    pending: Cell<bool>,
+    waker: RefCell<Option<Waker>>,
+}
+
+impl Nudge {
+    /// Makes the driver's next (or current) wait end.
+    pub(crate) fn notify_one(&self) {
+        self.pending.set(true);
+        if let Some(waker) = self.waker.borrow_mut().take() {
+            waker.wake();
+        }
+    }
+
+    fn poll(&self, cx: &mut Context<'_>) -> Poll<()> {
+        if self.pending.replace(false) {
+            return Poll::Ready(());
+        }
+        let mut slot = self.waker.borrow_mut();
+        if !slot.as_ref().is_some_and(|w| w.will_wake(cx.waker())) {
+            *slot = Some(cx.waker().clone());
+        }
+        Poll::Pending
+    }
+}
+
 /// The driver: owns the socket and the replica; run it with [`Driver::run`].
 pub struct Driver {
     inner: Rc<RefCell<Inner>>,
     socket: Rc<UdpSocket>,
-    wake: Rc<Notify>,
+    wake: Rc<Nudge>,
 }
 
 impl Driver {
@@ -507,7 +546,7 @@ impl Driver {
         }
         // Start values are this robot's business, not changes anyone waits for.
         while replica.poll_event().is_some() {}
-        let wake = Rc::new(Notify::new());
+        let wake = Rc::new(Nudge::default());
         let inner = Inner {
             clock,
             replica,
@@ -584,11 +623,31 @@ impl Driver {
             if sleep.deadline() != at {
                 sleep.as_mut().reset(at);
             }
-            tokio::select! {
-                biased;
-                () = &mut shutdown => return Ok(()),
-                ready = self.socket.readable() => {
-                    ready.map_err(DriverError::Io)?;
+            // One hand-written poll instead of `select!`: nothing is built, registered
+            // and dropped again on every pass (the socket keeps one waker per direction,
+            // the nudge one waker), which matters at one pass per datagram.
+            let cause = std::future::poll_fn(|cx| {
+                if shutdown.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(Cause::Shutdown));
+                }
+                if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {
+                    return Poll::Ready(ready.map(|()| Cause::Readable));
+                }
+                if sleep.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(Cause::Deadline));
+                }
+                if backlog {
+                    if let Poll::Ready(ready) = self.socket.poll_send_ready(cx) {
+                        return Poll::Ready(ready.map(|()| Cause::Writable));
+                    }
+                }
+                self.wake.poll(cx).map(|()| Ok(Cause::Nudged))
+            })
+            .await
+            .map_err(DriverError::Io)?;
+            match cause {
+                Cause::Shutdown => return Ok(()),
+                Cause::Readable => {
                     let handed_before = self.inner.borrow().handed_up;
                     if self.receive_batch(&mut buf)? {
                         // Watches react (and answer) right here, in this turn.
@@ -602,15 +661,12 @@ impl Driver {
                         }
                     }
                 }
-                () = &mut sleep => {
+                Cause::Deadline => {
                     self.inner.borrow_mut().handle_timeout();
                     run_reactions(&self.inner);
                 }
-                ready = self.socket.writable(), if backlog => {
-                    ready.map_err(DriverError::Io)?;
-                    self.inner.borrow_mut().flush_backlog();
-                }
-                () = self.wake.notified() => run_reactions(&self.inner),
+                Cause::Writable => self.inner.borrow_mut().flush_backlog(),
+                Cause::Nudged => run_reactions(&self.inner),
             }
         }
     }
