@@ -9,8 +9,14 @@
 //! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
 //!
 //! The run loop is str0m's: wait for a datagram, a deadline or a wake-up; feed it in;
-//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions and
-//! subscribers) until the replica has nothing more to say.
+//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions,
+//! watches and subscribers) until the replica has nothing more to say.
+//!
+//! Robot software reacts to changes in one of two ways. A [`Subscription`] is awaited by
+//! a task: each notice costs a task wake-up before the task can answer. A [`Watch`]
+//! ([`Handle::watch`]) runs a short reaction on the driver's own task, in the turn that
+//! applied the change: an answer set from it is on the wire before the driver reads the
+//! next datagram, which is the lowest latency this driver offers.
 //!
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
