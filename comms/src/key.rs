@@ -179,19 +179,31 @@ pub fn validate_path(path: &str) -> Result<(), KeyError> {
     if path.len() > MAX_PATH_LEN {
         return Err(KeyError::TooLong { len: path.len() });
     }
-    for level in path.split('.') {
-        if level.is_empty() {
-            return Err(KeyError::EmptyLevel(path.to_owned()));
-        }
-        if let Some(ch) = level
-            .chars()
-            .find(|c| !(c.is_ascii_alphanumeric() || *c == '-' || *c == '_'))
-        {
+    // One pass over the bytes (every received update is checked here): a level starts
+    // after each dot and must not be empty; every other byte is ASCII `[A-Za-z0-9_-]`.
+    let mut level_len = 0usize;
+    for (i, &b) in path.as_bytes().iter().enumerate() {
+        if b == b'.' {
+            if level_len == 0 {
+                return Err(KeyError::EmptyLevel(path.to_owned()));
+            }
+            level_len = 0;
+        } else if b.is_ascii_alphanumeric() || b == b'-' || b == b'_' {
+            level_len += 1;
+        } else {
+            // Report the whole character, which may be multi-byte.
+            let ch = path[i..]
+                .chars()
+                .next()
+                .unwrap_or(char::REPLACEMENT_CHARACTER);
             return Err(KeyError::BadChar {
                 ch,
                 key: path.to_owned(),
             });
         }
+    }
+    if level_len == 0 {
+        return Err(KeyError::EmptyLevel(path.to_owned()));
     }
     Ok(())
 }

@@ -2,7 +2,9 @@
 //!
 //! (a) raw UDP multicast ping-pong between two threads (std blocking sockets), and
 //! (b) ping-pong through two replicas over the real driver, each on its own thread and
-//! current-thread runtime (set on A → visible on B → B sets a reply → visible on A):
+//! current-thread runtime (set on A → visible on B → B sets a reply → visible on A; by
+//! default both robots' software reacts with `Handle::watch`, `--reply subscribe` uses
+//! tasks awaiting subscriptions instead):
 //! p50/p99 of each and their ratio; (c) sustained updates/s from A to B with the loss
 //! rate; (d) resident memory of a spawned daemon holding 10,000 keys.
 //! Everything sends on loopback only (IP_MULTICAST_IF 127.0.0.1, TTL 1).
@@ -48,6 +50,11 @@ pub struct CommsArgs {
     /// `same` (both ends on CPU 0) or `split` (pinger on CPU 0, ponger on CPU 1).
     #[arg(long, default_value = "none")]
     pub pin: Pin,
+    /// How both robots' software reacts in the huddle ping-pong: `watch` (reactions run
+    /// inside the driver's turn, `Handle::watch`) or `subscribe` (tasks awaiting
+    /// subscriptions, a task wake-up per notice).
+    #[arg(long, default_value = "watch")]
+    pub reply: Reply,
     /// Updates sent A → B in the throughput run.
     #[arg(long, default_value_t = 2_000_000)]
     pub updates: u64,
@@ -92,6 +99,16 @@ impl Pin {
     }
 }
 
+/// How the robots' software in the ping-pong receives a value and answers.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reply {
+    /// `Handle::watch`: a reaction on the driver's task.
+    Watch,
+    /// `Handle::subscribe`: a task awaiting notices.
+    Subscribe,
+}
+
 /// The figures, as `--json` prints them.
 #[derive(Serialize, Debug)]
 pub struct CommsReport {
@@ -105,6 +122,7 @@ pub struct CommsReport {
     pub p99_ratio: f64,
     pub tokio_p50_ratio: f64,
     pub pin: Pin,
+    pub reply: Reply,
     pub updates_per_s: f64,
     pub updates_sent: u64,
     pub updates_applied: u64,
@@ -313,19 +331,47 @@ async fn next_value(sub: &mut comms::driver::Subscription) -> Result<Value> {
     }
 }
 
-/// (b): ping on robot 1, pong on robot 2, each on its own thread.
-fn huddle_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
+/// (b): ping on robot 1, pong on robot 2, each on its own thread; both robots' software
+/// reacts as `reply` says.
+fn huddle_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin, reply: Reply) -> Result<Vec<f64>> {
     let ready = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
     let (r2, d2) = (ready.clone(), done.clone());
     let refresh = Duration::from_millis(100);
     let ponger = on_driver_thread(2, g, refresh, pin, move |h| async move {
-        let mut pings = h.subscribe("1.var.bench.ping")?;
-        r2.store(true, Ordering::Release);
-        while !d2.load(Ordering::Acquire) {
-            let wait = tokio::time::timeout(Duration::from_millis(200), next_value(&mut pings));
-            if let Ok(v) = wait.await {
-                h.set("*.var.bench.pong", v?)?;
+        match reply {
+            Reply::Watch => {
+                // B's robot software reacts inside the driver's turn that applied the
+                // ping: the reply is sent before the driver reads on.
+                let failed = std::rc::Rc::new(std::cell::RefCell::new(None));
+                let failed_in = failed.clone();
+                let _watch = h.watch("1.var.bench.ping", move |h, notice| {
+                    if let Notice::Changed { entry, .. } = notice {
+                        if let Err(e) = h.set("*.var.bench.pong", entry.value) {
+                            failed_in.borrow_mut().get_or_insert(e);
+                        }
+                    }
+                })?;
+                r2.store(true, Ordering::Release);
+                while !d2.load(Ordering::Acquire) {
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+                let failure = failed.borrow_mut().take();
+                if let Some(e) = failure {
+                    return Err(e.into());
+                }
+            }
+            Reply::Subscribe => {
+                // B's robot software is a task awaiting a subscription.
+                let mut pings = h.subscribe("1.var.bench.ping")?;
+                r2.store(true, Ordering::Release);
+                while !d2.load(Ordering::Acquire) {
+                    let wait =
+                        tokio::time::timeout(Duration::from_millis(200), next_value(&mut pings));
+                    if let Ok(v) = wait.await {
+                        h.set("*.var.bench.pong", v?)?;
+                    }
+                }
             }
         }
         Ok(())
@@ -334,29 +380,95 @@ fn huddle_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>
         while !ready.load(Ordering::Acquire) {
             tokio::time::sleep(Duration::from_millis(1)).await;
         }
-        let mut pongs = h.subscribe("2.var.bench.pong")?;
-        let mut rtts = Vec::with_capacity(rounds);
-        for i in 0..(WARM_UP_ROUNDS + rounds) as i64 {
-            let t0 = Instant::now();
-            h.set("*.var.bench.ping", i)?;
-            let reply = tokio::time::timeout(Duration::from_secs(2), async {
-                loop {
-                    if next_value(&mut pongs).await? == Value::Int(i) {
-                        return Ok::<_, anyhow::Error>(());
-                    }
+        let total = (WARM_UP_ROUNDS + rounds) as i64;
+        let rtts = match reply {
+            Reply::Watch => watch_pings(&h, total).await?,
+            Reply::Subscribe => {
+                let mut pongs = h.subscribe("2.var.bench.pong")?;
+                let mut rtts = Vec::with_capacity(rounds);
+                for i in 0..total {
+                    let t0 = Instant::now();
+                    h.set("*.var.bench.ping", i)?;
+                    let reply = tokio::time::timeout(Duration::from_secs(2), async {
+                        loop {
+                            if next_value(&mut pongs).await? == Value::Int(i) {
+                                return Ok::<_, anyhow::Error>(());
+                            }
+                        }
+                    });
+                    reply
+                        .await
+                        .context("huddle ping-pong: no reply within 2 s")??;
+                    rtts.push(t0.elapsed().as_secs_f64() * 1e6);
                 }
-            });
-            reply
-                .await
-                .context("huddle ping-pong: no reply within 2 s")??;
-            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
-        }
+                rtts
+            }
+        };
         done.store(true, Ordering::Release);
-        Ok(rtts.split_off(WARM_UP_ROUNDS))
+        Ok(rtts[WARM_UP_ROUNDS..].to_vec())
     });
     let rtts = pinger.join().expect("pinger thread")?;
     ponger.join().expect("ponger thread")?;
     Ok(rtts)
+}
+
+/// Robot 1's side of the ping-pong as a reaction: each pong seen in the driver's turn
+/// records the round trip and sets the next ping. Returns every round trip in µs.
+async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
+    struct Rounds {
+        next: i64,
+        t0: Instant,
+        rtts: Vec<f64>,
+        failed: Option<comms::SetError>,
+    }
+    let rounds = std::rc::Rc::new(std::cell::RefCell::new(Rounds {
+        next: 0,
+        t0: Instant::now(),
+        rtts: Vec::with_capacity(total as usize),
+        failed: None,
+    }));
+    let state = rounds.clone();
+    let _watch = h.watch("2.var.bench.pong", move |h, notice| {
+        let Notice::Changed { entry, .. } = notice else {
+            return;
+        };
+        let ping = {
+            let mut r = state.borrow_mut();
+            if entry.value != Value::Int(r.next) {
+                return;
+            }
+            let rtt = r.t0.elapsed().as_secs_f64() * 1e6;
+            r.rtts.push(rtt);
+            r.next += 1;
+            if r.next == total {
+                return;
+            }
+            r.t0 = Instant::now();
+            r.next
+        };
+        if let Err(e) = h.set("*.var.bench.ping", ping) {
+            state.borrow_mut().failed.get_or_insert(e);
+        }
+    })?;
+    rounds.borrow_mut().t0 = Instant::now();
+    h.set("*.var.bench.ping", 0)?;
+    // The reactions do the work; this task only watches for the end or a stall.
+    let mut last = (0, Instant::now());
+    loop {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        let mut r = rounds.borrow_mut();
+        if let Some(e) = r.failed.take() {
+            return Err(e.into());
+        }
+        if r.next == total {
+            return Ok(std::mem::take(&mut r.rtts));
+        }
+        if r.next != last.0 {
+            last = (r.next, Instant::now());
+        } else if last.1.elapsed() > Duration::from_secs(2) {
+            bail!("huddle ping-pong: no reply within 2 s");
+        }
+    }
 }
 
 struct Throughput {
@@ -545,6 +657,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             group(args.port + 1, 2),
             per_block,
             args.pin,
+            args.reply,
         )?);
     }
     let (raw_p50, raw_p99) = summarize(raw);
@@ -565,6 +678,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         p99_ratio: h_p99 / raw_p99,
         tokio_p50_ratio: tokio_p50 / raw_p50,
         pin: args.pin,
+        reply: args.reply,
         updates_per_s: tp.updates_per_s,
         updates_sent: tp.updates_sent,
         updates_applied: tp.updates_applied,
@@ -585,8 +699,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
     } else {
         let r = &report;
         println!(
-            "loopback multicast ping-pong ({} round trips each, pinning {:?}, {} build)",
-            args.rounds, r.pin, r.build
+            "loopback multicast ping-pong ({} round trips each, pinning {:?}, reply by {:?}, {} build)",
+            args.rounds, r.pin, r.reply, r.build
         );
         println!(
             "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",

@@ -3,7 +3,7 @@
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::future::poll_fn;
-use std::rc::Rc;
+use std::rc::{Rc, Weak};
 use std::task::{Poll, Waker};
 use std::time::Duration;
 
@@ -120,6 +120,43 @@ impl Subscription {
     }
 }
 
+/// What a [`Watch`] runs: the robot's reaction to a notice.
+type Reaction = dyn FnMut(&Handle, Notice);
+
+/// A watch's pattern and reaction, shared (weakly) with the driver.
+pub(crate) struct WatchSlot {
+    pub(crate) pattern: Pattern,
+    reaction: RefCell<Box<Reaction>>,
+}
+
+/// A reaction registered with [`Handle::watch`]; dropping it stops the reaction.
+pub struct Watch {
+    _slot: Rc<WatchSlot>,
+}
+
+/// Runs the reactions the driver has queued, unless some are already running further
+/// up the stack (a reaction that writes queues more; the outermost call runs them).
+/// The shared state is not borrowed while a reaction runs, so it may use the handle.
+pub(crate) fn run_reactions(inner: &Rc<RefCell<Inner>>) {
+    {
+        let mut state = inner.borrow_mut();
+        if state.reacting || state.reactions.is_empty() {
+            return;
+        }
+        state.reacting = true;
+    }
+    let handle = Handle::new(inner.clone());
+    loop {
+        let next = inner.borrow_mut().reactions.pop_front();
+        let Some((slot, notice)) = next else { break };
+        // A watch dropped after its notice was queued no longer reacts.
+        if let Some(slot) = Weak::upgrade(&slot) {
+            (slot.reaction.borrow_mut())(&handle, notice);
+        }
+    }
+    inner.borrow_mut().reacting = false;
+}
+
 /// Counters of a running driver.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DriverStats {
@@ -158,10 +195,13 @@ impl Handle {
     /// Sets `local.var.x`, `*.var.x` or `<own id>.var.x`; a global value is published
     /// before this returns.
     pub fn set(&self, key: &str, value: impl Into<Value>) -> Result<(), SetError> {
-        let mut inner = self.inner.borrow_mut();
-        let now = inner.clock.now();
-        inner.replica.set(now, key, value.into())?;
-        inner.pump();
+        {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            inner.replica.set(now, key, value.into())?;
+            inner.pump();
+        }
+        run_reactions(&self.inner);
         Ok(())
     }
 
@@ -169,22 +209,30 @@ impl Handle {
     /// MTU allows, sent when `f` returns (a single [`Handle::set`] sends at once, which
     /// is best for latency and worst for throughput).
     pub fn batch<R>(&self, f: impl FnOnce(&mut Batch<'_>) -> R) -> R {
-        let mut inner = self.inner.borrow_mut();
-        let now = inner.clock.now();
-        let result = f(&mut Batch {
-            inner: &mut inner,
-            now,
-        });
-        inner.pump();
+        let result = {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            let result = f(&mut Batch {
+                inner: &mut inner,
+                now,
+            });
+            inner.pump();
+            result
+        };
+        run_reactions(&self.inner);
         result
     }
 
     /// Posts a message to this robot's `*.talk.<queue>`; returns its sequence number.
     pub fn post(&self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
-        let mut inner = self.inner.borrow_mut();
-        let now = inner.clock.now();
-        let seq = inner.replica.post(now, key, value.into())?;
-        inner.pump();
+        let seq = {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            let seq = inner.replica.post(now, key, value.into())?;
+            inner.pump();
+            seq
+        };
+        run_reactions(&self.inner);
         Ok(seq)
     }
 
@@ -228,6 +276,29 @@ impl Handle {
         Ok(Subscription { queue })
     }
 
+    /// Runs `reaction` on the driver's task, inside the turn that applied the change,
+    /// for every notice [`Handle::subscribe`] would queue for `pattern`. It is the
+    /// lowest-latency way to answer a teammate: no hand-off to another task, so a reply
+    /// set from the reaction is sent before the driver reads the next datagram.
+    ///
+    /// The reaction must be short and must not block: the driver receives nothing
+    /// while it runs. It may use the handle it is given (set, post, get; a write it
+    /// makes may trigger further reactions, which run after it returns). It stops when
+    /// the returned [`Watch`] is dropped.
+    pub fn watch(
+        &self,
+        pattern: &str,
+        reaction: impl FnMut(&Handle, Notice) + 'static,
+    ) -> Result<Watch, PatternError> {
+        let pattern = Pattern::parse(pattern)?;
+        let slot = Rc::new(WatchSlot {
+            pattern,
+            reaction: RefCell::new(Box::new(reaction)),
+        });
+        self.inner.borrow_mut().watches.push(Rc::downgrade(&slot));
+        Ok(Watch { _slot: slot })
+    }
+
     /// The counters and peers.
     pub fn stats(&self) -> DriverStats {
         let inner = self.inner.borrow();
@@ -259,5 +330,107 @@ impl Batch<'_> {
     /// As [`Handle::post`], sent when the batch ends.
     pub fn post(&mut self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
         self.inner.replica.post(self.now, key, value.into())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::RefCell;
+    use std::net::{Ipv4Addr, SocketAddrV4};
+    use std::rc::Rc;
+    use std::time::Duration;
+
+    use super::*;
+    use crate::driver::{Driver, DriverConfig};
+    use crate::replica::ReplicaConfig;
+
+    fn config(id: u8, port: u16) -> DriverConfig {
+        let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
+        cfg.socket.group = SocketAddrV4::new(Ipv4Addr::new(239, 255, 41, 7), port);
+        cfg
+    }
+
+    async fn next_change(sub: &mut Subscription) -> (Key, Value) {
+        let wait = tokio::time::timeout(Duration::from_secs(5), async {
+            loop {
+                if let Some(Notice::Changed { key, entry }) = sub.next().await {
+                    return (key, entry.value);
+                }
+            }
+        });
+        wait.await.expect("a change within 5 s")
+    }
+
+    /// Robot 2 answers robot 1's question from a watch, inside its driver's turn; its
+    /// own write, seen by a second watch, chains a local note; dropping the watch stops
+    /// the answers.
+    #[test]
+    fn a_watch_answers_a_teammate_in_the_drivers_turn() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime");
+        tokio::task::LocalSet::new().block_on(&rt, async {
+            let one = Driver::bind(config(1, 38761)).expect("robot 1 binds");
+            let two = Driver::bind(config(2, 38761)).expect("robot 2 binds");
+            let (h1, h2) = (one.handle(), two.handle());
+            tokio::task::spawn_local(one.run(std::future::pending()));
+            tokio::task::spawn_local(two.run(std::future::pending()));
+
+            let answers = h2
+                .watch("1.var.question", |h, notice| {
+                    if let Notice::Changed { entry, .. } = notice {
+                        let Value::Int(q) = entry.value else { return };
+                        h.set("*.var.answer", q * 2)
+                            .expect("robot 2 sets its own key");
+                    }
+                })
+                .expect("valid pattern");
+            let notes = Rc::new(RefCell::new(Vec::new()));
+            let seen = notes.clone();
+            let _chained = h2
+                .watch("2.var.answer", move |h, notice| {
+                    if let Notice::Changed { entry, .. } = notice {
+                        seen.borrow_mut().push(entry.value.clone());
+                        h.set("local.var.last_answer", entry.value)
+                            .expect("local key");
+                    }
+                })
+                .expect("valid pattern");
+            let mut replies = h1.subscribe("2.var.answer").expect("valid pattern");
+
+            h1.set("*.var.question", 21)
+                .expect("robot 1 sets its own key");
+            let (key, value) = next_change(&mut replies).await;
+            assert_eq!(
+                (key.to_string().as_str(), value),
+                ("2.var.answer", Value::Int(42)),
+                "robot 2's watch answers the question and robot 1 sees it"
+            );
+            assert_eq!(
+                *notes.borrow(),
+                vec![Value::Int(42)],
+                "a write made by a reaction triggers the reactions watching it"
+            );
+            assert_eq!(
+                h2.get("local.var.last_answer")
+                    .expect("valid key")
+                    .map(|e| e.value),
+                Some(Value::Int(42)),
+                "the chained reaction could write through its handle"
+            );
+
+            drop(answers);
+            h1.set("*.var.question", 5)
+                .expect("robot 1 sets its own key");
+            let mut questions = h2.subscribe("1.var.question").expect("valid pattern");
+            let (_, asked) = next_change(&mut questions).await;
+            assert_eq!(asked, Value::Int(5), "robot 2 still hears the question");
+            assert_eq!(
+                h2.get("2.var.answer").expect("valid key").map(|e| e.value),
+                Some(Value::Int(42)),
+                "a dropped watch no longer reacts"
+            );
+        });
     }
 }

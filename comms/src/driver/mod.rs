@@ -9,8 +9,14 @@
 //! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
 //!
 //! The run loop is str0m's: wait for a datagram, a deadline or a wake-up; feed it in;
-//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions and
-//! subscribers) until the replica has nothing more to say.
+//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions,
+//! watches and subscribers) until the replica has nothing more to say.
+//!
+//! Robot software reacts to changes in one of two ways. A [`Subscription`] is awaited by
+//! a task: each notice costs a task wake-up before the task can answer. A [`Watch`]
+//! ([`Handle::watch`]) runs a short reaction on the driver's own task, in the turn that
+//! applied the change: an answer set from it is on the wire before the driver reads the
+//! next datagram, which is the lowest latency this driver offers.
 //!
 //! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
 //! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
@@ -39,12 +45,13 @@ mod handle;
 mod impair;
 mod socket;
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
 use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::rc::{Rc, Weak};
+use std::task::{Context, Poll, Waker};
 
 use thiserror::Error;
 use tokio::net::UdpSocket;
@@ -57,11 +64,11 @@ use crate::replica::{ConfigInvalid, Event, Replica, ReplicaConfig};
 use crate::time::Instant;
 use crate::value::Value;
 
-pub use handle::{Batch, DriverStats, Handle, Notice, Subscription};
+pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use impair::Impairment;
 pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
 
-use handle::SubQueue;
+use handle::{run_reactions, SubQueue, WatchSlot};
 use impair::Held;
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
@@ -200,13 +207,19 @@ pub(crate) struct Inner {
     peers: Vec<SocketAddr>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
     subscribers: Vec<Weak<RefCell<SubQueue>>>,
+    /// Reactions registered with [`Handle::watch`].
+    pub(crate) watches: Vec<Weak<WatchSlot>>,
+    /// Reactions due, run once the shared state is no longer borrowed.
+    pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
+    /// Reactions are running further up the stack.
+    pub(crate) reacting: bool,
     pub(crate) subscriber_backlog: usize,
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
     next_session: u64,
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
-    pub(crate) wake: Rc<Notify>,
+    pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
     impairment: Option<Box<dyn Impairment>>,
     held: BinaryHeap<Held>,
@@ -314,16 +327,25 @@ impl Inner {
     }
 
     fn dispatch_events(&mut self) {
-        let now = self.clock.now();
+        // The clock is read only if a relay session needs it (not on every pump).
+        let clock = self.clock;
+        let mut now = None;
         while let Some(event) = self.replica.poll_event() {
             match event {
                 Event::ValueChanged { key } => {
                     for slot in self.sessions.values_mut() {
                         if slot.session.wants_changes() {
                             let before = slot.session.pending_output().len();
+                            let now = *now.get_or_insert_with(|| clock.now());
                             slot.session.handle_change(now, &key, &self.replica);
                             self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
+                    }
+                    // Most changes (this robot's own writes among them) have no
+                    // listener: skip the lookup and the copy for those.
+                    let matches = |p: &crate::Pattern| p.matches(&key);
+                    if !listened(&self.watches, &self.subscribers, matches) {
+                        continue;
                     }
                     let entry = self.replica.blackboard().get(&key);
                     if let Some(entry) = entry {
@@ -331,8 +353,8 @@ impl Inner {
                             key: key.clone(),
                             entry: entry.clone(),
                         };
-                        self.handed_up +=
-                            deliver(&mut self.subscribers, |p| p.matches(&key), notice);
+                        queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
+                        self.handed_up += deliver(&mut self.subscribers, matches, notice);
                     }
                 }
                 Event::TalkDelivered {
@@ -355,6 +377,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::TalkGivenUp {
@@ -373,6 +396,7 @@ impl Inner {
                     let matches = |p: &crate::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, notice);
                 }
                 Event::PeerJoined { robot, incarnation } => {
@@ -455,6 +479,10 @@ impl Inner {
             self.wake.notify_one();
         }
         self.pump();
+        if !self.reactions.is_empty() {
+            // The caller holds the shared state: the driver task runs them.
+            self.wake.notify_one();
+        }
     }
 }
 
@@ -466,6 +494,40 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
         slot.notify.notify_one();
     }
     wake
+}
+
+/// Whether a live watch or subscriber has a pattern that matches.
+fn listened(
+    watches: &[Weak<WatchSlot>],
+    subscribers: &[Weak<RefCell<SubQueue>>],
+    matches: impl Fn(&crate::Pattern) -> bool,
+) -> bool {
+    watches
+        .iter()
+        .filter_map(Weak::upgrade)
+        .any(|w| matches(&w.pattern))
+        || subscribers
+            .iter()
+            .filter_map(Weak::upgrade)
+            .any(|s| matches(&s.borrow().pattern))
+}
+
+/// Queues a notice for every live watch whose pattern matches; forgets dropped ones.
+fn queue_reactions(
+    watches: &mut Vec<Weak<WatchSlot>>,
+    reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
+    matches: impl Fn(&crate::Pattern) -> bool,
+    notice: impl Fn() -> Notice,
+) {
+    watches.retain(|weak| {
+        let Some(watch) = weak.upgrade() else {
+            return false;
+        };
+        if matches(&watch.pattern) {
+            reactions.push_back((weak.clone(), notice()));
+        }
+        true
+    });
 }
 
 /// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
@@ -490,11 +552,49 @@ fn deliver(
     handed
 }
 
+/// What ended a wait of the run loop.
+enum Cause {
+    Shutdown,
+    Readable,
+    Deadline,
+    Writable,
+    Nudged,
+}
+
+/// Wakes the driver task from its handles (deadlines or the backlog changed, reactions
+/// are due): a flag and one waker, all on one thread.
+#[derive(Default)]
+pub(crate) struct Nudge {
+    pending: Cell<bool>,
+    waker: RefCell<Option<Waker>>,
+}
+
+impl Nudge {
+    /// Makes the driver's next (or current) wait end.
+    pub(crate) fn notify_one(&self) {
+        self.pending.set(true);
+        if let Some(waker) = self.waker.borrow_mut().take() {
+            waker.wake();
+        }
+    }
+
+    fn poll(&self, cx: &mut Context<'_>) -> Poll<()> {
+        if self.pending.replace(false) {
+            return Poll::Ready(());
+        }
+        let mut slot = self.waker.borrow_mut();
+        if !slot.as_ref().is_some_and(|w| w.will_wake(cx.waker())) {
+            *slot = Some(cx.waker().clone());
+        }
+        Poll::Pending
+    }
+}
+
 /// The driver: owns the socket and the replica; run it with [`Driver::run`].
 pub struct Driver {
     inner: Rc<RefCell<Inner>>,
     socket: Rc<UdpSocket>,
-    wake: Rc<Notify>,
+    wake: Rc<Nudge>,
 }
 
 impl Driver {
@@ -516,7 +616,7 @@ impl Driver {
         }
         // Start values are this robot's business, not changes anyone waits for.
         while replica.poll_event().is_some() {}
-        let wake = Rc::new(Notify::new());
+        let wake = Rc::new(Nudge::default());
         let inner = Inner {
             clock,
             replica,
@@ -525,6 +625,9 @@ impl Driver {
             peers: config.peers,
             backlog: VecDeque::new(),
             subscribers: Vec::new(),
+            watches: Vec::new(),
+            reactions: VecDeque::new(),
+            reacting: false,
             subscriber_backlog: config.subscriber_backlog.max(1),
             sessions: BTreeMap::new(),
             next_session: 0,
@@ -601,30 +704,57 @@ impl Driver {
             if sleep.deadline() != at {
                 sleep.as_mut().reset(at);
             }
-            tokio::select! {
-                biased;
-                () = &mut shutdown => return Ok(()),
-                ready = self.socket.readable() => {
-                    ready.map_err(DriverError::Io)?;
-                    if self.receive_batch(&mut buf)? {
-                        // A subscriber or relay session has a notice: let it run (and
-                        // answer) before this task reads on, so the read that finds the
-                        // socket empty is not on the critical path of a reply.
-                        tokio::task::yield_now().await;
+            // One hand-written poll instead of `select!`: nothing is built, registered
+            // and dropped again on every pass (the socket keeps one waker per direction,
+            // the nudge one waker), which matters at one pass per datagram.
+            let cause = std::future::poll_fn(|cx| {
+                if shutdown.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(Cause::Shutdown));
+                }
+                if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {
+                    return Poll::Ready(ready.map(|()| Cause::Readable));
+                }
+                if sleep.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(Cause::Deadline));
+                }
+                if backlog {
+                    if let Poll::Ready(ready) = self.socket.poll_send_ready(cx) {
+                        return Poll::Ready(ready.map(|()| Cause::Writable));
                     }
                 }
-                () = &mut sleep => self.inner.borrow_mut().handle_timeout(),
-                ready = self.socket.writable(), if backlog => {
-                    ready.map_err(DriverError::Io)?;
-                    self.inner.borrow_mut().flush_backlog();
+                self.wake.poll(cx).map(|()| Ok(Cause::Nudged))
+            })
+            .await
+            .map_err(DriverError::Io)?;
+            match cause {
+                Cause::Shutdown => return Ok(()),
+                Cause::Readable => {
+                    let handed_before = self.inner.borrow().handed_up;
+                    if self.receive_batch(&mut buf)? {
+                        // Watches react (and answer) right here, in this turn.
+                        run_reactions(&self.inner);
+                        if self.inner.borrow().handed_up != handed_before {
+                            // A subscriber or relay session has a notice: let it run
+                            // (and answer) before this task reads on, so the read that
+                            // finds the socket empty is not on the critical path of a
+                            // reply.
+                            tokio::task::yield_now().await;
+                        }
+                    }
                 }
-                () = self.wake.notified() => {}
+                Cause::Deadline => {
+                    self.inner.borrow_mut().handle_timeout();
+                    run_reactions(&self.inner);
+                }
+                Cause::Writable => self.inner.borrow_mut().flush_backlog(),
+                Cause::Nudged => run_reactions(&self.inner),
             }
         }
     }
 
     /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
-    /// or one of them gave a waiting task something to do; returns whether that happened.
+    /// or one of them gave a waiting task or a watch something to do; returns whether
+    /// that happened.
     fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
         let handed_before = inner.handed_up;
@@ -635,7 +765,7 @@ impl Driver {
                     let now = inner.clock.now();
                     inner.replica.handle_datagram(now, from, &buf[..n]);
                     inner.pump();
-                    if inner.handed_up != handed_before {
+                    if inner.handed_up != handed_before || !inner.reactions.is_empty() {
                         return Ok(true);
                     }
                 }
@@ -647,7 +777,7 @@ impl Driver {
             }
         }
         inner.pump();
-        Ok(false)
+        Ok(inner.handed_up != handed_before || !inner.reactions.is_empty())
     }
 }
 
