@@ -114,8 +114,8 @@
 //!
 //! # Measured in `huddle sim`
 //! Five robots, `competition` network, 300 s, seed 1 (see `huddle sim --json`): team-ball
-//! RMSE 0.107 m against 0.055 m for the centralized filter (1.94×), average NEES 2.11 inside
-//! its χ² 95% bounds [1.78, 2.23]; pose RMSE 3.6 cm, NEES 2.3 (3 dof). What it took, and
+//! RMSE 0.108 m against 0.057 m for the centralized filter (1.91×; seeds 1–6: 1.84–1.94),
+//! average NEES 2.17 inside its χ² 95% bounds [1.78, 2.23]; pose RMSE 3.6 cm, NEES 2.3 (3 dof). What it took, and
 //! what is left:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
 //!   and a kick-off that teleports the ball while every filter still tracks the old one
