@@ -7,7 +7,8 @@
 //! Claims:
 //! - the team ball is honest: its average position NEES lies inside the χ² 95% bounds the
 //!   report states for its number of independent samples;
-//! - the team ball's RMSE stays within 2.1× the centralized filter's. The target
+//! - the team ball's RMSE stays within 2.0× the centralized filter's (measured 1.88 here;
+//!   1.82–1.94 over seeds 1–6 at 300 s; the margin covers seed-to-seed spread). The target
 //!   is 1.25× and is **not** met on this network: the centralized filter has no network
 //!   delay, while a teammate's sighting reaches the GWM ~100 ms (median; p99 ~180 ms) later,
 //!   and the ball is kicked at 4 m/s, bounced off the boards and shoved by robots within
@@ -59,7 +60,7 @@ fn the_team_ball_on_the_competition_network_is_honest_and_near_the_centralized_f
         r.team_ball_nees_samples
     );
     assert!(
-        r.rmse_ratio <= 2.1,
+        r.rmse_ratio <= 2.0,
         "team ball RMSE {:.4} m is {:.3}× the centralized {:.4} m",
         r.team_ball_rmse_m,
         r.rmse_ratio,

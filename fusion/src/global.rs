@@ -39,6 +39,10 @@ pub struct GlobalConfig {
     /// The robot's own observations that must fail the gate in a row (agreeing with each
     /// other, unopposed) before its own camera restarts the team ball; 0 turns it off.
     pub own_restart_after: u32,
+    /// The same for a teammate's observations (see `challenge`): one more than the own,
+    /// since a teammate may be wrong about the ball where the own camera is what this
+    /// robot sees; 0 turns it off.
+    pub teammate_restart_after: u32,
 }
 
 impl Default for GlobalConfig {
@@ -54,6 +58,7 @@ impl Default for GlobalConfig {
             support_timeout_s: 0.5,
             transit_s: 0.0,
             own_restart_after: 2,
+            teammate_restart_after: 3,
         }
     }
 }
@@ -127,12 +132,14 @@ pub struct Teammate {
     pub lwm: LocalWorldModel,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 struct RobotRecord {
     lwm: LocalWorldModel,
     received_t_s: f64,
     last_rejected_t_s: Option<f64>,
     last_accepted_t_s: Option<f64>,
+    /// Its observations rejected in a row that agree with each other (see `challenge`).
+    rejected_run: Vec<FieldObservation>,
 }
 
 /// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
@@ -153,8 +160,9 @@ pub struct GlobalModel {
     forgotten_before_t_s: f64,
     /// The latest time of an observation that passed the gate.
     last_accepted_obs_t_s: f64,
-    /// The robot's own observations rejected in a row (see `own_challenge`).
-    own_rejected: Vec<FieldObservation>,
+    /// Every robot's rejected observations not yet older than the committed ball: after
+    /// a restart, those that agree with the new track are fused at their own times.
+    rejected: Vec<FieldObservation>,
     stats: GlobalStats,
 }
 
@@ -176,7 +184,7 @@ impl GlobalModel {
             last_support_t_s: f64::NEG_INFINITY,
             forgotten_before_t_s: f64::NEG_INFINITY,
             last_accepted_obs_t_s: f64::NEG_INFINITY,
-            own_rejected: Vec::new(),
+            rejected: Vec::new(),
             stats: GlobalStats::default(),
         }
     }
@@ -227,6 +235,7 @@ impl GlobalModel {
             received_t_s: now_s,
             last_rejected_t_s: None,
             last_accepted_t_s: None,
+            rejected_run: Vec::new(),
         });
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
@@ -290,23 +299,29 @@ impl GlobalModel {
         if d2 > self.config.gate_chi2 {
             rec.last_rejected_t_s = Some(now_s);
             self.stats.rejected += 1;
-            if robot == self.own_id {
-                self.own_challenge(obs, now_s);
-            }
+            let at = self.rejected.partition_point(|p| p.t_s <= obs.t_s);
+            self.rejected.insert(at, *obs);
+            self.challenge(robot, obs, now_s);
             return Ingest::Rejected(d2);
         }
         rec.last_accepted_t_s = Some(now_s);
+        rec.rejected_run.clear();
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(obs.t_s);
-        if robot == self.own_id {
-            self.own_rejected.clear();
-        }
         self.stats.accepted += 1;
+        self.insert_pending(obs, &prior);
+        Ingest::Accepted(d2)
+    }
+
+    /// Fuses `obs` (which passed the gate against `prior`, the state at its time) into the
+    /// pending observations and replays the ones after it.
+    fn insert_pending(&mut self, obs: &FieldObservation, prior: &BallEstimate) {
+        let model = self.config.ball;
         let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
         self.pending.insert(at, *obs);
         // `prior` is the state just before this observation: update it, then carry the
         // observations after it (arrived earlier, made later) forward from there.
-        let next = update(&model, &prior, obs, None).map_or(prior, |(e, _)| e);
+        let next = update(&model, prior, obs, None).map_or(*prior, |(e, _)| e);
         self.after.insert(at, next);
         let mut state = next;
         for k in at + 1..self.pending.len() {
@@ -316,7 +331,6 @@ impl GlobalModel {
             self.after[k] = state;
         }
         self.head = Some(state);
-        Ingest::Accepted(d2)
     }
 
     /// The state after the committed ball and every pending observation up to `t_s`,
@@ -346,6 +360,8 @@ impl GlobalModel {
     }
 
     fn commit(&mut self, before_t_s: f64) {
+        let r = self.rejected.partition_point(|p| p.t_s < before_t_s);
+        self.rejected.drain(..r);
         let n = self.pending.partition_point(|p| p.t_s < before_t_s);
         if n == 0 || self.committed.is_none() {
             return;
@@ -355,62 +371,92 @@ impl GlobalModel {
         self.after.drain(..n);
     }
 
-    /// The robot's own camera disagrees with the team ball: a kick it saw before its
-    /// teammates' reports of it could arrive (they come a network delay later). Its own
-    /// sightings are not a teammate's claim, so it need not wait for a consensus: once
-    /// `own_restart_after` of its own observations in a row fail the gate, agree with each
-    /// other, and nobody's observation made *since the first of them* has supported the old
-    /// ball, the team ball restarts from them. Teammates' reports from before the kick,
-    /// still arriving, do not hold it back (they describe the ball before it moved), and a
-    /// teammate's false ball cannot trigger this at all.
-    fn own_challenge(&mut self, obs: &FieldObservation, now_s: f64) {
-        if self.config.own_restart_after == 0 {
+    /// A robot's observations disagree with the team ball: a kick, bounce or shove that
+    /// it saw, or a false ball. Once enough of its observations in a row fail the gate
+    /// (`own_restart_after` for the robot's own camera, `teammate_restart_after` for a
+    /// teammate), agree with each other, and nobody's observation made *since the first of
+    /// them* has supported the old ball, the team ball restarts from the first of them and
+    /// every observation since (its own and everyone else's, accepted or rejected) that
+    /// agrees with the new track is fused at its own time. Reports from before the kick,
+    /// still arriving, do not hold it back (they describe the ball before it moved). A liar
+    /// among robots that see the real ball cannot do it: their observations keep
+    /// supporting the team ball after the liar's first false one.
+    fn challenge(&mut self, robot: u8, obs: &FieldObservation, now_s: f64) {
+        let needed = if robot == self.own_id {
+            self.config.own_restart_after
+        } else {
+            self.config.teammate_restart_after
+        };
+        if needed == 0 {
             return;
         }
         let model = self.config.ball;
-        if let Some(last) = self.own_rejected.last() {
-            let track = self.own_rejected.iter().skip(1).fold(
-                initial_estimate(
-                    &model,
-                    &self.own_rejected[0],
-                    self.config.initial_velocity_var,
-                ),
-                |est, o| update(&model, &est, o, None).map_or(est, |(e, _)| e),
-            );
+        let gate = self.config.gate_chi2;
+        let velocity_var = self.config.initial_velocity_var;
+        let Some(rec) = self.robots.get_mut(&robot) else {
+            return;
+        };
+        let run = &mut rec.rejected_run;
+        if let Some(last) = run.last() {
+            let track = run
+                .iter()
+                .skip(1)
+                .fold(initial_estimate(&model, &run[0], velocity_var), |est, o| {
+                    update(&model, &est, o, None).map_or(est, |(e, _)| e)
+                });
             let agrees = obs.t_s >= last.t_s
                 && track
                     .position_mahalanobis_sq(&model, obs)
-                    .is_some_and(|d2| d2 <= self.config.gate_chi2);
+                    .is_some_and(|d2| d2 <= gate);
             if !agrees {
-                self.own_rejected.clear();
+                run.clear();
             }
         }
-        self.own_rejected.push(*obs);
-        if self.own_rejected.len() < self.config.own_restart_after as usize
-            || self.own_rejected[0].t_s <= self.last_accepted_obs_t_s
-        {
+        run.push(*obs);
+        if run.len() < needed as usize || run[0].t_s <= self.last_accepted_obs_t_s {
             return;
         }
-        let mut fresh = initial_estimate(
-            &model,
-            &self.own_rejected[0],
-            self.config.initial_velocity_var,
-        );
-        for o in &self.own_rejected[1..] {
-            if let Ok((next, _)) = update(&model, &fresh, o, None) {
-                fresh = next;
-            }
-        }
+        let first = run[0];
+        run.clear();
+        rec.last_rejected_t_s = None;
+        rec.last_accepted_t_s = Some(now_s);
+        self.restart_from(&first, now_s);
+    }
+
+    /// The team ball restarts from `first`; every observation made after it (pending or
+    /// rejected) is gated against the new track and fused at its own time.
+    fn restart_from(&mut self, first: &FieldObservation, now_s: f64) {
+        let model = self.config.ball;
+        let fresh = initial_estimate(&model, first, self.config.initial_velocity_var);
+        let mut since: Vec<FieldObservation> = self
+            .pending
+            .iter()
+            .chain(self.rejected.iter())
+            .filter(|o| o.t_s > first.t_s)
+            .copied()
+            .collect();
+        since.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
         self.committed = Some(fresh);
         self.head = Some(fresh);
         self.clear_pending();
+        self.rejected.clear();
         self.last_support_t_s = now_s;
-        self.last_accepted_obs_t_s = fresh.t_s;
-        self.own_rejected.clear();
+        self.last_accepted_obs_t_s = first.t_s;
         self.stats.restarts += 1;
-        if let Some(rec) = self.robots.get_mut(&self.own_id) {
-            rec.last_rejected_t_s = None;
-            rec.last_accepted_t_s = Some(now_s);
+        for o in &since {
+            let Some(prior) = self.state_at(o.t_s) else {
+                continue;
+            };
+            match prior.position_mahalanobis_sq(&model, o) {
+                Some(d2) if d2 <= self.config.gate_chi2 => {
+                    self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(o.t_s);
+                    self.insert_pending(o, &prior);
+                }
+                _ => {
+                    let at = self.rejected.partition_point(|p| p.t_s <= o.t_s);
+                    self.rejected.insert(at, *o);
+                }
+            }
         }
     }
 
@@ -463,6 +509,7 @@ impl GlobalModel {
         self.committed = Some(fused);
         self.head = Some(fused);
         self.clear_pending();
+        self.rejected.clear();
         self.last_support_t_s = now_s;
         self.stats.restarts += 1;
         for &j in &best {
@@ -481,10 +528,11 @@ impl GlobalModel {
         self.head = None;
         self.clear_pending();
         self.forgotten_before_t_s = t_s;
-        self.own_rejected.clear();
+        self.rejected.clear();
         for rec in self.robots.values_mut() {
             rec.lwm.ball = None;
             rec.last_rejected_t_s = None;
+            rec.rejected_run.clear();
         }
     }
 

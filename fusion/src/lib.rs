@@ -78,8 +78,13 @@
 //! never moves the team ball. A real kick makes every robot that sees the ball dissent at
 //! once; when two or more dissenters' own ball tracks agree with each other, the team ball
 //! restarts from their fusion (their own tracks are built from their own sightings only, so
-//! this one-off product is not double counting). A lone dissenter may restart the ball only
-//! when no one has supported the team ball for `support_timeout_s`. When every teammate is
+//! this one-off product is not double counting). A lone robot restarts it when enough of its
+//! observations in a row (`own_restart_after` of the own camera's, `teammate_restart_after`
+//! of a teammate's) fail the gate, agree with each other, and no observation made since
+//! the first of them supported the old ball; every observation since, rejected or not, is
+//! then re-gated against the new track and fused at its own time. A liar among robots that
+//! see the real ball never gets there. Failing all that, a lone dissenter may restart the
+//! ball when no one has supported the team ball for `support_timeout_s`. When every teammate is
 //! silent, the team ball is the robot's own ([`TeamBallSource::OwnFallback`]).
 //!
 //! # Time
@@ -109,8 +114,8 @@
 //!
 //! # Measured in `huddle sim`
 //! Five robots, `competition` network, 300 s, seed 1 (see `huddle sim --json`): team-ball
-//! RMSE 0.107 m against 0.055 m for the centralized filter (1.94×), average NEES 2.11 inside
-//! its χ² 95% bounds [1.78, 2.23]; pose RMSE 3.6 cm, NEES 2.3 (3 dof). What it took, and
+//! RMSE 0.108 m against 0.057 m for the centralized filter (1.91×; seeds 1–6: 1.84–1.94),
+//! average NEES 2.17 inside its χ² 95% bounds [1.78, 2.23]; pose RMSE 3.6 cm, NEES 2.3 (3 dof). What it took, and
 //! what is left:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
 //!   and a kick-off that teleports the ball while every filter still tracks the old one

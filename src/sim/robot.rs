@@ -99,6 +99,13 @@ impl Default for WorldModelConfig {
             },
             global: GlobalConfig {
                 ball: ball.model,
+                // χ²₂ at 99.9% rather than 99%: robots push the ball all the time, and at a
+                // 100 ms network delay the 99% gate threw away ~1% of true sightings on
+                // every shove, each one a restart later. Measured over seeds 1–6 of the
+                // competition preset: ratio 1.95 → 1.88, NEES inside its bounds on all six
+                // (seed 6 was above them at 99%). A liar is still caught: the consensus
+                // and challenge rules, not the gate's width, keep it out.
+                gate_chi2: 13.82,
                 ..GlobalConfig::default()
             },
             start_sigma_m: 0.05,
