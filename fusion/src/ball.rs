@@ -43,6 +43,19 @@ pub enum BallModel {
         /// q: acceleration noise spectral density per axis (m²/s³).
         accel_noise_m2_per_s3: f64,
     },
+    /// The field's own friction: speed-proportional drag plus a constant rolling
+    /// deceleration along the direction of motion, `dv/dt = −c v − μ v/|v| + w(t)`, which
+    /// stops the ball in finite time. Nonlinear: the mean follows the exact solution and P
+    /// the Jacobian at the mean (see [`BallModel::propagate`]); Q is the drag-only one of
+    /// [`BallModel::Rolling`].
+    Friction {
+        /// c: speed-proportional drag (1/s).
+        drag_per_s: f64,
+        /// μ: constant rolling deceleration (m/s²).
+        rolling_decel_mps2: f64,
+        /// q: acceleration noise spectral density per axis (m²/s³).
+        accel_noise_m2_per_s3: f64,
+    },
     /// The seed's static model: the ball stays where it is, up to a random walk of the given
     /// spectral density (m²/s) per axis; the velocity is zero with zero variance.
     Static {
@@ -61,11 +74,91 @@ impl Default for BallModel {
 }
 
 impl BallModel {
-    /// F and Q over `dt_s` (negative `dt_s` is treated as 0).
+    /// The mean `x` predicted over `dt_s`, with F and Q (negative `dt_s` is treated as 0);
+    /// `velocity_var_m2ps2` is tr P_vv, used only to linearise [`BallModel::Friction`]. For the linear models this is `(F x, F, Q)` of [`Self::transition`].
+    ///
+    /// [`BallModel::Friction`]: with speed s, `ds/dt = −c s − μ`, so
+    /// `s(t) = (s + m) e^{−ct} − m` (`m = μ/c`) until it stops at `t* = ln(1 + s/m)/c`;
+    /// over `τ = min(dt, t*)` the ball travels `d = (s + m)(1 − e^{−cτ})/c − m τ` along
+    /// its direction `u`. The Jacobian splits along and across `u`: along it
+    /// `∂d/∂s = (1 − e^{−cτ})/c`, `∂s'/∂s = e^{−cτ}` (0 once stopped — the boundary terms
+    /// vanish because the speed is 0 at t*); across it `d/s` and `s'/s`. F is taken at the
+    /// speed `√(s² + tr P_vv)` rather than at s itself, which is the true Jacobian when
+    /// the velocity is known and stays smooth at rest (see the body).
+    #[allow(non_snake_case)]
+    pub fn propagate(
+        &self,
+        x: &Vector4<f64>,
+        velocity_var_m2ps2: f64,
+        dt_s: f64,
+    ) -> (Vector4<f64>, Matrix4<f64>, Matrix4<f64>) {
+        let dt = dt_s.max(0.0);
+        let BallModel::Friction {
+            drag_per_s: c,
+            rolling_decel_mps2: mu,
+            accel_noise_m2_per_s3: q,
+        } = *self
+        else {
+            let (F, Q) = self.transition(dt);
+            return (F * x, F, Q);
+        };
+        let (_, Q) = BallModel::Rolling {
+            friction_per_s: c,
+            accel_noise_m2_per_s3: q,
+        }
+        .transition(dt);
+        let v = Vector2::new(x.z, x.w);
+        let s = v.norm();
+        let s = if s.is_finite() { s } else { 0.0 };
+        // The mean rolls at its own speed; P is linearised at the speed the velocity
+        // uncertainty spans, √(s² + tr P_vv): at the mean itself a ball believed at rest
+        // would have F_vv = 0, and a fresh track (v = 0, wide P_vv) would lose its velocity
+        // variance in one step, which a ball that may have just been kicked does not.
+        let (d, s_next, _, _, _) = friction_roll(c, mu, s, dt);
+        let s_lin = (s * s + velocity_var_m2ps2.max(0.0)).sqrt();
+        let (d_lin, s_next_lin, g, a, _) = friction_roll(c, mu, s_lin, dt);
+        let mut F = Matrix4::identity();
+        let (across_p, across_v) = if s_lin > 0.0 {
+            (d_lin / s_lin, s_next_lin / s_lin)
+        } else {
+            (g, a)
+        };
+        let (along, across) = if s > 0.0 {
+            let u = v / s;
+            let along = u * u.transpose();
+            (along, Matrix2::identity() - along)
+        } else {
+            // No direction: every direction is as likely, so average the two.
+            (Matrix2::identity() * 0.5, Matrix2::identity() * 0.5)
+        };
+        let dp_dv = along * g + across * across_p;
+        let dv_dv = along * a + across * across_v;
+        F.fixed_view_mut::<2, 2>(0, 2).copy_from(&dp_dv);
+        F.fixed_view_mut::<2, 2>(2, 2).copy_from(&dv_dv);
+        let (p, vn) = if s > 0.0 {
+            let u = v / s;
+            (Vector2::new(x.x, x.y) + u * d, u * s_next)
+        } else {
+            (Vector2::new(x.x, x.y), Vector2::zeros())
+        };
+        (Vector4::new(p.x, p.y, vn.x, vn.y), F, Q)
+    }
+
+    /// F and Q over `dt_s` (negative `dt_s` is treated as 0). For [`BallModel::Friction`]
+    /// this is its drag-only linearisation; predict with [`Self::propagate`] instead.
     #[allow(non_snake_case)]
     pub fn transition(&self, dt_s: f64) -> (Matrix4<f64>, Matrix4<f64>) {
         let dt = dt_s.max(0.0);
         match *self {
+            BallModel::Friction {
+                drag_per_s,
+                accel_noise_m2_per_s3,
+                ..
+            } => BallModel::Rolling {
+                friction_per_s: drag_per_s,
+                accel_noise_m2_per_s3,
+            }
+            .transition(dt),
             BallModel::Rolling {
                 friction_per_s: c,
                 accel_noise_m2_per_s3: q,
@@ -119,10 +212,42 @@ impl BallModel {
     /// The velocity variance a fresh track starts with: none for the static model.
     fn initial_velocity_var(&self, rolling_var: f64) -> f64 {
         match self {
-            BallModel::Rolling { .. } => rolling_var,
+            BallModel::Rolling { .. } | BallModel::Friction { .. } => rolling_var,
             BallModel::Static { .. } => 0.0,
         }
     }
+}
+
+/// A ball at speed `s` rolling for `dt` under drag `c` and rolling deceleration `mu`:
+/// (distance, final speed, ∂distance/∂s, ∂(final speed)/∂s, stop time). The derivatives
+/// hold through the stop too: the speed is 0 there, so the stop time's own dependence on s
+/// adds nothing.
+fn friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64, f64, f64) {
+    let t_stop = if mu <= 0.0 {
+        f64::INFINITY
+    } else if c * s / mu < 1e-9 {
+        s / mu
+    } else {
+        (c * s / mu).ln_1p() / c
+    };
+    let stopped = dt >= t_stop;
+    let tau = dt.min(t_stop);
+    // g = ∫₀^τ e^{−ct} dt and ∫₀^τ g(t) dt, written so that c → 0 stays exact.
+    let (g, gg) = if c * tau < 1e-6 {
+        (tau, tau * tau / 2.0)
+    } else {
+        let g = -(-c * tau).exp_m1() / c;
+        (g, (tau - g) / c)
+    };
+    let a = 1.0 - c * g; // e^{−cτ}
+                         // s(t) = s e^{−ct} − μ g(t); the distance is its integral.
+    let s_next = if stopped {
+        0.0
+    } else {
+        (s * a - mu * g).max(0.0)
+    };
+    let d = (s * g - mu * gg).max(0.0);
+    (d, s_next, g, if stopped { 0.0 } else { a }, t_stop)
 }
 
 /// A ball estimate at time `t_s`: mean (x, y, vx, vy) in m and m/s, covariance P.
@@ -159,11 +284,12 @@ impl BallEstimate {
         if t_s <= self.t_s {
             return *self;
         }
-        let (F, Q) = model.transition(t_s - self.t_s);
+        let velocity_var = self.cov[(2, 2)] + self.cov[(3, 3)];
+        let (mean, F, Q) = model.propagate(&self.mean, velocity_var, t_s - self.t_s);
         let cov = F * self.cov * F.transpose() + Q;
         BallEstimate {
             t_s,
-            mean: F * self.mean,
+            mean,
             cov: (cov + cov.transpose()) * 0.5,
         }
     }
@@ -520,6 +646,50 @@ mod tests {
             "{}",
             far.mean
         );
+    }
+
+    #[test]
+    fn the_friction_model_rolls_like_the_field_and_its_jacobian_is_the_derivative() {
+        // The field's ball: 0.5/s drag, 0.6 m/s² rolling friction, integrated in 1 ms steps.
+        let model = BallModel::Friction {
+            drag_per_s: 0.5,
+            rolling_decel_mps2: 0.6,
+            accel_noise_m2_per_s3: 0.0,
+        };
+        let x = Vector4::new(0.0, 0.0, 2.4, 3.2);
+        let (mut p, mut v) = (Vector2::<f64>::zeros(), Vector2::new(2.4_f64, 3.2));
+        for _ in 0..500 {
+            let s = v.norm();
+            let slowed = (s * (1.0 - 0.5e-3) - 0.6e-3).max(0.0);
+            v = if s > 0.0 { v * (slowed / s) } else { v };
+            p += v * 1e-3;
+        }
+        let (m, _, _) = model.propagate(&x, 0.0, 0.5);
+        assert!((m.xy() - p).norm() < 5e-3, "rolled to {m} vs field {p}");
+        assert!((Vector2::new(m.z, m.w) - v).norm() < 5e-3);
+        // A ball at 0.2 m/s stops within 0.5 s and stays stopped.
+        let (m, _, _) = model.propagate(&Vector4::new(1.0, 1.0, 0.2, 0.0), 0.0, 2.0);
+        assert!(m.z == 0.0 && m.w == 0.0 && m.x > 1.0 && m.x < 1.04, "{m}");
+        // With no velocity uncertainty P is linearised at the mean: F is ∂f/∂x.
+        for dt in [0.03, 0.1, 5.0] {
+            let (_, f, _) = model.propagate(&x, 0.0, dt);
+            for j in 0..4 {
+                let h = 1e-6;
+                let (mut up, mut dn) = (x, x);
+                up[j] += h;
+                dn[j] -= h;
+                let col =
+                    (model.propagate(&up, 0.0, dt).0 - model.propagate(&dn, 0.0, dt).0) / (2.0 * h);
+                assert!(
+                    (col - f.column(j)).abs().max() < 1e-6,
+                    "dt {dt}, column {j}: {col} vs {}",
+                    f.column(j)
+                );
+            }
+        }
+        // At rest with a wide velocity variance (a fresh track) the variance survives.
+        let (_, f, _) = model.propagate(&Vector4::zeros(), 4.0, 0.03);
+        assert!(f[(2, 2)] > 0.9 && f[(3, 3)] > 0.9, "{f}");
     }
 
     #[test]
