@@ -26,7 +26,8 @@
 //!    frame is valid only with exactly one sender basic and exactly one data basic.
 //!    Two consecutive windows must give the same valid frame before it is accepted.
 //!    On the aligned slot a rival basic (a second sender or data basic) must pass the
-//!    stricter [`P_TONE_RIVAL`] to reject the frame, as must a stray tone.
+//!    stricter [`P_TONE_RIVAL`] to reject the frame (a stray tone keeps the lenient
+//!    threshold: judging it strictly too let one white-noise frame through in 10 h).
 //! 6. **Timing and re-decision**: once accepted, the onset is located on the per-window
 //!    energy of the frame's six tones (a step-change estimate refined by the Hann-window
 //!    share of the edge window); the frame is re-decided with the rules on exactly the
@@ -871,23 +872,15 @@ impl Decoder {
                             .and_then(|(sums, n, level, noise)| {
                                 let (frame, present) =
                                     Self::apply_rules(&sums, n, P_TONE_CONFIRM, P_TONE_RIVAL);
-                                // Stray tones are judged at the rival threshold too: at
-                                // P_TONE_CONFIRM, 66 noise tones give a present one in
-                                // half the slots, and at −13 dB its level often rivals ours.
-                                let rival = gamma_upper_quantile(n as f64, P_TONE_RIVAL);
-                                let mut strong = present;
-                                for (k, s) in strong.iter_mut().enumerate() {
-                                    *s = *s && sums[k] >= rival;
-                                }
                                 frame
                                     .filter(|f| f.sender == t.sender)
-                                    .map(|f| (f, present, strong, level, noise))
+                                    .map(|f| (f, present, level, noise))
                             });
-                    let decided = decided.filter(|(frame, present, strong, level, _)| {
+                    let decided = decided.filter(|(frame, present, level, _)| {
                         self.sounds_through_slot(*frame, present, t.scale, a, b)
-                            && !Self::has_stray_tone(*frame, present, strong, level)
+                            && !Self::has_stray_tone(*frame, present, level)
                     });
-                    let Some((frame, present, _, level, noise)) = decided else {
+                    let Some((frame, present, level, noise)) = decided else {
                         self.end_transmission(b, false);
                         return;
                     };
@@ -1113,7 +1106,6 @@ impl Decoder {
     fn has_stray_tone(
         frame: Frame,
         present: &[bool; TONE_COUNT],
-        strong: &[bool; TONE_COUNT],
         level: &[f64; TONE_COUNT],
     ) -> bool {
         let own = frame.tones();
@@ -1124,7 +1116,7 @@ impl Decoder {
             .collect();
         levels.sort_by(|a, b| a.total_cmp(b));
         let median = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
-        (0..TONE_COUNT).any(|k| strong[k] && !own.contains(&k) && level[k] >= STRAY_SHARE * median)
+        (0..TONE_COUNT).any(|k| present[k] && !own.contains(&k) && level[k] >= STRAY_SHARE * median)
     }
 
     /// Whether the sender's tones were sounding just before the onset (the mirror of the
