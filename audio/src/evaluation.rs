@@ -130,6 +130,23 @@ fn score(sent: &mut [Sent], d: &Detection, out: &mut SnrOutcome) {
     }
 }
 
+/// Ends the stream, collects what the decoder still holds, then scores every detection
+/// against what was sent (scoring after the end, so a late report still counts).
+fn finish_and_score(
+    decoder: &mut Decoder,
+    mut detections: Vec<Detection>,
+    sent: &mut [Sent],
+    out: &mut SnrOutcome,
+) {
+    decoder.finish();
+    while let Some(d) = decoder.poll_message() {
+        detections.push(d);
+    }
+    for d in &detections {
+        score(sent, d, out);
+    }
+}
+
 /// Sends `trial.messages` random messages separated by random gaps through white noise.
 pub fn run_snr_trial(trial: &SnrTrial) -> Result<SnrOutcome, TrialError> {
     let mut rng = ChaCha8Rng::seed_from_u64(trial.seed);
@@ -195,13 +212,7 @@ pub fn run_snr_trial(trial: &SnrTrial) -> Result<SnrOutcome, TrialError> {
             }
         }
     }
-    decoder.finish();
-    while let Some(d) = decoder.poll_message() {
-        detections.push(d);
-    }
-    for d in &detections {
-        score(&mut sent, d, &mut out);
-    }
+    finish_and_score(&mut decoder, detections, &mut sent, &mut out);
     out.samples = t_samples;
     Ok(out)
 }
@@ -370,13 +381,7 @@ pub fn run_whistle_over_messages(messages: usize, seed: u64) -> SnrOutcome {
             detections.push(d);
         }
     }
-    decoder.finish();
-    while let Some(d) = decoder.poll_message() {
-        detections.push(d);
-    }
-    for d in &detections {
-        score(&mut sent, d, &mut out);
-    }
+    finish_and_score(&mut decoder, detections, &mut sent, &mut out);
     out.samples = t;
     out
 }
