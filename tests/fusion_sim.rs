@@ -7,13 +7,17 @@
 //! Claims:
 //! - the team ball is honest: its average position NEES lies inside the χ² 95% bounds the
 //!   report states for its number of independent samples;
+//! - the fusion costs almost nothing: the team ball's RMSE is within 1.1× that of each
+//!   robot's network-limited reference (the centralized filter fed exactly the ball
+//!   information that had reached that robot; measured 1.01–1.03 over seeds 1–4). What
+//!   separates the team ball from the no-network centralized filter is the network:
+//!   a teammate's sighting reaches the GWM ~100 ms (median; p99 ~180 ms) later, and the
+//!   ball is kicked at 4 m/s, bounced off the boards and shoved by robots within that
+//!   window. The reference itself is 1.82–1.90× the centralized filter here, so the
+//!   issue's 1.25× is out of reach of any fusion of sightings on this network; on a LAN
+//!   the same code is at ~1.1×;
 //! - the team ball's RMSE stays within 2.0× the centralized filter's (measured 1.88 here;
-//!   1.82–1.94 over seeds 1–6 at 300 s; the margin covers seed-to-seed spread). The target
-//!   is 1.25× and is **not** met on this network: the centralized filter has no network
-//!   delay, while a teammate's sighting reaches the GWM ~100 ms (median; p99 ~180 ms) later,
-//!   and the ball is kicked at 4 m/s, bounced off the boards and shoved by robots within
-//!   that window. On a LAN (0.1 ms) the same code is at ~1.2× (see the crate docs of
-//!   `fusion`, *Measured in huddle sim*). The bound here guards what is achieved;
+//!   1.82–1.94 over seeds 1–6 at 300 s);
 //! - every robot's pose EKF is honest (average NEES within 1..=4 for 3 dof: it is
 //!   slightly conservative by design, the unmodelled-push floor) and accurate to < 6 cm.
 
@@ -35,10 +39,11 @@ fn competition(seed: u64, duration_s: f64) -> Report {
 fn the_team_ball_on_the_competition_network_is_honest_and_near_the_centralized_filter() {
     let r = competition(2, 90.0);
     eprintln!(
-        "team ball RMSE {:.4} m, centralized {:.4} m, ratio {:.3}; NEES {:.3} in [{:.3}, {:.3}] ({} independent samples, {} robot ticks); pose RMSE {:.4} m, NEES {:.3}",
+        "team ball RMSE {:.4} m, centralized {:.4} m, ratio {:.3}, network-limited {:.4} m; NEES {:.3} in [{:.3}, {:.3}] ({} independent samples, {} robot ticks); pose RMSE {:.4} m, NEES {:.3}",
         r.team_ball_rmse_m,
         r.centralized_rmse_m,
         r.rmse_ratio,
+        r.network_limited_rmse_m,
         r.team_ball_nees,
         r.team_ball_nees_bounds[0],
         r.team_ball_nees_bounds[1],
@@ -58,6 +63,13 @@ fn the_team_ball_on_the_competition_network_is_honest_and_near_the_centralized_f
         "team-ball NEES {:.3} outside its χ² 95% bounds [{lo:.3}, {hi:.3}] for {} samples",
         r.team_ball_nees,
         r.team_ball_nees_samples
+    );
+    assert!(
+        r.fusion_ratio <= 1.1,
+        "team ball RMSE {:.4} m is {:.3}× its network-limited reference's {:.4} m: the fusion loses information",
+        r.team_ball_rmse_m,
+        r.fusion_ratio,
+        r.network_limited_rmse_m
     );
     assert!(
         r.rmse_ratio <= 2.0,

@@ -611,6 +611,87 @@ impl CentralizedBall {
     }
 }
 
+/// The centralized filter under a network's information pattern: the same filter as
+/// [`CentralizedBall`], fed at one robot with exactly the ball information that has reached
+/// that robot so far (its own sightings at once, each teammate's batches when its message
+/// arrives, in whatever order they arrive). It is the ceiling of any fusion over that
+/// information — what a team ball could be at best on this network — so a team ball's RMSE
+/// over this one's measures the fusion, and this one's over [`CentralizedBall`]'s measures
+/// the network.
+///
+/// Observations are kept for `window_s` so that a late one slots in at its own time; an
+/// estimate replays them over the settled state (a clone and a few updates).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetworkLimitedBall {
+    settled: BallFilter,
+    /// Observations at or after `settled_until_s`, in time order.
+    recent: Vec<FieldObservation>,
+    settled_until_s: f64,
+    window_s: f64,
+    late: u64,
+}
+
+impl NetworkLimitedBall {
+    /// A reference with the given filter settings that keeps observations re-orderable for
+    /// `window_s` (longer than the network's worst delay plus the repeats' reach).
+    pub fn new(config: BallFilterConfig, window_s: f64) -> Self {
+        NetworkLimitedBall {
+            settled: BallFilter::new(config),
+            recent: Vec::new(),
+            settled_until_s: f64::NEG_INFINITY,
+            window_s,
+            late: 0,
+        }
+    }
+
+    /// One observation, whenever it arrives; `false` (and counted) if it is older than
+    /// the settled state and cannot be used.
+    pub fn observe(&mut self, obs: &FieldObservation) -> bool {
+        if obs.t_s < self.settled_until_s {
+            self.late += 1;
+            return false;
+        }
+        let at = self.recent.partition_point(|p| p.t_s <= obs.t_s);
+        self.recent.insert(at, *obs);
+        true
+    }
+
+    /// Settles every observation older than `now_s − window_s` into the filter for good.
+    pub fn settle(&mut self, now_s: f64) {
+        let until = now_s - self.window_s;
+        if until <= self.settled_until_s {
+            return;
+        }
+        self.settled_until_s = until;
+        let n = self.recent.partition_point(|p| p.t_s < until);
+        for obs in self.recent.drain(..n) {
+            self.settled.observe(&obs);
+        }
+    }
+
+    /// The estimate from everything received, predicted to `t_s`.
+    pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
+        let mut filter = self.settled.clone();
+        for obs in &self.recent {
+            filter.observe(obs);
+        }
+        filter.estimate_at(t_s)
+    }
+
+    /// Observations that arrived after their time had settled.
+    pub fn late(&self) -> u64 {
+        self.late
+    }
+
+    /// Drops the track and ignores information from before `t_s` (the ball was put
+    /// elsewhere by hand).
+    pub fn forget(&mut self, t_s: f64) {
+        self.settled = BallFilter::new(self.settled.config);
+        self.recent.clear();
+        self.settled_until_s = t_s;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -778,6 +859,58 @@ mod tests {
         assert!(matches!(f.observe(&away(0.93)), BallUpdate::Outlier(_)));
         assert_eq!(f.observe(&away(0.96)), BallUpdate::Restarted);
         assert!((f.estimate().unwrap().position() - Vector2::new(2.5, 1.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn the_network_limited_reference_is_the_centralized_filter_fed_out_of_order() {
+        // A ball rolling along x, seen by robot A every 40 ms and by robot B every 40 ms
+        // (offset 20 ms). B's observations reach the reference 100 ms late, A's at once:
+        // once everything has arrived it must equal the centralized filter fed in time
+        // order.
+        let cfg = BallFilterConfig::default();
+        let obs = |t: f64| FieldObservation {
+            t_s: t,
+            position: Vector2::new(1.0 + 0.8 * t + 0.01 * (7.0 * t).sin(), 0.5),
+            cov: Matrix2::identity() * 4e-4,
+        };
+        let times: Vec<f64> = (0..50).map(|k| k as f64 * 0.02).collect();
+        let mut central = CentralizedBall::new(cfg);
+        for &t in &times {
+            central.filter.observe(&obs(t));
+        }
+        let mut reference = NetworkLimitedBall::new(cfg, 0.3);
+        let mut late_b: Vec<f64> = Vec::new();
+        for (k, &t) in times.iter().enumerate() {
+            if k % 2 == 0 {
+                assert!(reference.observe(&obs(t)), "A's own sighting at {t}");
+            } else {
+                late_b.push(t);
+            }
+            // B's observations from 100 ms ago arrive now.
+            while late_b.first().is_some_and(|&tb| tb <= t - 0.1 + 1e-9) {
+                assert!(
+                    reference.observe(&obs(late_b.remove(0))),
+                    "B's, 100 ms late"
+                );
+            }
+            reference.settle(t);
+        }
+        for tb in late_b {
+            assert!(reference.observe(&obs(tb)));
+        }
+        let (a, b) = (
+            reference.estimate_at(1.2).unwrap(),
+            central.estimate_at(1.2).unwrap(),
+        );
+        assert!(
+            (a.mean - b.mean).norm() < 1e-9 && (a.cov - b.cov).norm() < 1e-9,
+            "reference {} vs centralized {}",
+            a.mean,
+            b.mean
+        );
+        // Something older than the window can no longer be placed: refused and counted.
+        assert!(!reference.observe(&obs(0.1)), "0.1 s is settled by now");
+        assert_eq!(reference.late(), 1);
     }
 
     use nalgebra::{Matrix3, Vector3};

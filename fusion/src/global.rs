@@ -241,14 +241,9 @@ impl GlobalModel {
         rec.received_t_s = now_s;
 
         // Oldest first, so that the filter sees them in time order.
-        for k in (0..2).rev() {
-            let seq = lwm.seq.wrapping_sub(k as u16 + 1);
-            if let (Some(obs), Some(last)) = (lwm.earlier[k], last_seq) {
-                if seq_newer(seq, last) {
-                    self.stats.recovered += 1;
-                    self.observe(robot, &obs, lwm, now_s);
-                }
-            }
+        for obs in lwm.missed_batches(last_seq) {
+            self.stats.recovered += 1;
+            self.observe(robot, &obs, lwm, now_s);
         }
         let result = match lwm.observation {
             None => Ingest::NoObservation,

@@ -41,6 +41,23 @@ pub struct LocalWorldModel {
     pub earlier: [Option<FieldObservation>; 2],
 }
 
+impl LocalWorldModel {
+    /// The repeated batches in this message that a receiver has not taken yet, oldest
+    /// first, when the last message it took from this robot was `last_seq` (`None`: it
+    /// took none, so the repeats are not news to rely on). The caller has already checked
+    /// that this message itself is new; its own batch is [`LocalWorldModel::observation`].
+    pub fn missed_batches(&self, last_seq: Option<u16>) -> impl Iterator<Item = FieldObservation> {
+        let seq = self.seq;
+        let earlier = self.earlier;
+        (0..2usize).rev().filter_map(move |k| {
+            let batch_seq = seq.wrapping_sub(k as u16 + 1);
+            let last = last_seq?;
+            let missed = (batch_seq.wrapping_sub(last) as i16) > 0;
+            earlier[k].filter(|_| missed)
+        })
+    }
+}
+
 /// Settings of a [`LocalModel`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LocalConfig {
@@ -139,12 +156,7 @@ impl LocalModel {
 
     /// A ball sighting in robot coordinates at `t_s`, made from the current pose estimate.
     pub fn ball_sighting(&mut self, t_s: f64, sighting: &BallSighting) -> BallUpdate {
-        let obs = field_observation_shared(
-            t_s,
-            &self.pose.estimate,
-            sighting,
-            self.ball.config.pose_error_sharing,
-        );
+        let obs = self.field_observation(t_s, sighting);
         let result = self.ball.observe(&obs);
         match result {
             BallUpdate::Initialised | BallUpdate::Updated(_) => self.pending.add(&obs),
@@ -160,6 +172,17 @@ impl LocalModel {
             self.last_seen_t_s = Some(t_s);
         }
         result
+    }
+
+    /// A ball sighting at `t_s` as the field-frame observation this robot makes of it: from
+    /// the current pose estimate, its uncertainty shared as the ball filter is set to.
+    pub fn field_observation(&self, t_s: f64, sighting: &BallSighting) -> FieldObservation {
+        field_observation_shared(
+            t_s,
+            &self.pose.estimate,
+            sighting,
+            self.ball.config.pose_error_sharing,
+        )
     }
 
     /// The pose filter itself, e.g. to set Q for an odometry event of a known size or R

@@ -15,11 +15,19 @@
 //!
 //! And about the world models ([`FusionMetrics`]):
 //! - **team-ball sample**: at every control tick of every live robot (goalkeeper included)
-//!   while the ball is visible (as above), once both that robot's GWM and the centralized
-//!   filter have a ball: that robot's team ball predicted to the tick, the centralized
-//!   estimate at the same instant, and the true ball.
+//!   while the ball is visible (as above), once that robot's GWM, the centralized filter
+//!   and the robot's network-limited reference all have a ball: that robot's team ball
+//!   predicted to the tick, the centralized estimate at the same instant, the reference's,
+//!   and the true ball.
 //! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
 //!   all team-ball samples; **ratio** = team / centralized.
+//! - **network-limited reference**: at each robot, the centralized filter fed exactly the
+//!   ball information that has reached that robot (its own sightings at once, teammates'
+//!   batches when their messages arrive; `fusion::NetworkLimitedBall`). Its RMSE is the
+//!   best a team ball could do on this network with this filter; team / it measures the
+//!   fusion, it / centralized measures the network.
+//! - **blind**: the samples of robots that do not see the ball themselves, whose team ball
+//!   can only be what the network brought.
 //! - **team-ball NEES**: the position NEES eᵀ P⁻¹ e (2 degrees of freedom) averaged over all
 //!   team-ball samples. Samples close in time (and different robots' team balls at one
 //!   instant) are strongly correlated, so its χ² 95% bounds are computed for one
@@ -38,15 +46,72 @@ pub const FLAP_WINDOW_S: f64 = 2.0;
 /// publish periods; a kick resets it).
 pub const NEES_INDEPENDENT_EVERY_S: f64 = 1.0;
 
+/// One team-ball sample (see the module docs): squared position errors against the true
+/// ball and position NEES.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallSample {
+    /// The robot's team ball, m².
+    pub team_sq_m2: f64,
+    /// Its NEES.
+    pub team_nees: f64,
+    /// The centralized filter (no network), m².
+    pub central_sq_m2: f64,
+    /// Its NEES.
+    pub central_nees: f64,
+    /// The network-limited reference of this robot (`fusion::NetworkLimitedBall`), m².
+    pub limited_sq_m2: f64,
+    /// The robot does not see the ball itself: all it knows came over the network.
+    pub blind: bool,
+}
+
+/// Squared-error sums of one group of team-ball samples.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ErrorSums {
+    /// Samples.
+    pub samples: u64,
+    /// Σ team ball, m².
+    pub team_sq_m2: f64,
+    /// Σ centralized, m².
+    pub central_sq_m2: f64,
+    /// Σ network-limited reference, m².
+    pub limited_sq_m2: f64,
+}
+
+impl ErrorSums {
+    fn add(&mut self, s: &BallSample) {
+        self.samples += 1;
+        self.team_sq_m2 += s.team_sq_m2;
+        self.central_sq_m2 += s.central_sq_m2;
+        self.limited_sq_m2 += s.limited_sq_m2;
+    }
+
+    fn rmse(&self, sum_sq_m2: f64) -> f64 {
+        (sum_sq_m2 / self.samples as f64).sqrt()
+    }
+
+    /// Team-ball RMSE, m (NaN without samples).
+    pub fn team_rmse_m(&self) -> f64 {
+        self.rmse(self.team_sq_m2)
+    }
+
+    /// Centralized RMSE, m.
+    pub fn central_rmse_m(&self) -> f64 {
+        self.rmse(self.central_sq_m2)
+    }
+
+    /// Network-limited reference RMSE, m.
+    pub fn limited_rmse_m(&self) -> f64 {
+        self.rmse(self.limited_sq_m2)
+    }
+}
+
 /// Sums behind the world-model figures; see the module docs for the definitions.
 #[derive(Debug, Clone, Default)]
 pub struct FusionMetrics {
-    /// Team-ball samples.
-    pub samples: u64,
-    /// Σ squared position error of the team ball, m².
-    pub team_sq_m2: f64,
-    /// Σ squared position error of the centralized filter, m².
-    pub central_sq_m2: f64,
+    /// Every team-ball sample.
+    pub all: ErrorSums,
+    /// The samples of robots that did not see the ball themselves.
+    pub blind: ErrorSums,
     /// Σ position NEES of the team ball.
     pub team_nees: f64,
     /// Σ position NEES of the centralized filter.
@@ -64,14 +129,14 @@ pub struct FusionMetrics {
 }
 
 impl FusionMetrics {
-    /// One team-ball sample: squared errors and NEES of the team ball and the centralized
-    /// filter.
-    pub fn ball(&mut self, team_sq_m2: f64, team_nees: f64, central_sq_m2: f64, central_nees: f64) {
-        self.samples += 1;
-        self.team_sq_m2 += team_sq_m2;
-        self.team_nees += team_nees;
-        self.central_sq_m2 += central_sq_m2;
-        self.central_nees += central_nees;
+    /// One team-ball sample.
+    pub fn ball(&mut self, s: &BallSample) {
+        self.all.add(s);
+        if s.blind {
+            self.blind.add(s);
+        }
+        self.team_nees += s.team_nees;
+        self.central_nees += s.central_nees;
     }
 
     /// One pose sample.
@@ -82,24 +147,19 @@ impl FusionMetrics {
         self.pose_nees += nees;
     }
 
-    /// Team-ball RMSE, m (NaN without samples).
-    pub fn team_rmse_m(&self) -> f64 {
-        (self.team_sq_m2 / self.samples as f64).sqrt()
-    }
-
-    /// Centralized RMSE, m.
-    pub fn central_rmse_m(&self) -> f64 {
-        (self.central_sq_m2 / self.samples as f64).sqrt()
+    /// Team-ball samples.
+    pub fn samples(&self) -> u64 {
+        self.all.samples
     }
 
     /// Average team-ball NEES.
     pub fn team_nees(&self) -> f64 {
-        self.team_nees / self.samples as f64
+        self.team_nees / self.all.samples as f64
     }
 
     /// Average centralized NEES.
     pub fn central_nees(&self) -> f64 {
-        self.central_nees / self.samples as f64
+        self.central_nees / self.all.samples as f64
     }
 
     /// Independent samples the NEES bounds are computed for.

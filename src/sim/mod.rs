@@ -29,7 +29,7 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use crate::harness::{Harness, HarnessError};
-pub use metrics::{FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
+pub use metrics::{BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use robot::{BrainConfig, Robot, TickInput, WorldModelConfig};
 
 /// The network the team plays on: a netsim preset with optional overrides.
@@ -473,7 +473,11 @@ impl Simulation {
             }
             let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6;
             let own = r.lwm.ball_at(now_s);
-            let (Some(team), Some(c)) = (r.gwm.team_ball(now_s, own.as_ref()), central) else {
+            let (Some(team), Some(c), Some(limited)) = (
+                r.gwm.team_ball(now_s, own.as_ref()),
+                central,
+                r.reference.estimate_at(now_s),
+            ) else {
                 continue;
             };
             let pos_nees = |b: &fusion::BallEstimate| {
@@ -484,8 +488,14 @@ impl Simulation {
             };
             let te = (team.estimate.position() - truth).norm_squared();
             let ce = (c.position() - truth).norm_squared();
-            self.fusion
-                .ball(te, pos_nees(&team.estimate), ce, pos_nees(&c));
+            self.fusion.ball(&BallSample {
+                team_sq_m2: te,
+                team_nees: pos_nees(&team.estimate),
+                central_sq_m2: ce,
+                central_nees: pos_nees(&c),
+                limited_sq_m2: (limited.position() - truth).norm_squared(),
+                blind: !r.sees_ball(),
+            });
         }
     }
 
@@ -555,14 +565,21 @@ impl Simulation {
             frames_sent: net.sent,
             frames_delivered: net.delivered,
             frames_lost: net.lost_total(),
-            team_ball_rmse_m: round4(f.team_rmse_m()),
-            centralized_rmse_m: round4(f.central_rmse_m()),
-            rmse_ratio: round3(f.team_rmse_m() / f.central_rmse_m()),
+            team_ball_rmse_m: round4(f.all.team_rmse_m()),
+            centralized_rmse_m: round4(f.all.central_rmse_m()),
+            rmse_ratio: round3(f.all.team_rmse_m() / f.all.central_rmse_m()),
+            network_limited_rmse_m: round4(f.all.limited_rmse_m()),
+            fusion_ratio: round3(f.all.team_rmse_m() / f.all.limited_rmse_m()),
+            network_ratio: round3(f.all.limited_rmse_m() / f.all.central_rmse_m()),
+            blind_samples: f.blind.samples,
+            blind_team_ball_rmse_m: round4(f.blind.team_rmse_m()),
+            blind_centralized_rmse_m: round4(f.blind.central_rmse_m()),
+            blind_network_limited_rmse_m: round4(f.blind.limited_rmse_m()),
             team_ball_nees: round3(f.team_nees()),
             team_ball_nees_bounds: [round3(nees_lo), round3(nees_hi)],
             team_ball_nees_samples: f.nees_independent_samples(),
             centralized_nees: round3(f.central_nees()),
-            team_ball_samples: f.samples,
+            team_ball_samples: f.samples(),
             pose_rmse_m: round4(f.pose_rmse_m()),
             heading_rmse_rad: round4(f.heading_rmse_rad()),
             pose_nees: round3(f.pose_nees()),
@@ -653,6 +670,22 @@ pub struct Report {
     pub centralized_rmse_m: f64,
     /// team_ball_rmse_m / centralized_rmse_m.
     pub rmse_ratio: f64,
+    /// The network-limited reference at the same instants, m: at each robot, the
+    /// centralized filter fed exactly the ball information that had reached it (see
+    /// [`metrics`]); the best a team ball can do on this network.
+    pub network_limited_rmse_m: f64,
+    /// team_ball_rmse_m / network_limited_rmse_m: what the fusion itself costs.
+    pub fusion_ratio: f64,
+    /// network_limited_rmse_m / centralized_rmse_m: what the network costs.
+    pub network_ratio: f64,
+    /// Samples of robots that did not see the ball themselves.
+    pub blind_samples: u64,
+    /// Team-ball RMSE over those samples, m.
+    pub blind_team_ball_rmse_m: f64,
+    /// Centralized RMSE over those samples, m.
+    pub blind_centralized_rmse_m: f64,
+    /// Network-limited reference RMSE over those samples, m.
+    pub blind_network_limited_rmse_m: f64,
     /// Average position NEES (2 dof) of the team ball over the same samples.
     pub team_ball_nees: f64,
     /// Its χ² 95% bounds for `team_ball_nees_samples` independent samples.
@@ -722,6 +755,19 @@ impl std::fmt::Display for Report {
             f,
             "team ball RMSE        {:>9.4} m  (centralized {:.4} m, ratio {:.3}; {} robot ticks)",
             self.team_ball_rmse_m, self.centralized_rmse_m, self.rmse_ratio, self.team_ball_samples
+        )?;
+        writeln!(
+            f,
+            "  network-limited     {:>9.4} m  (centralized fed what reached each robot: fusion costs ×{:.3}, the network ×{:.3})",
+            self.network_limited_rmse_m, self.fusion_ratio, self.network_ratio
+        )?;
+        writeln!(
+            f,
+            "  robots not seeing it{:>9.4} m  (centralized {:.4} m, network-limited {:.4} m; {} robot ticks)",
+            self.blind_team_ball_rmse_m,
+            self.blind_centralized_rmse_m,
+            self.blind_network_limited_rmse_m,
+            self.blind_samples
         )?;
         writeln!(
             f,

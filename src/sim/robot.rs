@@ -25,10 +25,11 @@ use comms::arbitration::{
 use comms::{Blackboard, Instant, Key, Scope, Value};
 use fusion::nalgebra::{Matrix3, Vector3};
 use fusion::{
-    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, LocalConfig, LocalModel, PoseNoise,
-    TeamBall,
+    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, LocalConfig, LocalModel,
+    NetworkLimitedBall, PoseNoise, TeamBall,
 };
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use super::perception;
@@ -60,6 +61,10 @@ fn seconds(t: Instant) -> f64 {
 fn world_local_of(id: u8) -> Key {
     Key::new(Scope::Robot(id), comms::Kind::Var, "world.local").expect("a valid key")
 }
+
+/// How long the network-limited reference keeps observations re-orderable: above the
+/// worst delay plus the two repeats' reach (as the GWM's commit lag).
+const REFERENCE_WINDOW_S: f64 = 0.5;
 
 /// How the robots' world models are set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -197,6 +202,11 @@ pub struct Robot {
     pub gwm: GlobalModel,
     /// The team ball at its latest tick.
     pub team_ball: Option<TeamBall>,
+    /// The yardstick of its team ball: the centralized filter fed exactly the ball
+    /// information that reached this robot (measurement only; it never steers play).
+    pub reference: NetworkLimitedBall,
+    /// Per teammate: the sequence number and time of the LWM the reference took last.
+    reference_seq: BTreeMap<u8, (u16, f64)>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
     pub ball_sighting: Option<BallSighting>,
     /// When it last saw the opponent goal, seconds.
@@ -265,6 +275,8 @@ impl Robot {
             ball: None,
             lwm: LocalModel::new(world_model.local, start),
             gwm: GlobalModel::new(id, world_model.global),
+            reference: NetworkLimitedBall::new(world_model.local.ball, REFERENCE_WINDOW_S),
+            reference_seq: BTreeMap::new(),
             team_ball: None,
             ball_sighting: None,
             goal_seen_at_s: None,
@@ -417,6 +429,8 @@ impl Robot {
         self.ball_sighting = self.frame.ball.map(|s| perception::ball_sighting(&cam, &s));
         if let Some(s) = &self.ball_sighting {
             self.lwm.ball_sighting(now_s, s);
+            self.reference
+                .observe(&self.lwm.field_observation(now_s, s));
             self.ball_seen_at_s = Some(input.t_s);
         }
         let recent = self
@@ -430,7 +444,7 @@ impl Robot {
             })
         });
 
-        for (j, heard) in self.heard.iter_mut().enumerate() {
+        for j in 0..self.heard.len() {
             let id = crate::harness::robot_id(j);
             if id == self.id {
                 continue;
@@ -438,17 +452,21 @@ impl Robot {
             let Some(e) = input.board.get(&world_local_of(id)) else {
                 continue;
             };
-            if *heard == Some((e.incarnation, e.version)) {
+            if self.heard[j] == Some((e.incarnation, e.version)) {
                 continue;
             }
-            *heard = Some((e.incarnation, e.version));
+            self.heard[j] = Some((e.incarnation, e.version));
             if let Value::Bytes(bytes) = &e.value {
+                let age_s = e.age(input.local_now).as_secs_f64();
                 // A malformed message is the sender's bug; the GWM just does not take it.
-                let _ = self
-                    .gwm
-                    .receive(id, bytes, now_s, e.age(input.local_now).as_secs_f64());
+                let _ = self.gwm.receive(id, bytes, now_s, age_s);
+                let sent_s = now_s - age_s - self.gwm.config().transit_s;
+                if let Ok(lwm) = fusion::LocalWorldModel::from_bytes(bytes, sent_s) {
+                    self.reference_receive(id, &lwm);
+                }
             }
         }
+        self.reference.settle(now_s);
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
         self.team_ball = self
@@ -456,6 +474,24 @@ impl Robot {
             .team_ball(now_s, own.as_ref())
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
         msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+    }
+
+    /// A teammate's LWM into the reference: each batch once, the repeats of lost messages
+    /// included (as the GWM takes them).
+    fn reference_receive(&mut self, id: u8, lwm: &fusion::LocalWorldModel) {
+        // As the GWM: a teammate silent for a second may have restarted its counter.
+        let last = self
+            .reference_seq
+            .get(&id)
+            .filter(|&&(_, t_s)| lwm.t_s - t_s <= self.gwm.config().stale_after_s)
+            .map(|&(seq, _)| seq);
+        if last.is_some_and(|l| (lwm.seq.wrapping_sub(l) as i16) <= 0) {
+            return;
+        }
+        self.reference_seq.insert(id, (lwm.seq, lwm.t_s));
+        for obs in lwm.missed_batches(last).chain(lwm.observation) {
+            self.reference.observe(&obs);
+        }
     }
 
     /// The team ball if there is a usable one, else the robot's own.
@@ -553,6 +589,7 @@ impl Robot {
     pub fn forget_ball(&mut self, now_s: f64) {
         self.lwm.forget_ball();
         self.gwm.forget_ball(now_s);
+        self.reference.forget(now_s);
         self.ball = None;
         self.ball_seen_at_s = None;
         self.team_ball = None;
