@@ -72,6 +72,7 @@ fn messages(rounds: usize) -> Vec<[[u8; fusion::LWM_WIRE_LEN]; 5]> {
                         cov: Matrix2::identity() * 0.01,
                     }),
                     earlier: [None; 2],
+                    kick: None,
                 };
                 lwm.to_bytes().expect("encodes")
             })

@@ -309,6 +309,79 @@ impl BallEstimate {
     }
 }
 
+/// A kick as the kicker commanded it: at `t_s` the ball leaves at `speed_mps` towards
+/// `direction_rad` (field frame, counter-clockwise from +x), each with the kicker's own
+/// σ. A robot knows its kicks before anyone sees them; published with its LWM, a kick
+/// turns every teammate's team ball the moment it arrives instead of several sightings
+/// later.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kick {
+    /// When the foot met the ball (s, on the owner's clock).
+    pub t_s: f64,
+    /// Speed right after the kick (m/s).
+    pub speed_mps: f64,
+    /// Direction of the kick in the field frame (rad).
+    pub direction_rad: f64,
+    /// σ of the speed (m/s).
+    pub speed_sigma_mps: f64,
+    /// σ of the direction (rad).
+    pub direction_sigma_rad: f64,
+}
+
+impl Kick {
+    /// The ball's velocity right after the kick and its covariance (the polar σ's through
+    /// the Jacobian of (s, φ) ↦ s (cos φ, sin φ)).
+    pub fn velocity(&self) -> (Vector2<f64>, Matrix2<f64>) {
+        let (sin, cos) = self.direction_rad.sin_cos();
+        let s = self.speed_mps;
+        let j = Matrix2::new(cos, -s * sin, sin, s * cos);
+        let polar = Matrix2::new(
+            self.speed_sigma_mps * self.speed_sigma_mps,
+            0.0,
+            0.0,
+            self.direction_sigma_rad * self.direction_sigma_rad,
+        );
+        (Vector2::new(s * cos, s * sin), j * polar * j.transpose())
+    }
+
+    /// Whether every number is finite and the σ's and speed non-negative.
+    pub fn is_valid(&self) -> bool {
+        [
+            self.t_s,
+            self.speed_mps,
+            self.direction_rad,
+            self.speed_sigma_mps,
+            self.direction_sigma_rad,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+            && self.speed_mps >= 0.0
+            && self.speed_sigma_mps >= 0.0
+            && self.direction_sigma_rad >= 0.0
+    }
+}
+
+impl BallEstimate {
+    /// This track kicked: predicted to the kick (or left at its own time if the kick is
+    /// older), the velocity replaced by the kick's, the position kept with its variance.
+    /// The position–velocity correlation goes: the new velocity is the foot's, not
+    /// something learnt from where the ball was. A static model has no velocity to set.
+    pub fn kicked(&self, model: &BallModel, kick: &Kick) -> BallEstimate {
+        let mut est = self.predict_to(model, kick.t_s);
+        if matches!(model, BallModel::Static { .. }) {
+            return est;
+        }
+        let (v, v_cov) = kick.velocity();
+        est.mean.z = v.x;
+        est.mean.w = v.y;
+        let p = est.position_cov();
+        est.cov = Matrix4::zeros();
+        est.cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&p);
+        est.cov.fixed_view_mut::<2, 2>(2, 2).copy_from(&v_cov);
+        est
+    }
+}
+
 /// A ball sighting in robot coordinates (x right, y forward) with its noise.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BallSighting {
@@ -558,6 +631,17 @@ impl BallFilter {
         }
     }
 
+    /// A kick (see [`Kick`]); without a track there is nothing to kick.
+    pub fn kick(&mut self, kick: &Kick) {
+        if !kick.is_valid() {
+            return;
+        }
+        if let Some(est) = &self.estimate {
+            self.estimate = Some(est.kicked(&self.config.model, kick));
+            self.outliers_in_a_row = 0;
+        }
+    }
+
     /// Applies a sighting in robot coordinates made from `pose` at `t_s`.
     pub fn sighting(
         &mut self,
@@ -600,6 +684,11 @@ impl CentralizedBall {
         self.filter.sighting(t_s, pose, sighting)
     }
 
+    /// A robot's kick, at once (it is a control input the team knows, not a sighting).
+    pub fn kick(&mut self, kick: &Kick) {
+        self.filter.kick(kick);
+    }
+
     /// The estimate predicted to `t_s`.
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
         self.filter.estimate_at(t_s)
@@ -624,11 +713,36 @@ impl CentralizedBall {
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetworkLimitedBall {
     settled: BallFilter,
-    /// Observations at or after `settled_until_s`, in time order.
-    recent: Vec<FieldObservation>,
+    /// Events at or after `settled_until_s`, in time order.
+    recent: Vec<Event>,
     settled_until_s: f64,
     window_s: f64,
     late: u64,
+}
+
+/// What the reference replays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Event {
+    Seen(FieldObservation),
+    Kicked(Kick),
+}
+
+impl Event {
+    fn t_s(&self) -> f64 {
+        match self {
+            Event::Seen(o) => o.t_s,
+            Event::Kicked(k) => k.t_s,
+        }
+    }
+
+    fn apply(&self, filter: &mut BallFilter) {
+        match self {
+            Event::Seen(o) => {
+                filter.observe(o);
+            }
+            Event::Kicked(k) => filter.kick(k),
+        }
+    }
 }
 
 impl NetworkLimitedBall {
@@ -644,41 +758,51 @@ impl NetworkLimitedBall {
         }
     }
 
-    /// One observation, whenever it arrives; `false` (and counted) if it is older than
-    /// the settled state and cannot be used.
-    pub fn observe(&mut self, obs: &FieldObservation) -> bool {
-        if obs.t_s < self.settled_until_s {
+    fn insert(&mut self, event: Event) -> bool {
+        let t_s = event.t_s();
+        if t_s < self.settled_until_s {
             self.late += 1;
             return false;
         }
-        let at = self.recent.partition_point(|p| p.t_s <= obs.t_s);
-        self.recent.insert(at, *obs);
+        let at = self.recent.partition_point(|p| p.t_s() <= t_s);
+        self.recent.insert(at, event);
         true
     }
 
-    /// Settles every observation older than `now_s − window_s` into the filter for good.
+    /// One observation, whenever it arrives; `false` (and counted) if it is older than
+    /// the settled state and cannot be used.
+    pub fn observe(&mut self, obs: &FieldObservation) -> bool {
+        self.insert(Event::Seen(*obs))
+    }
+
+    /// A kick, whenever its report arrives; `false` (and counted) if too late.
+    pub fn kick(&mut self, kick: &Kick) -> bool {
+        self.insert(Event::Kicked(*kick))
+    }
+
+    /// Settles every event older than `now_s − window_s` into the filter for good.
     pub fn settle(&mut self, now_s: f64) {
         let until = now_s - self.window_s;
         if until <= self.settled_until_s {
             return;
         }
         self.settled_until_s = until;
-        let n = self.recent.partition_point(|p| p.t_s < until);
-        for obs in self.recent.drain(..n) {
-            self.settled.observe(&obs);
+        let n = self.recent.partition_point(|p| p.t_s() < until);
+        for event in self.recent.drain(..n) {
+            event.apply(&mut self.settled);
         }
     }
 
     /// The estimate from everything received, predicted to `t_s`.
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
         let mut filter = self.settled.clone();
-        for obs in &self.recent {
-            filter.observe(obs);
+        for event in &self.recent {
+            event.apply(&mut filter);
         }
         filter.estimate_at(t_s)
     }
 
-    /// Observations that arrived after their time had settled.
+    /// Events that arrived after their time had settled.
     pub fn late(&self) -> u64 {
         self.late
     }
@@ -911,6 +1035,53 @@ mod tests {
         // Something older than the window can no longer be placed: refused and counted.
         assert!(!reference.observe(&obs(0.1)), "0.1 s is settled by now");
         assert_eq!(reference.late(), 1);
+    }
+
+    #[test]
+    fn a_kick_sets_the_velocity_and_keeps_the_position() {
+        let model = BallModel::Rolling {
+            friction_per_s: 1.0,
+            accel_noise_m2_per_s3: 1.0,
+        };
+        let resting = BallEstimate {
+            t_s: 2.0,
+            mean: Vector4::new(1.0, -0.5, 0.1, 0.0),
+            cov: Matrix4::from_diagonal(&Vector4::new(1e-3, 2e-3, 0.5, 0.5)),
+        };
+        // Straight up the field (+y) at 4 m/s: the speed σ lies along y, the direction σ
+        // across it, scaled by the speed.
+        let kick = Kick {
+            t_s: 2.1,
+            speed_mps: 4.0,
+            direction_rad: std::f64::consts::FRAC_PI_2,
+            speed_sigma_mps: 0.2,
+            direction_sigma_rad: 0.08,
+        };
+        let kicked = resting.kicked(&model, &kick);
+        let before = resting.predict_to(&model, 2.1);
+        assert_eq!(kicked.t_s, 2.1, "the kick happens at its own time");
+        assert!((kicked.position() - before.position()).norm() < 1e-12);
+        assert!((kicked.position_cov() - before.position_cov()).norm() < 1e-12);
+        assert!((kicked.velocity() - Vector2::new(0.0, 4.0)).norm() < 1e-12);
+        let v_cov = kicked.cov.fixed_view::<2, 2>(2, 2).into_owned();
+        assert!(
+            (v_cov[(0, 0)] - (4.0f64 * 0.08).powi(2)).abs() < 1e-12,
+            "across: {v_cov}"
+        );
+        assert!((v_cov[(1, 1)] - 0.04).abs() < 1e-12, "along: {v_cov}");
+        assert_eq!(
+            kicked.cov.fixed_view::<2, 2>(0, 2).into_owned(),
+            Matrix2::zeros(),
+            "the foot's velocity owes nothing to where the ball was"
+        );
+        let still = BallModel::Static {
+            drift_m2_per_s: 0.01,
+        };
+        assert_eq!(
+            resting.kicked(&still, &kick).mean,
+            resting.predict_to(&still, 2.1).mean,
+            "a static model has no velocity to kick"
+        );
     }
 
     use nalgebra::{Matrix3, Vector3};

@@ -1,13 +1,13 @@
 //! The global world model (GWM): teammates from their LWMs and the team ball, fused from
 //! every robot's published ball information (see the crate docs for why it is built this way).
 
-use crate::ball::{initial_estimate, update, BallEstimate, BallModel, FieldObservation};
+use crate::ball::{initial_estimate, update, BallEstimate, BallModel, FieldObservation, Kick};
 use crate::confidence::position_confidence;
 use crate::kalman;
 use crate::local::LocalWorldModel;
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
-use nalgebra::{Matrix4, Vector2};
+use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use std::collections::BTreeMap;
 
 /// Settings of a [`GlobalModel`].
@@ -95,6 +95,8 @@ pub struct GlobalStats {
     pub restarts: u64,
     /// Batches taken from the repeats in a later message (their own message was lost).
     pub recovered: u64,
+    /// Kicks applied to the team ball.
+    pub kicks: u64,
 }
 
 /// Where a [`TeamBall`] came from.
@@ -140,6 +142,8 @@ struct RobotRecord {
     last_accepted_t_s: Option<f64>,
     /// Its observations rejected in a row that agree with each other (see `challenge`).
     rejected_run: Vec<FieldObservation>,
+    /// The number and time of its last kick taken.
+    last_kick: Option<(u8, f64)>,
 }
 
 /// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
@@ -163,7 +167,22 @@ pub struct GlobalModel {
     /// Every robot's rejected observations not yet older than the committed ball: after
     /// a restart, those that agree with the new track are fused at their own times.
     rejected: Vec<FieldObservation>,
+    /// The track as it was before the latest restart, so that a kick whose report arrives
+    /// after the cameras already restarted the ball can rewind to it (see `kicked`).
+    rewind: Option<Rewind>,
     stats: GlobalStats,
+}
+
+/// A track set aside by a restart.
+#[derive(Debug, Clone, PartialEq)]
+struct Rewind {
+    /// The restarted track begins here.
+    restart_t_s: f64,
+    committed: BallEstimate,
+    pending: Vec<FieldObservation>,
+    after: Vec<BallEstimate>,
+    head: Option<BallEstimate>,
+    rejected: Vec<FieldObservation>,
 }
 
 fn seq_newer(a: u16, b: u16) -> bool {
@@ -185,6 +204,7 @@ impl GlobalModel {
             forgotten_before_t_s: f64::NEG_INFINITY,
             last_accepted_obs_t_s: f64::NEG_INFINITY,
             rejected: Vec::new(),
+            rewind: None,
             stats: GlobalStats::default(),
         }
     }
@@ -236,6 +256,7 @@ impl GlobalModel {
             last_rejected_t_s: None,
             last_accepted_t_s: None,
             rejected_run: Vec::new(),
+            last_kick: None,
         });
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
@@ -249,6 +270,17 @@ impl GlobalModel {
             None => Ingest::NoObservation,
             Some(obs) => self.observe(robot, &obs, lwm, now_s),
         };
+        if let Some(report) = lwm.kick {
+            let rec = self.robots.get_mut(&robot).expect("record inserted above");
+            // The same kick again (a repeat) has the same number and about the same time.
+            let seen = rec.last_kick.is_some_and(|(number, t_s)| {
+                number == report.number && (report.kick.t_s - t_s).abs() < self.config.stale_after_s
+            });
+            if !seen {
+                rec.last_kick = Some((report.number, report.kick.t_s));
+                self.kicked(&report.kick, now_s);
+            }
+        }
         self.commit(now_s - self.config.commit_lag_s);
         self.restart_on_consensus(now_s);
         result
@@ -418,16 +450,142 @@ impl GlobalModel {
         self.restart_from(&first, now_s);
     }
 
+    /// A teammate (or this robot) kicked the ball: the team ball as it was at the kick,
+    /// with the kick's velocity, replaces the track from then on, and every observation made
+    /// since (pending or rejected) is gated against it and fused at its own time. Sightings
+    /// after a kick no longer have to outvote the old track first: the team ball turns the
+    /// moment the kick's report arrives. Dissent is cleared (it was about the kick). A kick
+    /// older than the committed ball, or with no ball to kick, is too late to use.
+    fn kicked(&mut self, kick: &Kick, now_s: f64) {
+        if !kick.is_valid() || kick.t_s < self.forgotten_before_t_s {
+            return;
+        }
+        let Some(mut committed) = self.committed else {
+            return;
+        };
+        let mut late: Vec<FieldObservation> = Vec::new();
+        if let Some(rw) = self.rewind.take() {
+            if kick.t_s < rw.restart_t_s && kick.t_s >= rw.committed.t_s {
+                // The cameras restarted the ball after the kick, before its report came:
+                // back to the track as it was, and everything seen since the kick is
+                // gated again against the kicked track.
+                late = self
+                    .pending
+                    .iter()
+                    .chain(&self.rejected)
+                    .chain(&rw.pending)
+                    .chain(&rw.rejected)
+                    .filter(|o| o.t_s > kick.t_s)
+                    .copied()
+                    .collect();
+                late.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+                late.dedup();
+                committed = rw.committed;
+                self.committed = Some(rw.committed);
+                self.pending = rw.pending;
+                self.after = rw.after;
+                self.head = rw.head;
+                self.rejected.clear();
+            }
+        }
+        if kick.t_s < committed.t_s {
+            self.kick_velocity(kick, &committed);
+            return;
+        }
+        let Some(before) = self.state_at(kick.t_s) else {
+            return;
+        };
+        self.stats.kicks += 1;
+        let fresh = before.kicked(&self.config.ball, kick);
+        for rec in self.robots.values_mut() {
+            rec.last_rejected_t_s = None;
+            rec.rejected_run.clear();
+        }
+        self.rejected.extend(late);
+        self.restart_with(fresh, now_s);
+    }
+
+    /// A kick that is older than the committed ball: the track restarted since (a camera
+    /// saw the ball go before the report arrived), so the kick can no longer place the
+    /// turn, but it still tells the velocity. The kick's velocity, rolled forward by the
+    /// model to the committed time, is fused into the committed ball as a velocity
+    /// measurement (gated: a track restarted by something after the kick, a bounce or a
+    /// shove, does not take it), and the pending observations are replayed on top.
+    fn kick_velocity(&mut self, kick: &Kick, committed: &BallEstimate) {
+        let model = self.config.ball;
+        if committed.t_s - kick.t_s > self.config.commit_lag_s {
+            self.stats.late += 1;
+            return;
+        }
+        let (v, v_cov) = kick.velocity();
+        let mut kicked = BallEstimate {
+            t_s: kick.t_s,
+            mean: Vector4::new(0.0, 0.0, v.x, v.y),
+            cov: Matrix4::zeros(),
+        };
+        kicked.cov.fixed_view_mut::<2, 2>(2, 2).copy_from(&v_cov);
+        let rolled = kicked.predict_to(&model, committed.t_s);
+        let h = SMatrix::<f64, 2, 4>::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let r: Matrix2<f64> = rolled.cov.fixed_view::<2, 2>(2, 2).into_owned();
+        let innovation = rolled.velocity() - committed.velocity();
+        let Ok(u) = kalman::update(
+            &committed.mean,
+            &committed.cov,
+            &innovation,
+            &h,
+            &r,
+            Some(self.config.gate_chi2),
+        ) else {
+            self.stats.late += 1;
+            return;
+        };
+        self.stats.kicks += 1;
+        self.committed = Some(BallEstimate {
+            t_s: committed.t_s,
+            mean: u.mean,
+            cov: u.cov,
+        });
+        let mut state = self.committed.expect("just set");
+        for k in 0..self.pending.len() {
+            if let Ok((e, _)) = update(&model, &state, &self.pending[k], None) {
+                state = e;
+            }
+            self.after[k] = state;
+        }
+        self.head = Some(state);
+    }
+
     /// The team ball restarts from `first`; every observation made after it (pending or
     /// rejected) is gated against the new track and fused at its own time.
     fn restart_from(&mut self, first: &FieldObservation, now_s: f64) {
         let model = self.config.ball;
         let fresh = initial_estimate(&model, first, self.config.initial_velocity_var);
+        self.stats.restarts += 1;
+        self.keep_for_rewind(fresh.t_s);
+        self.restart_with(fresh, now_s);
+    }
+
+    /// Sets the current track aside before a restart at `restart_t_s`.
+    fn keep_for_rewind(&mut self, restart_t_s: f64) {
+        self.rewind = self.committed.map(|committed| Rewind {
+            restart_t_s,
+            committed,
+            pending: self.pending.clone(),
+            after: self.after.clone(),
+            head: self.head,
+            rejected: self.rejected.clone(),
+        });
+    }
+
+    /// The team ball restarts as `fresh`; every observation made after it (pending or
+    /// rejected) is gated against the new track and fused at its own time.
+    fn restart_with(&mut self, fresh: BallEstimate, now_s: f64) {
+        let model = self.config.ball;
         let mut since: Vec<FieldObservation> = self
             .pending
             .iter()
             .chain(self.rejected.iter())
-            .filter(|o| o.t_s > first.t_s)
+            .filter(|o| o.t_s > fresh.t_s)
             .copied()
             .collect();
         since.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
@@ -436,8 +594,7 @@ impl GlobalModel {
         self.clear_pending();
         self.rejected.clear();
         self.last_support_t_s = now_s;
-        self.last_accepted_obs_t_s = first.t_s;
-        self.stats.restarts += 1;
+        self.last_accepted_obs_t_s = fresh.t_s;
         for o in &since {
             let Some(prior) = self.state_at(o.t_s) else {
                 continue;
@@ -501,6 +658,7 @@ impl GlobalModel {
         for &j in &best[1..] {
             fused = fuse_independent(&fused, &dissenters[j].1);
         }
+        self.keep_for_rewind(fused.t_s);
         self.committed = Some(fused);
         self.head = Some(fused);
         self.clear_pending();
@@ -519,6 +677,7 @@ impl GlobalModel {
     /// information from before `t_s` still on its way: the ball was put somewhere else by
     /// hand at `t_s` (a referee's kick-off). Teammates' poses are kept.
     pub fn forget_ball(&mut self, t_s: f64) {
+        self.rewind = None;
         self.committed = None;
         self.head = None;
         self.clear_pending();

@@ -112,19 +112,33 @@
 //! [`LocalModel::forget_ball`], [`GlobalModel::forget_ball`] drop every ball belief and
 //! every observation from before that moment still on its way.
 //!
+//! # Kicks
+//! A robot knows its own kicks before anyone sees them. [`LocalModel::kick`] turns its own
+//! ball at once and puts the kick (time, speed, direction and their σ, as a [`Kick`]) in
+//! its messages for [`KICK_REPORTED_FOR_S`]; a receiver takes each kick once, by its
+//! number ([`KickReport`]). The GWM then restarts the team ball from its own state at the
+//! kick time with the kick's velocity and re-gates every observation made since, so the
+//! team ball turns the moment the report arrives instead of after several sightings have
+//! outvoted the old track. When the cameras already restarted the ball before the report
+//! came, the GWM rewinds to the track as it was before that restart; failing that, it fuses
+//! the kick's velocity, rolled forward by the model, into the current track (gated).
+//!
 //! # Measured in `huddle sim`
-//! Five robots, `competition` network, 300 s, seed 1 (see `huddle sim --json`): team-ball
-//! RMSE 0.108 m against 0.057 m for the centralized filter (1.91×; seeds 1–6: 1.84–1.94),
-//! average NEES 2.17 inside its χ² 95% bounds [1.78, 2.23]; pose RMSE 3.6 cm, NEES 2.3 (3 dof).
+//! Five robots, `competition` network, 300 s, seeds 1–6 (see `huddle sim --json`): team-ball
+//! RMSE 0.094–0.101 m against 0.051–0.056 m for the centralized filter that sees every
+//! sighting at once (1.73–1.85×), and 0.045–0.050 m for one also told every kick at once
+//! (1.97–2.11×); average NEES 1.79–2.00, inside its χ² 95% bounds [1.78, 2.23] on all six;
+//! pose RMSE 3.6–3.8 cm, NEES 2.4–2.5 (3 dof).
 //!
 //! The sim also runs, at every robot, a [`NetworkLimitedBall`]: the centralized filter fed
-//! exactly the ball information that has reached that robot (its own sightings at once,
-//! each teammate's batches when they arrive, late ones slotted in by time). That is the
-//! ceiling of any fusion over what this network delivered. Seeds 1–4: the team ball is
-//! 1.01–1.03× the reference (the fusion loses almost nothing), and the reference is
-//! 1.82–1.90× the centralized filter (the network costs the rest); for robots that do not
-//! see the ball themselves the team ball and the reference are both ~0.14 m against
-//! 0.06 m. On a LAN the three are within 1.10×. What it took, and what is left:
+//! exactly the ball information that has reached that robot (its own sightings and kicks at
+//! once, each teammate's batches and kick reports when they arrive, late ones slotted in by
+//! time). That is the ceiling of any fusion over what this network delivered. The team
+//! ball is 1.03–1.06× the reference (the fusion loses little), and the reference is
+//! 1.87–2.00× the centralized filter with kicks (the network costs the rest); for robots
+//! that do not see the ball themselves the team ball is ~0.14 m, the reference ~0.13 m and
+//! the centralized filter ~0.05 m. Reporting kicks took the team ball from 0.099–0.108 m to
+//! 0.094–0.101 m. On a LAN all of them are within 1.1×. What it took, and what is left:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
 //!   and a kick-off that teleports the ball while every filter still tracks the old one
 //!   dominated at first (ratio > 2.2, NEES 19); `transit_s` and `forget_ball` removed them;
@@ -147,14 +161,15 @@
 //!   against 1.91/1.91/1.84) and seed 3's NEES falls to 1.71, below its bound; q = 0.85
 //!   restores NEES (2.29/2.15/2.29) at ratio 1.90/1.92/1.91, q = 0.6 is overconfident
 //!   (NEES 2.7–3.0). The delay, not the friction law, sets the ratio, so the sim keeps
-//!   [`BallModel::Rolling`] at c = 1/s, q = 1;
+//!   [`BallModel::Rolling`] at c = 1/s (with kick reports q = 0.85: 1 left the team ball
+//!   underconfident);
 //! - *overconfidence from correlated pose errors*: `pose_error_sharing` (10) keeps the
 //!   centralized filter's and the team's NEES near 2.
 //!
 //! # The wire
-//! An LWM is [`LWM_WIRE_LEN`] = 70 bytes (mm, mrad-scale fixed point, σ on a log scale and
-//! correlations as i8), so it travels in a 107-byte comms frame, 123 with an HMAC tag:
-//! within a 128-byte SPL message. Quantising never shrinks a covariance: see
+//! An LWM is [`LWM_WIRE_LEN`] = 75 bytes (mm, mrad-scale fixed point, σ on a log scale and
+//! correlations as i8); a comms frame carrying it alone is at most 128 bytes (an SPL
+//! message) whatever its counters, 16 more with an HMAC tag. Quantising never shrinks a covariance: see
 //! [`LocalWorldModel::to_bytes`]. Decoding takes untrusted bytes and returns a
 //! [`DecodeError`], never panics.
 //!
@@ -170,7 +185,7 @@
 //! let seen = BallSighting { local: Vector2::new(0.0, 2.0), cov: Matrix2::identity() * 0.01 };
 //! lwm.ball_sighting(0.05, &seen);
 //! let bytes = lwm.publish(0.1).to_bytes().unwrap();
-//! assert_eq!(bytes.len(), fusion::LWM_WIRE_LEN); // 70: a 107-byte comms frame
+//! assert_eq!(bytes.len(), fusion::LWM_WIRE_LEN); // 75
 //!
 //! let mut gwm = GlobalModel::new(2, GlobalConfig::default());
 //! gwm.receive(1, &bytes, 0.15, 0.05).unwrap(); // robot 1's message, 50 ms old on arrival
@@ -190,7 +205,7 @@ mod wire;
 pub use ball::{
     field_observation, field_observation_shared, initial_estimate, update as ball_update,
     BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate,
-    CentralizedBall, FieldObservation, NetworkLimitedBall,
+    CentralizedBall, FieldObservation, Kick, NetworkLimitedBall,
 };
 pub use confidence::{pose_confidence, position_confidence, REFERENCE_RADIUS_M};
 pub use geometry::{
@@ -201,7 +216,7 @@ pub use global::{
     GlobalConfig, GlobalModel, GlobalStats, Ingest, TeamBall, TeamBallSource, Teammate,
 };
 pub use kalman::UpdateError;
-pub use local::{LocalConfig, LocalModel, LocalWorldModel};
+pub use local::{KickReport, LocalConfig, LocalModel, LocalWorldModel, KICK_REPORTED_FOR_S};
 pub use nalgebra;
 pub use pose::{
     predict as pose_predict, update_landmark, update_range_bearing, LandmarkSighting, Odometry,

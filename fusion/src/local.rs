@@ -3,7 +3,7 @@
 
 use crate::ball::{
     field_observation_shared, BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate,
-    FieldObservation,
+    FieldObservation, Kick,
 };
 use crate::confidence::{pose_confidence, position_confidence};
 use crate::kalman::UpdateError;
@@ -39,6 +39,23 @@ pub struct LocalWorldModel {
     /// message loses nothing if one of the next two arrives. A receiver takes each batch
     /// once, by sequence number.
     pub earlier: [Option<FieldObservation>; 2],
+    /// The robot's latest kick, repeated in every message for [`KICK_REPORTED_FOR_S`]
+    /// after it (so a lost message does not lose it).
+    pub kick: Option<KickReport>,
+}
+
+/// How long after a kick a robot's messages carry it.
+pub const KICK_REPORTED_FOR_S: f64 = 0.15;
+
+/// A kick as an LWM carries it: the kick and its number, so that a receiver applies each
+/// kick once however many messages repeat it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KickReport {
+    /// The robot's kick counter, modulo 4 (kicks are seconds apart, a report lasts
+    /// [`KICK_REPORTED_FOR_S`]: two bits tell consecutive kicks apart).
+    pub number: u8,
+    /// The kick, its time on the message's clock.
+    pub kick: Kick,
 }
 
 impl LocalWorldModel {
@@ -124,6 +141,8 @@ pub struct LocalModel {
     sent: [Option<FieldObservation>; 2],
     seq: u16,
     last_seen_t_s: Option<f64>,
+    kicks: u8,
+    last_kick: Option<KickReport>,
 }
 
 impl LocalModel {
@@ -136,6 +155,8 @@ impl LocalModel {
             sent: [None; 2],
             seq: 0,
             last_seen_t_s: None,
+            kicks: 0,
+            last_kick: None,
         }
     }
 
@@ -174,6 +195,20 @@ impl LocalModel {
         result
     }
 
+    /// The robot kicked the ball: its own ball track follows the kick at once, and its next
+    /// messages tell the team. An invalid kick (non-finite, negative σ) is ignored.
+    pub fn kick(&mut self, kick: &Kick) {
+        if !kick.is_valid() {
+            return;
+        }
+        self.ball.kick(kick);
+        self.kicks = self.kicks.wrapping_add(1) % 4;
+        self.last_kick = Some(KickReport {
+            number: self.kicks,
+            kick: *kick,
+        });
+    }
+
     /// A ball sighting at `t_s` as the field-frame observation this robot makes of it: from
     /// the current pose estimate, its uncertainty shared as the ball filter is set to.
     pub fn field_observation(&self, t_s: f64, sighting: &BallSighting) -> FieldObservation {
@@ -198,6 +233,7 @@ impl LocalModel {
         self.pending = Accumulator::EMPTY;
         self.sent = [None; 2];
         self.last_seen_t_s = None;
+        self.last_kick = None;
     }
 
     /// The current pose estimate.
@@ -230,6 +266,9 @@ impl LocalModel {
             lbc: ball.map_or(0.0, |b| position_confidence(&b.position_cov())),
             observation: None,
             earlier: [None; 2],
+            kick: self
+                .last_kick
+                .filter(|k| (0.0..=KICK_REPORTED_FOR_S).contains(&(t_s - k.kick.t_s))),
         }
     }
 

@@ -1,8 +1,8 @@
-//! The LWM on the wire: 70 bytes, fixed point, little-endian.
+//! The LWM on the wire: 75 bytes, fixed point, little-endian.
 //!
 //! ```text
 //! off  size  field
-//!  0    1    version (high nibble, = 2) | flags: bit0 ball present, bit1 observation
+//!  0    1    version (high nibble, = 3) | flags: bit0 ball present, bit1 observation
 //!            present, bit2 / bit3 the batch of message seq−1 / seq−2 present
 //!  1    2    seq u16
 //!  3    6    pose x, y (i16 mm), θ (i16, π/32768 rad)
@@ -19,12 +19,21 @@
 //! 46    2    observation age before the message time (u16 ms)
 //! 48   11    the batch of message seq−1 again, same layout as 37..48
 //! 59   11    the batch of message seq−2 again
+//! 70    1    kick: bit7 present, bits 6–5 its number (mod 4), bits 4–0 its age before
+//!            the message time (× 5 ms, ≤ 155 ms)
+//! 71    1    kick speed (u8, × 0.05 m/s)
+//! 72    1    kick direction (u8, × 2π/256 rad, counter-clockwise from field +x)
+//! 73    2    kick σ of speed, of direction (u8 log)
 //! ```
 //!
 //! The two earlier batches are repeats, so that a lost message (or one overwritten on a
 //! receiver's blackboard by the next before it was read) loses nothing as long as one of
-//! the next two arrives; the GWM takes each batch once, by sequence number. 70 bytes
-//! travel in a 107-byte comms frame (123 with an HMAC tag): within 128.
+//! the next two arrives; the GWM takes each batch once, by sequence number. A kick is
+//! likewise repeated for [`crate::KICK_REPORTED_FOR_S`] and taken once, by its number.
+//! A comms frame carrying the 75 bytes alone is at most 128 bytes (the SPL's message limit)
+//! whatever its counters, 16 more with an HMAC tag.
+//! The kick's speed and direction steps are added to its σ's (the time step, ≤ 2.5 ms, is
+//! not: 1 cm at 4 m/s).
 //!
 //! A u8 σ code q means `1e-4 · K8^q` (m, rad or m/s) with K8 = 10^(6/255) (5.6 % steps,
 //! up to 100); a u16 code means `1e-5 · K16^q` with K16 = 10^(7/65535).
@@ -39,16 +48,21 @@
 //! code maps to a finite number, and a correlation block that is not positive definite is a
 //! [`DecodeError`], never a panic.
 
-use crate::ball::{BallEstimate, FieldObservation};
-use crate::local::LocalWorldModel;
+use crate::ball::{BallEstimate, FieldObservation, Kick};
+use crate::local::{KickReport, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use nalgebra::{SMatrix, Vector2, Vector3, Vector4};
 use std::f64::consts::PI;
 use thiserror::Error;
 
 /// Bytes of an encoded LWM.
-pub const LWM_WIRE_LEN: usize = 70;
-const VERSION: u8 = 2;
+pub const LWM_WIRE_LEN: usize = 75;
+const VERSION: u8 = 3;
+const KICK_AT: usize = 70;
+const KICK_PRESENT: u8 = 0x80;
+const KICK_AGE_STEP_S: f64 = 0.005;
+const KICK_SPEED_STEP_MPS: f64 = 0.05;
+const KICK_DIRECTION_STEP_RAD: f64 = 2.0 * PI / 256.0;
 const FLAG_BALL: u8 = 1;
 const FLAG_OBSERVATION: u8 = 2;
 const FLAG_EARLIER: [u8; 2] = [4, 8];
@@ -334,8 +348,55 @@ fn get_observation(b: &[u8], at: usize, t_s: f64) -> Result<FieldObservation, De
     })
 }
 
+fn put_kick(b: &mut [u8], report: &KickReport, t_s: f64) -> Result<(), EncodeError> {
+    let k = &report.kick;
+    let out = |field| EncodeError::OutOfRange { field };
+    if !k.is_valid() {
+        return Err(out("kick"));
+    }
+    let age = ((t_s - k.t_s) / KICK_AGE_STEP_S).round();
+    if !(0.0..=31.0).contains(&age) {
+        return Err(out("kick age"));
+    }
+    let speed = (k.speed_mps / KICK_SPEED_STEP_MPS).round();
+    if speed > 255.0 {
+        return Err(out("kick speed"));
+    }
+    let direction = (k.direction_rad.rem_euclid(2.0 * PI) / KICK_DIRECTION_STEP_RAD).round() as u32;
+    // The steps' own variance (Δ²/12) goes into the σ's: never more confident than sent.
+    let with_step = |sigma: f64, step: f64| (sigma * sigma + step * step / 12.0).sqrt();
+    let code = SigmaCode::U8();
+    b[KICK_AT] = KICK_PRESENT | ((report.number & 3) << 5) | age as u8;
+    b[KICK_AT + 1] = speed as u8;
+    b[KICK_AT + 2] = (direction % 256) as u8;
+    b[KICK_AT + 3] = code.encode_up(with_step(k.speed_sigma_mps, KICK_SPEED_STEP_MPS)) as u8;
+    b[KICK_AT + 4] =
+        code.encode_up(with_step(k.direction_sigma_rad, KICK_DIRECTION_STEP_RAD)) as u8;
+    Ok(())
+}
+
+fn get_kick(b: &[u8], t_s: f64) -> Option<KickReport> {
+    let head = b[KICK_AT];
+    if head & KICK_PRESENT == 0 {
+        return None;
+    }
+    let code = SigmaCode::U8();
+    Some(KickReport {
+        number: (head >> 5) & 3,
+        kick: Kick {
+            t_s: t_s - (head & 0x1f) as f64 * KICK_AGE_STEP_S,
+            speed_mps: b[KICK_AT + 1] as f64 * KICK_SPEED_STEP_MPS,
+            direction_rad: crate::geometry::wrap_angle(
+                b[KICK_AT + 2] as f64 * KICK_DIRECTION_STEP_RAD,
+            ),
+            speed_sigma_mps: code.decode(b[KICK_AT + 3] as u32),
+            direction_sigma_rad: code.decode(b[KICK_AT + 4] as u32),
+        },
+    })
+}
+
 impl LocalWorldModel {
-    /// The 70-byte wire form. Times are sent relative to `self.t_s`.
+    /// The 75-byte wire form. Times are sent relative to `self.t_s`.
     pub fn to_bytes(&self) -> Result<[u8; LWM_WIRE_LEN], EncodeError> {
         let mut b = [0u8; LWM_WIRE_LEN];
         let mut flags = 0u8;
@@ -396,6 +457,9 @@ impl LocalWorldModel {
                 flags |= FLAG_EARLIER[k];
                 put_observation(&mut b, OBSERVATION_AT[k + 1], obs, self.t_s)?;
             }
+        }
+        if let Some(report) = &self.kick {
+            put_kick(&mut b, report, self.t_s)?;
         }
         b[0] = (VERSION << 4) | flags;
         Ok(b)
@@ -478,6 +542,7 @@ impl LocalWorldModel {
             lbc: b[36] as f64 / 255.0,
             observation,
             earlier,
+            kick: get_kick(b, t_s),
         })
     }
 }
@@ -531,6 +596,16 @@ mod tests {
                     cov: Matrix2::new(0.003, 0.0, 0.0, 0.002),
                 }),
             ],
+            kick: Some(KickReport {
+                number: 2,
+                kick: Kick {
+                    t_s: 9.96,
+                    speed_mps: 4.0,
+                    direction_rad: -2.5,
+                    speed_sigma_mps: 0.2,
+                    direction_sigma_rad: 0.08,
+                },
+            }),
         }
     }
 
@@ -538,10 +613,15 @@ mod tests {
     fn fixture_round_trips_within_one_quantum_and_never_shrinks_a_covariance() {
         let lwm = sample();
         let bytes = lwm.to_bytes().unwrap();
-        assert_eq!(bytes.len(), 70);
+        assert_eq!(bytes.len(), 75);
         assert_eq!(
-            bytes[0], 0x2b,
-            "version 2, ball, observation and the seq−2 batch present"
+            bytes[0], 0x3b,
+            "version 3, ball, observation and the seq−2 batch present"
+        );
+        assert_eq!(
+            &bytes[70..73],
+            &[0x80 | (2 << 5) | 8, 80, 154],
+            "kick: present, number 2, 40 ms old; 4.0 m/s; −2.5 rad = 154 × 2π/256"
         );
         assert_eq!(&bytes[1..3], &[0x01, 0x02], "seq 513 little-endian");
         assert_eq!(&bytes[3..5], &1234i16.to_le_bytes(), "pose x in mm");
@@ -574,29 +654,87 @@ mod tests {
         assert!((e1.t_s - 19.87).abs() < 1e-9, "repeat keeps its age");
         assert!((e1.position - e0.position).abs().max() < 1e-9);
         assert!(covers(&e1.cov, &e0.cov));
+        let (k0, k1) = (lwm.kick.unwrap(), back.kick.unwrap());
+        assert_eq!(k1.number, 2);
+        assert!(
+            (k1.kick.t_s - 19.96).abs() < 1e-9,
+            "kick time {}",
+            k1.kick.t_s
+        );
+        assert!((k1.kick.speed_mps - 4.0).abs() < 1e-9);
+        assert!(
+            crate::geometry::wrap_angle(k1.kick.direction_rad - k0.kick.direction_rad).abs()
+                <= PI / 256.0
+        );
+        assert!(
+            k1.kick.speed_sigma_mps >= k0.kick.speed_sigma_mps
+                && k1.kick.direction_sigma_rad >= k0.kick.direction_sigma_rad,
+            "a kick's σ's never shrink on the wire: {:?}",
+            k1.kick
+        );
+    }
+
+    #[test]
+    fn a_kick_that_cannot_be_carried_is_an_error_not_a_wrong_message() {
+        let mut lwm = sample();
+        let kick = |t_s: f64, speed_mps: f64| {
+            Some(KickReport {
+                number: 0,
+                kick: Kick {
+                    t_s,
+                    speed_mps,
+                    direction_rad: 0.0,
+                    speed_sigma_mps: 0.1,
+                    direction_sigma_rad: 0.1,
+                },
+            })
+        };
+        lwm.kick = kick(9.7, 4.0);
+        assert_eq!(
+            lwm.to_bytes(),
+            Err(EncodeError::OutOfRange { field: "kick age" }),
+            "300 ms is older than a report lasts"
+        );
+        lwm.kick = kick(9.99, 20.0);
+        assert_eq!(
+            lwm.to_bytes(),
+            Err(EncodeError::OutOfRange {
+                field: "kick speed"
+            })
+        );
+        lwm.kick = kick(f64::NAN, 4.0);
+        assert_eq!(
+            lwm.to_bytes(),
+            Err(EncodeError::OutOfRange { field: "kick" })
+        );
+        lwm.kick = None;
+        let bytes = lwm.to_bytes().unwrap();
+        assert_eq!(&bytes[70..], &[0; 5], "no kick: five zero bytes");
+        assert_eq!(LocalWorldModel::from_bytes(&bytes, 0.0).unwrap().kick, None);
     }
 
     #[test]
     fn bad_length_version_and_correlations_are_typed_errors() {
         let bytes = sample().to_bytes().unwrap();
         assert_eq!(
-            LocalWorldModel::from_bytes(&bytes[..69], 0.0),
+            LocalWorldModel::from_bytes(&bytes[..74], 0.0),
             Err(DecodeError::Length {
-                expected: 70,
-                got: 69
+                expected: 75,
+                got: 74
             })
         );
         let mut v = bytes;
-        v[0] = 0x13;
+        v[0] = 0x2b;
         assert_eq!(
             LocalWorldModel::from_bytes(&v, 0.0),
-            Err(DecodeError::Version { got: 1 })
+            Err(DecodeError::Version { got: 2 }),
+            "a version-2 sender's 70 bytes padded: refused, not misread"
         );
         let mut v = bytes;
-        v[0] = 0x3b;
+        v[0] = 0x4b;
         assert_eq!(
             LocalWorldModel::from_bytes(&v, 0.0),
-            Err(DecodeError::Version { got: 3 })
+            Err(DecodeError::Version { got: 4 })
         );
         let mut v = bytes;
         v[12..15].copy_from_slice(&[127, 127, 0x81]); // ρxy = 1, ρxθ = 1, ρyθ = −1
@@ -618,13 +756,16 @@ mod tests {
         }
 
         #[test]
-        fn any_70_bytes_decode_to_finite_pd_covariances_or_an_error(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform32(any::<u8>()), end in proptest::array::uniform8(any::<u8>()), flags in 0u8..16) {
-            let mut all = [0u8; 70];
-            bytes[0] = 0x20 | flags;
+        fn any_75_bytes_decode_to_finite_pd_covariances_or_an_error(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform32(any::<u8>()), end in proptest::array::uniform16(any::<u8>()), flags in 0u8..16) {
+            let mut all = [0u8; LWM_WIRE_LEN];
+            bytes[0] = 0x30 | flags;
             all[..32].copy_from_slice(&bytes);
             all[32..64].copy_from_slice(&tail);
-            all[64..].copy_from_slice(&end[..6]);
+            all[64..].copy_from_slice(&end[..11]);
             if let Ok(lwm) = LocalWorldModel::from_bytes(&all, 1.0) {
+                if let Some(k) = lwm.kick {
+                    prop_assert!(k.kick.is_valid() && k.kick.t_s <= 1.0 && k.number < 4, "{:?}", k);
+                }
                 prop_assert!(lwm.pose.cov.cholesky().is_some());
                 if let Some(b) = lwm.ball { prop_assert!(b.cov.cholesky().is_some() && b.mean.iter().all(|v| v.is_finite())); }
                 for o in lwm.observation.iter().chain(lwm.earlier.iter().flatten()) { prop_assert!(o.cov.cholesky().is_some()); }
@@ -648,6 +789,7 @@ mod tests {
                 lbc: 0.5,
                 observation: Some(FieldObservation { t_s: 5.0 - age, position: Vector2::new(x, y), cov: spd::<2>(&e[7..], scale) }),
                 earlier: [Some(FieldObservation { t_s: 4.9 - age, position: Vector2::new(y, x), cov: spd::<2>(&e[9..], scale) }), None],
+                kick: Some(KickReport { number: 1, kick: Kick { t_s: 5.0 - age * 0.15, speed_mps: v.abs() / 2.0, direction_rad: th, speed_sigma_mps: scale.sqrt(), direction_sigma_rad: scale.sqrt() } }),
             };
             let back = LocalWorldModel::from_bytes(&lwm.to_bytes().unwrap(), 5.0).unwrap();
             prop_assert!(covers(&back.pose.cov, &lwm.pose.cov));
@@ -655,6 +797,9 @@ mod tests {
             prop_assert!(covers(&back.observation.unwrap().cov, &lwm.observation.unwrap().cov));
             prop_assert!(covers(&back.earlier[0].unwrap().cov, &lwm.earlier[0].unwrap().cov));
             prop_assert!((crate::geometry::wrap_angle(back.pose.mean.z - th)).abs() < 1e-4);
+            let (k0, k1) = (lwm.kick.unwrap().kick, back.kick.unwrap().kick);
+            prop_assert!(k1.speed_sigma_mps >= k0.speed_sigma_mps.min(100.0) && k1.direction_sigma_rad >= k0.direction_sigma_rad.min(100.0));
+            prop_assert!((k1.t_s - k0.t_s).abs() <= 0.0025 + 1e-9);
         }
     }
 }
