@@ -87,7 +87,7 @@ pub use impairment::{
 pub use link::{DropReason, LinkModel, Verdict};
 pub use preset::{Preset, BEACON_INTERVAL};
 pub use sim::{Action, ActionError, Delivery, Dest, GroupId, NodeId, SendError, Sim, SimBuilder};
-pub use spec::SpecError;
+pub use spec::{parse_duration, parse_probability, SpecError};
 pub use stats::LinkStats;
 pub use time::Time;
 pub use trace::{Trace, TraceEvent, TraceKind};

@@ -59,8 +59,8 @@ pub enum SpecError {
         /// The offending name.
         name: String,
     },
-    /// A duration is malformed (needs a unit: ns, us, µs, ms, s).
-    #[error("{key}: `{value}` is not a duration like 50ms, 200us, 1.5s")]
+    /// A duration is malformed (needs a unit: ns, us, µs, ms, s, min).
+    #[error("{key}: `{value}` is not a duration like 50ms, 200us, 1.5s, 5min")]
     BadDuration {
         /// The key.
         key: String,
@@ -184,6 +184,18 @@ fn non_negative(number: &str) -> Option<f64> {
         .filter(|v| v.is_finite() && *v >= 0.0)
 }
 
+/// A duration with its unit, as spec strings take it (`50ms`, `200us`, `1.5s`, `5min`; a
+/// bare number is refused rather than guessed); `what` names the value in the error (a
+/// key, a command-line flag).
+pub fn parse_duration(what: &str, value: &str) -> Result<Duration, SpecError> {
+    duration(what, value)
+}
+
+/// A probability as spec strings take it: `20%` or `0.2`, within 0..=1.
+pub fn parse_probability(what: &str, value: &str) -> Result<f64, SpecError> {
+    probability(what, value)
+}
+
 fn duration(key: &str, value: &str) -> Result<Duration, SpecError> {
     let bad = || SpecError::BadDuration {
         key: key.to_string(),
@@ -195,6 +207,7 @@ fn duration(key: &str, value: &str) -> Result<Duration, SpecError> {
         "us" | "µs" => 1e3,
         "ms" => 1e6,
         "s" => 1e9,
+        "min" => 60e9,
         _ => return Err(bad()),
     };
     let ns = (non_negative(number).ok_or_else(bad)? * ns_per_unit).round();
@@ -432,7 +445,7 @@ mod tests {
         ));
         assert_eq!(
             err("delay=fast").to_string(),
-            "delay: `fast` is not a duration like 50ms, 200us, 1.5s"
+            "delay: `fast` is not a duration like 50ms, 200us, 1.5s, 5min"
         );
     }
 

@@ -20,7 +20,7 @@ pub struct SimArgs {
     /// Opponents on the field (obstacles that chase the ball).
     #[arg(long, default_value_t = 3)]
     pub opponents: usize,
-    /// Simulated duration: `300s`, `5m`, `90` (seconds).
+    /// Simulated duration, with its unit: `300s`, `5min`.
     #[arg(long, default_value = "300s", value_parser = parse_duration)]
     pub duration: Duration,
     /// Network preset: lan, wlan, competition.
@@ -63,43 +63,15 @@ impl Default for SimArgs {
     }
 }
 
-/// `300s`, `1.5s`, `50ms`, `200us`, `5m`, `5min`, or a bare number of seconds.
-pub fn parse_duration(s: &str) -> Result<Duration, String> {
-    let s = s.trim();
-    let split = s
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(s.len());
-    let (num, unit) = s.split_at(split);
-    let x: f64 = num
-        .parse()
-        .map_err(|_| format!("`{s}` is not a duration such as 300s or 50ms"))?;
-    let secs = match unit.trim() {
-        "" | "s" => x,
-        "ms" => x / 1e3,
-        "us" | "µs" => x / 1e6,
-        "m" | "min" => x * 60.0,
-        other => {
-            return Err(format!(
-                "unknown time unit `{other}` in `{s}` (use s, ms, us, m)"
-            ))
-        }
-    };
-    Duration::try_from_secs_f64(secs).map_err(|e| format!("`{s}`: {e}"))
+/// A duration with its unit (`300s`, `5min`, `50ms`), as netsim's spec strings take it: a
+/// bare `50` is refused, not read as 50 s.
+fn parse_duration(s: &str) -> Result<Duration, String> {
+    netsim::parse_duration("duration", s.trim()).map_err(|e| e.to_string())
 }
 
 /// `20%` or `0.2`, within 0..=1.
-pub fn parse_fraction(s: &str) -> Result<f64, String> {
-    let s = s.trim();
-    let x = match s.strip_suffix('%') {
-        Some(p) => p.trim().parse::<f64>().map(|v| v / 100.0),
-        None => s.parse::<f64>(),
-    }
-    .map_err(|_| format!("`{s}` is not a probability such as 20% or 0.2"))?;
-    if (0.0..=1.0).contains(&x) {
-        Ok(x)
-    } else {
-        Err(format!("`{s}` is outside 0–100%"))
-    }
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    netsim::parse_probability("probability", s.trim()).map_err(|e| e.to_string())
 }
 
 /// Run `huddle sim`.
@@ -163,11 +135,17 @@ mod tests {
     fn durations_and_fractions_parse_as_written_in_the_issue() {
         assert_eq!(parse_duration("300s"), Ok(Duration::from_secs(300)));
         assert_eq!(parse_duration("50ms"), Ok(Duration::from_millis(50)));
-        assert_eq!(parse_duration("5m"), Ok(Duration::from_secs(300)));
-        assert_eq!(parse_duration("90"), Ok(Duration::from_secs(90)));
+        assert_eq!(parse_duration("5min"), Ok(Duration::from_secs(300)));
         assert!(parse_duration("5 parsecs").is_err());
         assert_eq!(parse_fraction("20%"), Ok(0.2));
         assert_eq!(parse_fraction("0.3"), Ok(0.3));
         assert!(parse_fraction("120%").is_err());
+    }
+
+    #[test]
+    fn a_duration_without_a_unit_is_refused_not_guessed() {
+        // `--latency 50` once meant 50 s: a typo that silently ruins a run.
+        let err = parse_duration("50").expect_err("no unit");
+        assert!(err.contains("50ms"), "the error shows the form: {err}");
     }
 }
