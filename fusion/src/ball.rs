@@ -329,22 +329,24 @@ pub struct Kick {
 }
 
 impl Kick {
-    /// The ball's velocity right after the kick and its covariance (the polar σ's through
-    /// the Jacobian of (s, φ) ↦ s (cos φ, sin φ)).
+    /// The ball's velocity right after the kick and its covariance: the polar σ's through
+    /// the Jacobian of (s, φ) ↦ s (cos φ, sin φ), the across-track σ at least the speed σ
+    /// (a slow kick's direction says little, and a zero-speed one would leave the
+    /// covariance singular).
     pub fn velocity(&self) -> (Vector2<f64>, Matrix2<f64>) {
         let (sin, cos) = self.direction_rad.sin_cos();
         let s = self.speed_mps;
-        let j = Matrix2::new(cos, -s * sin, sin, s * cos);
-        let polar = Matrix2::new(
-            self.speed_sigma_mps * self.speed_sigma_mps,
-            0.0,
-            0.0,
-            self.direction_sigma_rad * self.direction_sigma_rad,
-        );
-        (Vector2::new(s * cos, s * sin), j * polar * j.transpose())
+        let along = self.speed_sigma_mps;
+        let across = (s * self.direction_sigma_rad).max(along);
+        let rot = Matrix2::new(cos, -sin, sin, cos);
+        let polar = Matrix2::new(along * along, 0.0, 0.0, across * across);
+        (
+            Vector2::new(s * cos, s * sin),
+            rot * polar * rot.transpose(),
+        )
     }
 
-    /// Whether every number is finite and the σ's and speed non-negative.
+    /// Whether every number is finite, the speed non-negative and the σ's positive.
     pub fn is_valid(&self) -> bool {
         [
             self.t_s,
@@ -356,8 +358,8 @@ impl Kick {
         .iter()
         .all(|v| v.is_finite())
             && self.speed_mps >= 0.0
-            && self.speed_sigma_mps >= 0.0
-            && self.direction_sigma_rad >= 0.0
+            && self.speed_sigma_mps > 0.0
+            && self.direction_sigma_rad > 0.0
     }
 }
 
@@ -702,11 +704,12 @@ impl CentralizedBall {
 
 /// The centralized filter under a network's information pattern: the same filter as
 /// [`CentralizedBall`], fed at one robot with exactly the ball information that has reached
-/// that robot so far (its own sightings at once, each teammate's batches when its message
-/// arrives, in whatever order they arrive). It is the ceiling of any fusion over that
-/// information — what a team ball could be at best on this network — so a team ball's RMSE
-/// over this one's measures the fusion, and this one's over [`CentralizedBall`]'s measures
-/// the network.
+/// that robot so far (its own sightings and kicks at once, each teammate's batches and
+/// kick reports when its message arrives, in whatever order they arrive). It is the
+/// reference for a fusion over that information: what the centralized filter itself makes
+/// of what this network delivered (not a proof of optimality — it is the same gated EKF),
+/// so a team ball's RMSE over this one's measures the fusion, and this one's over the
+/// centralized filter's measures the network.
 ///
 /// Observations are kept for `window_s` so that a late one slots in at its own time; an
 /// estimate replays them over the settled state (a clone and a few updates).

@@ -43,6 +43,10 @@ pub struct GlobalConfig {
     /// since a teammate may be wrong about the ball where the own camera is what this
     /// robot sees; 0 turns it off.
     pub teammate_restart_after: u32,
+    /// How far from a kicker's reported position the ball may be for its kick to be taken
+    /// (m), before both positions' uncertainty is added: the robot's radius, the ball's,
+    /// and the reach of a foot.
+    pub kick_reach_m: f64,
 }
 
 impl Default for GlobalConfig {
@@ -59,9 +63,15 @@ impl Default for GlobalConfig {
             transit_s: 0.0,
             own_restart_after: 2,
             teammate_restart_after: 3,
+            kick_reach_m: 0.5,
         }
     }
 }
+
+/// Two reports of a kick with the same number this close in time (each placed by its own
+/// message's age, so they differ by the network's jitter) are one kick: a report lasts
+/// [`crate::KICK_REPORTED_FOR_S`], and a robot's kicks with one number are four kicks apart.
+const KICK_SAME_WITHIN_S: f64 = 0.3;
 
 /// What [`GlobalModel::ingest`] did with one LWM.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -87,7 +97,7 @@ pub struct GlobalStats {
     pub accepted: u64,
     /// Observations gated out.
     pub rejected: u64,
-    /// Observations too late to use.
+    /// Observations too late to use (and kicks too late or gated out, see `kick_velocity`).
     pub late: u64,
     /// Messages ignored as duplicates or re-sends.
     pub duplicates: u64,
@@ -97,6 +107,8 @@ pub struct GlobalStats {
     pub recovered: u64,
     /// Kicks applied to the team ball.
     pub kicks: u64,
+    /// Kicks refused: the kicker was not within reach of the team ball.
+    pub kicks_refused: u64,
 }
 
 /// Where a [`TeamBall`] came from.
@@ -274,11 +286,11 @@ impl GlobalModel {
             let rec = self.robots.get_mut(&robot).expect("record inserted above");
             // The same kick again (a repeat) has the same number and about the same time.
             let seen = rec.last_kick.is_some_and(|(number, t_s)| {
-                number == report.number && (report.kick.t_s - t_s).abs() < self.config.stale_after_s
+                number == report.number && (report.kick.t_s - t_s).abs() < KICK_SAME_WITHIN_S
             });
             if !seen {
                 rec.last_kick = Some((report.number, report.kick.t_s));
-                self.kicked(&report.kick, now_s);
+                self.kicked(&report.kick, &lwm.pose, now_s);
             }
         }
         self.commit(now_s - self.config.commit_lag_s);
@@ -309,6 +321,12 @@ impl GlobalModel {
             self.last_accepted_obs_t_s = obs.t_s;
             if let Some(rec) = self.robots.get_mut(&robot) {
                 rec.last_accepted_t_s = Some(now_s);
+                if lwm.ball.is_some() {
+                    // The robot's own ball already turned with its kick: not twice.
+                    if let Some(report) = lwm.kick {
+                        rec.last_kick = Some((report.number, report.kick.t_s));
+                    }
+                }
             }
             return Ingest::Started;
         };
@@ -454,55 +472,96 @@ impl GlobalModel {
     /// with the kick's velocity, replaces the track from then on, and every observation made
     /// since (pending or rejected) is gated against it and fused at its own time. Sightings
     /// after a kick no longer have to outvote the old track first: the team ball turns the
-    /// moment the kick's report arrives. Dissent is cleared (it was about the kick). A kick
-    /// older than the committed ball, or with no ball to kick, is too late to use.
-    fn kicked(&mut self, kick: &Kick, now_s: f64) {
+    /// moment the kick's report arrives. Dissent is cleared (it was about the kick).
+    ///
+    /// A kick is taken only from a kicker that was within reach of the team ball at the
+    /// kick ([`GlobalConfig::kick_reach_m`] plus three σ of both positions): a robot that
+    /// claims to kick a ball it is nowhere near cannot turn the team ball. When the
+    /// cameras restarted the ball after the kick but before its report came, the track is
+    /// rewound to the kick first; when the kick is older than the committed ball and there
+    /// is nothing to rewind, its velocity is fused instead (see `kick_velocity`).
+    fn kicked(&mut self, kick: &Kick, kicker: &PoseEstimate, now_s: f64) {
         if !kick.is_valid() || kick.t_s < self.forgotten_before_t_s {
             return;
         }
-        let Some(mut committed) = self.committed else {
+        let Some(committed) = self.committed else {
+            return;
+        };
+        let model = self.config.ball;
+        // The track at the kick: the one set aside by a restart since, if there is one and
+        // nothing of the restarted track has been committed (true within the commit lag).
+        let rewind = self.rewind.take().filter(|rw| {
+            kick.t_s < rw.restart_t_s
+                && kick.t_s >= rw.committed.t_s
+                && now_s - kick.t_s <= self.config.commit_lag_s
+                && committed.t_s <= rw.restart_t_s
+        });
+        let at_kick = match &rewind {
+            Some(rw) => {
+                let n = rw.pending.partition_point(|o| o.t_s <= kick.t_s);
+                let state = if n == 0 {
+                    rw.committed
+                } else {
+                    rw.after[n - 1]
+                };
+                Some(state.predict_to(&model, kick.t_s))
+            }
+            None if kick.t_s >= committed.t_s => self.state_at(kick.t_s),
+            None => None,
+        };
+        let (ball, travelled_m) = match &at_kick {
+            Some(b) => (*b, 0.0),
+            // Older than the committed ball: since the kick it has rolled at most this far.
+            None => (committed, kick.speed_mps * (committed.t_s - kick.t_s)),
+        };
+        if !self.within_reach(&ball, kicker, travelled_m) {
+            self.stats.kicks_refused += 1;
+            self.rewind = rewind;
+            return;
+        }
+        let Some(before) = at_kick else {
+            self.kick_velocity(kick, &committed);
             return;
         };
         let mut late: Vec<FieldObservation> = Vec::new();
-        if let Some(rw) = self.rewind.take() {
-            if kick.t_s < rw.restart_t_s && kick.t_s >= rw.committed.t_s {
-                // The cameras restarted the ball after the kick, before its report came:
-                // back to the track as it was, and everything seen since the kick is
-                // gated again against the kicked track.
-                late = self
-                    .pending
-                    .iter()
-                    .chain(&self.rejected)
-                    .chain(&rw.pending)
-                    .chain(&rw.rejected)
-                    .filter(|o| o.t_s > kick.t_s)
-                    .copied()
-                    .collect();
-                late.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-                late.dedup();
-                committed = rw.committed;
-                self.committed = Some(rw.committed);
-                self.pending = rw.pending;
-                self.after = rw.after;
-                self.head = rw.head;
-                self.rejected.clear();
-            }
+        if let Some(mut rw) = rewind {
+            // Back to the track as it was up to the kick; everything seen since the kick
+            // (by either track, fused or not) is gated again against the kicked one.
+            let keep = rw.pending.partition_point(|o| o.t_s <= kick.t_s);
+            late = self
+                .pending
+                .iter()
+                .chain(&self.rejected)
+                .chain(&rw.pending[keep..])
+                .chain(&rw.rejected)
+                .filter(|o| o.t_s > kick.t_s)
+                .copied()
+                .collect();
+            rw.pending.truncate(keep);
+            rw.after.truncate(keep);
+            self.committed = Some(rw.committed);
+            self.pending = rw.pending;
+            self.after = rw.after;
+            self.rejected.clear();
         }
-        if kick.t_s < committed.t_s {
-            self.kick_velocity(kick, &committed);
-            return;
-        }
-        let Some(before) = self.state_at(kick.t_s) else {
-            return;
-        };
         self.stats.kicks += 1;
-        let fresh = before.kicked(&self.config.ball, kick);
+        let fresh = before.kicked(&model, kick);
         for rec in self.robots.values_mut() {
             rec.last_rejected_t_s = None;
             rec.rejected_run.clear();
         }
         self.rejected.extend(late);
         self.restart_with(fresh, now_s);
+    }
+
+    /// Whether a kicker at `kicker` could have reached `ball` (which may have rolled up to
+    /// `travelled_m` since the kick).
+    fn within_reach(&self, ball: &BallEstimate, kicker: &PoseEstimate, travelled_m: f64) -> bool {
+        let kicker_at = Vector2::new(kicker.mean.x, kicker.mean.y);
+        let cov = ball.position_cov() + kicker.cov.fixed_view::<2, 2>(0, 0);
+        let sigma_m = cov.symmetric_eigenvalues().max().max(0.0).sqrt();
+        let d = (ball.position() - kicker_at).norm();
+        d.is_finite() && d <= self.config.kick_reach_m + travelled_m + 3.0 * sigma_m
     }
 
     /// A kick that is older than the committed ball: the track restarted since (a camera
@@ -588,7 +647,15 @@ impl GlobalModel {
             .filter(|o| o.t_s > fresh.t_s)
             .copied()
             .collect();
-        since.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        // One observation may sit in both lists (or twice, after a rewind): fuse it once.
+        // Sorting by time, then place, puts copies next to each other.
+        since.sort_by(|a, b| {
+            a.t_s
+                .total_cmp(&b.t_s)
+                .then(a.position.x.total_cmp(&b.position.x))
+                .then(a.position.y.total_cmp(&b.position.y))
+        });
+        since.dedup();
         self.committed = Some(fresh);
         self.head = Some(fresh);
         self.clear_pending();

@@ -196,7 +196,11 @@ impl LocalModel {
     }
 
     /// The robot kicked the ball: its own ball track follows the kick at once, and its next
-    /// messages tell the team. An invalid kick (non-finite, negative σ) is ignored.
+    /// messages tell the team. `kick.direction_rad` is in the field frame, and its σ must
+    /// cover everything the robot does not know about it: a robot whose foot kicks along
+    /// its body adds its heading's variance (the pose's θθ entry); one that aims in the
+    /// field frame, as `huddle sim`'s robots do, does not. An invalid kick (non-finite, σ
+    /// not positive) is ignored.
     pub fn kick(&mut self, kick: &Kick) {
         if !kick.is_valid() {
             return;

@@ -31,7 +31,8 @@
 //! the next two arrives; the GWM takes each batch once, by sequence number. A kick is
 //! likewise repeated for [`crate::KICK_REPORTED_FOR_S`] and taken once, by its number.
 //! A comms frame carrying the 75 bytes alone is at most 128 bytes (the SPL's message limit)
-//! whatever its counters, 16 more with an HMAC tag.
+//! whatever its counters. An HMAC tag adds 16, which takes a keyed team's frame past 128
+//! (to 144 at most; the 70-byte version 2 was past it too once its counters grew).
 //! The kick's speed and direction steps are added to its σ's (the time step, ≤ 2.5 ms, is
 //! not: 1 cm at 4 m/s).
 //!
@@ -366,12 +367,24 @@ fn put_kick(b: &mut [u8], report: &KickReport, t_s: f64) -> Result<(), EncodeErr
     // The steps' own variance (Δ²/12) goes into the σ's: never more confident than sent.
     let with_step = |sigma: f64, step: f64| (sigma * sigma + step * step / 12.0).sqrt();
     let code = SigmaCode::U8();
+    let sigma = |sigma: f64, field| {
+        // Past the scale's top the decoded σ would be smaller than the sent one.
+        if sigma > code.decode(code.max_code) {
+            return Err(out(field));
+        }
+        Ok(code.encode_up(sigma) as u8)
+    };
+    b[KICK_AT + 3] = sigma(
+        with_step(k.speed_sigma_mps, KICK_SPEED_STEP_MPS),
+        "kick speed σ",
+    )?;
+    b[KICK_AT + 4] = sigma(
+        with_step(k.direction_sigma_rad, KICK_DIRECTION_STEP_RAD),
+        "kick direction σ",
+    )?;
     b[KICK_AT] = KICK_PRESENT | ((report.number & 3) << 5) | age as u8;
     b[KICK_AT + 1] = speed as u8;
     b[KICK_AT + 2] = (direction % 256) as u8;
-    b[KICK_AT + 3] = code.encode_up(with_step(k.speed_sigma_mps, KICK_SPEED_STEP_MPS)) as u8;
-    b[KICK_AT + 4] =
-        code.encode_up(with_step(k.direction_sigma_rad, KICK_DIRECTION_STEP_RAD)) as u8;
     Ok(())
 }
 
@@ -478,7 +491,7 @@ impl LocalWorldModel {
         if b[0] >> 4 != VERSION {
             return Err(DecodeError::Version { got: b[0] >> 4 });
         }
-        // Version 2 defines all four flag bits.
+        // Version 3 defines all four flag bits.
         let flags = b[0] & 0x0f;
         let seq = get_u16(b, 1);
         let theta = crate::geometry::wrap_angle(get_i16(b, 7) as f64 * ANGLE_STEP);
@@ -701,6 +714,17 @@ mod tests {
             Err(EncodeError::OutOfRange {
                 field: "kick speed"
             })
+        );
+        lwm.kick = kick(9.99, 4.0).map(|mut r| {
+            r.kick.speed_sigma_mps = 500.0;
+            r
+        });
+        assert_eq!(
+            lwm.to_bytes(),
+            Err(EncodeError::OutOfRange {
+                field: "kick speed σ"
+            }),
+            "past the σ scale's top the receiver would be told less than was sent"
         );
         lwm.kick = kick(f64::NAN, 4.0);
         assert_eq!(

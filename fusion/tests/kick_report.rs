@@ -2,7 +2,7 @@
 //! sightings later; and when the report comes after the cameras already restarted the
 //! ball, the team ball rewinds to the kick instead of keeping the restart's guesswork.
 //!
-//! One sender (robot 1, standing 2 m behind the ball's line, facing it) publishes its LWM
+//! One sender (robot 1, standing 0.2 m behind the ball, facing it) publishes its LWM
 //! at 25 Hz with a sighting per message; robot 2's GWM receives every message at once
 //! (age 0). The ball rests at the origin until robot 1 kicks it along +x at 4 m/s at
 //! t = 1 s. No friction, so the truth is x = 4 (t − 1).
@@ -41,7 +41,7 @@ fn kick() -> Kick {
 /// Robot 1's messages up to and including `until_s`, as robot 2 receives them; the kick
 /// is left out of the messages sent before `kick_reported_from_s`.
 fn messages(until_s: f64, kick_reported_from_s: f64) -> Vec<(f64, Vec<u8>)> {
-    let start = PoseEstimate::new(0.0, -2.0, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
+    let start = PoseEstimate::new(0.0, -0.2, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
     let config = LocalConfig {
         ball: BallFilterConfig {
             model: model(),
@@ -57,9 +57,9 @@ fn messages(until_s: f64, kick_reported_from_s: f64) -> Vec<(f64, Vec<u8>)> {
         if t_s > until_s + 1e-9 {
             return out;
         }
-        // Robot frame: +x right (field +x), +y forward (field +y); the ball is 2 m ahead.
+        // Robot frame: +x right (field +x), +y forward (field +y); the ball is 0.2 m ahead.
         let seen = BallSighting {
-            local: Vector2::new(truth_x(t_s), 2.0),
+            local: Vector2::new(truth_x(t_s), 0.2),
             cov: Matrix2::identity() * 4e-4,
         };
         sender.ball_sighting(t_s, &seen);
@@ -154,5 +154,69 @@ fn a_kick_reported_after_the_cameras_restarted_the_ball_rewinds_to_the_kick() {
     assert!(
         e_late < 0.5 * e_never,
         "the rewind must beat the restart's own track ({e_late:.3} m vs {e_never:.3} m)"
+    );
+}
+
+#[test]
+fn a_kick_repeated_in_later_messages_is_applied_once() {
+    // The report rides in every message for 150 ms: four messages here.
+    let mut gwm = gwm();
+    let mut carried = 0;
+    for (t_s, bytes) in messages(KICK_T_S + 0.3, 0.0) {
+        let lwm = LocalWorldModel::from_bytes(&bytes, t_s).expect("valid");
+        carried += usize::from(lwm.kick.is_some());
+        gwm.receive(1, &bytes, t_s, 0.0).expect("valid");
+    }
+    assert!(carried >= 3, "the report is repeated ({carried} messages)");
+    assert_eq!(gwm.stats().kicks, 1, "one kick, however often reported");
+    let e = team_ball_error_m(&gwm, KICK_T_S + 0.4);
+    assert!(
+        e < 0.05,
+        "the team ball follows the kicked ball: {e:.3} m off"
+    );
+}
+
+#[test]
+fn a_kick_claimed_far_from_the_ball_is_refused() {
+    // Robot 3 stands 4 m from the ball and claims to have kicked it: robot 1, which sees
+    // the ball, keeps reporting it at rest, and the team ball must stay put.
+    let mut gwm = gwm();
+    let liar_pose = PoseEstimate::new(-4.0, 0.0, 0.0, Vector3::new(1e-3, 1e-3, 1e-4));
+    let mut liar = LocalModel::new(LocalConfig::default(), liar_pose);
+    let mut still = messages(2.0, 0.0);
+    // Robot 1's ball never moves in this test: its sightings after the kick time are
+    // replaced by sightings of the ball at rest.
+    let rest = PoseEstimate::new(0.0, -2.0, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
+    let mut sender = LocalModel::new(LocalConfig::default(), rest);
+    still.clear();
+    for k in 0..=50 {
+        let t_s = k as f64 * PERIOD_S;
+        sender.ball_sighting(
+            t_s,
+            &BallSighting {
+                local: Vector2::new(0.0, 2.0),
+                cov: Matrix2::identity() * 4e-4,
+            },
+        );
+        still.push((t_s, sender.publish(t_s).to_bytes().unwrap().to_vec()));
+    }
+    for (t_s, bytes) in still {
+        gwm.receive(1, &bytes, t_s, 0.0).expect("valid");
+        if (t_s - KICK_T_S).abs() < 1e-9 {
+            liar.kick(&kick());
+        }
+        if t_s >= KICK_T_S - 1e-9 {
+            let lie = liar.publish(t_s);
+            gwm.receive(3, &lie.to_bytes().unwrap(), t_s, 0.0)
+                .expect("valid");
+        }
+    }
+    assert_eq!(gwm.stats().kicks, 0, "no kick taken: {:?}", gwm.stats());
+    assert!(gwm.stats().kicks_refused >= 1, "{:?}", gwm.stats());
+    let team = gwm.team_ball(2.0, None).expect("a team ball");
+    assert!(
+        team.estimate.position().norm() < 0.05 && team.estimate.velocity().norm() < 0.2,
+        "the team ball stays at rest: {}",
+        team.estimate.mean
     );
 }

@@ -26,12 +26,13 @@
 //!   centralized filter sees sightings only; a team that reports its kicks has more, so
 //!   this is its ceiling.
 //! - **network-limited reference**: at each robot, the centralized filter fed exactly the
-//!   ball information that has reached that robot (its own sightings at once, teammates'
-//!   batches when their messages arrive; `fusion::NetworkLimitedBall`). Its RMSE is the
-//!   best a team ball could do on this network with this filter; team / it measures the
-//!   fusion, it / centralized measures the network.
-//! - **blind**: the samples of robots that do not see the ball themselves, whose team ball
-//!   can only be what the network brought.
+//!   ball information that has reached that robot (its own sightings and kicks at once,
+//!   teammates' batches and kick reports when their messages arrive;
+//!   `fusion::NetworkLimitedBall`): what that filter makes of what the network delivered.
+//!   Team / it measures the fusion, it / centralized with kicks measures the network.
+//! - **blind**: the samples of robots that have not seen the ball themselves within their
+//!   ball memory (`BrainConfig::ball_memory_s`), whose team ball is what the network
+//!   brought.
 //! - **team-ball NEES**: the position NEES eᵀ P⁻¹ e (2 degrees of freedom) averaged over all
 //!   team-ball samples. Samples close in time (and different robots' team balls at one
 //!   instant) are strongly correlated, so its χ² 95% bounds are computed for one
@@ -66,7 +67,8 @@ pub struct BallSample {
     pub central_kicks_sq_m2: f64,
     /// The network-limited reference of this robot (`fusion::NetworkLimitedBall`), m².
     pub limited_sq_m2: f64,
-    /// The robot does not see the ball itself: all it knows came over the network.
+    /// The robot has not seen the ball itself within its ball memory: what it knows came
+    /// over the network.
     pub blind: bool,
 }
 

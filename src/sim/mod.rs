@@ -509,7 +509,7 @@ impl Simulation {
                 central_nees: pos_nees(&c),
                 central_kicks_sq_m2: (ck.position() - truth).norm_squared(),
                 limited_sq_m2: (limited.position() - truth).norm_squared(),
-                blind: !r.sees_ball(),
+                blind: r.ball.is_none(),
             });
         }
     }
@@ -695,14 +695,14 @@ pub struct Report {
     pub rmse_ratio_kicks: f64,
     /// The network-limited reference at the same instants, m: at each robot, the
     /// centralized filter fed exactly the ball information that had reached it (see
-    /// [`metrics`]); the best a team ball can do on this network.
+    /// [`metrics`]); what the centralized filter makes of what this network delivered.
     pub network_limited_rmse_m: f64,
     /// team_ball_rmse_m / network_limited_rmse_m: what the fusion itself costs.
     pub fusion_ratio: f64,
     /// network_limited_rmse_m / centralized_kicks_rmse_m: what the network costs (both know
     /// the kicks; the reference only once their reports arrive).
     pub network_ratio: f64,
-    /// Samples of robots that did not see the ball themselves.
+    /// Samples of robots that had not seen the ball themselves within their ball memory.
     pub blind_samples: u64,
     /// Team-ball RMSE over those samples, m.
     pub blind_team_ball_rmse_m: f64,
@@ -792,7 +792,7 @@ impl std::fmt::Display for Report {
         )?;
         writeln!(
             f,
-            "  robots not seeing it{:>9.4} m  (centralized {:.4} m, network-limited {:.4} m; {} robot ticks)",
+            "  robots blind to it  {:>9.4} m  (centralized {:.4} m, network-limited {:.4} m; {} robot ticks)",
             self.blind_team_ball_rmse_m,
             self.blind_centralized_rmse_m,
             self.blind_network_limited_rmse_m,
