@@ -112,11 +112,6 @@ pub fn run(args: SimArgs) -> Result<()> {
     let wall_s = started.elapsed().as_secs_f64();
     bar.finish_and_clear();
     let report = sim.report(wall_s);
-    if std::env::var("HUDDLE_DBG").is_ok() {
-        for r in &sim.robots {
-            eprintln!("robot {} {:?}", r.id, r.gwm.stats());
-        }
-    }
     if let Some(path) = &args.svg {
         std::fs::write(path, huddle::sim::svg::render(&sim))
             .with_context(|| format!("writing {}", path.display()))?;
