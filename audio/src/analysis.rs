@@ -196,6 +196,13 @@ impl Analyzer {
         &self.powers
     }
 
+    /// The `len` samples from absolute index `from`, if still held (samples from the next
+    /// window's start on are always held; older ones until the next trim).
+    pub fn samples(&self, from: u64, len: usize) -> Option<&[f32]> {
+        let i = usize::try_from(from.checked_sub(self.pending_start)?).ok()?;
+        self.pending.get(i..i.checked_add(len)?)
+    }
+
     /// Samples pushed so far.
     pub fn samples_pushed(&self) -> u64 {
         self.pending_start + self.pending.len() as u64
