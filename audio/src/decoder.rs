@@ -847,20 +847,37 @@ impl Decoder {
         let tones = frame.tones();
         let window_len = self.geometry.window_len as f64;
         let lookback = 3 * self.geometry.slot_windows + 4;
-        let candidates: Vec<(u64, u64, f64)> = self
+        let recent: Vec<&WindowRecord> = self
             .history
             .iter()
             .rev()
             .take(lookback)
             .filter(|w| w.start >= self.floor)
-            .map(|w| (w.index, w.start, Self::excess(w, scale, &tones)))
             .collect::<Vec<_>>()
             .into_iter()
             .rev()
             .collect();
-        if candidates.is_empty() {
+        if recent.is_empty() {
             return None;
         }
+        // Excess powers on one common noise level (the median of the windows'): each
+        // window's own level drifts by orders of magnitude where the noise is digital
+        // silence (a file that starts with the message), and a step found on such
+        // numbers lands windows late.
+        let mut levels: Vec<f64> = recent.iter().map(|w| w.level).collect();
+        levels.sort_by(|a, b| a.total_cmp(b));
+        let common = levels[levels.len() / 2].max(1e-300);
+        let candidates: Vec<(u64, u64, f64)> = recent
+            .iter()
+            .map(|w| {
+                (
+                    w.index,
+                    w.start,
+                    (Self::excess(w, scale, &tones) + tones.len() as f64) * w.level / common
+                        - tones.len() as f64,
+                )
+            })
+            .collect();
         // Step-change estimate: the start maximising the standardised sum to now.
         let mut best = (f64::NEG_INFINITY, 0usize);
         let mut tail = 0.0;
@@ -1704,6 +1721,24 @@ mod tests {
                 ..DecoderConfig::default()
             });
             assert_eq!(got.is_ok(), ok, "{tone_s} s tones");
+        }
+    }
+
+    #[test]
+    fn a_file_holding_just_the_message_decodes() {
+        // `huddle audio encode` writes the tones and nothing else: no noise, no silence
+        // before or after. The noise level then drifts down by orders of magnitude over
+        // the first windows (digital silence between the tones), which once put the
+        // onset two windows late and the message was dropped as the second half of a
+        // long one.
+        let enc = Encoder::new(EncoderConfig::default()).unwrap();
+        for msg in [
+            Message::short(Sender::RightAttacker, 7).unwrap(),
+            Message::long(Sender::LeftAttacker, 300).unwrap(),
+        ] {
+            let got = decode_all(DecoderConfig::default(), &enc.encode_f32(&msg), 4096);
+            assert_eq!(got.iter().map(|d| d.message).collect::<Vec<_>>(), vec![msg]);
+            assert!(got[0].start_s.abs() < 0.02, "start {}", got[0].start_s);
         }
     }
 
