@@ -300,7 +300,7 @@ proptest! {
         ], 0..20_000),
         block in 1usize..3000,
         rate in prop_oneof![Just(8_000u32), Just(16_000), Just(44_100)],
-        tone in 0.05f64..1.5,
+        tone in audio::MIN_TONE_DURATION_S..1.5,
     ) {
         let config = DecoderConfig { sample_rate_hz: rate, tone_duration_s: tone, ..Default::default() };
         let _ = decode(config, &samples, block);
