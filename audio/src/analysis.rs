@@ -31,6 +31,9 @@ pub(crate) struct Geometry {
     pub scales: Vec<f64>,
     /// `bins[j * 72 + k]`: FFT bin of tone `k` at scale `j`.
     pub bins: Vec<usize>,
+    /// `margin_bins[k]`: the bin just below tone `k`'s lowest comb bin; `[72 + k]`: just
+    /// above its highest. A peak there lies beyond the tolerated frequency error.
+    pub margin_bins: Vec<usize>,
 }
 
 /// Smallest `2^a · 3^b ≥ n` (sizes rustfft handles fastest).
@@ -85,6 +88,14 @@ impl Geometry {
                 bins.push(b.min(nyquist_bin));
             }
         }
+        let mut margin_bins = vec![0; 2 * TONE_COUNT];
+        for k in 0..TONE_COUNT {
+            let comb = (0..scales.len()).map(|j| bins[j * TONE_COUNT + k]);
+            let low = comb.clone().min().unwrap_or(0);
+            let high = comb.max().unwrap_or(0);
+            margin_bins[k] = low.saturating_sub(1);
+            margin_bins[TONE_COUNT + k] = (high + 1).min(nyquist_bin);
+        }
         Geometry {
             rate_hz,
             window_len,
@@ -94,6 +105,7 @@ impl Geometry {
             slot_samples,
             scales,
             bins,
+            margin_bins,
         }
     }
 
@@ -121,6 +133,8 @@ pub(crate) struct Analyzer {
     pending_start: u64,
     /// Powers of the last window, `[j * 72 + k]`.
     powers: Vec<f32>,
+    /// Powers of the last window at the margin bins (see [`Geometry::margin_bins`]).
+    margin_powers: Vec<f32>,
 }
 
 impl Analyzer {
@@ -134,6 +148,7 @@ impl Analyzer {
         Analyzer {
             buffer: vec![Complex::new(0.0, 0.0); geometry.fft_len],
             powers: vec![0.0; geometry.scale_count() * TONE_COUNT],
+            margin_powers: vec![0.0; 2 * TONE_COUNT],
             geometry,
             hann,
             fft,
@@ -188,12 +203,30 @@ impl Analyzer {
         for (p, &b) in self.powers.iter_mut().zip(&self.geometry.bins) {
             *p = self.buffer[b].norm_sqr();
         }
+        for (p, &b) in self
+            .margin_powers
+            .iter_mut()
+            .zip(&self.geometry.margin_bins)
+        {
+            *p = self.buffer[b].norm_sqr();
+        }
         self.offset += self.geometry.hop;
         Some(start)
     }
 
     pub fn powers(&self) -> &[f32] {
         &self.powers
+    }
+
+    pub fn margin_powers(&self) -> &[f32] {
+        &self.margin_powers
+    }
+
+    /// The `len` samples from absolute index `from`, if still held (samples from the next
+    /// window's start on are always held; older ones until the next trim).
+    pub fn samples(&self, from: u64, len: usize) -> Option<&[f32]> {
+        let i = usize::try_from(from.checked_sub(self.pending_start)?).ok()?;
+        self.pending.get(i..i.checked_add(len)?)
     }
 
     /// Samples pushed so far.

@@ -25,24 +25,37 @@
 //!    from a much louder neighbour; a basic is present when ≥ 2 of its 3 tones are; the
 //!    frame is valid only with exactly one sender basic and exactly one data basic.
 //!    Two consecutive windows must give the same valid frame before it is accepted.
-//!    On the aligned slot a rival basic (a second sender or data basic) must pass the
+//!    On the aligned slot the frame's six-tone energy must pass the frame test again, at
+//!    the stricter [`P_FRAME_CONFIRM`], and a rival basic (a second sender or data basic) must pass the
 //!    stricter [`P_TONE_RIVAL`] to reject the frame (a stray tone keeps the lenient
 //!    threshold: judging it strictly too let one white-noise frame through in 10 h).
 //! 6. **Timing and re-decision**: once accepted, the onset is located on the per-window
-//!    energy of the frame's six tones (a step-change estimate refined by the Hann-window
-//!    share of the edge window); the frame is re-decided with the rules on exactly the
+//!    energy of the frame's six tones (a step-change estimate refined by a least-squares
+//!    fit of the Hann-window share of the windows around the step), once more when the
+//!    whole slot has been heard; the frame is re-decided with the rules on exactly the
 //!    windows inside `[onset, onset + T]`.
 //! 7. **Short or long**: a sequential probability ratio test on the sender's tones just
 //!    after the slot end, with the tone level measured in the slot: sender stops → a
 //!    short message; sender continues → a second slot is decided the same way and the
 //!    sender must then stop → a long message. A frame that keeps sounding past two slots
 //!    is not a message (and is ignored until it stops).
+//!    Before that test, a quick look: when the slot was loud enough, one short window just
+//!    after the end, at the frame's exact frequencies, settles "stopped" or "continues"
+//!    as soon as its samples arrive (~80 ms after the end at ≥ 0 dB); in doubt the
+//!    sequential test decides.
 //!    The test looks half a slot past the end, so two messages from one robot need more
 //!    than half a tone of silence between them (closer frames *are* a long message).
 //!    Each slot must also sound through: both of its halves carry a fair share of the
 //!    frame's energy (a foreign burst shorter than a slot does not).
 //!    And a slot where a tone outside the frame is about as loud as the frame's own is
 //!    someone else's multi-tone signal that happens to contain our two basics.
+//!    So is a slot whose tones do not share one frequency scale: a sender's clock error
+//!    moves all six tones by one factor, while another codec's tones that pass near ours
+//!    are each off by their own amount (a present tone must keep 70% of its best-scale
+//!    power at the frame's scale, within the noise; at the comb's edge the power must not
+//!    still be rising outward; loud tones' interpolated peaks must agree with one scale
+//!    within `PEAK_TOLERANCE_HZ`, and none may peak on the bin just beyond the comb). A tone outside the frame 10 dB louder than one its
+//!    2-of-3 votes rest on is a stray too.
 //!    Symmetrically, a first frame whose sender was already sounding just before it is the
 //!    second half of a long message whose first half was missed, and is dropped.
 //! 8. **Once per transmission**: after a decision the integration restarts after the
@@ -52,27 +65,42 @@
 //!
 //! A false message needs, in two consecutive windows, the six-tone energy above a
 //! threshold at 1e-6 per window (union-bounded over hypotheses and scales) *and* ≥ 2 of 3
-//! tones of exactly one sender basic and of exactly one data basic at [`P_TONE`] = 3e-3
-//! per tone: 3 · 3p² · 21 · 3p² ≈ 567 p⁴ ≈ 5e-8 of noise windows, a union bound of about
-//! 1e-6 over the frequency scales; then the rules again on the aligned slot
-//! ([`P_TONE_CONFIRM`]), then the sender stopping cleanly. Consecutive windows share 13 of
-//! 14 windows' energy, so the second window adds little independence: the bound is about
-//! 1e-6 per window, i.e. ≲ 0.6 per 10 hours of Gaussian noise (≈ 560 000 windows at
-//! 64 ms) before the slot re-decision, which removes most of what remains. What is left
-//! are structured sounds, which `huddle audio eval` measures.
+//! tones of exactly one sender basic and of exactly one data basic at [`P_TONE`] per tone.
+//! Consecutive windows share 13 of 14 windows' energy, so the second window adds little
+//! independence: the search alone lets through about 1e-6 of noise windows, i.e. ≲ 0.6
+//! per 10 hours of Gaussian noise (≈ 560 000 windows at 64 ms; one was seen). The aligned
+//! slot then needs its six-tone energy at [`P_FRAME_CONFIRM`] = 1e-10 (union-bounded), the
+//! rules again ([`P_TONE_CONFIRM`]), and the sender stopping cleanly: well under 1e-3 false
+//! messages per 10 hours of Gaussian noise. What is left are structured sounds, which
+//! `huddle audio eval` measures.
+//!
+//! # Report delay
+//!
+//! A short message is reported once the sender is known to have stopped (otherwise it may
+//! be the first half of a long message, and reporting it would be a wrong message). From
+//! about 0 dB up the quick look decides on one 64 ms window: about 80 ms after the end
+//! (median; the 95th percentile is ~140 ms at 0 dB, where some slots are not loud enough
+//! for it and the sequential test decides). Lower, the evidence is simply not there
+//! sooner: at −13 dB each tone is ~2 dB above the noise in a 128 ms window, the sender's
+//! three tones give a few tenths of a nat per window towards "stopped", and holding
+//! wrong accepts at 1e-3 needs about 7 nats, i.e. several hundred milliseconds (measured:
+//! ~160 ms at −6 dB, ~540 ms at −13 dB).
 
 use std::collections::VecDeque;
 
 use crate::analysis::{Analyzer, Geometry};
-use crate::significance::{
-    gamma_upper_quantile, hann_area_inverse, hann_share_inside, ln_tone_likelihood,
-};
+use crate::significance::{gamma_upper_quantile, hann_share_inside, ln_tone_likelihood};
 use crate::tones::{
-    basic_tones, Frame, Message, Sender, BASIC_COUNT, DATA_VALUES, SENDER_COUNT, TONE_COUNT,
+    basic_tones, tone_frequency_hz, Frame, Message, Sender, BASIC_COUNT, DATA_VALUES, SENDER_COUNT,
+    TONE_COUNT,
 };
 
-/// Per-tone false-alarm probability of "present" on one slot's integrated sum.
-pub const P_TONE: f64 = 3e-3;
+/// Per-tone false-alarm probability of "present" on one slot's integrated sum while
+/// searching. It only triggers the slot decision (the frame-energy test at
+/// [`P_FRAME_CONFIRM`] there carries the protection against noise), so it is as lenient as
+/// [`P_TONE_CONFIRM`]: at 3e-3 a real frame at −13 dB missed 2 of 3 tones of a basic in
+/// every candidate window about 0.5% of the time.
+pub const P_TONE: f64 = 1e-2;
 /// Per-tone false-alarm probability of "present" when re-deciding an accepted frame on its
 /// aligned slot: a frame is already there, so the threshold trades a missed tone against
 /// an extra basic (21 · 3 · p² ≈ 0.6% of frames refused) rather than against noise alone.
@@ -85,6 +113,11 @@ pub const P_TONE_CONFIRM: f64 = 1e-2;
 pub const P_TONE_RIVAL: f64 = 1e-3;
 /// Per-window false-alarm probability of the frame-energy detector (before the rules).
 pub const P_FRAME: f64 = 1e-6;
+/// The frame-energy test again on the aligned slot, stricter (union-bounded like
+/// [`P_FRAME`]): a frame's six tones summed over exactly its slot. Real frames at −13 dB
+/// pass it with room (no loss in 3000 messages, first losses at 1e-12); a noise frame
+/// that scraped through the search at 1e-6 (one in 10 h of white noise) does not.
+pub const P_FRAME_CONFIRM: f64 = 1e-10;
 /// A tone is leakage, not present, when its excess is below this share of an adjacent
 /// tone's excess (−20 dB; Hann leakage at 3 bins is about −31 dB).
 pub const NEIGHBOUR_LEAKAGE: f64 = 0.01;
@@ -101,6 +134,32 @@ pub const SPRT_BOUND: f64 = 14.0;
 /// `sounds_through_slot`). At −13 dB a real frame's half-slot excess is about 6 standard
 /// deviations above this.
 const MIN_HALF_SHARE: f64 = 0.3;
+/// Per-tone false-alarm probability a tone outside the frame must pass to count as a
+/// stray (see `has_stray_tone`): 66 tones · 1e-6 ≈ 7e-5 of slots refused by noise alone.
+/// At the lenient [`P_TONE_CONFIRM`] a noise tone reached the stray share in 0.6% of
+/// slots at −13 dB (the frame's median level is itself noisy there); a foreign signal
+/// loud enough to assemble our frame is far above either threshold.
+const P_STRAY: f64 = 1e-6;
+/// Least share of a present tone's excess at its own best frequency scale that it must
+/// keep at the frame's scale (see `has_off_grid_tone`): −1.5 dB, a tone about 3 Hz off
+/// the frame's common scale at 128 ms windows. Real tones lose at most ~0.3 dB (the
+/// comb's step): the lowest share seen was 0.92 at 10 dB, 0.75 at 0 dB (where the noise
+/// allowance is far larger), while a foreign burst passed 0.5 at 0.63.
+const OFF_GRID_SHARE: f64 = 0.7;
+/// Per-window excess (20 dB) from which a tone's peak frequency is trusted (see
+/// `peaks_disagree`).
+const PEAK_LOUD: f64 = 100.0;
+/// Largest distance of a loud tone's peak from the frame's common scale, Hz. Real frames
+/// at 10 dB (tones ~27 dB per window) stayed within 0.08 Hz over 1000 messages, 0.06 Hz
+/// with the sender 0.5% sharp; the foreign burst this stops was 2.2 Hz off.
+const PEAK_TOLERANCE_HZ: f64 = 0.5;
+/// Noise allowance of the off-grid test, in standard deviations of the tone's sum.
+const OFF_GRID_Z: f64 = 4.0;
+/// A present tone outside the frame this many times louder than a tone the frame's
+/// 2-of-3 vote rests on (+10 dB) also makes the slot someone else's signal: a foreign
+/// burst whose loud tones hit one tone of each of our basics, their second tones being
+/// faint near-misses (seen in 10 h of foreign tones: votes at −21 dB, a stray at −3 dB).
+const STRAY_OVER_VOTE: f64 = 10.0;
 /// A present tone outside the frame at this share of the frame's median tone level
 /// makes the slot someone else's signal (see `has_stray_tone`).
 const STRAY_SHARE: f64 = 0.7;
@@ -113,8 +172,21 @@ const SPRT_HORIZON: f64 = 0.5;
 const MAX_SHARE_BEFORE_END: f64 = 0.02;
 /// Power share of the first slot's level assumed for a continuing tone (−2.2 dB).
 const CONTINUATION_SHARE: f64 = 0.6;
+/// Length of the quick end test's window, as a share of an analysis window (64 ms at
+/// 1 s tones: tones 49 Hz apart stay ~3 bins apart).
+const QUICK_WINDOW_SHARE: f64 = 0.5;
+/// Gap between the estimated end and the quick window, as a share of an analysis window
+/// (16 ms at 1 s tones; onset errors at ≥ 0 dB are within ~20 ms at p95, and the Hann taper
+/// makes a few ms of a late end's tail negligible).
+const QUICK_GUARD_SHARE: f64 = 0.125;
+/// How far, in standard deviations, the expected continuation must stand above the
+/// "stopped" threshold for the quick test to decide at all.
+const QUICK_MARGIN_SD: f64 = 3.5;
 /// Largest evidence one tone in one window adds to the short/long test.
 const LLR_CLIP: f64 = 8.0;
+
+/// Shortest tone duration the decoder accepts, s (see [`DecoderConfigError::ToneDuration`]).
+pub const MIN_TONE_DURATION_S: f64 = 0.06;
 
 /// How to decode.
 #[derive(Clone, Debug, PartialEq)]
@@ -143,8 +215,10 @@ pub enum DecoderConfigError {
     /// The rate must be 8000 … 192000 Hz: below 8 kHz the top tone is above Nyquist.
     #[error("sample rate {0} Hz unsupported (8000..=192000)")]
     SampleRate(u32),
-    /// The tone duration must be 0.02 … 5 s.
-    #[error("tone duration {0} s unsupported (0.02..=5)")]
+    /// The tone duration must be 0.06 … 5 s: the analysis window is at least 64 ms (so
+    /// tones 49 Hz apart stay resolved), and tones much shorter than it were decoded
+    /// wrongly more often than the 0.1% allowed (5% of 40 ms tones at 0 dB).
+    #[error("tone duration {0} s unsupported (0.06..=5)")]
     ToneDuration(f64),
     /// The tolerated frequency error must be 0 … 2%.
     #[error("frequency error {0} unsupported (0..=0.02)")]
@@ -268,6 +342,9 @@ struct WindowRecord {
     level: f64,
     /// Normalised powers `[j * 72 + k]`.
     r: Vec<f32>,
+    /// Normalised powers at the margin bins (`[k]` below tone `k`'s comb, `[72 + k]`
+    /// above).
+    margin_r: [f32; 2 * TONE_COUNT],
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -283,9 +360,21 @@ enum Stage {
         /// Evidence that each data basic sounds after the slot (a second frame's data).
         data_llr: [f64; DATA_VALUES as usize],
         next_index: u64,
+        /// The quick look after the end (see `quick_end_test`) was inconclusive.
+        quick_done: bool,
     },
     /// Waiting for the windows of the second slot.
     Slot2,
+}
+
+/// Outcome of the quick end test.
+enum QuickEnd {
+    /// Its samples have not all arrived.
+    NotYet,
+    /// No decision: the sequential test decides.
+    Unsure,
+    /// Decided once the stream reached sample `at`.
+    Decided { continues: bool, at: f64 },
 }
 
 #[derive(Clone, Debug)]
@@ -294,6 +383,8 @@ struct Tracking {
     data: [u8; 2],
     scale: usize,
     onset: f64,
+    /// The onset was re-estimated once the whole first slot had been heard.
+    onset_refined: bool,
     stage: Stage,
     /// Per-window excess power of each tone measured in the last decided slot.
     level: [f64; TONE_COUNT],
@@ -334,6 +425,9 @@ pub struct Decoder {
     tracking: Option<Tracking>,
     /// A frame that kept sounding too long: ignored until it stops.
     blocked: Option<(Frame, usize, f64, u32)>,
+    /// Sender and end (sample) of the last slot that failed its decision: a frame from
+    /// the same sender right after it is the second half of a long message.
+    failed_slot: Option<(Sender, f64)>,
     output: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     eof: bool,
@@ -355,7 +449,7 @@ impl Decoder {
         if !(8_000..=192_000).contains(&config.sample_rate_hz) {
             return Err(DecoderConfigError::SampleRate(config.sample_rate_hz));
         }
-        if !(0.02..=5.0).contains(&config.tone_duration_s) {
+        if !(MIN_TONE_DURATION_S..=5.0).contains(&config.tone_duration_s) {
             return Err(DecoderConfigError::ToneDuration(config.tone_duration_s));
         }
         if !(0.0..=0.02).contains(&config.max_frequency_error) {
@@ -386,6 +480,7 @@ impl Decoder {
             run: None,
             tracking: None,
             blocked: None,
+            failed_slot: None,
             output: VecDeque::new(),
             eof: false,
         })
@@ -410,6 +505,7 @@ impl Decoder {
     pub fn push_f32(&mut self, samples: &[f32]) {
         self.analyzer.push(samples.iter().copied());
         self.drain_windows();
+        self.quick_look();
     }
 
     /// Pushes 16-bit samples.
@@ -417,6 +513,24 @@ impl Decoder {
         self.analyzer
             .push(samples.iter().map(|&s| crate::pcm::i16_to_f32(s)));
         self.drain_windows();
+        self.quick_look();
+    }
+
+    /// The quick end test needs samples, not a whole analysis window: try it as soon as
+    /// they arrive rather than at the next window.
+    fn quick_look(&mut self) {
+        if matches!(
+            self.tracking,
+            Some(Tracking {
+                stage: Stage::EndTest {
+                    quick_done: false,
+                    ..
+                },
+                ..
+            })
+        ) {
+            self.advance_tracking();
+        }
     }
 
     /// The next decoded message, in order of decision.
@@ -511,6 +625,14 @@ impl Decoder {
             }
         }
         self.scratch_powers = powers;
+        let mut margin_r = [0.0f32; 2 * TONE_COUNT];
+        for (i, (m, &p)) in margin_r
+            .iter_mut()
+            .zip(self.analyzer.margin_powers())
+            .enumerate()
+        {
+            *m = (f64::from(p) / (level * self.noise.shape[i % TONE_COUNT])) as f32;
+        }
         let index = self.windows_seen;
         self.windows_seen += 1;
         self.history.push_back(WindowRecord {
@@ -518,6 +640,7 @@ impl Decoder {
             start,
             level,
             r,
+            margin_r,
         });
         if start >= self.floor {
             self.add_to_sliding(index);
@@ -690,8 +813,7 @@ impl Decoder {
                 best = (sender + data, j);
             }
         }
-        let hypotheses = (SENDER_COUNT * (BASIC_COUNT - SENDER_COUNT) * scales) as f64;
-        let threshold = gamma_upper_quantile(6.0 * count as f64, P_FRAME / hypotheses);
+        let threshold = self.frame_threshold(count, P_FRAME);
         if best.0 < threshold {
             self.run = None;
             return;
@@ -724,25 +846,50 @@ impl Decoder {
         }
     }
 
+    /// Least six-tone sum over `count` windows for a frame to stand out of noise: the
+    /// Gamma(6·count) quantile at `p` union-bounded over the 63 frames and all scales.
+    fn frame_threshold(&self, count: usize, p: f64) -> f64 {
+        let hypotheses =
+            (SENDER_COUNT * (BASIC_COUNT - SENDER_COUNT) * self.geometry.scale_count()) as f64;
+        gamma_upper_quantile(6.0 * count.max(1) as f64, p / hypotheses)
+    }
+
     /// Locates the onset of `frame` at `scale` in the windows since the floor.
     fn estimate_onset(&self, frame: Frame, scale: usize) -> Option<f64> {
         let tones = frame.tones();
         let window_len = self.geometry.window_len as f64;
         let lookback = 3 * self.geometry.slot_windows + 4;
-        let candidates: Vec<(u64, u64, f64)> = self
+        let recent: Vec<&WindowRecord> = self
             .history
             .iter()
             .rev()
             .take(lookback)
             .filter(|w| w.start >= self.floor)
-            .map(|w| (w.index, w.start, Self::excess(w, scale, &tones)))
             .collect::<Vec<_>>()
             .into_iter()
             .rev()
             .collect();
-        if candidates.is_empty() {
+        if recent.is_empty() {
             return None;
         }
+        // Excess powers on one common noise level (the median of the windows'): each
+        // window's own level drifts by orders of magnitude where the noise is digital
+        // silence (a file that starts with the message), and a step found on such
+        // numbers lands windows late.
+        let mut levels: Vec<f64> = recent.iter().map(|w| w.level).collect();
+        levels.sort_by(|a, b| a.total_cmp(b));
+        let common = levels[levels.len() / 2].max(1e-300);
+        let candidates: Vec<(u64, u64, f64)> = recent
+            .iter()
+            .map(|w| {
+                (
+                    w.index,
+                    w.start,
+                    (Self::excess(w, scale, &tones) + tones.len() as f64) * w.level / common
+                        - tones.len() as f64,
+                )
+            })
+            .collect();
         // Step-change estimate: the start maximising the standardised sum to now.
         let mut best = (f64::NEG_INFINITY, 0usize);
         let mut tail = 0.0;
@@ -765,19 +912,38 @@ impl Decoder {
             / (plateau_end - w0) as f64;
         let mut onset = candidates[w0].1 as f64;
         if plateau > 0.0 {
-            // Refine with the edge window whose share of the tone is nearest one half:
-            // its excess is (Hann area after the onset)² of the plateau.
+            // Refine on the windows around the step: each one's excess is (its Hann area
+            // inside the tone)² of the plateau; the onset is the least-squares fit of that
+            // model over a 2 ms-step grid. (Taking the one window nearest half the
+            // plateau picked a plateau window reading 12% low over the real edge window
+            // now and then: 0.8% of long messages at 0 dB started 80 ms late.)
             let first_index = candidates[w0].0;
-            let mut best_q = f64::INFINITY;
-            for idx in first_index.saturating_sub(2)..=first_index + 1 {
-                let Some(rec) = self.record(idx) else {
-                    continue;
-                };
-                let q = (Self::excess(rec, scale, &tones) * rec.level / plateau).clamp(0.0, 1.0);
-                if q > 0.05 && q < 0.95 && (q - 0.5).abs() < best_q {
-                    best_q = (q - 0.5).abs();
-                    let y = hann_area_inverse(1.0 - q.sqrt());
-                    onset = rec.start as f64 + y * window_len;
+            let measured: Vec<(f64, f64)> = (first_index.saturating_sub(2)..=first_index + 2)
+                .filter_map(|idx| self.record(idx))
+                .map(|rec| {
+                    (
+                        rec.start as f64,
+                        Self::excess(rec, scale, &tones) * rec.level / plateau,
+                    )
+                })
+                .collect();
+            let slot_len = self.geometry.slot_samples;
+            let steps = 96;
+            let from = onset - window_len;
+            let mut best = f64::INFINITY;
+            for i in 0..=steps {
+                let candidate = from + 1.5 * window_len * i as f64 / steps as f64;
+                let misfit: f64 = measured
+                    .iter()
+                    .map(|&(start, q)| {
+                        let share =
+                            hann_share_inside(start, window_len, candidate, candidate + slot_len);
+                        (q - share * share).powi(2)
+                    })
+                    .sum();
+                if misfit < best {
+                    best = misfit;
+                    onset = candidate;
                 }
             }
         }
@@ -793,6 +959,7 @@ impl Decoder {
             data: [frame.data, frame.data],
             scale,
             onset,
+            onset_refined: false,
             stage: Stage::Slot1,
             level: [0.0; TONE_COUNT],
             present: [false; TONE_COUNT],
@@ -806,6 +973,148 @@ impl Decoder {
             .back()
             .map(|w| (w.start + self.geometry.window_len as u64) as f64)
             .unwrap_or(0.0)
+    }
+
+    /// Whether a present tone of `frame` sits off the frame's common frequency scale: its
+    /// excess at `scale` is below [`OFF_GRID_SHARE`] of its excess at its own best scale,
+    /// by more than [`OFF_GRID_Z`] noise standard deviations. A sender's clock error moves
+    /// all six tones by one factor; another codec's tones that land near ours each sit off
+    /// by their own amount (its 600 + 50·j Hz grid passes 4–14 Hz from our tones 2–12 and
+    /// 58–66), so no single scale reads them all on their peaks. Loud foreign tones fail by
+    /// far; at low SNR the noise allowance swallows the test, as it should (a weak signal's
+    /// peak is not known that well).
+    fn has_off_grid_tone(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let scales = self.geometry.scale_count();
+        let tones: Vec<usize> = frame.tones().into_iter().filter(|&k| present[k]).collect();
+        let mut sums = vec![[0.0f64; 6]; scales];
+        let mut margins = [[0.0f64; 2]; 6];
+        let mut count = 0usize;
+        for w in &self.history {
+            if hann_share_inside(w.start as f64, window_len, a, b) >= 0.9 {
+                for (j, row) in sums.iter_mut().enumerate() {
+                    for (i, &k) in tones.iter().enumerate() {
+                        row[i] += f64::from(w.r[j * TONE_COUNT + k]);
+                    }
+                }
+                for (i, &k) in tones.iter().enumerate() {
+                    margins[i][0] += f64::from(w.margin_r[k]);
+                    margins[i][1] += f64::from(w.margin_r[TONE_COUNT + k]);
+                }
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return false;
+        }
+        let n = count as f64;
+        // At the comb's outermost scale, the frame's power still rising outward (by more
+        // than the noise allows) puts its tones beyond the tolerated error, where nothing
+        // tells them from another codec's tones passing near ours (the one foreign-tone
+        // false message left in 10 h by the per-tone test read best at −0.6%, all four
+        // tones still rising). A real sender inside the tolerance peaks inside the comb.
+        let last = scales - 1;
+        if last > 0 && (scale == 0 || scale == last) {
+            let inner = if scale == 0 { 1 } else { last - 1 };
+            let edge: f64 = sums[scale].iter().sum();
+            let next: f64 = sums[inner].iter().sum();
+            if edge - next > OFF_GRID_Z * edge.sqrt() {
+                return true;
+            }
+        }
+        let off = tones.iter().enumerate().any(|(i, _)| {
+            let best = sums
+                .iter()
+                .map(|row| row[i])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let here = sums[scale][i];
+            here - n < OFF_GRID_SHARE * (best - n) - OFF_GRID_Z * best.sqrt()
+        });
+        off || self.peaks_disagree(&tones, &sums, &margins, n)
+    }
+
+    /// Whether the loud tones among `tones` (slot sums `sums[j][i]` at every scale `j` over
+    /// `n` windows) peak at frequencies no single scale explains: each loud tone's peak is
+    /// located between FFT bins (a parabola through the log excess of the loudest bin
+    /// the comb reads for it and its two neighbours), the common scale fitted (weighted by
+    /// frequency², as the Hz error is alike for every tone), and a tone more than
+    /// [`PEAK_TOLERANCE_HZ`] from it fails. Only tones ≥ 20 dB per window count: their peak
+    /// is known to a small fraction of a bin, and a foreign burst loud enough to pass for
+    /// our frame is that loud.
+    fn peaks_disagree(
+        &self,
+        tones: &[usize],
+        sums: &[[f64; 6]],
+        margins: &[[f64; 2]; 6],
+        n: f64,
+    ) -> bool {
+        let bin_hz = self.rate() / self.geometry.fft_len as f64;
+        let mut peaks = Vec::new();
+        for (i, &k) in tones.iter().enumerate() {
+            let mut by_bin: Vec<(usize, f64)> = sums
+                .iter()
+                .enumerate()
+                .map(|(j, row)| {
+                    (
+                        self.geometry.bins[j * TONE_COUNT + k],
+                        (row[i] - n).max(1e-9),
+                    )
+                })
+                .collect();
+            by_bin.dedup_by_key(|x| x.0);
+            // One bin beyond the comb on each side: a loud tone peaking there lies beyond
+            // the tolerated error (seen in 10 h of foreign tones: a burst read at +0.6%
+            // whose low tones really sat at +0.74%).
+            by_bin.insert(
+                0,
+                (self.geometry.margin_bins[k], (margins[i][0] - n).max(1e-9)),
+            );
+            by_bin.push((
+                self.geometry.margin_bins[TONE_COUNT + k],
+                (margins[i][1] - n).max(1e-9),
+            ));
+            let Some((p, _)) = by_bin
+                .iter()
+                .enumerate()
+                .max_by(|x, y| x.1 .1.total_cmp(&y.1 .1))
+            else {
+                continue;
+            };
+            if by_bin[p].1 < PEAK_LOUD * n {
+                continue;
+            }
+            if p == 0 || p + 1 >= by_bin.len() {
+                return true;
+            }
+            if by_bin[p - 1].0 + 1 != by_bin[p].0 || by_bin[p].0 + 1 != by_bin[p + 1].0 {
+                continue;
+            }
+            let (l, c, r) = (by_bin[p - 1].1.ln(), by_bin[p].1.ln(), by_bin[p + 1].1.ln());
+            let den = l - 2.0 * c + r;
+            if den >= 0.0 {
+                continue;
+            }
+            let delta = (0.5 * (l - r) / den).clamp(-0.5, 0.5);
+            peaks.push((tone_frequency_hz(k), (by_bin[p].0 as f64 + delta) * bin_hz));
+        }
+        if peaks.len() < 3 {
+            return false;
+        }
+        // Least squares for f̂ = f · (1 + s): s = Σ f (f̂ − f) / Σ f².
+        let s = peaks.iter().map(|(f, g)| f * (g - f)).sum::<f64>()
+            / peaks.iter().map(|(f, _)| f * f).sum::<f64>();
+        let worst = peaks
+            .iter()
+            .map(|(f, g)| (g - f * (1.0 + s)).abs())
+            .fold(0.0, f64::max);
+        worst > PEAK_TOLERANCE_HZ
     }
 
     /// Integrates the windows lying (≥ 90% of their Hann area) inside `[a, b)`; returns the
@@ -867,6 +1176,22 @@ impl Decoder {
                     if self.latest_window_end() < b + quarter && !self.eof {
                         return;
                     }
+                    if first && !t.onset_refined {
+                        // Tracking can start two windows into a loud frame, when the edge
+                        // refinement has a plateau of two noisy windows to go by (0.8% of
+                        // long messages at 0 dB started 80 ms late and caught the second
+                        // frame's data as a rival). With the whole slot heard, once more.
+                        let frame = Frame {
+                            sender: t.sender,
+                            data: t.data[0],
+                        };
+                        let onset = self.estimate_onset(frame, t.scale).unwrap_or(t.onset);
+                        if let Some(tr) = self.tracking.as_mut() {
+                            tr.onset = onset;
+                            tr.onset_refined = true;
+                        }
+                        continue;
+                    }
                     let decided =
                         self.integrate_slot(t.scale, a, b)
                             .and_then(|(sums, n, level, noise)| {
@@ -874,13 +1199,19 @@ impl Decoder {
                                     Self::apply_rules(&sums, n, P_TONE_CONFIRM, P_TONE_RIVAL);
                                 frame
                                     .filter(|f| f.sender == t.sender)
-                                    .map(|f| (f, present, level, noise))
+                                    .filter(|f| {
+                                        let energy: f64 = f.tones().iter().map(|&k| sums[k]).sum();
+                                        energy >= self.frame_threshold(n, P_FRAME_CONFIRM)
+                                    })
+                                    .map(|f| (f, present, level, noise, sums, n))
                             });
-                    let decided = decided.filter(|(frame, present, level, _)| {
+                    let decided = decided.filter(|(frame, present, level, _, sums, n)| {
                         self.sounds_through_slot(*frame, present, t.scale, a, b)
-                            && !Self::has_stray_tone(*frame, present, level)
+                            && !Self::has_stray_tone(*frame, present, level, sums, *n)
+                            && !self.has_off_grid_tone(*frame, present, t.scale, a, b)
                     });
-                    let Some((frame, present, level, noise)) = decided else {
+                    let Some((frame, present, level, noise, ..)) = decided else {
+                        self.failed_slot = Some((t.sender, b));
                         self.end_transmission(b, false);
                         return;
                     };
@@ -892,7 +1223,19 @@ impl Decoder {
                     next.level = level;
                     next.present = present;
                     next.noise = noise;
-                    if first && self.sender_sounded_before(&next) {
+                    // By the protocol a robot leaves more than half a tone of silence
+                    // between messages, so the same sender within that of a slot that
+                    // failed its decision is the second frame of that transmission (seen
+                    // at −13 dB: a long whose first frame failed the rules, its second
+                    // frame reported as a short because the sender's tones before it were
+                    // too weak for the look-back test alone).
+                    let follows_failed = matches!(
+                        self.failed_slot,
+                        Some((sender, end)) if sender == t.sender
+                            && a - end < SPRT_HORIZON * slot_len
+                                + self.geometry.window_len as f64
+                    );
+                    if first && (follows_failed || self.sender_sounded_before(&next)) {
                         // The sender was already sounding: this is the second frame of a
                         // long message whose first frame was missed. Reporting it as a
                         // short would be a wrong message; missing it is the lesser harm.
@@ -906,6 +1249,7 @@ impl Decoder {
                         llr: 0.0,
                         data_llr: [0.0; DATA_VALUES as usize],
                         next_index,
+                        quick_done: false,
                     };
                     self.tracking = Some(next);
                 }
@@ -915,6 +1259,7 @@ impl Decoder {
                     mut llr,
                     mut data_llr,
                     mut next_index,
+                    mut quick_done,
                 } => {
                     let window_len = self.geometry.window_len as f64;
                     let current_data = t.data[usize::from(slot.clamp(1, 2) - 1)];
@@ -927,8 +1272,20 @@ impl Decoder {
                     let typical = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
                     let slot_start = slot_end - slot_len;
                     let mut verdict = None;
+                    let mut decided_at = None;
+                    if !quick_done {
+                        match self.quick_end_test(&t, slot_end) {
+                            QuickEnd::NotYet => {}
+                            QuickEnd::Unsure => quick_done = true,
+                            QuickEnd::Decided { continues, at } => {
+                                verdict = Some(continues);
+                                decided_at = Some(at);
+                            }
+                        }
+                    }
                     let sender_tones = basic_tones(t.sender.index() as usize);
-                    for w in &self.history {
+                    let quick_verdict = verdict.is_some();
+                    for w in self.history.iter().filter(|_| !quick_verdict) {
                         if w.index < next_index {
                             continue;
                         }
@@ -1017,17 +1374,19 @@ impl Decoder {
                                 llr,
                                 data_llr,
                                 next_index,
+                                quick_done,
                             };
                         }
                         return;
                     };
+                    let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
                     match (slot, continues) {
                         (1, false) => {
                             let message = Message::Short {
                                 sender: t.sender,
                                 data: t.data[0],
                             };
-                            self.report(&t, message, slot_end);
+                            self.report(&t, message, slot_end, decided_at);
                             self.end_transmission(slot_end, false);
                         }
                         (1, true) => {
@@ -1041,7 +1400,7 @@ impl Decoder {
                                 sender: t.sender,
                                 value,
                             };
-                            self.report(&t, message, slot_end);
+                            self.report(&t, message, slot_end, decided_at);
                             self.end_transmission(slot_end, false);
                         }
                         (_, true) => {
@@ -1050,6 +1409,79 @@ impl Decoder {
                     }
                 }
             }
+        }
+    }
+
+    /// The quick look after a slot's end: the sender's present tones measured on one short
+    /// Hann window ([`QUICK_WINDOW_SHARE`] of an analysis window) starting
+    /// [`QUICK_GUARD_SHARE`] of a window after the estimated end, at the frame's exact
+    /// frequencies. When the slot was loud enough that a continuation (at the conservative
+    /// [`CONTINUATION_SHARE`]) would stand [`QUICK_MARGIN_SD`] standard deviations above
+    /// the "stopped" threshold, it decides: power below the noise's 1e-3 quantile → stopped;
+    /// above its 1e-6 quantile and half the expected continuation → continues. Otherwise,
+    /// or in between (an end estimated early leaves the tone's tail in the window), the
+    /// sequential test on analysis windows decides as before. At 0 dB and above this
+    /// reports about 80 ms after the end instead of a whole analysis window (~140 ms).
+    fn quick_end_test(&self, t: &Tracking, slot_end: f64) -> QuickEnd {
+        let window_len = self.geometry.window_len as f64;
+        let len = ((QUICK_WINDOW_SHARE * window_len).round() as usize).max(8);
+        let start = (slot_end + QUICK_GUARD_SHARE * window_len).ceil().max(0.0) as u64;
+        let Some(x) = self.analyzer.samples(start, len) else {
+            return if self.analyzer.samples_pushed() >= start + len as u64 {
+                QuickEnd::Unsure // no longer held
+            } else {
+                QuickEnd::NotYet
+            };
+        };
+        let tones: Vec<usize> = basic_tones(t.sender.index() as usize)
+            .into_iter()
+            .filter(|&k| t.present[k] && t.level[k] > 0.0)
+            .collect();
+        if tones.is_empty() {
+            return QuickEnd::Unsure;
+        }
+        // Normalised like the analysis: a Hann window of `len` has `len / L` of the noise
+        // power of one of length L, and (`len / L`)² of a steady tone's.
+        let ratio = len as f64 / window_len;
+        let expected: f64 = tones.iter().map(|&k| t.level[k]).sum::<f64>() * ratio;
+        let m = tones.len() as f64;
+        let continued_mean = m + CONTINUATION_SHARE * expected;
+        let continued_sd = (m + 2.0 * CONTINUATION_SHARE * expected).sqrt();
+        let stop_threshold = gamma_upper_quantile(m, 1e-3);
+        if continued_mean - QUICK_MARGIN_SD * continued_sd < stop_threshold {
+            return QuickEnd::Unsure;
+        }
+        let mean = x.iter().map(|&v| f64::from(v)).sum::<f64>() / len as f64;
+        let scale = 1.0 + self.geometry.scales[t.scale];
+        let rate = self.rate();
+        let mut total = 0.0;
+        for &k in &tones {
+            let w = 2.0 * std::f64::consts::PI * tone_frequency_hz(k) * scale / rate;
+            let (mut re, mut im) = (0.0f64, 0.0f64);
+            for (n, &v) in x.iter().enumerate() {
+                let hann = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * n as f64 / len as f64).cos();
+                let phase = w * n as f64;
+                let y = (f64::from(v) - mean) * hann;
+                re += y * phase.cos();
+                im -= y * phase.sin();
+            }
+            let noise = t.noise * self.noise.shape[k] * ratio;
+            total += (re * re + im * im) / noise.max(1e-300);
+        }
+        let at = (start + len as u64) as f64;
+        if total < stop_threshold {
+            QuickEnd::Decided {
+                continues: false,
+                at,
+            }
+        } else if total > gamma_upper_quantile(m, 1e-6).max(m + 0.5 * CONTINUATION_SHARE * expected)
+        {
+            QuickEnd::Decided {
+                continues: true,
+                at,
+            }
+        } else {
+            QuickEnd::Unsure
         }
     }
 
@@ -1107,8 +1539,11 @@ impl Decoder {
         frame: Frame,
         present: &[bool; TONE_COUNT],
         level: &[f64; TONE_COUNT],
+        sums: &[f64; TONE_COUNT],
+        count: usize,
     ) -> bool {
         let own = frame.tones();
+        let strict = gamma_upper_quantile(count.max(1) as f64, P_STRAY);
         let mut levels: Vec<f64> = own
             .iter()
             .filter(|&&k| present[k])
@@ -1116,7 +1551,20 @@ impl Decoder {
             .collect();
         levels.sort_by(|a, b| a.total_cmp(b));
         let median = levels.get(levels.len() / 2).copied().unwrap_or(0.0);
-        (0..TONE_COUNT).any(|k| present[k] && !own.contains(&k) && level[k] >= STRAY_SHARE * median)
+        // The weakest tone a basic's 2-of-3 vote rests on (the second loudest of each).
+        let vote = |b: usize| {
+            let mut l = basic_tones(b).map(|k| if present[k] { level[k] } else { 0.0 });
+            l.sort_by(|a, b| b.total_cmp(a));
+            l[1]
+        };
+        let weakest_vote =
+            vote(frame.sender.index() as usize).min(vote(SENDER_COUNT + usize::from(frame.data)));
+        (0..TONE_COUNT).any(|k| {
+            present[k]
+                && !own.contains(&k)
+                && sums[k] >= strict
+                && (level[k] >= STRAY_SHARE * median || level[k] >= STRAY_OVER_VOTE * weakest_vote)
+        })
     }
 
     /// Whether the sender's tones were sounding just before the onset (the mirror of the
@@ -1151,7 +1599,7 @@ impl Decoder {
         llr > SPRT_BOUND / 3.0
     }
 
-    fn report(&mut self, t: &Tracking, message: Message, end: f64) {
+    fn report(&mut self, t: &Tracking, message: Message, end: f64, decided_at: f64) {
         let rate = self.rate();
         let mut levels: Vec<f64> = (0..TONE_COUNT)
             .filter(|&k| t.present[k])
@@ -1163,7 +1611,7 @@ impl Decoder {
             message,
             start_s: t.onset / rate,
             end_s: end / rate,
-            decided_at_s: self.latest_window_end() / rate,
+            decided_at_s: decided_at / rate,
             frequency_scale: 1.0 + self.geometry.scales[t.scale],
             tone_snr_db: 10.0 * median.max(1e-12).log10(),
         });
@@ -1222,8 +1670,10 @@ mod tests {
             "start {}",
             got[0].start_s
         );
+        // Loud and clean: the quick end test reports it within 100 ms of its end (one
+        // 64 ms window 16 ms after it), not a whole analysis window later.
         assert!(
-            got[0].decided_at_s - 1.5 < 0.2,
+            got[0].decided_at_s - 1.5 < 0.1,
             "decided at {}",
             got[0].decided_at_s
         );
@@ -1244,6 +1694,128 @@ mod tests {
                 "value {value}"
             );
         }
+    }
+
+    /// Six plain sines at `frame`'s tones, tone `i` moved by `offsets_hz[i]`, 1 s long.
+    fn sines(frame: Frame, offsets_hz: [f64; 6], rate: f64) -> Vec<f32> {
+        let tones = frame.tones();
+        (0..rate as usize)
+            .map(|n| {
+                let t = n as f64 / rate;
+                tones
+                    .iter()
+                    .zip(offsets_hz)
+                    .map(|(&k, d)| {
+                        (2.0 * std::f64::consts::PI * (crate::tones::tone_frequency_hz(k) + d) * t)
+                            .sin()
+                    })
+                    .sum::<f64>() as f32
+                    * 0.05
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tones_off_our_grid_by_their_own_amounts_are_not_a_message() {
+        // Another codec's six tones, each near one of ours but off by its own amount (as a
+        // 50 Hz grid passes ours): loud and clean, every tone inside the ±0.6% tolerance,
+        // yet no one frequency scale explains them all. The same tones moved by
+        // one common factor (a sender's clock 0.4% fast) are our message.
+        let frame = Frame {
+            sender: Sender::RightAttacker,
+            data: 7,
+        };
+        let mut noise = crate::channel::WhiteNoise::new(6, 0.002);
+        let lead = vec![0.0f32; 8_000];
+        let tail = vec![0.0f32; 16_000];
+        let scaled: [f64; 6] = {
+            let tones = frame.tones();
+            std::array::from_fn(|i| 0.004 * crate::tones::tone_frequency_hz(tones[i]))
+        };
+        for (offsets, expected) in [
+            ([7.0, -6.0, 9.0, -5.0, 8.0, -7.0], 0),
+            // Only 2 Hz off each way: every tone keeps ~95% of its power at a middle
+            // scale, but their peaks disagree by 4 Hz where ours agree within 0.1 Hz.
+            ([2.0, -2.0, 2.0, -2.0, 2.0, -2.0], 0),
+            (scaled, 1),
+        ] {
+            let mut x = lead.clone();
+            x.extend(sines(frame, offsets, 16_000.0));
+            x.extend(&tail);
+            crate::channel::Source::add_to(&mut noise, &mut x);
+            let got = decode_all(DecoderConfig::default(), &x, 1000);
+            assert_eq!(got.len(), expected, "offsets {offsets:?}: {got:?}");
+        }
+    }
+
+    #[test]
+    fn tones_shorter_than_the_shortest_window_are_refused_up_front() {
+        // 40 ms tones through 64 ms windows were decoded wrongly 5% of the time at 0 dB;
+        // the decoder says so at configuration instead of guessing.
+        for (tone_s, ok) in [(0.04, false), (0.059, false), (0.06, true), (1.0, true)] {
+            let got = Decoder::new(DecoderConfig {
+                tone_duration_s: tone_s,
+                ..DecoderConfig::default()
+            });
+            assert_eq!(got.is_ok(), ok, "{tone_s} s tones");
+        }
+    }
+
+    #[test]
+    fn a_file_holding_just_the_message_decodes() {
+        // `huddle audio encode` writes the tones and nothing else: no noise, no silence
+        // before or after. The noise level then drifts down by orders of magnitude over
+        // the first windows (digital silence between the tones), which once put the
+        // onset two windows late and the message was dropped as the second half of a
+        // long one.
+        let enc = Encoder::new(EncoderConfig::default()).unwrap();
+        for msg in [
+            Message::short(Sender::RightAttacker, 7).unwrap(),
+            Message::long(Sender::LeftAttacker, 300).unwrap(),
+        ] {
+            let got = decode_all(DecoderConfig::default(), &enc.encode_f32(&msg), 4096);
+            assert_eq!(got.iter().map(|d| d.message).collect::<Vec<_>>(), vec![msg]);
+            assert!(got[0].start_s.abs() < 0.02, "start {}", got[0].start_s);
+        }
+    }
+
+    #[test]
+    fn a_burst_whose_low_tones_lie_beyond_the_tolerance_is_not_a_message() {
+        // Like a foreign burst seen in 10 h of foreign tones: four loud tones, two of each
+        // of two of our basics' three; three are 0.55% sharp, one is 0.74% sharp, beyond
+        // the ±0.6% comb, where the comb's last bin still reads it strongly. The bin just
+        // beyond the comb shows its peak is out there. The same four tones all 0.55%
+        // sharp are our frame (2 of 3 tones of each basic).
+        let rate = 16_000.0;
+        let play = |tones: &[(usize, f64)]| -> Vec<f32> {
+            let mut x = vec![0.0f32; 8_000];
+            x.extend((0..16_000).map(|n| {
+                let t = n as f64 / rate;
+                tones
+                    .iter()
+                    .map(|&(k, e)| {
+                        (2.0 * std::f64::consts::PI
+                            * crate::tones::tone_frequency_hz(k)
+                            * (1.0 + e)
+                            * t)
+                            .sin()
+                    })
+                    .sum::<f64>() as f32
+                    * 0.05
+            }));
+            x.extend(vec![0.0f32; 16_000]);
+            crate::channel::Source::add_to(&mut crate::channel::WhiteNoise::new(9, 0.002), &mut x);
+            x
+        };
+        let foreign = play(&[(2, 0.0055), (11, 0.0074), (26, 0.0055), (35, 0.0055)]);
+        let got = decode_all(DecoderConfig::default(), &foreign, 1000);
+        assert!(got.is_empty(), "foreign burst decoded: {got:?}");
+        let ours = play(&[(2, 0.0055), (11, 0.0055), (26, 0.0055), (35, 0.0055)]);
+        let got = decode_all(DecoderConfig::default(), &ours, 1000);
+        assert_eq!(
+            got.iter().map(|d| d.message).collect::<Vec<_>>(),
+            vec![Message::short(Sender::RightAttacker, 8).unwrap()]
+        );
     }
 
     #[test]

@@ -61,8 +61,8 @@ mod tones;
 mod wav;
 
 pub use decoder::{
-    Decoder, DecoderConfig, DecoderConfigError, Detection, DYNAMIC_RANGE, NEIGHBOUR_LEAKAGE,
-    P_FRAME, P_TONE, P_TONE_CONFIRM, P_TONE_RIVAL, SPRT_BOUND,
+    Decoder, DecoderConfig, DecoderConfigError, Detection, DYNAMIC_RANGE, MIN_TONE_DURATION_S,
+    NEIGHBOUR_LEAKAGE, P_FRAME, P_FRAME_CONFIRM, P_TONE, P_TONE_CONFIRM, P_TONE_RIVAL, SPRT_BOUND,
 };
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};

@@ -181,6 +181,34 @@ fn corrupt_and_truncated_wavs_are_typed_errors() {
 }
 
 #[test]
+fn loud_long_messages_start_where_they_start() {
+    // 300 long messages at 0 dB (seed 103 of the eval's long row). The onset used to be
+    // read off the one edge window nearest half the plateau, and a plateau window reading
+    // 12% low now and then won: the first slot started 80 ms late, caught the second
+    // frame's data as a rival basic and the message was lost (2 of these 300). The
+    // least-squares fit over the windows around the edge loses none.
+    let out = run_snr_trial(&SnrTrial {
+        seed: 103,
+        snr_db: 0.0,
+        messages: 300,
+        tone_duration_s: 1.0,
+        sample_rate_hz: 16_000,
+        long_share: 1.0,
+        frequency_error: 0.0,
+    })
+    .unwrap();
+    assert_eq!(
+        (out.correct, out.wrong, out.spurious),
+        (300, 0, 0),
+        "correct, wrong, extra of 300 long messages at 0 dB"
+    );
+    let mut errors = out.start_errors_s.clone();
+    errors.sort_by(|a, b| a.total_cmp(b));
+    let p95 = errors[errors.len() * 95 / 100];
+    assert!(p95 < 0.03, "start error p95 {p95} s");
+}
+
+#[test]
 fn noisy_messages_at_minus_6_db_decode() {
     // 200 messages (a quarter long) at −6 dB in-band SNR: seven dB above the target
     // operating point, so every one should come through, none wrong.
@@ -272,7 +300,7 @@ proptest! {
         ], 0..20_000),
         block in 1usize..3000,
         rate in prop_oneof![Just(8_000u32), Just(16_000), Just(44_100)],
-        tone in 0.05f64..1.5,
+        tone in audio::MIN_TONE_DURATION_S..1.5,
     ) {
         let config = DecoderConfig { sample_rate_hz: rate, tone_duration_s: tone, ..Default::default() };
         let _ = decode(config, &samples, block);

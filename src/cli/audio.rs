@@ -314,6 +314,10 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             frequency_error: 0.0,
         })
     };
+    // Figures the closing summary compares with the targets.
+    let mut worst_wrong = 0.0f64;
+    let mut short_13 = None;
+    let mut delays = Vec::new();
     for (i, snr) in [
         -20.0, -17.0, -15.0, -14.0, -13.0, -12.0, -10.0, -6.0, 0.0, 10.0,
     ]
@@ -322,6 +326,17 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     {
         let out = trial(snr, 1.0, messages, 0.0, seed.wrapping_add(i as u64))?;
         snr_row("short", snr, 1.0, &out);
+        worst_wrong = worst_wrong.max(out.wrong_share());
+        if snr == -13.0 {
+            short_13 = Some(out.correct_share());
+        }
+        if [-13.0, -6.0, 0.0, 10.0].contains(&snr) {
+            delays.push((
+                snr,
+                percentile(&out.delays_s, 0.5),
+                percentile(&out.delays_s, 0.95),
+            ));
+        }
     }
     println!();
     println!("1 s tones, long messages (two frames), white noise:");
@@ -334,6 +349,7 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             seed.wrapping_add(100 + i as u64),
         )?;
         snr_row("long", snr, 1.0, &out);
+        worst_wrong = worst_wrong.max(out.wrong_share());
     }
     println!();
     println!("1 s tones, short, sender 0.5% sharp:");
@@ -347,14 +363,24 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         frequency_error: 0.005,
     })?;
     snr_row("+0.5%", -13.0, 1.0, &out);
+    worst_wrong = worst_wrong.max(out.wrong_share());
 
     println!();
     println!("Shortest tone that still decodes ≥ 99% at 0 dB (short messages):");
     let mut shortest = None;
+    let mut tones_100 = None;
     for (i, tone_s) in [0.2, 0.15, 0.1, 0.08, 0.06, 0.05, 0.04]
         .into_iter()
         .enumerate()
     {
+        if tone_s < audio::MIN_TONE_DURATION_S {
+            println!(
+                "  {:>4.0} ms tones: refused by the decoder (shortest {:.0} ms)",
+                tone_s * 1000.0,
+                audio::MIN_TONE_DURATION_S * 1000.0
+            );
+            continue;
+        }
         let out = trial(
             0.0,
             tone_s,
@@ -370,6 +396,10 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             out.spurious,
             out.sent
         );
+        worst_wrong = worst_wrong.max(out.wrong_share());
+        if tone_s == 0.1 {
+            tones_100 = Some(out.correct_share());
+        }
         if out.correct_share() >= 0.99 {
             shortest = Some(tone_s);
         }
@@ -381,8 +411,10 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
 
     println!();
     println!("False messages, nothing sent ({hours} h of each):");
+    let mut false_total = 0;
     for (i, kind) in Interference::ALL.into_iter().enumerate() {
         let out = run_false_alarm_trial(kind, hours, seed.wrapping_add(400 + i as u64));
+        false_total += out.false_messages;
         println!(
             "  {:<16} {:>4} false in {:.2} h  ({:.2} per hour)",
             kind.name(),
@@ -408,6 +440,48 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         per_s,
         per_s / 16_000.0
     );
+
+    println!();
+    println!("Against the issue's targets (seed {seed}):");
+    let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
+    if let Some(c) = short_13 {
+        println!(
+            "  short at -13 dB, 1 s tones     {:>7.2}%   target >= 99%      {}",
+            100.0 * c,
+            verdict(c >= 0.99)
+        );
+    }
+    println!(
+        "  worst wrong share, any row     {:>7.2}%   target <= 0.1%     {}",
+        100.0 * worst_wrong,
+        verdict(worst_wrong <= 0.001)
+    );
+    println!(
+        "  false messages, all noises     {:>8}   target 0 in {hours} h each {}",
+        false_total,
+        verdict(false_total == 0)
+    );
+    println!(
+        "  decode speed                   {:>7.0}×   target >= 1000×    {}",
+        per_s / 16_000.0,
+        verdict(per_s / 16_000.0 >= 1000.0)
+    );
+    for (snr, d50, d95) in &delays {
+        println!(
+            "  report delay at {:>5.1} dB       {:>4.0} ms median, {:>4.0} ms p95   target <= 100 ms  {}",
+            snr,
+            1000.0 * d50,
+            1000.0 * d95,
+            verdict(*d50 <= 0.1)
+        );
+    }
+    if let Some(c) = tones_100 {
+        println!(
+            "  100 ms tones at 0 dB           {:>7.2}%   target >= 99%      {}",
+            100.0 * c,
+            verdict(c >= 0.99)
+        );
+    }
     println!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
     Ok(())
 }
