@@ -601,6 +601,7 @@ impl Decoder {
                 stage: Stage::EndTest {
                     short: EndWindows {
                         abandoned: false,
+                        out_of_time: false,
                         ..
                     },
                     ..
@@ -1505,11 +1506,13 @@ impl Decoder {
     /// adds, per tone, the log-likelihood ratio of "continues" (the sender's tones at
     /// [`CONTINUATION_SHARE`] of the level measured in the slot; a second frame's data
     /// basic, the best of the 21, likewise) against "stopped"; the sum, divided by its
-    /// variance inflation from the windows' overlap, decides at ±[`END_BOUND_NATS`]. A loud
-    /// slot decides on its first window (~80 ms after the end); at −6 dB a few more. Out
-    /// of time ([`SPRT_HORIZON`]) a weak lean is a stop, as in the analysis-window test.
+    /// variance inflation from the windows' overlap, decides "stopped" at
+    /// −[`END_BOUND_NATS`] and "continues" at [`END_CONTINUE_NATS`] + ln 21. A loud slot
+    /// decides on its first window (~68 ms after the end); at −6 dB a few more.
     /// Returns the verdict (continues?) and the sample at which it was reached, or `None`
-    /// until then; marks the state abandoned when a window's samples are no longer held.
+    /// until then; marks the state out of time at [`SPRT_HORIZON`] (the analysis windows'
+    /// lean then decides) and abandoned when a window's samples are no longer held. At the
+    /// end of the stream, a weak lean is a stop.
     fn short_end_test(
         &self,
         t: &Tracking,
@@ -1536,7 +1539,7 @@ impl Decoder {
             2.0 * (2.0 * std::f64::consts::PI * tone_frequency_hz(k) * scale / rate).cos()
         });
         let normaliser = |k: usize| (t.noise * self.noise.shape[k] * ratio).max(1e-300);
-        let decide = |st: &EndWindows| {
+        let effective = |st: &EndWindows| {
             let best_data = st
                 .data_llr
                 .iter()
@@ -1554,7 +1557,7 @@ impl Decoder {
                 }
                 if self.eof {
                     let at = self.analyzer.samples_pushed() as f64;
-                    return Some((decide(st) > END_BOUND_NATS / 3.0, at));
+                    return Some((effective(st) > END_BOUND_NATS / 3.0, at));
                 }
                 return None;
             };
@@ -1599,7 +1602,7 @@ impl Decoder {
                 }
             }
             st.next += 1;
-            let evidence = decide(st);
+            let evidence = effective(st);
             let at = end as f64;
             // "Continues" rests on the best of 21 data basics: a union over them costs
             // ln 21 (the stop side needs no such allowance: the true one is among them).
