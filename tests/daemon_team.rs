@@ -9,9 +9,10 @@ use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
 use std::time::Duration;
 
 use comms::driver::{open_multicast, SocketConfig};
+use comms::relay::Binding;
 use comms::wire::{encode_frame, Frame, Item, TeamKey};
 use comms::Value;
-use daemon_support::{parse_val, Daemon};
+use daemon_support::Daemon;
 
 const GROUP: &str = "239.255.38.1:38100";
 
@@ -30,7 +31,7 @@ fn start(id: u8, dir: &std::path::Path) -> Daemon {
 
 fn stat(c: &mut daemon_support::Client, name: &str) -> i64 {
     let answer = c.ask(&format!("GETV local.var.huddle.stats.{name}"));
-    parse_val(&answer).map_or(0, |(_, _, v, _)| v.parse().unwrap())
+    Binding::parse(&answer).map_or(0, |b| b.value.parse().unwrap())
 }
 
 #[test]
@@ -50,9 +51,10 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     let answer = c3.wait_for("1.var.ball.dist", Duration::from_secs(3), |a| {
         a.starts_with("VAL")
     });
-    let (key, ty, value, age_ms) = parse_val(&answer).unwrap();
+    let b = Binding::parse(&answer).unwrap();
+    let age_ms = b.age_ms;
     assert_eq!(
-        (key.as_str(), ty.as_str(), value.as_str()),
+        (b.key.as_str(), b.ty.as_str(), b.value.as_str()),
         ("1.var.ball.dist", "float", "1.5")
     );
     assert!(age_ms < 200, "robot 3 sees robot 1's value {age_ms} ms old");
@@ -98,7 +100,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
         let role = c.wait_for("2.var.role", Duration::from_secs(3), |a| {
             a.contains("\"attacker\"")
         });
-        let (_, _, _, age_ms) = parse_val(&role).unwrap();
+        let age_ms = Binding::parse(&role).unwrap().age_ms;
         assert!(age_ms < 500, "the restarted robot's value is fresh: {role}");
     }
 

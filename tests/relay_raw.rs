@@ -5,7 +5,8 @@ mod daemon_support;
 
 use std::time::{Duration, Instant};
 
-use daemon_support::{parse_val, Client, Daemon};
+use comms::relay::Binding;
+use daemon_support::{Client, Daemon};
 
 fn daemon(id: u8, port: u16) -> (Daemon, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
@@ -23,9 +24,10 @@ fn every_command_over_tcp() {
     assert_eq!(c.greeting, "HUDDLE 1 robot 4");
     assert_eq!(c.ask("SETV *.var.pose [1.5, -2, 0.25]"), "OK");
     assert_eq!(c.ask("setv local.var.note \"a \\\"quoted\\\" word\""), "OK");
-    let (key, ty, value, age) = parse_val(&c.ask("GETV *.var.pose")).unwrap();
+    let b = Binding::parse(&c.ask("GETV *.var.pose")).unwrap();
+    let age = b.age_ms;
     assert_eq!(
-        (key.as_str(), ty.as_str(), value.as_str()),
+        (b.key.as_str(), b.ty.as_str(), b.value.as_str()),
         ("4.var.pose", "floats", "[1.5, -2.0, 0.25]")
     );
     assert!(age < 1000);

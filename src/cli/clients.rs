@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
+use comms::relay::Binding;
 
 /// Where the daemon's relay listens.
 #[derive(Args, Debug, Clone)]
@@ -132,42 +133,6 @@ impl RelayClient {
 
     fn into_reader(self) -> BufReader<TcpStream> {
         self.reader
-    }
-}
-
-/// One `VAL`/`UPD` line: `WORD key type value age_ms`, value possibly with spaces.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Binding {
-    /// The key as stored.
-    pub key: String,
-    /// The type name.
-    pub ty: String,
-    /// The value literal.
-    pub value: String,
-    /// Age in milliseconds when the line was written.
-    pub age_ms: u64,
-}
-
-impl Binding {
-    /// Parses `VAL ...` or `UPD ...`.
-    pub fn parse(line: &str) -> Option<Binding> {
-        let rest = line
-            .strip_prefix("VAL ")
-            .or_else(|| line.strip_prefix("UPD "))?;
-        let (key, rest) = rest.split_once(' ')?;
-        let (ty, rest) = rest.split_once(' ')?;
-        let (value, age) = rest.rsplit_once(' ')?;
-        Some(Binding {
-            key: key.to_owned(),
-            ty: ty.to_owned(),
-            value: value.to_owned(),
-            age_ms: age.parse().ok()?,
-        })
-    }
-
-    /// The owner: the key's first level (`3`, `local`).
-    pub fn owner(&self) -> &str {
-        self.key.split('.').next().unwrap_or("")
     }
 }
 

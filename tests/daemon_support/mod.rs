@@ -148,14 +148,3 @@ impl Client {
         (total, false)
     }
 }
-
-/// `VAL key type value age_ms` → (key, type, value, age_ms).
-pub fn parse_val(line: &str) -> Option<(String, String, String, u64)> {
-    let rest = line
-        .strip_prefix("VAL ")
-        .or_else(|| line.strip_prefix("UPD "))?;
-    let (key, rest) = rest.split_once(' ')?;
-    let (ty, rest) = rest.split_once(' ')?;
-    let (value, age) = rest.rsplit_once(' ')?;
-    Some((key.into(), ty.into(), value.into(), age.parse().ok()?))
-}
