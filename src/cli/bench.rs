@@ -154,6 +154,42 @@ fn summarize(mut v: Vec<f64>) -> (f64, f64) {
 /// the scheduler's idea of the threads).
 const WARM_UP_ROUNDS: usize = 200;
 
+/// The ping-pong's datagrams: `P` and the round number (u64 LE) out, the same with `R`
+/// back, `Q` to stop the ponger. Both baselines speak it.
+fn ping(round: u64) -> [u8; 9] {
+    let mut msg = [0u8; 9];
+    msg[0] = b'P';
+    msg[1..].copy_from_slice(&round.to_le_bytes());
+    msg
+}
+
+/// Whether `datagram` is the reply to `ping` (the pinger also hears its own pings looped
+/// back, and late replies to earlier rounds).
+fn is_reply(datagram: &[u8], ping: &[u8; 9]) -> bool {
+    datagram.len() == 9 && datagram[0] == b'R' && datagram[1..] == ping[1..]
+}
+
+/// What the ponger does with a datagram it heard.
+enum Echo {
+    /// Send it back (it has been turned into the reply).
+    Reply,
+    /// Stop.
+    Quit,
+    /// Its own reply, looped back: nothing.
+    Ignore,
+}
+
+fn echo(datagram: &mut [u8]) -> Echo {
+    match datagram.first() {
+        Some(b'P') => {
+            datagram[0] = b'R';
+            Echo::Reply
+        }
+        Some(b'Q') => Echo::Quit,
+        _ => Echo::Ignore,
+    }
+}
+
 /// (a): two threads, blocking sockets on one group and port; each skips its own echoes.
 fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
     let cfg = SocketConfig {
@@ -173,13 +209,12 @@ fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
         let mut buf = [0u8; 64];
         loop {
             let (n, _) = b.recv_from(&mut buf)?;
-            match buf[0] {
-                b'P' => {
-                    buf[0] = b'R';
+            match echo(&mut buf[..n]) {
+                Echo::Reply => {
                     b.send_to(&buf[..n], to)?;
                 }
-                b'Q' => return Ok(()),
-                _ => {} // its own reply, looped back
+                Echo::Quit => return Ok(()),
+                Echo::Ignore => {}
             }
         }
     });
@@ -189,14 +224,12 @@ fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
         let mut rtts = Vec::with_capacity(rounds);
         let mut buf = [0u8; 64];
         for i in 0..(WARM_UP_ROUNDS + rounds) as u64 {
-            let mut msg = [0u8; 9];
-            msg[0] = b'P';
-            msg[1..].copy_from_slice(&i.to_le_bytes());
+            let msg = ping(i);
             let t0 = Instant::now();
             a.send_to(&msg, to)?;
             loop {
                 let (n, _) = a.recv_from(&mut buf).context("raw ping-pong: no reply")?;
-                if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
+                if is_reply(&buf[..n], &msg) {
                     break;
                 }
             }
@@ -244,13 +277,12 @@ fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>>
         let mut buf = [0u8; 64];
         loop {
             let (n, _) = b.recv_from(&mut buf).await?;
-            match buf[0] {
-                b'P' => {
-                    buf[0] = b'R';
+            match echo(&mut buf[..n]) {
+                Echo::Reply => {
                     b.send_to(&buf[..n], to).await?;
                 }
-                b'Q' => return Ok(()),
-                _ => {}
+                Echo::Quit => return Ok(()),
+                Echo::Ignore => {}
             }
         }
     });
@@ -259,15 +291,13 @@ fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>>
         let mut rtts = Vec::with_capacity(rounds);
         let mut buf = [0u8; 64];
         for i in 0..(WARM_UP_ROUNDS + rounds) as u64 {
-            let mut msg = [0u8; 9];
-            msg[0] = b'P';
-            msg[1..].copy_from_slice(&i.to_le_bytes());
+            let msg = ping(i);
             let t0 = Instant::now();
             a.send_to(&msg, to).await?;
             let reply = tokio::time::timeout(Duration::from_secs(2), async {
                 loop {
                     let (n, _) = a.recv_from(&mut buf).await?;
-                    if n == 9 && buf[0] == b'R' && buf[1..9] == msg[1..] {
+                    if is_reply(&buf[..n], &msg) {
                         return Ok::<_, std::io::Error>(());
                     }
                 }
