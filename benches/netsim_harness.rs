@@ -37,6 +37,15 @@ fn send_time(k: usize, n: u32) -> Duration {
     Duration::from_millis(2 * k as u64) + FRAME_INTERVAL * n
 }
 
+/// The robot that sends next and when, given how many frames each has sent; `None` once
+/// the match is over.
+fn next_send(sent: &[u32; ROBOTS]) -> Option<(usize, Duration)> {
+    (0..ROBOTS)
+        .map(|k| (k, send_time(k, sent[k])))
+        .min_by_key(|&(_, t)| t)
+        .filter(|&(_, t)| t <= SIMULATED)
+}
+
 /// One 10 s match, network only; returns the number of packets received.
 fn network_only(seed: u64) -> u64 {
     let mut sim = Sim::builder()
@@ -49,14 +58,7 @@ fn network_only(seed: u64) -> u64 {
     let mut sent = [0u32; ROBOTS];
     let frame = vec![0xA5u8; FRAME_BYTES];
     let mut received = 0u64;
-    loop {
-        let (k, due) = (0..ROBOTS)
-            .map(|k| (k, send_time(k, sent[k])))
-            .min_by_key(|&(_, t)| t)
-            .expect("robots");
-        if due > SIMULATED {
-            break;
-        }
+    while let Some((k, due)) = next_send(&sent) {
         sim.run_until(at(due));
         for &r in &robots {
             received += sim.drain(r).count() as u64;
@@ -76,14 +78,7 @@ fn replicas(seed: u64) -> u64 {
     h.keep_events(false);
     let pose = Key::parse("*.var.pose").expect("valid key");
     let mut sent = [0u32; ROBOTS];
-    loop {
-        let (k, due) = (0..ROBOTS)
-            .map(|k| (k, send_time(k, sent[k])))
-            .min_by_key(|&(_, t)| t)
-            .expect("robots");
-        if due > SIMULATED {
-            break;
-        }
+    while let Some((k, due)) = next_send(&sent) {
         h.run_until(at(due));
         let v = Value::Floats(vec![k as f32, sent[k] as f32 * 0.01, 0.5]);
         h.set(k, &pose, v).expect("own key");
