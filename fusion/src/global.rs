@@ -4,7 +4,7 @@
 use crate::ball::{initial_estimate, update, BallEstimate, BallModel, FieldObservation, Kick};
 use crate::confidence::position_confidence;
 use crate::kalman;
-use crate::local::LocalWorldModel;
+use crate::local::{Heard, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
@@ -67,11 +67,6 @@ impl Default for GlobalConfig {
         }
     }
 }
-
-/// Two reports of a kick with the same number this close in time (each placed by its own
-/// message's age, so they differ by the network's jitter) are one kick: a report lasts
-/// [`crate::KICK_REPORTED_FOR_S`], and a robot's kicks with one number are four kicks apart.
-const KICK_SAME_WITHIN_S: f64 = 0.3;
 
 /// What [`GlobalModel::ingest`] did with one LWM.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,8 +149,8 @@ struct RobotRecord {
     last_accepted_t_s: Option<f64>,
     /// Its observations rejected in a row that agree with each other (see `challenge`).
     rejected_run: Vec<FieldObservation>,
-    /// The number and time of its last kick taken.
-    last_kick: Option<(u8, f64)>,
+    /// What has been taken from its messages (sequence numbers, kicks).
+    heard: Heard,
 }
 
 /// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
@@ -195,10 +190,6 @@ struct Rewind {
     after: Vec<BallEstimate>,
     head: Option<BallEstimate>,
     rejected: Vec<FieldObservation>,
-}
-
-fn seq_newer(a: u16, b: u16) -> bool {
-    (a.wrapping_sub(b) as i16) > 0
 }
 
 impl GlobalModel {
@@ -248,33 +239,24 @@ impl GlobalModel {
     /// One LWM (`lwm.t_s` on this robot's clock). Use this for the robot's own LWM each
     /// time it publishes, and [`GlobalModel::receive`] for teammates.
     pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
-        // The last message taken from this robot: its repeats of batches after that one
-        // are new here (a message in between was lost).
-        let mut last_seq = None;
-        if let Some(rec) = self.robots.get(&robot) {
-            // A robot that was silent for a while may have restarted its counter.
-            let restarted = lwm.t_s - rec.lwm.t_s > self.config.stale_after_s;
-            if !seq_newer(lwm.seq, rec.lwm.seq) && !restarted {
-                self.stats.duplicates += 1;
-                return Ingest::Duplicate;
-            }
-            if !restarted {
-                last_seq = Some(rec.lwm.seq);
-            }
-        }
         let rec = self.robots.entry(robot).or_insert(RobotRecord {
             lwm: *lwm,
             received_t_s: now_s,
             last_rejected_t_s: None,
             last_accepted_t_s: None,
             rejected_run: Vec::new(),
-            last_kick: None,
+            heard: Heard::default(),
         });
+        let Some(missed) = rec.heard.take(lwm, self.config.stale_after_s) else {
+            self.stats.duplicates += 1;
+            return Ingest::Duplicate;
+        };
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
 
-        // Oldest first, so that the filter sees them in time order.
-        for obs in lwm.missed_batches(last_seq) {
+        // Oldest first, so that the filter sees them in time order: the repeats of
+        // messages lost in between, then the message's own batch.
+        for obs in missed.into_iter().flatten() {
             self.stats.recovered += 1;
             self.observe(robot, &obs, lwm, now_s);
         }
@@ -282,16 +264,9 @@ impl GlobalModel {
             None => Ingest::NoObservation,
             Some(obs) => self.observe(robot, &obs, lwm, now_s),
         };
-        if let Some(report) = lwm.kick {
-            let rec = self.robots.get_mut(&robot).expect("record inserted above");
-            // The same kick again (a repeat) has the same number and about the same time.
-            let seen = rec.last_kick.is_some_and(|(number, t_s)| {
-                number == report.number && (report.kick.t_s - t_s).abs() < KICK_SAME_WITHIN_S
-            });
-            if !seen {
-                rec.last_kick = Some((report.number, report.kick.t_s));
-                self.kicked(&report.kick, &lwm.pose, now_s);
-            }
+        let rec = self.robots.get_mut(&robot).expect("record inserted above");
+        if let Some(kick) = rec.heard.kick(lwm) {
+            self.kicked(&kick, &lwm.pose, now_s);
         }
         self.commit(now_s - self.config.commit_lag_s);
         self.restart_on_consensus(now_s);
@@ -324,7 +299,7 @@ impl GlobalModel {
                 if lwm.ball.is_some() {
                     // The robot's own ball already turned with its kick: not twice.
                     if let Some(report) = lwm.kick {
-                        rec.last_kick = Some((report.number, report.kick.t_s));
+                        rec.heard.take_kick(&report);
                     }
                 }
             }

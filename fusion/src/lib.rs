@@ -220,7 +220,7 @@ pub use global::{
     GlobalConfig, GlobalModel, GlobalStats, Ingest, TeamBall, TeamBallSource, Teammate,
 };
 pub use kalman::UpdateError;
-pub use local::{KickReport, LocalConfig, LocalModel, LocalWorldModel, KICK_REPORTED_FOR_S};
+pub use local::{Heard, KickReport, LocalConfig, LocalModel, LocalWorldModel, KICK_REPORTED_FOR_S};
 pub use nalgebra;
 pub use pose::{
     predict as pose_predict, update_landmark, update_range_bearing, LandmarkSighting, Odometry,

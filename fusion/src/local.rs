@@ -58,20 +58,69 @@ pub struct KickReport {
     pub kick: Kick,
 }
 
-impl LocalWorldModel {
-    /// The repeated batches in this message that a receiver has not taken yet, oldest
-    /// first, when the last message it took from this robot was `last_seq` (`None`: it
-    /// took none, so the repeats are not news to rely on). The caller has already checked
-    /// that this message itself is new; its own batch is [`LocalWorldModel::observation`].
-    pub fn missed_batches(&self, last_seq: Option<u16>) -> impl Iterator<Item = FieldObservation> {
-        let seq = self.seq;
-        let earlier = self.earlier;
-        (0..2usize).rev().filter_map(move |k| {
-            let batch_seq = seq.wrapping_sub(k as u16 + 1);
-            let last = last_seq?;
-            let missed = (batch_seq.wrapping_sub(last) as i16) > 0;
-            earlier[k].filter(|_| missed)
-        })
+/// What a receiver has taken from one robot's messages, so that each batch and each kick
+/// in them is taken once however often messages repeat them (the GWM keeps one per
+/// teammate; so does anything else that consumes LWMs, such as `huddle sim`'s reference).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Heard {
+    /// Sequence number and time of the last message taken.
+    last: Option<(u16, f64)>,
+    /// Number and time of the last kick taken.
+    kick: Option<(u8, f64)>,
+}
+
+/// Two reports of a kick with the same number this close in time (each placed by its own
+/// message's age, so they differ by the network's jitter) are one kick: a report lasts
+/// [`KICK_REPORTED_FOR_S`], and a robot's kicks with one number are four kicks apart.
+const KICK_SAME_WITHIN_S: f64 = 0.3;
+
+impl Heard {
+    /// Takes `lwm` if it is news: `None` for a duplicate or an older message; otherwise the
+    /// repeated batches of messages missed since the last one taken, oldest first (the
+    /// message's own batch is [`LocalWorldModel::observation`]). A robot silent for
+    /// `stale_after_s` may have restarted its counter: its next message is news, and its
+    /// repeats are not relied on.
+    pub fn take(
+        &mut self,
+        lwm: &LocalWorldModel,
+        stale_after_s: f64,
+    ) -> Option<[Option<FieldObservation>; 2]> {
+        let last_seq = match self.last {
+            Some((seq, t_s)) if lwm.t_s - t_s <= stale_after_s => {
+                if (lwm.seq.wrapping_sub(seq) as i16) <= 0 {
+                    return None;
+                }
+                Some(seq)
+            }
+            _ => None,
+        };
+        self.last = Some((lwm.seq, lwm.t_s));
+        // Oldest first: earlier[1] is the batch of message seq − 2.
+        Some(std::array::from_fn(|i| {
+            let k = 1 - i;
+            let batch_seq = lwm.seq.wrapping_sub(k as u16 + 1);
+            let missed = last_seq.is_some_and(|last| (batch_seq.wrapping_sub(last) as i16) > 0);
+            lwm.earlier[k].filter(|_| missed)
+        }))
+    }
+
+    /// The kick `lwm` reports, if it was not taken before (it is taken now).
+    pub fn kick(&mut self, lwm: &LocalWorldModel) -> Option<Kick> {
+        let report = lwm.kick?;
+        let seen = self.kick.is_some_and(|(number, t_s)| {
+            number == report.number && (report.kick.t_s - t_s).abs() < KICK_SAME_WITHIN_S
+        });
+        if seen {
+            return None;
+        }
+        self.take_kick(&report);
+        Some(report.kick)
+    }
+
+    /// Marks a kick as taken without a message's say (a track started from the kicker's
+    /// own ball, which already followed it).
+    pub fn take_kick(&mut self, report: &KickReport) {
+        self.kick = Some((report.number, report.kick.t_s));
     }
 }
 
@@ -285,5 +334,58 @@ impl LocalModel {
         lwm.earlier = self.sent;
         self.sent = [lwm.observation, self.sent[0]];
         lwm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn each_batch_and_kick_is_taken_once_however_often_repeated() {
+        // A robot publishes four messages, each with a sighting; the receiver gets the
+        // first and the fourth (two lost), then the fourth again (a duplicate).
+        let start = PoseEstimate::new(0.0, -0.2, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
+        let mut sender = LocalModel::new(LocalConfig::default(), start);
+        let seen = BallSighting {
+            local: Vector2::new(0.0, 0.2),
+            cov: Matrix2::identity() * 1e-3,
+        };
+        let mut msgs = Vec::new();
+        for k in 0..4 {
+            let t_s = 0.04 * k as f64;
+            sender.ball_sighting(t_s, &seen);
+            if k == 2 {
+                sender.kick(&Kick {
+                    t_s,
+                    speed_mps: 2.0,
+                    direction_rad: 0.0,
+                    speed_sigma_mps: 0.1,
+                    direction_sigma_rad: 0.05,
+                });
+            }
+            msgs.push(sender.publish(t_s + 0.01));
+        }
+        let mut heard = Heard::default();
+        let first = heard
+            .take(&msgs[0], 1.0)
+            .expect("the first message is news");
+        assert_eq!(first, [None, None], "nothing before the first to recover");
+        assert_eq!(heard.kick(&msgs[0]), None);
+        let fourth = heard.take(&msgs[3], 1.0).expect("news");
+        assert_eq!(
+            fourth,
+            [msgs[1].observation, msgs[2].observation],
+            "the two lost batches, oldest first"
+        );
+        assert!(heard.kick(&msgs[3]).is_some(), "the kick, first time");
+        assert_eq!(heard.take(&msgs[3], 1.0), None, "a duplicate");
+        assert_eq!(heard.take(&msgs[1], 1.0), None, "an older message");
+        assert_eq!(heard.kick(&msgs[3]), None, "the same kick again");
+        // After a long silence the counter may have restarted: news again, repeats unused.
+        let mut restarted = msgs[1];
+        restarted.t_s += 5.0;
+        assert_eq!(heard.take(&restarted, 1.0), Some([None, None]));
     }
 }

@@ -25,8 +25,8 @@ use comms::arbitration::{
 use comms::{Blackboard, Instant, Key, Scope, Value};
 use fusion::nalgebra::{Matrix3, Vector3};
 use fusion::{
-    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, Kick, LocalConfig, LocalModel,
-    NetworkLimitedBall, PoseNoise, TeamBall,
+    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, Heard, Kick, LocalConfig,
+    LocalModel, NetworkLimitedBall, PoseNoise, TeamBall,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -65,15 +65,6 @@ fn world_local_of(id: u8) -> Key {
 /// How long the network-limited reference keeps observations re-orderable: above the
 /// worst delay plus the two repeats' reach (as the GWM's commit lag).
 const REFERENCE_WINDOW_S: f64 = 0.5;
-
-/// What a robot's reference took last from one teammate.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct ReferenceHeard {
-    seq: u16,
-    t_s: f64,
-    /// Number and time of its last kick taken.
-    kick: Option<(u8, f64)>,
-}
 
 /// How the robots' world models are set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -222,8 +213,8 @@ pub struct Robot {
     /// The yardstick of its team ball: the centralized filter fed exactly the ball
     /// information that reached this robot (measurement only; it never steers play).
     pub reference: NetworkLimitedBall,
-    /// Per teammate: what the reference took last from it.
-    reference_heard: BTreeMap<u8, ReferenceHeard>,
+    /// Per teammate: what the reference has taken from its messages.
+    reference_heard: BTreeMap<u8, Heard>,
     /// The kick it made at its latest tick, if any.
     pub kicked: Option<Kick>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
@@ -497,39 +488,19 @@ impl Robot {
         msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
     }
 
-    /// A teammate's LWM into the reference: each batch once, the repeats of lost messages
-    /// included (as the GWM takes them).
+    /// A teammate's LWM into the reference: each batch and kick once, the repeats of lost
+    /// messages included (as the GWM takes them).
     fn reference_receive(&mut self, id: u8, lwm: &fusion::LocalWorldModel) {
-        // As the GWM: a teammate silent for a second may have restarted its counter.
-        let stale_after_s = self.gwm.config().stale_after_s;
-        let heard = self.reference_heard.get(&id).copied();
-        let last = heard
-            .filter(|h| lwm.t_s - h.t_s <= stale_after_s)
-            .map(|h| h.seq);
-        if last.is_some_and(|l| (lwm.seq.wrapping_sub(l) as i16) <= 0) {
+        let heard = self.reference_heard.entry(id).or_default();
+        let Some(missed) = heard.take(lwm, self.gwm.config().stale_after_s) else {
             return;
-        }
-        for obs in lwm.missed_batches(last).chain(lwm.observation) {
+        };
+        for obs in missed.into_iter().flatten().chain(lwm.observation) {
             self.reference.observe(&obs);
         }
-        let mut kick = heard.and_then(|h| h.kick);
-        if let Some(report) = lwm.kick {
-            let repeat = kick.is_some_and(|(number, t_s)| {
-                number == report.number && (report.kick.t_s - t_s).abs() < stale_after_s
-            });
-            if !repeat {
-                self.reference.kick(&report.kick);
-                kick = Some((report.number, report.kick.t_s));
-            }
+        if let Some(kick) = heard.kick(lwm) {
+            self.reference.kick(&kick);
         }
-        self.reference_heard.insert(
-            id,
-            ReferenceHeard {
-                seq: lwm.seq,
-                t_s: lwm.t_s,
-                kick,
-            },
-        );
     }
 
     /// The team ball if there is a usable one, else the robot's own.
