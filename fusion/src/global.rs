@@ -232,8 +232,19 @@ impl GlobalModel {
         now_s: f64,
         age_s: f64,
     ) -> Result<Ingest, DecodeError> {
-        let lwm = LocalWorldModel::from_bytes(bytes, now_s - age_s - self.config.transit_s)?;
+        let lwm = self.decode(bytes, now_s, age_s)?;
         Ok(self.ingest(robot, &lwm, now_s))
+    }
+
+    /// A teammate's message decoded and placed on this robot's clock as [`Self::receive`]
+    /// places it, for a caller that also wants the LWM itself (then [`Self::ingest`] it).
+    pub fn decode(
+        &self,
+        bytes: &[u8],
+        now_s: f64,
+        age_s: f64,
+    ) -> Result<LocalWorldModel, DecodeError> {
+        LocalWorldModel::from_bytes(bytes, now_s - age_s - self.config.transit_s)
     }
 
     /// One LWM (`lwm.t_s` on this robot's clock). Use this for the robot's own LWM each

@@ -471,9 +471,8 @@ impl Robot {
             if let Value::Bytes(bytes) = &e.value {
                 let age_s = e.age(input.local_now).as_secs_f64();
                 // A malformed message is the sender's bug; the GWM just does not take it.
-                let _ = self.gwm.receive(id, bytes, now_s, age_s);
-                let sent_s = now_s - age_s - self.gwm.config().transit_s;
-                if let Ok(lwm) = fusion::LocalWorldModel::from_bytes(bytes, sent_s) {
+                if let Ok(lwm) = self.gwm.decode(bytes, now_s, age_s) {
+                    self.gwm.ingest(id, &lwm, now_s);
                     self.reference_receive(id, &lwm);
                 }
             }
