@@ -354,8 +354,14 @@ impl GlobalModel {
         // observations after it (arrived earlier, made later) forward from there.
         let next = update(&model, prior, obs, None).map_or(*prior, |(e, _)| e);
         self.after.insert(at, next);
-        let mut state = next;
-        for k in at + 1..self.pending.len() {
+        self.replay_from(at + 1, next);
+    }
+
+    /// Carries `state` (the state before pending observation `from`) through the pending
+    /// observations from `from` on, rewriting their checkpoints and the head.
+    fn replay_from(&mut self, from: usize, mut state: BallEstimate) {
+        let model = self.config.ball;
+        for k in from..self.pending.len() {
             if let Ok((e, _)) = update(&model, &state, &self.pending[k], None) {
                 state = e;
             }
@@ -590,14 +596,7 @@ impl GlobalModel {
             mean: u.mean,
             cov: u.cov,
         });
-        let mut state = self.committed.expect("just set");
-        for k in 0..self.pending.len() {
-            if let Ok((e, _)) = update(&model, &state, &self.pending[k], None) {
-                state = e;
-            }
-            self.after[k] = state;
-        }
-        self.head = Some(state);
+        self.replay_from(0, self.committed.expect("just set"));
     }
 
     /// The team ball restarts from `first`; every observation made after it (pending or
