@@ -92,6 +92,7 @@ fn gwm(c: &mut Criterion) {
                 // A fresh GWM per pass over the recorded rounds, so sequence numbers move on.
                 let mut gwm = GlobalModel::new(0, GlobalConfig::default());
                 let n = ((iters - done) as usize).min(rounds.len());
+                #[allow(clippy::disallowed_methods)] // iter_custom: the bench times its passes
                 let started = Instant::now();
                 for (r, round) in rounds[..n].iter().enumerate() {
                     let now = r as f64 * 0.1 + 0.05;

@@ -46,7 +46,7 @@
 //!
 //! # Ball EKF
 //! State (x, y, vx, vy) in the field frame, velocity decaying at `friction_per_s` with
-//! white acceleration noise; the exact discretisation is in [`BallModel`]'s module docs
+//! white acceleration noise; the exact discretisation is in [`BallModel`]'s docs
 //! (see [`BallModel::transition`]). [`BallEstimate::predict_to`] predicts to any future time
 //! (the goalie's interception query). The seed's static model is [`BallModel::Static`].
 //! A sighting in robot coordinates becomes a field-frame position with
@@ -57,9 +57,9 @@
 //! A teammate's ball *estimate* is not a measurement: it already contains everything that
 //! robot saw before, the process noise it shares with every other track of the same ball,
 //! and — if its GWM fed back — other robots' information. Fusing such estimates as if
-//! independent, message after message, counts the same sightings again and again (≈ 4×
-//! overconfident); covariance intersection avoids that by assuming the worst correlation and
-//! pays for it in accuracy (≈ 1.35× the RMSE of a centralized filter).
+//! independent, message after message, counts the same sightings again and again and is
+//! overconfident; covariance intersection avoids that by assuming the worst correlation and
+//! pays for it in accuracy.
 //!
 //! huddle sends the *new information* instead. Each LWM message carries, besides the
 //! snapshot, one field-frame position measurement: the information-weighted combination
@@ -123,59 +123,45 @@
 //! came, the GWM rewinds to the track as it was before that restart; failing that, it fuses
 //! the kick's velocity, rolled forward by the model, into the current track (gated).
 //!
-//! # Measured in `huddle sim`
-//! Five robots, `competition` network, 300 s, seeds 1–12 (see `huddle sim --json`): team-ball
-//! RMSE 0.094–0.107 m (median 0.100) against 0.053–0.060 m for the centralized filter that
-//! sees every sighting at once (1.67–1.88×, median 1.80), and 0.046–0.053 m for one also
-//! told every kick at once (1.89–2.13×); average NEES 1.82–2.32, inside its χ² 95% bounds
-//! [1.78, 2.23] on 11 of the 12 (seed 11: 2.32); pose RMSE 3.4–3.8 cm, NEES 2.2–2.5 (3 dof).
-//!
-//! The sim also runs, at every robot, a [`NetworkLimitedBall`]: the centralized filter fed
-//! exactly the ball information that has reached that robot (its own sightings and kicks at
-//! once, each teammate's batches and kick reports when they arrive, late ones slotted in by
-//! time): what the centralized filter itself makes of what this network delivered. The
-//! team ball is 1.01–1.10× the reference (median 1.05: the fusion loses little), and the
-//! reference is 1.65–1.76× the sightings-only centralized filter (the network costs the
-//! rest); for robots that have not seen the ball themselves for 0.5 s the team ball is
-//! 0.13–0.15 m, the reference 0.12–0.14 m and the centralized filter ~0.06 m. Kick reports
-//! take the team ball from 0.103 to 0.100 m (mean of the 12 seeds, same q) and are what
-//! keeps its NEES in bounds at q = 0.85 (without them it is outside on 7 of 12). Where the
-//! network is quick the issue's 1.25× is met: seed 1 on the `lan` preset gives 0.95× the
-//! sightings-only centralized filter (the kick reports beat it) and 1.09× the one told the
-//! kicks; on `wlan`, 1.00× and 1.19×. What it took, and what is left:
+//! # What limits the team ball
+//! `huddle sim` measures the team ball against two references (its figures are in
+//! `huddle sim --json`): [`CentralizedBall`], one filter that sees every robot's sightings
+//! at once with no network, and, at every robot, a [`NetworkLimitedBall`]: the centralized
+//! filter fed exactly the ball information that has reached that robot (its own sightings
+//! and kicks at once, each teammate's batches and kick reports when they arrive, late ones
+//! slotted in by time), that is, what the centralized filter itself makes of what this
+//! network delivered. The team ball over the network-limited reference measures the
+//! fusion; the network-limited reference over the centralized filter measures the network.
+//! [`consistency::nees_bounds`] gives the χ² bounds that NEES is held to. What sets the gap:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
-//!   and a kick-off that teleports the ball while every filter still tracks the old one
-//!   dominated at first (ratio > 2.2, NEES 19); `transit_s` and `forget_ball` removed them;
-//! - *the centralized filter is not delayed*: on a LAN (0.1 ms) this design is at ~1.2×,
-//!   at 150 ms with no jitter and no loss at ~2.1×. Nearly all of the gap is the ~0.1–0.2 s
-//!   after each kick, bounce or shove, when a robot that does not see the ball itself has
-//!   only its teammates' sightings, a network delay old, to go by (errors of 0.3–0.7 m
-//!   while the centralized filter has already followed). The own camera restarts the team
-//!   ball at once (`own_restart_after`), which took the 150 ms case from 2.7× to 2.1×; no
-//!   design can give a robot a teammate's sighting before it arrives, so 1.25× against an
-//!   undelayed reference is out of reach on a 100 ms network with a kicked ball;
-//! - *lost messages*: the repeats recover ~45% of all batches (a beacon delivers two or
-//!   three of a teammate's messages at once and the blackboard keeps the last); at 20%
-//!   independent loss on a LAN the ratio is 1.16;
-//! - *the ball model*: [`BallModel::Friction`] models the field's own 0.5/s drag plus
-//!   0.6 m/s² rolling friction exactly (nonlinear mean, Jacobian linearised at
-//!   √(s² + tr P_vv) so a ball at rest keeps a fresh track's velocity variance). Measured
-//!   in the competition preset, seeds 1–3, q = 1: team RMSE 0.108/0.099/0.102 →
-//!   0.103/0.101/0.095 m, but the centralized filter gains as much (ratio 1.94/1.90/1.89
-//!   against 1.91/1.91/1.84) and seed 3's NEES falls to 1.71, below its bound; q = 0.85
-//!   restores NEES (2.29/2.15/2.29) at ratio 1.90/1.92/1.91, q = 0.6 is overconfident
-//!   (NEES 2.7–3.0). The delay, not the friction law, sets the ratio, so the sim keeps
-//!   [`BallModel::Rolling`] at c = 1/s (with kick reports q = 0.85: 1 left the team ball
-//!   underconfident);
-//! - *overconfidence from correlated pose errors*: `pose_error_sharing` (10) keeps the
-//!   centralized filter's and the team's NEES near 2.
+//!   lags a rolling ball, and a kick-off that teleports the ball leaves every filter on the
+//!   old one; `transit_s` and `forget_ball` remove both;
+//! - *the centralized filter is not delayed*: nearly all of the gap is the short time after
+//!   each kick, bounce or shove, when a robot that does not see the ball itself has only
+//!   its teammates' sightings, a network delay old, to go by, while the centralized filter
+//!   has already followed. The own camera restarts the team ball at once
+//!   (`own_restart_after`) and kick reports turn it when they arrive; no design can give a
+//!   robot a teammate's sighting before it arrives, so against an undelayed reference the
+//!   ratio is set by the network's delay, and where the network is quick the kick reports
+//!   can take the team ball past a centralized filter that sees only sightings;
+//! - *lost messages*: the repeats (see Redundancy) recover the batches a beacon hold and
+//!   the blackboard's newest-copy rule would otherwise lose;
+//! - *the ball model*: [`BallModel::Friction`] models the field's own drag plus rolling
+//!   friction exactly (nonlinear mean, Jacobian linearised at √(s² + tr P_vv) so a ball at
+//!   rest keeps a fresh track's velocity variance), but the centralized filter gains as
+//!   much from it as the team ball: the delay, not the friction law, sets the ratio, so the
+//!   linear [`BallModel::Rolling`] serves; its acceleration noise is what trades accuracy
+//!   against an honest NEES, and kick reports are what let a smaller one stay honest;
+//! - *overconfidence from correlated pose errors*: `pose_error_sharing` (see
+//!   [`field_observation_shared`]) keeps the centralized filter's and the team's NEES near
+//!   their degrees of freedom.
 //!
 //! # The wire
 //! An LWM is [`LWM_WIRE_LEN`] = 75 bytes (mm, mrad-scale fixed point, σ on a log scale and
 //! correlations as i8); a comms frame carrying it alone is at most 128 bytes (an SPL
-//! message) whatever its counters. An HMAC tag adds 16 bytes beyond that. Quantising never shrinks a covariance: see
-//! [`LocalWorldModel::to_bytes`]. Decoding takes untrusted bytes and returns a
-//! [`DecodeError`], never panics.
+//! message) whatever its counters. An HMAC tag adds 16 bytes beyond that. Quantising never
+//! shrinks a covariance: see [`LocalWorldModel::to_bytes`]. Decoding takes untrusted bytes
+//! and returns a [`DecodeError`], never panics.
 //!
 //! # Example
 //! One robot sees the ball, publishes; a teammate fuses it.
@@ -197,8 +183,11 @@
 //! assert!((team.estimate.position() - Vector2::new(0.0, 1.1)).norm() < 0.01);
 //! ```
 
+#![forbid(unsafe_code)]
+
 mod ball;
 mod confidence;
+pub mod consistency;
 mod geometry;
 mod global;
 mod kalman;

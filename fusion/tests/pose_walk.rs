@@ -42,7 +42,7 @@ fn pose_nees_over_fifty_walks_is_inside_the_95_percent_bounds() {
         }
     }
     let anees = total / n as f64;
-    let (lo, hi) = nees_bounds(3, runs as usize);
+    let (lo, hi) = nees_bounds(3, runs);
     eprintln!("pose ANEES over {runs} walks: {anees:.3} (95 % bounds [{lo:.3}, {hi:.3}])");
     assert!(
         (lo..=hi).contains(&anees),

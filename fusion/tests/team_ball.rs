@@ -104,8 +104,8 @@ fn at_30_percent_loss_and_100_ms_the_team_ball_loses_a_little_accuracy_but_stays
     report("30% loss, 100 ms", &s);
     let (lo, hi) = nees_bounds(4, 20);
     // Each message repeats the two batches before it, so a batch is lost only when three
-    // messages in a row are (2.7% at 30% independent loss): measured 1.28× (1.33× before
-    // the repeats). What remains is mostly the 100 ms delay. Honesty must not suffer.
+    // messages in a row are (2.7% at 30% independent loss); what remains is mostly the
+    // 100 ms delay. Honesty must not suffer.
     assert!(
         s.team_rmse_m / s.central_rmse_m <= 1.3,
         "ratio {:.3}",

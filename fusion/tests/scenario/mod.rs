@@ -404,11 +404,5 @@ pub fn position_error(est: &BallEstimate, truth: &Vector4<f64>) -> f64 {
     (est.position() - Vector2::new(truth.x, truth.y)).norm()
 }
 
-/// Two-sided 95 % bounds on the average NEES of `runs` independent runs of a `dof`-D
-/// state: χ²_{dof·runs}(0.025, 0.975) / runs (Wilson–Hilferty).
-pub fn nees_bounds(dof: usize, runs: usize) -> (f64, f64) {
-    let k = (dof * runs) as f64;
-    let q =
-        |z: f64| k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3) / runs as f64;
-    (q(-1.959964), q(1.959964))
-}
+/// Two-sided 95 % bounds on the average NEES of `runs` independent runs of a `dof`-D state.
+pub use fusion::consistency::nees_bounds;

@@ -1,0 +1,268 @@
+//! The ball EKF's unit tests: the motion model, sightings, the update, kicks and the
+//! references.
+
+use super::*;
+use crate::kalman;
+use crate::pose::PoseEstimate;
+use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
+
+#[test]
+fn transition_matches_the_continuous_model() {
+    let model = BallModel::Rolling {
+        friction_per_s: 0.8,
+        accel_noise_m2_per_s3: 0.3,
+    };
+    // Composition: two half steps equal one step (F and Q alike), on both sides of the
+    // series switch-over.
+    for dt in [1e-4, 3e-3, 0.1, 1.7] {
+        let (f1, q1) = model.transition(dt);
+        let (fh, qh) = model.transition(dt / 2.0);
+        let f2 = fh * fh;
+        let q2 = fh * qh * fh.transpose() + qh;
+        assert!((f1 - f2).abs().max() < 1e-12, "F at dt {dt}");
+        assert!(
+            (q1 - q2).abs().max() < 1e-12 * (1.0 + q1.abs().max()),
+            "Q at dt {dt}"
+        );
+    }
+    // A ball at 2 m/s with c = 0.8 stops 2.5 m further on.
+    let est = BallEstimate {
+        t_s: 0.0,
+        mean: Vector4::new(0.0, 0.0, 2.0, 0.0),
+        cov: Matrix4::zeros(),
+    };
+    let far = est.predict_to(&model, 100.0);
+    assert!(
+        (far.mean.x - 2.5).abs() < 1e-9 && far.mean.z.abs() < 1e-9,
+        "{}",
+        far.mean
+    );
+}
+
+#[test]
+fn the_friction_model_rolls_like_the_field_and_its_jacobian_is_the_derivative() {
+    // The field's ball: 0.5/s drag, 0.6 m/s² rolling friction, integrated in 1 ms steps.
+    let model = BallModel::Friction {
+        drag_per_s: 0.5,
+        rolling_decel_mps2: 0.6,
+        accel_noise_m2_per_s3: 0.0,
+    };
+    let x = Vector4::new(0.0, 0.0, 2.4, 3.2);
+    let (mut p, mut v) = (Vector2::<f64>::zeros(), Vector2::new(2.4_f64, 3.2));
+    for _ in 0..500 {
+        let s = v.norm();
+        let slowed = (s * (1.0 - 0.5e-3) - 0.6e-3).max(0.0);
+        v = if s > 0.0 { v * (slowed / s) } else { v };
+        p += v * 1e-3;
+    }
+    let (m, _, _) = model.propagate(&x, 0.0, 0.5);
+    assert!((m.xy() - p).norm() < 5e-3, "rolled to {m} vs field {p}");
+    assert!((Vector2::new(m.z, m.w) - v).norm() < 5e-3);
+    // A ball at 0.2 m/s stops within 0.5 s and stays stopped.
+    let (m, _, _) = model.propagate(&Vector4::new(1.0, 1.0, 0.2, 0.0), 0.0, 2.0);
+    assert!(m.z == 0.0 && m.w == 0.0 && m.x > 1.0 && m.x < 1.04, "{m}");
+    // With no velocity uncertainty P is linearised at the mean: F is ∂f/∂x.
+    for dt in [0.03, 0.1, 5.0] {
+        let (_, f, _) = model.propagate(&x, 0.0, dt);
+        for j in 0..4 {
+            let h = 1e-6;
+            let (mut up, mut dn) = (x, x);
+            up[j] += h;
+            dn[j] -= h;
+            let col =
+                (model.propagate(&up, 0.0, dt).0 - model.propagate(&dn, 0.0, dt).0) / (2.0 * h);
+            assert!(
+                (col - f.column(j)).abs().max() < 1e-6,
+                "dt {dt}, column {j}: {col} vs {}",
+                f.column(j)
+            );
+        }
+    }
+    // At rest with a wide velocity variance (a fresh track) the variance survives.
+    let (_, f, _) = model.propagate(&Vector4::zeros(), 4.0, 0.03);
+    assert!(f[(2, 2)] > 0.9 && f[(3, 3)] > 0.9, "{f}");
+}
+
+#[test]
+fn frictionless_noise_is_the_textbook_white_acceleration_q() {
+    let model = BallModel::Rolling {
+        friction_per_s: 0.0,
+        accel_noise_m2_per_s3: 2.0,
+    };
+    let (_, q) = model.transition(0.5);
+    assert!((q[(0, 0)] - 2.0 * 0.125 / 3.0).abs() < 1e-15);
+    assert!((q[(0, 2)] - 2.0 * 0.25 / 2.0).abs() < 1e-15);
+    assert!((q[(2, 2)] - 1.0).abs() < 1e-15);
+}
+
+#[test]
+fn pose_uncertainty_widens_the_observation_across_the_line_of_sight() {
+    // Facing +y, the ball 3 m ahead; a heading σ of 0.1 rad adds (0.3 m)² sideways (x).
+    let mut pose = PoseEstimate::new(0.0, 0.0, 0.0, Vector3::new(0.0, 0.0, 0.01));
+    let s = BallSighting {
+        local: Vector2::new(0.0, 3.0),
+        cov: Matrix2::identity() * 1e-4,
+    };
+    let obs = field_observation(1.0, &pose, &s);
+    assert!((obs.position - Vector2::new(0.0, 3.0)).norm() < 1e-12);
+    assert!(
+        (obs.cov[(0, 0)] - (1e-4 + 0.09)).abs() < 1e-9,
+        "{}",
+        obs.cov
+    );
+    assert!((obs.cov[(1, 1)] - 1e-4).abs() < 1e-9);
+    pose.cov = Matrix3::zeros();
+    assert!((field_observation(1.0, &pose, &s).cov - Matrix2::identity() * 1e-4).norm() < 1e-12);
+}
+
+#[test]
+fn the_block_update_is_the_general_joseph_update() {
+    let model = BallModel::default();
+    let est = BallEstimate {
+        t_s: 1.0,
+        mean: Vector4::new(0.5, -0.2, 1.0, 0.3),
+        cov: Matrix4::new(
+            0.04, 0.01, 0.02, 0.0, 0.01, 0.03, 0.0, 0.01, 0.02, 0.0, 0.5, 0.1, 0.0, 0.01, 0.1, 0.4,
+        ),
+    };
+    let obs = FieldObservation {
+        t_s: 1.0,
+        position: Vector2::new(0.6, -0.1),
+        cov: Matrix2::new(0.01, 0.002, 0.002, 0.02),
+    };
+    let (fast, d2) = update(&model, &est, &obs, None).unwrap();
+    let h = nalgebra::Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0);
+    let general = kalman::update(
+        &est.mean,
+        &est.cov,
+        &(obs.position - est.position()),
+        &h,
+        &obs.cov,
+        None,
+    )
+    .unwrap();
+    assert!((fast.mean - general.mean).abs().max() < 1e-12);
+    assert!((fast.cov - general.cov).abs().max() < 1e-12);
+    assert!((d2 - general.mahalanobis_sq).abs() < 1e-12);
+}
+
+#[test]
+fn a_kick_restarts_the_track_after_two_outliers() {
+    let mut f = BallFilter::new(BallFilterConfig::default());
+    let r = Matrix2::identity() * 1e-3;
+    for k in 0..30 {
+        let obs = FieldObservation {
+            t_s: k as f64 * 0.03,
+            position: Vector2::new(1.0, 1.0),
+            cov: r,
+        };
+        f.observe(&obs);
+    }
+    let away = |t: f64| FieldObservation {
+        t_s: t,
+        position: Vector2::new(2.5, 1.0),
+        cov: r,
+    };
+    assert!(matches!(f.observe(&away(0.93)), BallUpdate::Outlier(_)));
+    assert_eq!(f.observe(&away(0.96)), BallUpdate::Restarted);
+    assert!((f.estimate().unwrap().position() - Vector2::new(2.5, 1.0)).norm() < 1e-12);
+}
+
+#[test]
+fn the_network_limited_reference_is_the_centralized_filter_fed_out_of_order() {
+    // A ball rolling along x, seen by robot A every 40 ms and by robot B every 40 ms
+    // (offset 20 ms). B's observations reach the reference 100 ms late, A's at once:
+    // once everything has arrived it must equal the centralized filter fed in time
+    // order.
+    let cfg = BallFilterConfig::default();
+    let obs = |t: f64| FieldObservation {
+        t_s: t,
+        position: Vector2::new(1.0 + 0.8 * t + 0.01 * (7.0 * t).sin(), 0.5),
+        cov: Matrix2::identity() * 4e-4,
+    };
+    let times: Vec<f64> = (0..50).map(|k| k as f64 * 0.02).collect();
+    let mut central = CentralizedBall::new(cfg);
+    for &t in &times {
+        central.filter.observe(&obs(t));
+    }
+    let mut reference = NetworkLimitedBall::new(cfg, 0.3);
+    let mut late_b: Vec<f64> = Vec::new();
+    for (k, &t) in times.iter().enumerate() {
+        if k % 2 == 0 {
+            assert!(reference.observe(&obs(t)), "A's own sighting at {t}");
+        } else {
+            late_b.push(t);
+        }
+        // B's observations from 100 ms ago arrive now.
+        while late_b.first().is_some_and(|&tb| tb <= t - 0.1 + 1e-9) {
+            assert!(
+                reference.observe(&obs(late_b.remove(0))),
+                "B's, 100 ms late"
+            );
+        }
+        reference.settle(t);
+    }
+    for tb in late_b {
+        assert!(reference.observe(&obs(tb)));
+    }
+    let (a, b) = (
+        reference.estimate_at(1.2).unwrap(),
+        central.estimate_at(1.2).unwrap(),
+    );
+    assert!(
+        (a.mean - b.mean).norm() < 1e-9 && (a.cov - b.cov).norm() < 1e-9,
+        "reference {} vs centralized {}",
+        a.mean,
+        b.mean
+    );
+    // Something older than the window can no longer be placed: refused and counted.
+    assert!(!reference.observe(&obs(0.1)), "0.1 s is settled by now");
+    assert_eq!(reference.late(), 1);
+}
+
+#[test]
+fn a_kick_sets_the_velocity_and_keeps_the_position() {
+    let model = BallModel::Rolling {
+        friction_per_s: 1.0,
+        accel_noise_m2_per_s3: 1.0,
+    };
+    let resting = BallEstimate {
+        t_s: 2.0,
+        mean: Vector4::new(1.0, -0.5, 0.1, 0.0),
+        cov: Matrix4::from_diagonal(&Vector4::new(1e-3, 2e-3, 0.5, 0.5)),
+    };
+    // Straight up the field (+y) at 4 m/s: the speed σ lies along y, the direction σ
+    // across it, scaled by the speed.
+    let kick = Kick {
+        t_s: 2.1,
+        speed_mps: 4.0,
+        direction_rad: std::f64::consts::FRAC_PI_2,
+        speed_sigma_mps: 0.2,
+        direction_sigma_rad: 0.08,
+    };
+    let kicked = resting.kicked(&model, &kick);
+    let before = resting.predict_to(&model, 2.1);
+    assert_eq!(kicked.t_s, 2.1, "the kick happens at its own time");
+    assert!((kicked.position() - before.position()).norm() < 1e-12);
+    assert!((kicked.position_cov() - before.position_cov()).norm() < 1e-12);
+    assert!((kicked.velocity() - Vector2::new(0.0, 4.0)).norm() < 1e-12);
+    let v_cov = kicked.cov.fixed_view::<2, 2>(2, 2).into_owned();
+    assert!(
+        (v_cov[(0, 0)] - (4.0f64 * 0.08).powi(2)).abs() < 1e-12,
+        "across: {v_cov}"
+    );
+    assert!((v_cov[(1, 1)] - 0.04).abs() < 1e-12, "along: {v_cov}");
+    assert_eq!(
+        kicked.cov.fixed_view::<2, 2>(0, 2).into_owned(),
+        Matrix2::zeros(),
+        "the foot's velocity owes nothing to where the ball was"
+    );
+    let still = BallModel::Static {
+        drift_m2_per_s: 0.01,
+    };
+    assert_eq!(
+        resting.kicked(&still, &kick).mean,
+        resting.predict_to(&still, 2.1).mean,
+        "a static model has no velocity to kick"
+    );
+}
