@@ -1,6 +1,6 @@
 //! netsim's link model on a real daemon's socket: `huddle daemon --impair SPEC`.
 //!
-//! [`LinkImpairment`] implements `comms::driver::Impairment` with netsim's standalone
+//! [`LinkImpairment`] implements `driver::Impairment` with netsim's standalone
 //! [`LinkModel`]: the driver hands it every outgoing datagram, it answers when each copy
 //! should go on the socket (or that the datagram is lost), and the driver holds the
 //! copies with tokio timers. The spec is netsim's (`loss=20%,delay=50ms,jitter=20ms`,
@@ -13,8 +13,8 @@
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 
-use comms::driver::Impairment;
 use comms::Instant;
+use driver::Impairment;
 use netsim::{ConfigError, LinkConfig, LinkModel, Time};
 
 /// netsim's link model, one stream per destination.

@@ -8,11 +8,11 @@ mod daemon_support;
 use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
 use std::time::Duration;
 
-use comms::driver::{open_multicast, SocketConfig};
 use comms::relay::Binding;
 use comms::wire::{encode_frame, Frame, Item, TeamKey};
 use comms::Value;
 use daemon_support::Daemon;
+use driver::{open_multicast, SocketConfig};
 
 const GROUP: &str = "239.255.38.1:38100";
 

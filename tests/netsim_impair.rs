@@ -26,9 +26,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use comms::driver::{open_multicast, Driver, DriverConfig, SocketConfig};
 use comms::wire::{decode_frame, Item};
 use comms::{ReplicaConfig, Value};
+use driver::{open_multicast, Driver, DriverConfig, SocketConfig};
 use huddle::impair::LinkImpairment;
 
 const GROUP: &str = "239.255.73.1:47301";

@@ -15,8 +15,8 @@ use std::collections::BTreeMap;
 use std::net::SocketAddrV4;
 use std::time::Duration;
 
-use comms::driver::{Driver, DriverConfig, Handle, Notice, SocketConfig};
 use comms::{Event, Key, Pattern, ReplicaConfig, Scope, Value};
+use driver::{Driver, DriverConfig, Handle, Notice, SocketConfig};
 use huddle::harness::Harness;
 use netsim::{Preset, Sim, Time};
 

@@ -1,4 +1,4 @@
-//! Should-I-go arbitration (ISocRob-2000 §3.2.2, eq. 19) and CMUnited-97's team modes.
+//! Should-I-go arbitration (ISocRob-2000 §3.2.2, eq. 19): who goes to the ball.
 //!
 //! Pure logic, no I/O and no clock: every robot posts its cost `h` for going to the ball
 //! (with whether it is going now) to `*.var.machine.heuristic`, reads everyone's copies
@@ -491,121 +491,6 @@ pub fn is_goalkeeper(board: &Blackboard) -> Result<bool, ParamsError> {
     }
 }
 
-/// CMUnited-97's team modes (§3.2): the goer is active, the robot it intends to pass
-/// to is auxiliary, the rest hold their formation positions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Mode {
-    /// Going to the ball: passes or shoots.
-    Active,
-    /// The intended receiver of the active robot's pass.
-    Auxiliary,
-    /// Holding its formation position, facing the ball.
-    Inactive,
-    /// The goalkeeper: never competes for the ball.
-    Goaltend,
-}
-
-/// The key the active robot announces its intended receiver on (`Int`, 0 = shooting).
-pub const PASS_TO_KEY: &str = "*.var.machine.pass_to";
-
-/// The mode of robot `me`, given the decision and the active robot's announced receiver.
-pub fn mode(me: u8, goalkeeper: bool, decision: &Decision, pass_to: Option<u8>) -> Mode {
-    if goalkeeper {
-        Mode::Goaltend
-    } else if decision.should_go(me) {
-        Mode::Active
-    } else if pass_to == Some(me) && decision.goer.is_some() {
-        Mode::Auxiliary
-    } else {
-        Mode::Inactive
-    }
-}
-
-/// A point on the field, metres (field frame).
-pub type Point = (f64, f64);
-
-/// The constants of the obstruction-free-index (cmunited-97-perception §3.2.2).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PassParams {
-    /// Opponents farther than this from the segment do not count, metres.
-    pub min_dist_m: f64,
-    /// Distances along the segment are capped here, metres: beyond it an opponent has
-    /// time to block anyway.
-    pub max_denominator_m: f64,
-}
-
-impl Default for PassParams {
-    fn default() -> Self {
-        Self {
-            min_dist_m: 1.0,
-            max_denominator_m: 3.0,
-        }
-    }
-}
-
-/// The obstruction-free-index of the segment from `origin` (where the ball is kicked)
-/// to `target`: 1 for a clear path, smaller the closer opponents stand to the line and
-/// the farther they are from the origin along it.
-pub fn obstruction_free_index(
-    params: &PassParams,
-    origin: Point,
-    target: Point,
-    opponents: &[Point],
-) -> f64 {
-    let (dx, dy) = (target.0 - origin.0, target.1 - origin.1);
-    let len = (dx * dx + dy * dy).sqrt();
-    let mut index = 1.0;
-    for &(ox, oy) in opponents {
-        let (rx, ry) = (ox - origin.0, oy - origin.1);
-        // y: distance along the segment from its origin (clamped to the segment);
-        // x: distance from the opponent to the segment.
-        let (x, y) = if len > 0.0 {
-            let along = ((rx * dx + ry * dy) / len).clamp(0.0, len);
-            let (px, py) = (origin.0 + dx * along / len, origin.1 + dy * along / len);
-            (((ox - px).powi(2) + (oy - py).powi(2)).sqrt(), along)
-        } else {
-            ((rx * rx + ry * ry).sqrt(), 0.0)
-        };
-        if x < params.min_dist_m && x < y {
-            index *= x / params.max_denominator_m.min(y);
-        }
-    }
-    index
-}
-
-/// What the active robot does with the ball.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Play {
-    /// Shoot at the goal; the value is the shot's obstruction-free-index.
-    Shoot { value: f64 },
-    /// Pass to a teammate; the value is the product of the two segments' indices.
-    Pass { to: u8, value: f64 },
-}
-
-/// Choose pass or shot (cmunited-97-perception §3.2.2): the shot is worth the index of
-/// ball→goal; a pass to receiver r is worth index(ball→r) · index(r→goal). The maximum
-/// wins; ties prefer the shot (no second kick to get wrong).
-pub fn choose_play(
-    params: &PassParams,
-    ball: Point,
-    goal: Point,
-    receivers: &[(u8, Point)],
-    opponents: &[Point],
-) -> Play {
-    let shot = obstruction_free_index(params, ball, goal, opponents);
-    let mut play = Play::Shoot { value: shot };
-    let mut best = shot;
-    for &(id, at) in receivers {
-        let value = obstruction_free_index(params, ball, at, opponents)
-            * obstruction_free_index(params, at, goal, opponents);
-        if value > best {
-            best = value;
-            play = Play::Pass { to: id, value };
-        }
-    }
-    play
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -687,50 +572,6 @@ mod tests {
             going: true,
         };
         assert_eq!(Posted::from_floats(&p.to_floats()), Some(p));
-    }
-
-    #[test]
-    fn modes_follow_the_decision() {
-        let p = ArbitrationParams::default();
-        let d = decide(
-            &p,
-            &[
-                fresh(1, 1.0, false),
-                fresh(2, 2.0, false),
-                fresh(3, 3.0, false),
-            ],
-        );
-        assert_eq!(mode(1, false, &d, Some(3)), Mode::Active);
-        assert_eq!(mode(3, false, &d, Some(3)), Mode::Auxiliary);
-        assert_eq!(mode(2, false, &d, Some(3)), Mode::Inactive);
-        assert_eq!(mode(4, true, &d, Some(3)), Mode::Goaltend);
-    }
-
-    #[test]
-    fn an_opponent_on_the_line_far_from_the_ball_blocks_more_than_one_near_it() {
-        let pp = PassParams::default();
-        let clear = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[]);
-        assert_eq!(clear, 1.0);
-        let near = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(0.5, 0.2)]);
-        let far = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(3.0, 0.2)]);
-        // near: x=0.2, y=0.5 → 0.2/0.5 = 0.4; far: x=0.2, y=3 → 0.2/3.
-        assert!((near - 0.4).abs() < 1e-12, "near index {near}");
-        assert!((far - 0.2 / 3.0).abs() < 1e-12, "far index {far}");
-        let off = obstruction_free_index(&pp, (0.0, 0.0), (4.0, 0.0), &[(2.0, 1.5)]);
-        assert_eq!(off, 1.0, "an opponent beyond min-dist does not count");
-    }
-
-    #[test]
-    fn a_blocked_shot_becomes_a_pass_to_the_open_teammate() {
-        let pp = PassParams::default();
-        let goal = (4.5, 0.0);
-        // A defender stands on the shooting line; teammate 3 is open on the wing.
-        let opponents = [(3.0, 0.1)];
-        let play = choose_play(&pp, (0.0, 0.0), goal, &[(3, (2.0, 2.5))], &opponents);
-        assert!(matches!(play, Play::Pass { to: 3, .. }), "{play:?}");
-        // With the line clear, the robot shoots.
-        let play = choose_play(&pp, (0.0, 0.0), goal, &[(3, (2.0, 2.5))], &[]);
-        assert!(matches!(play, Play::Shoot { .. }), "{play:?}");
     }
 
     #[test]

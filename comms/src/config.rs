@@ -1,4 +1,6 @@
-//! Start-up values from `config.dat`, then `config-<id>.dat` (isocrob-2000 §3.1).
+//! The text of start-up configuration files: `config.dat`, then `config-<id>.dat`
+//! (isocrob-2000 §3.1). Reading the files is the driver's job (`driver::load_config`);
+//! this module only parses text.
 //!
 //! One `key = value` per line; blank lines and `#` comments (whole-line, or after the
 //! value) are ignored; values use the literal syntax of [`crate::literal`]. A missing
@@ -27,17 +29,9 @@ pub struct ConfigEntry {
     pub line: usize,
 }
 
-/// Why a configuration could not be loaded.
-#[derive(Debug, Error)]
+/// Why a configuration text does not parse.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
 pub enum ConfigError {
-    /// The file exists but could not be read.
-    #[error("{}: {source}", file.display())]
-    Io {
-        /// The file.
-        file: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
     /// A line is not `key = value`.
     #[error("{}:{line}: {reason}", file.display())]
     Line {
@@ -99,22 +93,6 @@ pub fn parse_config(file: &Path, text: &str) -> Result<Vec<ConfigEntry>, ConfigE
     Ok(entries)
 }
 
-/// Reads `dir/config.dat` then `dir/config-<robot_id>.dat`, skipping missing files, and
-/// returns their entries in order (apply them in order: later ones override).
-pub fn load_config(dir: &Path, robot_id: u8) -> Result<Vec<ConfigEntry>, ConfigError> {
-    let mut entries = Vec::new();
-    for name in ["config.dat".to_string(), format!("config-{robot_id}.dat")] {
-        let file = dir.join(name);
-        let text = match std::fs::read_to_string(&file) {
-            Ok(text) => text,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(source) => return Err(ConfigError::Io { file, source }),
-        };
-        entries.extend(parse_config(&file, &text)?);
-    }
-    Ok(entries)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -168,19 +146,5 @@ mod tests {
             let err = parse_config(Path::new("c"), text).unwrap_err();
             assert!(format!("{err:?}").contains(want), "{text:?} gave {err:?}");
         }
-    }
-
-    #[test]
-    fn per_robot_file_comes_after_the_common_one_and_missing_files_are_skipped() {
-        let dir = std::env::temp_dir().join(format!("comms-config-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("config.dat"), "local.var.x = 1\n").unwrap();
-        std::fs::write(dir.join("config-4.dat"), "local.var.x = 2\n").unwrap();
-        let entries = load_config(&dir, 4);
-        let only_common = load_config(&dir, 5);
-        std::fs::remove_dir_all(&dir).unwrap();
-        let values: Vec<Value> = entries.unwrap().into_iter().map(|e| e.value).collect();
-        assert_eq!(values, [Value::Int(1), Value::Int(2)]);
-        assert_eq!(only_common.unwrap().len(), 1, "no config-5.dat");
     }
 }

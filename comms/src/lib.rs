@@ -8,14 +8,14 @@
 //! one lossy multicast group: writing `*.var.x` on robot n publishes it, and every robot
 //! (n too) reads it as `n.var.x`; reading `*.var.x` gives the newest copy. Around it: the
 //! value [literal] syntax and type names shared with the relay protocol and config files,
-//! MQTT-style [`Pattern`]s (`+.var.machine.heuristic`, `2.var.#`), `config.dat` loading
-//! ([`load_config`]) and the frame format ([`wire`]).
+//! MQTT-style [`Pattern`]s (`+.var.machine.heuristic`, `2.var.#`), `config.dat` parsing
+//! ([`parse_config`]) and the frame format ([`wire`]).
 //!
 //! **What it is not.** No sockets, threads, clocks or randomness: the replica is a state
 //! machine in the quinn / str0m style. Time comes in as [`Instant`] (microseconds on the
 //! robot's monotonic clock, read by the driver), the incarnation number comes from the
 //! driver's RNG, and datagrams go in and out as byte slices. The tokio/socket2 driver, the
-//! daemon and the relay TCP server are built on top of this crate, elsewhere; netsim runs
+//! relay TCP server and configuration file loading are the `driver` crate; netsim runs
 //! the very same machine in virtual time.
 //!
 //! # The run loop
@@ -104,7 +104,6 @@
 pub mod arbitration;
 mod blackboard;
 mod config;
-pub mod driver;
 mod key;
 pub mod literal;
 mod pattern;
@@ -117,7 +116,7 @@ mod value;
 pub mod wire;
 
 pub use blackboard::{Applied, Blackboard, Entry, SetError};
-pub use config::{load_config, parse_config, ConfigEntry, ConfigError, LineError};
+pub use config::{parse_config, ConfigEntry, ConfigError, LineError};
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};

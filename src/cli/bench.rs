@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use comms::driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
 use comms::{ReplicaConfig, Value};
+use driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
 use serde::Serialize;
 
 use super::clients::RelayClient;
@@ -351,7 +351,7 @@ where
     })
 }
 
-async fn next_value(sub: &mut comms::driver::Subscription) -> Result<Value> {
+async fn next_value(sub: &mut driver::Subscription) -> Result<Value> {
     loop {
         match sub.next().await {
             Some(Notice::Changed { entry, .. }) => return Ok(entry.value),

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
-use comms::driver::{resolve_iface, Driver, DriverConfig};
 use comms::ReplicaConfig;
+use driver::{resolve_iface, Driver, DriverConfig};
 use huddle::impair::LinkImpairment;
 
 /// Arguments of `huddle daemon`.
@@ -101,7 +101,7 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
         }
         replica = replica.with_team_key(key.to_vec());
     }
-    let entries = comms::load_config(&args.config_dir, id)?;
+    let entries = driver::load_config(&args.config_dir, id)?;
     let mut config = DriverConfig::new(replica);
     config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
     config.socket.group = args.group;
@@ -151,7 +151,7 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         );
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let mut relay_stop = stop_rx.clone();
-        tokio::task::spawn_local(comms::relay::serve(relay, handle, async move {
+        tokio::task::spawn_local(driver::serve(relay, handle, async move {
             let _ = relay_stop.wait_for(|s| *s).await;
         }));
         let signals = async move {

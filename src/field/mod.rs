@@ -11,6 +11,7 @@ pub mod behaviour;
 pub mod body;
 pub mod camera;
 pub mod geometry;
+pub mod tactics;
 
 use ball::{Ball, BallConfig};
 use body::{Body, Kinematics, MotionCommand, Odometry};

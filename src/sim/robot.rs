@@ -18,10 +18,7 @@
 //! - motion commands are meant in the robot's own frame: the world turns them into field
 //!   motion with the robot's true heading ([`World::command_believed`]).
 
-use comms::arbitration::{
-    self, choose_play, heuristic, mode, Arbiter, ArbitrationParams, BallView, Decision, Mode,
-    PassParams, Play, Posted,
-};
+use comms::arbitration::{self, heuristic, Arbiter, ArbitrationParams, BallView, Decision, Posted};
 use comms::{Blackboard, Instant, Key, Scope, Value};
 use fusion::nalgebra::{Matrix3, Vector3};
 use fusion::{
@@ -38,11 +35,12 @@ use crate::field::behaviour::{self, Position};
 use crate::field::body::{MotionCommand, Odometry};
 use crate::field::camera::Frame;
 use crate::field::geometry::{Pose, Vec2};
+use crate::field::tactics::{self, choose_play, mode, Mode, PassParams, Play};
 use crate::field::{FieldConfig, World};
 
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub fn pass_to_key() -> Key {
-    Key::parse(arbitration::PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
+    Key::parse(tactics::PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
 }
 
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
@@ -527,36 +525,24 @@ impl Robot {
                     return 0;
                 };
                 let goal = field.opponent_goal();
-                let receivers: Vec<(u8, (f64, f64))> = behaviour::receivers_of(input.homes, k)
+                let receivers: Vec<(u8, Vec2)> = behaviour::receivers_of(input.homes, k)
                     .into_iter()
                     .map(|j| {
                         let at = behaviour::flexible_home(&field, input.homes[j], ball);
-                        (input.holders[j], (at.x, at.y))
+                        (input.holders[j], at)
                     })
                     .collect();
-                let opponents: Vec<(f64, f64)> = self
+                let opponents: Vec<Vec2> = self
                     .frame
                     .opponents
                     .iter()
-                    .map(|s| {
-                        let p = pose.to_field(s.local());
-                        (p.x, p.y)
-                    })
+                    .map(|s| pose.to_field(s.local()))
                     .collect();
-                let play = choose_play(
-                    &cfg.pass,
-                    (b.x, b.y),
-                    (goal.x, goal.y),
-                    &receivers,
-                    &opponents,
-                );
+                let play = choose_play(&cfg.pass, b, goal, &receivers, &opponents);
                 self.play = Some(play);
                 let (aim, receiver) = match play {
                     Play::Pass { to, .. } => {
-                        let at = receivers
-                            .iter()
-                            .find(|r| r.0 == to)
-                            .map_or(goal, |r| Vec2::new(r.1 .0, r.1 .1));
+                        let at = receivers.iter().find(|r| r.0 == to).map_or(goal, |r| r.1);
                         (at, i64::from(to))
                     }
                     Play::Shoot { .. } => (goal, 0),

@@ -37,12 +37,10 @@ mod board;
 mod command;
 mod error;
 mod reply;
-mod server;
 mod session;
 
 pub use board::Board;
 pub use command::{Command, Rejected, MAX_REFRESH_MS};
 pub use error::ErrCode;
 pub use reply::Binding;
-pub use server::serve;
 pub use session::{CloseReason, Session, SessionLimits, SessionState, PROTOCOL_VERSION};

@@ -1,49 +1,5 @@
-//! The real driver: the sans-IO [`Replica`] over a tokio + socket2 multicast UDP
-//! socket, with its timers, relay sessions and in-process subscribers.
-//!
-//! One task owns everything (socket, replica, timers, watchers) and everything runs on
-//! one thread: a hand-off between threads costs a full wake-up, several times the
-//! loopback round trip (see DESIGN.md, *Performance notes*). So the driver and its
-//! [`Handle`]s are `!Send`: run them on a current-thread runtime or inside a
-//! [`tokio::task::LocalSet`]. The handle works synchronously on the shared state: a
-//! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
-//!
-//! The run loop is str0m's: wait for a datagram, a deadline or a wake-up; feed it in;
-//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions,
-//! watches and subscribers) until the replica has nothing more to say.
-//!
-//! Robot software reacts to changes in one of two ways. A [`Subscription`] is awaited by
-//! a task: each notice costs a task wake-up before the task can answer. A [`Watch`]
-//! ([`Handle::watch`]) runs a short reaction on the driver's own task, in the turn that
-//! applied the change: an answer set from it is on the wire before the driver reads the
-//! next datagram, which is the lowest latency this driver offers.
-//!
-//! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
-//! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
-//! model): lost datagrams are never sent, the others wait in a queue released by the
-//! same timer as the replica's deadlines.
-//!
-//! ```no_run
-//! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
-//! use comms::driver::{Driver, DriverConfig};
-//! use comms::ReplicaConfig;
-//!
-//! let mut config = DriverConfig::new(ReplicaConfig::new(1, 0));
-//! config.socket.group = "239.255.42.1:47000".parse()?;
-//! let driver = Driver::bind(config)?; // inside a current-thread runtime / LocalSet
-//! let handle = driver.handle();
-//! let mut balls = handle.subscribe("+.var.ball.#")?;
-//! tokio::task::spawn_local(driver.run(std::future::pending()));
-//! handle.set("*.var.ball.dist", 1.5)?;
-//! while let Some(notice) = balls.next().await {
-//!     println!("{notice:?}");
-//! }
-//! # Ok(()) }
-//! ```
-
-mod handle;
-mod impair;
-mod socket;
+//! The driver proper: one task owning the socket, the replica, its timers, relay
+//! sessions and in-process subscribers.
 
 use std::cell::{Cell, RefCell};
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
@@ -57,19 +13,16 @@ use thiserror::Error;
 use tokio::net::UdpSocket;
 use tokio::sync::Notify;
 
-use crate::blackboard::SetError;
-use crate::key::{Key, Kind, Scope};
-use crate::relay::{Session, SessionLimits};
-use crate::replica::{ConfigInvalid, Event, Replica, ReplicaConfig};
-use crate::time::Instant;
-use crate::value::Value;
+use comms::relay::{Session, SessionLimits};
+use comms::{
+    ConfigInvalid, Event, Instant, Key, Kind, Replica, ReplicaConfig, Scope, SetError, Value,
+};
 
-pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
-pub use impair::Impairment;
-pub use socket::{open_multicast, resolve_iface, IfaceError, Opened, SocketConfig, SocketError};
-
-use handle::{run_reactions, SubQueue, WatchSlot};
-use impair::Held;
+pub use crate::handle::Handle;
+use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
+use crate::impair::{Held, Impairment};
+use crate::incarnation::random_incarnation;
+use crate::socket::{open_multicast, SocketConfig, SocketError};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
@@ -206,7 +159,7 @@ pub(crate) struct Inner {
     group: SocketAddr,
     peers: Vec<SocketAddr>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
-    subscribers: Vec<Weak<RefCell<SubQueue>>>,
+    pub(crate) subscribers: Vec<Weak<RefCell<SubQueue>>>,
     /// Reactions registered with [`Handle::watch`].
     pub(crate) watches: Vec<Weak<WatchSlot>>,
     /// Reactions due, run once the shared state is no longer borrowed.
@@ -343,7 +296,7 @@ impl Inner {
                     }
                     // Most changes (this robot's own writes among them) have no
                     // listener: skip the lookup and the copy for those.
-                    let matches = |p: &crate::Pattern| p.matches(&key);
+                    let matches = |p: &comms::Pattern| p.matches(&key);
                     if !listened(&self.watches, &self.subscribers, matches) {
                         continue;
                     }
@@ -374,7 +327,7 @@ impl Inner {
                         seq,
                         value: value.clone(),
                     };
-                    let matches = |p: &crate::Pattern| {
+                    let matches = |p: &comms::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
                     queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
@@ -393,7 +346,7 @@ impl Inner {
                         first,
                         last,
                     };
-                    let matches = |p: &crate::Pattern| {
+                    let matches = |p: &comms::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
                     queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
@@ -500,7 +453,7 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
 fn listened(
     watches: &[Weak<WatchSlot>],
     subscribers: &[Weak<RefCell<SubQueue>>],
-    matches: impl Fn(&crate::Pattern) -> bool,
+    matches: impl Fn(&comms::Pattern) -> bool,
 ) -> bool {
     watches
         .iter()
@@ -516,7 +469,7 @@ fn listened(
 fn queue_reactions(
     watches: &mut Vec<Weak<WatchSlot>>,
     reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
-    matches: impl Fn(&crate::Pattern) -> bool,
+    matches: impl Fn(&comms::Pattern) -> bool,
     notice: impl Fn() -> Notice,
 ) {
     watches.retain(|weak| {
@@ -534,7 +487,7 @@ fn queue_reactions(
 /// Returns how many got it.
 fn deliver(
     subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
-    matches: impl Fn(&crate::Pattern) -> bool,
+    matches: impl Fn(&comms::Pattern) -> bool,
     notice: impl Fn() -> Notice,
 ) -> u64 {
     let mut handed = 0;
@@ -779,19 +732,4 @@ impl Driver {
         inner.pump();
         Ok(inner.handed_up != handed_before || !inner.reactions.is_empty())
     }
-}
-
-/// A random incarnation without a RNG dependency: std's per-process random hash keys
-/// mixed with the wall clock and the process id.
-#[allow(clippy::disallowed_methods)] // I/O layer: a seed from the outside world
-fn random_incarnation() -> u64 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-    let wall = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or_default();
-    h.write_u128(wall);
-    h.write_u32(std::process::id());
-    h.finish()
 }

@@ -1,14 +1,14 @@
 //! The relay's TCP side: accept clients, shuttle bytes between each socket and its
-//! [`super::Session`], which lives inside the driver next to the replica.
+//! [`comms::relay::Session`], which lives inside the driver next to the replica.
 
 use std::future::Future;
 use std::io;
 
 use tokio::net::{TcpListener, TcpStream};
 
-use crate::driver::Handle;
+use comms::relay::{CloseReason, SessionState};
 
-use super::session::{CloseReason, SessionState};
+use crate::handle::Handle;
 
 /// Accepts relay clients on `listener` until `shutdown` completes. Each client runs as a
 /// local task on this thread (call this inside a [`tokio::task::LocalSet`] on the

@@ -19,7 +19,7 @@
 use std::cmp::Ordering;
 use std::net::SocketAddr;
 
-use crate::time::Instant;
+use comms::Instant;
 
 /// A model of what the network does to outgoing datagrams.
 pub trait Impairment {

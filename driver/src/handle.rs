@@ -7,15 +7,12 @@ use std::rc::{Rc, Weak};
 use std::task::{Poll, Waker};
 use std::time::Duration;
 
-use crate::blackboard::{Entry, SetError};
-use crate::key::{Key, KeyError};
-use crate::pattern::{Pattern, PatternError};
-use crate::replica::PostError;
-use crate::stats::{PeerInfo, Stats};
-use crate::time::Instant;
-use crate::value::Value;
+use comms::{
+    Entry, Instant, Key, KeyError, Pattern, PatternError, PeerInfo, PostError, SetError, Stats,
+    Value,
+};
 
-use super::{Inner, IoStats};
+use crate::driver::{Inner, IoStats};
 
 /// Something a subscription reports.
 #[derive(Clone, Debug, PartialEq)]
@@ -342,7 +339,7 @@ mod tests {
 
     use super::*;
     use crate::driver::{Driver, DriverConfig};
-    use crate::replica::ReplicaConfig;
+    use comms::ReplicaConfig;
 
     fn config(id: u8, port: u16) -> DriverConfig {
         let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));

@@ -66,74 +66,6 @@ pub enum SocketError {
     },
 }
 
-/// Why an `--iface` argument names no usable interface.
-#[derive(Debug, Error)]
-pub enum IfaceError {
-    /// No interface of that name exists.
-    #[error("no network interface named {0:?}")]
-    NoSuchInterface(String),
-    /// The interface exists but has no IPv4 address.
-    #[error("interface {0:?} has no IPv4 address")]
-    NoIpv4(String),
-    /// Listing the interfaces failed.
-    #[error("cannot list network interfaces: {0}")]
-    List(io::Error),
-}
-
-/// Resolves an interface given as an IPv4 address (`127.0.0.1`) or a name (`lo`,
-/// `wlan0`) to its first IPv4 address.
-pub fn resolve_iface(name_or_addr: &str) -> Result<Ipv4Addr, IfaceError> {
-    if let Ok(addr) = name_or_addr.parse::<Ipv4Addr>() {
-        return Ok(addr);
-    }
-    let mut known = false;
-    for (name, addr) in interface_addresses().map_err(IfaceError::List)? {
-        if name == name_or_addr {
-            known = true;
-            if let Some(v4) = addr {
-                return Ok(v4);
-            }
-        }
-    }
-    Err(if known {
-        IfaceError::NoIpv4(name_or_addr.to_owned())
-    } else {
-        IfaceError::NoSuchInterface(name_or_addr.to_owned())
-    })
-}
-
-/// Every (interface name, IPv4 address if the entry is one) pair, from `getifaddrs`.
-fn interface_addresses() -> io::Result<Vec<(String, Option<Ipv4Addr>)>> {
-    let mut head: *mut libc::ifaddrs = std::ptr::null_mut();
-    // SAFETY: getifaddrs fills `head` with a list we free below with freeifaddrs.
-    if unsafe { libc::getifaddrs(&mut head) } != 0 {
-        return Err(io::Error::last_os_error());
-    }
-    let mut out = Vec::new();
-    let mut cur = head;
-    while !cur.is_null() {
-        // SAFETY: `cur` is a node of the list getifaddrs returned, not yet freed; its
-        // name is a NUL-terminated string and `ifa_addr`, when set, points to a sockaddr
-        // whose family says how long it is.
-        unsafe {
-            let ifa = &*cur;
-            let name = std::ffi::CStr::from_ptr(ifa.ifa_name)
-                .to_string_lossy()
-                .into_owned();
-            let mut v4 = None;
-            if !ifa.ifa_addr.is_null() && i32::from((*ifa.ifa_addr).sa_family) == libc::AF_INET {
-                let sin = &*(ifa.ifa_addr as *const libc::sockaddr_in);
-                v4 = Some(Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)));
-            }
-            out.push((name, v4));
-            cur = ifa.ifa_next;
-        }
-    }
-    // SAFETY: `head` came from getifaddrs and is freed once.
-    unsafe { libc::freeifaddrs(head) };
-    Ok(out)
-}
-
 /// The socket as opened, with what the kernel granted.
 #[derive(Debug)]
 pub struct Opened {
@@ -187,20 +119,6 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn interfaces_resolve_by_address_and_by_name() {
-        assert_eq!(resolve_iface("127.0.0.1").unwrap(), Ipv4Addr::LOCALHOST);
-        assert_eq!(
-            resolve_iface("lo").unwrap(),
-            Ipv4Addr::LOCALHOST,
-            "the loopback interface is named lo on Linux"
-        );
-        assert!(matches!(
-            resolve_iface("no-such-if0"),
-            Err(IfaceError::NoSuchInterface(_))
-        ));
-    }
 
     #[test]
     fn a_unicast_group_and_a_foreign_interface_are_clear_errors() {

@@ -1,0 +1,61 @@
+//! The real driver: the sans-IO [`Replica`] over a tokio + socket2 multicast UDP
+//! socket, with its timers, relay sessions and in-process subscribers.
+//!
+//! One task owns everything (socket, replica, timers, watchers) and everything runs on
+//! one thread: a hand-off between threads costs a full wake-up, several times the
+//! loopback round trip (see DESIGN.md, *Performance notes*). So the driver and its
+//! [`Handle`]s are `!Send`: run them on a current-thread runtime or inside a
+//! [`tokio::task::LocalSet`]. The handle works synchronously on the shared state: a
+//! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
+//!
+//! The run loop is str0m's: wait for a datagram, a deadline or a wake-up; feed it in;
+//! then drain the outputs (`poll_transmit` → socket, `poll_event` → relay sessions,
+//! watches and subscribers) until the replica has nothing more to say.
+//!
+//! Robot software reacts to changes in one of two ways. A [`Subscription`] is awaited by
+//! a task: each notice costs a task wake-up before the task can answer. A [`Watch`]
+//! ([`Handle::watch`]) runs a short reaction on the driver's own task, in the turn that
+//! applied the change: an answer set from it is on the wire before the driver reads the
+//! next datagram, which is the lowest latency this driver offers.
+//!
+//! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
+//! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
+//! model): lost datagrams are never sent, the others wait in a queue released by the
+//! same timer as the replica's deadlines.
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
+//! use driver::{Driver, DriverConfig};
+//! use comms::ReplicaConfig;
+//!
+//! let mut config = DriverConfig::new(ReplicaConfig::new(1, 0));
+//! config.socket.group = "239.255.42.1:47000".parse()?;
+//! let driver = Driver::bind(config)?; // inside a current-thread runtime / LocalSet
+//! let handle = driver.handle();
+//! let mut balls = handle.subscribe("+.var.ball.#")?;
+//! tokio::task::spawn_local(driver.run(std::future::pending()));
+//! handle.set("*.var.ball.dist", 1.5)?;
+//! while let Some(notice) = balls.next().await {
+//!     println!("{notice:?}");
+//! }
+//! # Ok(()) }
+//! ```
+
+#![forbid(unsafe_code)]
+
+mod config_files;
+mod driver;
+mod handle;
+mod iface;
+mod impair;
+mod incarnation;
+mod relay;
+mod socket;
+
+pub use config_files::load_config;
+pub use driver::{Driver, DriverConfig, DriverError, IoStats};
+pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
+pub use iface::{resolve_iface, IfaceError};
+pub use impair::Impairment;
+pub use relay::serve;
+pub use socket::{open_multicast, Opened, SocketConfig, SocketError};
