@@ -49,6 +49,8 @@
 //! assert!((heard[0].start_s - 0.5).abs() < 0.05);
 //! ```
 
+#![forbid(unsafe_code)]
+
 mod analysis;
 pub mod channel;
 
@@ -60,10 +62,7 @@ mod significance;
 mod tones;
 mod wav;
 
-pub use decoder::{
-    Decoder, DecoderConfig, DecoderConfigError, Detection, DYNAMIC_RANGE, MIN_TONE_DURATION_S,
-    NEIGHBOUR_LEAKAGE, P_FRAME, P_FRAME_CONFIRM, P_TONE, P_TONE_CONFIRM, P_TONE_RIVAL, SPRT_BOUND,
-};
+pub use decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};
 pub use tones::{

@@ -1,0 +1,220 @@
+//! The decision on one aligned slot: the rules again on exactly its windows, the frame
+//! test at a stricter level, and the checks that tell our message from someone else's
+//! sound that happens to contain its tones (it must sound through the slot, carry no
+//! stray tone as loud as its own, and sit on one frequency scale, see `off_grid`); and
+//! the check that a first frame is not the orphaned second half of a long message.
+
+use super::end_test::{
+    CONTINUATION_SHARE, LLR_CLIP, MAX_SHARE_BEFORE_END, SPRT_BOUND, SPRT_HORIZON,
+};
+use super::tracking::Tracking;
+use super::windows::SlotSums;
+use super::{median, Decoder};
+use crate::significance::{gamma_upper_quantile, hann_share_inside, ln_tone_likelihood};
+use crate::tones::{basic_tones, Frame, SENDER_COUNT, TONE_COUNT};
+
+/// Per-tone false-alarm probability of "present" when re-deciding an accepted frame on its
+/// aligned slot: a frame is already there, so the threshold trades a missed tone against
+/// an extra basic (21 · 3 · p² ≈ 0.6% of frames refused) rather than against noise alone.
+pub(super) const P_TONE_CONFIRM: f64 = 1e-2;
+/// Per-tone false-alarm probability for a *rival* basic on the aligned slot: a second
+/// sender or data basic rejects the frame only when 2 of its 3 tones pass this stricter
+/// threshold (22 rival basics · 3p² ≈ 7e-5 of frames refused by noise, instead of 0.6% at
+/// [`P_TONE_CONFIRM`]). A real second transmitter sounds all three of its tones at full
+/// level, far above either threshold unless it is itself lost in the noise.
+pub(super) const P_TONE_RIVAL: f64 = 1e-3;
+/// The frame-energy test again on the aligned slot, stricter (union-bounded like
+/// [`P_FRAME`](super::search::P_FRAME)): a frame's six tones summed over exactly its slot.
+/// Real frames at the lowest operating SNR pass it with room; a noise frame that scraped
+/// through the search's coarser gate does not.
+pub(super) const P_FRAME_CONFIRM: f64 = 1e-10;
+
+/// Least share of its even-spread energy each half of a slot must hold (see
+/// [`Decoder::sounds_through_slot`]): far below what a real frame's halves hold even at
+/// the lowest operating SNR.
+const MIN_HALF_SHARE: f64 = 0.3;
+/// Per-tone false-alarm probability a tone outside the frame must pass to count as a
+/// stray (see [`Decoder::has_stray_tone`]): 66 tones · 1e-6 ≈ 7e-5 of slots refused by
+/// noise alone. At the lenient [`P_TONE_CONFIRM`] noise tones would reach the stray share
+/// now and then at low SNR (the frame's median level is itself noisy there); a foreign
+/// signal loud enough to assemble our frame is far above either threshold.
+const P_STRAY: f64 = 1e-6;
+/// A present tone outside the frame this many times louder than a tone the frame's
+/// 2-of-3 vote rests on (+10 dB) also makes the slot someone else's signal: a foreign
+/// burst whose loud tones hit one tone of each of our basics, their second tones being
+/// faint near-misses.
+const STRAY_OVER_VOTE: f64 = 10.0;
+/// A present tone outside the frame at this share of the frame's median tone level
+/// makes the slot someone else's signal (see [`Decoder::has_stray_tone`]).
+const STRAY_SHARE: f64 = 0.7;
+
+/// A slot that passed its decision.
+pub(super) struct SlotDecision {
+    /// The frame it sounds.
+    pub(super) frame: Frame,
+    /// Tones present in it.
+    pub(super) present: [bool; TONE_COUNT],
+    /// Per-window excess power of each tone.
+    pub(super) level: [f64; TONE_COUNT],
+    /// Noise level during the slot.
+    pub(super) noise: f64,
+}
+
+impl Decoder {
+    /// Decides the slot `[a, b)` of the tracked frame `t`: the rules on exactly its windows
+    /// must give a frame from `t`'s sender whose six-tone energy passes
+    /// [`P_FRAME_CONFIRM`], and the frame must pass the checks against foreign sounds.
+    pub(super) fn confirm_slot(&self, t: &Tracking, a: f64, b: f64) -> Option<SlotDecision> {
+        let SlotSums {
+            sums,
+            count,
+            level,
+            noise,
+        } = self.integrate_slot(t.scale, a, b)?;
+        let (frame, present) = Self::apply_rules(&sums, count, P_TONE_CONFIRM, P_TONE_RIVAL);
+        let frame = frame.filter(|f| f.sender == t.sender).filter(|f| {
+            let energy: f64 = f.tones().iter().map(|&k| sums[k]).sum();
+            energy >= self.frame_threshold(count, P_FRAME_CONFIRM)
+        })?;
+        let ours = self.sounds_through_slot(frame, &present, t.scale, a, b)
+            && !Self::has_stray_tone(frame, &present, &level, &sums, count)
+            && !self.has_off_grid_tone(frame, &present, t.scale, a, b);
+        ours.then_some(SlotDecision {
+            frame,
+            present,
+            level,
+            noise,
+        })
+    }
+
+    /// Whether the first slot `t` (its level and tones measured, starting at `a`) is the
+    /// second frame of a long message whose first frame was missed: the same sender's slot
+    /// failed its decision just before it, or the sender was already sounding.
+    ///
+    /// By the protocol a robot leaves more than half a tone of silence between messages,
+    /// so the same sender within that of a failed slot is the second frame of that
+    /// transmission; the look-back test alone can miss it when the sender's tones before
+    /// the onset are weak. Reporting such a frame as a short would be a wrong message;
+    /// missing it is the lesser harm.
+    pub(super) fn continues_earlier_frame(&self, t: &Tracking, a: f64) -> bool {
+        let slot_len = self.geometry.slot_samples;
+        let follows_failed = matches!(
+            self.failed_slot,
+            Some((sender, end)) if sender == t.sender
+                && a - end < SPRT_HORIZON * slot_len + self.geometry.window_len as f64
+        );
+        follows_failed || self.sender_sounded_before(t)
+    }
+
+    /// Whether the sender's tones were sounding just before the onset (the mirror of the
+    /// end test): log-likelihood of "sounding at the measured level" against "silent" on
+    /// the windows (almost) wholly before the onset, within [`SPRT_HORIZON`] slots.
+    fn sender_sounded_before(&self, t: &Tracking) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        let onset = t.onset;
+        let mut llr = 0.0;
+        for w in &self.history {
+            let start = w.start as f64;
+            if start + window_len < onset - SPRT_HORIZON * slot_len {
+                continue;
+            }
+            let after = hann_share_inside(start, window_len, onset, onset + slot_len);
+            if after > MAX_SHARE_BEFORE_END {
+                break;
+            }
+            let before = hann_share_inside(start, window_len, onset - slot_len, onset);
+            for k in basic_tones(t.sender.index() as usize) {
+                if !t.present[k] || t.level[k] <= 0.0 {
+                    continue;
+                }
+                let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                let silent = t.level[k] * after * after;
+                let sounding = t.level[k] * (after * after + CONTINUATION_SHARE * before * before);
+                llr += (ln_tone_likelihood(r, sounding) - ln_tone_likelihood(r, silent))
+                    .clamp(-LLR_CLIP, LLR_CLIP);
+            }
+        }
+        llr > SPRT_BOUND / 3.0
+    }
+
+    /// Whether the frame's tones sound through the whole slot: the excess power of its
+    /// present tones in each half of the slot must be at least [`MIN_HALF_SHARE`] of what
+    /// an even spread would give. A burst of foreign tones shorter than a slot, or a sweep
+    /// crossing a tone, piles its energy into part of the slot; a message does not.
+    fn sounds_through_slot(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        if self.geometry.slot_windows >= 2 && b - a < 2.0 * window_len {
+            // A half slot shorter than a window: the windows of the two halves overlap,
+            // so the split cannot tell a burst from a tone and only costs real frames.
+            // The other rules still apply. With a single whole window per slot (tones
+            // under 1.5 windows) the check stays: there it still refuses frames assembled
+            // from the edges of two messages.
+            return true;
+        }
+        let mid = 0.5 * (a + b);
+        let tones: Vec<usize> = frame.tones().into_iter().filter(|&k| present[k]).collect();
+        let mut halves = [(0.0f64, 0usize); 2];
+        for w in &self.history {
+            let start = w.start as f64;
+            if hann_share_inside(start, window_len, a, b) < 0.9 {
+                continue;
+            }
+            let half = usize::from(start + 0.5 * window_len >= mid);
+            halves[half].0 += Self::excess(w, scale, &tones);
+            halves[half].1 += 1;
+        }
+        let total: f64 = halves.iter().map(|h| h.0).sum();
+        let count: usize = halves.iter().map(|h| h.1).sum();
+        if halves.iter().any(|h| h.1 == 0) || total <= 0.0 {
+            // Too few windows to split (tones about as short as a window): no verdict.
+            return true;
+        }
+        halves
+            .iter()
+            .all(|h| h.0 >= MIN_HALF_SHARE * total * h.1 as f64 / count as f64)
+    }
+
+    /// Whether a tone outside the frame sounds about as loud as the frame's own tones
+    /// ([`STRAY_SHARE`] of their median excess), or far louder than a tone a 2-of-3 vote
+    /// rests on ([`STRAY_OVER_VOTE`]): the mark of someone else's multi-tone signal that
+    /// happens to contain our two basics, not of noise (the tone must pass [`P_STRAY`])
+    /// nor of leakage (ruled out by the neighbour and dynamic-range tests already).
+    fn has_stray_tone(
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        level: &[f64; TONE_COUNT],
+        sums: &[f64; TONE_COUNT],
+        count: usize,
+    ) -> bool {
+        let own = frame.tones();
+        let strict = gamma_upper_quantile(count.max(1) as f64, P_STRAY);
+        let median = median(
+            own.iter()
+                .filter(|&&k| present[k])
+                .map(|&k| level[k])
+                .collect(),
+        );
+        // The weakest tone a basic's 2-of-3 vote rests on (the second loudest of each).
+        let vote = |b: usize| {
+            let mut l = basic_tones(b).map(|k| if present[k] { level[k] } else { 0.0 });
+            l.sort_by(|a, b| b.total_cmp(a));
+            l[1]
+        };
+        let weakest_vote =
+            vote(frame.sender.index() as usize).min(vote(SENDER_COUNT + usize::from(frame.data)));
+        (0..TONE_COUNT).any(|k| {
+            present[k]
+                && !own.contains(&k)
+                && sums[k] >= strict
+                && (level[k] >= STRAY_SHARE * median || level[k] >= STRAY_OVER_VOTE * weakest_vote)
+        })
+    }
+}

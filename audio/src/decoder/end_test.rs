@@ -1,0 +1,426 @@
+//! The end test after a slot: did the sender stop (a short message, or the end of a long
+//! one) or does it continue (a long message's second frame)? A sequential
+//! log-likelihood-ratio test, run on short windows from the estimated slot end on as
+//! soon as their samples arrive, and alongside on the analysis windows, which decide when
+//! the short windows cannot.
+
+use super::tracking::Tracking;
+use super::{median, Decoder};
+use crate::significance::{hann_share_inside, ln_tone_likelihood};
+use crate::tones::{basic_tones, tone_frequency_hz, DATA_VALUES, SENDER_COUNT, TONE_COUNT};
+
+/// Bound of the short/long sequential test on the analysis windows (log-likelihood
+/// ratio). Half-overlapping windows count their evidence about twice, so this is about
+/// ±7 (1 in 1000) in independent evidence.
+pub(super) const SPRT_BOUND: f64 = 14.0;
+/// How far after a slot's end (in slots) the short/long test looks. A long message's
+/// second frame follows with no gap, so its evidence is in the first windows; looking
+/// further would mistake the same robot's next message for a continuation.
+pub(super) const SPRT_HORIZON: f64 = 0.5;
+/// Largest share of a window's Hann area before the slot end for it to count as "after"
+/// in the short/long test (a window starting 1/8 window before the end).
+pub(super) const MAX_SHARE_BEFORE_END: f64 = 0.02;
+/// Power share of the first slot's level assumed for a continuing tone (−2.2 dB).
+pub(super) const CONTINUATION_SHARE: f64 = 0.6;
+/// Largest evidence one tone in one window adds to the short/long test.
+pub(super) const LLR_CLIP: f64 = 8.0;
+/// Length of the end test's short windows, as a share of an analysis window (64 ms at
+/// 1 s tones: tones 49 Hz apart stay ~3 bins apart).
+const END_WINDOW_SHARE: f64 = 0.5;
+/// Hop between the end test's short windows, as a share of their length (16 ms at 1 s
+/// tones): evidence arrives every hop instead of every analysis window.
+const END_HOP_SHARE: f64 = 0.25;
+/// "Stopped" bound of the end test in independent evidence (nats): stopping wrongly when
+/// the sender continues at the modelled level (a long message reported as a short, a
+/// wrong message) has probability about e^−7 ≈ 1e-3 (Wald). The summed evidence of
+/// overlapping windows is first divided by its variance inflation (see
+/// [`ShortWindow::effective`]).
+const END_BOUND_NATS: f64 = 7.0;
+/// "Continues" bound of the end test, nats (plus ln 21 for the unknown data basic). Far
+/// stricter: continuing wrongly loses the message (and the second slot swallows what
+/// follows), while deciding "continues" later costs nothing, as the second slot must be
+/// heard anyway.
+const END_CONTINUE_NATS: f64 = 12.0;
+
+/// Evidence, summed over windows, that the tracked frame continues after the slot end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Evidence {
+    /// From the sender's tones.
+    llr: f64,
+    /// From each data basic's tones (a second frame sounds one, which one unknown).
+    data_llr: [f64; DATA_VALUES as usize],
+}
+
+impl Evidence {
+    fn new() -> Self {
+        Evidence {
+            llr: 0.0,
+            data_llr: [0.0; DATA_VALUES as usize],
+        }
+    }
+
+    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio).
+    fn total(&self) -> f64 {
+        let best_data = self
+            .data_llr
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        self.llr + best_data
+    }
+
+    /// Adds one window's evidence: the window holds `before` of the ended slot's Hann area
+    /// and `after` of the next slot's, and `power(k)` is tone `k`'s normalised power in it.
+    fn add_window(
+        &mut self,
+        c: &Continuation,
+        before: f64,
+        after: f64,
+        power: impl Fn(usize) -> f64,
+    ) {
+        let t = c.tracking;
+        // Clipped: at high SNR a small level mismatch (fades, a phase step, room echo)
+        // must not swamp the evidence of other windows.
+        let llr = |r: f64, ended: f64, continued: f64| {
+            (ln_tone_likelihood(r, continued) - ln_tone_likelihood(r, ended))
+                .clamp(-LLR_CLIP, LLR_CLIP)
+        };
+        for k in basic_tones(t.sender.index() as usize) {
+            if !t.present[k] || t.level[k] <= 0.0 {
+                continue;
+            }
+            // Continuation modelled conservatively: an unknown phase at the slot edge
+            // (powers add) and the second frame up to 2.2 dB quieter (another encoder may
+            // normalise each frame's peak). A louder continuation only strengthens the
+            // evidence.
+            let level = t.level[k] * c.ratio;
+            let ended = level * before * before;
+            let continued = level * (before * before + CONTINUATION_SHARE * after * after);
+            self.llr += llr(power(k), ended, continued);
+        }
+        // A second frame also sounds one data basic, which one unknown: its evidence
+        // enters as the best of the 21, doubling what the sender alone gives.
+        for (d, acc) in self.data_llr.iter_mut().enumerate() {
+            let same = d as u8 == c.current_data;
+            for k in basic_tones(SENDER_COUNT + d) {
+                let level = if same && t.present[k] {
+                    t.level[k]
+                } else {
+                    c.typical
+                } * c.ratio;
+                if level <= 0.0 {
+                    continue;
+                }
+                let ended = if same { level * before * before } else { 0.0 };
+                let continued = ended + CONTINUATION_SHARE * level * after * after;
+                *acc += llr(power(k), ended, continued);
+            }
+        }
+    }
+}
+
+/// What the tracked frame would sound like if it continued: the levels measured in its
+/// last slot, in units of a window `ratio` times an analysis window's length.
+struct Continuation<'a> {
+    tracking: &'a Tracking,
+    /// The data value of the slot that just ended.
+    current_data: u8,
+    /// Typical tone level of the slot, for data tones it did not contain.
+    typical: f64,
+    ratio: f64,
+}
+
+/// State of the end test on short windows (see [`Decoder::short_end_test`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct EndWindows {
+    /// Next short window, counted from the first after the end.
+    next: u32,
+    /// Evidence summed over the windows so far.
+    evidence: Evidence,
+    /// A window's samples were no longer held: the test on analysis windows decides.
+    abandoned: bool,
+    /// The windows reached [`SPRT_HORIZON`] undecided: the analysis windows' lean decides.
+    out_of_time: bool,
+}
+
+impl EndWindows {
+    fn new() -> Self {
+        EndWindows {
+            next: 0,
+            evidence: Evidence::new(),
+            abandoned: false,
+            out_of_time: false,
+        }
+    }
+
+    /// Whether the short windows may still decide.
+    pub(super) fn running(&self) -> bool {
+        !self.abandoned && !self.out_of_time
+    }
+}
+
+/// Where the end test after a slot stands.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct EndTest {
+    /// The slot that ended (1 or 2).
+    pub(super) slot: u8,
+    /// Where it ended, sample.
+    pub(super) slot_end: f64,
+    /// Evidence of the analysis windows so far.
+    windows: Evidence,
+    /// Next analysis window to weigh.
+    next_index: u64,
+    /// The test on short windows.
+    pub(super) short: EndWindows,
+}
+
+impl EndTest {
+    /// The end test after `slot` ending at `slot_end`, weighing analysis windows from
+    /// `next_index` on.
+    pub(super) fn new(slot: u8, slot_end: f64, next_index: u64) -> Self {
+        EndTest {
+            slot,
+            slot_end,
+            windows: Evidence::new(),
+            next_index,
+            short: EndWindows::new(),
+        }
+    }
+}
+
+/// The end test's short Hann window and how much overlapping ones share.
+pub(super) struct ShortWindow {
+    hann: Vec<f64>,
+    /// Samples between window starts.
+    hop: usize,
+    /// Amplitude correlation of noise between windows 1, 2, … hops apart.
+    overlap: Vec<f64>,
+}
+
+impl ShortWindow {
+    /// The short window for analysis windows of `window_len` samples.
+    pub(super) fn new(window_len: usize) -> Self {
+        let len = ((END_WINDOW_SHARE * window_len as f64).round() as usize).max(8);
+        let hann: Vec<f64> = (0..len)
+            .map(|n| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * n as f64 / len as f64).cos())
+            .collect();
+        let hop = ((END_HOP_SHARE * len as f64).round() as usize).max(1);
+        let energy: f64 = hann.iter().map(|w| w * w).sum();
+        let overlap = (1..)
+            .map(|m| m * hop)
+            .take_while(|&lag| lag < len)
+            .map(|lag| {
+                hann.iter()
+                    .zip(&hann[lag..])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    / energy
+            })
+            .collect();
+        ShortWindow { hann, hop, overlap }
+    }
+
+    /// The evidence `sum` of `n` overlapping short windows in independent terms: divided
+    /// by the variance inflation of a sum of `n` correlated terms,
+    /// 1 + 2 Σ_m (1 − m/n) c_m, with c_m the windows' amplitude correlation m hops apart
+    /// (the bound where a steady tone's cross term dominates; the powers of noise alone
+    /// correlate only by c_m²). One window counts fully; a long run about 3/8 (hop 1/4).
+    fn effective(&self, sum: f64, n: u32) -> f64 {
+        let n = f64::from(n.max(1));
+        let inflation = 1.0
+            + 2.0
+                * self
+                    .overlap
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| (1.0 - (i + 1) as f64 / n).max(0.0) * c)
+                    .sum::<f64>();
+        sum / inflation
+    }
+}
+
+/// Powers of the Hann-weighted samples `y` at the angular frequencies (rad/sample) whose
+/// `2 cos ω` are `coefs`, in the analysis's units (|Σ y e^{−iωn}|²): Goertzel's recursion,
+/// all tones in one pass over the samples (three flops per sample and tone).
+pub(super) fn tone_powers(y: &[f64], coefs: &[f64; TONE_COUNT]) -> [f64; TONE_COUNT] {
+    let mut s1 = [0.0f64; TONE_COUNT];
+    let mut s2 = [0.0f64; TONE_COUNT];
+    for &v in y {
+        for k in 0..TONE_COUNT {
+            let s0 = v + coefs[k] * s1[k] - s2[k];
+            s2[k] = s1[k];
+            s1[k] = s0;
+        }
+    }
+    std::array::from_fn(|k| (s1[k] * s1[k] + s2[k] * s2[k] - coefs[k] * s1[k] * s2[k]).max(0.0))
+}
+
+impl Decoder {
+    /// Moves the end test `test` of the tracked frame `t` on with the samples and windows
+    /// that arrived: the verdict (continues?) and, when the short windows reached it, the
+    /// sample at which they did; `None` until then.
+    pub(super) fn decide_end(
+        &self,
+        t: &Tracking,
+        test: &mut EndTest,
+    ) -> Option<(bool, Option<f64>)> {
+        let c = Continuation {
+            tracking: t,
+            current_data: t.data[usize::from(test.slot.clamp(1, 2) - 1)],
+            typical: median(
+                (0..TONE_COUNT)
+                    .filter(|&k| t.present[k] && t.level[k] > 0.0)
+                    .map(|k| t.level[k])
+                    .collect(),
+            ),
+            ratio: 1.0,
+        };
+        if test.short.running() {
+            if let Some((continues, at)) = self.short_end_test(&c, test.slot_end, &mut test.short) {
+                return Some((continues, Some(at)));
+            }
+        }
+        self.window_end_test(&c, test)
+            .map(|continues| (continues, None))
+    }
+
+    /// The short/long test after a slot's end, on short Hann windows
+    /// ([`END_WINDOW_SHARE`] of an analysis window, the first starting at the estimated
+    /// end, then every [`END_HOP_SHARE`] of their length) at the
+    /// frame's exact frequencies, each judged as soon as its samples arrive. Each window
+    /// adds, per tone, the log-likelihood ratio of "continues" (the sender's tones at
+    /// [`CONTINUATION_SHARE`] of the level measured in the slot; a second frame's data
+    /// basic, the best of the 21, likewise) against "stopped"; the sum, divided by its
+    /// variance inflation from the windows' overlap, decides "stopped" at
+    /// −[`END_BOUND_NATS`] and "continues" at [`END_CONTINUE_NATS`] + ln 21. A loud slot
+    /// decides on its first window; a quieter one after a few more.
+    /// Returns the verdict (continues?) and the sample at which it was reached, or `None`
+    /// until then; marks the state out of time at [`SPRT_HORIZON`] (the analysis windows'
+    /// lean then decides) and abandoned when a window's samples are no longer held. At the
+    /// end of the stream, a weak lean is a stop.
+    fn short_end_test(
+        &self,
+        c: &Continuation,
+        slot_end: f64,
+        st: &mut EndWindows,
+    ) -> Option<(bool, f64)> {
+        let t = c.tracking;
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        let slot_start = slot_end - slot_len;
+        let len = self.short_window.hann.len();
+        let hop = self.short_window.hop as u64;
+        // No guard after the end: the Hann taper keeps a late end's tail small (20 ms late,
+        // a 64 ms window holds 3% of the tone's power), and a tail only slows "stopped",
+        // while a guard would delay every report by its length.
+        let first = slot_end.ceil().max(0.0) as u64;
+        // Normalised like the analysis: a Hann window of `len` has `len / L` of the noise
+        // power of one of length L, and (`len / L`)² of a steady tone's.
+        let ratio = len as f64 / window_len;
+        let c = Continuation { ratio, ..*c };
+        let scale = 1.0 + self.geometry.scales[t.scale];
+        let rate = self.rate();
+        let coefs: [f64; TONE_COUNT] = std::array::from_fn(|k| {
+            2.0 * (2.0 * std::f64::consts::PI * tone_frequency_hz(k) * scale / rate).cos()
+        });
+        let normaliser = |k: usize| (t.noise * self.noise.shape[k] * ratio).max(1e-300);
+        let effective = |st: &EndWindows| self.short_window.effective(st.evidence.total(), st.next);
+        loop {
+            let start = first + u64::from(st.next) * hop;
+            let end = start + len as u64;
+            let Some(x) = self.analyzer.samples(start, len) else {
+                if self.analyzer.samples_pushed() >= end {
+                    st.abandoned = true;
+                    return None;
+                }
+                if self.eof {
+                    let at = self.analyzer.samples_pushed() as f64;
+                    return Some((effective(st) > END_BOUND_NATS / 3.0, at));
+                }
+                return None;
+            };
+            let mean = x.iter().map(|&v| f64::from(v)).sum::<f64>() / len as f64;
+            let y: Vec<f64> = x
+                .iter()
+                .zip(&self.short_window.hann)
+                .map(|(&v, &w)| (f64::from(v) - mean) * w)
+                .collect();
+            let s = start as f64;
+            let before = hann_share_inside(s, len as f64, slot_start, slot_end);
+            let after = hann_share_inside(s, len as f64, slot_end, slot_end + slot_len);
+            let powers = tone_powers(&y, &coefs);
+            st.evidence
+                .add_window(&c, before, after, |k| powers[k] / normaliser(k));
+            st.next += 1;
+            let evidence = effective(st);
+            let at = end as f64;
+            // "Continues" rests on the best of 21 data basics: a union over them costs
+            // ln 21 (the stop side needs no such allowance: the true one is among them).
+            if evidence >= END_CONTINUE_NATS + (DATA_VALUES as f64).ln() {
+                return Some((true, at));
+            }
+            if evidence <= -END_BOUND_NATS {
+                return Some((false, at));
+            }
+            if at >= slot_end + SPRT_HORIZON * slot_len {
+                st.out_of_time = true;
+                return None;
+            }
+        }
+    }
+
+    /// The same test on the analysis windows (almost) wholly after the slot end, run
+    /// alongside the short windows: it decides at ±[`SPRT_BOUND`] only when the short
+    /// windows' samples were no longer held, and by its lean when the short windows ran
+    /// out of time undecided (at low SNR the short windows' lean is the noisier one) or
+    /// the stream ends. Out of time, a long message continues with no gap, so its
+    /// evidence comes early and strong: a weak lean is a stop.
+    fn window_end_test(&self, c: &Continuation, test: &mut EndTest) -> Option<bool> {
+        let t = c.tracking;
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        let slot_end = test.slot_end;
+        let slot_start = slot_end - slot_len;
+        let fallback = test.short.abandoned;
+        let lean_here = test.short.abandoned || test.short.out_of_time;
+        let mut verdict = None;
+        for w in &self.history {
+            if w.index < test.next_index {
+                continue;
+            }
+            test.next_index = w.index + 1;
+            let start = w.start as f64;
+            if start + window_len <= slot_end {
+                continue;
+            }
+            let before = hann_share_inside(start, window_len, slot_start, slot_end);
+            // Only windows (almost) wholly after the estimated slot end: the power of a
+            // window straddling the end depends on the exact end, known only to some tens
+            // of milliseconds, and at high SNR that mismatch alone would decide the test.
+            if before > MAX_SHARE_BEFORE_END {
+                continue;
+            }
+            let after = hann_share_inside(start, window_len, slot_end, slot_end + slot_len);
+            // Same normalisation as the slot, so levels compare directly even where the
+            // per-window noise estimate jumps.
+            test.windows.add_window(c, before, after, |k| {
+                f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise
+            });
+            let evidence = test.windows.total();
+            if fallback && evidence >= SPRT_BOUND {
+                verdict = Some(true);
+            } else if fallback && evidence <= -SPRT_BOUND {
+                verdict = Some(false);
+            } else if lean_here && start + window_len >= slot_end + SPRT_HORIZON * slot_len {
+                verdict = Some(evidence > SPRT_BOUND / 3.0);
+            }
+            if verdict.is_some() {
+                break;
+            }
+        }
+        if verdict.is_none() && self.eof && lean_here {
+            verdict = Some(test.windows.total() > SPRT_BOUND / 3.0);
+        }
+        verdict
+    }
+}

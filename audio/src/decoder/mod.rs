@@ -1,0 +1,363 @@
+//! The streaming decoder: a sans-IO detector you push samples into and poll messages out of.
+//!
+//! # Where each idea lives
+//!
+//! | file            | what it holds                                                       |
+//! |-----------------|---------------------------------------------------------------------|
+//! | `mod.rs`        | the public API: [`Decoder`], [`DecoderConfig`], [`Detection`]        |
+//! | `windows.rs`    | analysed windows: normalised, kept for look-back, integrated         |
+//! | `noise_floor.rs`| the noise level and spectral shape powers are divided by             |
+//! | `rules.rs`      | the seed's rules (tone present, 2-of-3 vote, one sender, one data)   |
+//! | `search.rs`     | finding a frame in the integrated sums while nothing is tracked      |
+//! | `onset.rs`      | where a found frame began                                            |
+//! | `confirm.rs`    | the decision on one aligned slot, and the checks a message must pass |
+//! | `off_grid.rs`   | the check that all six tones share one frequency scale               |
+//! | `tracking.rs`   | following a frame from its first slot to a report                    |
+//! | `end_test.rs`   | the end test after a slot: short or long message                     |
+//!
+//! # How it decides
+//!
+//! 1. **Analysis** (`analysis`): Hann windows of about 1/8 of a tone (64–128 ms), half
+//!    overlapping, zero-padded FFT; the power of each of the 72 tones at each candidate
+//!    frequency scale.
+//! 2. **Noise floor** ([`NoiseFloor`]): per window, the level is the median over the 66
+//!    tones outside the candidate frame (the tracked one, else the best sender and data
+//!    basic so far), over that order statistic's expectation, divided by the spectral
+//!    shape (with the frame's tones in, the median would read high exactly while a
+//!    message sounds); the shape (pink noise, a microphone's response) is a slow,
+//!    outlier-gated average per tone, frozen on the tones of a message being tracked.
+//!    Powers are divided by level × shape, so under noise each is ≈ Exp(1).
+//! 3. **Integration**: the normalised powers of the last `n` windows that fit in one tone
+//!    duration are summed per tone and scale (the energy detector matched to the tone
+//!    length). Under noise each sum is ≈ Gamma(n, 1).
+//! 4. **Detection**: for each scale, the best sender basic and the best data basic (sums
+//!    of their three tones); the frame hypothesis energy (six tones) must exceed the
+//!    Gamma(6n) quantile for a per-window false-alarm probability of
+//!    [`P_FRAME`](search::P_FRAME) after a union bound over the 63 hypotheses and all
+//!    scales. This is a coarse gate; the rules below carry most of the false-alarm
+//!    protection.
+//! 5. **The seed's rules**, on the integrated sums at the chosen scale: a tone is present
+//!    when its sum exceeds the Gamma(n) quantile at [`P_TONE`](search::P_TONE) and is not
+//!    merely leakage from a much louder neighbour; a basic is present when ≥ 2 of its 3
+//!    tones are; the frame is valid only with exactly one sender basic and exactly one data
+//!    basic. Two consecutive windows must give the same valid frame before it is accepted.
+//!    On the aligned slot the frame's six-tone energy must pass the frame test again, at
+//!    the stricter [`P_FRAME_CONFIRM`](confirm::P_FRAME_CONFIRM), and a rival basic (a
+//!    second sender or data basic) must pass the stricter
+//!    [`P_TONE_RIVAL`](confirm::P_TONE_RIVAL) to reject the frame. A stray tone outside
+//!    the frame's basics is judged by its own test (step 7).
+//! 6. **Timing and re-decision**: once accepted, the onset is located on the per-window
+//!    energy of the frame's six tones (a step-change estimate refined by a least-squares
+//!    fit of the Hann-window share of the windows around the step), once more when the
+//!    whole slot has been heard; the frame is re-decided with the rules on exactly the
+//!    windows inside `[onset, onset + T]`.
+//! 7. **Short or long**: a sequential probability ratio test on the sender's tones (and
+//!    a second frame's data basic, the best of the 21) just after the slot end, with the
+//!    tone level measured in the slot: sender stops → a short message; sender continues →
+//!    a second slot is decided the same way and the sender must then stop → a long
+//!    message. A frame that keeps sounding past two slots is not a message (and is
+//!    ignored until it stops).
+//!    The test runs on short Hann windows (half an analysis window, 64 ms at 1 s tones)
+//!    from the estimated end on, every quarter of their length, at the frame's exact
+//!    frequencies, each judged as soon as its samples arrive. Overlapping windows do not
+//!    carry independent evidence: the sum is divided by its variance inflation
+//!    (1 + 2 Σ (1 − m/n) c_m over the windows' correlations c_m; one window counts fully,
+//!    a long run 3/8) before it meets the bounds: "stopped" at 7 nats (a long message
+//!    cut to a wrong short about 1 in 1000 at the conservative continuation level),
+//!    "continues" at 12 + ln 21 nats (a wrong "continues" loses the message, a late one
+//!    costs nothing). Undecided at the horizon, the same test on the analysis windows
+//!    gives the lean (a weak lean is a stop).
+//!    The test looks half a slot past the end, so two messages from one robot need more
+//!    than half a tone of silence between them (closer frames *are* a long message).
+//!    Each slot must also sound through: both of its halves carry a fair share of the
+//!    frame's energy (a foreign burst shorter than a slot does not).
+//!    And a slot where a tone outside the frame is about as loud as the frame's own is
+//!    someone else's multi-tone signal that happens to contain our two basics.
+//!    So is a slot whose tones do not share one frequency scale: a sender's clock error
+//!    moves all six tones by one factor, while another codec's tones that pass near ours
+//!    are each off by their own amount (a present tone must keep most of its best-scale
+//!    power at the frame's scale, within the noise; at the comb's edge the power must not
+//!    still be rising outward; loud tones' interpolated peaks must agree with one scale
+//!    within a fraction of a hertz, and none may peak on the bin just beyond the comb).
+//!    A tone outside the frame much louder than one its 2-of-3 votes rest on is a stray
+//!    too.
+//!    Symmetrically, a first frame whose sender was already sounding just before it is the
+//!    second half of a long message whose first half was missed, and is dropped.
+//! 8. **Once per transmission**: after a decision the integration restarts after the
+//!    transmission's end.
+//!
+//! # False alarms
+//!
+//! A false message needs, in two consecutive windows, the six-tone energy above a
+//! threshold at 1e-6 per window (union-bounded over hypotheses and scales) *and* ≥ 2 of 3
+//! tones of exactly one sender basic and of exactly one data basic at
+//! [`P_TONE`](search::P_TONE) per tone. Consecutive windows share 13 of 14 windows'
+//! energy, so the second window adds little independence: the search alone lets through
+//! about 1e-6 of noise windows, i.e. ≲ 0.6 per 10 hours of Gaussian noise (≈ 560 000
+//! windows at 64 ms). The aligned slot then needs its six-tone energy at
+//! [`P_FRAME_CONFIRM`](confirm::P_FRAME_CONFIRM) = 1e-10 (union-bounded), the rules again
+//! ([`P_TONE_CONFIRM`](confirm::P_TONE_CONFIRM)), and the sender stopping cleanly: well
+//! under 1e-3 false messages per 10 hours of Gaussian noise. What is left are structured
+//! sounds, which `huddle audio eval` measures.
+//!
+//! # Report delay
+//!
+//! A short message is reported once the sender is known to have stopped (otherwise it may
+//! be the first half of a long message, and reporting it would be a wrong message). A
+//! loud slot decides on the first short window after its end, i.e. about one short window
+//! after the end; a quieter one needs a few more windows, a hop apart. Lower still, the
+//! evidence is simply not there sooner: each tone is barely above the noise in a window,
+//! the sender's three tones give a few tenths of a nat per window towards "stopped", and
+//! holding wrong accepts at 1e-3 needs about 7 nats, i.e. more than the half-slot horizon
+//! holds: the lean decides there, about half a tone after the end.
+
+mod confirm;
+mod end_test;
+mod noise_floor;
+mod off_grid;
+mod onset;
+mod rules;
+mod search;
+mod tracking;
+mod windows;
+
+#[cfg(test)]
+mod tests;
+
+use std::collections::VecDeque;
+
+use crate::analysis::{Analyzer, Geometry};
+use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+
+use end_test::ShortWindow;
+use noise_floor::NoiseFloor;
+use search::Run;
+use tracking::{Stage, Tracking};
+use windows::WindowRecord;
+
+/// Shortest tone duration the decoder accepts, s (see [`DecoderConfigError::ToneDuration`]).
+pub const MIN_TONE_DURATION_S: f64 = 0.06;
+
+/// How to decode.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecoderConfig {
+    /// Input sample rate, Hz (8000 … 192000).
+    pub sample_rate_hz: u32,
+    /// Duration of one frame (short message), seconds, as the senders use it.
+    pub tone_duration_s: f64,
+    /// Largest relative frequency error tolerated between sender and receiver clocks.
+    pub max_frequency_error: f64,
+}
+
+impl Default for DecoderConfig {
+    fn default() -> Self {
+        DecoderConfig {
+            sample_rate_hz: 16_000,
+            tone_duration_s: 1.0,
+            max_frequency_error: 0.006,
+        }
+    }
+}
+
+/// Why a decoder configuration is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecoderConfigError {
+    /// The rate must be 8000 … 192000 Hz: below 8 kHz the top tone is above Nyquist.
+    #[error("sample rate {0} Hz unsupported (8000..=192000)")]
+    SampleRate(u32),
+    /// The tone duration must be 0.06 … 5 s: the analysis window is at least 64 ms (so
+    /// tones 49 Hz apart stay resolved), and tones much shorter than it are decoded
+    /// wrongly more often than a wrong message may be.
+    #[error("tone duration {0} s unsupported (0.06..=5)")]
+    ToneDuration(f64),
+    /// The tolerated frequency error must be 0 … 2%.
+    #[error("frequency error {0} unsupported (0..=0.02)")]
+    FrequencyError(f64),
+}
+
+/// A decoded message.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Detection {
+    /// What was said.
+    pub message: Message,
+    /// When it began, seconds from the first sample pushed.
+    pub start_s: f64,
+    /// When it ended (estimated), seconds from the first sample pushed.
+    pub end_s: f64,
+    /// How much audio had been pushed when it was decided, seconds: `decided_at_s - end_s`
+    /// is the reporting delay.
+    pub decided_at_s: f64,
+    /// Sender's frequency scale relative to the plan (1.003 = 0.3% sharp).
+    pub frequency_scale: f64,
+    /// Estimated signal-to-noise ratio per tone in one analysis window, dB.
+    pub tone_snr_db: f64,
+}
+
+/// The streaming decoder. Push samples in any block size with [`Decoder::push_f32`] or
+/// [`Decoder::push_i16`]; after each push, drain [`Decoder::poll_message`] until `None`.
+/// At the end of a stream call [`Decoder::finish`] and drain again.
+///
+/// No input panics it: non-finite samples count as 0, silence is handled, and the
+/// state's size is bounded by the configuration.
+pub struct Decoder {
+    config: DecoderConfig,
+    analyzer: Analyzer,
+    geometry: Geometry,
+    noise: NoiseFloor,
+    history: VecDeque<WindowRecord>,
+    history_cap: usize,
+    windows_seen: u64,
+    /// Per-tone sums over the integration windows, `[j * 72 + k]`.
+    sliding: Vec<f64>,
+    /// Index of the oldest window in `sliding`, and how many are summed.
+    sliding_first: u64,
+    sliding_count: usize,
+    /// Windows starting before this sample belong to a finished transmission.
+    floor: u64,
+    run: Option<Run>,
+    tracking: Option<Tracking>,
+    /// A frame that kept sounding too long: ignored until it stops.
+    blocked: Option<(Frame, usize, f64, u32)>,
+    /// Sender and end (sample) of the last slot that failed its decision: a frame from
+    /// the same sender right after it is the second half of a long message.
+    failed_slot: Option<(Sender, f64)>,
+    output: VecDeque<Detection>,
+    scratch_powers: Vec<f32>,
+    /// The end test's short window.
+    short_window: ShortWindow,
+    eof: bool,
+}
+
+impl std::fmt::Debug for Decoder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Decoder")
+            .field("config", &self.config)
+            .field("window_len", &self.geometry.window_len)
+            .field("windows_seen", &self.windows_seen)
+            .finish()
+    }
+}
+
+impl Decoder {
+    /// A decoder for `config`.
+    pub fn new(config: DecoderConfig) -> Result<Decoder, DecoderConfigError> {
+        if !(8_000..=192_000).contains(&config.sample_rate_hz) {
+            return Err(DecoderConfigError::SampleRate(config.sample_rate_hz));
+        }
+        if !(MIN_TONE_DURATION_S..=5.0).contains(&config.tone_duration_s) {
+            return Err(DecoderConfigError::ToneDuration(config.tone_duration_s));
+        }
+        if !(0.0..=0.02).contains(&config.max_frequency_error) {
+            return Err(DecoderConfigError::FrequencyError(
+                config.max_frequency_error,
+            ));
+        }
+        let geometry = Geometry::new(
+            config.sample_rate_hz,
+            config.tone_duration_s,
+            config.max_frequency_error,
+        );
+        let per_slot = (geometry.slot_samples / geometry.hop as f64).ceil() as usize + 2;
+        let history_cap = 3 * geometry.slot_windows + 3 * per_slot + 16;
+        Ok(Decoder {
+            analyzer: Analyzer::new(geometry.clone()),
+            sliding: vec![0.0; geometry.scale_count() * TONE_COUNT],
+            scratch_powers: vec![0.0; geometry.scale_count() * TONE_COUNT],
+            noise: NoiseFloor::new(geometry.window_len),
+            short_window: ShortWindow::new(geometry.window_len),
+            geometry,
+            config,
+            history: VecDeque::with_capacity(history_cap),
+            history_cap,
+            windows_seen: 0,
+            sliding_first: 0,
+            sliding_count: 0,
+            floor: 0,
+            run: None,
+            tracking: None,
+            blocked: None,
+            failed_slot: None,
+            output: VecDeque::new(),
+            eof: false,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DecoderConfig {
+        &self.config
+    }
+
+    /// Analysis window length in samples (the time resolution of detection).
+    pub fn window_len(&self) -> usize {
+        self.geometry.window_len
+    }
+
+    /// Samples pushed so far.
+    pub fn samples_pushed(&self) -> u64 {
+        self.analyzer.samples_pushed()
+    }
+
+    /// Pushes f32 samples (full scale ±1; any level works, the detector is relative).
+    pub fn push_f32(&mut self, samples: &[f32]) {
+        self.analyzer.push(samples.iter().copied());
+        self.drain_windows();
+        self.quick_look();
+    }
+
+    /// Pushes 16-bit samples.
+    pub fn push_i16(&mut self, samples: &[i16]) {
+        self.analyzer
+            .push(samples.iter().map(|&s| crate::pcm::i16_to_f32(s)));
+        self.drain_windows();
+        self.quick_look();
+    }
+
+    /// The end test's short windows need samples, not a whole analysis window: try them
+    /// as soon as they arrive rather than at the next window.
+    fn quick_look(&mut self) {
+        if matches!(
+            self.tracking,
+            Some(Tracking {
+                stage: Stage::EndTest(end),
+                ..
+            }) if end.short.running()
+        ) {
+            self.advance_tracking();
+        }
+    }
+
+    /// The next decoded message, in order of decision.
+    pub fn poll_message(&mut self) -> Option<Detection> {
+        self.output.pop_front()
+    }
+
+    /// Ends the stream: a transmission whose slots are complete is decided on the evidence
+    /// so far (a stream ending right after a message reports it). Pushing after this
+    /// continues the stream.
+    pub fn finish(&mut self) {
+        self.eof = true;
+        self.advance_tracking();
+        if self.tracking.is_some() {
+            // Slots not complete: not a message.
+            self.tracking = None;
+        }
+        self.eof = false;
+    }
+
+    fn rate(&self) -> f64 {
+        f64::from(self.geometry.rate_hz)
+    }
+
+    fn drain_windows(&mut self) {
+        while let Some(start) = self.analyzer.next_window() {
+            self.scratch_powers.copy_from_slice(self.analyzer.powers());
+            self.on_window(start);
+        }
+    }
+}
+
+/// The median of `values` (the upper one of an even count), 0 when there are none.
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(|a, b| a.total_cmp(b));
+    values.get(values.len() / 2).copied().unwrap_or(0.0)
+}

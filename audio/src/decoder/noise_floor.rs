@@ -1,0 +1,144 @@
+//! The noise floor every tone power is divided by: a per-window level times a slowly
+//! learnt per-tone shape, measured on the tones a message is not using.
+
+use super::Decoder;
+use crate::tones::{basic_tones, Frame, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
+
+/// Powers above this multiple of the floor do not update the shape (a signal, not noise).
+const SHAPE_GATE: f64 = 4.0;
+/// Slowest shape adaptation rate per window (time constant 256 windows, 16–33 s).
+const SHAPE_RATE: f64 = 1.0 / 256.0;
+/// The quietest noise assumed: quantisation noise of a 20-bit recording. Without it a
+/// synthetic, noise-free signal would be normalised by FFT round-off, which jumps by
+/// orders of magnitude from window to window.
+const QUIETEST_NOISE_BITS: i32 = 20;
+
+/// The noise floor: a per-window level times a slowly learnt per-tone shape.
+#[derive(Clone, Debug)]
+pub(super) struct NoiseFloor {
+    pub(super) shape: [f64; TONE_COUNT],
+    level: f64,
+    updates: u64,
+    /// Lowest level used (see [`QUIETEST_NOISE_BITS`]).
+    minimum: f64,
+}
+
+impl NoiseFloor {
+    pub(super) fn new(window_len: usize) -> Self {
+        let step = 2f64.powi(1 - QUIETEST_NOISE_BITS);
+        // Quantisation noise variance step²/12 through a Hann window (Σw² = 3L/8).
+        let minimum = step * step / 12.0 * 0.375 * window_len as f64;
+        NoiseFloor {
+            shape: [1.0; TONE_COUNT],
+            level: 0.0,
+            updates: 0,
+            minimum,
+        }
+    }
+
+    /// Updates from the nominal-scale powers of one window; returns the level.
+    ///
+    /// The level is the median of the tones not in `exclude` (the candidate message's
+    /// tones), divided by that order statistic's expectation under noise alone. Taking it
+    /// over all 72 would read high whenever a message sounds: its six loud tones push
+    /// every order statistic up, i.e. the detector would lose sensitivity exactly when it
+    /// matters. `frozen` tones keep their learnt shape.
+    pub(super) fn update(
+        &mut self,
+        nominal: &[f32],
+        exclude: &[bool; TONE_COUNT],
+        frozen: &[bool; TONE_COUNT],
+    ) -> f64 {
+        let mut ratios = [0.0f64; TONE_COUNT];
+        let mut m = 0;
+        for k in 0..TONE_COUNT {
+            if !exclude[k] {
+                ratios[m] = f64::from(nominal[k]) / self.shape[k];
+                m += 1;
+            }
+        }
+        let ratios = &mut ratios[..m.max(1)];
+        let m = ratios.len();
+        let mid = m / 2;
+        let (_, median, _) = ratios.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        // E[X_(mid+1) of m] for Exp(1) = Σ_{j=0}^{mid} 1/(m − j).
+        let expected: f64 = (0..=mid).map(|j| 1.0 / (m - j) as f64).sum();
+        let measured = *median / expected;
+        let instant = measured.max(self.minimum);
+        self.level = if self.level <= 0.0 {
+            instant
+        } else {
+            // Light smoothing in the log domain: the median of 72 exponentials is ±17%.
+            (0.7 * self.level.ln() + 0.3 * instant.ln()).exp()
+        };
+        if measured < 2.0 * self.minimum {
+            // (Near-)digital silence says nothing about the noise's shape.
+            return self.level;
+        }
+        // E[X | X < 4] for X ~ Exp(1): undoes the gate's bias.
+        let gate_mean =
+            (1.0 - (1.0 + SHAPE_GATE) * (-SHAPE_GATE).exp()) / (1.0 - (-SHAPE_GATE).exp());
+        let rate = SHAPE_RATE.max(1.0 / (self.updates as f64 + 8.0));
+        for k in 0..TONE_COUNT {
+            if frozen[k] {
+                continue;
+            }
+            let x = f64::from(nominal[k]) / (self.level * self.shape[k]);
+            if x < SHAPE_GATE {
+                self.shape[k] *= 1.0 + rate * (x / gate_mean - 1.0);
+                self.shape[k] = self.shape[k].clamp(1e-6, 1e6);
+            }
+        }
+        self.updates += 1;
+        self.level
+    }
+}
+
+impl Decoder {
+    /// The tones the floor leaves out of its level (`exclude`) and whose shape it does
+    /// not learn (`frozen`): the tracked frame's, both data basics of a long message
+    /// included; with nothing tracked, the best sender and data basic of the integrated
+    /// sums so far (nominal scale), whose shape is still learnt. Under noise alone these
+    /// are six tones picked by a slot-long sum, barely louder than the rest in any one
+    /// window.
+    pub(super) fn floor_masks(&self) -> ([bool; TONE_COUNT], [bool; TONE_COUNT]) {
+        let nominal = self.geometry.nominal_scale();
+        let mut frozen = [false; TONE_COUNT];
+        if let Some(t) = &self.tracking {
+            for k in (Frame {
+                sender: t.sender,
+                data: t.data[0],
+            })
+            .tones()
+            {
+                frozen[k] = true;
+            }
+            for k in (Frame {
+                sender: t.sender,
+                data: t.data[1],
+            })
+            .tones()
+            {
+                frozen[k] = true;
+            }
+        }
+        let exclude = if self.tracking.is_some() {
+            frozen
+        } else {
+            let s = &self.sliding[nominal * TONE_COUNT..(nominal + 1) * TONE_COUNT];
+            let basic = |b: usize| -> f64 { basic_tones(b).iter().map(|&k| s[k]).sum() };
+            let best = |r: std::ops::Range<usize>| {
+                r.max_by(|&a, &b| basic(a).total_cmp(&basic(b)))
+                    .unwrap_or(0)
+            };
+            let mut exclude = [false; TONE_COUNT];
+            for b in [best(0..SENDER_COUNT), best(SENDER_COUNT..BASIC_COUNT)] {
+                for k in basic_tones(b) {
+                    exclude[k] = true;
+                }
+            }
+            exclude
+        };
+        (exclude, frozen)
+    }
+}

@@ -1,0 +1,163 @@
+//! The check that a slot's tones share one frequency scale. A sender's clock error moves
+//! all six tones by one factor; another codec's tones that land near ours each sit off by
+//! their own amount, so no single scale reads them all on their peaks.
+
+use super::Decoder;
+use crate::significance::hann_share_inside;
+use crate::tones::{tone_frequency_hz, Frame, TONE_COUNT};
+
+/// Least share of a present tone's excess at its own best frequency scale that it must
+/// keep at the frame's scale (see [`Decoder::has_off_grid_tone`]): −1.5 dB, a tone about
+/// 3 Hz off the frame's common scale at 128 ms windows. A real tone loses at most the
+/// comb's step (about 0.3 dB), plus noise, which [`OFF_GRID_Z`] allows for.
+const OFF_GRID_SHARE: f64 = 0.7;
+/// Noise allowance of the off-grid test, in standard deviations of the tone's sum.
+const OFF_GRID_Z: f64 = 4.0;
+/// Per-window excess (20 dB) from which a tone's peak frequency is trusted (see
+/// [`Decoder::peaks_disagree`]).
+const PEAK_LOUD: f64 = 100.0;
+/// Largest distance of a loud tone's peak from the frame's common scale, Hz. A real
+/// frame's loud tones agree with one scale to a small fraction of this; another codec's
+/// tones passing near ours are off by their own hertz or more.
+const PEAK_TOLERANCE_HZ: f64 = 0.5;
+
+impl Decoder {
+    /// Whether a present tone of `frame` sits off the frame's common frequency scale: its
+    /// excess at `scale` is below [`OFF_GRID_SHARE`] of its excess at its own best scale,
+    /// by more than [`OFF_GRID_Z`] noise standard deviations. Another codec's tones that
+    /// land near ours (its 600 + 50·j Hz grid passes 4–14 Hz from our tones 2–12 and
+    /// 58–66) each sit off by their own amount. Loud foreign tones fail by far; at low SNR
+    /// the noise allowance swallows the test, as it should (a weak signal's peak is not
+    /// known that well).
+    pub(super) fn has_off_grid_tone(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let scales = self.geometry.scale_count();
+        let tones: Vec<usize> = frame.tones().into_iter().filter(|&k| present[k]).collect();
+        let mut sums = vec![[0.0f64; 6]; scales];
+        let mut margins = [[0.0f64; 2]; 6];
+        let mut count = 0usize;
+        for w in &self.history {
+            if hann_share_inside(w.start as f64, window_len, a, b) >= 0.9 {
+                for (j, row) in sums.iter_mut().enumerate() {
+                    for (i, &k) in tones.iter().enumerate() {
+                        row[i] += f64::from(w.r[j * TONE_COUNT + k]);
+                    }
+                }
+                for (i, &k) in tones.iter().enumerate() {
+                    margins[i][0] += f64::from(w.margin_r[k]);
+                    margins[i][1] += f64::from(w.margin_r[TONE_COUNT + k]);
+                }
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return false;
+        }
+        let n = count as f64;
+        // At the comb's outermost scale, the frame's power still rising outward (by more
+        // than the noise allows) puts its tones beyond the tolerated error, where nothing
+        // tells them from another codec's tones passing near ours. A real sender inside
+        // the tolerance peaks inside the comb.
+        let last = scales - 1;
+        if last > 0 && (scale == 0 || scale == last) {
+            let inner = if scale == 0 { 1 } else { last - 1 };
+            let edge: f64 = sums[scale].iter().sum();
+            let next: f64 = sums[inner].iter().sum();
+            if edge - next > OFF_GRID_Z * edge.sqrt() {
+                return true;
+            }
+        }
+        let off = tones.iter().enumerate().any(|(i, _)| {
+            let best = sums
+                .iter()
+                .map(|row| row[i])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let here = sums[scale][i];
+            here - n < OFF_GRID_SHARE * (best - n) - OFF_GRID_Z * best.sqrt()
+        });
+        off || self.peaks_disagree(&tones, &sums, &margins, n)
+    }
+
+    /// Whether the loud tones among `tones` (slot sums `sums[j][i]` at every scale `j` over
+    /// `n` windows) peak at frequencies no single scale explains: each loud tone's peak is
+    /// located between FFT bins (a parabola through the log excess of the loudest bin
+    /// the comb reads for it and its two neighbours), the common scale fitted (weighted by
+    /// frequency², as the Hz error is alike for every tone), and a tone more than
+    /// [`PEAK_TOLERANCE_HZ`] from it fails. Only tones ≥ 20 dB per window count: their peak
+    /// is known to a small fraction of a bin, and a foreign burst loud enough to pass for
+    /// our frame is that loud.
+    fn peaks_disagree(
+        &self,
+        tones: &[usize],
+        sums: &[[f64; 6]],
+        margins: &[[f64; 2]; 6],
+        n: f64,
+    ) -> bool {
+        let bin_hz = self.rate() / self.geometry.fft_len as f64;
+        let mut peaks = Vec::new();
+        for (i, &k) in tones.iter().enumerate() {
+            let mut by_bin: Vec<(usize, f64)> = sums
+                .iter()
+                .enumerate()
+                .map(|(j, row)| {
+                    (
+                        self.geometry.bins[j * TONE_COUNT + k],
+                        (row[i] - n).max(1e-9),
+                    )
+                })
+                .collect();
+            by_bin.dedup_by_key(|x| x.0);
+            // One bin beyond the comb on each side: a loud tone peaking there lies beyond
+            // the tolerated error, even when the comb's last bin still reads it strongly.
+            by_bin.insert(
+                0,
+                (self.geometry.margin_bins[k], (margins[i][0] - n).max(1e-9)),
+            );
+            by_bin.push((
+                self.geometry.margin_bins[TONE_COUNT + k],
+                (margins[i][1] - n).max(1e-9),
+            ));
+            let Some((p, _)) = by_bin
+                .iter()
+                .enumerate()
+                .max_by(|x, y| x.1 .1.total_cmp(&y.1 .1))
+            else {
+                continue;
+            };
+            if by_bin[p].1 < PEAK_LOUD * n {
+                continue;
+            }
+            if p == 0 || p + 1 >= by_bin.len() {
+                return true;
+            }
+            if by_bin[p - 1].0 + 1 != by_bin[p].0 || by_bin[p].0 + 1 != by_bin[p + 1].0 {
+                continue;
+            }
+            let (l, c, r) = (by_bin[p - 1].1.ln(), by_bin[p].1.ln(), by_bin[p + 1].1.ln());
+            let den = l - 2.0 * c + r;
+            if den >= 0.0 {
+                continue;
+            }
+            let delta = (0.5 * (l - r) / den).clamp(-0.5, 0.5);
+            peaks.push((tone_frequency_hz(k), (by_bin[p].0 as f64 + delta) * bin_hz));
+        }
+        if peaks.len() < 3 {
+            return false;
+        }
+        // Least squares for f̂ = f · (1 + s): s = Σ f (f̂ − f) / Σ f².
+        let s = peaks.iter().map(|(f, g)| f * (g - f)).sum::<f64>()
+            / peaks.iter().map(|(f, _)| f * f).sum::<f64>();
+        let worst = peaks
+            .iter()
+            .map(|(f, g)| (g - f * (1.0 + s)).abs())
+            .fold(0.0, f64::max);
+        worst > PEAK_TOLERANCE_HZ
+    }
+}

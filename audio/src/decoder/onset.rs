@@ -1,0 +1,103 @@
+//! Where a found frame began: a step change in the per-window energy of its six tones,
+//! refined by fitting the Hann-window share of the windows around the step.
+
+use super::windows::WindowRecord;
+use super::{median, Decoder};
+use crate::significance::hann_share_inside;
+use crate::tones::Frame;
+
+impl Decoder {
+    /// Locates the onset of `frame` at `scale` in the windows since the floor.
+    pub(super) fn estimate_onset(&self, frame: Frame, scale: usize) -> Option<f64> {
+        let tones = frame.tones();
+        let window_len = self.geometry.window_len as f64;
+        let lookback = 3 * self.geometry.slot_windows + 4;
+        let recent: Vec<&WindowRecord> = self
+            .history
+            .iter()
+            .rev()
+            .take(lookback)
+            .filter(|w| w.start >= self.floor)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
+        if recent.is_empty() {
+            return None;
+        }
+        // Excess powers on one common noise level (the median of the windows'): each
+        // window's own level drifts by orders of magnitude where the noise is digital
+        // silence (a file that starts with the message), and a step found on such
+        // numbers lands windows late.
+        let common = median(recent.iter().map(|w| w.level).collect()).max(1e-300);
+        let candidates: Vec<(u64, u64, f64)> = recent
+            .iter()
+            .map(|w| {
+                (
+                    w.index,
+                    w.start,
+                    (Self::excess(w, scale, &tones) + tones.len() as f64) * w.level / common
+                        - tones.len() as f64,
+                )
+            })
+            .collect();
+        // Step-change estimate: the start maximising the standardised sum to now.
+        let mut best = (f64::NEG_INFINITY, 0usize);
+        let mut tail = 0.0;
+        for i in (0..candidates.len()).rev() {
+            tail += candidates[i].2;
+            let score = tail / ((candidates.len() - i) as f64).sqrt();
+            if score > best.0 {
+                best = (score, i);
+            }
+        }
+        let w0 = best.1;
+        let plateau_end = (w0 + self.geometry.slot_windows).min(candidates.len());
+        // The edge refinement compares raw (level-scaled) excess powers, so a jump of the
+        // per-window noise estimate at the edge does not bias it.
+        let plateau = candidates[w0..plateau_end]
+            .iter()
+            .filter_map(|c| self.record(c.0))
+            .map(|w| Self::excess(w, scale, &tones) * w.level)
+            .sum::<f64>()
+            / (plateau_end - w0) as f64;
+        let mut onset = candidates[w0].1 as f64;
+        if plateau > 0.0 {
+            // Refine on the windows around the step: each one's excess is (its Hann area
+            // inside the tone)² of the plateau; the onset is the least-squares fit of that
+            // model over a 2 ms-step grid. Fitting all of them, rather than taking the one
+            // window nearest half the plateau, keeps one plateau window that happens to
+            // read low from passing for the edge.
+            let first_index = candidates[w0].0;
+            let measured: Vec<(f64, f64)> = (first_index.saturating_sub(2)..=first_index + 2)
+                .filter_map(|idx| self.record(idx))
+                .map(|rec| {
+                    (
+                        rec.start as f64,
+                        Self::excess(rec, scale, &tones) * rec.level / plateau,
+                    )
+                })
+                .collect();
+            let slot_len = self.geometry.slot_samples;
+            let steps = 96;
+            let from = onset - window_len;
+            let mut best = f64::INFINITY;
+            for i in 0..=steps {
+                let candidate = from + 1.5 * window_len * i as f64 / steps as f64;
+                let misfit: f64 = measured
+                    .iter()
+                    .map(|&(start, q)| {
+                        let share =
+                            hann_share_inside(start, window_len, candidate, candidate + slot_len);
+                        (q - share * share).powi(2)
+                    })
+                    .sum();
+                if misfit < best {
+                    best = misfit;
+                    onset = candidate;
+                }
+            }
+        }
+        Some(onset.max(self.floor as f64))
+    }
+}

@@ -1,0 +1,90 @@
+//! The seed's rules on integrated sums: which tones are present, which basics have 2 of
+//! their 3 tones, and whether that leaves exactly one sender and one data basic; and the
+//! six-tone energy test a frame must pass to stand out of noise at all.
+
+use super::Decoder;
+use crate::significance::gamma_upper_quantile;
+use crate::tones::{basic_tones, Frame, Sender, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
+
+/// A tone is leakage, not present, when its excess is below this share of an adjacent
+/// tone's excess (−20 dB; Hann leakage at 3 bins is about −31 dB).
+const NEIGHBOUR_LEAKAGE: f64 = 0.01;
+/// A tone more than 25 dB below the loudest tone is not present: window sidelobes two or
+/// more tones away, and a loudspeaker's harmonic and intermodulation products, sit lower
+/// than that; a real tone that weak would be lost anyway (and the 2-of-3 vote covers one).
+const DYNAMIC_RANGE: f64 = 0.003_162;
+
+impl Decoder {
+    /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
+    /// at `p_tone`; when several sender (or data) basics have 2 of 3 tones present, the
+    /// strongest stands and each other one counts only if it also has 2 of 3 at `p_rival`.
+    pub(super) fn apply_rules(
+        sums: &[f64],
+        count: usize,
+        p_tone: f64,
+        p_rival: f64,
+    ) -> (Option<Frame>, [bool; TONE_COUNT]) {
+        let n = count.max(1) as f64;
+        let threshold = gamma_upper_quantile(n, p_tone);
+        let rival_threshold = gamma_upper_quantile(n, p_rival);
+        let mut present = [false; TONE_COUNT];
+        let loudest = sums.iter().fold(0.0f64, |m, &s| m.max(s - n));
+        for k in 0..TONE_COUNT {
+            let excess = sums[k] - n;
+            let left = if k > 0 { sums[k - 1] - n } else { 0.0 };
+            let right = if k + 1 < TONE_COUNT {
+                sums[k + 1] - n
+            } else {
+                0.0
+            };
+            present[k] = sums[k] >= threshold
+                && excess >= NEIGHBOUR_LEAKAGE * left.max(right)
+                && excess >= DYNAMIC_RANGE * loudest;
+        }
+        let mut senders = Vec::new();
+        let mut data = Vec::new();
+        for b in 0..BASIC_COUNT {
+            let votes = basic_tones(b).iter().filter(|&&k| present[k]).count();
+            if votes >= 2 {
+                if b < SENDER_COUNT {
+                    senders.push(b);
+                } else {
+                    data.push(b);
+                }
+            }
+        }
+        let basic_sum = |b: usize| -> f64 { basic_tones(b).iter().map(|&k| sums[k]).sum() };
+        let strong_votes = |b: usize| {
+            basic_tones(b)
+                .iter()
+                .filter(|&&k| present[k] && sums[k] >= rival_threshold)
+                .count()
+        };
+        for group in [&mut senders, &mut data] {
+            if group.len() > 1 {
+                let top = group
+                    .iter()
+                    .copied()
+                    .max_by(|&a, &b| basic_sum(a).total_cmp(&basic_sum(b)))
+                    .unwrap_or(0);
+                group.retain(|&b| b == top || strong_votes(b) >= 2);
+            }
+        }
+        let frame = match (senders.as_slice(), data.as_slice()) {
+            (&[s], &[d]) => Sender::from_index(s as u8).map(|sender| Frame {
+                sender,
+                data: (d - SENDER_COUNT) as u8,
+            }),
+            _ => None,
+        };
+        (frame, present)
+    }
+
+    /// Least six-tone sum over `count` windows for a frame to stand out of noise: the
+    /// Gamma(6·count) quantile at `p` union-bounded over the 63 frames and all scales.
+    pub(super) fn frame_threshold(&self, count: usize, p: f64) -> f64 {
+        let hypotheses =
+            (SENDER_COUNT * (BASIC_COUNT - SENDER_COUNT) * self.geometry.scale_count()) as f64;
+        gamma_upper_quantile(6.0 * count.max(1) as f64, p / hypotheses)
+    }
+}

@@ -1,0 +1,208 @@
+//! Following a found frame to a report: decide its first slot, run the end test, decide a
+//! second slot if the sender continued, and report a short or a long message (or nothing).
+
+use super::end_test::EndTest;
+use super::{median, Decoder, Detection};
+use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+
+/// The transmission being followed.
+#[derive(Clone, Debug)]
+pub(super) struct Tracking {
+    pub(super) sender: Sender,
+    /// Data of the first and second slot (the second equals the first until decided).
+    pub(super) data: [u8; 2],
+    /// Frequency scale the frame was found at.
+    pub(super) scale: usize,
+    /// First sample of the first slot.
+    pub(super) onset: f64,
+    /// The onset was re-estimated once the whole first slot had been heard.
+    onset_refined: bool,
+    pub(super) stage: Stage,
+    /// Per-window excess power of each tone measured in the last decided slot.
+    pub(super) level: [f64; TONE_COUNT],
+    /// Tones present in the last decided slot.
+    pub(super) present: [bool; TONE_COUNT],
+    /// Noise level during the last decided slot.
+    pub(super) noise: f64,
+}
+
+// The end test's evidence per data basic makes `EndTest` a few hundred bytes; there is one
+// `Stage` per decoder, so boxing it would buy nothing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Stage {
+    /// Waiting for the windows of the first slot.
+    Slot1,
+    /// The end test after slot 1 or 2.
+    EndTest(EndTest),
+    /// Waiting for the windows of the second slot.
+    Slot2,
+}
+
+/// Whether tracking can go on with what has been heard, or must wait for more.
+enum Step {
+    Again,
+    Wait,
+}
+
+impl Decoder {
+    /// Starts following `frame`, found at `scale`.
+    pub(super) fn start_tracking(&mut self, frame: Frame, scale: usize) {
+        let Some(onset) = self.estimate_onset(frame, scale) else {
+            return;
+        };
+        self.tracking = Some(Tracking {
+            sender: frame.sender,
+            data: [frame.data, frame.data],
+            scale,
+            onset,
+            onset_refined: false,
+            stage: Stage::Slot1,
+            level: [0.0; TONE_COUNT],
+            present: [false; TONE_COUNT],
+            noise: 1.0,
+        });
+        self.advance_tracking();
+    }
+
+    /// Moves the tracked transmission on as far as the audio heard allows.
+    pub(super) fn advance_tracking(&mut self) {
+        while let Some(t) = self.tracking.clone() {
+            let step = match t.stage {
+                Stage::Slot1 | Stage::Slot2 => self.decide_slot(&t),
+                Stage::EndTest(test) => self.end_test(&t, test),
+            };
+            if let Step::Wait = step {
+                return;
+            }
+        }
+    }
+
+    /// Decides the tracked transmission's current slot once all its windows are in: the
+    /// end test follows a slot that passes; a slot that fails ends the transmission.
+    fn decide_slot(&mut self, t: &Tracking) -> Step {
+        let first = t.stage == Stage::Slot1;
+        let slot_len = self.geometry.slot_samples;
+        let quarter = 0.25 * self.geometry.window_len as f64;
+        let a = if first { t.onset } else { t.onset + slot_len };
+        let b = a + slot_len;
+        if self.latest_window_end() < b + quarter && !self.eof {
+            return Step::Wait;
+        }
+        if first && !t.onset_refined {
+            self.refine_onset(t);
+            return Step::Again;
+        }
+        let Some(slot) = self.confirm_slot(t, a, b) else {
+            self.failed_slot = Some((t.sender, b));
+            self.end_transmission(b, false);
+            return Step::Wait;
+        };
+        let mut next = t.clone();
+        next.data[if first { 0 } else { 1 }] = slot.frame.data;
+        if first {
+            next.data[1] = slot.frame.data;
+        }
+        next.level = slot.level;
+        next.present = slot.present;
+        next.noise = slot.noise;
+        if first && self.continues_earlier_frame(&next, a) {
+            self.end_transmission(b, false);
+            return Step::Wait;
+        }
+        let next_index = self.history.front().map(|w| w.index).unwrap_or(0);
+        next.stage = Stage::EndTest(EndTest::new(if first { 1 } else { 2 }, b, next_index));
+        self.tracking = Some(next);
+        Step::Again
+    }
+
+    /// Re-estimates the onset once the whole first slot has been heard. Tracking can start
+    /// two windows into a loud frame, when the edge refinement has a plateau of two noisy
+    /// windows to go by; a first slot that starts late catches the second frame's data as
+    /// a rival.
+    fn refine_onset(&mut self, t: &Tracking) {
+        let frame = Frame {
+            sender: t.sender,
+            data: t.data[0],
+        };
+        let onset = self.estimate_onset(frame, t.scale).unwrap_or(t.onset);
+        if let Some(tr) = self.tracking.as_mut() {
+            tr.onset = onset;
+            tr.onset_refined = true;
+        }
+    }
+
+    /// Moves the end test after a slot on; acts on its verdict when there is one.
+    fn end_test(&mut self, t: &Tracking, mut test: EndTest) -> Step {
+        let Some((continues, decided_at)) = self.decide_end(t, &mut test) else {
+            if let Some(tr) = self.tracking.as_mut() {
+                tr.stage = Stage::EndTest(test);
+            }
+            return Step::Wait;
+        };
+        let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
+        let slot_end = test.slot_end;
+        match (test.slot, continues) {
+            (1, false) => {
+                let message = Message::Short {
+                    sender: t.sender,
+                    data: t.data[0],
+                };
+                self.report(t, message, slot_end, decided_at);
+                self.end_transmission(slot_end, false);
+            }
+            (1, true) => {
+                if let Some(tr) = self.tracking.as_mut() {
+                    tr.stage = Stage::Slot2;
+                }
+            }
+            (_, false) => {
+                let value = 21 * u16::from(t.data[0]) + u16::from(t.data[1]);
+                let message = Message::Long {
+                    sender: t.sender,
+                    value,
+                };
+                self.report(t, message, slot_end, decided_at);
+                self.end_transmission(slot_end, false);
+            }
+            (_, true) => {
+                self.end_transmission(slot_end, true);
+            }
+        }
+        Step::Again
+    }
+
+    fn report(&mut self, t: &Tracking, message: Message, end: f64, decided_at: f64) {
+        let rate = self.rate();
+        let median = median(
+            (0..TONE_COUNT)
+                .filter(|&k| t.present[k])
+                .map(|k| t.level[k])
+                .collect(),
+        );
+        self.output.push_back(Detection {
+            message,
+            start_s: t.onset / rate,
+            end_s: end / rate,
+            decided_at_s: decided_at / rate,
+            frequency_scale: 1.0 + self.geometry.scales[t.scale],
+            tone_snr_db: 10.0 * median.max(1e-12).log10(),
+        });
+    }
+
+    /// Closes the tracked transmission at `end`; `too_long` blocks its frame until it stops.
+    fn end_transmission(&mut self, end: f64, too_long: bool) {
+        if let Some(t) = self.tracking.take() {
+            if too_long {
+                let frame = Frame {
+                    sender: t.sender,
+                    data: t.data[1],
+                };
+                let tones = frame.tones();
+                let level: f64 = tones.iter().map(|&k| t.level[k]).sum();
+                self.blocked = Some((frame, t.scale, level, 0));
+            }
+        }
+        self.reset_sliding(end.max(0.0).floor() as u64);
+    }
+}
