@@ -182,11 +182,10 @@ fn corrupt_and_truncated_wavs_are_typed_errors() {
 
 #[test]
 fn loud_long_messages_start_where_they_start() {
-    // 300 long messages at 0 dB (seed 103 of the eval's long row). The onset used to be
-    // read off the one edge window nearest half the plateau, and a plateau window reading
-    // 12% low now and then won: the first slot started 80 ms late, caught the second
-    // frame's data as a rival basic and the message was lost (2 of these 300). The
-    // least-squares fit over the windows around the edge loses none.
+    // 300 long messages at 0 dB (seed 103 of the eval's long row). A first slot that
+    // starts late catches the second frame's data as a rival basic and the message is
+    // lost; the onset is a least-squares fit over the windows around the edge, so one
+    // plateau window reading low cannot pass for the edge.
     let out = run_snr_trial(&SnrTrial {
         seed: 103,
         snr_db: 0.0,
@@ -227,8 +226,8 @@ fn noisy_messages_at_minus_6_db_decode() {
         (200, 0, 0),
         "{out:?}"
     );
-    // The same from a sender 0.3% sharp (resampled): the scale search finds it; about
-    // one message in 150 is lost there (a known weakness), none is wrong.
+    // The same from a sender 0.3% sharp (resampled): the scale search finds it; a few
+    // messages may be lost there (a known weakness), none may be wrong.
     let out = run_snr_trial(&SnrTrial {
         frequency_error: 0.003,
         messages: 150,

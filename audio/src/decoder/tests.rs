@@ -160,8 +160,9 @@ fn tones_off_our_grid_by_their_own_amounts_are_not_a_message() {
     };
     for (offsets, expected) in [
         ([7.0, -6.0, 9.0, -5.0, 8.0, -7.0], 0),
-        // Only 2 Hz off each way: every tone keeps ~95% of its power at a middle
-        // scale, but their peaks disagree by 4 Hz where ours agree within 0.1 Hz.
+        // Only 2 Hz off each way: every tone keeps most of its power at a middle
+        // scale, but their peaks disagree by 4 Hz, where ours agree to a small fraction
+        // of a hertz.
         ([2.0, -2.0, 2.0, -2.0, 2.0, -2.0], 0),
         (scaled, 1),
     ] {
