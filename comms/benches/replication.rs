@@ -53,7 +53,7 @@ fn publish(r: &mut Replica, now: Instant, tick: u64) {
         Value::String(["active", "auxiliary", "inactive"][(tick % 3) as usize].into()),
     )
     .unwrap();
-    r.set(now, "*.var.ball.seen", Value::Bool(tick % 2 == 0))
+    r.set(now, "*.var.ball.seen", Value::Bool(tick.is_multiple_of(2)))
         .unwrap();
 }
 

@@ -124,7 +124,7 @@ fn parse_float<F: std::str::FromStr>(token: &str) -> Result<F, LiteralError> {
 
 fn parse_hex(hex: &str) -> Result<Vec<u8>, LiteralError> {
     let bad = || LiteralError::BadHex(format!("0x{hex}"));
-    if hex.len() % 2 != 0 {
+    if !hex.len().is_multiple_of(2) {
         return Err(bad());
     }
     hex.as_bytes()

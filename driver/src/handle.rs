@@ -333,7 +333,7 @@ impl Batch<'_> {
 #[cfg(test)]
 mod tests {
     use std::cell::RefCell;
-    use std::net::{Ipv4Addr, SocketAddrV4};
+    use std::net::SocketAddrV4;
     use std::rc::Rc;
     use std::time::Duration;
 
@@ -341,9 +341,9 @@ mod tests {
     use crate::driver::{Driver, DriverConfig};
     use comms::ReplicaConfig;
 
-    fn config(id: u8, port: u16) -> DriverConfig {
+    fn config(id: u8, group: SocketAddrV4) -> DriverConfig {
         let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
-        cfg.socket.group = SocketAddrV4::new(Ipv4Addr::new(239, 255, 41, 7), port);
+        cfg.socket.group = group;
         cfg
     }
 
@@ -368,8 +368,9 @@ mod tests {
             .build()
             .expect("runtime");
         tokio::task::LocalSet::new().block_on(&rt, async {
-            let one = Driver::bind(config(1, 38761)).expect("robot 1 binds");
-            let two = Driver::bind(config(2, 38761)).expect("robot 2 binds");
+            let group = crate::scratch_group().expect("a scratch group");
+            let one = Driver::bind(config(1, group)).expect("robot 1 binds");
+            let two = Driver::bind(config(2, group)).expect("robot 2 binds");
             let (h1, h2) = (one.handle(), two.handle());
             tokio::task::spawn_local(one.run(std::future::pending()));
             tokio::task::spawn_local(two.run(std::future::pending()));

@@ -1,9 +1,17 @@
-//! The real driver: the sans-IO [`Replica`] over a tokio + socket2 multicast UDP
-//! socket, with its timers, relay sessions and in-process subscribers.
+//! driver: huddle's I/O shell around the sans-IO `comms` core, as quinn is around
+//! quinn-proto. It runs a [`comms::Replica`] over a tokio + socket2 multicast UDP socket,
+//! with its timers, relay sessions ([`serve`] is the relay's TCP side) and in-process
+//! subscribers, and it reads what the core may not: configuration files
+//! ([`load_config`]), network interfaces ([`resolve_iface`]), the OS's random source
+//! for a replica's incarnation and the monotonic clock.
+//!
+//! **What it is not.** No protocol logic: every frame, version, talk sequence and relay
+//! reply is decided by `comms`, which netsim also drives in virtual time, so a test in
+//! simulation checks the code that runs here.
 //!
 //! One task owns everything (socket, replica, timers, watchers) and everything runs on
 //! one thread: a hand-off between threads costs a full wake-up, several times the
-//! loopback round trip (see DESIGN.md, *Performance notes*). So the driver and its
+//! loopback multicast round trip. So the driver and its
 //! [`Handle`]s are `!Send`: run them on a current-thread runtime or inside a
 //! [`tokio::task::LocalSet`]. The handle works synchronously on the shared state: a
 //! [`Handle::set`] updates the replica and sends the resulting frame before it returns.
@@ -58,4 +66,4 @@ pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{resolve_iface, IfaceError};
 pub use impair::Impairment;
 pub use relay::serve;
-pub use socket::{open_multicast, Opened, SocketConfig, SocketError};
+pub use socket::{open_multicast, scratch_group, Opened, SocketConfig, SocketError};

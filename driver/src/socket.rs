@@ -66,6 +66,27 @@ pub enum SocketError {
     },
 }
 
+/// A multicast group and port that no other test, benchmark or demo run on this host is
+/// using: a free UDP port (the kernel's choice) and an organisation-local group
+/// (239.255.0.0/16) drawn from the process id and a counter. Two runs of the test suite on
+/// one machine then never hear each other's frames. Use it with the loopback interface.
+pub fn scratch_group() -> io::Result<SocketAddrV4> {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let port = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0))?
+        .local_addr()?
+        .port();
+    let pid = std::process::id();
+    // 239.255.0.x and 239.255.255.x are avoided: some stacks treat them specially.
+    let third = (pid % 254 + 1) as u8;
+    let fourth = ((pid / 254).wrapping_add(n) % 254 + 1) as u8;
+    Ok(SocketAddrV4::new(
+        Ipv4Addr::new(239, 255, third, fourth),
+        port,
+    ))
+}
+
 /// The socket as opened, with what the kernel granted.
 #[derive(Debug)]
 pub struct Opened {
@@ -121,6 +142,13 @@ mod tests {
     use super::*;
 
     #[test]
+    fn scratch_groups_differ_within_a_run() {
+        let (a, b) = (scratch_group().unwrap(), scratch_group().unwrap());
+        assert!(a.ip().is_multicast() && b.ip().is_multicast(), "{a} {b}");
+        assert_ne!(a.ip(), b.ip(), "two calls give two groups");
+    }
+
+    #[test]
     fn a_unicast_group_and_a_foreign_interface_are_clear_errors() {
         let cfg = SocketConfig {
             group: "127.0.0.1:47110".parse().unwrap(),
@@ -132,7 +160,7 @@ mod tests {
         ));
         // 192.0.2.1 (TEST-NET-1) is no interface of this machine: the join fails.
         let cfg = SocketConfig {
-            group: "239.255.71.10:47110".parse().unwrap(),
+            group: scratch_group().unwrap(),
             iface: Ipv4Addr::new(192, 0, 2, 1),
             ..SocketConfig::default()
         };
@@ -145,7 +173,7 @@ mod tests {
     #[test]
     fn two_sockets_share_a_port_and_hear_each_other_on_loopback() {
         let cfg = SocketConfig {
-            group: "239.255.71.11:47111".parse().unwrap(),
+            group: scratch_group().unwrap(),
             ..SocketConfig::default()
         };
         let a = open_multicast(&cfg).unwrap();

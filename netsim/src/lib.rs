@@ -66,6 +66,8 @@
 //! # }
 //! ```
 
+#![forbid(unsafe_code)]
+
 mod burst;
 mod clock;
 mod impairment;

@@ -341,7 +341,7 @@ pub fn run(sc: &Scenario) -> Vec<Record> {
                     central.sighting(t, lwm.pose(), &s);
                 }
             }
-            if (k + i as u64) % sc.publish_every == 0 {
+            if (k + i as u64).is_multiple_of(sc.publish_every) {
                 let msg = lwm.publish(t);
                 gwms[i].ingest(i as u8, &msg, t);
                 let bytes = msg.to_bytes().expect("LWM encodes");
