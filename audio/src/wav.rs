@@ -117,7 +117,7 @@ pub fn read_wav<R: Read>(reader: R) -> Result<Recording, ReadWavError> {
             }
         }
     }
-    if interleaved.len() % channels != 0 {
+    if !interleaved.len().is_multiple_of(channels) {
         return Err(ReadWavError::Truncated {
             samples_read: interleaved.len() / channels,
         });
