@@ -26,24 +26,24 @@ pub enum Position {
 pub fn formation_homes(cfg: &FieldConfig, field_players: usize) -> Vec<Vec2> {
     let (hx, hy) = (cfg.length_m / 2.0, cfg.width_m / 2.0);
     // Normalised spots in order of filling: defender, midfielder, two attackers, …
-    const SPOTS: [(f64, f64); 10] = [
-        (-0.55, 0.0),
-        (-0.1, 0.0),
-        (0.4, 0.5),
-        (0.4, -0.5),
-        (-0.5, 0.6),
-        (-0.5, -0.6),
-        (0.1, 0.7),
-        (0.1, -0.7),
-        (0.7, 0.0),
-        (-0.25, 0.35),
+    const SPOTS: [Vec2; 10] = [
+        Vec2::new(-0.55, 0.0),
+        Vec2::new(-0.1, 0.0),
+        Vec2::new(0.4, 0.5),
+        Vec2::new(0.4, -0.5),
+        Vec2::new(-0.5, 0.6),
+        Vec2::new(-0.5, -0.6),
+        Vec2::new(0.1, 0.7),
+        Vec2::new(0.1, -0.7),
+        Vec2::new(0.7, 0.0),
+        Vec2::new(-0.25, 0.35),
     ];
     (0..field_players)
         .map(|k| {
-            let (x, y) = SPOTS[k % SPOTS.len()];
+            let spot = SPOTS[k % SPOTS.len()];
             // Wrap-around spots (more than ten field players) are nudged apart.
             let lap = (k / SPOTS.len()) as f64 * 0.1;
-            Vec2::new((x + lap) * hx, (y - lap) * hy)
+            Vec2::new((spot.x + lap) * hx, (spot.y - lap) * hy)
         })
         .collect()
 }

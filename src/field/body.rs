@@ -1,7 +1,9 @@
 //! Robot kinematics: an omnidirectional base with a top speed, an acceleration limit and
 //! a turn-rate limit, and the odometry it reports.
 
-use super::geometry::{wrap_angle, Pose, Vec2};
+use fusion::wrap_angle;
+
+use super::geometry::{Pose, Vec2};
 use serde::Serialize;
 
 /// Limits of a robot's base.

@@ -1,7 +1,9 @@
 //! A robot's camera: a limited field of view and range, detections that sometimes fail,
 //! and noisy range and bearing in the robot's own frame.
 
-use super::geometry::{wrap_angle, Pose, Vec2};
+use fusion::wrap_angle;
+
+use super::geometry::{Pose, Vec2};
 use rand::RngExt;
 use serde::Serialize;
 

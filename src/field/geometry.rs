@@ -1,7 +1,9 @@
 //! Plane geometry in the field frame: metres, radians, x toward the opponent goal.
+//! Headings are wrapped into (-π, π] by `fusion::wrap_angle`, the one wrap the sim and
+//! the filters share.
 
 use serde::Serialize;
-use std::ops::{Add, Mul, Sub};
+use std::ops::{Add, Div, Mul, Sub};
 
 /// A point or a vector on the field, metres.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
@@ -90,6 +92,13 @@ impl Mul<f64> for Vec2 {
     }
 }
 
+impl Div<f64> for Vec2 {
+    type Output = Vec2;
+    fn div(self, k: f64) -> Vec2 {
+        Vec2::new(self.x / k, self.y / k)
+    }
+}
+
 /// A robot's pose: position (metres) and heading (radians, 0 = toward the opponent goal).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct Pose {
@@ -108,17 +117,6 @@ impl Pose {
     /// A field point in this pose's frame.
     pub fn to_local(&self, field: Vec2) -> Vec2 {
         (field - self.at).rotate(-self.theta_rad)
-    }
-}
-
-/// `angle_rad` wrapped into (-π, π].
-pub fn wrap_angle(angle_rad: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let a = angle_rad.rem_euclid(TAU);
-    if a > PI {
-        a - TAU
-    } else {
-        a
     }
 }
 
@@ -145,7 +143,8 @@ mod tests {
     }
 
     #[test]
-    fn angles_wrap_into_the_half_open_interval() {
+    fn headings_wrap_into_the_half_open_interval() {
+        use fusion::wrap_angle;
         use std::f64::consts::PI;
         assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(-PI / 2.0 - 2.0 * PI) + PI / 2.0).abs() < 1e-12);

@@ -65,19 +65,20 @@ pub fn obstruction_free_index(
     target: Vec2,
     opponents: &[Vec2],
 ) -> f64 {
-    let (dx, dy) = (target.x - origin.x, target.y - origin.y);
-    let len = (dx * dx + dy * dy).sqrt();
+    let d = target - origin;
+    let len = d.dot(d).sqrt();
     let mut index = 1.0;
-    for &Vec2 { x: ox, y: oy } in opponents {
-        let (rx, ry) = (ox - origin.x, oy - origin.y);
+    for &o in opponents {
+        let r = o - origin;
         // y: distance along the segment from its origin (clamped to the segment);
         // x: distance from the opponent to the segment.
         let (x, y) = if len > 0.0 {
-            let along = ((rx * dx + ry * dy) / len).clamp(0.0, len);
-            let (px, py) = (origin.x + dx * along / len, origin.y + dy * along / len);
-            (((ox - px).powi(2) + (oy - py).powi(2)).sqrt(), along)
+            let along = (r.dot(d) / len).clamp(0.0, len);
+            let foot = origin + d * along / len;
+            let off = o - foot;
+            ((off.x.powi(2) + off.y.powi(2)).sqrt(), along)
         } else {
-            ((rx * rx + ry * ry).sqrt(), 0.0)
+            (r.dot(r).sqrt(), 0.0)
         };
         if x < params.min_dist_m && x < y {
             index *= x / params.max_denominator_m.min(y);

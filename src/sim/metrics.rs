@@ -183,9 +183,10 @@ impl FusionMetrics {
         (self.visible_s / NEES_INDEPENDENT_EVERY_S).floor().max(1.0) as u64
     }
 
-    /// χ² 95% bounds of the average 2-dof NEES over [`Self::nees_independent_samples`].
+    /// χ² 95% bounds of the average 2-dof NEES over [`Self::nees_independent_samples`]
+    /// (`fusion::consistency::nees_bounds`, Wilson–Hilferty).
     pub fn nees_bounds(&self) -> (f64, f64) {
-        chi2_mean_bounds(2, self.nees_independent_samples())
+        fusion::consistency::nees_bounds(2, self.nees_independent_samples())
     }
 
     /// Pose position RMSE, m.
@@ -202,15 +203,6 @@ impl FusionMetrics {
     pub fn pose_nees(&self) -> f64 {
         self.pose_nees / self.pose_samples as f64
     }
-}
-
-/// Two-sided 95% bounds of the mean of `n` independent χ² variables of `dof` degrees of
-/// freedom: χ²_{dof·n}(0.025, 0.975) / n (Wilson–Hilferty; within 0.1% for dof·n ≥ 10).
-pub fn chi2_mean_bounds(dof: u64, n: u64) -> (f64, f64) {
-    let k = (dof * n.max(1)) as f64;
-    let q = |z: f64| k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3);
-    let n = n.max(1) as f64;
-    (q(-1.959_964) / n, q(1.959_964) / n)
 }
 
 /// Accumulates samples; see the module docs for the definitions.
@@ -412,10 +404,15 @@ mod tests {
     }
 
     #[test]
-    fn chi2_bounds_match_the_tables() {
-        // χ²₆₀₀(0.025) = 534.02, χ²₆₀₀(0.975) = 669.77 (exact, by the incomplete gamma
-        // function), over 300 samples.
-        let (lo, hi) = chi2_mean_bounds(2, 300);
+    fn the_team_ball_nees_bounds_are_for_one_sample_per_second_of_visible_time() {
+        // 300 s of ball-visible time: 300 independent 2-dof samples. χ²₆₀₀(0.025) =
+        // 534.02, χ²₆₀₀(0.975) = 669.77 (exact, by the incomplete gamma function).
+        let f = FusionMetrics {
+            visible_s: 300.5,
+            ..FusionMetrics::default()
+        };
+        assert_eq!(f.nees_independent_samples(), 300);
+        let (lo, hi) = f.nees_bounds();
         assert!((lo - 534.02 / 300.0).abs() < 0.001, "{lo}");
         assert!((hi - 669.77 / 300.0).abs() < 0.001, "{hi}");
     }

@@ -461,7 +461,6 @@ impl Simulation {
     /// The world-model figures at `t_s` for the robots that ticked then (see
     /// [`metrics`] for the definitions).
     fn sample_world_models(&mut self, t_s: f64, ticked: &[usize]) {
-        use fusion::nalgebra::Vector2;
         let visible = self
             .robots
             .iter()
@@ -469,7 +468,7 @@ impl Simulation {
         if visible {
             self.fusion.visible_s += self.cfg.physics_dt_s;
         }
-        let truth = Vector2::new(self.world.ball.at.x, self.world.ball.at.y);
+        let truth = perception::to_fusion_point(self.world.ball.at);
         let central = self.central.estimate_at(t_s);
         let central_kicks = self.central_kicks.estimate_at(t_s);
         for &i in ticked {
@@ -478,7 +477,7 @@ impl Simulation {
                 perception::to_fusion_pose(&self.world.robots[i].pose, Default::default());
             let est = r.lwm.pose();
             let mut e = true_pose.mean - est.mean;
-            e.z = crate::field::geometry::wrap_angle(e.z);
+            e.z = fusion::wrap_angle(e.z);
             let nees = est.cov.cholesky().map_or(f64::NAN, |c| e.dot(&c.solve(&e)));
             self.fusion.pose(e.x * e.x + e.y * e.y, e.z * e.z, nees);
             if !visible {
@@ -519,7 +518,7 @@ impl Simulation {
     pub fn run(&mut self, mut progress: impl FnMut(f64)) {
         while !self.finished() {
             self.step();
-            if self.step % 10 == 0 {
+            if self.step.is_multiple_of(10) {
                 progress(self.time_s());
             }
         }

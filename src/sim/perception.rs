@@ -10,11 +10,11 @@
 use std::f64::consts::FRAC_PI_2;
 
 use fusion::nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
-use fusion::{BallSighting, PoseEstimate, RangeBearingSighting};
+use fusion::{wrap_angle, BallSighting, PoseEstimate, RangeBearingSighting};
 
 use crate::field::body::Odometry;
 use crate::field::camera::{CameraConfig, Sighting};
-use crate::field::geometry::{wrap_angle, Pose, Vec2};
+use crate::field::geometry::{Pose, Vec2};
 
 /// A true (or believed) pose as a `fusion` pose estimate with covariance `cov`.
 pub fn to_fusion_pose(pose: &Pose, cov: Matrix3<f64>) -> PoseEstimate {
@@ -71,7 +71,7 @@ pub fn landmark_sighting(
     let sr = range_sigma(cam, s.range_m);
     (
         RangeBearingSighting {
-            field: Vector2::new(field.x, field.y),
+            field: to_fusion_point(field),
             range_m: s.range_m,
             bearing_rad: s.bearing_rad,
         },
@@ -97,8 +97,13 @@ pub fn ball_sighting(cam: &CameraConfig, s: &Sighting) -> BallSighting {
     }
 }
 
-/// A field point as a simulator vector.
-pub fn to_vec2(v: &Vector2<f64>) -> Vec2 {
+/// A field point as `fusion` takes it (both crates' field frames are the same).
+pub fn to_fusion_point(p: Vec2) -> Vector2<f64> {
+    Vector2::new(p.x, p.y)
+}
+
+/// A `fusion` field point as the simulator's.
+pub fn from_fusion_point(v: &Vector2<f64>) -> Vec2 {
     Vec2::new(v.x, v.y)
 }
 

@@ -449,7 +449,7 @@ impl Robot {
         let own = self.lwm.ball_at(now_s);
         self.ball = recent.and_then(|seen_at_s| {
             own.map(|b| BallBelief {
-                at: perception::to_vec2(&b.position()),
+                at: perception::from_fusion_point(&b.position()),
                 seen_at_s,
             })
         });
@@ -503,7 +503,7 @@ impl Robot {
     /// The team ball if there is a usable one, else the robot's own.
     fn best_ball(&self) -> Option<Vec2> {
         self.team_ball
-            .map(|b| perception::to_vec2(&b.estimate.position()))
+            .map(|b| perception::from_fusion_point(&b.estimate.position()))
             .or(self.ball.map(|b| b.at))
     }
 
