@@ -7,3 +7,4 @@ pub mod field;
 pub mod harness;
 pub mod impair;
 pub mod sim;
+pub mod summary;

@@ -30,6 +30,7 @@ use comms::wire::{decode_frame, Item};
 use comms::{ReplicaConfig, Value};
 use driver::{open_multicast, Driver, DriverConfig, SocketConfig};
 use huddle::impair::LinkImpairment;
+use huddle::summary::percentile;
 
 const GROUP: &str = "239.255.73.1:47301";
 const SPEC: &str = "loss=20%,delay=50ms,jitter=20ms";
@@ -138,10 +139,6 @@ fn measure() -> Measured {
     }
 }
 
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
-
 #[test]
 fn impaired_daemon_traffic_on_loopback_matches_the_spec() {
     let m = measure();
@@ -174,7 +171,10 @@ fn impaired_daemon_traffic_on_loopback_matches_the_spec() {
     );
     // Uniform in [30 ms, 70 ms].
     let expected = [(0.1, 34.0), (0.5, 50.0), (0.9, 66.0)];
-    let measured: Vec<f64> = expected.iter().map(|&(p, _)| percentile(&d, p)).collect();
+    let measured: Vec<f64> = expected
+        .iter()
+        .map(|&(p, _)| percentile(&d, p).expect("frames were delivered"))
+        .collect();
     eprintln!(
         "delays of {} delivered updates: p10 {:.1} ms, p50 {:.1} ms, p90 {:.1} ms \
          (expected 34, 50, 66)",

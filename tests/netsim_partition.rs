@@ -46,6 +46,7 @@ use std::time::Duration;
 
 use comms::{Event, Key, Pattern, ReplicaConfig, Scope, Value};
 use huddle::harness::Harness;
+use huddle::summary::percentile;
 use netsim::{Preset, Sim, Time};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -199,10 +200,6 @@ fn run(seed: u64, preset_net: netsim::SimBuilder) -> Outcome {
     out
 }
 
-fn percentile(sorted: &[Duration], p: f64) -> Duration {
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
-
 fn check_talk(seed: u64, out: &Outcome) {
     assert_eq!(out.given_up, 0, "seed {seed}: a talk message was given up");
     for (sender, text) in [(4u8, "from 4 in the dark"), (1u8, "from 1 while 4 is away")] {
@@ -246,8 +243,8 @@ fn a_team_reconverges_after_robot_4_is_cut_off_for_two_seconds_on_a_competition_
     times.sort();
     let within_two = times.iter().filter(|&&t| t <= 2 * REFRESH).count();
     let (p50, p90, max) = (
-        percentile(&times, 0.5),
-        percentile(&times, 0.9),
+        percentile(&times, 0.5).expect("seeds"),
+        percentile(&times, 0.9).expect("seeds"),
         *times.last().expect("seeds"),
     );
     eprintln!(
@@ -293,7 +290,7 @@ fn without_loss_the_team_reconverges_within_one_refresh_period_and_one_crossing(
     eprintln!(
         "competition delays without loss, {SEEDS} seeds: converged after the heal in p50 \
          {:?}, max {:?}; within two refresh periods: {within_two}/{SEEDS}",
-        percentile(&times, 0.5),
+        percentile(&times, 0.5).expect("seeds"),
         times.last().expect("seeds")
     );
 }

@@ -160,7 +160,7 @@ fn a_client_that_never_reads_is_cut_off_and_the_others_carry_on() {
             format!("UPD local.var.tick int {round} 0"),
             "the watcher carries on"
         );
-        if round % 20 == 0 {
+        if round.is_multiple_of(20) {
             // Peek without reading the backlog: has the relay closed the socket?
             let mut probe = [0u8; 1];
             let sock = sluggard.reader.get_ref();
@@ -177,7 +177,7 @@ fn a_client_that_never_reads_is_cut_off_and_the_others_carry_on() {
                 break;
             }
             // A closed socket still delivers its buffered bytes first: drain it to know.
-            if round % 200 == 0 {
+            if round.is_multiple_of(200) {
                 let (bytes, closed) = sluggard.drain_to_end(Duration::from_secs(2));
                 assert!(closed, "after {round} rounds ({bytes} bytes read late) the sluggard is still connected");
                 cut_off = true;

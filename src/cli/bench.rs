@@ -18,6 +18,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use comms::{ReplicaConfig, Value};
 use driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
+use huddle::summary::percentile;
 use serde::Serialize;
 
 use super::clients::RelayClient;
@@ -139,15 +140,11 @@ fn group(port: u16, last: u8) -> SocketAddrV4 {
     SocketAddrV4::new(Ipv4Addr::new(239, 255, 39, last), port)
 }
 
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[i]
-}
-
 /// p50 and p99 in microseconds of round trips.
 fn summarize(mut v: Vec<f64>) -> (f64, f64) {
     v.sort_by(|a, b| a.total_cmp(b));
-    (percentile(&v, 0.5), percentile(&v, 0.99))
+    let at = |p| percentile(&v, p).expect("at least one round trip was measured");
+    (at(0.5), at(0.99))
 }
 
 /// Round trips not recorded at the start of every block (caches, branch predictors,
