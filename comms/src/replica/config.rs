@@ -1,0 +1,94 @@
+//! A replica's settings, and why a set of them is refused.
+
+use std::time::Duration;
+
+use thiserror::Error;
+
+use crate::key::ROBOT_IDS;
+use crate::talk::TalkLimits;
+use crate::wire::{MAX_FRAME_LEN, MIN_MTU};
+
+/// Settings of a replica. Every robot of a team should use the same `team_id`,
+/// `refresh_period`, `mtu` and `team_key`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReplicaConfig {
+    /// This robot's id, 1..=254.
+    pub robot_id: u8,
+    /// The team's id; frames of other teams are dropped.
+    pub team_id: u8,
+    /// Every own global value is re-sent this often (default 100 ms), repairing losses;
+    /// it is also the heartbeat period.
+    pub refresh_period: Duration,
+    /// Largest frame sent and accepted, in bytes (default 1200; 64..=65507).
+    pub mtu: usize,
+    /// A peer silent this long is reported departed (default 3 refresh periods).
+    pub departed_after: Duration,
+    /// With a key, every frame carries a truncated HMAC-SHA256 tag, untagged, badly
+    /// tagged and replayed frames are dropped.
+    pub team_key: Option<Vec<u8>>,
+    /// Talk queue limits and timers.
+    pub talk: TalkLimits,
+}
+
+impl ReplicaConfig {
+    /// Defaults for robot `robot_id` of team `team_id`.
+    pub fn new(robot_id: u8, team_id: u8) -> ReplicaConfig {
+        ReplicaConfig {
+            robot_id,
+            team_id,
+            refresh_period: Duration::from_millis(100),
+            mtu: 1200,
+            departed_after: Duration::from_millis(300),
+            team_key: None,
+            talk: TalkLimits::default(),
+        }
+    }
+
+    /// Sets the refresh period and, with it, `departed_after` to three periods.
+    pub fn with_refresh_period(mut self, period: Duration) -> ReplicaConfig {
+        self.refresh_period = period;
+        self.departed_after = period * 3;
+        self
+    }
+
+    /// Sets the team key.
+    pub fn with_team_key(mut self, key: impl Into<Vec<u8>>) -> ReplicaConfig {
+        self.team_key = Some(key.into());
+        self
+    }
+
+    /// Whether a replica can work with these settings.
+    pub(super) fn validate(&self) -> Result<(), ConfigInvalid> {
+        if !ROBOT_IDS.contains(&self.robot_id) {
+            return Err(ConfigInvalid::RobotId(self.robot_id));
+        }
+        if !(MIN_MTU..=MAX_FRAME_LEN).contains(&self.mtu) {
+            return Err(ConfigInvalid::Mtu(self.mtu));
+        }
+        if self.refresh_period.is_zero() || self.departed_after.is_zero() {
+            return Err(ConfigInvalid::Period);
+        }
+        let t = &self.talk;
+        if t.retain == 0 || t.window == 0 || t.max_queues == 0 {
+            return Err(ConfigInvalid::TalkLimits);
+        }
+        Ok(())
+    }
+}
+
+/// Why a [`ReplicaConfig`] was refused.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+pub enum ConfigInvalid {
+    /// `robot_id` outside 1..=254.
+    #[error("robot id {0} is outside 1..=254")]
+    RobotId(u8),
+    /// `mtu` outside [`wire::MIN_MTU`](MIN_MTU)..=[`wire::MAX_FRAME_LEN`](MAX_FRAME_LEN).
+    #[error("mtu {0} is outside {MIN_MTU}..={MAX_FRAME_LEN} bytes")]
+    Mtu(usize),
+    /// A zero refresh period or departure limit.
+    #[error("refresh period and departure limit must be positive")]
+    Period,
+    /// Talk limits of zero.
+    #[error("talk retain, window and max_queues must be at least 1")]
+    TalkLimits,
+}

@@ -1,0 +1,200 @@
+//! The replication state machine (sans-IO): one robot's blackboard plus everything needed
+//! to keep the team's copies in step over a lossy multicast group.
+//!
+//! One type, [`Replica`], with its parts in files named for what they do:
+//!
+//! - `config.rs`: [`ReplicaConfig`], and [`ConfigInvalid`] for one that cannot work;
+//! - `events.rs`: what comes out: [`Event`]s, and [`Transmit`]s with their [`Destination`];
+//! - `receive.rs`: [`Replica::handle_datagram`]: a received frame checked and applied;
+//! - `peers.rs`: the peer table: joins, restarts (incarnations, the retired ones whose
+//!   late frames are dropped) and the replay window of keyed teams;
+//! - `talk.rs`: posting to own talk queues, delivering teammates' messages in order, NACK
+//!   repair;
+//! - `timers.rs`: [`Replica::handle_timeout`] and [`Replica::poll_timeout`]: the periodic
+//!   refresh (and the extra one for a newcomer), departures, talk timers, the stats mirror;
+//! - `transmit.rs`: [`Replica::poll_transmit`]: pending changes packed into frames
+//!   within the MTU;
+//! - this file: the state itself, writes and reads.
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::time::Duration;
+
+use crate::blackboard::{Blackboard, Entry, SetError};
+use crate::key::{Key, KeyError, Scope};
+use crate::pattern::Pattern;
+use crate::stats::Stats;
+use crate::talk::{Delivery, Outbox};
+use crate::time::Instant;
+use crate::value::Value;
+use crate::wire::{self, ItemRef, TeamKey};
+
+mod config;
+mod events;
+mod peers;
+mod receive;
+mod talk;
+mod timers;
+mod transmit;
+
+pub use config::{ConfigInvalid, ReplicaConfig};
+pub use events::{Destination, Event, Transmit};
+use peers::Peer;
+pub use talk::PostError;
+
+/// One robot's replicated blackboard. See the crate docs for the run loop.
+#[derive(Debug)]
+pub struct Replica {
+    cfg: ReplicaConfig,
+    key: Option<TeamKey>,
+    incarnation: u64,
+    board: Blackboard,
+    /// Latest `now` seen by any input: ages in outgoing frames are measured to it.
+    now: Instant,
+    seq: u64,
+    next_refresh: Instant,
+    /// When the last full refresh (periodic, or for a joining peer) was queued.
+    last_full_refresh: Option<Instant>,
+    heartbeat_due: bool,
+    dirty: BTreeSet<String>,
+    refresh_queue: VecDeque<String>,
+    talk_out: VecDeque<(String, u64)>,
+    heads_out: BTreeSet<String>,
+    nacks_out: VecDeque<(u8, String, u64, u64)>,
+    outboxes: BTreeMap<String, Outbox>,
+    peers: BTreeMap<u8, Peer>,
+    events: VecDeque<Event>,
+    stats: Stats,
+    deliveries: Vec<Delivery>,
+}
+
+impl Replica {
+    /// A replica for `config`, started at `now`. `incarnation` must differ between
+    /// starts of the same robot (use a random number from the driver's RNG): it is how
+    /// teammates tell a restart from old frames. The first frame goes out at once.
+    pub fn new(
+        config: ReplicaConfig,
+        incarnation: u64,
+        now: Instant,
+    ) -> Result<Replica, ConfigInvalid> {
+        config.validate()?;
+        let mut board = Blackboard::new(config.robot_id);
+        board.set_incarnation(incarnation);
+        Ok(Replica {
+            key: config.team_key.as_deref().map(TeamKey::new),
+            cfg: config,
+            incarnation,
+            board,
+            now,
+            seq: 0,
+            next_refresh: now,
+            last_full_refresh: None,
+            heartbeat_due: false,
+            dirty: BTreeSet::new(),
+            refresh_queue: VecDeque::new(),
+            talk_out: VecDeque::new(),
+            heads_out: BTreeSet::new(),
+            nacks_out: VecDeque::new(),
+            outboxes: BTreeMap::new(),
+            peers: BTreeMap::new(),
+            events: VecDeque::new(),
+            stats: Stats::default(),
+            deliveries: Vec::new(),
+        })
+    }
+
+    /// This robot's id.
+    pub fn robot_id(&self) -> u8 {
+        self.cfg.robot_id
+    }
+
+    /// This start's incarnation.
+    pub fn incarnation(&self) -> u64 {
+        self.incarnation
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ReplicaConfig {
+        &self.cfg
+    }
+
+    /// The blackboard, read-only.
+    pub fn blackboard(&self) -> &Blackboard {
+        &self.board
+    }
+
+    fn advance(&mut self, now: Instant) {
+        self.now = self.now.max(now);
+    }
+
+    /// Sets `key` (`local.var.x`, `*.var.x` or `<own id>.var.x`) at `now`. Global
+    /// values go out with the next [`Replica::poll_transmit`].
+    pub fn set(&mut self, now: Instant, key: &str, value: Value) -> Result<(), SetError> {
+        let key = Key::parse(key)?;
+        self.set_key(now, &key, value)
+    }
+
+    /// [`Replica::set`] with a parsed key.
+    pub fn set_key(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
+        self.advance(now);
+        let scope = self.board.storage_scope(key)?;
+        let global = scope != Scope::Local;
+        if global {
+            let bytes = wire::item_len(ItemRef::Update {
+                path: key.path(),
+                value: &value,
+                version: u64::MAX,
+                age_us: u64::MAX,
+            });
+            if bytes + self.frame_overhead() > self.cfg.mtu {
+                return Err(SetError::TooLarge {
+                    key: key.to_string(),
+                    bytes,
+                    mtu: self.cfg.mtu,
+                });
+            }
+        }
+        self.board.write(now, key, value)?;
+        if global {
+            self.dirty.insert(key.path().to_owned());
+        }
+        Ok(())
+    }
+
+    /// The binding for `key` (see [`Blackboard::get`]; `*.var.x` is the newest copy).
+    pub fn get(&self, key: &str) -> Result<Option<&Entry>, KeyError> {
+        Ok(self.board.get(&Key::parse(key)?))
+    }
+
+    /// [`Replica::get`], only if at most `max_age` old at `now` by this robot's stamps.
+    pub fn get_fresher(
+        &self,
+        now: Instant,
+        key: &str,
+        max_age: Duration,
+    ) -> Result<Option<&Entry>, KeyError> {
+        Ok(self.board.get_fresher_than(now, &Key::parse(key)?, max_age))
+    }
+
+    /// Every stored binding matching `pattern`, in key order.
+    pub fn iter<'a>(&'a self, pattern: &'a Pattern) -> impl Iterator<Item = (Key, &'a Entry)> + 'a {
+        self.board.iter(pattern)
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> &Stats {
+        &self.stats
+    }
+
+    /// The next event, oldest first (value changes after the other events).
+    pub fn poll_event(&mut self) -> Option<Event> {
+        if let Some(e) = self.events.pop_front() {
+            return Some(e);
+        }
+        self.board
+            .poll_change()
+            .map(|key| Event::ValueChanged { key })
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,142 @@
+//! Talk queues through the replica: posting to own queues, handing teammates' messages up
+//! in order (or as given up), and repairing what a teammate NACKs. The per-queue state
+//! machines are [`crate::talk`]'s.
+
+use std::collections::VecDeque;
+
+use thiserror::Error;
+
+use crate::key::{Key, KeyError, Kind, Scope};
+use crate::stats::Stats;
+use crate::talk::{Delivery, Inbox};
+use crate::time::Instant;
+use crate::value::Value;
+use crate::wire::{self, ItemRef};
+
+use super::{Event, Replica};
+
+/// Why a talk message was refused.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+pub enum PostError {
+    /// The key does not parse.
+    #[error(transparent)]
+    Key(#[from] KeyError),
+    /// Only `*.talk.<queue>` (or this robot's own `n.talk.<queue>`) can be posted to.
+    #[error("{0} is not a talk queue of this robot (post to *.talk.<queue>)")]
+    NotOwnQueue(String),
+    /// The message would not fit in one frame.
+    #[error("{key}: the message takes {bytes} bytes, more than one frame holds ({mtu} byte MTU)")]
+    TooLarge {
+        /// The key as given.
+        key: String,
+        /// Encoded item size.
+        bytes: usize,
+        /// Configured MTU.
+        mtu: usize,
+    },
+    /// This robot already has `talk.max_queues` queues.
+    #[error("too many talk queues (limit {0})")]
+    TooManyQueues(usize),
+}
+
+impl Replica {
+    /// Posts a message to this robot's queue `*.talk.<queue>`; every teammate receives
+    /// it once, in order, as [`Event::TalkDelivered`] (this robot does not). Returns its
+    /// sequence number.
+    pub fn post(&mut self, now: Instant, key: &str, value: Value) -> Result<u64, PostError> {
+        self.advance(now);
+        let key = Key::parse(key)?;
+        let own =
+            matches!(key.scope(), Scope::Global) || key.scope() == Scope::Robot(self.cfg.robot_id);
+        if key.kind() != Kind::Talk || !own {
+            return Err(PostError::NotOwnQueue(key.to_string()));
+        }
+        let bytes = wire::item_len(ItemRef::Talk {
+            queue: key.path(),
+            seq: u64::MAX,
+            value: &value,
+        });
+        if bytes + self.frame_overhead() > self.cfg.mtu {
+            return Err(PostError::TooLarge {
+                key: key.to_string(),
+                bytes,
+                mtu: self.cfg.mtu,
+            });
+        }
+        if !self.outboxes.contains_key(key.path())
+            && self.outboxes.len() >= self.cfg.talk.max_queues
+        {
+            return Err(PostError::TooManyQueues(self.cfg.talk.max_queues));
+        }
+        let outbox = self.outboxes.entry(key.path().to_owned()).or_default();
+        let seq = outbox.post(value, self.cfg.talk.retain);
+        self.talk_out.push_back((key.path().to_owned(), seq));
+        Ok(seq)
+    }
+
+    pub(super) fn inbox(&mut self, sender: u8, queue: &str) -> Option<&mut Inbox> {
+        let max = self.cfg.talk.max_queues;
+        let peer = self.peers.get_mut(&sender)?;
+        if !peer.inboxes.contains_key(queue) {
+            if peer.inboxes.len() >= max {
+                self.stats.talk_queue_overflow += 1;
+                return None;
+            }
+            peer.inboxes.insert(queue.to_owned(), Inbox::default());
+        }
+        peer.inboxes.get_mut(queue)
+    }
+
+    pub(super) fn hand_up(&mut self, sender: u8, queue: &str, out: &mut Vec<Delivery>) {
+        Self::hand_up_into(&mut self.events, &mut self.stats, out, sender, queue);
+    }
+
+    pub(super) fn hand_up_into(
+        events: &mut VecDeque<Event>,
+        stats: &mut Stats,
+        deliveries: &mut Vec<Delivery>,
+        from: u8,
+        queue: &str,
+    ) {
+        for d in deliveries.drain(..) {
+            events.push_back(match d {
+                Delivery::Message { seq, value } => {
+                    stats.talk_delivered += 1;
+                    Event::TalkDelivered {
+                        queue: queue.to_owned(),
+                        from,
+                        seq,
+                        value,
+                    }
+                }
+                Delivery::GivenUp { first, last } => {
+                    stats.talk_given_up = stats.talk_given_up.saturating_add(last - first + 1);
+                    Event::TalkGivenUp {
+                        queue: queue.to_owned(),
+                        from,
+                        first,
+                        last,
+                    }
+                }
+            });
+        }
+    }
+
+    /// A teammate asked for `first..=last` of our queue.
+    pub(super) fn repair(&mut self, now: Instant, queue: &str, first: u64, last: u64) {
+        let Some(outbox) = self.outboxes.get_mut(queue) else {
+            return;
+        };
+        // A resend within half a NACK interval already answers this request.
+        let quiet = self.cfg.talk.nack_interval / 2;
+        for seq in outbox.to_resend(first, last, now, quiet) {
+            outbox.mark_sent(seq, now);
+            self.talk_out.push_back((queue.to_owned(), seq));
+            self.stats.talk_resent += 1;
+        }
+        if first < outbox.first() || last > outbox.last() {
+            // Some of it is gone (or never existed): the head tells them to give up.
+            self.heads_out.insert(queue.to_owned());
+        }
+    }
+}

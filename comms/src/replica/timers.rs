@@ -1,0 +1,132 @@
+//! Timers: the periodic refresh and heartbeat (and the extra refresh for a newcomer),
+//! departures, talk NACKs and give-ups, and the stats mirror written at each refresh.
+
+use crate::key::{Key, Kind, Scope};
+use crate::stats::DropReason;
+use crate::time::Instant;
+use crate::value::Value;
+
+use super::{Event, Replica};
+
+impl Replica {
+    /// A robot appeared, came back after departing, or restarted: it may have missed
+    /// (or lost) everything we own, so it gets a full refresh and our talk heads now
+    /// instead of up to a refresh period later. The periodic schedule is untouched, so
+    /// this is an extra copy, which on a lossy network is also an extra chance. At most
+    /// one per quarter period: a refresh that recent reaches the newcomer as well when
+    /// several robots come back at once (after a team-wide outage).
+    pub(super) fn refresh_for_newcomer(&mut self, now: Instant) {
+        let quiet = self.cfg.refresh_period / 4;
+        if self.last_full_refresh.is_none_or(|t| t + quiet <= now) {
+            self.queue_full_refresh(now);
+        }
+    }
+
+    /// Queues every own global value and every own talk head, and a heartbeat.
+    fn queue_full_refresh(&mut self, now: Instant) {
+        let own = Scope::Robot(self.cfg.robot_id);
+        self.refresh_queue = self
+            .board
+            .scope_entries(own)
+            .map(|(p, _)| p.clone())
+            .collect();
+        self.heads_out.extend(self.outboxes.keys().cloned());
+        self.heartbeat_due = true;
+        self.last_full_refresh = Some(now);
+    }
+
+    /// Runs timers due at `now`: the periodic refresh and heartbeat, departures, NACKs
+    /// and talk give-ups. Call it when [`Replica::poll_timeout`] is reached (calling it
+    /// earlier is harmless).
+    pub fn handle_timeout(&mut self, now: Instant) {
+        self.advance(now);
+        if now >= self.next_refresh {
+            self.next_refresh += self.cfg.refresh_period;
+            if self.next_refresh <= now {
+                self.next_refresh = now + self.cfg.refresh_period;
+            }
+            self.queue_full_refresh(now);
+            self.mirror_stats(now);
+        }
+        let limits = self.cfg.talk.clone();
+        let departed_after = self.cfg.departed_after;
+        let mut nacks = Vec::new();
+        let mut handed = Vec::new();
+        for (&robot, peer) in &mut self.peers {
+            if peer.present && peer.last_heard + departed_after <= now {
+                peer.present = false;
+                self.events.push_back(Event::PeerDeparted { robot });
+            }
+            for (queue, inbox) in &mut peer.inboxes {
+                for (first, last) in inbox.on_timeout(now, &limits, &mut self.deliveries) {
+                    nacks.push((robot, queue.clone(), first, last));
+                }
+                if !self.deliveries.is_empty() {
+                    handed.push((robot, queue.clone(), std::mem::take(&mut self.deliveries)));
+                }
+            }
+        }
+        for (robot, queue, mut d) in handed {
+            Self::hand_up_into(&mut self.events, &mut self.stats, &mut d, robot, &queue);
+        }
+        self.stats.nacks_sent += nacks.len() as u64;
+        self.nacks_out.extend(nacks);
+    }
+
+    /// Mirrors the counters into `local.var.huddle.stats.*`.
+    fn mirror_stats(&mut self, now: Instant) {
+        let s = &self.stats;
+        let mut values: Vec<(String, i64)> = vec![
+            ("frames_in".into(), s.frames_in as i64),
+            ("frames_out".into(), s.frames_out as i64),
+            ("bytes_in".into(), s.bytes_in as i64),
+            ("bytes_out".into(), s.bytes_out as i64),
+            ("updates_applied".into(), s.updates_applied as i64),
+            ("updates_stale".into(), s.updates_stale as i64),
+            ("talk_delivered".into(), s.talk_delivered as i64),
+            ("talk_given_up".into(), s.talk_given_up as i64),
+            ("talk_resent".into(), s.talk_resent as i64),
+            ("nacks_sent".into(), s.nacks_sent as i64),
+            ("drops.total".into(), s.drops_total() as i64),
+        ];
+        values.extend(
+            DropReason::ALL
+                .iter()
+                .map(|r| (format!("drops.{}", r.name()), s.drops(*r) as i64)),
+        );
+        values.extend(
+            s.last_heard
+                .iter()
+                .map(|(robot, t)| (format!("peer.{robot}.last_heard_us"), t.as_micros() as i64)),
+        );
+        for (name, v) in values {
+            let key =
+                Key::from_valid_parts(Scope::Local, Kind::Var, format!("huddle.stats.{name}"));
+            let unchanged = self
+                .board
+                .get(&key)
+                .is_some_and(|e| e.value == Value::Int(v));
+            if !unchanged {
+                // A local key of valid shape: this cannot fail.
+                let _ = self.board.set(now, &key, Value::Int(v));
+            }
+        }
+    }
+
+    /// When [`Replica::handle_timeout`] should next be called.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let limits = &self.cfg.talk;
+        let mut next = self.next_refresh;
+        for peer in self.peers.values() {
+            if peer.present {
+                next = next.min(peer.last_heard + self.cfg.departed_after);
+            }
+            for inbox in peer.inboxes.values() {
+                if let Some(t) = inbox.deadline(limits) {
+                    next = next.min(t);
+                }
+            }
+        }
+        Some(next)
+    }
+}

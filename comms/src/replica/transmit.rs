@@ -1,0 +1,139 @@
+//! Transmit packing: pending NACKs, talk messages, changed values, the refresh and talk
+//! heads, in that order, packed into frames of at most `mtu` bytes.
+
+use crate::blackboard::Entry;
+use crate::key::Scope;
+use crate::time::{duration_to_micros, Instant};
+use crate::wire::{FrameWriter, ItemRef, HEADER_LEN, TAG_LEN};
+
+use super::{Destination, Replica, Transmit};
+
+impl Replica {
+    /// Bytes a frame spends besides its items, at worst.
+    pub(super) fn frame_overhead(&self) -> usize {
+        HEADER_LEN + 9 + 3 + if self.key.is_some() { TAG_LEN } else { 0 }
+    }
+
+    /// The next frame to send, at most `mtu` bytes: NACKs, talk messages, changed
+    /// values, the periodic refresh and talk heads, in that order of priority. Ages in it
+    /// are measured to the latest `now` given to any input.
+    pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        let pending = !(self.nacks_out.is_empty()
+            && self.talk_out.is_empty()
+            && self.dirty.is_empty()
+            && self.refresh_queue.is_empty()
+            && self.heads_out.is_empty());
+        if !pending && !self.heartbeat_due {
+            return None;
+        }
+        let me = Scope::Robot(self.cfg.robot_id);
+        let now = self.now;
+        let mut w = FrameWriter::new(
+            self.cfg.team_id,
+            self.cfg.robot_id,
+            self.incarnation,
+            self.seq + 1,
+            self.cfg.mtu,
+            self.key.as_ref(),
+        );
+        let mut full = false;
+        while let Some((target, queue, first, last)) = self.nacks_out.front() {
+            if !w.push(ItemRef::Nack {
+                target: *target,
+                queue,
+                first: *first,
+                last: *last,
+            }) {
+                full = true;
+                break;
+            }
+            self.nacks_out.pop_front();
+        }
+        while !full {
+            let Some((queue, seq)) = self.talk_out.front() else {
+                break;
+            };
+            if let Some(outbox) = self.outboxes.get_mut(queue) {
+                if let Some(value) = outbox.get(*seq) {
+                    if !w.push(ItemRef::Talk {
+                        queue,
+                        seq: *seq,
+                        value,
+                    }) {
+                        full = true;
+                        break;
+                    }
+                    outbox.mark_sent(*seq, now);
+                }
+            }
+            self.talk_out.pop_front();
+        }
+        while !full {
+            let Some(path) = self.dirty.first() else {
+                break;
+            };
+            if let Some(e) = self.board.get_stored(me, path) {
+                if !w.push(update_ref(path, e, now)) {
+                    full = true;
+                    break;
+                }
+            }
+            self.dirty.pop_first();
+        }
+        while !full {
+            let Some(path) = self.refresh_queue.front() else {
+                break;
+            };
+            if let Some(e) = self.board.get_stored(me, path) {
+                if !self.dirty.contains(path) && !w.push(update_ref(path, e, now)) {
+                    full = true;
+                    break;
+                }
+            }
+            self.refresh_queue.pop_front();
+        }
+        if !full {
+            while let Some(queue) = self.heads_out.first() {
+                if let Some(outbox) = self.outboxes.get(queue) {
+                    if !w.push(ItemRef::TalkHead {
+                        queue,
+                        first: outbox.first(),
+                        last: outbox.last(),
+                    }) {
+                        break;
+                    }
+                }
+                self.heads_out.pop_first();
+            }
+        }
+        if w.is_empty() && pending {
+            // Cannot happen (set and post refuse items that do not fit an empty frame),
+            // but never stall on one: skip the item that did not fit.
+            if self.nacks_out.pop_front().is_none()
+                && self.talk_out.pop_front().is_none()
+                && self.dirty.pop_first().is_none()
+                && self.refresh_queue.pop_front().is_none()
+            {
+                self.heads_out.pop_first();
+            }
+        }
+        self.heartbeat_due = false;
+        self.seq += 1;
+        let payload = w.finish();
+        self.stats.frames_out += 1;
+        self.stats.bytes_out += payload.len() as u64;
+        Some(Transmit {
+            destination: Destination::Group,
+            payload,
+        })
+    }
+}
+
+fn update_ref<'a>(path: &'a str, e: &'a Entry, now: Instant) -> ItemRef<'a> {
+    ItemRef::Update {
+        path,
+        value: &e.value,
+        version: e.version,
+        age_us: duration_to_micros(e.age(now)),
+    }
+}

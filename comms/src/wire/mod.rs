@@ -1,0 +1,239 @@
+//! The wire format: the only place that knows how frames look on the network.
+//!
+//! ```text
+//! offset  size  field
+//! 0       2     magic "HD"
+//! 2       1     format version (1)
+//! 3       1     flags: bit 0 = an HMAC tag follows the body; other bits must be 0
+//! 4       1     team id
+//! 5       1     sender robot id (1..=254)
+//! 6       8     sender incarnation, u64 little-endian (random per start)
+//! 14      ..    body: seq (varint u64), items (varint count, then each item)
+//! end-16  16    tag (only if flag bit 0): HMAC-SHA256 over bytes [0, end-16), truncated
+//! ```
+//!
+//! Items (varint variant index, then the fields in order):
+//!
+//! | idx | item       | fields                                            |
+//! |-----|------------|---------------------------------------------------|
+//! | 0   | `Update`   | path (str), value, version (varint), age_us (varint) |
+//! | 1   | `Talk`     | queue (str), seq (varint), value                  |
+//! | 2   | `TalkHead` | queue (str), first retained seq, last posted seq  |
+//! | 3   | `Nack`     | target robot (u8), queue (str), first, last (missing seqs) |
+//!
+//! Values: varint tag 0..=5 (`Int` zigzag varint, `Float` 8 bytes LE, `Bool` 1 byte,
+//! `String` varint length + UTF-8, `Floats` varint count + 4 bytes LE each, `Bytes` varint
+//! length + bytes). Strings are validated as UTF-8 and paths as key paths on decode.
+//! A varint is one byte below 251, else a marker byte (251, 252, 253) and the value as a
+//! little-endian u16, u32 or u64.
+//!
+//! # A frame's size
+//!
+//! Overhead per frame: the 14-byte header, the seq and item-count varints (1 to 9 bytes
+//! each) and, with a team key, the 16-byte tag. Per update item: 1 byte of item index,
+//! the path (length varint and bytes), the value (1 tag byte, then its encoding; `Bytes`
+//! adds a length varint), and the version and age varints (1 to 9 bytes each). So the
+//! same payload costs more as a match goes on and its counters grow; [`FrameWriter::len`]
+//! and [`item_len`] compute it exactly without encoding.
+//!
+//! # Reading frames
+//!
+//! Decoding happens in two steps, smoltcp-style: the fixed header is checked first (magic,
+//! version, team, tag), then the body is decoded into owned values and validated.
+//! [`decode_frame`] is safe on any input: it returns a [`DecodeError`], never panics.
+//!
+//! # Why bincode, and the way out
+//!
+//! The body is bincode 2 with `config::standard()` (little-endian, varint integers),
+//! decoding limited to [`MAX_FRAME_LEN`] bytes of claimed allocations, because bincode
+//! is what the project asked for. It is pinned (`=2.0.1`), built without its default
+//! features (no derive macros, no serde: the encode and decode impls are written by
+//! hand) and used in one file of this module, `codec.rs`, and nowhere else in huddle.
+//!
+//! RustSec advisory RUSTSEC-2025-0141 marks bincode unmaintained: its team stopped work
+//! on it. It reports no vulnerability, and the format needs no further work from
+//! upstream. There is no upgrade to take: 3.0.0 is a tombstone release. The exits are
+//! wincode, a bincode-compatible implementation, and postcard, whose LEB128 varints
+//! differ from bincode's, so there the integer encoding would be written by hand. The
+//! golden-byte tests beside this module freeze the format byte for byte: either swap is
+//! a change to `codec.rs` alone, and those tests tell whether it kept the format.
+
+use crate::value::Value;
+
+mod auth;
+mod codec;
+mod decode;
+mod writer;
+
+pub use auth::TeamKey;
+pub use decode::{decode_frame, peek_origin, DecodeError};
+pub use writer::{encode_frame, item_len, value_len, varint_len, FrameWriter};
+
+/// The first two bytes of every frame.
+pub const MAGIC: [u8; 2] = *b"HD";
+/// The format version this code speaks.
+pub const VERSION: u8 = 1;
+/// Bytes before the body.
+pub const HEADER_LEN: usize = 14;
+/// Bytes of the truncated HMAC-SHA256 tag (128 bits).
+pub const TAG_LEN: usize = 16;
+/// Largest frame ever decoded (the largest UDP payload over IPv4).
+pub const MAX_FRAME_LEN: usize = 65_507;
+/// Smallest MTU a frame writer accepts: a header, the largest seq and count varints and
+/// a tag, with room for small items.
+pub const MIN_MTU: usize = 64;
+
+/// Largest talk sequence number accepted (2^62): far beyond any real queue, and it keeps
+/// the receivers' `seq + 1` arithmetic free of overflow whatever a frame claims.
+pub const MAX_TALK_SEQ: u64 = 1 << 62;
+
+const FLAG_TAGGED: u8 = 1;
+
+/// A decoded frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Team id; frames of other teams are dropped.
+    pub team: u8,
+    /// Sending robot (1..=254).
+    pub sender: u8,
+    /// Sender's incarnation: random per start, so a restart is recognised at once.
+    pub incarnation: u64,
+    /// Sender's frame counter within this incarnation (replay protection).
+    pub seq: u64,
+    /// The payload.
+    pub items: Vec<Item>,
+}
+
+/// One unit of payload.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Item {
+    /// The sender's own global value `sender.var.path`.
+    Update {
+        /// Key path (after `n.var.`).
+        path: String,
+        /// The value.
+        value: Value,
+        /// The sender's version of this key.
+        version: u64,
+        /// Microseconds since the sender set it, by the sender's clock.
+        age_us: u64,
+    },
+    /// A message of the sender's talk queue `sender.talk.queue`.
+    Talk {
+        /// Queue path (after `n.talk.`).
+        queue: String,
+        /// 1-based sequence number within the queue and the sender's incarnation.
+        seq: u64,
+        /// The message.
+        value: Value,
+    },
+    /// The span of messages the sender still holds for a queue: lets receivers see a lost
+    /// tail (`last`) and give up at once on what was evicted (before `first`).
+    TalkHead {
+        /// Queue path.
+        queue: String,
+        /// Oldest retained sequence number (`last + 1` if none is retained).
+        first: u64,
+        /// Newest posted sequence number (0 if none yet).
+        last: u64,
+    },
+    /// A request to `target` to re-send messages `first..=last` of its queue.
+    Nack {
+        /// The robot asked to repair.
+        target: u8,
+        /// Queue path.
+        queue: String,
+        /// First missing sequence number.
+        first: u64,
+        /// Last missing sequence number.
+        last: u64,
+    },
+}
+
+/// A borrowed item, for encoding without copying values out of the blackboard.
+#[derive(Clone, Copy, Debug)]
+pub enum ItemRef<'a> {
+    /// See [`Item::Update`].
+    Update {
+        /// Key path.
+        path: &'a str,
+        /// The value.
+        value: &'a Value,
+        /// Version.
+        version: u64,
+        /// Age in microseconds.
+        age_us: u64,
+    },
+    /// See [`Item::Talk`].
+    Talk {
+        /// Queue path.
+        queue: &'a str,
+        /// Sequence number.
+        seq: u64,
+        /// The message.
+        value: &'a Value,
+    },
+    /// See [`Item::TalkHead`].
+    TalkHead {
+        /// Queue path.
+        queue: &'a str,
+        /// Oldest retained.
+        first: u64,
+        /// Newest posted.
+        last: u64,
+    },
+    /// See [`Item::Nack`].
+    Nack {
+        /// Robot asked to repair.
+        target: u8,
+        /// Queue path.
+        queue: &'a str,
+        /// First missing.
+        first: u64,
+        /// Last missing.
+        last: u64,
+    },
+}
+
+impl Item {
+    /// A borrowed view for encoding.
+    pub fn as_ref(&self) -> ItemRef<'_> {
+        match self {
+            Item::Update {
+                path,
+                value,
+                version,
+                age_us,
+            } => ItemRef::Update {
+                path,
+                value,
+                version: *version,
+                age_us: *age_us,
+            },
+            Item::Talk { queue, seq, value } => ItemRef::Talk {
+                queue,
+                seq: *seq,
+                value,
+            },
+            Item::TalkHead { queue, first, last } => ItemRef::TalkHead {
+                queue,
+                first: *first,
+                last: *last,
+            },
+            Item::Nack {
+                target,
+                queue,
+                first,
+                last,
+            } => ItemRef::Nack {
+                target: *target,
+                queue,
+                first: *first,
+                last: *last,
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests;
