@@ -2,6 +2,7 @@
 //! sessions and in-process subscribers.
 
 use std::cell::{Cell, RefCell};
+use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
 use std::future::Future;
 use std::io;
@@ -175,7 +176,7 @@ pub(crate) struct Inner {
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
     impairment: Option<Box<dyn Impairment>>,
-    held: BinaryHeap<Held>,
+    held: BinaryHeap<Reverse<Held>>,
     held_order: u64,
     copies: Vec<Instant>,
     /// Notices handed to subscribers and relay sessions so far: tells the receive loop
@@ -211,7 +212,7 @@ impl Inner {
             self.io.impair_dropped += 1;
         }
         self.io.impair_duplicated += copies.len().saturating_sub(1) as u64;
-        let earliest = self.held.peek().map(|h| h.at);
+        let earliest = self.held.peek().map(|Reverse(h)| h.at);
         let shared: Rc<[u8]> = Rc::from(payload);
         for &at in &copies {
             if self.held.len() >= HELD_LIMIT {
@@ -219,15 +220,15 @@ impl Inner {
                 continue;
             }
             self.held_order += 1;
-            self.held.push(Held {
+            self.held.push(Reverse(Held {
                 at,
                 order: self.held_order,
                 payload: shared.clone(),
                 to,
-            });
+            }));
         }
         self.copies = copies;
-        if self.held.peek().map(|h| h.at) != earliest {
+        if self.held.peek().map(|Reverse(h)| h.at) != earliest {
             // The driver task may be asleep until a later deadline.
             self.wake.notify_one();
         }
@@ -236,8 +237,10 @@ impl Inner {
     /// Sends every held copy whose time has come.
     fn release_held(&mut self) {
         let now = self.clock.now();
-        while self.held.peek().is_some_and(|h| h.at <= now) {
-            let Some(h) = self.held.pop() else { break };
+        while self.held.peek().is_some_and(|Reverse(h)| h.at <= now) {
+            let Some(Reverse(h)) = self.held.pop() else {
+                break;
+            };
             self.send(&h.payload, h.to);
         }
     }
@@ -386,7 +389,7 @@ impl Inner {
             .poll_timeout()
             .into_iter()
             .chain(sessions)
-            .chain(self.held.peek().map(|h| h.at))
+            .chain(self.held.peek().map(|Reverse(h)| h.at))
             .min()
     }
 

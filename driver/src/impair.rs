@@ -16,7 +16,6 @@
 //! is, as after a slow network. Own frames looped back by the kernel are delayed too
 //! (the replica ignores them anyway).
 
-use std::cmp::Ordering;
 use std::net::SocketAddr;
 
 use comms::Instant;
@@ -29,29 +28,13 @@ pub trait Impairment {
     fn judge(&mut self, now: Instant, to: SocketAddr, len: usize, copies: &mut Vec<Instant>);
 }
 
-/// A copy waiting for its time.
+/// A copy waiting for its time. Ordered by time, then insertion order (unique), so the
+/// driver's min-heap of them (through [`std::cmp::Reverse`]) sends copies due at the
+/// same instant first-in first-out.
+#[derive(PartialEq, Eq, PartialOrd, Ord)]
 pub(crate) struct Held {
     pub(crate) at: Instant,
-    /// Insertion order: copies due at the same instant leave first-in first-out.
     pub(crate) order: u64,
     pub(crate) payload: std::rc::Rc<[u8]>,
     pub(crate) to: SocketAddr,
-}
-
-impl PartialEq for Held {
-    fn eq(&self, other: &Self) -> bool {
-        (self.at, self.order) == (other.at, other.order)
-    }
-}
-impl Eq for Held {}
-impl PartialOrd for Held {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for Held {
-    /// Reversed, so that `BinaryHeap` pops the earliest copy.
-    fn cmp(&self, other: &Self) -> Ordering {
-        (other.at, other.order).cmp(&(self.at, self.order))
-    }
 }

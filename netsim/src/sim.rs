@@ -1,6 +1,6 @@
 //! The simulator: nodes, links, groups, virtual time and the event queue.
 
-use std::cmp::Ordering;
+use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashSet, VecDeque};
 use std::fmt;
 use std::io::{self, Write};
@@ -304,29 +304,14 @@ enum Event {
 }
 
 /// A queue entry; the event itself waits in `Sim::slots` so that heap moves stay small.
+/// Ordered by time, then insertion order (unique), so the queue, a min-heap through
+/// [`Reverse`], runs events at the same time first-in first-out.
+#[derive(PartialEq, Eq, PartialOrd, Ord)]
 struct Scheduled {
     at: Time,
     /// Insertion order: events at the same time run first-in first-out.
     order: u64,
     slot: usize,
-}
-
-impl PartialEq for Scheduled {
-    fn eq(&self, other: &Self) -> bool {
-        (self.at, self.order) == (other.at, other.order)
-    }
-}
-impl Eq for Scheduled {}
-impl PartialOrd for Scheduled {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for Scheduled {
-    /// Reversed, so that `BinaryHeap` pops the earliest event.
-    fn cmp(&self, other: &Self) -> Ordering {
-        (other.at, other.order).cmp(&(self.at, self.order))
-    }
 }
 
 /// A deterministic network in virtual time.
@@ -346,7 +331,7 @@ pub struct Sim {
     links: Vec<Vec<LinkState>>,
     /// Members of each group, sorted, by group index (id − 1).
     groups: Vec<Vec<NodeId>>,
-    queue: BinaryHeap<Scheduled>,
+    queue: BinaryHeap<Reverse<Scheduled>>,
     /// Events by slot; `None` slots are listed in `free_slots` for reuse.
     slots: Vec<Option<Event>>,
     free_slots: Vec<usize>,
@@ -782,13 +767,13 @@ impl Sim {
 
     /// When the next queued event happens, if any.
     pub fn next_event_time(&self) -> Option<Time> {
-        self.queue.peek().map(|s| s.at)
+        self.queue.peek().map(|Reverse(s)| s.at)
     }
 
     /// Runs the next queued event, moving time to it; returns its time, or `None` (and
     /// time stays put) if nothing is queued.
     pub fn step(&mut self) -> Option<Time> {
-        let Scheduled { at, slot, .. } = self.queue.pop()?;
+        let Reverse(Scheduled { at, slot, .. }) = self.queue.pop()?;
         let event = self.slots[slot].take().expect("queued slots hold an event");
         self.free_slots.push(slot);
         self.now = at;
@@ -828,11 +813,11 @@ impl Sim {
                 self.slots.len() - 1
             }
         };
-        self.queue.push(Scheduled {
+        self.queue.push(Reverse(Scheduled {
             at,
             order: self.order,
             slot,
-        });
+        }));
     }
 
     fn transmit(&mut self, from: NodeId, dest: Dest, bytes: Arc<[u8]>) -> u64 {
