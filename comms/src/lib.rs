@@ -42,8 +42,9 @@
 //! (default 300 ms) is reported departed. A robot heard for the first time, again after
 //! departing, or restarted gets an extra full refresh at once (unless one went out in
 //! the last quarter period), so a healed partition or a reboot does not wait for the
-//! schedule. A 40-byte world model under
-//! `*.var.world.local` travels in a 77-byte frame, 93 bytes with a tag.
+//! schedule. A frame's overhead is the 14-byte header, the seq and item-count varints (1
+//! to 9 bytes each, growing with the counters) and the 16-byte tag when keyed; each update
+//! adds its path, value, version and age ([`wire`] has the exact sizes).
 //!
 //! `talk` queues (`*.talk.q`) deliver each message to every teammate exactly once and in
 //! order despite loss, duplication and reordering: per-queue sequence numbers, gap
@@ -100,6 +101,8 @@
 //! }
 //! assert_eq!(plan, Some(("plan".into(), 1, 1, Value::from("pass to 2"))));
 //! ```
+
+#![forbid(unsafe_code)]
 
 pub mod arbitration;
 mod blackboard;

@@ -10,7 +10,7 @@ use crate::value::Value;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum Destination {
-    /// The team's multicast group (every frame today: repairs help every receiver).
+    /// The team's multicast group (every frame goes there: repairs help every receiver).
     Group,
 }
 
