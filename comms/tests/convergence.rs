@@ -1,43 +1,35 @@
-//! N replicas joined by a tiny in-test network that loses, duplicates and reorders frames
-//! must end with the same blackboard, and every talk message must reach every teammate
-//! exactly once, in order. The network's randomness comes from a seeded ChaCha RNG, so a
-//! failing case is replayed exactly from the seed proptest prints.
+//! N replicas on a netsim network that loses, duplicates and reorders frames must end
+//! with the same blackboard, and every talk message must reach every teammate exactly once,
+//! in order. The network and the script of writes are seeded, so a failing case is replayed
+//! exactly from the seed proptest prints.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::Duration;
 
 use comms::{Event, Instant, Pattern, Replica, ReplicaConfig, Value};
+use netsim::{Dest, JitterDist, LinkConfig, LinkStats, Sim, Time};
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-struct Net {
-    rng: ChaCha8Rng,
-    loss: f64,
-    dup: f64,
-    max_delay_ms: u64,
-    in_flight: Vec<(Instant, usize, Vec<u8>)>,
-}
-
-impl Net {
-    /// Multicast: every other robot gets its own impaired copy; the sender hears itself.
-    fn send(&mut self, now: Instant, from: usize, n: usize, payload: &[u8]) {
-        for to in 0..n {
-            if to == from {
-                self.in_flight.push((now, to, payload.to_vec()));
-                continue;
-            }
-            if self.rng.random_bool(self.loss) {
-                continue;
-            }
-            let copies = if self.rng.random_bool(self.dup) { 2 } else { 1 };
-            for _ in 0..copies {
-                let delay = Duration::from_millis(self.rng.random_range(0..=self.max_delay_ms));
-                self.in_flight.push((now + delay, to, payload.to_vec()));
-            }
-        }
-    }
+/// Every link: a delay uniform in 0..=30 ms per copy (so frames overtake each other), the
+/// given loss, and one frame in ten duplicated. Multicast loop is on: a sender hears itself.
+fn network(seed: u64, loss: f64) -> Sim {
+    let link = LinkConfig {
+        latency: Duration::from_millis(15),
+        jitter: Duration::from_millis(15),
+        jitter_dist: JitterDist::Uniform,
+        loss,
+        duplicate: 0.1,
+        ..LinkConfig::default()
+    };
+    Sim::builder()
+        .seed(seed ^ 0x9e37_79b9)
+        .link(link)
+        .record_trace(false)
+        .build()
+        .expect("a valid link")
 }
 
 struct Outcome {
@@ -47,17 +39,15 @@ struct Outcome {
     posted: BTreeMap<(u8, String), Vec<i64>>,
     given_up: usize,
     replicas: Vec<Replica>,
+    /// What the network did, all links together.
+    network: LinkStats,
 }
 
 fn run(seed: u64, n: usize, loss: f64, keyed: bool) -> Outcome {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut net = Net {
-        rng: ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9),
-        loss,
-        dup: 0.1,
-        max_delay_ms: 30,
-        in_flight: Vec::new(),
-    };
+    let mut net = network(seed, loss);
+    let nodes = net.add_nodes(n);
+    let team = net.add_group(&nodes).expect("fresh nodes form a group");
     let start = Instant::from_micros(1_000_000);
     let mut replicas: Vec<Replica> = (0..n)
         .map(|i| {
@@ -74,16 +64,17 @@ fn run(seed: u64, n: usize, loss: f64, keyed: bool) -> Outcome {
         posted: BTreeMap::new(),
         given_up: 0,
         replicas: Vec::new(),
+        network: LinkStats::default(),
     };
     let mut counter = 0i64;
     // 2 s of traffic, then 3 s for repairs under the same impairments.
     for tick_ms in 0..5_000u64 {
         let now = start + Duration::from_millis(tick_ms);
-        let (due, later): (Vec<_>, Vec<_>) =
-            net.in_flight.drain(..).partition(|(at, _, _)| *at <= now);
-        net.in_flight = later;
-        for (_, to, bytes) in due {
-            replicas[to].handle_datagram(now, addr, &bytes);
+        net.run_until(Time::from_millis(tick_ms));
+        for (r, &node) in replicas.iter_mut().zip(&nodes) {
+            while let Some(d) = net.recv(node) {
+                r.handle_datagram(now, addr, &d.bytes);
+            }
         }
         for (i, r) in replicas.iter_mut().enumerate() {
             if tick_ms < 2_000 && tick_ms % 5 == 0 {
@@ -107,7 +98,8 @@ fn run(seed: u64, n: usize, loss: f64, keyed: bool) -> Outcome {
                 r.handle_timeout(now);
             }
             while let Some(t) = r.poll_transmit() {
-                net.send(now, i, n, &t.payload);
+                net.send(nodes[i], Dest::Group(team), t.payload)
+                    .expect("a member sends to its group");
             }
             while let Some(e) = r.poll_event() {
                 match e {
@@ -124,6 +116,7 @@ fn run(seed: u64, n: usize, loss: f64, keyed: bool) -> Outcome {
         }
     }
     out.replicas = replicas;
+    out.network = net.network_stats();
     out
 }
 
@@ -214,4 +207,12 @@ fn the_checker_notices_a_team_that_never_hears_each_other() {
         "the script posts enough talk to matter ({posted})"
     );
     assert!(resent > 0, "at 20% loss some talk needs NACK repair");
+    let net = &out.network;
+    assert!(
+        net.lost_total() > 0 && net.duplicated > 0 && net.reordered > 0,
+        "the network loses ({}), duplicates ({}) and reorders ({})",
+        net.lost_total(),
+        net.duplicated,
+        net.reordered
+    );
 }
