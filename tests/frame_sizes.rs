@@ -1,0 +1,125 @@
+//! The bytes on the wire of a robot's local world model: fusion's real encoded LWM
+//! ([`fusion::LWM_WIRE_LEN`] bytes) under `*.var.world.local`, in a comms replica frame,
+//! without and with a team key. SPL limits a team message to 128 bytes; these tests pin
+//! the exact sizes so a change to either format shows up here, and say where the keyed
+//! frame does not fit (packing it into 128 bytes is a later issue).
+//!
+//! A frame is the 14-byte header, the seq and item-count varints and, when keyed, a
+//! 16-byte tag; the update adds 1 byte of item index, the path, the value (tag, length,
+//! bytes) and the version and age varints. A varint is 1 byte below 251, 3 below 2^16,
+//! 5 below 2^32, else 9, so the same model costs more as a match's counters grow.
+
+use std::time::Duration;
+
+use comms::wire::{decode_frame, FrameWriter, ItemRef, TeamKey};
+use comms::{Instant, Key, Replica, ReplicaConfig, Value};
+use fusion::nalgebra::{Matrix2, Vector2, Vector3};
+use fusion::{BallSighting, LocalConfig, LocalModel, Odometry, PoseEstimate, LWM_WIRE_LEN};
+use huddle::sim::robot::WORLD_LOCAL_KEY;
+
+const TEAM_KEY: [u8; 32] = [7; 32];
+/// The SPL's limit on one team message, in bytes.
+const SPL_MESSAGE_LIMIT: usize = 128;
+
+/// A real local world model, encoded by fusion: a robot that has moved and sees the ball.
+fn world_model() -> Value {
+    let start = PoseEstimate::new(-3.2, 1.7, 2.0, Vector3::new(1e-3, 1e-3, 1e-4));
+    let mut lwm = LocalModel::new(LocalConfig::default(), start);
+    lwm.odometry(&Odometry {
+        forward_m: 0.1,
+        left_m: 0.0,
+        turn_rad: 0.05,
+    });
+    let seen = BallSighting {
+        local: Vector2::new(0.1, 1.5),
+        cov: Matrix2::identity() * 1e-3,
+    };
+    lwm.ball_sighting(0.05, &seen);
+    let bytes = lwm.publish(0.1).to_bytes().expect("a finite model encodes");
+    assert_eq!(bytes.len(), LWM_WIRE_LEN);
+    Value::Bytes(bytes.to_vec())
+}
+
+/// The frame a replica sends after publishing its world model at 30 Hz for `ticks` ticks
+/// (the version of the key is then `ticks`, the frame's seq `ticks + 1`).
+fn replica_frame(keyed: bool, ticks: u64) -> Vec<u8> {
+    let mut cfg = ReplicaConfig::new(3, 7);
+    if keyed {
+        cfg = cfg.with_team_key(TEAM_KEY);
+    }
+    let mut r = Replica::new(cfg, 0x5eed_5eed_5eed_5eed, Instant::ZERO).expect("valid config");
+    r.handle_timeout(Instant::ZERO);
+    while r.poll_transmit().is_some() {}
+    let model = world_model();
+    let mut now = Instant::ZERO;
+    let mut last = Vec::new();
+    for _ in 0..ticks {
+        now += Duration::from_micros(33_333);
+        r.set(now, WORLD_LOCAL_KEY, model.clone()).expect("own key");
+        last = r.poll_transmit().expect("a changed value goes out").payload;
+        assert!(r.poll_transmit().is_none(), "one frame per tick");
+    }
+    let key = keyed.then(|| TeamKey::new(&TEAM_KEY));
+    let frame = decode_frame(&last, 7, key.as_ref()).expect("a valid frame");
+    assert_eq!(frame.items.len(), 1, "the world model alone");
+    last
+}
+
+#[test]
+fn the_first_world_model_frame_of_a_match() {
+    let (plain, keyed) = (replica_frame(false, 1).len(), replica_frame(true, 1).len());
+    assert_eq!(
+        plain, 108,
+        "the first world-model frame (seq 2, version 1, age 0) is 108 bytes without a key"
+    );
+    assert_eq!(
+        keyed, 124,
+        "and 124 bytes with the 16-byte tag: within SPL's {SPL_MESSAGE_LIMIT}"
+    );
+}
+
+#[test]
+fn a_world_model_frame_ten_minutes_into_a_match() {
+    let ticks = 10 * 60 * 30;
+    let (plain, keyed) = (
+        replica_frame(false, ticks).len(),
+        replica_frame(true, ticks).len(),
+    );
+    assert_eq!(
+        plain, 112,
+        "after 10 min at 30 Hz (seq and version 3-byte varints) the frame is 112 bytes without a key"
+    );
+    assert_eq!(
+        keyed, 128,
+        "and 128 bytes with the tag: exactly SPL's {SPL_MESSAGE_LIMIT}, no byte to spare"
+    );
+}
+
+#[test]
+fn a_keyed_world_model_frame_with_wider_counters_does_not_fit_the_spl_limit() {
+    // A copy re-sent 40 ms after it was set, with a frame seq past 2^31 and version
+    // 60,000: the age, seq and version varints take 3, 5 and 3 bytes.
+    let model = world_model();
+    let path = Key::parse(WORLD_LOCAL_KEY).expect("a valid key");
+    let key = TeamKey::new(&TEAM_KEY);
+    let frame = |key: Option<&TeamKey>| {
+        let mut w = FrameWriter::new(7, 3, u64::MAX, 1 << 31, 1200, key);
+        assert!(w.push(ItemRef::Update {
+            path: path.path(),
+            value: &model,
+            version: 60_000,
+            age_us: 40_000,
+        }));
+        w.finish().len()
+    };
+    let (plain, keyed) = (frame(None), frame(Some(&key)));
+    assert_eq!(
+        plain, 116,
+        "a world-model frame with these counters is 116 bytes without a key"
+    );
+    assert_eq!(
+        keyed, 132,
+        "and 132 bytes with the 16-byte tag: over SPL's {SPL_MESSAGE_LIMIT}-byte message \
+         limit (packing the keyed world model into 128 bytes is a later issue)"
+    );
+}
