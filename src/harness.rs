@@ -14,7 +14,7 @@
 //! [`Harness::replica`] / [`Harness::set`]; frames produced by those writes go out at
 //! that same instant on the next call to `run_until` (or [`Harness::flush`]).
 //!
-//! It is not a driver for real sockets (that is `comms`' tokio driver), and it judges
+//! It is not a driver for real sockets (that is the `driver` crate), and it judges
 //! nothing: tests and the simulator do.
 //!
 //! ```
@@ -40,51 +40,21 @@ use netsim::{ConfigError, Dest, GroupId, NodeClock, NodeId, Sim, SimBuilder, Tim
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// Why a harness could not be built. (The `huddle` package has no `thiserror`; the
-/// impls below are what it would derive.)
-#[derive(Debug)]
+/// Why a harness could not be built.
+#[derive(Debug, thiserror::Error)]
 pub enum HarnessError {
     /// More robots than robot ids (1–254), or none.
+    #[error("a team has 1 to 254 robots, not {0}")]
     TeamSize(usize),
     /// The network configuration is invalid.
-    Network(ConfigError),
+    #[error("network: {0}")]
+    Network(#[from] ConfigError),
     /// The replica configuration is invalid.
-    Replica(comms::ConfigInvalid),
+    #[error("replica: {0}")]
+    Replica(#[from] comms::ConfigInvalid),
     /// A node clock could not be set.
+    #[error("clock: {0}")]
     Clock(String),
-}
-
-impl std::fmt::Display for HarnessError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            HarnessError::TeamSize(n) => write!(f, "a team has 1 to 254 robots, not {n}"),
-            HarnessError::Network(e) => write!(f, "network: {e}"),
-            HarnessError::Replica(e) => write!(f, "replica: {e}"),
-            HarnessError::Clock(e) => write!(f, "clock: {e}"),
-        }
-    }
-}
-
-impl std::error::Error for HarnessError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            HarnessError::Network(e) => Some(e),
-            HarnessError::Replica(e) => Some(e),
-            _ => None,
-        }
-    }
-}
-
-impl From<ConfigError> for HarnessError {
-    fn from(e: ConfigError) -> Self {
-        HarnessError::Network(e)
-    }
-}
-
-impl From<comms::ConfigInvalid> for HarnessError {
-    fn from(e: comms::ConfigInvalid) -> Self {
-        HarnessError::Replica(e)
-    }
 }
 
 /// N robots' replicas over one simulated network. Robot `i` (0-based index) has robot id

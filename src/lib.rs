@@ -3,6 +3,8 @@
 //! `huddle sim`. The protocol itself lives in `comms`, the filters in `fusion`, the tone
 //! codec in `audio` and the network model in `netsim`; this crate adds no protocol logic.
 
+#![forbid(unsafe_code)]
+
 pub mod field;
 pub mod harness;
 pub mod impair;

@@ -1,5 +1,7 @@
 //! The `huddle` command: daemon, command-line clients, simulator, audio and fusion tools.
 
+#![forbid(unsafe_code)]
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 

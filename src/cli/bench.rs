@@ -19,6 +19,8 @@ use clap::{Args, Subcommand};
 use comms::{ReplicaConfig, Value};
 use driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
 use huddle::summary::percentile;
+use nix::sched::{sched_setaffinity, CpuSet};
+use nix::unistd::Pid;
 use serde::Serialize;
 
 use super::clients::RelayClient;
@@ -85,17 +87,13 @@ impl Pin {
             Pin::Same => 0,
             Pin::Split => end,
         };
-        // Linux's cpu_set_t: a bit mask of 1024 CPUs.
-        let mut mask = [0u64; 16];
-        mask[cpu / 64] |= 1 << (cpu % 64);
-        extern "C" {
-            fn sched_setaffinity(pid: i32, size: usize, mask: *const u64) -> i32;
-        }
-        // SAFETY: `mask` is a valid 128-byte CPU set that the call only reads; pid 0 is
-        // the calling thread.
-        let rc = unsafe { sched_setaffinity(0, std::mem::size_of_val(&mask), mask.as_ptr()) };
-        if rc != 0 {
-            tracing::warn!(cpu, "cannot pin the thread; it runs unpinned");
+        let mut set = CpuSet::new();
+        // Pid 0 is the calling thread.
+        let pinned = set
+            .set(cpu)
+            .and_then(|()| sched_setaffinity(Pid::from_raw(0), &set));
+        if let Err(e) = pinned {
+            tracing::warn!(cpu, "cannot pin the thread ({e}); it runs unpinned");
         }
     }
 }

@@ -174,36 +174,15 @@ impl SimConfig {
 }
 
 /// Why a simulation could not start.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
 pub enum SimError {
-    /// The team or the network could not be built.
-    Harness(HarnessError),
+    /// The team or the network could not be built (shown as the harness's message, with
+    /// the harness error as its source).
+    #[error("{0}")]
+    Harness(#[from] HarnessError),
     /// A parameter is out of range.
+    #[error("{0}")]
     Config(String),
-}
-
-impl std::fmt::Display for SimError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SimError::Harness(e) => e.fmt(f),
-            SimError::Config(e) => f.write_str(e),
-        }
-    }
-}
-
-impl std::error::Error for SimError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            SimError::Harness(e) => Some(e),
-            SimError::Config(_) => None,
-        }
-    }
-}
-
-impl From<HarnessError> for SimError {
-    fn from(e: HarnessError) -> Self {
-        SimError::Harness(e)
-    }
 }
 
 /// Where everything was at one instant (for the SVG).
