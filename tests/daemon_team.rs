@@ -3,6 +3,8 @@
 //! re-accepted, garbage and wrongly keyed frames are dropped and counted.
 //! Everything sends on loopback only (group 239.255.38.1, IP_MULTICAST_IF 127.0.0.1).
 
+#![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
+
 mod daemon_support;
 
 use std::net::{Ipv4Addr, SocketAddr, UdpSocket};

@@ -1,6 +1,8 @@
 //! Raw bytes against a real daemon's relay port: every command, every error, a 1 MiB
 //! line, and a client that never reads while values change fast. Loopback only.
 
+#![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
+
 mod daemon_support;
 
 use std::time::{Duration, Instant};
