@@ -11,8 +11,7 @@
 //! Asserted: the loss rate lies within the 99.9% binomial bound of 20% for the number of
 //! frames sent; no frame arrives before 30 ms; the delay's 10th, 50th and 90th
 //! percentiles lie within 4 ms of the uniform distribution's (34, 50, 66 ms): sampling
-//! error is under 1 ms and tokio's millisecond timers add about 1 ms on top (measured:
-//! +1.1 ms at every percentile). The daemon's `--impair` flag itself is checked too:
+//! error is under 1 ms and tokio's millisecond timers add about 1 ms on top. The daemon's `--impair` flag itself is checked too:
 //! `preset=competition` runs, a bad spec is refused with the parser's message.
 
 #![allow(clippy::disallowed_methods)] // real sockets, real time

@@ -18,24 +18,18 @@
 //! **no loss** this takes up to one refresh period (the phase of the first refresh after
 //! the heal) plus the worst crossing: ≈ 312 ms, i.e. the 277 ms beacon. "Within two
 //! refresh periods" (200 ms, i.e. the 175 ms beacon) is therefore not guaranteed by the
-//! preset even without loss, and with 20% loss (all eight directions succeeding at the
-//! first attempt: 0.8⁸ ≈ 17%) it holds for about a third of the seeds. Measured over 100
-//! seeds (robots switched on at random phases):
+//! preset even without loss, and with 20% loss it needs all eight directions to succeed
+//! at the first attempt (0.8⁸ ≈ 17%), so most seeds miss it.
 //!
-//! | comms                                 | ≤ 200 ms | p50    | p90    | max    | no loss: ≤ 200 ms, max |
-//! |---------------------------------------|----------|--------|--------|--------|------------------------|
-//! | periodic refresh only                 | 28/100   | 277 ms | 482 ms | 789 ms | 93/100, 277 ms         |
-//! | + full refresh for a reappearing peer | 34/100   | 277 ms | 380 ms | 789 ms | 98/100, 277 ms         |
-//!
-//! The second row is `comms` today: a replica that hears a robot for the first time,
-//! again after it departed, or restarted, queues a full refresh at once (an extra copy
-//! besides the periodic one). The test asserts what the preset allows a correct
-//! protocol to guarantee, and what the change bought:
+//! A replica that hears a robot for the first time, again after it departed, or
+//! restarted, queues a full refresh at once (an extra copy besides the periodic one), so
+//! a lost attempt is repaired by the next without waiting a whole period. The test
+//! asserts what the preset allows a correct protocol to guarantee:
 //! - without loss, every seed converges within one refresh period plus the worst
 //!   crossing (beacon + 50 ms + 3 × 20 ms);
 //! - with the preset's loss, the median does too, the 90th percentile converges within
 //!   two refresh periods plus the worst crossing (one lost attempt repaired by the next:
-//!   the periodic refresh alone misses this), and every seed within 1 s;
+//!   the periodic refresh alone would miss this), and every seed within 1 s;
 //! - each talk message posted during the cut reaches every other robot exactly once
 //!   (never given up), on every seed.
 //!

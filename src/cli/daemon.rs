@@ -115,8 +115,9 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
 pub fn run(args: DaemonArgs) -> Result<()> {
     let config = driver_config(&args)?;
     let impair = impairment(&args, config.replica.robot_id)?;
-    // One thread for socket, replica, timers and relay clients (DESIGN.md,
-    // *Performance notes*).
+    // One thread for socket, replica, timers and relay clients: a hand-off between threads
+    // costs a full wake-up, several times a loopback round trip, and the driver and its
+    // handles are `!Send` for that reason.
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;

@@ -144,7 +144,7 @@ mod tests {
 
     #[test]
     fn a_duration_without_a_unit_is_refused_not_guessed() {
-        // `--latency 50` once meant 50 s: a typo that silently ruins a run.
+        // Read as seconds, `--latency 50` would be a typo that silently ruins a run.
         let err = parse_duration("50").expect_err("no unit");
         assert!(err.contains("50ms"), "the error shows the form: {err}");
     }

@@ -86,12 +86,11 @@ pub struct WorldModelConfig {
 impl Default for WorldModelConfig {
     fn default() -> Self {
         // The field's ball slows by 0.5/s drag plus 0.6 m/s² rolling friction: at the
-        // 0.5–2 m/s it mostly rolls at, an exponential decay of ~1/s fits (0.5/s predicted
-        // stopping balls rolling on, ~0.1 m over a 150 ms network delay). The acceleration
-        // noise covers the rest, pushes and bounces (kicks are reported, see `Kick`):
-        // measured over seeds 1–6 of the competition preset, q = 1 left the team ball
-        // underconfident (NEES 1.58–1.80, below the bound on two seeds), 0.7 overconfident
-        // (2.29–2.33 on two), 0.85 inside the bounds on all six at the same RMSE.
+        // 0.5–2 m/s it mostly rolls at, an exponential decay of about 1/s fits (the drag
+        // alone would predict stopping balls rolling on, by metres over a network delay).
+        // The acceleration noise covers the rest, pushes and bounces (kicks are reported,
+        // see `Kick`): larger q leaves the team ball underconfident (NEES below its
+        // bounds), smaller q overconfident; 0.85 sits between, at the same RMSE.
         let ball = BallFilterConfig {
             model: fusion::BallModel::Rolling {
                 friction_per_s: 1.0,
@@ -107,11 +106,9 @@ impl Default for WorldModelConfig {
             },
             global: GlobalConfig {
                 ball: ball.model,
-                // χ²₂ at 99.9% rather than 99%: robots push the ball all the time, and at a
-                // 100 ms network delay the 99% gate threw away ~1% of true sightings on
-                // every shove, each one a restart later. Measured over seeds 1–6 of the
-                // competition preset: ratio 1.95 → 1.88, NEES inside its bounds on all six
-                // (seed 6 was above them at 99%). A liar is still caught: the consensus
+                // χ²₂ at 99.9% rather than 99%: robots push the ball all the time, and
+                // with a network delay a tighter gate throws away true sightings on every
+                // shove, each one a restart later. A liar is still caught: the consensus
                 // and challenge rules, not the gate's width, keep it out.
                 gate_chi2: 13.82,
                 ..GlobalConfig::default()
