@@ -158,8 +158,9 @@
 //!
 //! # The wire
 //! An LWM is [`LWM_WIRE_LEN`] = 75 bytes (mm, mrad-scale fixed point, σ on a log scale and
-//! correlations as i8); a comms frame carrying it alone is at most 128 bytes (an SPL
-//! message) whatever its counters. An HMAC tag adds 16 bytes beyond that. Quantising never
+//! correlations as i8). A comms frame carrying it alone fits an SPL message's 128 bytes
+//! without a team key; the key's 16-byte HMAC tag takes it past 128 once the frame's
+//! counters grow (the root `tests/frame_sizes.rs` pins the sizes). Quantising never
 //! shrinks a covariance: see [`LocalWorldModel::to_bytes`]. Decoding takes untrusted bytes
 //! and returns a [`DecodeError`], never panics.
 //!
