@@ -1,13 +1,13 @@
 //! Three daemons (robots 1, 2, 3) on loopback multicast, one test, the list:
 //! values cross robots with a small age, talk arrives in order, a restarted robot is
 //! re-accepted, garbage and wrongly keyed frames are dropped and counted.
-//! Everything sends on loopback only (group 239.255.38.1, IP_MULTICAST_IF 127.0.0.1).
+//! Everything sends on loopback only (a group and port of the test's own, IP_MULTICAST_IF 127.0.0.1).
 
 #![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
 
 mod daemon_support;
 
-use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
+use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
 use std::time::Duration;
 
 use comms::relay::Binding;
@@ -16,9 +16,7 @@ use comms::Value;
 use daemon_support::Daemon;
 use driver::{open_multicast, SocketConfig};
 
-const GROUP: &str = "239.255.38.1:38100";
-
-fn start(id: u8, dir: &std::path::Path) -> Daemon {
+fn start(id: u8, group: SocketAddrV4, dir: &std::path::Path) -> Daemon {
     let key = dir.join("team.key");
     let args = [
         "--refresh",
@@ -28,7 +26,8 @@ fn start(id: u8, dir: &std::path::Path) -> Daemon {
         "--key-file",
         key.to_str().unwrap(),
     ];
-    Daemon::start(id, GROUP, 38100 + u16::from(id), &args, dir)
+    let relay_port = daemon_support::free_tcp_port();
+    Daemon::start(id, &group.to_string(), relay_port, &args, dir)
 }
 
 fn stat(c: &mut daemon_support::Client, name: &str) -> i64 {
@@ -42,9 +41,10 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     std::fs::write(dir.path().join("team.key"), "robocup-2000-team-key\n").unwrap();
     std::fs::write(dir.path().join("config.dat"), "*.var.team = \"ISocRob\"\n").unwrap();
     std::fs::write(dir.path().join("config-2.dat"), "*.var.boot = 1\n").unwrap();
-    let d1 = start(1, dir.path());
-    let mut d2 = start(2, dir.path());
-    let d3 = start(3, dir.path());
+    let group = daemon_support::scratch_group();
+    let d1 = start(1, group, dir.path());
+    let mut d2 = start(2, group, dir.path());
+    let d3 = start(3, group, dir.path());
     let (mut c1, mut c3) = (d1.client(), d3.client());
     assert_eq!(c1.greeting, "HUDDLE 1 robot 1");
 
@@ -92,7 +92,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     drop(c2);
     d2.kill();
     std::fs::write(dir.path().join("config-2.dat"), "*.var.boot = 2\n").unwrap();
-    let d2 = start(2, dir.path());
+    let d2 = start(2, group, dir.path());
     let mut c2 = d2.client();
     assert_eq!(c2.ask("SETV *.var.role \"attacker\""), "OK");
     for c in [&mut c1, &mut c3] {
@@ -114,12 +114,11 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
         .collect();
     // The driver's own socket set-up: IP_MULTICAST_IF 127.0.0.1, TTL 1.
     let cfg = SocketConfig {
-        group: GROUP.parse().unwrap(),
+        group,
         iface: Ipv4Addr::LOCALHOST,
         ..SocketConfig::default()
     };
     let tx: UdpSocket = open_multicast(&cfg).unwrap().socket;
-    let group: SocketAddr = GROUP.parse().unwrap();
     tx.send_to(&[0x5a; 40], group).unwrap();
     let forged = Frame {
         team: 7,

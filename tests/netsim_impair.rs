@@ -1,5 +1,5 @@
-//! `--impair` on a real socket: a comms driver on loopback multicast (group
-//! 239.255.73.1, IP_MULTICAST_IF 127.0.0.1, loop on) whose outgoing datagrams pass
+//! `--impair` on a real socket: a comms driver on loopback multicast (a group and port of
+//! the test's own, IP_MULTICAST_IF 127.0.0.1, loop on) whose outgoing datagrams pass
 //! through netsim's link model (`huddle::impair::LinkImpairment`), measured by a plain
 //! socket in the same group.
 //!
@@ -31,7 +31,6 @@ use driver::{open_multicast, Driver, DriverConfig, SocketConfig};
 use huddle::impair::LinkImpairment;
 use huddle::summary::percentile;
 
-const GROUP: &str = "239.255.73.1:47301";
 const SPEC: &str = "loss=20%,delay=50ms,jitter=20ms";
 const SETS: i64 = 2000;
 const EVERY: Duration = Duration::from_millis(2);
@@ -47,7 +46,7 @@ struct Measured {
 }
 
 fn measure() -> Measured {
-    let group: SocketAddrV4 = GROUP.parse().expect("valid group");
+    let group: SocketAddrV4 = daemon_support::scratch_group();
     let socket = SocketConfig {
         group,
         ..SocketConfig::default()
@@ -204,10 +203,11 @@ fn impaired_daemon_traffic_on_loopback_matches_the_spec() {
 fn the_daemon_accepts_a_preset_and_refuses_a_bad_spec() {
     let dir = tempfile::tempdir().expect("temp dir");
     // A daemon impaired like a competition WLAN comes up and serves its relay.
+    let group = daemon_support::scratch_group().to_string();
     let d = daemon_support::Daemon::start(
         1,
-        "239.255.73.3:47303",
-        47304,
+        &group,
+        daemon_support::free_tcp_port(),
         &["--impair", "preset=competition", "--impair-seed", "9"],
         dir.path(),
     );
@@ -215,8 +215,8 @@ fn the_daemon_accepts_a_preset_and_refuses_a_bad_spec() {
     assert_eq!(c.ask("SETV *.var.x 1"), "OK");
     drop(d);
     let out = Command::new(env!("CARGO_BIN_EXE_huddle"))
-        .args(["daemon", "--id", "1", "--group", "239.255.73.3:47303"])
-        .args(["--iface", "127.0.0.1", "--relay", "127.0.0.1:47305"])
+        .args(["daemon", "--id", "1", "--group", &group])
+        .args(["--iface", "127.0.0.1", "--relay", "127.0.0.1:0"])
         .args(["--impair", "loss=120%"])
         .arg("--config-dir")
         .arg(dir.path())

@@ -1,6 +1,6 @@
 //! Parity: the same three-robot script through netsim (the harness, `lan` preset: no
-//! loss, ~100 µs) and through three real comms drivers on loopback multicast (group
-//! 239.255.73.4, IP_MULTICAST_IF 127.0.0.1, loop on; one process, one thread) ends with
+//! loss, ~100 µs) and through three real comms drivers on loopback multicast (a group and
+//! port of the test's own, IP_MULTICAST_IF 127.0.0.1, loop on; one process, one thread) ends with
 //! the same blackboards and the same talk deliveries.
 //!
 //! The script sets global values and posts talk messages at fixed times over 0.6 s;
@@ -22,7 +22,6 @@ use netsim::{Preset, Sim, Time};
 
 const ROBOTS: usize = 3;
 const TEAM: u8 = 7;
-const GROUP: &str = "239.255.73.4:47306";
 const END: Duration = Duration::from_millis(1200);
 
 #[derive(Clone, Debug)]
@@ -124,7 +123,7 @@ fn through_netsim() -> (Vec<Board>, Vec<Talk>) {
 }
 
 fn through_real_drivers() -> (Vec<Board>, Vec<Talk>) {
-    let group: SocketAddrV4 = GROUP.parse().expect("valid group");
+    let group: SocketAddrV4 = driver::scratch_group().expect("a free port on loopback");
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

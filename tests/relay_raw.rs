@@ -10,18 +10,20 @@ use std::time::{Duration, Instant};
 use comms::relay::Binding;
 use daemon_support::{Client, Daemon};
 
-fn daemon(id: u8, port: u16) -> (Daemon, tempfile::TempDir) {
+/// Robot `id` alone on a group of its own, its relay on a free port.
+fn daemon(id: u8) -> (Daemon, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
-    let group = format!("239.255.38.2:{port}");
+    let group = daemon_support::scratch_group().to_string();
+    let relay_port = daemon_support::free_tcp_port();
     (
-        Daemon::start(id, &group, port + 1, &["--refresh", "100"], dir.path()),
+        Daemon::start(id, &group, relay_port, &["--refresh", "100"], dir.path()),
         dir,
     )
 }
 
 #[test]
 fn every_command_over_tcp() {
-    let (d, _dir) = daemon(4, 38200);
+    let (d, _dir) = daemon(4);
     let mut c = d.client();
     assert_eq!(c.greeting, "HUDDLE 1 robot 4");
     assert_eq!(c.ask("SETV *.var.pose [1.5, -2, 0.25]"), "OK");
@@ -71,7 +73,7 @@ fn every_command_over_tcp() {
 
 #[test]
 fn every_error_over_tcp_and_the_session_continues() {
-    let (d, _dir) = daemon(5, 38210);
+    let (d, _dir) = daemon(5);
     let mut c = d.client();
     let too_big = format!("SETV *.var.blob \"{}\"", "x".repeat(2000));
     let cases: Vec<(String, &str)> = vec![
@@ -110,7 +112,7 @@ fn every_error_over_tcp_and_the_session_continues() {
 
 #[test]
 fn a_one_mebibyte_line_is_refused_once_and_the_session_continues() {
-    let (d, _dir) = daemon(6, 38220);
+    let (d, _dir) = daemon(6);
     let mut c = d.client();
     let mut huge = b"SETV local.var.x \"".to_vec();
     huge.resize(huge.len() + (1 << 20), b'z');
@@ -132,7 +134,7 @@ fn a_one_mebibyte_line_is_refused_once_and_the_session_continues() {
 
 #[test]
 fn a_client_that_never_reads_is_cut_off_and_the_others_carry_on() {
-    let (d, _dir) = daemon(7, 38230);
+    let (d, _dir) = daemon(7);
     // The sluggard watches everything, asks for every change, then never reads.
     let mut sluggard = d.client();
     sluggard.send_raw(b"ADDW #\nREFR 0\n");

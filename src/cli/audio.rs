@@ -259,13 +259,11 @@ fn listen(rate: u32, duration: f64, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// The `p` quantile of unsorted figures ([`huddle::summary::percentile`]), NaN for none.
 fn percentile(v: &[f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
     let mut s = v.to_vec();
     s.sort_by(|a, b| a.total_cmp(b));
-    s[((s.len() - 1) as f64 * p).round() as usize]
+    huddle::summary::percentile(&s, p).unwrap_or(f64::NAN)
 }
 
 fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) {

@@ -3,10 +3,25 @@
 #![allow(dead_code)] // each test file uses a different part
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{SocketAddr, TcpStream};
+use std::net::{SocketAddr, SocketAddrV4, TcpListener, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// A multicast group and port of this test's own, so that two runs of the suite on one
+/// host never hear each other (see `driver::scratch_group`).
+pub fn scratch_group() -> SocketAddrV4 {
+    driver::scratch_group().expect("a free UDP port on loopback")
+}
+
+/// A TCP port on 127.0.0.1 that nothing listens on right now (the kernel's pick), for a
+/// daemon's relay.
+pub fn free_tcp_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free TCP port on loopback")
+        .port()
+}
 
 /// A running daemon, killed when dropped.
 pub struct Daemon {
