@@ -1,0 +1,639 @@
+//! The node: a `driver::Driver` on a thread of its own (a current-thread tokio runtime
+//! and a `LocalSet`, as `huddle daemon` runs it, without the relay), and the C-facing
+//! side that talks to it from any thread.
+//!
+//! Calls go to the driver thread as commands on a tokio channel, which wakes that thread
+//! directly; the caller waits for the reply on a std channel. A `set` or `post` has sent
+//! its frame when it returns, as `driver::Handle::set` has. Talk messages and peer
+//! changes are queued for `huddle_node_next_event`.
+
+use std::collections::VecDeque;
+use std::ffi::{c_char, c_int};
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::Path;
+use std::sync::{mpsc as std_mpsc, Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use comms::{Entry, Key, KeyError, PostError, ReplicaConfig, SetError, Value};
+use driver::{resolve_iface, Driver, DriverConfig, Handle, Notice};
+use tokio::sync::{mpsc, oneshot};
+
+use crate::binding::{fill_binding, huddle_binding};
+use crate::error::*;
+use crate::event::{fill_node_event, huddle_event, NodeEvent};
+use crate::handles::Handles;
+use crate::text::{read_opt_str, read_str};
+
+/// Events a node keeps for `huddle_node_next_event` before it drops the oldest (and says
+/// so with `HUDDLE_EVENT_LAGGED`).
+const EVENT_CAPACITY: usize = 65_536;
+
+/// A running node. Opaque: create it with `huddle_node_start`, release it with
+/// `huddle_node_stop`.
+#[allow(non_camel_case_types)]
+pub struct huddle_node {
+    _opaque: [u8; 0],
+}
+
+/// How to start a node. Zero every field first (`huddle_node_config cfg = {0};`): a zero
+/// or NULL field means its default.
+#[repr(C)]
+#[allow(non_camel_case_types)]
+pub struct huddle_node_config {
+    /// This robot's id, 1..=254; 0: the `ROBOT_ID` environment variable.
+    pub robot_id: u8,
+    /// The team's id; frames of other teams are dropped.
+    pub team_id: u8,
+    /// The team's IPv4 multicast group; NULL: `"224.0.0.1"`.
+    pub group_address: *const c_char,
+    /// The group's UDP port; 0: 2000.
+    pub group_port: u16,
+    /// The interface, by IPv4 address or name (`"wlan0"`); NULL: `"127.0.0.1"`, so
+    /// nothing leaves the machine unless an interface is named.
+    pub interface_address: *const c_char,
+    /// Every global value is re-sent this often (ms); 0: 100.
+    pub refresh_ms: u32,
+    /// A file holding the team key (trailing whitespace ignored); NULL: no team key.
+    pub key_file: *const c_char,
+    /// A directory with `config.dat` and `config-<id>.dat`; NULL: no config files.
+    pub config_dir: *const c_char,
+}
+
+/// A binding a read found: the key as stored, the entry, its age.
+type Found = (Key, Entry, Duration);
+
+/// What the caller asks of the driver thread.
+enum Command {
+    Set {
+        key: String,
+        value: Value,
+        reply: std_mpsc::SyncSender<Result<(), SetError>>,
+    },
+    Post {
+        key: String,
+        value: Value,
+        reply: std_mpsc::SyncSender<Result<u64, PostError>>,
+    },
+    Get {
+        key: String,
+        reply: std_mpsc::SyncSender<Result<Option<Found>, KeyError>>,
+    },
+}
+
+/// Events waiting for the caller, and how it waits for them.
+#[derive(Default)]
+struct EventQueue {
+    queue: Mutex<(VecDeque<NodeEvent>, u64)>,
+    ready: Condvar,
+}
+
+impl EventQueue {
+    fn push(&self, event: NodeEvent) {
+        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        if q.0.len() >= EVENT_CAPACITY {
+            q.0.pop_front();
+            q.1 += 1;
+        }
+        q.0.push_back(event);
+        self.ready.notify_all();
+    }
+
+    /// The next event, waiting up to `timeout` for one.
+    fn pop(&self, timeout: Duration) -> Option<NodeEvent> {
+        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        if q.0.is_empty() && q.1 == 0 && !timeout.is_zero() {
+            q = self
+                .ready
+                .wait_timeout_while(q, timeout, |q| q.0.is_empty() && q.1 == 0)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+        if q.1 > 0 {
+            return Some(NodeEvent::Lagged(std::mem::take(&mut q.1)));
+        }
+        q.0.pop_front()
+    }
+}
+
+/// The C-facing side of a node: `Send + Sync`, shared by every calling thread.
+struct Node {
+    commands: mpsc::UnboundedSender<Command>,
+    events: Arc<EventQueue>,
+    thread: Mutex<Option<(oneshot::Sender<()>, JoinHandle<()>)>>,
+}
+
+static NODES: Handles<Node> = Handles::new();
+
+impl Node {
+    /// Sends `command` to the driver thread and waits for its reply.
+    fn call<R>(
+        &self,
+        command: impl FnOnce(std_mpsc::SyncSender<R>) -> Command,
+    ) -> Result<R, Failure> {
+        let (reply, answer) = std_mpsc::sync_channel(1);
+        self.commands
+            .send(command(reply))
+            .map_err(|_| Failure::stopped("node"))?;
+        // The driver thread drops the reply sender unanswered only when it stops.
+        answer.recv().map_err(|_| Failure::stopped("node"))
+    }
+
+    /// Ends the driver thread and waits for it; a second call does nothing.
+    fn stop(&self) {
+        let running = self.thread.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some((stop, thread)) = running {
+            let _ = stop.send(());
+            // A panic on the driver thread was already reported there; nothing to add.
+            let _ = thread.join();
+        }
+    }
+}
+
+/// The settings checked and resolved on the caller's thread, so that a bad one fails
+/// the start with a clear reason.
+fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
+    let robot_id = match cfg.robot_id {
+        0 => {
+            let raw = std::env::var("ROBOT_ID").map_err(|_| {
+                Failure::new(
+                    HUDDLE_E_CONFIG,
+                    "no robot id: set robot_id or the ROBOT_ID environment variable",
+                )
+            })?;
+            raw.trim().parse::<u8>().map_err(|_| {
+                Failure::new(
+                    HUDDLE_E_CONFIG,
+                    format!("ROBOT_ID={raw:?} is not a robot id 1..=254"),
+                )
+            })?
+        }
+        id => id,
+    };
+    if !comms::ROBOT_IDS.contains(&robot_id) {
+        return Err(Failure::new(
+            HUDDLE_E_CONFIG,
+            format!("robot id {robot_id} is outside 1..=254"),
+        ));
+    }
+    let refresh_ms = if cfg.refresh_ms == 0 {
+        100
+    } else {
+        cfg.refresh_ms
+    };
+    let mut replica = ReplicaConfig::new(robot_id, cfg.team_id)
+        .with_refresh_period(Duration::from_millis(refresh_ms.into()));
+    // SAFETY (all three reads): the caller promises the config's strings are NULL or
+    // NUL-terminated and alive for the call.
+    let group = unsafe { read_opt_str(cfg.group_address, "group_address") }?.unwrap_or("224.0.0.1");
+    let iface =
+        unsafe { read_opt_str(cfg.interface_address, "interface_address") }?.unwrap_or("127.0.0.1");
+    let key_file = unsafe { read_opt_str(cfg.key_file, "key_file") }?;
+    // SAFETY: as above.
+    let config_dir = unsafe { read_opt_str(cfg.config_dir, "config_dir") }?;
+
+    let group: Ipv4Addr = group.parse().map_err(|_| {
+        Failure::new(
+            HUDDLE_E_NETWORK,
+            format!("group_address {group:?} is not an IPv4 address"),
+        )
+    })?;
+    if !group.is_multicast() {
+        return Err(Failure::new(
+            HUDDLE_E_NETWORK,
+            format!("group_address {group} is not a multicast address (224.0.0.0/4)"),
+        ));
+    }
+    let port = if cfg.group_port == 0 {
+        2000
+    } else {
+        cfg.group_port
+    };
+    let iface = resolve_iface(iface)
+        .map_err(|e| Failure::new(HUDDLE_E_NETWORK, format!("interface_address: {e}")))?;
+    if let Some(file) = key_file {
+        let bytes = std::fs::read(file)
+            .map_err(|e| Failure::new(HUDDLE_E_IO, format!("cannot read key file {file}: {e}")))?;
+        let key = bytes.trim_ascii_end();
+        if key.is_empty() {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!("key file {file} is empty"),
+            ));
+        }
+        replica = replica.with_team_key(key.to_vec());
+    }
+    let mut config = DriverConfig::new(replica);
+    if let Some(dir) = config_dir {
+        if !Path::new(dir).is_dir() {
+            return Err(Failure::new(
+                HUDDLE_E_IO,
+                format!("config_dir {dir} is not a directory"),
+            ));
+        }
+        let entries = driver::load_config(Path::new(dir), robot_id)
+            .map_err(|e| Failure::new(HUDDLE_E_CONFIG, e.to_string()))?;
+        config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
+    }
+    config.socket.group = SocketAddrV4::new(group, port);
+    config.socket.iface = iface;
+    Ok(config)
+}
+
+/// Starts the driver thread; returns once the socket is bound (or could not be).
+fn start(config: DriverConfig) -> Result<Node, Failure> {
+    let (commands, command_rx) = mpsc::unbounded_channel();
+    let (stop, stop_rx) = oneshot::channel();
+    let (ready, started) = std_mpsc::sync_channel(1);
+    let events = Arc::new(EventQueue::default());
+    let queue = events.clone();
+    let robot = config.replica.robot_id;
+    let thread = std::thread::Builder::new()
+        .name(format!("huddle-node-{robot}"))
+        .spawn(move || run_thread(config, command_rx, stop_rx, queue, ready))
+        .map_err(|e| Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}")))?;
+    match started.recv() {
+        Ok(Ok(())) => Ok(Node {
+            commands,
+            events,
+            thread: Mutex::new(Some((stop, thread))),
+        }),
+        Ok(Err(failure)) => {
+            let _ = thread.join();
+            Err(failure)
+        }
+        Err(_) => {
+            let _ = thread.join();
+            Err(Failure::new(
+                HUDDLE_E_INTERNAL,
+                "the node thread ended before it started",
+            ))
+        }
+    }
+}
+
+/// The node thread: the driver, the command loop and the event feeds on one `LocalSet`.
+fn run_thread(
+    config: DriverConfig,
+    commands: mpsc::UnboundedReceiver<Command>,
+    stop: oneshot::Receiver<()>,
+    events: Arc<EventQueue>,
+    ready: std_mpsc::SyncSender<Result<(), Failure>>,
+) {
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            let _ = ready.send(Err(Failure::new(
+                HUDDLE_E_INTERNAL,
+                format!("cannot start a tokio runtime: {e}"),
+            )));
+            return;
+        }
+    };
+    let local = tokio::task::LocalSet::new();
+    local.block_on(&runtime, async move {
+        let refresh = config.replica.refresh_period;
+        let driver = match Driver::bind(config) {
+            Ok(driver) => driver,
+            Err(e) => {
+                let code = match e {
+                    driver::DriverError::Replica(_) | driver::DriverError::StartValue { .. } => {
+                        HUDDLE_E_CONFIG
+                    }
+                    _ => HUDDLE_E_NETWORK,
+                };
+                let _ = ready.send(Err(Failure::new(code, e.to_string())));
+                return;
+            }
+        };
+        let handle = driver.handle();
+        let talk = events.clone();
+        let watch = handle.watch("+.talk.#", move |_, notice| match notice {
+            Notice::Talk {
+                from,
+                queue,
+                seq,
+                value,
+            } => talk.push(NodeEvent::Talk {
+                from,
+                queue,
+                seq,
+                value,
+            }),
+            Notice::TalkLost {
+                from,
+                queue,
+                first,
+                last,
+            } => talk.push(NodeEvent::TalkLost {
+                from,
+                queue,
+                first,
+                last,
+            }),
+            Notice::Changed { .. } | Notice::Lagged(_) => {}
+        });
+        let Ok(_watch) = watch else {
+            let _ = ready.send(Err(Failure::new(
+                HUDDLE_E_INTERNAL,
+                "cannot watch the talk queues",
+            )));
+            return;
+        };
+        tokio::task::spawn_local(serve_commands(handle.clone(), commands));
+        tokio::task::spawn_local(watch_peers(handle, events, refresh / 4));
+        let _ = ready.send(Ok(()));
+        if let Err(e) = driver
+            .run(async {
+                let _ = stop.await;
+            })
+            .await
+        {
+            tracing_free_warning(&e);
+        }
+    });
+}
+
+/// The driver stopped on a socket error: say so on stderr (the C caller has no log).
+fn tracing_free_warning(e: &driver::DriverError) {
+    eprintln!("huddle node: the driver stopped: {e}");
+}
+
+/// Runs the caller's commands on the driver thread, each in the turn it arrives.
+async fn serve_commands(handle: Handle, mut commands: mpsc::UnboundedReceiver<Command>) {
+    while let Some(command) = commands.recv().await {
+        match command {
+            Command::Set { key, value, reply } => {
+                let _ = reply.send(handle.set(&key, value));
+            }
+            Command::Post { key, value, reply } => {
+                let _ = reply.send(handle.post(&key, value));
+            }
+            Command::Get { key, reply } => {
+                let now = handle.now();
+                let found = Key::parse(&key).and_then(|parsed| {
+                    Ok(handle
+                        .get(&key)?
+                        .map(|entry| (stored_key(&parsed, &entry), entry.clone(), entry.age(now))))
+                });
+                let _ = reply.send(found);
+            }
+        }
+    }
+}
+
+/// The key a read found: `*.var.x` reads the owner's copy `n.var.x`.
+fn stored_key(asked: &Key, entry: &Entry) -> Key {
+    match asked.scope() {
+        comms::Scope::Global => asked.with_scope(comms::Scope::Robot(entry.owner)),
+        _ => asked.clone(),
+    }
+}
+
+/// Turns changes in the peer table into events, looking every `period`.
+async fn watch_peers(handle: Handle, events: Arc<EventQueue>, period: Duration) {
+    let mut known: Vec<comms::PeerInfo> = Vec::new();
+    let mut tick = tokio::time::interval(period.max(Duration::from_millis(1)));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tick.tick().await;
+        let peers = handle.stats().peers;
+        for peer in &peers {
+            let before = known.iter().find(|p| p.robot == peer.robot);
+            let event = match before {
+                None if peer.present => Some(NodeEvent::Joined {
+                    robot: peer.robot,
+                    incarnation: peer.incarnation,
+                }),
+                Some(b) if b.incarnation != peer.incarnation => Some(NodeEvent::Restarted {
+                    robot: peer.robot,
+                    incarnation: peer.incarnation,
+                }),
+                Some(b) if !b.present && peer.present => Some(NodeEvent::Joined {
+                    robot: peer.robot,
+                    incarnation: peer.incarnation,
+                }),
+                Some(b) if b.present && !peer.present => {
+                    Some(NodeEvent::Departed { robot: peer.robot })
+                }
+                _ => None,
+            };
+            if let Some(event) = event {
+                events.push(event);
+            }
+        }
+        known = peers;
+    }
+}
+
+/// The live node behind `node`.
+fn lookup(node: *const huddle_node) -> Result<Arc<Node>, Failure> {
+    if node.is_null() {
+        return Err(Failure::null("node"));
+    }
+    NODES.get(node).ok_or_else(|| Failure::stopped("node"))
+}
+
+fn parse_value(literal: &str) -> Result<Value, Failure> {
+    comms::parse_literal(literal)
+        .map_err(|e| Failure::new(HUDDLE_E_LITERAL, format!("value {literal:?}: {e}")))
+}
+
+pub(crate) fn set_failure(e: SetError) -> Failure {
+    Failure::new(HUDDLE_E_KEY, e.to_string())
+}
+
+pub(crate) fn post_failure(e: PostError) -> Failure {
+    let code = match e {
+        PostError::Key(_) | PostError::NotOwnQueue(_) => HUDDLE_E_KEY,
+        _ => HUDDLE_E_POST,
+    };
+    Failure::new(code, e.to_string())
+}
+
+/// Starts a node: opens the team's multicast socket on the interface, applies the
+/// config files, and runs the driver on a thread of its own until `huddle_node_stop`.
+/// Returns NULL on failure, with the reason in `err` (bad robot id, group, interface,
+/// key file, config directory or config line; the port or group could not be joined).
+///
+/// Thread safety: may be called from any thread.
+///
+/// # Safety
+///
+/// `cfg` is NULL or points to a valid `huddle_node_config` whose strings are NULL or
+/// NUL-terminated; `err` is NULL or points to a writable `huddle_error`.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_start(
+    cfg: *const huddle_node_config,
+    err: *mut huddle_error,
+) -> *mut huddle_node {
+    let body = || {
+        // SAFETY: the caller promises `cfg` is NULL or valid for reads.
+        let cfg = unsafe { cfg.as_ref() }.ok_or_else(|| Failure::null("cfg"))?;
+        let node = start(driver_config(cfg)?)?;
+        Ok(NODES.insert(Arc::new(node)))
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, std::ptr::null_mut(), body) }
+}
+
+/// Sets `key` (`*.var.x`: published to the team; `local.var.x`: this robot only) to the
+/// value the `literal` spells (`42`, `1.5`, `true`, `"text"`, `[1, 2.5]`, `0x0a0b`).
+/// A global value is on the wire when this returns. Returns 0, or -1 with `err` set.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `key` and `literal` are NULL or NUL-terminated strings; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set(
+    node: *mut huddle_node,
+    key: *const c_char,
+    literal: *const c_char,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        let node = lookup(node)?;
+        // SAFETY: the caller promises NULL or NUL-terminated strings.
+        let key = unsafe { read_str(key, "key") }?.to_owned();
+        // SAFETY: as above.
+        let value = parse_value(unsafe { read_str(literal, "literal") }?)?;
+        node.call(|reply| Command::Set { key, value, reply })?
+            .map_err(set_failure)?;
+        Ok(0)
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Reads `key` (`2.var.x`: robot 2's copy; `*.var.x`: the newest copy of any robot;
+/// `local.var.x`) into `out`: key as stored, type, value as a literal, owner, age in ms.
+/// Returns 1 when found, 0 when the key is unknown (`out` untouched), -1 on error.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `key` is NULL or NUL-terminated; `out` is NULL or points to a writable
+/// `huddle_binding`; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_get(
+    node: *mut huddle_node,
+    key: *const c_char,
+    out: *mut huddle_binding,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        let node = lookup(node)?;
+        // SAFETY: the caller promises a NULL or NUL-terminated string.
+        let key = unsafe { read_str(key, "key") }?.to_owned();
+        // SAFETY: the caller promises `out` is NULL or valid for writes.
+        let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
+        let found = node
+            .call(|reply| Command::Get { key, reply })?
+            .map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))?;
+        Ok(match found {
+            Some((key, entry, age)) => {
+                fill_binding(out, &key, &entry, age);
+                1
+            }
+            None => 0,
+        })
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Posts the value `literal` spells to this robot's talk queue `key` (`*.talk.plan`):
+/// every teammate gets it once, in order, as `HUDDLE_EVENT_TALK_DELIVERED` (or learns
+/// it was lost: `HUDDLE_EVENT_TALK_GIVEN_UP`). Writes its sequence number to `seq` when
+/// not NULL. Returns 0, or -1 with `err` set.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `key` and `literal` are NULL or NUL-terminated; `seq` is NULL or writable; `err` is
+/// NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_post(
+    node: *mut huddle_node,
+    key: *const c_char,
+    literal: *const c_char,
+    seq: *mut u64,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        let node = lookup(node)?;
+        // SAFETY: the caller promises NULL or NUL-terminated strings.
+        let key = unsafe { read_str(key, "key") }?.to_owned();
+        // SAFETY: as above.
+        let value = parse_value(unsafe { read_str(literal, "literal") }?)?;
+        let n = node
+            .call(|reply| Command::Post { key, value, reply })?
+            .map_err(post_failure)?;
+        // SAFETY: the caller promises `seq` is NULL or valid for writes.
+        if let Some(seq) = unsafe { seq.as_mut() } {
+            *seq = n;
+        }
+        Ok(0)
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Takes the next event (talk delivered or given up, peer joined, departed or
+/// restarted, events dropped) into `out`, waiting up to `timeout_ms` for one (0: do not
+/// wait). Returns 1 with an event, 0 when there was none, -1 on error. Events wait in a
+/// queue of 65,536; beyond that the oldest are dropped and `HUDDLE_EVENT_LAGGED` says
+/// how many. Events queued before `huddle_node_stop` can no longer be read after it.
+///
+/// Thread safety: may be called from any thread; several threads polling share one
+/// queue (each event goes to one of them).
+///
+/// # Safety
+///
+/// `out` is NULL or points to a writable `huddle_event`; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_next_event(
+    node: *mut huddle_node,
+    timeout_ms: u32,
+    out: *mut huddle_event,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        let node = lookup(node)?;
+        // SAFETY: the caller promises `out` is NULL or valid for writes.
+        let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
+        Ok(
+            match node.events.pop(Duration::from_millis(timeout_ms.into())) {
+                Some(event) => {
+                    fill_node_event(out, &event);
+                    1
+                }
+                None => 0,
+            },
+        )
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Stops the node (its thread ends, its socket closes) and releases it. The pointer is
+/// dead afterwards: any call with it returns -1 with `HUDDLE_E_STOPPED`, a second stop
+/// does nothing. NULL does nothing.
+///
+/// Thread safety: may be called from any thread; calls still running on other threads
+/// finish first or return `HUDDLE_E_STOPPED`.
+#[no_mangle]
+pub extern "C" fn huddle_node_stop(node: *mut huddle_node) {
+    let _ = std::panic::catch_unwind(|| {
+        if let Some(node) = NODES.remove(node) {
+            node.stop();
+        }
+    });
+}
