@@ -2,8 +2,10 @@
 
 #![forbid(unsafe_code)]
 
+use std::process::ExitCode;
+
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{ArgAction, CommandFactory, Parser, Subcommand};
 
 mod cli;
 
@@ -11,6 +13,12 @@ mod cli;
 #[derive(Parser, Debug)]
 #[command(name = "huddle", version, about, long_about = None)]
 struct Cli {
+    /// More log output: -v debug, -vv trace (instead of RUST_LOG).
+    #[arg(short, long, action = ArgAction::Count, global = true)]
+    verbose: u8,
+    /// Less log output: -q warnings only, -qq errors only (instead of RUST_LOG).
+    #[arg(short, long, action = ArgAction::Count, global = true, conflicts_with = "verbose")]
+    quiet: u8,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -29,28 +37,68 @@ enum Command {
     Get(cli::clients::GetArgs),
     /// Write a key (or post to a talk queue) through a daemon's relay.
     Set(cli::clients::SetArgs),
+    /// List the keys bound on a daemon (all, or those matching a pattern).
+    Keys(cli::clients::KeysArgs),
+    /// Stream changes as they happen, one line each (time, owner, key, value, age).
+    Echo(cli::clients::EchoArgs),
     /// Live table of the keys matching patterns (the seed's Monitor).
-    Watch(cli::clients::WatchArgs),
+    Watch(cli::watch::WatchArgs),
     /// A daemon's counters: frames, drops by reason, peers.
     Stats(cli::clients::StatsArgs),
     /// Measurements: `huddle bench comms`.
     Bench(cli::bench::BenchArgs),
+    /// Print a shell completion script: `huddle completions bash > /etc/bash_completion.d/huddle`.
+    Completions(cli::generate::CompletionsArgs),
+    /// Print the man page (roff): `huddle man > huddle.1`.
+    Man(cli::generate::ManArgs),
 }
 
-fn main() -> Result<()> {
-    cli::init_tracing();
-    let cli = Cli::parse();
-    match cli.command {
+fn run(command: Option<Command>) -> Result<()> {
+    match command {
         Some(Command::Audio(args)) => cli::audio::run(args),
         Some(Command::Fusion(args)) => cli::fusion::run(args),
         Some(Command::Sim(args)) => cli::sim::run(args),
         Some(Command::Daemon(args)) => cli::daemon::run(args),
         Some(Command::Get(args)) => cli::clients::get(args),
         Some(Command::Set(args)) => cli::clients::set(args),
-        Some(Command::Watch(args)) => cli::clients::watch(args),
+        Some(Command::Keys(args)) => cli::clients::keys(args),
+        Some(Command::Echo(args)) => cli::clients::echo(args),
+        Some(Command::Watch(args)) => cli::watch::watch(args),
         Some(Command::Stats(args)) => cli::clients::stats(args),
         Some(Command::Bench(args)) => cli::bench::run(args),
+        Some(Command::Completions(args)) => cli::generate::completions(args, Cli::command()),
+        Some(Command::Man(args)) => cli::generate::man(args, Cli::command()),
         // The README's main command: `cargo run --release` runs the built-in match.
         None => cli::sim::run(cli::sim::SimArgs::default()),
+    }
+}
+
+fn main() -> ExitCode {
+    // Output a reader stopped reading (`huddle sim | head -1`) is no reason for a panic
+    // message; anything else that panics is a bug and is reported as usual.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let text = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if text.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        default_hook(info);
+    }));
+    let cli = Cli::parse();
+    cli::init_tracing(cli.verbose, cli.quiet);
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if cli::is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}`: the message and its causes on one line, never a backtrace, whatever
+            // RUST_BACKTRACE says: these are the user's errors, not the program's.
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
     }
 }

@@ -20,7 +20,7 @@ fn start(id: u8, group: SocketAddrV4, dir: &std::path::Path) -> Daemon {
     let key = dir.join("team.key");
     let args = [
         "--refresh",
-        "50",
+        "50ms",
         "--team",
         "7",
         "--key-file",

@@ -16,7 +16,7 @@ fn daemon(id: u8) -> (Daemon, tempfile::TempDir) {
     let group = daemon_support::scratch_group().to_string();
     let relay_port = daemon_support::free_tcp_port();
     (
-        Daemon::start(id, &group, relay_port, &["--refresh", "100"], dir.path()),
+        Daemon::start(id, &group, relay_port, &["--refresh", "100ms"], dir.path()),
         dir,
     )
 }

@@ -7,7 +7,7 @@
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use audio::channel::{power, white_sigma_for_in_band_snr, Source, WhiteNoise};
@@ -20,6 +20,8 @@ use audio::{
     Encoder, EncoderConfig, Message, S16leDecoder, Sender,
 };
 use clap::{Args, Subcommand, ValueEnum};
+
+use super::duration;
 
 /// Acoustic messaging: the 72-tone codec.
 #[derive(Args, Debug)]
@@ -52,18 +54,18 @@ enum AudioCommand {
         /// One JSON object per line: {"t", "kind", "sender", "data"}.
         #[arg(long)]
         json: bool,
-        /// Tone duration the senders use, seconds.
-        #[arg(long, default_value_t = 1.0)]
-        duration: f64,
+        /// Tone duration the senders use (`1s`, `250ms`).
+        #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
+        duration: Duration,
     },
     /// Decode raw s16le mono PCM from stdin as it arrives (`arecord … | huddle audio listen`).
     Listen {
         /// Sample rate of the input, Hz.
         #[arg(long, default_value_t = 16_000)]
         rate: u32,
-        /// Tone duration the senders use, seconds.
-        #[arg(long, default_value_t = 1.0)]
-        duration: f64,
+        /// Tone duration the senders use (`1s`, `250ms`).
+        #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
+        duration: Duration,
         /// One JSON object per line.
         #[arg(long)]
         json: bool,
@@ -71,9 +73,9 @@ enum AudioCommand {
     /// Robustness report: decode rates vs SNR, false messages per hour, whistle, speed,
     /// delay, shortest tone. Seeded and reproducible.
     Eval {
-        /// Hours of each interference for the false-message rows.
-        #[arg(long, default_value_t = 0.1)]
-        hours: f64,
+        /// How long each interference plays for the false-message rows (`6min`, `1s`).
+        #[arg(long, default_value = "6min", value_parser = duration::parse_positive)]
+        noise_time: Duration,
         /// Seed of every trial.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -97,9 +99,9 @@ struct MessageArgs {
     /// Sample rate, Hz.
     #[arg(long, default_value_t = 16_000)]
     rate: u32,
-    /// Tone duration, seconds.
-    #[arg(long, default_value_t = 1.0)]
-    duration: f64,
+    /// Tone duration (`1s`, `250ms`).
+    #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
+    duration: Duration,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -122,8 +124,8 @@ impl MessageArgs {
     fn encoder(&self) -> Result<Encoder> {
         Ok(Encoder::new(EncoderConfig {
             sample_rate_hz: self.rate,
-            tone_duration_s: self.duration,
-            fade_s: (self.duration / 20.0).min(0.01),
+            tone_duration_s: self.duration.as_secs_f64(),
+            fade_s: (self.duration.as_secs_f64() / 20.0).min(0.01),
             ..EncoderConfig::default()
         })?)
     }
@@ -164,7 +166,7 @@ pub fn run(args: AudioArgs) -> Result<()> {
                 .with_context(|| format!("reading {}", input.display()))?;
             let mut d = Decoder::new(DecoderConfig {
                 sample_rate_hz: rec.sample_rate_hz,
-                tone_duration_s: duration,
+                tone_duration_s: duration.as_secs_f64(),
                 ..DecoderConfig::default()
             })?;
             let mut out = std::io::stdout().lock();
@@ -184,12 +186,12 @@ pub fn run(args: AudioArgs) -> Result<()> {
             rate,
             duration,
             json,
-        } => listen(rate, duration, json),
+        } => listen(rate, duration.as_secs_f64(), json),
         AudioCommand::Eval {
-            hours,
+            noise_time,
             seed,
             messages,
-        } => eval(hours, seed, messages),
+        } => eval(noise_time.as_secs_f64() / 3600.0, seed, messages),
     }
 }
 
@@ -266,8 +268,8 @@ fn percentile(v: &[f64], p: f64) -> f64 {
     huddle::summary::percentile(&s, p).unwrap_or(f64::NAN)
 }
 
-fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) {
-    println!(
+fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) -> Result<()> {
+    outln!(
         "{label:>6} {snr_db:>6.1} {:>8.1} {:>6} {:>8.2}% {:>6.2}% {:>5} {:>7.0} {:>7.0} {:>7.0}",
         es_n0_db(snr_db, tone_s),
         out.sent,
@@ -278,16 +280,17 @@ fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) {
         1000.0 * percentile(&out.delays_s, 0.95),
         1000.0 * percentile(&out.start_errors_s, 0.95),
     );
+    Ok(())
 }
 
 fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     let started = Instant::now();
-    println!("huddle audio eval — seed {seed}, {messages} messages per row, 16 kHz");
-    println!("in-band SNR = message power / noise power inside 500–4000 Hz (white noise);");
-    println!("Es/N0 = energy of one short message (six tones × tone duration) / noise PSD.");
-    println!();
-    println!("1 s tones, short messages, white noise:");
-    println!(
+    outln!("huddle audio eval — seed {seed}, {messages} messages per row, 16 kHz");
+    outln!("in-band SNR = message power / noise power inside 500–4000 Hz (white noise);");
+    outln!("Es/N0 = energy of one short message (six tones × tone duration) / noise PSD.");
+    outln!();
+    outln!("1 s tones, short messages, white noise:");
+    outln!(
         "{:>6} {:>6} {:>8} {:>6} {:>9} {:>7} {:>5} {:>7} {:>7} {:>7}",
         "",
         "SNR dB",
@@ -300,7 +303,7 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         "delay95",
         "t0err95"
     );
-    println!("{:>70}", "(ms)     (ms)    (ms)");
+    outln!("{:>70}", "(ms)     (ms)    (ms)");
     let trial = |snr_db: f64, tone_s: f64, n: usize, long_share: f64, s: u64| {
         run_snr_trial(&SnrTrial {
             seed: s,
@@ -323,7 +326,7 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     .enumerate()
     {
         let out = trial(snr, 1.0, messages, 0.0, seed.wrapping_add(i as u64))?;
-        snr_row("short", snr, 1.0, &out);
+        snr_row("short", snr, 1.0, &out)?;
         worst_wrong = worst_wrong.max(out.wrong_share());
         if snr == -13.0 {
             short_13 = Some(out.correct_share());
@@ -336,8 +339,8 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             ));
         }
     }
-    println!();
-    println!("1 s tones, long messages (two frames), white noise:");
+    outln!();
+    outln!("1 s tones, long messages (two frames), white noise:");
     for (i, snr) in [-13.0, -10.0, 0.0].into_iter().enumerate() {
         let out = trial(
             snr,
@@ -346,11 +349,11 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             1.0,
             seed.wrapping_add(100 + i as u64),
         )?;
-        snr_row("long", snr, 1.0, &out);
+        snr_row("long", snr, 1.0, &out)?;
         worst_wrong = worst_wrong.max(out.wrong_share());
     }
-    println!();
-    println!("1 s tones, short, sender 0.5% sharp:");
+    outln!();
+    outln!("1 s tones, short, sender 0.5% sharp:");
     let out = run_snr_trial(&SnrTrial {
         seed: seed.wrapping_add(200),
         snr_db: -13.0,
@@ -360,11 +363,11 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         long_share: 0.0,
         frequency_error: 0.005,
     })?;
-    snr_row("+0.5%", -13.0, 1.0, &out);
+    snr_row("+0.5%", -13.0, 1.0, &out)?;
     worst_wrong = worst_wrong.max(out.wrong_share());
 
-    println!();
-    println!("Shortest tone that still decodes ≥ 99% at 0 dB (short messages):");
+    outln!();
+    outln!("Shortest tone that still decodes ≥ 99% at 0 dB (short messages):");
     let mut shortest = None;
     let mut tones_100 = None;
     for (i, tone_s) in [0.2, 0.15, 0.1, 0.08, 0.06, 0.05, 0.04]
@@ -372,7 +375,7 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         .enumerate()
     {
         if tone_s < audio::MIN_TONE_DURATION_S {
-            println!(
+            outln!(
                 "  {:>4.0} ms tones: refused by the decoder (shortest {:.0} ms)",
                 tone_s * 1000.0,
                 audio::MIN_TONE_DURATION_S * 1000.0
@@ -386,7 +389,7 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
             0.0,
             seed.wrapping_add(300 + i as u64),
         )?;
-        println!(
+        outln!(
             "  {:>4.0} ms tones: {:>6.2}% correct, {:.2}% wrong, {} extra ({} sent)",
             tone_s * 1000.0,
             100.0 * out.correct_share(),
@@ -403,17 +406,17 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         }
     }
     match shortest {
-        Some(t) => println!("  shortest ≥ 99%: {:.0} ms", t * 1000.0),
-        None => println!("  none of these reached 99%"),
+        Some(t) => outln!("  shortest ≥ 99%: {:.0} ms", t * 1000.0),
+        None => outln!("  none of these reached 99%"),
     }
 
-    println!();
-    println!("False messages, nothing sent ({hours} h of each):");
+    outln!();
+    outln!("False messages, nothing sent ({hours} h of each):");
     let mut false_total = 0;
     for (i, kind) in Interference::ALL.into_iter().enumerate() {
         let out = run_false_alarm_trial(kind, hours, seed.wrapping_add(400 + i as u64));
         false_total += out.false_messages;
-        println!(
+        outln!(
             "  {:<16} {:>4} false in {:.2} h  ({:.2} per hour)",
             kind.name(),
             out.false_messages,
@@ -422,50 +425,50 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         );
     }
 
-    println!();
+    outln!();
     let n = (messages / 4).max(20);
     let out = run_whistle_over_messages(n, seed.wrapping_add(500));
-    println!(
+    outln!(
         "Whistle sweep over a message (10 dB SNR, whistle −10…+20 dB): {} sent, {} correct, {} wrong, {} extra",
         out.sent, out.correct, out.wrong, out.spurious
     );
 
-    println!();
+    outln!();
     let (samples, seconds) = decode_speed(seed)?;
     let per_s = samples as f64 / seconds;
-    println!(
+    outln!(
         "Decode speed: {:.2e} samples/s on one core = {:.0}× real time at 16 kHz",
         per_s,
         per_s / 16_000.0
     );
 
-    println!();
-    println!("Against the issue's targets (seed {seed}):");
+    outln!();
+    outln!("Against the issue's targets (seed {seed}):");
     let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
     if let Some(c) = short_13 {
-        println!(
+        outln!(
             "  short at -13 dB, 1 s tones     {:>7.2}%   target >= 99%      {}",
             100.0 * c,
             verdict(c >= 0.99)
         );
     }
-    println!(
+    outln!(
         "  worst wrong share, any row     {:>7.2}%   target <= 0.1%     {}",
         100.0 * worst_wrong,
         verdict(worst_wrong <= 0.001)
     );
-    println!(
+    outln!(
         "  false messages, all noises     {:>8}   target 0 in {hours} h each {}",
         false_total,
         verdict(false_total == 0)
     );
-    println!(
+    outln!(
         "  decode speed                   {:>7.0}×   target >= 1000×    {}",
         per_s / 16_000.0,
         verdict(per_s / 16_000.0 >= 1000.0)
     );
     for (snr, d50, d95) in &delays {
-        println!(
+        outln!(
             "  report delay at {:>5.1} dB       {:>4.0} ms median, {:>4.0} ms p95   target <= 100 ms  {}",
             snr,
             1000.0 * d50,
@@ -474,13 +477,13 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         );
     }
     if let Some(c) = tones_100 {
-        println!(
+        outln!(
             "  100 ms tones at 0 dB           {:>7.2}%   target >= 99%      {}",
             100.0 * c,
             verdict(c >= 0.99)
         );
     }
-    println!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
+    outln!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
     Ok(())
 }
 

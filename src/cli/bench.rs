@@ -23,7 +23,7 @@ use nix::sched::{sched_setaffinity, CpuSet};
 use nix::unistd::Pid;
 use serde::Serialize;
 
-use super::clients::RelayClient;
+use super::relay::RelayClient;
 
 /// `huddle bench ...`
 #[derive(Args, Debug)]
@@ -47,7 +47,7 @@ pub struct CommsArgs {
     pub json: bool,
     /// Ping-pong round trips per measurement, split into interleaved blocks of raw,
     /// bare tokio and huddle (each block after its own warm-up).
-    #[arg(long, default_value_t = 5000)]
+    #[arg(long, default_value_t = 5000, value_parser = at_least_one)]
     pub rounds: usize,
     /// CPU pinning of the two ends of every ping-pong (the same for all three): `none`,
     /// `same` (both ends on CPU 0) or `split` (pinger on CPU 0, ponger on CPU 1).
@@ -59,11 +59,20 @@ pub struct CommsArgs {
     #[arg(long, default_value = "watch")]
     pub reply: Reply,
     /// Updates sent A → B in the throughput run.
-    #[arg(long, default_value_t = 2_000_000)]
+    #[arg(long, default_value_t = 2_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub updates: u64,
     /// First of the four UDP ports used (each test its own group and port).
     #[arg(long, default_value_t = 38900)]
     pub port: u16,
+}
+
+/// A count of at least one (no measurement is made of nothing).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("0 measures nothing: give at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("{s:?} is not a count: {e}")),
+    }
 }
 
 /// Where the two ends of a ping-pong run.
@@ -621,7 +630,7 @@ fn rss_with_10k_keys(g: SocketAddrV4, relay_port: u16) -> Result<f64> {
     let result = (|| -> Result<f64> {
         let deadline = Instant::now() + Duration::from_secs(10);
         let mut client = loop {
-            match RelayClient::connect(relay) {
+            match RelayClient::connect_addr(relay) {
                 Ok(c) => break c,
                 Err(_) if Instant::now() < deadline => {
                     std::thread::sleep(Duration::from_millis(20))
@@ -720,30 +729,33 @@ pub fn run(args: BenchArgs) -> Result<()> {
         },
     };
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?);
     } else {
         let r = &report;
-        println!(
+        outln!(
             "loopback multicast ping-pong ({} round trips each, pinning {:?}, reply by {:?}, {} build)",
             args.rounds, r.pin, r.reply, r.build
         );
-        println!(
+        outln!(
             "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",
-            r.raw_p50_us, r.raw_p99_us
+            r.raw_p50_us,
+            r.raw_p99_us
         );
-        println!(
+        outln!(
             "  bare tokio        p50 {:7.1} us   p99 {:7.1} us   (p50 {:.2}x raw: the cost of tokio)",
             r.tokio_p50_us, r.tokio_p99_us, r.tokio_p50_ratio
         );
-        println!(
+        outln!(
             "  huddle replicas   p50 {:7.1} us   p99 {:7.1} us",
-            r.huddle_p50_us, r.huddle_p99_us
+            r.huddle_p50_us,
+            r.huddle_p99_us
         );
-        println!(
+        outln!(
             "  ratio             p50 {:7.2}      p99 {:7.2}   (target p50 <= 1.5)",
-            r.p50_ratio, r.p99_ratio
+            r.p50_ratio,
+            r.p99_ratio
         );
-        println!(
+        outln!(
             "sustained A -> B    {:.0} updates/s, {} of {} updates applied, frame loss {:.4}% ({} of {} frames)   (target >= 500000, no loss)",
             r.updates_per_s,
             r.updates_applied,
@@ -752,8 +764,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
             r.frames_sent - r.frames_received.min(r.frames_sent),
             r.frames_sent
         );
-        println!("  receive buffer granted {} bytes", r.recv_buffer_bytes);
-        println!(
+        outln!("  receive buffer granted {} bytes", r.recv_buffer_bytes);
+        outln!(
             "daemon RSS with 10,000 keys: {:.1} MB   (target <= 20)",
             r.rss_mb_10k_keys
         );

@@ -1,29 +1,34 @@
-//! The command-line clients: `huddle get`, `set`, `watch` (the seed's Monitor) and
-//! `stats`. Each speaks the relay line protocol to a daemon (`--relay ADDR:PORT`).
+//! The command-line clients: `huddle get`, `set`, `keys`, `echo` and `stats` (`watch`,
+//! the seed's Monitor, is in `watch.rs`). Each speaks the relay line protocol to a daemon
+//! (`--relay`, default `HUDDLE_RELAY` or 127.0.0.1:2001).
 
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader, IsTerminal, Write};
-use std::net::{SocketAddr, TcpStream};
-use std::sync::mpsc;
+use std::io::Write;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use comms::relay::Binding;
+use serde_json::json;
 
-/// Where the daemon's relay listens.
-#[derive(Args, Debug, Clone)]
-pub struct RelayAddr {
-    /// The daemon's relay address.
-    #[arg(long, default_value = "127.0.0.1:2001")]
-    pub relay: SocketAddr,
-}
+use super::duration;
+use super::feed::{Feed, FeedEvent};
+use super::relay::{binding_json, utc_now, RelayAddr, RelayClient, RelayTarget};
 
 /// `huddle get KEY`
 #[derive(Args, Debug)]
 pub struct GetArgs {
     /// Key: `*.var.x` (newest copy of any robot), `3.var.x`, `local.var.x`.
     pub key: String,
+    /// Print one JSON object: key, owner, type, value, age_ms.
+    #[arg(long)]
+    pub json: bool,
+    /// Wait for the key to appear instead of failing at once.
+    #[arg(long)]
+    pub wait: bool,
+    /// With `--wait`: give up after this long (`5s`; default: wait until it appears).
+    #[arg(long, requires = "wait", value_parser = duration::parse)]
+    pub timeout: Option<Duration>,
     #[command(flatten)]
     pub relay: RelayAddr,
 }
@@ -41,15 +46,34 @@ pub struct SetArgs {
     pub relay: RelayAddr,
 }
 
-/// `huddle watch PATTERN...`
+/// `huddle keys [PATTERN]`
 #[derive(Args, Debug)]
-pub struct WatchArgs {
-    /// Patterns: `+` one level, `#` the rest (`+.var.machine.#`, `2.var.#`).
+pub struct KeysArgs {
+    /// Pattern: `+` one level, `#` the rest (default `#`: every key).
+    #[arg(default_value = "#")]
+    pub pattern: String,
+    /// With each key its owner, type, value and age.
+    #[arg(long, short)]
+    pub long: bool,
+    /// One JSON object per line (as `get --json`).
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub relay: RelayAddr,
+}
+
+/// `huddle echo PATTERN...`
+#[derive(Args, Debug)]
+pub struct EchoArgs {
+    /// Patterns: `+` one level, `#` the rest (`+.var.ball.#`, `+.talk.plan`).
     #[arg(required = true)]
     pub patterns: Vec<String>,
-    /// Refresh interval in milliseconds.
-    #[arg(long, default_value_t = 500)]
-    pub interval: u64,
+    /// One JSON object per line: time, owner, key, type, value, age_ms.
+    #[arg(long)]
+    pub json: bool,
+    /// Exit after this many updates.
+    #[arg(long, short = 'n', value_name = "N")]
+    pub count: Option<u64>,
     #[command(flatten)]
     pub relay: RelayAddr,
 }
@@ -57,207 +81,194 @@ pub struct WatchArgs {
 /// `huddle stats`
 #[derive(Args, Debug)]
 pub struct StatsArgs {
+    /// Print one JSON object: every counter, drops by reason, peers' last-heard age.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub relay: RelayAddr,
 }
 
-/// A blocking relay connection.
-pub struct RelayClient {
-    reader: BufReader<TcpStream>,
-    writer: TcpStream,
-    /// The greeting line.
-    pub greeting: String,
-}
-
-impl RelayClient {
-    /// Connects and reads the greeting.
-    pub fn connect(addr: SocketAddr) -> Result<RelayClient> {
-        let stream =
-            TcpStream::connect_timeout(&addr, Duration::from_secs(2)).with_context(|| {
-                format!("cannot reach a huddle relay at {addr} (is the daemon running?)")
-            })?;
-        stream.set_nodelay(true)?;
-        let writer = stream.try_clone()?;
-        let mut client = RelayClient {
-            reader: BufReader::new(stream),
-            writer,
-            greeting: String::new(),
-        };
-        client.greeting = client.line()?;
-        if !client.greeting.starts_with("HUDDLE ") {
-            bail!(
-                "{addr} is not a huddle relay (it said {:?})",
-                client.greeting
-            );
-        }
-        Ok(client)
+fn print_binding(out: &mut impl Write, b: &Binding, json: bool) -> Result<()> {
+    if json {
+        writeln!(out, "{}", binding_json(b))?;
+    } else {
+        writeln!(out, "{} {} {} (age {} ms)", b.key, b.ty, b.value, b.age_ms)?;
     }
-
-    /// Sends one command line.
-    pub fn send(&mut self, line: &str) -> Result<()> {
-        self.writer.write_all(line.as_bytes())?;
-        self.writer.write_all(b"\n")?;
-        Ok(())
-    }
-
-    /// Reads one line, without its terminator.
-    pub fn line(&mut self) -> Result<String> {
-        let mut s = String::new();
-        if self.reader.read_line(&mut s)? == 0 {
-            bail!("the relay closed the connection");
-        }
-        Ok(s.trim_end_matches(['\r', '\n']).to_owned())
-    }
-
-    /// Sends a command and reads its one-line answer; `ERR` becomes an error.
-    pub fn request(&mut self, line: &str) -> Result<String> {
-        self.send(line)?;
-        let answer = self.line()?;
-        match answer.strip_prefix("ERR ") {
-            Some(err) => Err(anyhow!("relay refused {line:?}: {err}")),
-            None => Ok(answer),
-        }
-    }
-
-    /// Reads lines until the `stop` line, returning those before it.
-    pub fn lines_until(&mut self, stop: &str) -> Result<Vec<String>> {
-        let mut out = Vec::new();
-        loop {
-            let line = self.line()?;
-            if line == stop {
-                return Ok(out);
-            }
-            out.push(line);
-        }
-    }
-
-    fn into_reader(self) -> BufReader<TcpStream> {
-        self.reader
-    }
+    Ok(())
 }
 
 /// `huddle get`
 pub fn get(args: GetArgs) -> Result<()> {
-    let mut c = RelayClient::connect(args.relay.relay)?;
-    let answer = c.request(&format!("GETV {}", args.key))?;
-    let b = Binding::parse(&answer).ok_or_else(|| anyhow!("unexpected answer {answer:?}"))?;
-    println!("{} {} {} (age {} ms)", b.key, b.ty, b.value, b.age_ms);
+    let mut c = RelayClient::connect(&args.relay.relay)?;
+    let started = Instant::now();
+    let b = loop {
+        match c.get(&args.key)? {
+            Some(b) => break b,
+            None if !args.wait => bail!("no value for {} (wait for it with --wait)", args.key),
+            None => match args.timeout {
+                Some(limit) if started.elapsed() >= limit => {
+                    bail!("no value for {} after {}", args.key, duration::show(limit))
+                }
+                _ => std::thread::sleep(Duration::from_millis(20)),
+            },
+        }
+    };
+    print_binding(&mut std::io::stdout().lock(), &b, args.json)?;
     let _ = c.send("QUIT");
     Ok(())
 }
 
 /// `huddle set`
 pub fn set(args: SetArgs) -> Result<()> {
-    let mut c = RelayClient::connect(args.relay.relay)?;
+    let mut c = RelayClient::connect(&args.relay.relay)?;
     c.request(&format!("SETV {} {}", args.key, args.value.join(" ")))?;
     let _ = c.send("QUIT");
     Ok(())
 }
 
-/// `huddle watch`: a live table of key, owner, value and age, redrawn in place on a
-/// terminal; on a pipe, one line per update.
-pub fn watch(args: WatchArgs) -> Result<()> {
-    let mut c = RelayClient::connect(args.relay.relay)?;
-    for p in &args.patterns {
-        c.request(&format!("ADDW {p}"))?;
-    }
-    c.request(&format!("REFR {}", args.interval))?;
-    let tty = std::io::stdout().is_terminal();
-    let (tx, rx) = mpsc::channel::<String>();
-    let mut reader = c.into_reader();
-    std::thread::spawn(move || {
-        let mut s = String::new();
-        while matches!(reader.read_line(&mut s), Ok(n) if n > 0) {
-            if tx.send(s.trim_end().to_owned()).is_err() {
-                return;
-            }
-            s.clear();
-        }
-    });
-    let interval = Duration::from_millis(args.interval.max(50));
-    let mut table: BTreeMap<String, (Binding, Instant)> = BTreeMap::new();
-    let mut next_draw = Instant::now();
+/// `huddle keys`
+pub fn keys(args: KeysArgs) -> Result<()> {
+    let mut c = RelayClient::connect(&args.relay.relay)?;
+    let all = c.snapshot(&[args.pattern.as_str()])?;
     let mut out = std::io::stdout().lock();
-    loop {
-        let wait = next_draw.saturating_duration_since(Instant::now());
-        match rx.recv_timeout(wait) {
-            Ok(line) => match Binding::parse(&line) {
-                Some(b) if tty => {
-                    table.insert(b.key.clone(), (b, Instant::now()));
-                }
-                Some(b) => writeln!(
-                    out,
-                    "{}\t{}\t{}\t{} ms",
-                    b.key,
-                    b.owner(),
-                    b.value,
-                    b.age_ms
-                )?,
-                None => eprintln!("relay: {line}"),
-            },
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the relay closed the connection"),
-        }
-        if tty && Instant::now() >= next_draw {
-            draw(&mut out, &args.patterns, &table)?;
-            next_draw = Instant::now() + interval;
+    for b in &all {
+        if args.json {
+            writeln!(out, "{}", binding_json(b))?;
+        } else if args.long {
+            writeln!(
+                out,
+                "{}\t{}\t{}\t{}\t{}ms",
+                b.key,
+                b.owner(),
+                b.ty,
+                b.value,
+                b.age_ms
+            )?;
+        } else {
+            writeln!(out, "{}", b.key)?;
         }
     }
-}
-
-fn draw(
-    out: &mut impl Write,
-    patterns: &[String],
-    table: &BTreeMap<String, (Binding, Instant)>,
-) -> Result<()> {
-    // Home, clear screen: redraw in place.
-    write!(out, "\x1b[H\x1b[2J")?;
-    writeln!(out, "huddle watch {}", patterns.join(" "))?;
-    writeln!(out, "{:<40} {:>6} {:>10}  value", "key", "owner", "age")?;
-    for (b, seen) in table.values() {
-        let age_ms = b.age_ms + seen.elapsed().as_millis() as u64;
-        writeln!(
-            out,
-            "{:<40} {:>6} {:>7} ms  {}",
-            b.key,
-            b.owner(),
-            age_ms,
-            b.value
-        )?;
-    }
-    out.flush()?;
     Ok(())
 }
 
-/// The daemon's counters as `(name, value, age_ms)`, read from `local.var.huddle.stats.#`.
-pub fn fetch_stats(relay: SocketAddr) -> Result<Vec<Binding>> {
-    let mut c = RelayClient::connect(relay)?;
-    c.request("ADDW local.var.huddle.stats.#")?;
-    // REFR pushes the current state at once; QUIT's BYE marks its end.
-    c.send("REFR 3600000")?;
-    c.send("QUIT")?;
-    let lines = c.lines_until("BYE")?;
-    Ok(lines.iter().filter_map(|l| Binding::parse(l)).collect())
+/// One pushed line as `echo` prints it; `None` for lines that are not news.
+fn echo_line(line: &str, json: bool) -> Option<String> {
+    let time = utc_now();
+    if let Some(b) = Binding::parse(line) {
+        return Some(if json {
+            let mut v = binding_json(&b);
+            v["time"] = json!(time);
+            v.to_string()
+        } else {
+            format!(
+                "{time}\t{}\t{}\t{}\t{}ms",
+                b.owner(),
+                b.key,
+                b.value,
+                b.age_ms
+            )
+        });
+    }
+    // Talk messages given up by the replica (`LOST …`): never dropped silently.
+    let lost = line.strip_prefix("LOST ")?;
+    Some(if json {
+        json!({"time": time, "lost": lost}).to_string()
+    } else {
+        format!("{time}\tLOST\t{lost}")
+    })
+}
+
+/// `huddle echo`: each change as it happens, one line each (like `mosquitto_sub -v` or
+/// `ros2 topic echo`), reconnecting when the daemon restarts.
+pub fn echo(args: EchoArgs) -> Result<()> {
+    let feed = Feed::start(args.relay.relay.clone(), args.patterns.clone(), 0)?;
+    let mut out = std::io::stdout().lock();
+    let mut printed = 0u64;
+    if args.count == Some(0) {
+        return Ok(());
+    }
+    loop {
+        match feed.next()? {
+            FeedEvent::Line(line) => match echo_line(&line, args.json) {
+                Some(text) => {
+                    writeln!(out, "{text}")?;
+                    out.flush()?;
+                    printed += 1;
+                    if args.count.is_some_and(|n| printed >= n) {
+                        return Ok(());
+                    }
+                }
+                None => tracing::warn!("relay: {line}"),
+            },
+            FeedEvent::Connected(greeting) => {
+                tracing::info!(%greeting, "reconnected to the relay")
+            }
+            FeedEvent::Down { reason, retry_in } => tracing::warn!(
+                "{reason}; reconnecting to {} in {}",
+                args.relay.relay,
+                duration::show(retry_in)
+            ),
+        }
+    }
+}
+
+/// The daemon's counters, read from `local.var.huddle.stats.#`.
+pub fn fetch_stats(relay: &RelayTarget) -> Result<Vec<Binding>> {
+    RelayClient::connect(relay)?.snapshot(&["local.var.huddle.stats.#"])
+}
+
+fn stat_name(b: &Binding) -> &str {
+    b.key.trim_start_matches("local.var.huddle.stats.")
+}
+
+/// `huddle stats --json`: counters by name, `drops` by reason, `peers` by robot.
+fn stats_json(all: &[Binding]) -> serde_json::Value {
+    let mut counters = serde_json::Map::new();
+    let mut drops = BTreeMap::new();
+    let mut peers = BTreeMap::new();
+    for b in all {
+        let n = stat_name(b);
+        let v: i64 = b.value.parse().unwrap_or(0);
+        if let Some(reason) = n.strip_prefix("drops.") {
+            drops.insert(reason.to_owned(), v);
+        } else if let Some(robot) = n
+            .strip_prefix("peer.")
+            .and_then(|r| r.strip_suffix(".last_heard_us"))
+        {
+            peers.insert(robot.to_owned(), json!({ "last_heard_ms": b.age_ms }));
+        } else {
+            counters.insert(n.to_owned(), json!(v));
+        }
+    }
+    counters.insert("drops".into(), json!(drops));
+    counters.insert("peers".into(), json!(peers));
+    serde_json::Value::Object(counters)
 }
 
 /// `huddle stats`
 pub fn stats(args: StatsArgs) -> Result<()> {
-    let all = fetch_stats(args.relay.relay)?;
-    let name = |b: &Binding| {
-        b.key
-            .trim_start_matches("local.var.huddle.stats.")
-            .to_owned()
+    let all = fetch_stats(&args.relay.relay)?;
+    let mut out = std::io::stdout().lock();
+    if args.json {
+        writeln!(out, "{}", stats_json(&all))?;
+        return Ok(());
+    }
+    let get = |n: &str| {
+        all.iter()
+            .find(|b| stat_name(b) == n)
+            .map(|b| b.value.clone())
     };
-    let get = |n: &str| all.iter().find(|b| name(b) == n).map(|b| b.value.clone());
     let or0 = |n: &str| get(n).unwrap_or_else(|| "0".into());
-    println!(
+    writeln!(
+        out,
         "frames in {}  out {}   bytes in {}  out {}",
         or0("frames_in"),
         or0("frames_out"),
         or0("bytes_in"),
         or0("bytes_out")
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "updates applied {}  stale {}   talk delivered {}  given up {}  resent {}  nacks {}",
         or0("updates_applied"),
         or0("updates_stale"),
@@ -265,16 +276,16 @@ pub fn stats(args: StatsArgs) -> Result<()> {
         or0("talk_given_up"),
         or0("talk_resent"),
         or0("nacks_sent")
-    );
+    )?;
     let drops: Vec<String> = all
         .iter()
         .filter_map(|b| {
-            let n = name(b);
-            let reason = n.strip_prefix("drops.")?;
+            let reason = stat_name(b).strip_prefix("drops.")?;
             (reason != "total" && b.value != "0").then(|| format!("{reason} {}", b.value))
         })
         .collect();
-    println!(
+    writeln!(
+        out,
         "drops {}{}",
         or0("drops.total"),
         if drops.is_empty() {
@@ -282,17 +293,51 @@ pub fn stats(args: StatsArgs) -> Result<()> {
         } else {
             format!(" ({})", drops.join(", "))
         }
-    );
+    )?;
     for b in &all {
-        let n = name(b);
-        if let Some(robot) = n
+        if let Some(robot) = stat_name(b)
             .strip_prefix("peer.")
             .and_then(|r| r.strip_suffix(".last_heard_us"))
         {
             // The counter is mirrored once per refresh period when it moves, so its age
             // is the time since the peer was last heard, to within one period.
-            println!("peer {robot}: last heard {} ms ago", b.age_ms);
+            writeln!(out, "peer {robot}: last heard {} ms ago", b.age_ms)?;
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn echo_prints_time_owner_key_value_age_and_never_drops_a_loss() {
+        let line = echo_line("UPD 3.var.ball.dist float 1.5 12", false).unwrap();
+        let fields: Vec<&str> = line.split('\t').collect();
+        assert_eq!(&fields[1..], ["3", "3.var.ball.dist", "1.5", "12ms"]);
+        let v: serde_json::Value =
+            serde_json::from_str(&echo_line("UPD 3.var.n int 7 0", true).unwrap()).unwrap();
+        assert_eq!(v["value"], json!(7));
+        assert_eq!(v["owner"], json!("3"));
+        assert!(v["time"].is_string());
+        let lost = echo_line("LOST 3.talk.plan 4 6", false).unwrap();
+        assert!(lost.ends_with("\tLOST\t3.talk.plan 4 6"), "{lost}");
+        assert_eq!(echo_line("OK", false), None);
+    }
+
+    #[test]
+    fn stats_json_groups_drops_and_peers() {
+        let b = |line: &str| Binding::parse(line).unwrap();
+        let all = [
+            b("UPD local.var.huddle.stats.frames_in int 10 0"),
+            b("UPD local.var.huddle.stats.drops.total int 2 0"),
+            b("UPD local.var.huddle.stats.drops.garbage int 2 0"),
+            b("UPD local.var.huddle.stats.peer.3.last_heard_us int 99 40"),
+        ];
+        let v = stats_json(&all);
+        assert_eq!(v["frames_in"], json!(10));
+        assert_eq!(v["drops"]["garbage"], json!(2));
+        assert_eq!(v["peers"]["3"]["last_heard_ms"], json!(40));
+    }
 }

@@ -7,6 +7,9 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
+
+use super::duration;
+use super::relay::RelayTarget;
 use comms::ReplicaConfig;
 use driver::{resolve_iface, Driver, DriverConfig};
 use huddle::impair::LinkImpairment;
@@ -30,9 +33,10 @@ pub struct DaemonArgs {
     /// Also send every frame by unicast to this teammate (repeatable).
     #[arg(long = "peer")]
     pub peers: Vec<SocketAddr>,
-    /// Relay listening address; any other than loopback must be given explicitly.
-    #[arg(long, default_value = "127.0.0.1:2001")]
-    pub relay: SocketAddr,
+    /// Relay listening address: host:port, a port (on 127.0.0.1) or a host name (port
+    /// 2001); any other than loopback must be given explicitly.
+    #[arg(long, env = "HUDDLE_RELAY", default_value = "127.0.0.1:2001")]
+    pub relay: RelayTarget,
     /// Directory of config.dat and config-<id>.dat.
     #[arg(long, default_value = ".")]
     pub config_dir: PathBuf,
@@ -40,9 +44,9 @@ pub struct DaemonArgs {
     /// whitespace ignored); untagged or badly tagged frames are dropped.
     #[arg(long)]
     pub key_file: Option<PathBuf>,
-    /// Refresh period of every global value, in milliseconds.
-    #[arg(long, default_value_t = 100)]
-    pub refresh: u64,
+    /// Refresh period of every global value (`100ms`, `1s`).
+    #[arg(long, default_value = "100ms", value_parser = duration::parse_positive)]
+    pub refresh: Duration,
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
@@ -87,21 +91,30 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     if !comms::ROBOT_IDS.contains(&id) {
         bail!("robot id {id} is outside 1..=254");
     }
-    if args.refresh == 0 {
-        bail!("--refresh must be at least 1 ms");
+    if args.refresh.is_zero() {
+        bail!("--refresh must be positive");
     }
-    let mut replica =
-        ReplicaConfig::new(id, args.team).with_refresh_period(Duration::from_millis(args.refresh));
-    if let Some(file) = &args.key_file {
-        let bytes = std::fs::read(file)
-            .with_context(|| format!("cannot read key file {}", file.display()))?;
-        let key = bytes.trim_ascii_end();
-        if key.is_empty() {
-            bail!("key file {} is empty", file.display());
+    let mut replica = ReplicaConfig::new(id, args.team).with_refresh_period(args.refresh);
+    // Say what was loaded (never the key itself): a robot that cannot hear its team
+    // usually runs with another key or config than its teammates.
+    match &args.key_file {
+        Some(file) => {
+            let key = driver::read_key_file(file)?;
+            tracing::info!(
+                "team key: {} (untagged or badly tagged frames are dropped)",
+                file.display()
+            );
+            replica = replica.with_team_key(key);
         }
-        replica = replica.with_team_key(key.to_vec());
+        None => tracing::info!("team key: none (frames are not authenticated)"),
     }
-    let entries = driver::load_config(&args.config_dir, id)?;
+    let loaded = driver::load_config_files(&args.config_dir, id)?;
+    tracing::info!(
+        "config: {} ({})",
+        loaded.summary(),
+        args.config_dir.display()
+    );
+    let entries = loaded.entries;
     let mut config = DriverConfig::new(replica);
     config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
     config.socket.group = args.group;
@@ -123,7 +136,8 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         .build()?;
     let local = tokio::task::LocalSet::new();
     local.block_on(&runtime, async move {
-        let relay = std::net::TcpListener::bind(args.relay).map_err(|e| {
+        let relay_addrs = args.relay.resolve()?;
+        let relay = std::net::TcpListener::bind(&relay_addrs[..]).map_err(|e| {
             anyhow!(
                 "cannot open the relay port {}: {e}{}",
                 args.relay,

@@ -11,6 +11,8 @@ use huddle::sim::{NetworkConfig, SimConfig, Simulation};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use netsim::Preset;
 
+use super::duration;
+
 /// Arguments of `huddle sim`.
 #[derive(Args, Debug, Clone)]
 pub struct SimArgs {
@@ -21,7 +23,7 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 3)]
     pub opponents: usize,
     /// Simulated duration, with its unit: `300s`, `5min`.
-    #[arg(long, default_value = "300s", value_parser = parse_duration)]
+    #[arg(long, default_value = "300s", value_parser = duration::parse)]
     pub duration: Duration,
     /// Network preset: lan, wlan, competition.
     #[arg(long, default_value = "competition")]
@@ -30,10 +32,10 @@ pub struct SimArgs {
     #[arg(long, value_parser = parse_fraction)]
     pub loss: Option<f64>,
     /// One-way latency, `50ms` (replaces the preset's).
-    #[arg(long, value_parser = parse_duration)]
+    #[arg(long, value_parser = duration::parse)]
     pub latency: Option<Duration>,
     /// Latency jitter, `20ms` (replaces the preset's).
-    #[arg(long, value_parser = parse_duration)]
+    #[arg(long, value_parser = duration::parse)]
     pub jitter: Option<Duration>,
     /// Seed of everything random: the same seed gives the same match.
     #[arg(long, default_value_t = 1)]
@@ -61,12 +63,6 @@ impl Default for SimArgs {
             json: false,
         }
     }
-}
-
-/// A duration with its unit (`300s`, `5min`, `50ms`), as netsim's spec strings take it: a
-/// bare `50` is refused, not read as 50 s.
-fn parse_duration(s: &str) -> Result<Duration, String> {
-    netsim::parse_duration("duration", s.trim()).map_err(|e| e.to_string())
 }
 
 /// `20%` or `0.2`, within 0..=1.
@@ -117,11 +113,11 @@ pub fn run(args: SimArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?);
     } else {
-        println!("{report}");
+        outln!("{report}");
         if let Some(path) = &args.svg {
-            println!("picture               {}", path.display());
+            outln!("picture               {}", path.display());
         }
     }
     Ok(())
@@ -133,10 +129,10 @@ mod tests {
 
     #[test]
     fn durations_and_fractions_parse_as_written_in_the_issue() {
-        assert_eq!(parse_duration("300s"), Ok(Duration::from_secs(300)));
-        assert_eq!(parse_duration("50ms"), Ok(Duration::from_millis(50)));
-        assert_eq!(parse_duration("5min"), Ok(Duration::from_secs(300)));
-        assert!(parse_duration("5 parsecs").is_err());
+        assert_eq!(duration::parse("300s"), Ok(Duration::from_secs(300)));
+        assert_eq!(duration::parse("50ms"), Ok(Duration::from_millis(50)));
+        assert_eq!(duration::parse("5min"), Ok(Duration::from_secs(300)));
+        assert!(duration::parse("5 parsecs").is_err());
         assert_eq!(parse_fraction("20%"), Ok(0.2));
         assert_eq!(parse_fraction("0.3"), Ok(0.3));
         assert!(parse_fraction("120%").is_err());
@@ -145,7 +141,10 @@ mod tests {
     #[test]
     fn a_duration_without_a_unit_is_refused_not_guessed() {
         // Read as seconds, `--latency 50` would be a typo that silently ruins a run.
-        let err = parse_duration("50").expect_err("no unit");
-        assert!(err.contains("50ms"), "the error shows the form: {err}");
+        let err = duration::parse("50").expect_err("no unit");
+        assert!(
+            err.contains("50ms") && err.contains("50s"),
+            "the error shows the form: {err}"
+        );
     }
 }

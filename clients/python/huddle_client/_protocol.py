@@ -1,0 +1,346 @@
+"""The relay line protocol without I/O: value literals both ways, reply lines parsed.
+
+Shared by the blocking :class:`~huddle_client.Relay` and the asyncio
+:class:`~huddle_client.AsyncRelay`.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Union
+
+#: A value as Python holds it: ``int`` (64-bit), ``float``, ``bool``, ``str``, ``bytes``
+#: or a list of floats.
+Value = Union[int, float, bool, str, bytes, List[float]]
+
+#: Inputs :func:`encode_value` accepts (``bytearray``/``memoryview`` as bytes, tuples
+#: and lists of numbers as a float list).
+ValueLike = Union[Value, bytearray, memoryview, Sequence[Union[int, float]]]
+
+I64_MIN = -(2**63)
+I64_MAX = 2**63 - 1
+
+#: Default relay port.
+DEFAULT_PORT = 2001
+
+#: Longest ``REFR`` period the relay takes, in milliseconds (one hour).
+MAX_INTERVAL_MS = 3_600_000
+
+
+class HuddleError(Exception):
+    """Base of every error this package raises on its own."""
+
+
+class RelayError(HuddleError):
+    """The relay answered ``ERR code text``.
+
+    ``code`` is the relay's stable numeric code (404 no value, 410 bad key, 411 bad
+    pattern, 412 bad value, 413 bad period, 420 another robot's key, 421 wrong kind of
+    key, 422 too large, 429 too many, 503 not available, 400-403 malformed commands);
+    ``text`` is the explanation, for people.
+    """
+
+    def __init__(self, code: int, text: str, command: str = "") -> None:
+        self.code = code
+        self.text = text
+        self.command = command
+        where = f" (to {command!r})" if command else ""
+        super().__init__(f"ERR {code} {text}{where}")
+
+
+class RelayConnectionError(HuddleError, ConnectionError):
+    """The relay could not be reached, or closed the connection unexpectedly."""
+
+
+class TalkLost(HuddleError):
+    """Talk messages the daemon gave up on: they could not be recovered from the
+    network, so the queue skips them. The relay reports this with a line starting with
+    ``LOST``; a watch raises it (default) or yields it (``lost="event"``), never drops it.
+
+    ``line`` is the relay's line as sent. ``queue`` is the queue it names (as the relay
+    wrote it, e.g. ``3.talk.plan``), ``sender`` the robot that posted the messages, and
+    ``first``/``last`` their sequence numbers (inclusive), where the line carries them
+    (``None`` otherwise).
+    """
+
+    def __init__(
+        self,
+        line: str,
+        queue: Optional[str],
+        sender: Optional[int],
+        first: Optional[int],
+        last: Optional[int],
+    ) -> None:
+        self.line = line
+        self.queue = queue
+        self.sender = sender
+        self.first = first
+        self.last = last
+        super().__init__(f"talk messages lost: {line}")
+
+    @property
+    def count(self) -> Optional[int]:
+        """How many messages were lost, when the line says."""
+        if self.first is None or self.last is None:
+            return None
+        return self.last - self.first + 1
+
+
+@dataclass(frozen=True)
+class Binding:
+    """One value as the relay reported it.
+
+    ``key`` is the key as stored (``3.var.ball.dist``, ``local.var.mode``; a ``*.var.x``
+    read names the copy that answered), ``type`` the relay's type name (``int``,
+    ``float``, ``bool``, ``string``, ``floats``, ``bytes``), ``value`` the Python value,
+    ``age_ms`` the milliseconds since it was set, on the answering robot's clock, and
+    ``owner`` the robot it belongs to (for ``local.`` keys, the robot of this relay).
+    A talk message is a binding of a ``n.talk.queue`` key with age 0.
+    """
+
+    key: str
+    type: str
+    value: Value
+    age_ms: int
+    owner: int
+
+    @property
+    def is_talk(self) -> bool:
+        """Whether this is a talk message (``n.talk.queue``)."""
+        return self.key.split(".")[1:2] == ["talk"]
+
+
+def _is_control(ch: str) -> bool:
+    o = ord(ch)
+    return o < 0x20 or 0x7F <= o <= 0x9F
+
+
+def _quote(s: str) -> str:
+    try:
+        s.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise ValueError(f"string is not valid Unicode text: {e}") from None
+    out = ['"']
+    for ch in s:
+        if ch == '"':
+            out.append('\\"')
+        elif ch == "\\":
+            out.append("\\\\")
+        elif ch == "\n":
+            out.append("\\n")
+        elif ch == "\r":
+            out.append("\\r")
+        elif ch == "\t":
+            out.append("\\t")
+        elif _is_control(ch):
+            out.append("\\u{%x}" % ord(ch))
+        else:
+            out.append(ch)
+    out.append('"')
+    return "".join(out)
+
+
+def _float_literal(x: float) -> str:
+    if math.isnan(x):
+        return "NaN"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    # repr is the shortest string that reads back to the same float.
+    return repr(x)
+
+
+def _exact_float(x: object, where: str) -> float:
+    """A number as an f64, refusing anything that would change on the way."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        raise TypeError(f"{where}: {type(x).__name__} is not a number")
+    if isinstance(x, float):
+        return x
+    if isinstance(x, numbers.Integral):
+        n = int(x)
+        try:
+            f = float(n)
+        except OverflowError:
+            raise ValueError(f"{where}: {n} does not fit in a 64-bit float") from None
+        if int(f) != n:
+            raise ValueError(f"{where}: {n} is not exactly representable as a 64-bit float")
+        return f
+    f = float(x)
+    # Widening (numpy.float32) is exact; narrowing (Fraction(1, 3)) is refused.
+    if not (f == x or (math.isnan(f) and x != x)):
+        raise ValueError(f"{where}: {x!r} is not exactly representable as a 64-bit float")
+    return f
+
+
+def encode_value(value: object) -> str:
+    """The relay literal for a Python value.
+
+    ``bool`` → ``bool``; ``int`` → ``int`` (must fit in 64 bits); ``float`` → ``float``;
+    ``str`` → ``string``; ``bytes``/``bytearray``/``memoryview`` → ``bytes``; a list or
+    tuple of numbers → ``floats`` (64-bit; an int must be exactly representable).
+    Anything else raises ``TypeError``; a value that would change on the way raises
+    ``ValueError``: nothing is narrowed silently.
+    """
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        if not I64_MIN <= value <= I64_MAX:
+            raise ValueError(f"{value} does not fit in a 64-bit integer")
+        return str(value)
+    if isinstance(value, float):
+        return _float_literal(value)
+    if isinstance(value, str):
+        return _quote(value)
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return "0x" + bytes(value).hex()
+    if isinstance(value, (list, tuple)):
+        items = [_exact_float(x, f"element {i}") for i, x in enumerate(value)]
+        return "[" + ", ".join(_float_literal(x) for x in items) + "]"
+    if isinstance(value, numbers.Integral):  # numpy.int64 and friends
+        return encode_value(int(value))
+    if isinstance(value, numbers.Real):  # numpy.float32 and friends, exactly
+        return _float_literal(_exact_float(value, "value"))
+    raise TypeError(
+        f"cannot send a {type(value).__name__}: the relay takes int, float, bool, str, "
+        "bytes and lists of numbers"
+    )
+
+
+def _unquote(lit: str) -> str:
+    if len(lit) < 2 or lit[0] != '"' or lit[-1] != '"':
+        raise ValueError(f"bad string literal {lit!r}")
+    out = []
+    i, end = 1, len(lit) - 1
+    simple = {'"': '"', "\\": "\\", "n": "\n", "r": "\r", "t": "\t"}
+    while i < end:
+        ch = lit[i]
+        if ch != "\\":
+            out.append(ch)
+            i += 1
+            continue
+        esc = lit[i + 1]
+        if esc in simple:
+            out.append(simple[esc])
+            i += 2
+        elif esc == "u" and lit[i + 2] == "{":
+            close = lit.index("}", i + 3)
+            out.append(chr(int(lit[i + 3 : close], 16)))
+            i = close + 1
+        else:
+            raise ValueError(f"bad escape in {lit!r}")
+    return "".join(out)
+
+
+def decode_value(type_name: str, literal: str) -> Value:
+    """The Python value of a relay literal of type ``type_name``. A type this package
+    does not know is returned as its literal text."""
+    if type_name == "int":
+        return int(literal)
+    if type_name == "float":
+        return float(literal)
+    if type_name == "bool":
+        return literal == "true"
+    if type_name == "string":
+        return _unquote(literal)
+    if type_name == "floats":
+        inner = literal.strip()[1:-1].strip()
+        return [float(x) for x in inner.split(",")] if inner else []
+    if type_name == "bytes":
+        return bytes.fromhex(literal[2:])
+    return literal
+
+
+def parse_binding(line: str, robot: int) -> Optional[Binding]:
+    """A ``VAL``/``UPD key type value age_ms`` line; ``None`` for any other line."""
+    word, _, rest = line.partition(" ")
+    if word not in ("VAL", "UPD"):
+        return None
+    try:
+        key, type_name, rest = rest.split(" ", 2)
+        literal, age = rest.rsplit(" ", 1)
+        head = key.split(".", 1)[0]
+        owner = int(head) if head.isdigit() else robot
+        return Binding(key, type_name, decode_value(type_name, literal), int(age), owner)
+    except (ValueError, IndexError):
+        return None
+
+
+def parse_error(line: str, command: str = "") -> Optional[RelayError]:
+    """An ``ERR code text`` line as a :class:`RelayError`; ``None`` for other lines."""
+    if not line.startswith("ERR "):
+        return None
+    code, _, text = line[4:].partition(" ")
+    try:
+        number = int(code)
+    except ValueError:
+        number = 0
+    return RelayError(number, text, command)
+
+
+def parse_lost(line: str) -> Optional[TalkLost]:
+    """A line starting with ``LOST`` as a :class:`TalkLost`; ``None`` for other lines.
+
+    The fields are read leniently (``LOST 3.talk.plan 4 6``, ``LOST plan 3 4 6``): the
+    first word that is not a number is the queue, the last two numbers are the first
+    and last sequence numbers lost, and the sender is the queue key's robot or, failing
+    that, a third number before them.
+    """
+    if not (line == "LOST" or line.startswith("LOST ")):
+        return None
+    queue: Optional[str] = None
+    numbers_seen: List[int] = []
+    for word in line.split()[1:]:
+        if word.isdigit():
+            numbers_seen.append(int(word))
+        elif queue is None:
+            queue = word
+    sender: Optional[int] = None
+    if queue is not None:
+        head = queue.split(".", 1)[0]
+        if head.isdigit() and ".talk." in queue:
+            sender = int(head)
+    first = last = None
+    if len(numbers_seen) >= 2:
+        first, last = numbers_seen[-2], numbers_seen[-1]
+        if sender is None and len(numbers_seen) >= 3:
+            sender = numbers_seen[-3]
+    return TalkLost(line, queue, sender, first, last)
+
+
+def parse_greeting(line: str) -> "tuple[int, int]":
+    """``HUDDLE <version> robot <id>`` → (version, robot id)."""
+    words = line.split()
+    if len(words) != 4 or words[0] != "HUDDLE" or words[2] != "robot":
+        raise RelayConnectionError(f"not a huddle relay: it said {line!r}")
+    return int(words[1]), int(words[3])
+
+
+def talk_key(queue: str) -> str:
+    """``plan`` → ``*.talk.plan``; a full key (``*.talk.plan``) is kept."""
+    return queue if "." in queue else f"*.talk.{queue}"
+
+
+def check_interval(interval_ms: int) -> int:
+    if isinstance(interval_ms, bool) or not isinstance(interval_ms, int):
+        raise TypeError("interval_ms is whole milliseconds (an int)")
+    if not 0 <= interval_ms <= MAX_INTERVAL_MS:
+        raise ValueError(f"interval_ms must be within 0..={MAX_INTERVAL_MS}")
+    return interval_ms
+
+
+def check_patterns(pattern: Union[str, Sequence[str]]) -> List[str]:
+    patterns = [pattern] if isinstance(pattern, str) else list(pattern)
+    if not patterns:
+        raise ValueError("watch needs at least one pattern")
+    for p in patterns:
+        if not isinstance(p, str) or not p or any(c.isspace() for c in p):
+            raise ValueError(f"bad pattern {p!r}")
+    return patterns
+
+
+def check_word(what: str, text: str) -> str:
+    """Keys and patterns are single words on the line."""
+    if not isinstance(text, str) or not text or any(c.isspace() for c in text):
+        raise ValueError(f"bad {what} {text!r}")
+    return text
