@@ -15,6 +15,7 @@ from ._protocol import (
     check_interval,
     check_patterns,
     check_word,
+    getv_line,
     encode_value,
     parse_binding,
     parse_error,
@@ -185,10 +186,10 @@ class AsyncRelay:
         literal = encode_value(value)
         await self._request(f"SETV {check_word('key', key)} {literal}")
 
-    async def get(self, key: str) -> Optional[Binding]:
+    async def get(self, key: str, max_age_ms: Optional[int] = None) -> Optional[Binding]:
         """As :meth:`Relay.get <huddle_client.Relay.get>`."""
         try:
-            answer = await self._request(f"GETV {check_word('key', key)}")
+            answer = await self._request(getv_line(key, max_age_ms))
         except Exception as e:
             if getattr(e, "code", None) == 404:
                 return None

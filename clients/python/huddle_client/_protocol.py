@@ -36,9 +36,11 @@ class HuddleError(Exception):
 class RelayError(HuddleError):
     """The relay answered ``ERR code text``.
 
-    ``code`` is the relay's stable numeric code (404 no value, 410 bad key, 411 bad
-    pattern, 412 bad value, 413 bad period, 420 another robot's key, 421 wrong kind of
-    key, 422 too large, 429 too many, 503 not available, 400-403 malformed commands);
+    ``code`` is the relay's stable numeric code (404 no value, 406 older than the
+    ``max_age_ms`` asked for, 410 bad key, 411 bad pattern, 412 bad value, 413 bad
+    period, 420 another robot's key, 421 wrong kind of key, 422 too large, 429 too many,
+    430 the talk queue's retention is full, 503 not available, 400-403 malformed
+    commands);
     ``text`` is the explanation, for people.
     """
 
@@ -96,8 +98,11 @@ class Binding:
     read names the copy that answered), ``type`` the relay's type name (``int``,
     ``float``, ``bool``, ``string``, ``floats``, ``bytes``), ``value`` the Python value,
     ``age_ms`` the milliseconds since it was set, on the answering robot's clock, and
-    ``owner`` the robot it belongs to (for ``local.`` keys, the robot of this relay).
-    A talk message is a binding of a ``n.talk.queue`` key with age 0.
+    ``owner`` the robot it belongs to (for ``local.`` keys, the robot of this relay), and
+    ``departed`` whether the relay flags the owner as departed (silent for longer than
+    the daemon's departure limit: the value is old news however young its age; relay
+    protocol 2 and later). A talk message is a binding of a ``n.talk.queue`` key with
+    age 0.
     """
 
     key: str
@@ -105,6 +110,7 @@ class Binding:
     value: Value
     age_ms: int
     owner: int
+    departed: bool = False
 
     @property
     def is_talk(self) -> bool:
@@ -252,16 +258,29 @@ def decode_value(type_name: str, literal: str) -> Value:
 
 
 def parse_binding(line: str, robot: int) -> Optional[Binding]:
-    """A ``VAL``/``UPD key type value age_ms`` line; ``None`` for any other line."""
+    """A ``VAL``/``UPD key type value age_ms [flag ...]`` line; ``None`` for any other
+    line."""
     word, _, rest = line.partition(" ")
     if word not in ("VAL", "UPD"):
         return None
     try:
         key, type_name, rest = rest.split(" ", 2)
-        literal, age = rest.rsplit(" ", 1)
+        flags = []
+        # After the age (all digits) may come flag words (letters only): `departed`;
+        # unknown flags are skipped, so newer relays stay readable.
+        while True:
+            literal, last = rest.rsplit(" ", 1)
+            if last.isdigit():
+                age = int(last)
+                break
+            if not (last.isascii() and last.isalpha()):
+                return None
+            flags.append(last)
+            rest = literal
         head = key.split(".", 1)[0]
         owner = int(head) if head.isdigit() else robot
-        return Binding(key, type_name, decode_value(type_name, literal), int(age), owner)
+        value = decode_value(type_name, literal)
+        return Binding(key, type_name, value, age, owner, "departed" in flags)
     except (ValueError, IndexError):
         return None
 
@@ -344,3 +363,13 @@ def check_word(what: str, text: str) -> str:
     if not isinstance(text, str) or not text or any(c.isspace() for c in text):
         raise ValueError(f"bad {what} {text!r}")
     return text
+
+
+def getv_line(key: str, max_age_ms: Optional[int]) -> str:
+    """``GETV key`` or ``GETV key max_age_ms``."""
+    check_word("key", key)
+    if max_age_ms is None:
+        return f"GETV {key}"
+    if isinstance(max_age_ms, bool) or not isinstance(max_age_ms, int) or max_age_ms < 0:
+        raise ValueError("max_age_ms is whole milliseconds (an int >= 0)")
+    return f"GETV {key} {max_age_ms}"

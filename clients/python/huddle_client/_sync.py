@@ -16,6 +16,7 @@ from ._protocol import (
     check_interval,
     check_patterns,
     check_word,
+    getv_line,
     encode_value,
     parse_binding,
     parse_error,
@@ -186,11 +187,12 @@ class Relay:
         literal = encode_value(value)
         self._request(f"SETV {check_word('key', key)} {literal}")
 
-    def get(self, key: str) -> Optional[Binding]:
+    def get(self, key: str, max_age_ms: Optional[int] = None) -> Optional[Binding]:
         """The binding of ``key`` (``*.var.x``: the newest copy of any robot), or
-        ``None`` if no value is bound to it."""
+        ``None`` if no value is bound to it. With ``max_age_ms``, a value older than
+        that raises ``RelayError`` with code 406 (relay protocol 2 and later)."""
         try:
-            answer = self._request(f"GETV {check_word('key', key)}")
+            answer = self._request(getv_line(key, max_age_ms))
         except Exception as e:
             if getattr(e, "code", None) == 404:
                 return None

@@ -106,6 +106,8 @@ def start_daemon(robot: int, group: str, config_dir: Path) -> Daemon:
 class Team:
     a: Daemon
     b: Daemon
+    group: str
+    config_dir: Path
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +121,7 @@ def team(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Team]:
         a.stop()
         raise
     try:
-        yield Team(a, b)
+        yield Team(a, b, group, config_dir)
     finally:
         a.stop()
         b.stop()
@@ -172,8 +174,8 @@ class AsyncAdapter:
     def set(self, key: str, value: object) -> None:
         self._run(self._relay.set(key, value))
 
-    def get(self, key: str) -> Any:
-        return self._run(self._relay.get(key))
+    def get(self, key: str, max_age_ms: Optional[int] = None) -> Any:
+        return self._run(self._relay.get(key, max_age_ms))
 
     def post(self, queue: str, value: object) -> None:
         self._run(self._relay.post(queue, value))

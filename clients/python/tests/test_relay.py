@@ -12,6 +12,7 @@ from typing import Any, Callable, List
 
 import pytest
 
+from conftest import start_daemon
 from huddle_client import Binding, RelayConnectionError, RelayError, TalkLost
 
 
@@ -110,6 +111,33 @@ def test_a_value_crosses_robots_with_its_age_and_owner(team, connect):
     assert later.age_ms >= got.age_ms + 200, "the age grows on the reader's clock"
     newest = b.get("*.var.ball.dist")
     assert newest.key == "1.var.ball.dist", "a * read names the copy that answered"
+
+
+def test_a_departed_robot_s_values_are_flagged(team, connect):
+    r = connect(team.b.port)
+    if r.version < 2:
+        pytest.skip("the relay flags departed owners from protocol 2 on")
+    third = start_daemon(3, team.group, team.config_dir)
+    try:
+        c = connect(third.port)
+        c.set("*.var.alive", True)
+        got = wait_for(lambda: r.get("3.var.alive"))
+        assert not got.departed
+    finally:
+        third.stop()
+    wait_for(lambda: r.get("3.var.alive") if r.get("3.var.alive").departed else None)
+
+
+def test_get_with_a_maximum_age(team, connect):
+    r = connect(team.a.port)
+    if r.version < 2:
+        pytest.skip("GETV key max_age_ms is protocol 2")
+    r.set("local.var.aging", 1)
+    time.sleep(0.15)
+    with pytest.raises(RelayError) as e:
+        r.get("local.var.aging", max_age_ms=50)
+    assert e.value.code == 406
+    assert r.get("local.var.aging", max_age_ms=60_000).value == 1
 
 
 def test_an_unknown_key_reads_as_none(team, connect):
@@ -245,6 +273,17 @@ SCRIPT = [
     "LOST 3.talk.plan 4 6",
     'UPD 3.talk.plan string "seven" 0',
 ]
+
+
+def test_flags_after_the_age_are_read_and_unknown_ones_skipped(connect):
+    fake = FakeRelay(["UPD 3.var.x int 1 500 departed", 'UPD 3.var.y string "a 1" 5 shiny'])
+    try:
+        with connect(fake.port).watch("3.var.+", timeout=5) as w:
+            x, y = next(w), next(w)
+        assert (x.value, x.age_ms, x.departed) == (1, 500, True)
+        assert (y.value, y.age_ms, y.departed) == ("a 1", 5, False)
+    finally:
+        fake.close()
 
 
 def test_a_lost_line_raises_talk_lost_and_the_watch_goes_on(connect):
