@@ -46,7 +46,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     let mut d2 = start(2, group, dir.path());
     let d3 = start(3, group, dir.path());
     let (mut c1, mut c3) = (d1.client(), d3.client());
-    assert_eq!(c1.greeting, "HUDDLE 1 robot 1");
+    assert_eq!(c1.greeting, "HUDDLE 2 robot 1");
 
     // 1. A value set through robot 1's relay is read through robot 3's, freshly.
     assert_eq!(c1.ask("SETV *.var.ball.dist 1.5"), "OK");

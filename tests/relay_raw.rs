@@ -25,7 +25,7 @@ fn daemon(id: u8) -> (Daemon, tempfile::TempDir) {
 fn every_command_over_tcp() {
     let (d, _dir) = daemon(4);
     let mut c = d.client();
-    assert_eq!(c.greeting, "HUDDLE 1 robot 4");
+    assert_eq!(c.greeting, "HUDDLE 2 robot 4");
     assert_eq!(c.ask("SETV *.var.pose [1.5, -2, 0.25]"), "OK");
     assert_eq!(c.ask("setv local.var.note \"a \\\"quoted\\\" word\""), "OK");
     let b = Binding::parse(&c.ask("GETV *.var.pose")).unwrap();

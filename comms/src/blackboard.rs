@@ -6,14 +6,36 @@
 //! own id). `*` is a view: writing `*.var.x` writes the own copy, reading it returns the
 //! copy with the newest timestamp. `talk` messages are not stored; they are delivered as
 //! events by the replica.
+//!
+//! # Bounds
+//!
+//! Nothing a teammate (or a forger, without a team key) sends can grow the blackboard
+//! without limit or pin a value forever ([`BoardLimits`]):
+//! - at most `per_owner` bindings per robot and `remote` bindings of all other robots
+//!   together; an update for a new key beyond them is refused ([`Applied::Refused`]) and
+//!   nothing stored is lost; this robot's own global values obey `per_owner` too (the
+//!   teammates would refuse more), its `local` values `local` ([`SetError::TooManyKeys`]);
+//! - the first update of an owner's new incarnation (a restart) removes the bindings the
+//!   owner's older incarnations left;
+//! - a stored version its owner has not re-sent for `unconfirmed_after`, while lower
+//!   versions of the same key keep arriving from the same incarnation, was not the
+//!   owner's (every owner re-sends its values each refresh period): the arriving one
+//!   replaces it. A late frame inside that window is still stale;
+//! - the replica releases a departed owner's bindings after a grace period.
+//!
+//! Matching a pattern costs what it can match, not the blackboard's size: the scopes
+//! and the literal start of the path (`2.var.ball.#`: robot 2's `ball` and `ball.…`) are
+//! looked up in per-scope ordered indexes, and only those bindings are checked.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::ops::Bound;
+use std::sync::Arc;
 use std::time::Duration;
 
 use thiserror::Error;
 
 use crate::key::{Key, KeyError, Kind, Scope};
-use crate::pattern::Pattern;
+use crate::pattern::{PathSel, Pattern, ScopeSel};
 use crate::time::Instant;
 use crate::value::Value;
 
@@ -70,6 +92,18 @@ pub enum SetError {
         /// Configured MTU.
         mtu: usize,
     },
+    /// A new key beyond the limit of its scope ([`BoardLimits::local`] for `local`,
+    /// [`BoardLimits::per_owner`] for this robot's global values). Keys already bound
+    /// can still be written.
+    #[error("{key}: no room for a new key, {scope} already holds {limit} (the limit)")]
+    TooManyKeys {
+        /// The key as given.
+        key: String,
+        /// Where it would be stored (`local`, or this robot's id).
+        scope: Scope,
+        /// The limit.
+        limit: usize,
+    },
 }
 
 /// What [`Blackboard::apply_remote`] did with an update.
@@ -84,28 +118,84 @@ pub enum Applied {
     Refreshed,
     /// An older version than the one held: ignored.
     Stale,
+    /// A key not held before, beyond [`BoardLimits::per_owner`] or
+    /// [`BoardLimits::remote`]: ignored.
+    Refused,
 }
 
-/// A stored binding, its key as stored, and whether a change event for it is queued (so an
-/// undrained queue holds each binding at most once and stays bounded by their number).
+/// The bounds of a blackboard (the replica takes them from its
+/// [`ReplicaConfig`](crate::ReplicaConfig)).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BoardLimits {
+    /// Most bindings per robot (default 4096): another robot's copies, and this robot's
+    /// own global values.
+    pub per_owner: usize,
+    /// Most bindings of all other robots together (default 65536).
+    pub remote: usize,
+    /// Most `local` bindings (default 65536).
+    pub local: usize,
+    /// A stored version not received again for this long while lower versions of the
+    /// key arrive from the same incarnation is replaced by them (default 300 ms: the
+    /// replica's `departed_after`).
+    pub unconfirmed_after: Duration,
+}
+
+impl Default for BoardLimits {
+    fn default() -> BoardLimits {
+        BoardLimits {
+            per_owner: 4096,
+            remote: 65536,
+            local: 65536,
+            unconfirmed_after: Duration::from_millis(300),
+        }
+    }
+}
+
+/// What the bounds did, counted (the replica mirrors them into its stats).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct BoardCounts {
+    /// Updates of new keys refused by a limit.
+    pub(crate) refused: u64,
+    /// Stored versions never re-sent by their owner, replaced by a lower one.
+    pub(crate) unconfirmed_replaced: u64,
+    /// Bindings an owner's older incarnation left, removed when a newer one published.
+    pub(crate) superseded: u64,
+    /// Bindings of departed owners released.
+    pub(crate) released: u64,
+}
+
+/// A stored binding, where it is stored, whether a change event for it is queued (so an
+/// undrained queue holds each binding at most once and stays bounded by their number),
+/// and when its version was last received (or written).
 #[derive(Clone, Debug)]
 struct Slot {
-    key: Key,
+    scope: Scope,
+    path: Arc<str>,
     entry: Entry,
     change_queued: bool,
+    confirmed: Instant,
 }
 
-/// Where a binding lives in [`Blackboard::slots`]. Bindings are never removed, so an id
-/// stays valid for the blackboard's life.
+impl Slot {
+    fn key(&self) -> Key {
+        Key::from_valid_parts(self.scope, Kind::Var, self.path.to_string())
+    }
+}
+
+/// Where a binding lives in [`Blackboard::slots`]. Ids of removed bindings are reused,
+/// and removal takes them out of every index and the change queue first.
 pub(crate) type SlotId = u32;
 
 /// The bindings of one scope, found two ways: by hash for the per-update lookups of the
 /// hot path (a B-tree walk compares the path against a dozen or more stored paths, and
-/// paths of one robot often share long prefixes), and in key order for iteration.
+/// paths of one robot often share long prefixes), and in key order for iteration and
+/// prefix lookups. Both share one allocation of each path.
 #[derive(Clone, Debug, Default)]
 struct ScopeIndex {
-    by_path: HashMap<String, SlotId>,
-    ordered: BTreeMap<String, SlotId>,
+    by_path: HashMap<Arc<str>, SlotId>,
+    ordered: BTreeMap<Arc<str>, SlotId>,
+    /// A robot's scope: the incarnation whose update came last.
+    incarnation: Option<u64>,
 }
 
 /// The set of bindings.
@@ -113,21 +203,41 @@ struct ScopeIndex {
 pub struct Blackboard {
     robot_id: u8,
     incarnation: u64,
-    slots: Vec<Slot>,
+    slots: Vec<Option<Slot>>,
+    free: Vec<SlotId>,
+    len: usize,
+    /// Bindings of other robots.
+    remote_len: usize,
     scopes: BTreeMap<Scope, ScopeIndex>,
     changes: VecDeque<SlotId>,
+    limits: BoardLimits,
+    /// The latest instant this blackboard was told about (writes, stamps, the replica's
+    /// inputs): the reception time of a remote update.
+    clock: Instant,
+    counts: BoardCounts,
 }
 
 impl Blackboard {
     /// An empty blackboard for robot `robot_id` (1..=254; writes of `*.var.x` land in
-    /// `robot_id.var.x`).
+    /// `robot_id.var.x`), with the default [`BoardLimits`].
     pub fn new(robot_id: u8) -> Blackboard {
+        Blackboard::with_limits(robot_id, BoardLimits::default())
+    }
+
+    /// An empty blackboard with the given bounds.
+    pub fn with_limits(robot_id: u8, limits: BoardLimits) -> Blackboard {
         Blackboard {
             robot_id,
             incarnation: 0,
             slots: Vec::new(),
+            free: Vec::new(),
+            len: 0,
+            remote_len: 0,
             scopes: BTreeMap::new(),
             changes: VecDeque::new(),
+            limits,
+            clock: Instant::ZERO,
+            counts: BoardCounts::default(),
         }
     }
 
@@ -135,36 +245,149 @@ impl Blackboard {
         self.incarnation = incarnation;
     }
 
+    /// The replica's latest `now`: remote updates applied next were received then.
+    pub(crate) fn advance_clock(&mut self, now: Instant) {
+        self.clock = self.clock.max(now);
+    }
+
+    pub(crate) fn counts(&self) -> BoardCounts {
+        self.counts
+    }
+
+    /// The bounds.
+    pub fn limits(&self) -> &BoardLimits {
+        &self.limits
+    }
+
     /// This robot's id.
     pub fn robot_id(&self) -> u8 {
         self.robot_id
+    }
+
+    fn slot(&self, id: SlotId) -> Option<&Slot> {
+        self.slots.get(id as usize).and_then(Option::as_ref)
+    }
+
+    fn slot_mut(&mut self, id: SlotId) -> Option<&mut Slot> {
+        self.slots.get_mut(id as usize).and_then(Option::as_mut)
     }
 
     fn find(&self, scope: Scope, path: &str) -> Option<SlotId> {
         self.scopes.get(&scope)?.by_path.get(path).copied()
     }
 
-    fn insert(&mut self, scope: Scope, path: &str, entry: Entry) -> SlotId {
-        let id = SlotId::try_from(self.slots.len()).expect("fewer than 2^32 bindings");
-        self.slots.push(Slot {
-            key: Key::from_valid_parts(scope, Kind::Var, path.to_owned()),
+    fn is_remote(&self, scope: Scope) -> bool {
+        matches!(scope, Scope::Robot(n) if n != self.robot_id)
+    }
+
+    /// Bindings stored under `scope`.
+    fn scope_len(&self, scope: Scope) -> usize {
+        self.scopes.get(&scope).map_or(0, |i| i.by_path.len())
+    }
+
+    /// Stores a new binding (the caller checked the limits). `None` only if the slot
+    /// numbers ran out, which the limits keep far away.
+    fn insert(&mut self, scope: Scope, path: &str, entry: Entry) -> Option<SlotId> {
+        let id = match self.free.pop() {
+            Some(id) => id,
+            None => SlotId::try_from(self.slots.len()).ok()?,
+        };
+        let path: Arc<str> = Arc::from(path);
+        let slot = Slot {
+            scope,
+            path: path.clone(),
+            confirmed: self.clock,
             entry,
             change_queued: true,
-        });
+        };
+        match self.slots.get_mut(id as usize) {
+            Some(free) => *free = Some(slot),
+            None => self.slots.push(Some(slot)),
+        }
         let index = self.scopes.entry(scope).or_default();
-        index.by_path.insert(path.to_owned(), id);
-        index.ordered.insert(path.to_owned(), id);
+        index.by_path.insert(path.clone(), id);
+        index.ordered.insert(path, id);
+        self.len += 1;
+        if self.is_remote(scope) {
+            self.remote_len += 1;
+        }
         self.changes.push_back(id);
-        id
+        Some(id)
+    }
+
+    /// Removes the bindings of `scope` for which `doomed` holds; returns how many.
+    fn remove_where(
+        &mut self,
+        scope: Scope,
+        mut doomed: impl FnMut(&str, &Entry) -> bool,
+    ) -> usize {
+        let remote = self.is_remote(scope);
+        let Some(index) = self.scopes.get_mut(&scope) else {
+            return 0;
+        };
+        let slots = &mut self.slots;
+        let mut removed = Vec::new();
+        let mut queued = false;
+        index.ordered.retain(|path, &mut id| {
+            let Some(slot) = slots.get(id as usize).and_then(Option::as_ref) else {
+                return false;
+            };
+            if !doomed(path, &slot.entry) {
+                return true;
+            }
+            queued |= slot.change_queued;
+            slots[id as usize] = None;
+            removed.push(id);
+            false
+        });
+        if removed.is_empty() {
+            return 0;
+        }
+        index
+            .by_path
+            .retain(|_, id| slots.get(*id as usize).is_some_and(Option::is_some));
+        if index.by_path.is_empty() {
+            self.scopes.remove(&scope);
+        }
+        if queued {
+            // Before the ids are reused: a queued change of a removed binding goes too.
+            self.changes
+                .retain(|id| slots.get(*id as usize).is_some_and(Option::is_some));
+        }
+        let n = removed.len();
+        self.free.extend(removed);
+        self.len -= n;
+        if remote {
+            self.remote_len -= n;
+        }
+        n
+    }
+
+    /// Removes every binding of robot `owner` (another robot; this robot's own values
+    /// stay); returns how many. The replica calls it for a robot departed longer than
+    /// its grace period.
+    pub(crate) fn release_owner(&mut self, owner: u8) -> usize {
+        if owner == self.robot_id {
+            return 0;
+        }
+        let n = self.remove_where(Scope::Robot(owner), |_, _| true);
+        self.counts.released += n as u64;
+        n
+    }
+
+    /// Number of bindings stored for robot `owner`.
+    pub fn owner_len(&self, owner: u8) -> usize {
+        self.scope_len(Scope::Robot(owner))
     }
 
     /// Writes a value at `now`. `local.var.x` stays here; `*.var.x` and
     /// `<own id>.var.x` set this robot's own copy (returned: the key it is stored under).
     /// Every write bumps the version, even with an unchanged value, so freshness
-    /// propagates; a change event is queued only when the value differs.
+    /// propagates; a change event is queued only when the value differs. A new key
+    /// beyond its scope's limit is refused ([`SetError::TooManyKeys`]).
     pub fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<Key, SetError> {
         let id = self.write(now, key, value)?;
-        Ok(self.slots[id as usize].key.clone())
+        Ok(self.slot(id).map_or_else(|| key.clone(), |slot| slot.key()))
     }
 
     /// [`Blackboard::set`] without building the stored key: the binding's slot.
@@ -174,9 +397,36 @@ impl Blackboard {
         key: &Key,
         value: Value,
     ) -> Result<SlotId, SetError> {
+        self.write_checked(now, key, value, true)
+    }
+
+    /// A write of the replica's own bookkeeping (`local.var.huddle.stats.*`), which a
+    /// client's keys filling the local limit must not stop.
+    pub(crate) fn write_unlimited(
+        &mut self,
+        now: Instant,
+        key: &Key,
+        value: Value,
+    ) -> Result<SlotId, SetError> {
+        self.write_checked(now, key, value, false)
+    }
+
+    fn write_checked(
+        &mut self,
+        now: Instant,
+        key: &Key,
+        value: Value,
+        limited: bool,
+    ) -> Result<SlotId, SetError> {
         let scope = self.storage_scope(key)?;
+        self.advance_clock(now);
         let (robot_id, incarnation) = (self.robot_id, self.incarnation);
         let Some(id) = self.find(scope, key.path()) else {
+            let limit = match scope {
+                Scope::Local => self.limits.local,
+                _ => self.limits.per_owner,
+            };
+            let full = limited && self.scope_len(scope) >= limit;
             let entry = Entry {
                 value,
                 owner: robot_id,
@@ -184,15 +434,27 @@ impl Blackboard {
                 incarnation,
                 stamp: now,
             };
-            return Ok(self.insert(scope, key.path(), entry));
+            return match full {
+                false => self.insert(scope, key.path(), entry),
+                true => None,
+            }
+            .ok_or_else(|| SetError::TooManyKeys {
+                key: key.to_string(),
+                scope,
+                limit,
+            });
         };
-        let slot = &mut self.slots[id as usize];
+        let clock = self.clock;
+        let Some(slot) = self.slot_mut(id) else {
+            return Ok(id); // indexed slots are stored
+        };
         let e = &mut slot.entry;
         let changed = !e.value.same_as(&value);
         e.value = value;
         e.version += 1;
         e.stamp = now;
         e.incarnation = incarnation;
+        slot.confirmed = clock;
         if changed && !slot.change_queued {
             slot.change_queued = true;
             self.changes.push_back(id);
@@ -219,9 +481,12 @@ impl Blackboard {
 
     /// Applies another robot's update to `owner.var.path`. Newer versions replace older
     /// ones; an update from a different incarnation than the stored one replaces it at
-    /// once (a restarted robot). Deciding which incarnation is current is the caller's
-    /// job (the replica drops frames from retired incarnations). For the same version the
-    /// earlier stamp wins: the copy that travelled fastest estimates the set time best.
+    /// once (a restarted robot), and the first update of an incarnation other than the
+    /// last one heard from `owner` removes every binding `owner`'s other incarnations
+    /// left. Deciding which incarnation is current is the caller's job (the replica
+    /// drops frames from retired incarnations). For the same version the earlier stamp
+    /// wins: the copy that travelled fastest estimates the set time best. See the
+    /// module docs for the limits and for versions the owner never re-sends.
     pub fn apply_remote(
         &mut self,
         owner: u8,
@@ -246,6 +511,17 @@ impl Blackboard {
         stamp: Instant,
     ) -> Applied {
         let scope = Scope::Robot(owner);
+        // Received now (the replica's input time); a bare blackboard knows the stamp.
+        self.advance_clock(stamp);
+        let now = self.clock;
+        if let Some(index) = self.scopes.get_mut(&scope) {
+            let previous = index.incarnation.replace(incarnation);
+            if previous.is_some_and(|p| p != incarnation) {
+                // The key being updated stays: the update replaces it below.
+                let n = self.remove_where(scope, |p, e| e.incarnation != incarnation && p != path);
+                self.counts.superseded += n as u64;
+            }
+        }
         let fresh = Entry {
             value,
             owner,
@@ -254,28 +530,53 @@ impl Blackboard {
             stamp,
         };
         let Some(id) = self.find(scope, path) else {
-            self.insert(scope, path, fresh);
+            let full = self.scope_len(scope) >= self.limits.per_owner
+                || (self.is_remote(scope) && self.remote_len >= self.limits.remote);
+            if full || self.insert(scope, path, fresh).is_none() {
+                self.counts.refused += 1;
+                return Applied::Refused;
+            }
+            if let Some(index) = self.scopes.get_mut(&scope) {
+                index.incarnation = Some(incarnation);
+            }
             return Applied::Inserted;
         };
-        let slot = &mut self.slots[id as usize];
+        let window = self.limits.unconfirmed_after;
+        let Some(slot) = self.slot_mut(id) else {
+            return Applied::Refused; // indexed slots are stored
+        };
         let e = &mut slot.entry;
+        let mut unconfirmed = false;
         if e.incarnation == incarnation && version < e.version {
-            return Applied::Stale;
+            if now.saturating_duration_since(slot.confirmed) <= window {
+                return Applied::Stale;
+            }
+            // Never re-sent by its owner, who keeps sending lower versions: not its.
+            unconfirmed = true;
         }
         if e.incarnation == incarnation && version == e.version {
             e.stamp = e.stamp.min(stamp);
+            slot.confirmed = now;
             return Applied::Refreshed;
         }
         let changed = !e.value.same_as(&fresh.value);
         *e = fresh;
-        if !changed {
-            return Applied::Refreshed;
-        }
-        if !slot.change_queued {
+        slot.confirmed = now;
+        let queue = changed && !slot.change_queued;
+        if queue {
             slot.change_queued = true;
+        }
+        if unconfirmed {
+            self.counts.unconfirmed_replaced += 1;
+        }
+        if queue {
             self.changes.push_back(id);
         }
-        Applied::Changed
+        if changed {
+            Applied::Changed
+        } else {
+            Applied::Refreshed
+        }
     }
 
     /// The binding for `key`: `local.var.x`, `n.var.x`, or for `*.var.x` the copy with
@@ -289,7 +590,8 @@ impl Blackboard {
                 .scopes
                 .range(Scope::Robot(1)..=Scope::Robot(254))
                 .filter_map(|(_, index)| index.by_path.get(key.path()))
-                .map(|&id| &self.slots[id as usize].entry)
+                .filter_map(|&id| self.slot(id))
+                .map(|slot| &slot.entry)
                 .fold(None, |best: Option<&Entry>, e| match best {
                     Some(b) if b.stamp >= e.stamp => Some(b),
                     _ => Some(e),
@@ -305,39 +607,80 @@ impl Blackboard {
 
     /// Every stored binding whose key matches `pattern`, in key order (local first,
     /// then by robot id, then by path). Keys come out as stored (`n.var.x`, never `*`).
+    /// Only the bindings in the scopes the pattern names and under the literal start of
+    /// its path are looked at.
     pub fn iter<'a>(&'a self, pattern: &'a Pattern) -> impl Iterator<Item = (Key, &'a Entry)> + 'a {
-        self.scopes.iter().flat_map(move |(scope, index)| {
-            index
-                .ordered
-                .iter()
-                .filter(move |(path, _)| pattern.matches_parts(*scope, Kind::Var, path))
-                .map(move |(_, &id)| {
-                    let slot = &self.slots[id as usize];
-                    (slot.key.clone(), &slot.entry)
-                })
-        })
+        self.candidates(pattern)
+            .filter(move |slot| pattern.matches_parts(slot.scope, Kind::Var, &slot.path))
+            .map(|slot| (slot.key(), &slot.entry))
+    }
+
+    /// The bindings [`Blackboard::iter`] looks at for `pattern`, in key order.
+    fn candidates<'a>(&'a self, pattern: &Pattern) -> impl Iterator<Item = &'a Slot> + 'a {
+        let plan = pattern.var_plan();
+        let scopes: Box<dyn Iterator<Item = &'a ScopeIndex> + 'a> = match plan.scopes {
+            ScopeSel::All => Box::new(self.scopes.values()),
+            ScopeSel::Robots => Box::new(
+                self.scopes
+                    .range(Scope::Robot(1)..=Scope::Robot(254))
+                    .map(|(_, index)| index),
+            ),
+            ScopeSel::Some(list) => Box::new(list.into_iter().filter_map(|s| self.scopes.get(&s))),
+        };
+        let path = plan.path;
+        scopes
+            .flat_map(move |index| -> Box<dyn Iterator<Item = SlotId> + 'a> {
+                match &path {
+                    PathSel::Any => Box::new(index.ordered.values().copied()),
+                    PathSel::Exact(p) => {
+                        Box::new(index.by_path.get(p.as_str()).copied().into_iter())
+                    }
+                    PathSel::Prefix { literal, with_self } => {
+                        let itself = with_self
+                            .then(|| index.by_path.get(literal.as_str()).copied())
+                            .flatten();
+                        // `literal.` up to `literal/`: '/' follows '.' in ASCII.
+                        let (low, high) = (format!("{literal}."), format!("{literal}/"));
+                        let below = index
+                            .ordered
+                            .range::<str, _>((
+                                Bound::Included(low.as_str()),
+                                Bound::Excluded(high.as_str()),
+                            ))
+                            .map(|(_, &id)| id);
+                        Box::new(itself.into_iter().chain(below))
+                    }
+                }
+            })
+            .filter_map(move |id| self.slot(id))
+    }
+
+    /// How many bindings [`Blackboard::iter`] looks at for `pattern` (its cost).
+    pub fn visited(&self, pattern: &Pattern) -> usize {
+        self.candidates(pattern).count()
     }
 
     /// The bindings this robot owns under `scope` (for the replica's refresh), in path
     /// order.
-    pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&String, &Entry)> {
+    pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&str, &Entry)> {
         self.scopes.get(&scope).into_iter().flat_map(move |index| {
             index
                 .ordered
                 .iter()
-                .map(move |(p, &id)| (p, &self.slots[id as usize].entry))
+                .filter_map(move |(p, &id)| Some((&**p, &self.slot(id)?.entry)))
         })
     }
 
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
         self.find(scope, path)
-            .map(|id| &self.slots[id as usize].entry)
+            .and_then(|id| self.slot(id))
+            .map(|slot| &slot.entry)
     }
 
     /// Number of stored bindings.
     pub fn len(&self) -> usize {
-        self.slots.len()
+        self.len
     }
 
     /// Whether nothing is stored.
@@ -346,12 +689,16 @@ impl Blackboard {
     }
 
     /// The next key whose value changed (inserted or set to a different value), oldest
-    /// first. Changes are coalesced: a key appears at most once until drained.
+    /// first. Changes are coalesced: a key appears at most once until drained. A
+    /// binding removed before its change was drained is not reported.
     pub fn poll_change(&mut self) -> Option<Key> {
-        let id = self.changes.pop_front()?;
-        let slot = &mut self.slots[id as usize];
-        slot.change_queued = false;
-        Some(slot.key.clone())
+        while let Some(id) = self.changes.pop_front() {
+            if let Some(slot) = self.slot_mut(id) {
+                slot.change_queued = false;
+                return Some(slot.key());
+            }
+        }
+        None
     }
 }
 
@@ -495,5 +842,148 @@ mod tests {
         );
         let p = Pattern::parse("2.var.#").unwrap();
         assert_eq!(bb.iter(&p).count(), 1);
+    }
+
+    #[test]
+    fn a_version_its_owner_never_resends_is_replaced_by_the_versions_it_sends() {
+        let mut bb = Blackboard::new(1);
+        let up = |bb: &mut Blackboard, v: i64, version: u64, at: u64| {
+            bb.apply_remote(3, 100, "x".into(), Value::Int(v), version, t(at))
+        };
+        assert_eq!(up(&mut bb, 1, 10, 0), Applied::Inserted);
+        // A forged (or corrupted) version far ahead of the owner's.
+        assert_eq!(up(&mut bb, 666, u64::MAX, 5), Applied::Changed);
+        // The owner keeps sending its own, lower versions: stale for a while, as a late
+        // frame would be...
+        assert_eq!(up(&mut bb, 2, 11, 100), Applied::Stale);
+        assert_eq!(up(&mut bb, 2, 11, 305), Applied::Stale, "within the window");
+        assert_eq!(bb.get(&k("3.var.x")).unwrap().value, Value::Int(666));
+        // ...until the forged version has gone unconfirmed for longer than the window.
+        assert_eq!(up(&mut bb, 2, 11, 306), Applied::Changed);
+        assert_eq!(bb.get(&k("3.var.x")).unwrap().value, Value::Int(2));
+        assert_eq!(bb.counts().unconfirmed_replaced, 1);
+        // A real newer version, re-sent by its owner, is never undone by a late frame.
+        assert_eq!(up(&mut bb, 3, 12, 400), Applied::Changed);
+        for at in [500, 600, 700, 800] {
+            assert_eq!(up(&mut bb, 3, 12, at), Applied::Refreshed);
+            assert_eq!(up(&mut bb, 2, 11, at), Applied::Stale, "late copy at {at}");
+        }
+    }
+
+    #[test]
+    fn a_new_incarnation_removes_what_the_old_one_left() {
+        let mut bb = Blackboard::new(1);
+        for path in ["a", "b", "c"] {
+            bb.apply_remote(3, 100, path.into(), Value::Int(1), 5, t(0));
+        }
+        bb.apply_remote(4, 7, "a".into(), Value::Int(1), 1, t(0));
+        // Robot 3 restarted and publishes only `b`.
+        assert_eq!(
+            bb.apply_remote(3, 200, "b".into(), Value::Int(2), 1, t(10)),
+            Applied::Changed
+        );
+        assert!(bb.get(&k("3.var.a")).is_none());
+        assert!(bb.get(&k("3.var.c")).is_none());
+        assert_eq!(bb.get(&k("3.var.b")).unwrap().incarnation, 200);
+        assert!(bb.get(&k("4.var.a")).is_some(), "other owners keep theirs");
+        assert_eq!((bb.len(), bb.counts().superseded), (2, 2));
+        // A change queued for a removed binding is not reported.
+        let changes: Vec<String> = std::iter::from_fn(|| bb.poll_change())
+            .map(|k| k.to_string())
+            .collect();
+        assert_eq!(changes, ["3.var.b", "4.var.a"]);
+    }
+
+    #[test]
+    fn keys_beyond_the_limits_are_refused_and_nothing_stored_is_lost() {
+        let limits = BoardLimits {
+            per_owner: 3,
+            remote: 5,
+            local: 2,
+            ..BoardLimits::default()
+        };
+        let mut bb = Blackboard::with_limits(1, limits);
+        let up = |bb: &mut Blackboard, owner: u8, path: &str, version: u64| {
+            bb.apply_remote(owner, 9, path.into(), Value::Int(1), version, t(0))
+        };
+        for p in ["a", "b", "c"] {
+            assert_eq!(up(&mut bb, 2, p, 1), Applied::Inserted);
+        }
+        assert_eq!(up(&mut bb, 2, "d", 1), Applied::Refused, "per owner");
+        assert_eq!(
+            up(&mut bb, 2, "a", 2),
+            Applied::Refreshed,
+            "held keys still update"
+        );
+        assert_eq!(up(&mut bb, 3, "a", 1), Applied::Inserted);
+        assert_eq!(up(&mut bb, 3, "b", 1), Applied::Inserted);
+        assert_eq!(
+            up(&mut bb, 3, "c", 1),
+            Applied::Refused,
+            "all owners together"
+        );
+        assert_eq!(bb.counts().refused, 2);
+        assert_eq!(bb.len(), 5);
+        // This robot's own values and local values have limits of their own.
+        bb.set(t(0), &k("local.var.a"), Value::Int(1)).unwrap();
+        bb.set(t(0), &k("local.var.b"), Value::Int(1)).unwrap();
+        assert!(matches!(
+            bb.set(t(0), &k("local.var.c"), Value::Int(1)),
+            Err(SetError::TooManyKeys {
+                scope: Scope::Local,
+                limit: 2,
+                ..
+            })
+        ));
+        bb.set(t(1), &k("local.var.a"), Value::Int(2)).unwrap();
+        for p in ["a", "b", "c"] {
+            bb.set(t(0), &k(&format!("*.var.{p}")), Value::Int(1))
+                .unwrap();
+        }
+        assert!(matches!(
+            bb.set(t(0), &k("*.var.d"), Value::Int(1)),
+            Err(SetError::TooManyKeys { limit: 3, .. })
+        ));
+        // Releasing an owner makes room, and the freed slots are reused.
+        assert_eq!(bb.release_owner(2), 3);
+        assert_eq!(bb.release_owner(1), 0, "never this robot's own values");
+        assert_eq!(up(&mut bb, 3, "c", 1), Applied::Inserted);
+        assert_eq!(bb.len(), 2 + 3 + 3);
+        assert!(bb.slots.len() <= 11);
+    }
+
+    #[test]
+    fn a_pattern_visits_only_what_its_scope_and_literal_prefix_can_match() {
+        let limits = BoardLimits {
+            per_owner: usize::MAX,
+            remote: usize::MAX,
+            ..BoardLimits::default()
+        };
+        let mut bb = Blackboard::with_limits(1, limits);
+        // 20,000 keys of other robots and of robot 2 outside `ball`, 4 inside it.
+        for owner in 2..=11u8 {
+            for i in 0..2000 {
+                let path = format!("junk{i}.x");
+                bb.apply_remote(owner, 5, path, Value::Int(0), 1, t(0));
+            }
+        }
+        for path in ["ball", "ball.x", "ball.y.z", "ballast", "ball-pit"] {
+            bb.apply_remote(2, 5, path.into(), Value::Int(1), 1, t(0));
+        }
+        let p = Pattern::parse("2.var.ball.#").unwrap();
+        let keys: Vec<String> = bb.iter(&p).map(|(k, _)| k.to_string()).collect();
+        assert_eq!(keys, ["2.var.ball", "2.var.ball.x", "2.var.ball.y.z"]);
+        assert_eq!(bb.visited(&p), 3, "of {} bindings", bb.len());
+        let p = Pattern::parse("+.var.ball.+").unwrap();
+        assert_eq!(bb.iter(&p).count(), 1);
+        assert_eq!(bb.visited(&p), 2, "robot 2's ball.x and ball.y.z");
+        let p = Pattern::parse("*.var.junk7.x").unwrap();
+        assert_eq!(bb.iter(&p).count(), 10);
+        assert_eq!(bb.visited(&p), 10, "one lookup per robot");
+        assert_eq!(bb.visited(&Pattern::parse("2.talk.#").unwrap()), 0);
+        // Wildcards up front still scan what they must, and match the same as before.
+        let p = Pattern::parse("+.var.+.x").unwrap();
+        assert_eq!(bb.iter(&p).count(), 20_001);
+        assert_eq!(bb.visited(&p), bb.len());
     }
 }

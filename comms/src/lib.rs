@@ -118,7 +118,7 @@ mod time;
 mod value;
 pub mod wire;
 
-pub use blackboard::{Applied, Blackboard, Entry, SetError};
+pub use blackboard::{Applied, Blackboard, BoardLimits, Entry, SetError};
 pub use config::{parse_config, ConfigEntry, ConfigError, LineError};
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};

@@ -103,6 +103,103 @@ impl Pattern {
     pub fn matches(&self, key: &crate::Key) -> bool {
         self.matches_parts(key.scope(), key.kind(), key.path())
     }
+
+    /// Where the `var` bindings this pattern can match are, for an indexed lookup: the
+    /// scopes to look in and the literal start of the path. A superset: candidates are
+    /// still checked with [`Pattern::matches_parts`].
+    pub(crate) fn var_plan(&self) -> VarPlan {
+        let nothing = VarPlan {
+            scopes: ScopeSel::Some(Vec::new()),
+            path: PathSel::Any,
+        };
+        let scopes = match self.levels.first() {
+            Some(Level::Rest) => {
+                return VarPlan {
+                    scopes: ScopeSel::All,
+                    path: PathSel::Any,
+                }
+            }
+            Some(Level::One) => ScopeSel::All,
+            Some(Level::Exact(l)) => match l.as_str() {
+                "*" => ScopeSel::Robots,
+                "local" => ScopeSel::Some(vec![Scope::Local]),
+                l => match crate::key::parse_scope(l) {
+                    Ok(scope @ Scope::Robot(_)) => ScopeSel::Some(vec![scope]),
+                    _ => return nothing,
+                },
+            },
+            None => return nothing,
+        };
+        match self.levels.get(1) {
+            Some(Level::Rest) => {
+                return VarPlan {
+                    scopes,
+                    path: PathSel::Any,
+                }
+            }
+            Some(Level::One) => {}
+            Some(Level::Exact(l)) if l == "var" => {}
+            _ => return nothing,
+        }
+        let mut literal = String::new();
+        for level in &self.levels[2..] {
+            let with_self = match level {
+                Level::Exact(l) => {
+                    if !literal.is_empty() {
+                        literal.push('.');
+                    }
+                    literal.push_str(l);
+                    continue;
+                }
+                Level::One => false,
+                Level::Rest => true,
+            };
+            let path = if literal.is_empty() {
+                PathSel::Any
+            } else {
+                PathSel::Prefix { literal, with_self }
+            };
+            return VarPlan { scopes, path };
+        }
+        if literal.is_empty() {
+            // `n.var`: a key has at least one path level.
+            return nothing;
+        }
+        VarPlan {
+            scopes,
+            path: PathSel::Exact(literal),
+        }
+    }
+}
+
+/// Which stored `var` bindings a pattern can match ([`Pattern::var_plan`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct VarPlan {
+    pub(crate) scopes: ScopeSel,
+    pub(crate) path: PathSel,
+}
+
+/// The scopes a pattern's first level selects.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) enum ScopeSel {
+    /// Every scope (`+`, `#`).
+    All,
+    /// Every robot's scope (`*`).
+    Robots,
+    /// These (none: the pattern matches no `var` binding).
+    Some(Vec<Scope>),
+}
+
+/// The paths a pattern selects within a scope.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) enum PathSel {
+    /// Any path (the first path level is a wildcard).
+    Any,
+    /// Exactly this path (no wildcard).
+    Exact(String),
+    /// Paths below `literal` (`literal.…`), and `literal` itself if `with_self` (`#`
+    /// matches zero levels).
+    Prefix { literal: String, with_self: bool },
 }
 
 fn match_levels<'a>(mut pattern: &[Level], key: impl Iterator<Item = &'a str>) -> bool {
@@ -166,6 +263,28 @@ mod tests {
             "local values are nobody's global copy"
         );
         assert!(!m("07.var.x", "7.var.x"));
+    }
+
+    #[test]
+    fn the_plan_names_the_scopes_and_the_literal_start_of_the_path() {
+        let plan = |p: &str| Pattern::parse(p).unwrap().var_plan();
+        let prefix = |l: &str, with_self| PathSel::Prefix {
+            literal: l.into(),
+            with_self,
+        };
+        let two = ScopeSel::Some(vec![Scope::Robot(2)]);
+        assert_eq!(plan("2.var.ball.#").scopes, two);
+        assert_eq!(plan("2.var.ball.#").path, prefix("ball", true));
+        assert_eq!(plan("2.+.ball.+.x").path, prefix("ball", false));
+        assert_eq!(plan("2.var.a.b").path, PathSel::Exact("a.b".into()));
+        assert_eq!(plan("*.var.a").scopes, ScopeSel::Robots);
+        assert_eq!(plan("+.var.+.x").scopes, ScopeSel::All);
+        assert_eq!(plan("+.var.+.x").path, PathSel::Any);
+        assert_eq!(plan("local.#").path, PathSel::Any);
+        let none = ScopeSel::Some(Vec::new());
+        for p in ["2.talk.x", "07.var.x", "robot.var.x", "2.var", "2"] {
+            assert_eq!(plan(p).scopes, none, "{p} matches no var binding");
+        }
     }
 
     #[test]

@@ -114,6 +114,16 @@ pub struct Stats {
     pub updates_applied: u64,
     /// Updates older than the stored version (ignored).
     pub updates_stale: u64,
+    /// Updates of new keys refused because the sender (or all teammates together) has
+    /// as many bindings as the limits allow.
+    pub updates_refused: u64,
+    /// Stored versions their owner never re-sent, replaced by the lower versions it
+    /// keeps sending (a forged or corrupted version).
+    pub updates_unconfirmed_replaced: u64,
+    /// Bindings an owner's older incarnation left, removed when its new one published.
+    pub bindings_superseded: u64,
+    /// Bindings of departed robots released after the grace period.
+    pub bindings_released: u64,
     /// Talk messages delivered.
     pub talk_delivered: u64,
     /// Talk messages given up.

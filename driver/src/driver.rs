@@ -343,6 +343,11 @@ impl Inner {
                     last,
                 } => {
                     tracing::warn!(from, %queue, first, last, "talk messages given up");
+                    for slot in self.sessions.values_mut() {
+                        let before = slot.session.pending_output().len();
+                        slot.session.handle_talk_lost(from, &queue, first, last);
+                        self.handed_up += u64::from(wake_if_changed(slot, before));
+                    }
                     let notice = || Notice::TalkLost {
                         from,
                         queue: queue.clone(),

@@ -25,6 +25,12 @@ pub trait Board {
     fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
     /// Posts a message to an own `talk` queue.
     fn post(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
+    /// Whether robot `owner` is departed (its values are old news): replies about its
+    /// bindings carry the `departed` flag. A bare blackboard knows of no departures.
+    fn departed(&self, owner: u8) -> bool {
+        let _ = owner;
+        false
+    }
 }
 
 impl From<SetError> for Rejected {
@@ -34,6 +40,7 @@ impl From<SetError> for Rejected {
             SetError::TalkKey(_) => ErrCode::WrongKind,
             SetError::NotOwner { .. } => ErrCode::NotOwner,
             SetError::TooLarge { .. } => ErrCode::TooLarge,
+            SetError::TooManyKeys { .. } => ErrCode::TooMany,
         };
         Rejected {
             code,
@@ -111,5 +118,9 @@ impl Board for Replica {
         Replica::post(self, now, &key.to_string(), value)
             .map(|_| ())
             .map_err(Rejected::from)
+    }
+
+    fn departed(&self, owner: u8) -> bool {
+        self.is_departed(owner)
     }
 }

@@ -14,8 +14,9 @@ pub const MAX_REFRESH_MS: u64 = 3_600_000;
 /// A parsed command.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Command {
-    /// `GETV key`
-    Get(Key),
+    /// `GETV key [max_age_ms]`: with a maximum age, an older value is refused
+    /// (`ERR 406`).
+    Get(Key, Option<u64>),
     /// `SETV key value` (on a `talk` key: post a message).
     Set(Key, Value),
     /// `ADDW pattern`
@@ -113,7 +114,26 @@ impl Command {
         let (verb, rest) = word(line);
         let upper = verb.to_ascii_uppercase();
         match upper.as_str() {
-            "GETV" => Ok(Command::Get(Key::parse(single("GETV", rest, "key")?)?)),
+            "GETV" => {
+                let usage = || Rejected::new(ErrCode::Usage, "usage: GETV key [max_age_ms]");
+                let (key, rest) = word(rest);
+                let (max_age, after) = word(rest);
+                if key.is_empty() || !after.trim().is_empty() {
+                    return Err(usage());
+                }
+                let digits = max_age.bytes().all(|b| b.is_ascii_digit());
+                let max_age = match max_age.parse::<u64>() {
+                    _ if max_age.is_empty() => None,
+                    Ok(ms) if digits => Some(ms),
+                    _ => {
+                        return Err(Rejected::new(
+                            ErrCode::Usage,
+                            format!("bad max_age_ms {max_age:?}: expected whole milliseconds"),
+                        ))
+                    }
+                };
+                Ok(Command::Get(Key::parse(key)?, max_age))
+            }
             "SETV" => {
                 let (key, value) = word(rest);
                 if key.is_empty() || value.trim().is_empty() {

@@ -11,6 +11,7 @@ use std::fmt;
 /// | 402 | line longer than the limit (4 KiB): the whole line is discarded |
 /// | 403 | line is not UTF-8 text |
 /// | 404 | `GETV`: no value bound to the key; `DELW`: pattern not watched |
+/// | 406 | `GETV key max_age_ms`: the value is older than `max_age_ms` |
 /// | 410 | malformed key |
 /// | 411 | malformed watch pattern |
 /// | 412 | malformed value literal |
@@ -18,7 +19,8 @@ use std::fmt;
 /// | 420 | write refused: the key belongs to another robot |
 /// | 421 | write refused: wrong kind of key (a talk queue has no value to get or set; only own queues can be posted to) |
 /// | 422 | write refused: the value does not fit in one frame |
-/// | 429 | too many watch patterns, or too many talk queues |
+/// | 429 | limit reached: too many watch patterns, talk queues, or keys (`SETV` of a new `local` key beyond the local-key limit, or of a new own global beyond the per-robot limit) |
+/// | 430 | post refused: the talk queue's retention buffer is full of messages teammates may still need; retry later |
 /// | 503 | not available here (e.g. posting without a replica) |
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ErrCode {
@@ -32,6 +34,8 @@ pub enum ErrCode {
     NotText,
     /// 404
     NotFound,
+    /// 406
+    TooOld,
     /// 410
     BadKey,
     /// 411
@@ -48,6 +52,8 @@ pub enum ErrCode {
     TooLarge,
     /// 429
     TooMany,
+    /// 430
+    QueueFull,
     /// 503
     Unavailable,
 }
@@ -61,6 +67,7 @@ impl ErrCode {
             ErrCode::LineTooLong => 402,
             ErrCode::NotText => 403,
             ErrCode::NotFound => 404,
+            ErrCode::TooOld => 406,
             ErrCode::BadKey => 410,
             ErrCode::BadPattern => 411,
             ErrCode::BadValue => 412,
@@ -69,6 +76,7 @@ impl ErrCode {
             ErrCode::WrongKind => 421,
             ErrCode::TooLarge => 422,
             ErrCode::TooMany => 429,
+            ErrCode::QueueFull => 430,
             ErrCode::Unavailable => 503,
         }
     }

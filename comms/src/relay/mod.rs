@@ -6,21 +6,41 @@
 //! `#` the rest), because `*` is already a scope.
 //!
 //! ```text
-//! on connect       -> HUDDLE <version> robot <id>
-//! GETV key         -> VAL key type value age_ms      | ERR code text
-//! SETV key value   -> OK                             | ERR code text
+//! on connect       -> HUDDLE <version> robot <id>          (version 2)
+//! GETV key [max_age_ms]
+//!                  -> VAL key type value age_ms [departed] | ERR code text
+//! SETV key value   -> OK                                   | ERR code text
 //! ADDW pattern     -> OK      DELW pattern -> OK     CLRW -> OK
 //! LSTW             -> WATCH pattern (one per line), then END
-//! REFR ms          -> OK   then every ms: UPD key type value age_ms for each watched key
-//!                          (REFR 0: push each change as it happens)
+//! REFR ms          -> OK   then every ms: UPD key type value age_ms [departed] for each
+//!                          watched key (REFR 0: push each change as it happens)
 //! QUIT             -> BYE, connection closed
+//! pushed any time  -> UPD n.talk.q type value 0            a watched queue's message
+//!                     LOST n.talk.q first last             messages first..=last of
+//!                                                          robot n's queue q are lost
 //! ```
 //!
 //! Details the grammar leaves open, as this implementation settles them:
 //! - `type` is `int|float|bool|string|floats|bytes`; values use the literal syntax of
 //!   [`crate::literal`] (strings double-quoted with escapes; floats parse back to the
-//!   same bits). `age_ms` is whole milliseconds since the value was set, on this robot's
-//!   clock.
+//!   same bits).
+//! - `age_ms` is whole milliseconds since the value was set, on **this** robot's clock:
+//!   for a teammate's value, the time since it arrived plus the age the sender reported
+//!   (the time since it was set on the sender's clock). It does **not** include the
+//!   network transit, which no robot measures: a value 3 ms on the air reads 3 ms
+//!   younger than it is. No two clocks are ever compared.
+//! - After the age, a line may carry flag words (letters only; clients skip flags they
+//!   do not know, as [`Binding::parse`] does). `departed`: the owner has been silent for
+//!   longer than the departure limit (300 ms by default), so the value is old news
+//!   however young its age; a departed robot's values are released 60 s (by default)
+//!   after its departure, and are gone from then on (`ERR 404`), as are the values a
+//!   robot's previous life left once it restarted and published again.
+//! - `GETV key max_age_ms` answers `ERR 406` instead of a value older than `max_age_ms`
+//!   (by the age above); `GETV key` answers whatever age.
+//! - `LOST n.talk.q first last`: the relay gave up messages `first..=last` (sequence
+//!   numbers, inclusive) of robot n's queue q: they were lost on the network and can no
+//!   longer be repaired. Pushed like a watched queue's `UPD` (a watch must match
+//!   `n.talk.q`), in order with its messages, whatever `REFR` says. Never silent loss.
 //! - Replies name keys as stored: `GETV *.var.x` answers `VAL 3.var.x ...` when robot 3's
 //!   copy is the newest, so the owner is always visible.
 //! - `REFR` (any period) first pushes every watched binding once, so a client starts from
@@ -28,7 +48,9 @@
 //!   Bindings matched by several patterns are pushed once.
 //! - `SETV` on an own `talk` queue (`*.talk.q`) posts a message. Messages of watched
 //!   queues arrive as `UPD n.talk.q type value 0`, as delivered, whatever `REFR` says.
-//! - `SETV` follows the library's rules: another robot's `n.var.x` gives `ERR 420`.
+//! - `SETV` follows the library's rules: another robot's `n.var.x` gives `ERR 420`; a new
+//!   key beyond the limits (65536 `local` keys, 4096 own globals by default) `ERR 429`;
+//!   a post the queue's full retention buffer cannot take `ERR 430`.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).

@@ -27,8 +27,9 @@ use super::board::Board;
 use super::command::{Command, Rejected};
 use super::error::ErrCode;
 
-/// The relay protocol version in the greeting.
-pub const PROTOCOL_VERSION: u32 = 1;
+/// The relay protocol version in the greeting. 2: `VAL`/`UPD` lines may end in flag words
+/// (`departed`), `LOST` lines, `GETV key max_age_ms`.
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Per-session memory and watch limits.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -237,7 +238,7 @@ impl Session {
 
     fn execute<B: Board + ?Sized>(&mut self, now: Instant, command: Command, board: &mut B) {
         match command {
-            Command::Get(key) => {
+            Command::Get(key, max_age_ms) => {
                 if key.kind() == Kind::Talk {
                     return self.push_err(&Rejected::new(
                         ErrCode::WrongKind,
@@ -247,7 +248,14 @@ impl Session {
                 match board.get(&key) {
                     Some(entry) => {
                         let stored = stored_key(&key, entry);
-                        self.push_binding("VAL", &stored, entry, now);
+                        let age_ms = entry.age(now).as_millis();
+                        match max_age_ms {
+                            Some(max) if age_ms > u128::from(max) => self.push_err(&Rejected::new(
+                                ErrCode::TooOld,
+                                format!("{stored} is {age_ms} ms old, more than {max} ms"),
+                            )),
+                            _ => self.push_binding("VAL", &stored, entry, now, board),
+                        }
                     }
                     None => self.push_err(&Rejected::new(
                         ErrCode::NotFound,
@@ -364,7 +372,7 @@ impl Session {
             return;
         }
         if let Some(entry) = board.get(key) {
-            self.push_binding("UPD", key, entry, now);
+            self.push_binding("UPD", key, entry, now, board);
         }
     }
 
@@ -384,11 +392,27 @@ impl Session {
         }
     }
 
+    /// Messages `first..=last` of a teammate's talk queue were given up (they can no
+    /// longer arrive): pushed at once, whatever `REFR` says, as
+    /// `LOST <from>.talk.<queue> <first> <last>` if a watch matches.
+    pub fn handle_talk_lost(&mut self, from: u8, queue: &str, first: u64, last: u64) {
+        if self.state != SessionState::Open {
+            return;
+        }
+        let matches = self
+            .watches
+            .iter()
+            .any(|w| w.matches_parts(Scope::Robot(from), Kind::Talk, queue));
+        if matches {
+            self.push(format_args!("LOST {from}.talk.{queue} {first} {last}"));
+        }
+    }
+
     fn push_snapshot<B: Board + ?Sized>(&mut self, now: Instant, watches: &[Pattern], board: &B) {
         match watches {
             [] => {}
             [one] => board.visit(one, &mut |key, entry| {
-                self.push_binding("UPD", key, entry, now)
+                self.push_binding("UPD", key, entry, now, board)
             }),
             many => {
                 // Overlapping patterns: each binding once, in key order.
@@ -400,17 +424,31 @@ impl Session {
                 }
                 for key in keys {
                     if let Some(entry) = board.get(&key) {
-                        self.push_binding("UPD", &key, entry, now);
+                        self.push_binding("UPD", &key, entry, now, board);
                     }
                 }
             }
         }
     }
 
-    fn push_binding(&mut self, word: &str, key: &Key, entry: &Entry, now: Instant) {
+    fn push_binding<B: Board + ?Sized>(
+        &mut self,
+        word: &str,
+        key: &Key,
+        entry: &Entry,
+        now: Instant,
+        board: &B,
+    ) {
         let age_ms = entry.age(now).as_millis();
         let ty = entry.value.value_type();
-        self.push(format_args!("{word} {key} {ty} {} {age_ms}", entry.value));
+        let departed = match key.scope() {
+            Scope::Robot(owner) if board.departed(owner) => " departed",
+            _ => "",
+        };
+        self.push(format_args!(
+            "{word} {key} {ty} {} {age_ms}{departed}",
+            entry.value
+        ));
     }
 
     fn push_err(&mut self, rejected: &Rejected) {
@@ -456,7 +494,7 @@ mod tests {
     /// Robot 2's session over a bare blackboard, greeting already read.
     fn open() -> (Session, Blackboard) {
         let mut s = Session::new(2, SessionLimits::default());
-        assert_eq!(take(&mut s), "HUDDLE 1 robot 2\n");
+        assert_eq!(take(&mut s), "HUDDLE 2 robot 2\n");
         (s, Blackboard::new(2))
     }
 
@@ -732,5 +770,124 @@ mod tests {
             s.handle_input(t(0), flood.as_bytes(), &mut bb);
         }
         assert_eq!(s.state(), SessionState::Closed(CloseReason::OutputOverflow));
+    }
+
+    #[test]
+    fn getv_with_a_maximum_age_refuses_an_older_value_with_its_own_code() {
+        let (mut s, mut bb) = open();
+        say(&mut s, &mut bb, t(0), "SETV *.var.pose 1.0\n");
+        assert_eq!(
+            say(&mut s, &mut bb, t(500), "GETV *.var.pose 500\n"),
+            "VAL 2.var.pose float 1.0 500\n"
+        );
+        let refused = say(&mut s, &mut bb, t(501), "GETV *.var.pose 500\n");
+        assert!(
+            refused.starts_with("ERR 406 2.var.pose is 501 ms old"),
+            "{refused}"
+        );
+        assert!(say(&mut s, &mut bb, t(501), "GETV *.var.none 500\n").starts_with("ERR 404 "));
+        for bad in [
+            "GETV *.var.pose -1\n",
+            "GETV *.var.pose soon\n",
+            "GETV *.var.pose 1 2\n",
+        ] {
+            assert!(
+                say(&mut s, &mut bb, t(501), bad).starts_with("ERR 401 "),
+                "{bad}"
+            );
+        }
+        assert_eq!(
+            say(&mut s, &mut bb, t(501), "GETV *.var.pose\n"),
+            "VAL 2.var.pose float 1.0 501\n",
+            "without a maximum, any age"
+        );
+    }
+
+    #[test]
+    fn given_up_talk_messages_reach_watching_clients_as_lost_lines() {
+        let (mut s, mut bb) = open();
+        s.handle_talk_lost(3, "plan", 4, 7);
+        assert_eq!(take(&mut s), "", "nobody watches the queue");
+        say(&mut s, &mut bb, t(0), "ADDW +.talk.plan\n");
+        s.handle_talk(3, "plan", &Value::Int(3));
+        s.handle_talk_lost(3, "plan", 4, 7);
+        s.handle_talk_lost(3, "other", 1, 1);
+        s.handle_talk(3, "plan", &Value::Int(8));
+        assert_eq!(
+            take(&mut s),
+            "UPD 3.talk.plan int 3 0\nLOST 3.talk.plan 4 7\nUPD 3.talk.plan int 8 0\n"
+        );
+    }
+
+    #[test]
+    fn new_local_keys_beyond_the_limit_get_an_error_and_old_ones_still_change() {
+        let limits = crate::BoardLimits {
+            local: 2,
+            ..crate::BoardLimits::default()
+        };
+        let mut bb = Blackboard::with_limits(2, limits);
+        let mut s = Session::new(2, SessionLimits::default());
+        take(&mut s);
+        assert_eq!(
+            say(
+                &mut s,
+                &mut bb,
+                t(0),
+                "SETV local.var.a 1\nSETV local.var.b 1\n"
+            ),
+            "OK\nOK\n"
+        );
+        let refused = say(&mut s, &mut bb, t(0), "SETV local.var.c 1\n");
+        assert!(
+            refused.starts_with("ERR 429 local.var.c: no room"),
+            "{refused}"
+        );
+        assert_eq!(say(&mut s, &mut bb, t(0), "SETV local.var.a 2\n"), "OK\n");
+        assert_eq!(bb.len(), 2);
+    }
+
+    #[test]
+    fn a_departed_robots_values_are_flagged_until_released() {
+        use crate::{Replica, ReplicaConfig};
+        let from = std::net::SocketAddr::from(([127, 0, 0, 1], 2000));
+        let mut a = Replica::new(ReplicaConfig::new(1, 7), 11, t(0)).unwrap();
+        let mut b = Replica::new(ReplicaConfig::new(2, 7), 22, t(0)).unwrap();
+        a.set(t(0), "*.var.pose", Value::Float(1.0)).unwrap();
+        while let Some(tx) = a.poll_transmit() {
+            b.handle_datagram(t(1), from, &tx.payload);
+        }
+        let mut s = Session::new(2, SessionLimits::default());
+        take(&mut s);
+        s.handle_input(t(1), b"GETV 1.var.pose\nADDW 1.var.#\nREFR 1000\n", &mut b);
+        assert_eq!(
+            take(&mut s),
+            "VAL 1.var.pose float 1.0 0\nOK\nOK\nUPD 1.var.pose float 1.0 0\n"
+        );
+        // Robot 1 falls silent: after departed_after it is departed.
+        b.handle_timeout(t(301));
+        assert!(b.is_departed(1));
+        s.handle_input(t(301), b"GETV *.var.pose\n", &mut b);
+        assert_eq!(take(&mut s), "VAL 1.var.pose float 1.0 300 departed\n");
+        s.handle_timeout(t(1001), &b);
+        let line = take(&mut s);
+        assert_eq!(line, "UPD 1.var.pose float 1.0 1000 departed\n");
+        let parsed = super::super::Binding::parse(line.trim_end()).unwrap();
+        assert!(parsed.departed);
+        // After the grace period (60 s after the departure) the values are released.
+        let mut now = t(1001);
+        while b.get("1.var.pose").unwrap().is_some() {
+            assert!(now < t(70_000), "never released");
+            now = b.poll_timeout().unwrap();
+            b.handle_timeout(now);
+        }
+        let release = now;
+        assert_eq!(
+            release,
+            t(1 + 300 + 60_000),
+            "last heard + departure + grace"
+        );
+        assert_eq!(b.stats().bindings_released, 1);
+        s.handle_input(release, b"GETV 1.var.pose\n", &mut b);
+        assert!(take(&mut s).starts_with("ERR 404 "));
     }
 }

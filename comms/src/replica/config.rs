@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use thiserror::Error;
 
+use crate::blackboard::BoardLimits;
 use crate::key::ROBOT_IDS;
 use crate::talk::TalkLimits;
 use crate::wire::{MAX_FRAME_LEN, MIN_MTU};
@@ -28,6 +29,18 @@ pub struct ReplicaConfig {
     pub team_key: Option<Vec<u8>>,
     /// Talk queue limits and timers.
     pub talk: TalkLimits,
+    /// Most bindings stored per robot (default 4096): each teammate's copies, and this
+    /// robot's own global values (teammates would refuse more). An update for a new key
+    /// beyond it is refused and counted (`updates_refused`).
+    pub max_bindings_per_owner: usize,
+    /// Most bindings of all teammates together (default 65536).
+    pub max_remote_bindings: usize,
+    /// Most `local` bindings (default 65536); a write of a new one beyond it is
+    /// refused ([`SetError::TooManyKeys`](crate::SetError::TooManyKeys)).
+    pub max_local_bindings: usize,
+    /// A departed robot's values stay readable (the relay marks them `departed`) this
+    /// long after its departure, then they are released (default 60 s).
+    pub release_departed_after: Duration,
 }
 
 impl ReplicaConfig {
@@ -41,6 +54,10 @@ impl ReplicaConfig {
             departed_after: Duration::from_millis(300),
             team_key: None,
             talk: TalkLimits::default(),
+            max_bindings_per_owner: 4096,
+            max_remote_bindings: 65536,
+            max_local_bindings: 65536,
+            release_departed_after: Duration::from_secs(60),
         }
     }
 
@@ -55,6 +72,16 @@ impl ReplicaConfig {
     pub fn with_team_key(mut self, key: impl Into<Vec<u8>>) -> ReplicaConfig {
         self.team_key = Some(key.into());
         self
+    }
+
+    /// The blackboard bounds these settings give.
+    pub(super) fn board_limits(&self) -> BoardLimits {
+        BoardLimits {
+            per_owner: self.max_bindings_per_owner,
+            remote: self.max_remote_bindings,
+            local: self.max_local_bindings,
+            unconfirmed_after: self.departed_after,
+        }
     }
 
     /// Whether a replica can work with these settings.

@@ -19,7 +19,7 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
-use crate::blackboard::{Blackboard, Entry, SetError};
+use crate::blackboard::{Applied, Blackboard, Entry, SetError};
 use crate::key::{Key, KeyError, Scope};
 use crate::pattern::Pattern;
 use crate::stats::Stats;
@@ -77,8 +77,9 @@ impl Replica {
         now: Instant,
     ) -> Result<Replica, ConfigInvalid> {
         config.validate()?;
-        let mut board = Blackboard::new(config.robot_id);
+        let mut board = Blackboard::with_limits(config.robot_id, config.board_limits());
         board.set_incarnation(incarnation);
+        board.advance_clock(now);
         Ok(Replica {
             key: config.team_key.as_deref().map(TeamKey::new),
             cfg: config,
@@ -124,6 +125,47 @@ impl Replica {
 
     fn advance(&mut self, now: Instant) {
         self.now = self.now.max(now);
+        self.board.advance_clock(now);
+    }
+
+    /// Applies one received update (stamped on this robot's clock) and counts it.
+    pub(super) fn apply_update(
+        &mut self,
+        sender: u8,
+        incarnation: u64,
+        path: &str,
+        value: Value,
+        version: u64,
+        stamp: Instant,
+    ) {
+        match self
+            .board
+            .apply_remote_path(sender, incarnation, path, value, version, stamp)
+        {
+            Applied::Stale => self.stats.updates_stale += 1,
+            Applied::Refused => {}
+            Applied::Inserted | Applied::Changed | Applied::Refreshed => {
+                self.stats.updates_applied += 1
+            }
+        }
+        self.sync_board_counts();
+    }
+
+    /// Copies what the blackboard's bounds did into the stats.
+    pub(super) fn sync_board_counts(&mut self) {
+        let c = self.board.counts();
+        let s = &mut self.stats;
+        s.updates_refused = c.refused;
+        s.updates_unconfirmed_replaced = c.unconfirmed_replaced;
+        s.bindings_superseded = c.superseded;
+        s.bindings_released = c.released;
+    }
+
+    /// Whether robot `robot` was heard and is now departed (silent for longer than
+    /// `departed_after`). Its values are still stored until
+    /// `release_departed_after` has passed.
+    pub fn is_departed(&self, robot: u8) -> bool {
+        self.peers.get(&robot).is_some_and(|p| !p.present)
     }
 
     /// Sets `key` (`local.var.x`, `*.var.x` or `<own id>.var.x`) at `now`. Global
@@ -196,5 +238,7 @@ impl Replica {
     }
 }
 
+#[cfg(test)]
+mod bounds_tests;
 #[cfg(test)]
 mod tests;

@@ -5,7 +5,6 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use crate::blackboard::Applied;
 use crate::stats::DropReason;
 use crate::time::Instant;
 use crate::wire::{self, Item};
@@ -61,17 +60,7 @@ impl Replica {
                     age_us,
                 } => {
                     let stamp = now.saturating_sub(Duration::from_micros(age_us));
-                    match self.board.apply_remote_path(
-                        sender,
-                        frame.incarnation,
-                        &path,
-                        value,
-                        version,
-                        stamp,
-                    ) {
-                        Applied::Stale => self.stats.updates_stale += 1,
-                        _ => self.stats.updates_applied += 1,
-                    }
+                    self.apply_update(sender, frame.incarnation, &path, value, version, stamp);
                 }
                 Item::Talk { queue, seq, value } => {
                     let mut out = std::mem::take(&mut self.deliveries);

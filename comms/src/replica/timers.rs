@@ -28,7 +28,7 @@ impl Replica {
         self.refresh_queue = self
             .board
             .scope_entries(own)
-            .map(|(p, _)| p.clone())
+            .map(|(p, _)| p.to_owned())
             .collect();
         self.heads_out.extend(self.outboxes.keys().cloned());
         self.heartbeat_due = true;
@@ -71,6 +71,28 @@ impl Replica {
         }
         self.stats.nacks_sent += nacks.len() as u64;
         self.nacks_out.extend(nacks);
+        self.release_departed(now);
+    }
+
+    /// When robot `robot`'s values are released if it stays departed: its
+    /// `release_departed_after` grace period after its departure.
+    fn release_at(&self, last_heard: Instant) -> Instant {
+        last_heard + self.cfg.departed_after + self.cfg.release_departed_after
+    }
+
+    /// Releases the values of robots departed for longer than the grace period.
+    fn release_departed(&mut self, now: Instant) {
+        let due: Vec<u8> = self
+            .peers
+            .iter()
+            .filter(|(_, p)| !p.present && self.release_at(p.last_heard) <= now)
+            .map(|(&robot, _)| robot)
+            .filter(|&robot| self.board.owner_len(robot) > 0)
+            .collect();
+        for robot in due {
+            self.board.release_owner(robot);
+        }
+        self.sync_board_counts();
     }
 
     /// Mirrors the counters into `local.var.huddle.stats.*`.
@@ -83,6 +105,13 @@ impl Replica {
             ("bytes_out".into(), s.bytes_out as i64),
             ("updates_applied".into(), s.updates_applied as i64),
             ("updates_stale".into(), s.updates_stale as i64),
+            ("updates_refused".into(), s.updates_refused as i64),
+            (
+                "updates_unconfirmed_replaced".into(),
+                s.updates_unconfirmed_replaced as i64,
+            ),
+            ("bindings_superseded".into(), s.bindings_superseded as i64),
+            ("bindings_released".into(), s.bindings_released as i64),
             ("talk_delivered".into(), s.talk_delivered as i64),
             ("talk_given_up".into(), s.talk_given_up as i64),
             ("talk_resent".into(), s.talk_resent as i64),
@@ -107,8 +136,9 @@ impl Replica {
                 .get(&key)
                 .is_some_and(|e| e.value == Value::Int(v));
             if !unchanged {
-                // A local key of valid shape: this cannot fail.
-                let _ = self.board.set(now, &key, Value::Int(v));
+                // A local key of valid shape, not subject to the local-key limit: this
+                // cannot fail.
+                let _ = self.board.write_unlimited(now, &key, Value::Int(v));
             }
         }
     }
@@ -117,9 +147,11 @@ impl Replica {
     pub fn poll_timeout(&self) -> Option<Instant> {
         let limits = &self.cfg.talk;
         let mut next = self.next_refresh;
-        for peer in self.peers.values() {
+        for (&robot, peer) in &self.peers {
             if peer.present {
                 next = next.min(peer.last_heard + self.cfg.departed_after);
+            } else if self.board.owner_len(robot) > 0 {
+                next = next.min(self.release_at(peer.last_heard));
             }
             for inbox in peer.inboxes.values() {
                 if let Some(t) = inbox.deadline(limits) {
