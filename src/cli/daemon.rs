@@ -95,26 +95,16 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
         bail!("--refresh must be positive");
     }
     let mut replica = ReplicaConfig::new(id, args.team).with_refresh_period(args.refresh);
-    // Say what was loaded (never the key itself): a robot that cannot hear its team
-    // usually runs with another key or config than its teammates.
-    match &args.key_file {
-        Some(file) => {
-            let key = driver::read_key_file(file)?;
-            tracing::info!(
-                "team key: {} (untagged or badly tagged frames are dropped)",
-                file.display()
-            );
-            replica = replica.with_team_key(key);
+    if let Some(file) = &args.key_file {
+        let bytes = std::fs::read(file)
+            .with_context(|| format!("cannot read key file {}", file.display()))?;
+        let key = bytes.trim_ascii_end();
+        if key.is_empty() {
+            bail!("key file {} is empty", file.display());
         }
-        None => tracing::info!("team key: none (frames are not authenticated)"),
+        replica = replica.with_team_key(key.to_vec());
     }
-    let loaded = driver::load_config_files(&args.config_dir, id)?;
-    tracing::info!(
-        "config: {} ({})",
-        loaded.summary(),
-        args.config_dir.display()
-    );
-    let entries = loaded.entries;
+    let entries = driver::load_config(&args.config_dir, id)?;
     let mut config = DriverConfig::new(replica);
     config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
     config.socket.group = args.group;
