@@ -96,7 +96,8 @@
 // Replica only: a datagram was dropped; `name` says why (e.g. `bad_tag`).
 #define HUDDLE_EVENT_FRAME_DROPPED 8
 
-// Replica only: an event this version has no kind for; `name` describes it.
+// An event this version has no kind for; `name` describes it. The node reports this way
+// that another robot sends with its robot id (`IncarnationConflict`, `robot` set).
 #define HUDDLE_EVENT_OTHER 9
 
 // A running node. Opaque: create it with `huddle_node_start`, release it with
@@ -210,7 +211,8 @@ extern "C" {
 const char *huddle_version(void);
 
 // Starts a node: opens the team's multicast socket on the interface, applies the
-// config files, and runs the driver on a thread of its own until `huddle_node_stop`.
+// config files, sends the first frame, and receives (and runs the replica's timers) on a
+// thread of its own until `huddle_node_stop`.
 // Returns NULL on failure, with the reason in `err` (bad robot id, group, interface,
 // key file, config directory or config line; the port or group could not be joined).
 //
@@ -279,7 +281,8 @@ int huddle_node_next_event(huddle_node *node,
                            huddle_event *out,
                            huddle_error *err);
 
-// Stops the node (its thread ends, its socket closes) and releases it. The pointer is
+// Stops the node (its thread ends, its socket closes) and releases it; takes up to
+// 20 ms (the longest its receive thread waits before it looks for a stop). The pointer is
 // dead afterwards: any call with it returns -1 with `HUDDLE_E_STOPPED`, a second stop
 // does nothing. NULL does nothing.
 //

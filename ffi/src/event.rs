@@ -25,7 +25,8 @@ pub const HUDDLE_EVENT_VALUE_CHANGED: i32 = 7;
 /// Replica only: a datagram was dropped; `name` says why (e.g. `bad_tag`).
 pub const HUDDLE_EVENT_FRAME_DROPPED: i32 = 8;
 
-/// Replica only: an event this version has no kind for; `name` describes it.
+/// An event this version has no kind for; `name` describes it. The node reports this way
+/// that another robot sends with its robot id (`IncarnationConflict`, `robot` set).
 pub const HUDDLE_EVENT_OTHER: i32 = 9;
 
 /// One event. Fields an event kind does not use are zero (strings empty).
@@ -81,6 +82,11 @@ pub(crate) enum NodeEvent {
         incarnation: u64,
     },
     Lagged(u64),
+    /// An event with no kind of its own (`HUDDLE_EVENT_OTHER`).
+    Other {
+        robot: u8,
+        description: String,
+    },
 }
 
 fn clear(out: &mut huddle_event, kind: i32) {
@@ -147,6 +153,11 @@ pub(crate) fn fill_node_event(out: &mut huddle_event, event: &NodeEvent) {
         NodeEvent::Lagged(n) => {
             clear(out, HUDDLE_EVENT_LAGGED);
             out.count = *n;
+        }
+        NodeEvent::Other { robot, description } => {
+            clear(out, HUDDLE_EVENT_OTHER);
+            out.robot = *robot;
+            write_text(&mut out.name, description);
         }
     }
 }

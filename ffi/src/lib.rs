@@ -4,10 +4,12 @@
 //!
 //! **What it is.** Two levels behind one C API:
 //!
-//! - **the node** (`huddle_node_*`): the `driver` crate's `Driver` on a thread of its own,
-//!   as `huddle daemon` runs it without the relay. The program sets, reads and posts
-//!   in-process, with no daemon and no socket round trip per update; talk messages and
-//!   peer changes arrive as events (`huddle_node_next_event`);
+//! - **the node** (`huddle_node_*`): `comms::Replica` on the `driver` crate's multicast
+//!   socket, as `huddle daemon` runs it without the relay. The program sets, reads and
+//!   posts in-process, on its own thread (a set is on the wire when it returns), with no
+//!   daemon and no socket round trip per update; a thread of the node's own receives
+//!   and runs the timers; talk messages and peer changes arrive as events
+//!   (`huddle_node_next_event`);
 //! - **the replica** (`huddle_replica_*`): `comms::Replica`, the sans-IO state machine,
 //!   for programs that own their socket and their clock.
 //!
@@ -15,8 +17,9 @@
 //! `two_robots.c` and `two_robots.cpp`, which `tests/examples.rs` compiles with the
 //! system `cc`/`c++` and runs on loopback.
 //!
-//! **What it is not.** No protocol logic and no I/O of its own: every frame is decided
-//! by `comms`, every socket is the `driver`'s.
+//! **What it is not.** No protocol logic: every frame is decided by `comms`, every socket
+//! is opened by the `driver` (`open_multicast`); the node only moves datagrams between
+//! them.
 //!
 //! # Rules at the boundary
 //!
@@ -61,6 +64,7 @@
 #![warn(missing_docs)]
 
 mod binding;
+mod engine;
 mod error;
 mod event;
 mod handles;

@@ -1,33 +1,26 @@
-//! The node: a `driver::Driver` on a thread of its own (a current-thread tokio runtime
-//! and a `LocalSet`, as `huddle daemon` runs it, without the relay), and the C-facing
-//! side that talks to it from any thread.
+//! The node: a `comms::Replica` with its multicast socket (`engine`), and the C-facing
+//! side that calls it from any thread.
 //!
-//! Calls go to the driver thread as commands on a tokio channel, which wakes that thread
-//! directly; the caller waits for the reply on a std channel. A `set` or `post` has sent
-//! its frame when it returns, as `driver::Handle::set` has. Talk messages and peer
-//! changes are queued for `huddle_node_next_event`.
+//! Every call runs on the caller's thread under the node's lock: a `set` or `post` has
+//! sent its frame when it returns, as `driver::Handle::set` has, without waking another
+//! thread first. A thread of the node's own receives datagrams and runs the replica's
+//! timers. Talk messages and peer changes are queued for `huddle_node_next_event`.
 
-use std::collections::VecDeque;
 use std::ffi::{c_char, c_int};
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::Path;
-use std::sync::{mpsc as std_mpsc, Arc, Condvar, Mutex};
-use std::thread::JoinHandle;
+use std::sync::Arc;
 use std::time::Duration;
 
-use comms::{Entry, Key, KeyError, PostError, ReplicaConfig, SetError, Value};
-use driver::{resolve_iface, Driver, DriverConfig, Handle, Notice};
-use tokio::sync::{mpsc, oneshot};
+use comms::{Entry, Key, PostError, ReplicaConfig, SetError, Value};
+use driver::{resolve_iface, DriverConfig};
 
 use crate::binding::{fill_binding, huddle_binding};
+use crate::engine::Engine;
 use crate::error::*;
-use crate::event::{fill_node_event, huddle_event, NodeEvent};
+use crate::event::{fill_node_event, huddle_event};
 use crate::handles::Handles;
 use crate::text::{read_opt_str, read_str};
-
-/// Events a node keeps for `huddle_node_next_event` before it drops the oldest (and says
-/// so with `HUDDLE_EVENT_LAGGED`).
-const EVENT_CAPACITY: usize = 65_536;
 
 /// A running node. Opaque: create it with `huddle_node_start`, release it with
 /// `huddle_node_stop`.
@@ -60,95 +53,10 @@ pub struct huddle_node_config {
     pub config_dir: *const c_char,
 }
 
-/// A binding a read found: the key as stored, the entry, its age.
-type Found = (Key, Entry, Duration);
-
-/// What the caller asks of the driver thread.
-enum Command {
-    Set {
-        key: String,
-        value: Value,
-        reply: std_mpsc::SyncSender<Result<(), SetError>>,
-    },
-    Post {
-        key: String,
-        value: Value,
-        reply: std_mpsc::SyncSender<Result<u64, PostError>>,
-    },
-    Get {
-        key: String,
-        reply: std_mpsc::SyncSender<Result<Option<Found>, KeyError>>,
-    },
-}
-
-/// Events waiting for the caller, and how it waits for them.
-#[derive(Default)]
-struct EventQueue {
-    queue: Mutex<(VecDeque<NodeEvent>, u64)>,
-    ready: Condvar,
-}
-
-impl EventQueue {
-    fn push(&self, event: NodeEvent) {
-        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
-        if q.0.len() >= EVENT_CAPACITY {
-            q.0.pop_front();
-            q.1 += 1;
-        }
-        q.0.push_back(event);
-        self.ready.notify_all();
-    }
-
-    /// The next event, waiting up to `timeout` for one.
-    fn pop(&self, timeout: Duration) -> Option<NodeEvent> {
-        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
-        if q.0.is_empty() && q.1 == 0 && !timeout.is_zero() {
-            q = self
-                .ready
-                .wait_timeout_while(q, timeout, |q| q.0.is_empty() && q.1 == 0)
-                .unwrap_or_else(|e| e.into_inner())
-                .0;
-        }
-        if q.1 > 0 {
-            return Some(NodeEvent::Lagged(std::mem::take(&mut q.1)));
-        }
-        q.0.pop_front()
-    }
-}
-
 /// The C-facing side of a node: `Send + Sync`, shared by every calling thread.
-struct Node {
-    commands: mpsc::UnboundedSender<Command>,
-    events: Arc<EventQueue>,
-    thread: Mutex<Option<(oneshot::Sender<()>, JoinHandle<()>)>>,
-}
+type Node = Engine;
 
 static NODES: Handles<Node> = Handles::new();
-
-impl Node {
-    /// Sends `command` to the driver thread and waits for its reply.
-    fn call<R>(
-        &self,
-        command: impl FnOnce(std_mpsc::SyncSender<R>) -> Command,
-    ) -> Result<R, Failure> {
-        let (reply, answer) = std_mpsc::sync_channel(1);
-        self.commands
-            .send(command(reply))
-            .map_err(|_| Failure::stopped("node"))?;
-        // The driver thread drops the reply sender unanswered only when it stops.
-        answer.recv().map_err(|_| Failure::stopped("node"))
-    }
-
-    /// Ends the driver thread and waits for it; a second call does nothing.
-    fn stop(&self) {
-        let running = self.thread.lock().unwrap_or_else(|e| e.into_inner()).take();
-        if let Some((stop, thread)) = running {
-            let _ = stop.send(());
-            // A panic on the driver thread was already reported there; nothing to add.
-            let _ = thread.join();
-        }
-    }
-}
 
 /// The settings checked and resolved on the caller's thread, so that a bad one fails
 /// the start with a clear reason.
@@ -240,192 +148,11 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
     Ok(config)
 }
 
-/// Starts the driver thread; returns once the socket is bound (or could not be).
-fn start(config: DriverConfig) -> Result<Node, Failure> {
-    let (commands, command_rx) = mpsc::unbounded_channel();
-    let (stop, stop_rx) = oneshot::channel();
-    let (ready, started) = std_mpsc::sync_channel(1);
-    let events = Arc::new(EventQueue::default());
-    let queue = events.clone();
-    let robot = config.replica.robot_id;
-    let thread = std::thread::Builder::new()
-        .name(format!("huddle-node-{robot}"))
-        .spawn(move || run_thread(config, command_rx, stop_rx, queue, ready))
-        .map_err(|e| Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}")))?;
-    match started.recv() {
-        Ok(Ok(())) => Ok(Node {
-            commands,
-            events,
-            thread: Mutex::new(Some((stop, thread))),
-        }),
-        Ok(Err(failure)) => {
-            let _ = thread.join();
-            Err(failure)
-        }
-        Err(_) => {
-            let _ = thread.join();
-            Err(Failure::new(
-                HUDDLE_E_INTERNAL,
-                "the node thread ended before it started",
-            ))
-        }
-    }
-}
-
-/// The node thread: the driver, the command loop and the event feeds on one `LocalSet`.
-fn run_thread(
-    config: DriverConfig,
-    commands: mpsc::UnboundedReceiver<Command>,
-    stop: oneshot::Receiver<()>,
-    events: Arc<EventQueue>,
-    ready: std_mpsc::SyncSender<Result<(), Failure>>,
-) {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            let _ = ready.send(Err(Failure::new(
-                HUDDLE_E_INTERNAL,
-                format!("cannot start a tokio runtime: {e}"),
-            )));
-            return;
-        }
-    };
-    let local = tokio::task::LocalSet::new();
-    local.block_on(&runtime, async move {
-        let refresh = config.replica.refresh_period;
-        let driver = match Driver::bind(config) {
-            Ok(driver) => driver,
-            Err(e) => {
-                let code = match e {
-                    driver::DriverError::Replica(_) | driver::DriverError::StartValue { .. } => {
-                        HUDDLE_E_CONFIG
-                    }
-                    _ => HUDDLE_E_NETWORK,
-                };
-                let _ = ready.send(Err(Failure::new(code, e.to_string())));
-                return;
-            }
-        };
-        let handle = driver.handle();
-        let talk = events.clone();
-        let watch = handle.watch("+.talk.#", move |_, notice| match notice {
-            Notice::Talk {
-                from,
-                queue,
-                seq,
-                value,
-            } => talk.push(NodeEvent::Talk {
-                from,
-                queue,
-                seq,
-                value,
-            }),
-            Notice::TalkLost {
-                from,
-                queue,
-                first,
-                last,
-            } => talk.push(NodeEvent::TalkLost {
-                from,
-                queue,
-                first,
-                last,
-            }),
-            Notice::Changed { .. } | Notice::Lagged(_) => {}
-        });
-        let Ok(_watch) = watch else {
-            let _ = ready.send(Err(Failure::new(
-                HUDDLE_E_INTERNAL,
-                "cannot watch the talk queues",
-            )));
-            return;
-        };
-        tokio::task::spawn_local(serve_commands(handle.clone(), commands));
-        tokio::task::spawn_local(watch_peers(handle, events, refresh / 4));
-        let _ = ready.send(Ok(()));
-        if let Err(e) = driver
-            .run(async {
-                let _ = stop.await;
-            })
-            .await
-        {
-            tracing_free_warning(&e);
-        }
-    });
-}
-
-/// The driver stopped on a socket error: say so on stderr (the C caller has no log).
-fn tracing_free_warning(e: &driver::DriverError) {
-    eprintln!("huddle node: the driver stopped: {e}");
-}
-
-/// Runs the caller's commands on the driver thread, each in the turn it arrives.
-async fn serve_commands(handle: Handle, mut commands: mpsc::UnboundedReceiver<Command>) {
-    while let Some(command) = commands.recv().await {
-        match command {
-            Command::Set { key, value, reply } => {
-                let _ = reply.send(handle.set(&key, value));
-            }
-            Command::Post { key, value, reply } => {
-                let _ = reply.send(handle.post(&key, value));
-            }
-            Command::Get { key, reply } => {
-                let now = handle.now();
-                let found = Key::parse(&key).and_then(|parsed| {
-                    Ok(handle
-                        .get(&key)?
-                        .map(|entry| (stored_key(&parsed, &entry), entry.clone(), entry.age(now))))
-                });
-                let _ = reply.send(found);
-            }
-        }
-    }
-}
-
 /// The key a read found: `*.var.x` reads the owner's copy `n.var.x`.
 fn stored_key(asked: &Key, entry: &Entry) -> Key {
     match asked.scope() {
         comms::Scope::Global => asked.with_scope(comms::Scope::Robot(entry.owner)),
         _ => asked.clone(),
-    }
-}
-
-/// Turns changes in the peer table into events, looking every `period`.
-async fn watch_peers(handle: Handle, events: Arc<EventQueue>, period: Duration) {
-    let mut known: Vec<comms::PeerInfo> = Vec::new();
-    let mut tick = tokio::time::interval(period.max(Duration::from_millis(1)));
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    loop {
-        tick.tick().await;
-        let peers = handle.stats().peers;
-        for peer in &peers {
-            let before = known.iter().find(|p| p.robot == peer.robot);
-            let event = match before {
-                None if peer.present => Some(NodeEvent::Joined {
-                    robot: peer.robot,
-                    incarnation: peer.incarnation,
-                }),
-                Some(b) if b.incarnation != peer.incarnation => Some(NodeEvent::Restarted {
-                    robot: peer.robot,
-                    incarnation: peer.incarnation,
-                }),
-                Some(b) if !b.present && peer.present => Some(NodeEvent::Joined {
-                    robot: peer.robot,
-                    incarnation: peer.incarnation,
-                }),
-                Some(b) if b.present && !peer.present => {
-                    Some(NodeEvent::Departed { robot: peer.robot })
-                }
-                _ => None,
-            };
-            if let Some(event) = event {
-                events.push(event);
-            }
-        }
-        known = peers;
     }
 }
 
@@ -455,7 +182,8 @@ pub(crate) fn post_failure(e: PostError) -> Failure {
 }
 
 /// Starts a node: opens the team's multicast socket on the interface, applies the
-/// config files, and runs the driver on a thread of its own until `huddle_node_stop`.
+/// config files, sends the first frame, and receives (and runs the replica's timers) on a
+/// thread of its own until `huddle_node_stop`.
 /// Returns NULL on failure, with the reason in `err` (bad robot id, group, interface,
 /// key file, config directory or config line; the port or group could not be joined).
 ///
@@ -473,7 +201,7 @@ pub unsafe extern "C" fn huddle_node_start(
     let body = || {
         // SAFETY: the caller promises `cfg` is NULL or valid for reads.
         let cfg = unsafe { cfg.as_ref() }.ok_or_else(|| Failure::null("cfg"))?;
-        let node = start(driver_config(cfg)?)?;
+        let node = Engine::start(driver_config(cfg)?)?;
         Ok(NODES.insert(Arc::new(node)))
     };
     // SAFETY: the caller promises `err` is NULL or writable.
@@ -499,10 +227,10 @@ pub unsafe extern "C" fn huddle_node_set(
     let body = || {
         let node = lookup(node)?;
         // SAFETY: the caller promises NULL or NUL-terminated strings.
-        let key = unsafe { read_str(key, "key") }?.to_owned();
+        let key = unsafe { read_str(key, "key") }?;
         // SAFETY: as above.
         let value = parse_value(unsafe { read_str(literal, "literal") }?)?;
-        node.call(|reply| Command::Set { key, value, reply })?
+        node.with_state(|state, now| state.replica.set(now, key, value))?
             .map_err(set_failure)?;
         Ok(0)
     };
@@ -530,11 +258,19 @@ pub unsafe extern "C" fn huddle_node_get(
     let body = || {
         let node = lookup(node)?;
         // SAFETY: the caller promises a NULL or NUL-terminated string.
-        let key = unsafe { read_str(key, "key") }?.to_owned();
+        let key = unsafe { read_str(key, "key") }?;
         // SAFETY: the caller promises `out` is NULL or valid for writes.
         let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
         let found = node
-            .call(|reply| Command::Get { key, reply })?
+            .with_state(|state, now| {
+                let parsed = Key::parse(key)?;
+                Ok::<_, comms::KeyError>(
+                    state
+                        .replica
+                        .get(key)?
+                        .map(|entry| (stored_key(&parsed, entry), entry.clone(), entry.age(now))),
+                )
+            })?
             .map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))?;
         Ok(match found {
             Some((key, entry, age)) => {
@@ -570,11 +306,11 @@ pub unsafe extern "C" fn huddle_node_post(
     let body = || {
         let node = lookup(node)?;
         // SAFETY: the caller promises NULL or NUL-terminated strings.
-        let key = unsafe { read_str(key, "key") }?.to_owned();
+        let key = unsafe { read_str(key, "key") }?;
         // SAFETY: as above.
         let value = parse_value(unsafe { read_str(literal, "literal") }?)?;
         let n = node
-            .call(|reply| Command::Post { key, value, reply })?
+            .with_state(|state, now| state.replica.post(now, key, value))?
             .map_err(post_failure)?;
         // SAFETY: the caller promises `seq` is NULL or valid for writes.
         if let Some(seq) = unsafe { seq.as_mut() } {
@@ -610,7 +346,11 @@ pub unsafe extern "C" fn huddle_node_next_event(
         // SAFETY: the caller promises `out` is NULL or valid for writes.
         let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
         Ok(
-            match node.events.pop(Duration::from_millis(timeout_ms.into())) {
+            match node
+                .shared
+                .events
+                .pop(Duration::from_millis(timeout_ms.into()))
+            {
                 Some(event) => {
                     fill_node_event(out, &event);
                     1
@@ -623,7 +363,8 @@ pub unsafe extern "C" fn huddle_node_next_event(
     unsafe { guard(err, -1, body) }
 }
 
-/// Stops the node (its thread ends, its socket closes) and releases it. The pointer is
+/// Stops the node (its thread ends, its socket closes) and releases it; takes up to
+/// 20 ms (the longest its receive thread waits before it looks for a stop). The pointer is
 /// dead afterwards: any call with it returns -1 with `HUDDLE_E_STOPPED`, a second stop
 /// does nothing. NULL does nothing.
 ///

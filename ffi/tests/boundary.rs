@@ -110,7 +110,11 @@ fn bad_arguments_to_the_node_are_errors_and_use_after_stop_is_refused() {
     for step in 0..2000 {
         let key = cstr(rng.pick(KEYS));
         let literal = cstr(rng.pick(LITERALS));
-        let key = if rng.next().is_multiple_of(10) { null() } else { key };
+        let key = if rng.next().is_multiple_of(10) {
+            null()
+        } else {
+            key
+        };
         let literal = if rng.next().is_multiple_of(10) {
             null()
         } else {

@@ -1,0 +1,371 @@
+//! What runs a node: the `comms::Replica` behind a mutex with the multicast socket, and a
+//! receive thread for datagrams and timers.
+//!
+//! The calls of the C API work on the caller's own thread, as `driver::Handle::set`
+//! works on the driver's task: lock, hand the write to the replica, send every frame it
+//! outputs, queue its events, unlock. A `set` or `post` has sent its frame when it
+//! returns, with no hand-off to another thread on the way (that hand-off, a thread
+//! wake-up, cost more than the loopback round trip itself).
+//!
+//! The receive thread blocks in `recv_from` until a datagram arrives or the replica's
+//! next deadline (`poll_timeout`) comes, and feeds either to the replica under the same
+//! lock. Stopping sets a flag the thread sees within [`STOP_CHECK`].
+//!
+//! Like `driver::Driver` without peers, relay or impairment: the socket is
+//! `driver::open_multicast`'s, every frame goes to the group, the clock is microseconds
+//! since the node started.
+
+use std::collections::VecDeque;
+use std::io;
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use comms::{Event, Instant, Replica};
+use driver::DriverConfig;
+
+use crate::error::*;
+use crate::event::NodeEvent;
+
+/// Events a node keeps for `huddle_node_next_event` before it drops the oldest (and says
+/// so with `HUDDLE_EVENT_LAGGED`).
+const EVENT_CAPACITY: usize = 65_536;
+/// The longest the receive thread waits before it looks at the stop flag again: how long
+/// `huddle_node_stop` may take at most (a blocked `recv_from` cannot be woken portably
+/// without sending something the teammates would also receive).
+pub(crate) const STOP_CHECK: Duration = Duration::from_millis(20);
+/// The longest a send may wait for room in the kernel's send buffer; past it the frame is
+/// dropped (the periodic refresh repairs values, NACKs repair talk).
+const SEND_TIMEOUT: Duration = Duration::from_millis(50);
+
+/// The node's monotonic clock: microseconds since it started, as the driver's.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Clock {
+    origin: std::time::Instant,
+}
+
+impl Clock {
+    // The I/O shell reads the clock and hands `now` to the sans-IO replica.
+    #[allow(clippy::disallowed_methods)]
+    fn new() -> Clock {
+        Clock {
+            origin: std::time::Instant::now(),
+        }
+    }
+
+    pub(crate) fn now(&self) -> Instant {
+        let us = self.origin.elapsed().as_micros();
+        Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
+    }
+}
+
+/// A fresh incarnation: the start time in ms in the high bits, 16 random bits below
+/// (`comms::ordered_incarnation`, as the driver makes them), so a restart is later.
+fn new_incarnation() -> u64 {
+    use std::hash::BuildHasher;
+    // std seeds every `RandomState` from the OS's random source.
+    let random = std::collections::hash_map::RandomState::new().hash_one(std::process::id());
+    #[allow(clippy::disallowed_methods)] // the start time comes from the world
+    let unix_ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or_default();
+    comms::ordered_incarnation(unix_ms, random)
+}
+
+/// Events waiting for the caller, and how it waits for them.
+#[derive(Default)]
+pub(crate) struct EventQueue {
+    queue: Mutex<(VecDeque<NodeEvent>, u64)>,
+    ready: Condvar,
+}
+
+impl EventQueue {
+    fn lock(&self) -> MutexGuard<'_, (VecDeque<NodeEvent>, u64)> {
+        self.queue.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn push(&self, event: NodeEvent) {
+        let mut q = self.lock();
+        if q.0.len() >= EVENT_CAPACITY {
+            q.0.pop_front();
+            q.1 += 1;
+        }
+        q.0.push_back(event);
+        drop(q);
+        self.ready.notify_all();
+    }
+
+    /// The next event, waiting up to `timeout` for one.
+    pub(crate) fn pop(&self, timeout: Duration) -> Option<NodeEvent> {
+        let mut q = self.lock();
+        if q.0.is_empty() && q.1 == 0 && !timeout.is_zero() {
+            q = self
+                .ready
+                .wait_timeout_while(q, timeout, |q| q.0.is_empty() && q.1 == 0)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+        if q.1 > 0 {
+            return Some(NodeEvent::Lagged(std::mem::take(&mut q.1)));
+        }
+        q.0.pop_front()
+    }
+}
+
+/// The replica and what it sends through; one lock for both, so frames leave in the
+/// order the replica made them.
+pub(crate) struct State {
+    pub(crate) replica: Replica,
+    /// `None` once the node is stopped: calls still in flight then fail.
+    socket: Option<UdpSocket>,
+    group: SocketAddr,
+    events: Arc<EventQueue>,
+}
+
+impl State {
+    /// Drains the replica: frames to the group, events to the queue.
+    pub(crate) fn pump(&mut self) {
+        while let Some(transmit) = self.replica.poll_transmit() {
+            // Every frame goes to the group (`Destination::Group`, the only one so far).
+            if let Some(socket) = &self.socket {
+                // A failed send is a lost datagram, which the protocol repairs.
+                let _ = socket.send_to(&transmit.payload, self.group);
+            }
+        }
+        while let Some(event) = self.replica.poll_event() {
+            if let Some(event) = node_event(event) {
+                self.events.push(event);
+            }
+        }
+    }
+
+    /// Whether the node still runs (a call racing `huddle_node_stop` may find it not).
+    pub(crate) fn running(&self) -> bool {
+        self.socket.is_some()
+    }
+}
+
+/// What the node reports of a replica event: talk, peers, and anything unexpected (two
+/// robots with one id; a variant a later comms adds). Value changes and dropped frames
+/// are the replica API's business (they would flood the queue).
+fn node_event(event: Event) -> Option<NodeEvent> {
+    Some(match event {
+        Event::TalkDelivered {
+            queue,
+            from,
+            seq,
+            value,
+        } => NodeEvent::Talk {
+            from,
+            queue,
+            seq,
+            value,
+        },
+        Event::TalkGivenUp {
+            queue,
+            from,
+            first,
+            last,
+        } => NodeEvent::TalkLost {
+            from,
+            queue,
+            first,
+            last,
+        },
+        Event::PeerJoined { robot, incarnation } => NodeEvent::Joined { robot, incarnation },
+        Event::PeerRestarted {
+            robot,
+            new_incarnation,
+            ..
+        } => NodeEvent::Restarted {
+            robot,
+            incarnation: new_incarnation,
+        },
+        Event::PeerDeparted { robot } => NodeEvent::Departed { robot },
+        Event::ValueChanged { .. } | Event::FrameDropped { .. } => return None,
+        #[allow(unreachable_patterns)] // variants a later comms adds
+        other => NodeEvent::Other {
+            robot: other_robot(&other),
+            description: format!("{other:?}"),
+        },
+    })
+}
+
+/// The robot an unexpected event is about, when it names one.
+fn other_robot(event: &Event) -> u8 {
+    match event {
+        Event::IncarnationConflict { robot, .. } => *robot,
+        _ => 0,
+    }
+}
+
+/// Shared by the C-facing side and the receive thread.
+pub(crate) struct Shared {
+    state: Mutex<State>,
+    pub(crate) clock: Clock,
+    pub(crate) events: Arc<EventQueue>,
+    stopping: AtomicBool,
+}
+
+impl Shared {
+    pub(crate) fn lock(&self) -> MutexGuard<'_, State> {
+        // A panic under the lock (caught at the boundary) leaves the replica usable: it
+        // never panics half-way through a change by design, and a poisoned lock must not
+        // turn every later call into a panic.
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// A running node's engine: the shared state and the receive thread.
+pub(crate) struct Engine {
+    pub(crate) shared: Arc<Shared>,
+    thread: Mutex<Option<JoinHandle<()>>>,
+}
+
+impl Engine {
+    /// Opens the socket, starts the replica with the start values, sends its first frame
+    /// and starts the receive thread.
+    pub(crate) fn start(config: DriverConfig) -> Result<Engine, Failure> {
+        let opened = driver::open_multicast(&config.socket)
+            .map_err(|e| Failure::new(HUDDLE_E_NETWORK, e.to_string()))?;
+        let network = |e: io::Error| {
+            Failure::new(
+                HUDDLE_E_NETWORK,
+                format!("cannot set up the socket for {}: {e}", config.socket.group),
+            )
+        };
+        let socket = opened.socket;
+        socket.set_nonblocking(false).map_err(network)?;
+        socket
+            .set_write_timeout(Some(SEND_TIMEOUT))
+            .map_err(network)?;
+        socket.set_read_timeout(Some(STOP_CHECK)).map_err(network)?;
+        let receiver = socket.try_clone().map_err(network)?;
+
+        let clock = Clock::new();
+        let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
+        let mut replica = Replica::new(config.replica, incarnation, clock.now())
+            .map_err(|e| Failure::new(HUDDLE_E_CONFIG, format!("invalid configuration: {e}")))?;
+        for (key, value) in config.start_values {
+            replica
+                .set_key(clock.now(), &key, value)
+                .map_err(|e| Failure::new(HUDDLE_E_CONFIG, format!("start value {key}: {e}")))?;
+        }
+        // Start values are this robot's business, not changes anyone waits for.
+        while replica.poll_event().is_some() {}
+
+        let events = Arc::new(EventQueue::default());
+        let shared = Arc::new(Shared {
+            state: Mutex::new(State {
+                replica,
+                socket: Some(socket),
+                group: config.socket.group.into(),
+                events: events.clone(),
+            }),
+            clock,
+            events,
+            stopping: AtomicBool::new(false),
+        });
+        // The first frame (heartbeat, start values) goes out at once.
+        shared.lock().pump();
+        let robot = shared.lock().replica.robot_id();
+        let for_thread = shared.clone();
+        let thread = std::thread::Builder::new()
+            .name(format!("huddle-node-{robot}"))
+            .spawn(move || receive_loop(&for_thread, receiver))
+            .map_err(|e| Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}")))?;
+        Ok(Engine {
+            shared,
+            thread: Mutex::new(Some(thread)),
+        })
+    }
+
+    /// Runs `f` on the replica under the node's lock, on the caller's thread; then sends
+    /// what it output and queues its events. Fails once the node is stopped.
+    pub(crate) fn with_state<R>(
+        &self,
+        f: impl FnOnce(&mut State, Instant) -> R,
+    ) -> Result<R, Failure> {
+        let mut state = self.shared.lock();
+        if !state.running() {
+            return Err(Failure::stopped("node"));
+        }
+        let now = self.shared.clock.now();
+        let result = f(&mut state, now);
+        state.pump();
+        Ok(result)
+    }
+
+    /// Ends the receive thread, waits for it and closes the socket; a second call does
+    /// nothing. Calls in flight on other threads finish before it or fail after it.
+    pub(crate) fn stop(&self) {
+        let running = self.thread.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(thread) = running {
+            self.shared.stopping.store(true, Ordering::Relaxed);
+            self.shared.lock().socket = None;
+            // A panic on the receive thread was already reported there; nothing to add.
+            let _ = thread.join();
+        }
+    }
+}
+
+/// The receive thread: datagrams and deadlines into the replica until the node stops.
+fn receive_loop(shared: &Shared, socket: UdpSocket) {
+    let mut buf = vec![0u8; 65_536];
+    let mut timeout = STOP_CHECK;
+    while !shared.stopping.load(Ordering::Relaxed) {
+        // Deadlines first; then wait for a datagram until the next one.
+        let wait = {
+            let mut state = shared.lock();
+            let mut now = shared.clock.now();
+            if state.replica.poll_timeout().is_some_and(|t| t <= now) {
+                state.replica.handle_timeout(now);
+                state.pump();
+                now = shared.clock.now();
+            }
+            state
+                .replica
+                .poll_timeout()
+                .map_or(STOP_CHECK, |t| t.saturating_duration_since(now))
+        };
+        // Whole milliseconds, rounded up (as tokio's timers, which the driver uses): the
+        // timeout changes, and costs a system call, only when the deadline comes near.
+        // Never zero, which would mean "forever" to the OS.
+        let wait = Duration::from_millis(wait.as_micros().div_ceil(1000) as u64)
+            .clamp(Duration::from_millis(1), STOP_CHECK);
+        if wait != timeout && socket.set_read_timeout(Some(wait)).is_ok() {
+            timeout = wait;
+        }
+        match socket.recv_from(&mut buf) {
+            Ok((n, from)) => {
+                let mut state = shared.lock();
+                let now = shared.clock.now();
+                state.replica.handle_datagram(now, from, &buf[..n]);
+                state.pump();
+            }
+            Err(e) if is_transient(&e) => {}
+            Err(e) => {
+                if !shared.stopping.load(Ordering::Relaxed) {
+                    // The C caller has no log: stderr is all there is.
+                    eprintln!("huddle node: receiving stopped: {e}");
+                }
+                return;
+            }
+        }
+    }
+}
+
+/// An error `recv_from` may give that is no reason to stop: the wait timed out, a
+/// signal interrupted it, an ICMP error of an earlier send surfaced.
+fn is_transient(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::WouldBlock
+            | io::ErrorKind::TimedOut
+            | io::ErrorKind::Interrupted
+            | io::ErrorKind::ConnectionRefused
+    )
+}
