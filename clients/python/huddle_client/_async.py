@@ -14,7 +14,11 @@ from ._protocol import (
     TalkLost,
     check_interval,
     check_patterns,
+    FLOAT_PROBE,
+    FLOAT_PROBE_KEY,
     check_word,
+    narrow_error,
+    needs_wide_floats,
     getv_line,
     encode_value,
     parse_binding,
@@ -127,6 +131,7 @@ class AsyncRelay:
         self.port = port
         self.timeout = timeout
         self._lines = _AsyncLines(host, port)
+        self._wide: Optional[bool] = None
         self._lock: Optional[asyncio.Lock] = None  # made on the loop that connects
         self._watches: List[AsyncWatch] = []  # type: ignore[type-arg]
         self.version = 0
@@ -184,7 +189,16 @@ class AsyncRelay:
     async def set(self, key: str, value: object) -> None:
         """As :meth:`Relay.set <huddle_client.Relay.set>`."""
         literal = encode_value(value)
+        if needs_wide_floats(value) and not await self._wide_floats():
+            raise narrow_error(value)
         await self._request(f"SETV {check_word('key', key)} {literal}")
+
+    async def _wide_floats(self) -> bool:
+        if self._wide is None:
+            await self._request(f"SETV {FLOAT_PROBE_KEY} [{FLOAT_PROBE!r}]")
+            b = await self.get(FLOAT_PROBE_KEY)
+            self._wide = b is not None and b.value == [FLOAT_PROBE]
+        return self._wide
 
     async def get(self, key: str, max_age_ms: Optional[int] = None) -> Optional[Binding]:
         """As :meth:`Relay.get <huddle_client.Relay.get>`."""

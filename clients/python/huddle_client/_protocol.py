@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import struct
 from dataclasses import dataclass
 from typing import List, Optional, Sequence, Union
 
@@ -373,3 +374,34 @@ def getv_line(key: str, max_age_ms: Optional[int]) -> str:
     if isinstance(max_age_ms, bool) or not isinstance(max_age_ms, int) or max_age_ms < 0:
         raise ValueError("max_age_ms is whole milliseconds (an int >= 0)")
     return f"GETV {key} {max_age_ms}"
+
+
+#: The local key a client writes once to learn whether the relay keeps float lists as
+#: 64-bit floats (newer relays) or 32-bit ones (older relays), before it sends a list
+#: that only 64 bits hold exactly.
+FLOAT_PROBE_KEY = "local.var.huddle_client.float_probe"
+FLOAT_PROBE = 16777217.0  # 2**24 + 1: a 32-bit float cannot hold it
+
+
+def _f32_exact(x: float) -> bool:
+    try:
+        y: float = struct.unpack("<f", struct.pack("<f", x))[0]
+    except OverflowError:
+        return False
+    return y == x or (math.isnan(x) and math.isnan(y))
+
+
+def needs_wide_floats(value: object) -> bool:
+    """Whether ``value`` is a float list that a 32-bit float list would change."""
+    if not isinstance(value, (list, tuple)):
+        return False
+    return not all(
+        _f32_exact(_exact_float(x, f"element {i}")) for i, x in enumerate(value)
+    )
+
+
+def narrow_error(value: object) -> ValueError:
+    return ValueError(
+        f"{value!r}: this relay keeps float lists as 32-bit floats, which would change "
+        "these values; send them one by one as floats, or scale them"
+    )

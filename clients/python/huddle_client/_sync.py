@@ -15,7 +15,11 @@ from ._protocol import (
     TalkLost,
     check_interval,
     check_patterns,
+    FLOAT_PROBE,
+    FLOAT_PROBE_KEY,
     check_word,
+    narrow_error,
+    needs_wide_floats,
     getv_line,
     encode_value,
     parse_binding,
@@ -130,6 +134,7 @@ class Relay:
         self.timeout = timeout
         self._lines = _Lines(host, port, timeout)
         self._lock = threading.Lock()
+        self._wide: Optional[bool] = None
         self._watches: List[Watch] = []  # type: ignore[type-arg]
         #: The relay protocol version from the greeting.
         self.version: int = self._lines.version
@@ -185,7 +190,18 @@ class Relay:
         422: too large), ``TypeError``/``ValueError`` for a value that cannot be sent
         exactly (nothing is sent then)."""
         literal = encode_value(value)
+        if needs_wide_floats(value) and not self._wide_floats():
+            raise narrow_error(value)
         self._request(f"SETV {check_word('key', key)} {literal}")
+
+    def _wide_floats(self) -> bool:
+        """Whether the relay keeps float lists as 64-bit floats (asked once, by writing
+        ``FLOAT_PROBE_KEY``, only when a list needs it)."""
+        if self._wide is None:
+            self._request(f"SETV {FLOAT_PROBE_KEY} [{FLOAT_PROBE!r}]")
+            b = self.get(FLOAT_PROBE_KEY)
+            self._wide = b is not None and b.value == [FLOAT_PROBE]
+        return self._wide
 
     def get(self, key: str, max_age_ms: Optional[int] = None) -> Optional[Binding]:
         """The binding of ``key`` (``*.var.x``: the newest copy of any robot), or
