@@ -80,7 +80,7 @@ fn replicas(seed: u64) -> u64 {
     let mut sent = [0u32; ROBOTS];
     while let Some((k, due)) = next_send(&sent) {
         h.run_until(at(due));
-        let v = Value::Floats(vec![k as f32, sent[k] as f32 * 0.01, 0.5]);
+        let v = Value::Floats(vec![k as f64, sent[k] as f64 * 0.01, 0.5]);
         h.set(k, &pose, v).expect("own key");
         sent[k] += 1;
     }

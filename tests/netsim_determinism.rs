@@ -55,7 +55,7 @@ fn run(seed: u64) -> Run {
         h.run_until(at(t));
         for (i, log) in events.iter_mut().enumerate() {
             log.extend(h.drain_events(i).map(|e| format!("{e:?}")));
-            let v = Value::Floats(vec![i as f32, tick as f32]);
+            let v = Value::Floats(vec![i as f64, tick as f64]);
             h.set(i, &pose, v).expect("own key");
             if tick % 10 == i as u32 {
                 let now = h.local_now(i);

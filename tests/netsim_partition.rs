@@ -160,7 +160,7 @@ fn run(seed: u64, preset_net: netsim::SimBuilder) -> Outcome {
         tick += 1;
         h.run_until(at(t));
         for i in 0..ROBOTS {
-            let v = Value::Floats(vec![i as f32, tick as f32 * 0.01]);
+            let v = Value::Floats(vec![i as f64, tick as f64 * 0.01]);
             h.set(i, &pose, v).expect("own key");
         }
         if t == Duration::from_millis(2000) {

@@ -6,7 +6,7 @@
 //! | `float`  | `4.2`, `1e-3`, `-0.0`, `inf`, `-inf`, `NaN` (has `.`, `e` or is a special) |
 //! | `bool`   | `true`, `false`                         |
 //! | `string` | `"text"`; escapes `\"` `\\` `\n` `\r` `\t` `\u{1f}` |
-//! | `floats` | `[1.5, 2, -3e-2]` (each element an f32; `[]` is empty) |
+//! | `floats` | `[1.5, 2, -3e-2]` (each element an f64; `[]` is empty) |
 //! | `bytes`  | `0x0a0b` (hex pairs; `0x` is empty)     |
 //!
 //! Formatting (`Value`'s `Display`) always produces a literal that parses back to the same
@@ -194,7 +194,7 @@ fn parse_floats(s: &str) -> Result<(Value, &str), LiteralError> {
                 out.len()
             )));
         }
-        out.push(parse_float::<f32>(token)?);
+        out.push(parse_float::<f64>(token)?);
         rest = after.trim_start();
         if let Some(after) = rest.strip_prefix(',') {
             rest = after.trim_start();
@@ -337,6 +337,10 @@ mod tests {
         assert_eq!(Value::Float(1.0).to_string(), "1.0");
         assert_eq!(Value::Float(1e300).to_string(), "1e300");
         assert_eq!(Value::Floats(vec![2.0, 0.1]).to_string(), "[2.0, 0.1]");
+        // Elements are f64: nothing is narrowed on the way through the printer.
+        let wide = Value::Floats(vec![123456789.123, 1e-50, 1e300]);
+        assert_eq!(wide.to_string(), "[123456789.123, 1e-50, 1e300]");
+        assert_eq!(parse_literal(&wide.to_string()), Ok(wide));
         assert_eq!(
             Value::String("a\"b\u{1}".into()).to_string(),
             r#""a\"b\u{1}""#
@@ -350,7 +354,7 @@ mod tests {
             any::<f64>().prop_map(Value::Float),
             any::<bool>().prop_map(Value::Bool),
             any::<String>().prop_map(Value::String),
-            proptest::collection::vec(any::<f32>(), 0..8).prop_map(Value::Floats),
+            proptest::collection::vec(any::<f64>(), 0..8).prop_map(Value::Floats),
             proptest::collection::vec(any::<u8>(), 0..16).prop_map(Value::Bytes),
         ]
     }

@@ -17,9 +17,9 @@ pub enum Value {
     Bool(bool),
     /// UTF-8 text. Literal: `"text"` with `\"`, `\\`, `\n`, `\r`, `\t`, `\u{..}` escapes.
     String(String),
-    /// A vector of 32-bit floats: structured sensor data at 4 bytes per element on the
-    /// wire. Literal: `[1.5, 2, -3e-2]`.
-    Floats(Vec<f32>),
+    /// A vector of 64-bit floats, kept exactly as set (8 bytes per element on the wire).
+    /// Literal: `[1.5, 2, -3e-2]`.
+    Floats(Vec<f64>),
     /// Opaque bytes (e.g. an encoded world model). Literal: `0x0a0b` (lowercase hex out,
     /// either case in; `0x` is empty).
     Bytes(Vec<u8>),
@@ -106,13 +106,10 @@ impl Value {
         fn same64(a: f64, b: f64) -> bool {
             (a.is_nan() && b.is_nan()) || a.to_bits() == b.to_bits()
         }
-        fn same32(a: f32, b: f32) -> bool {
-            (a.is_nan() && b.is_nan()) || a.to_bits() == b.to_bits()
-        }
         match (self, other) {
             (Value::Float(a), Value::Float(b)) => same64(*a, *b),
             (Value::Floats(a), Value::Floats(b)) => {
-                a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same32(*x, *y))
+                a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same64(*x, *y))
             }
             _ => self == other,
         }
@@ -144,8 +141,8 @@ impl From<String> for Value {
         Value::String(v)
     }
 }
-impl From<Vec<f32>> for Value {
-    fn from(v: Vec<f32>) -> Value {
+impl From<Vec<f64>> for Value {
+    fn from(v: Vec<f64>) -> Value {
         Value::Floats(v)
     }
 }

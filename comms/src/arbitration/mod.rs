@@ -130,16 +130,16 @@ pub struct Posted {
 
 impl Posted {
     /// As the float vector stored on the blackboard.
-    pub fn to_floats(self) -> Vec<f32> {
-        vec![self.h as f32, if self.going { 1.0 } else { 0.0 }]
+    pub fn to_floats(self) -> Vec<f64> {
+        vec![self.h, if self.going { 1.0 } else { 0.0 }]
     }
 
     /// From a float vector; `None` when it is not of this shape (a bad value from a
     /// client must not decide anything).
-    pub fn from_floats(v: &[f32]) -> Option<Self> {
+    pub fn from_floats(v: &[f64]) -> Option<Self> {
         match v {
             [h, going] if h.is_finite() && going.is_finite() => Some(Self {
-                h: f64::from(*h),
+                h: *h,
                 going: *going >= 0.5,
             }),
             _ => None,

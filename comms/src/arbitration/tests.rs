@@ -71,7 +71,7 @@ fn the_current_goer_keeps_going_unless_beaten_by_more_than_the_margin() {
 #[test]
 fn malformed_posted_values_are_ignored() {
     assert_eq!(Posted::from_floats(&[1.0]), None);
-    assert_eq!(Posted::from_floats(&[f32::NAN, 1.0]), None);
+    assert_eq!(Posted::from_floats(&[f64::NAN, 1.0]), None);
     let p = Posted {
         h: 2.5,
         going: true,

@@ -71,7 +71,7 @@ impl<Ctx> Decode<Ctx> for Value {
             1 => Value::Float(f64::decode(d)?),
             2 => Value::Bool(bool::decode(d)?),
             3 => Value::String(String::decode(d)?),
-            4 => Value::Floats(Vec::<f32>::decode(d)?),
+            4 => Value::Floats(Vec::<f64>::decode(d)?),
             5 => Value::Bytes(Vec::<u8>::decode(d)?),
             found => {
                 return Err(BincodeDecodeError::UnexpectedVariant {

@@ -3,7 +3,7 @@
 //! ```text
 //! offset  size  field
 //! 0       2     magic "HD"
-//! 2       1     format version (1)
+//! 2       1     format version (2)
 //! 3       1     flags: bit 0 = an HMAC tag follows the body; other bits must be 0
 //! 4       1     team id
 //! 5       1     sender robot id (1..=254)
@@ -22,8 +22,8 @@
 //! | 3   | `Nack`     | target robot (u8), queue (str), first, last (missing seqs) |
 //!
 //! Values: varint tag 0..=5 (`Int` zigzag varint, `Float` 8 bytes LE, `Bool` 1 byte,
-//! `String` varint length + UTF-8, `Floats` varint count + 4 bytes LE each, `Bytes` varint
-//! length + bytes). Strings are validated as UTF-8 and paths as key paths on decode.
+//! `String` varint length + UTF-8, `Floats` varint count + 8 bytes LE each (f64), `Bytes`
+//! varint length + bytes). Strings are validated as UTF-8 and paths as key paths on decode.
 //! A varint is one byte below 251, else a marker byte (251, 252, 253) and the value as a
 //! little-endian u16, u32 or u64.
 //!
@@ -71,8 +71,9 @@ pub use writer::{encode_frame, item_len, value_len, varint_len, FrameWriter};
 
 /// The first two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"HD";
-/// The format version this code speaks.
-pub const VERSION: u8 = 1;
+/// The format version this code speaks. Version 2: `Floats` elements are f64 (8 bytes);
+/// version 1 carried f32 and is dropped ([`DecodeError::UnknownVersion`]) rather than misread.
+pub const VERSION: u8 = 2;
 /// Bytes before the body.
 pub const HEADER_LEN: usize = 14;
 /// Bytes of the truncated HMAC-SHA256 tag (128 bits).

@@ -66,7 +66,7 @@ fn sample() -> Frame {
 // editing the fixture, or robots running different builds stop understanding each other.
 const GOLDEN: &str = concat!(
     "4844",
-    "01",
+    "02",
     "00",
     "07",
     "03",
@@ -108,8 +108,8 @@ const GOLDEN: &str = concat!(
     "0176",
     "04",
     "02",
-    "0000803f",
-    "000000c0",
+    "000000000000f03f", // Floats are f64 since format version 2
+    "00000000000000c0",
     "01",
     "00",
     "00",
@@ -135,6 +135,42 @@ fn golden_bytes_freeze_the_format() {
 }
 
 #[test]
+fn floats_that_do_not_fit_f32_cross_the_wire_exactly() {
+    let wide = vec![123_456_789.123, 1e-50, -1e300, f64::MIN_POSITIVE, 0.1];
+    assert!(
+        wide.iter().all(|&x| f64::from(x as f32) != x),
+        "none fits f32"
+    );
+    let frame = Frame {
+        items: vec![Item::Update {
+            path: "f".into(),
+            value: Value::Floats(wide.clone()),
+            version: 1,
+            age_us: 0,
+        }],
+        ..sample()
+    };
+    let bytes = encode_frame(&frame, None);
+    assert_eq!(
+        value_len(&Value::Floats(wide)),
+        1 + 1 + 8 * 5,
+        "tag, count, 8 bytes each"
+    );
+    let back = decode_frame(&bytes, 7, None).unwrap();
+    assert_eq!(back.items[0], frame.items[0]);
+}
+
+#[test]
+fn a_version_1_frame_is_refused_not_misread() {
+    let mut bytes = encode_frame(&sample(), None);
+    bytes[2] = 1;
+    assert_eq!(
+        decode_frame(&bytes, 7, None),
+        Err(DecodeError::UnknownVersion(1))
+    );
+}
+
+#[test]
 fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
     let key = TeamKey::new(b"team key");
     let frame = Frame {
@@ -144,7 +180,7 @@ fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
     let bytes = encode_frame(&frame, Some(&key));
     assert_eq!(
         hex(&bytes),
-        "4844010107030807060504030201fb2c0100dab453d28cb443313096653934e84bdc",
+        "4844020107030807060504030201fb2c01009915b4974aa18a41138775daccb1e5bb",
         "header with flag 1, seq, 0 items, 16-byte tag (checked against Python's hmac)"
     );
     assert_eq!(decode_frame(&bytes, 7, Some(&key)), Ok(frame));
@@ -153,7 +189,7 @@ fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
 // Frozen bytes for every varint width (1, 3, 5 and 9 bytes) and the zigzag of a signed
 // integer: the part of the format a replacement encoder is most likely to get wrong.
 const GOLDEN_VARINTS: &str = concat!(
-    "4844010007030807060504030201", // header
+    "4844020007030807060504030201", // header
     "fdffffffffffffffff",           // seq u64::MAX
     "04",                           // 4 items
     "00",
@@ -230,11 +266,11 @@ fn bad_frames_are_told_apart() {
         decode_frame(b"XX0123456789abcdef", 7, None),
         Err(DecodeError::BadMagic)
     );
-    let mut v2 = plain.clone();
-    v2[2] = 2;
+    let mut v3 = plain.clone();
+    v3[2] = 3;
     assert_eq!(
-        decode_frame(&v2, 7, None),
-        Err(DecodeError::UnknownVersion(2))
+        decode_frame(&v3, 7, None),
+        Err(DecodeError::UnknownVersion(3))
     );
     assert_eq!(
         decode_frame(&plain, 8, None),
@@ -340,7 +376,7 @@ fn any_value() -> impl Strategy<Value = Value> {
             .prop_map(Value::Float),
         any::<bool>().prop_map(Value::Bool),
         ".{0,12}".prop_map(Value::String),
-        proptest::collection::vec(-1e6f32..1e6, 0..6).prop_map(Value::Floats),
+        proptest::collection::vec(-1e6f64..1e6, 0..6).prop_map(Value::Floats),
         proptest::collection::vec(any::<u8>(), 0..48).prop_map(Value::Bytes),
     ]
 }

@@ -125,7 +125,7 @@ pub fn value_len(value: &Value) -> usize {
         Value::Float(_) => 8,
         Value::Bool(_) => 1,
         Value::String(s) => varint_len(s.len() as u64) + s.len(),
-        Value::Floats(v) => varint_len(v.len() as u64) + 4 * v.len(),
+        Value::Floats(v) => varint_len(v.len() as u64) + 8 * v.len(),
         Value::Bytes(b) => varint_len(b.len() as u64) + b.len(),
     }
 }
