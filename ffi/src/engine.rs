@@ -313,19 +313,23 @@ impl Engine {
 }
 
 /// The receive thread: datagrams and deadlines into the replica until the node stops.
+/// One lock per wake-up: the datagram, a deadline that came, the frames and events they
+/// caused, and the time to the next deadline.
 fn receive_loop(shared: &Shared, socket: UdpSocket) {
     let mut buf = vec![0u8; 65_536];
+    let mut received = None;
     let mut timeout = STOP_CHECK;
     while !shared.stopping.load(Ordering::Relaxed) {
-        // Deadlines first; then wait for a datagram until the next one.
         let wait = {
             let mut state = shared.lock();
-            let mut now = shared.clock.now();
+            let now = shared.clock.now();
+            if let Some((n, from)) = received.take() {
+                state.replica.handle_datagram(now, from, &buf[..n]);
+            }
             if state.replica.poll_timeout().is_some_and(|t| t <= now) {
                 state.replica.handle_timeout(now);
-                state.pump();
-                now = shared.clock.now();
             }
+            state.pump();
             state
                 .replica
                 .poll_timeout()
@@ -340,12 +344,7 @@ fn receive_loop(shared: &Shared, socket: UdpSocket) {
             timeout = wait;
         }
         match socket.recv_from(&mut buf) {
-            Ok((n, from)) => {
-                let mut state = shared.lock();
-                let now = shared.clock.now();
-                state.replica.handle_datagram(now, from, &buf[..n]);
-                state.pump();
-            }
+            Ok(got) => received = Some(got),
             Err(e) if is_transient(&e) => {}
             Err(e) => {
                 if !shared.stopping.load(Ordering::Relaxed) {
