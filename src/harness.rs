@@ -102,7 +102,8 @@ impl Harness {
             rng: ChaCha8Rng::seed_from_u64(0),
         };
         for i in 0..n {
-            let incarnation = rng.random();
+            // Ordered like the driver's: a later start has a larger incarnation.
+            let incarnation = comms::ordered_incarnation(0, rng.random());
             let r = Replica::new(h.config_for(i), incarnation, Instant::ZERO)?;
             h.replicas.push(Some(r));
         }
@@ -227,8 +228,10 @@ impl Harness {
     /// Switch robot `i` on again with a fresh replica (new incarnation, empty blackboard),
     /// as a rebooted robot.
     pub fn restart(&mut self, i: usize) -> Result<(), HarnessError> {
-        let incarnation = self.rng.random();
-        let r = Replica::new(self.config_for(i), incarnation, self.local_now(i))?;
+        let start = self.local_now(i);
+        let incarnation =
+            comms::ordered_incarnation(start.as_micros() / 1000 + 1, self.rng.random());
+        let r = Replica::new(self.config_for(i), incarnation, start)?;
         self.replicas[i] = Some(r);
         self.flush();
         Ok(())

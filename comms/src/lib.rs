@@ -35,9 +35,9 @@
 //! messages, talk heads and NACKs, and optionally a 16-byte truncated HMAC-SHA256 tag. The
 //! receiver stamps an update at *reception time − reported age* on its own clock, so no
 //! clocks are compared and a re-sent old value never looks fresh. Versions count per
-//! (owner, key) within an owner's incarnation: older updates never overwrite newer ones,
-//! and a new incarnation (a restart) is accepted at once while the old one's late frames
-//! are dropped. Every own global value is re-sent each `refresh_period` (default 100 ms),
+//! (owner, key) within an owner's incarnation: older updates never overwrite newer ones.
+//! Incarnations are ordered (a later start has a larger one, see [`ordered_incarnation`]):
+//! a larger one is a restart, accepted at once; frames of a smaller one are dropped. Every own global value is re-sent each `refresh_period` (default 100 ms),
 //! which repairs losses and is the heartbeat; a robot silent for `departed_after`
 //! (default 300 ms) is reported departed. A robot heard for the first time, again after
 //! departing, or restarted gets an extra full refresh at once (unless one went out in
@@ -50,6 +50,28 @@
 //! order despite loss, duplication and reordering: per-queue sequence numbers, gap
 //! detection, NACK-driven repair from a bounded retention buffer, and an explicit
 //! [`Event::TalkGivenUp`] when a message cannot be recovered (never silent loss).
+//!
+//! # Security model
+//!
+//! **With a team key** (`ReplicaConfig::with_team_key`, `huddle daemon --key-file`), every
+//! frame carries a truncated HMAC-SHA256 tag over its bytes, so nothing an outsider on the
+//! WLAN sends can change this robot's state: unsigned and badly signed frames are dropped
+//! and counted. Within an incarnation a 64-frame replay window drops repeated and too old
+//! frames. A frame recorded in a robot's earlier life and replayed later changes nothing
+//! at a receiver that has heard the robot's current life: its incarnation is smaller, so it
+//! is dropped, never applied and never taken for a restart. A receiver that has never
+//! heard the robot accepts the first life it hears, until it hears a newer one. The key
+//! does not hide the contents (frames are signed, not encrypted) and does not protect
+//! against a teammate that holds the key.
+//!
+//! **Without a key**, a team trusts its LAN: any host can write any robot's values. What
+//! is still bounded is the damage one stray or misconfigured sender can do: a frame with a
+//! forged newer incarnation costs the real robot at most `departed_after` and a few frames
+//! (it keeps sending in its life and is heard again); two robots sending with one id are
+//! reported ([`Event::IncarnationConflict`], `id_conflicts`) and the older takes over
+//! again within `departed_after` of the newer leaving; a forged version or talk head cannot
+//! pin a value or silence a queue; bindings per owner and in total, talk reorder buffers
+//! and repairs have bounds that cannot be exceeded from the network.
 //!
 //! # Panic policy
 //!
@@ -123,7 +145,10 @@ pub use config::{parse_config, ConfigEntry, ConfigError, LineError};
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
-pub use replica::{ConfigInvalid, Destination, Event, PostError, Replica, ReplicaConfig, Transmit};
+pub use replica::{
+    ordered_incarnation, ConfigInvalid, Destination, Event, PostError, Replica, ReplicaConfig,
+    Transmit,
+};
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;
 pub use time::Instant;

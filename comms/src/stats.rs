@@ -134,6 +134,16 @@ pub struct Stats {
     pub nacks_sent: u64,
     /// Talk items ignored because the sender has too many queues.
     pub talk_queue_overflow: u64,
+    /// Talk items refused as implausible (a head spanning or jumping too far, a message
+    /// beyond the reorder window) or over the reorder buffers' byte bounds.
+    pub talk_refused: u64,
+    /// Own posts refused because the queue's retention was full of recent messages.
+    pub talk_refused_full: u64,
+    /// Re-sends not made because the queue's repair allowance was spent.
+    pub talk_repair_limited: u64,
+    /// Times two live incarnations of one robot id were heard (reported at most once a
+    /// second per pair): a second robot runs with a teammate's id.
+    pub id_conflicts: u64,
     /// Last time each robot was heard (on this robot's clock).
     pub last_heard: BTreeMap<u8, Instant>,
     drops: [u64; DropReason::ALL.len()],
@@ -168,4 +178,7 @@ pub struct PeerInfo {
     pub present: bool,
     /// Valid frames received from it.
     pub frames: u64,
+    /// An older incarnation of this id is sending beside the current one (two robots
+    /// share the id), as of its last frames.
+    pub conflicting: bool,
 }

@@ -4,12 +4,28 @@
 //! The sender numbers its messages per queue (1, 2, ... within one incarnation), keeps
 //! the last `retain` of them for repair, and advertises the span it still holds (`TalkHead`
 //! with every refresh). A receiver delivers message `next` and whatever follows it from
-//! its reorder buffer; a gap (a later message, or a head beyond `next`) starts a timer:
-//! after `nack_interval` it asks the sender to re-send the missing span (NACK), again
-//! every `nack_interval`, and after `give_up_after` (or at once, when the sender's head
-//! says the messages were evicted) it gives the span up and reports it. Memory is bounded
-//! on both sides: `retain` messages per own queue, `window` buffered messages per
-//! (sender, queue), `max_queues` queues per sender.
+//! its reorder buffer. A message is *known missing* from the moment a later message or a
+//! head shows it exists; from then on it is NACKed (first after `nack_interval`, then at
+//! growing intervals up to three times that), and `give_up_after` after it became known
+//! missing (or at once, when the sender's head says it was evicted) it is given up and
+//! reported. Each missing message gets the full `give_up_after` from its own moment.
+//!
+//! Where a receiver starts: from the start of a sender incarnation it saw begin (a
+//! restart it witnessed, a sender that started about when it did, or a queue that
+//! appeared later), every message is delivered. A receiver that meets a sender mid-life
+//! (it started or joined the network late, while the sender had been running for several
+//! seconds) starts each queue at the first message or head it hears: older messages were
+//! for the team as it was then, and are not delivered as if new.
+//!
+//! Bounds, so that a misconfigured or hostile sender cannot do lasting damage: a head
+//! spanning more than [`MAX_HEAD_SPAN`] messages is ignored; a head that would give up
+//! more than `window` messages at once is applied only when a second, later head agrees
+//! (the real sender repeats its head every refresh; one stray frame does not); a message
+//! beyond the reorder window does not open a gap. Memory: `retain` messages per own
+//! queue, `window` messages and `window_bytes` bytes buffered per (sender, queue),
+//! `max_queues` queues per sender. Repairs cost the sender at most [`REPAIR_SHARE`] times
+//! the bytes it posted (a re-send serves every receiver that lost the message) plus
+//! [`REPAIR_TRICKLE_BYTES_PER_S`], however many NACKs arrive.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -17,18 +33,41 @@ use std::time::Duration;
 use crate::time::Instant;
 use crate::value::Value;
 
+/// Missing spans one NACK asks for at most.
+pub(crate) const NACK_SPANS: usize = 16;
+
+/// A head claiming a span longer than this is not from a real sender.
+pub const MAX_HEAD_SPAN: u64 = 1 << 16;
+
+/// Repairs a queue may send, as a share of the bytes it posted: a message lost by any of
+/// several receivers is re-sent once for all of them, and at 30% loss with up to ten
+/// receivers one message in a few needs a second round.
+pub const REPAIR_SHARE: f64 = 2.0;
+
+/// Repair allowance earned with time alone, bytes per second per queue (beyond
+/// [`REPAIR_SHARE`] of the bytes posted): enough to answer a newcomer's NACK of a quiet
+/// queue.
+pub const REPAIR_TRICKLE_BYTES_PER_S: f64 = 2048.0;
+
 /// Limits and timers of the talk queues.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TalkLimits {
-    /// Messages kept per own queue for repair (default 256).
+    /// Messages kept per own queue for repair (default 256). A post is refused while all
+    /// of them are younger than `give_up_after` (a teammate may still need them): that
+    /// caps one queue at `retain / give_up_after` messages a second.
     pub retain: usize,
     /// Out-of-order messages buffered per (sender, queue) (default 256).
     pub window: usize,
+    /// Bytes of out-of-order messages buffered per (sender, queue) (default 256 KiB).
+    pub window_bytes: usize,
+    /// Bytes of out-of-order messages buffered over all senders and queues (default
+    /// 16 MiB).
+    pub buffered_bytes_total: usize,
     /// Queues tracked per sender, and own queues (default 64).
     pub max_queues: usize,
-    /// Delay before the first NACK of a gap, and between NACKs (default 20 ms).
+    /// Delay before the first NACK of a gap, and between the first NACKs (default 20 ms).
     pub nack_interval: Duration,
-    /// How long a gap may stay open before its messages are given up (default 1 s).
+    /// How long a message may stay known missing before it is given up (default 1 s).
     pub give_up_after: Duration,
 }
 
@@ -37,6 +76,8 @@ impl Default for TalkLimits {
         TalkLimits {
             retain: 256,
             window: 256,
+            window_bytes: 256 * 1024,
+            buffered_bytes_total: 16 << 20,
             max_queues: 64,
             nack_interval: Duration::from_millis(20),
             give_up_after: Duration::from_secs(1),
@@ -44,19 +85,45 @@ impl Default for TalkLimits {
     }
 }
 
+/// Bytes a message takes in memory and, roughly, on the wire.
+pub(crate) fn message_bytes(value: &Value) -> usize {
+    8 + match value {
+        Value::Int(_) | Value::Float(_) => 8,
+        Value::Bool(_) => 1,
+        Value::String(s) => s.len(),
+        Value::Floats(v) => 8 * v.len(),
+        Value::Bytes(b) => b.len(),
+    }
+}
+
 /// The sender's side of one queue.
 #[derive(Debug, Default)]
 pub(crate) struct Outbox {
     last: u64,
-    /// Contiguous, oldest first: (seq, message, when last put on the wire).
-    retained: VecDeque<(u64, Value, Option<Instant>)>,
+    /// Contiguous, oldest first: (seq, message, when posted, when last put on the wire).
+    retained: VecDeque<(u64, Value, Instant, Option<Instant>)>,
+    /// Bytes of repairs still allowed, and when that was last brought up to date.
+    repair_budget: f64,
+    budget_at: Option<Instant>,
 }
 
 impl Outbox {
+    /// Whether a post at `now` must be refused: every retained message is younger than
+    /// `give_up_after`, so evicting the oldest could lose it for a teammate still
+    /// repairing it.
+    pub(crate) fn full(&self, now: Instant, limits: &TalkLimits) -> bool {
+        self.retained.len() >= limits.retain.max(1)
+            && self
+                .retained
+                .front()
+                .is_some_and(|m| m.2 + limits.give_up_after > now)
+    }
+
     /// Numbers and keeps a new message; returns its sequence number.
-    pub(crate) fn post(&mut self, value: Value, retain: usize) -> u64 {
+    pub(crate) fn post(&mut self, now: Instant, value: Value, retain: usize) -> u64 {
         self.last += 1;
-        self.retained.push_back((self.last, value, None));
+        self.repair_budget += REPAIR_SHARE * message_bytes(&value) as f64;
+        self.retained.push_back((self.last, value, now, None));
         while self.retained.len() > retain.max(1) {
             self.retained.pop_front();
         }
@@ -87,8 +154,33 @@ impl Outbox {
     /// Records that `seq` went on the wire at `now`.
     pub(crate) fn mark_sent(&mut self, seq: u64, now: Instant) {
         if let Some(i) = self.index(seq) {
-            self.retained[i].2 = Some(now);
+            self.retained[i].3 = Some(now);
         }
+    }
+
+    /// Takes the bytes of one re-send of `seq` from the repair allowance; `false` (and
+    /// nothing taken) when the allowance is spent.
+    pub(crate) fn spend_repair(&mut self, now: Instant, seq: u64) -> bool {
+        let Some(i) = self.index(seq) else {
+            return false;
+        };
+        let cap = REPAIR_SHARE * self.retained_bytes() as f64 + 4.0 * REPAIR_TRICKLE_BYTES_PER_S;
+        if let Some(at) = self.budget_at {
+            let dt = now.saturating_duration_since(at).as_secs_f64();
+            self.repair_budget += dt * REPAIR_TRICKLE_BYTES_PER_S;
+        }
+        self.repair_budget = self.repair_budget.min(cap);
+        self.budget_at = Some(now);
+        let cost = message_bytes(&self.retained[i].1) as f64;
+        if self.repair_budget < cost {
+            return false;
+        }
+        self.repair_budget -= cost;
+        true
+    }
+
+    fn retained_bytes(&self) -> usize {
+        self.retained.iter().map(|m| message_bytes(&m.1)).sum()
     }
 
     /// Retained messages of `first..=last` not sent within `quiet` before `now`: what to
@@ -110,7 +202,7 @@ impl Outbox {
             .iter()
             .skip(start)
             .take_while(|m| m.0 <= to)
-            .filter(|m| m.2.is_none_or(|t| t + quiet <= now))
+            .filter(|m| m.3.is_none_or(|t| t + quiet <= now))
             .map(|m| m.0)
             .collect()
     }
@@ -125,47 +217,105 @@ pub(crate) enum Delivery {
     GivenUp { first: u64, last: u64 },
 }
 
+/// Whether a received talk item was taken into account.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Heard {
+    /// Used (or a harmless duplicate).
+    Taken,
+    /// Not plausible from a real sender, or over a bound: ignored.
+    Refused,
+}
+
 /// The receiver's side of one (sender incarnation, queue).
 #[derive(Debug)]
 pub(crate) struct Inbox {
     next: u64,
     buffer: BTreeMap<u64, Value>,
+    buffered_bytes: usize,
     known_last: u64,
-    /// Since when the gap at `next` has been open, and when to NACK next.
-    gap: Option<(Instant, Instant)>,
+    /// From which sequence number on messages became known to exist, and when: increasing
+    /// in both; the entry at or below `next` tells when `next` became known missing.
+    known_since: VecDeque<(u64, Instant)>,
+    /// When to NACK next, and how many NACKs the current gap has had.
+    nack_at: Option<Instant>,
+    nacks: u32,
+    /// A head asked to give up more than a window at once: its `first`, until a later
+    /// head agrees.
+    unconfirmed_jump: Option<u64>,
 }
 
 impl Default for Inbox {
     fn default() -> Inbox {
-        Inbox {
-            next: 1,
-            buffer: BTreeMap::new(),
-            known_last: 0,
-            gap: None,
-        }
+        Inbox::starting_at(1)
     }
 }
 
 impl Inbox {
-    /// A message arrived.
+    /// An inbox whose first message to deliver is `next`.
+    pub(crate) fn starting_at(next: u64) -> Inbox {
+        let next = next.max(1);
+        Inbox {
+            next,
+            buffer: BTreeMap::new(),
+            buffered_bytes: 0,
+            known_last: next - 1,
+            known_since: VecDeque::new(),
+            nack_at: None,
+            nacks: 0,
+            unconfirmed_jump: None,
+        }
+    }
+
+    /// Bytes held in the reorder buffer.
+    pub(crate) fn buffered_bytes(&self) -> usize {
+        self.buffered_bytes
+    }
+
+    /// Messages up to `last` are now known to exist (from `now` on, for those new).
+    fn learn(&mut self, now: Instant, last: u64) {
+        if last > self.known_last {
+            self.known_since.push_back((self.known_last + 1, now));
+            self.known_last = last;
+        }
+    }
+
+    /// A message arrived. `room` is how many more bytes the replica lets all reorder
+    /// buffers hold.
     pub(crate) fn on_message(
         &mut self,
         now: Instant,
         seq: u64,
         value: Value,
         limits: &TalkLimits,
+        room: usize,
         out: &mut Vec<Delivery>,
-    ) {
-        self.known_last = self.known_last.max(seq);
+    ) -> Heard {
+        let window_end = self.next.saturating_add(limits.window as u64);
+        if seq >= window_end {
+            // Beyond the window: it opens no gap; the sender's head will, if it is real.
+            return Heard::Refused;
+        }
+        let mut heard = Heard::Taken;
         if seq == self.next {
+            self.learn(now, seq);
             out.push(Delivery::Message { seq, value });
             self.next += 1;
             self.drain(out);
-        } else if seq > self.next && seq - self.next < limits.window as u64 {
-            // Beyond the window it is dropped; the NACK will bring it back later.
-            self.buffer.entry(seq).or_insert(value);
+        } else if seq > self.next {
+            self.learn(now, seq);
+            if !self.buffer.contains_key(&seq) {
+                let bytes = message_bytes(&value);
+                if bytes > room || self.buffered_bytes + bytes > limits.window_bytes {
+                    // Over the byte bound: dropped; a NACK brings it back later.
+                    heard = Heard::Refused;
+                } else {
+                    self.buffered_bytes += bytes;
+                    self.buffer.insert(seq, value);
+                }
+            }
         }
         self.update_gap(now, limits);
+        heard
     }
 
     /// The sender says it holds `first..=last`: anything older than `first` is gone.
@@ -176,12 +326,24 @@ impl Inbox {
         last: u64,
         limits: &TalkLimits,
         out: &mut Vec<Delivery>,
-    ) {
-        self.known_last = self.known_last.max(last);
+    ) -> Heard {
+        if first > last.saturating_add(1) || last - first.min(last) >= MAX_HEAD_SPAN {
+            return Heard::Refused;
+        }
+        if first > self.next.saturating_add(limits.window as u64) {
+            // It would give up more than a window at once: only if a later head agrees.
+            if self.unconfirmed_jump.is_none_or(|j| first < j) {
+                self.unconfirmed_jump = Some(first);
+                return Heard::Refused;
+            }
+        }
+        self.unconfirmed_jump = None;
+        self.learn(now, last);
         if first > self.next {
             self.give_up_until(first, out);
         }
         self.update_gap(now, limits);
+        Heard::Taken
     }
 
     /// Delivers buffered messages below `until` in order, giving up the missing ones,
@@ -190,6 +352,7 @@ impl Inbox {
         while self.next < until {
             match self.buffer.pop_first() {
                 Some((seq, value)) if seq < until => {
+                    self.buffered_bytes -= message_bytes(&value);
                     if seq > self.next {
                         out.push(Delivery::GivenUp {
                             first: self.next,
@@ -221,6 +384,7 @@ impl Inbox {
 
     fn drain(&mut self, out: &mut Vec<Delivery>) {
         while let Some(value) = self.buffer.remove(&self.next) {
+            self.buffered_bytes -= message_bytes(&value);
             out.push(Delivery::Message {
                 seq: self.next,
                 value,
@@ -229,12 +393,17 @@ impl Inbox {
         }
         // Stale entries cannot exist (only seqs > next are buffered), but keep the
         // invariant cheap to trust.
-        while self
-            .buffer
-            .first_key_value()
-            .is_some_and(|(&s, _)| s < self.next)
-        {
-            self.buffer.pop_first();
+        while let Some((&s, _)) = self.buffer.first_key_value() {
+            if s >= self.next {
+                break;
+            }
+            if let Some((_, v)) = self.buffer.pop_first() {
+                self.buffered_bytes -= message_bytes(&v);
+            }
+        }
+        // Forget when messages before `next` became known.
+        while self.known_since.len() >= 2 && self.known_since[1].0 <= self.next {
+            self.known_since.pop_front();
         }
     }
 
@@ -242,21 +411,38 @@ impl Inbox {
         self.known_last >= self.next
     }
 
+    /// When message `next` became known missing.
+    fn missing_since(&self) -> Option<Instant> {
+        if !self.has_gap() {
+            return None;
+        }
+        self.known_since
+            .iter()
+            .take_while(|(from, _)| *from <= self.next)
+            .last()
+            .map(|&(_, at)| at)
+    }
+
     fn update_gap(&mut self, now: Instant, limits: &TalkLimits) {
-        match (self.has_gap(), self.gap) {
-            (false, _) => self.gap = None,
-            (true, None) => self.gap = Some((now, now + limits.nack_interval)),
-            (true, Some(_)) => {}
+        if !self.has_gap() {
+            self.nack_at = None;
+            self.nacks = 0;
+        } else if self.nack_at.is_none() {
+            self.nack_at = Some(now + limits.nack_interval);
         }
     }
 
     /// When this inbox next needs `on_timeout`.
     pub(crate) fn deadline(&self, limits: &TalkLimits) -> Option<Instant> {
-        self.gap
-            .map(|(since, nack_at)| nack_at.min(since + limits.give_up_after))
+        let give_up = self.missing_since().map(|t| t + limits.give_up_after);
+        match (self.nack_at, give_up) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
-    /// Up to four missing spans in the window, for a NACK.
+    /// Up to [`NACK_SPANS`] missing spans in the window, for a NACK: enough that every
+    /// message known missing is asked for while its give-up time runs.
     pub(crate) fn missing(&self, limits: &TalkLimits) -> Vec<(u64, u64)> {
         let horizon = self
             .known_last
@@ -264,7 +450,7 @@ impl Inbox {
         let mut spans = Vec::new();
         let mut from = self.next;
         for &seq in self.buffer.keys() {
-            if spans.len() == 4 || from > horizon {
+            if spans.len() == NACK_SPANS || from > horizon {
                 break;
             }
             if seq > from {
@@ -272,41 +458,55 @@ impl Inbox {
             }
             from = seq + 1;
         }
-        if spans.len() < 4 && from <= horizon {
+        if spans.len() < NACK_SPANS && from <= horizon {
             spans.push((from, horizon));
         }
         spans
     }
 
-    /// Timers: returns the spans to NACK now (if any) and gives up a gap that stayed
-    /// open too long.
+    /// Timers: gives up the messages that have been known missing for `give_up_after`,
+    /// and returns the spans to NACK now (if any).
     pub(crate) fn on_timeout(
         &mut self,
         now: Instant,
         limits: &TalkLimits,
         out: &mut Vec<Delivery>,
     ) -> Vec<(u64, u64)> {
-        let Some((since, nack_at)) = self.gap else {
-            return Vec::new();
-        };
-        if now >= since + limits.give_up_after {
-            // Give up the first missing span only; later ones get their own time.
-            let until = self
-                .buffer
-                .keys()
-                .next()
-                .copied()
+        while let Some(since) = self.missing_since() {
+            if now < since + limits.give_up_after {
+                break;
+            }
+            // Give up the missing run at `next`, but only as far as its messages have
+            // been known missing that long; later ones get their own time.
+            let buffered = self.buffer.keys().next().copied();
+            let due_until = self
+                .known_since
+                .iter()
+                .find(|(from, at)| *from > self.next && now < *at + limits.give_up_after)
+                .map(|&(from, _)| from);
+            let until = [buffered, due_until, Some(self.known_last + 1)]
+                .into_iter()
+                .flatten()
+                .min()
                 .unwrap_or(self.known_last + 1);
             self.give_up_until(until, out);
-            self.gap = None;
-            self.update_gap(now, limits);
-            return Vec::new();
+            self.nacks = 0;
         }
-        if now >= nack_at {
-            self.gap = Some((since, now + limits.nack_interval));
-            return self.missing(limits);
+        self.update_gap(now, limits);
+        match self.nack_at {
+            Some(at) if now >= at && self.has_gap() => {
+                self.nacks = self.nacks.saturating_add(1);
+                // 1, 1, 2, 3, 3, ... intervals: quick repair first, then no flood.
+                let factor = match self.nacks {
+                    0..=2 => 1,
+                    3 => 2,
+                    _ => 3,
+                };
+                self.nack_at = Some(now + limits.nack_interval * factor);
+                self.missing(limits)
+            }
+            _ => Vec::new(),
         }
-        Vec::new()
     }
 
     /// The sender restarted: hand up what is buffered, give up the holes, forget.
@@ -324,6 +524,8 @@ mod tests {
     fn t(ms: u64) -> Instant {
         Instant::from_micros(ms * 1000)
     }
+    const ROOM: usize = usize::MAX / 2;
+
     fn msg(seq: u64) -> Delivery {
         Delivery::Message {
             seq,
@@ -337,7 +539,7 @@ mod tests {
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
         for seq in [2, 3, 2, 1, 3, 4, 1] {
-            inbox.on_message(t(0), seq, Value::Int(seq as i64), &limits, &mut out);
+            inbox.on_message(t(0), seq, Value::Int(seq as i64), &limits, ROOM, &mut out);
         }
         assert_eq!(out, vec![msg(1), msg(2), msg(3), msg(4)]);
         assert_eq!(inbox.deadline(&limits), None, "no gap left");
@@ -348,8 +550,8 @@ mod tests {
         let limits = TalkLimits::default();
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
-        inbox.on_message(t(0), 1, Value::Int(1), &limits, &mut out);
-        inbox.on_message(t(0), 4, Value::Int(4), &limits, &mut out);
+        inbox.on_message(t(0), 1, Value::Int(1), &limits, ROOM, &mut out);
+        inbox.on_message(t(0), 4, Value::Int(4), &limits, ROOM, &mut out);
         inbox.on_head(t(0), 1, 6, &limits, &mut out);
         assert_eq!(
             inbox.on_timeout(t(10), &limits, &mut out),
@@ -361,7 +563,7 @@ mod tests {
             vec![(2, 3), (5, 6)]
         );
         assert_eq!(inbox.deadline(&limits), Some(t(40)));
-        inbox.on_message(t(30), 3, Value::Int(3), &limits, &mut out);
+        inbox.on_message(t(30), 3, Value::Int(3), &limits, ROOM, &mut out);
         inbox.on_timeout(t(1000), &limits, &mut out);
         assert_eq!(
             out,
@@ -369,9 +571,11 @@ mod tests {
                 msg(1),
                 Delivery::GivenUp { first: 2, last: 2 },
                 msg(3),
-                msg(4)
+                msg(4),
+                Delivery::GivenUp { first: 5, last: 6 },
             ],
-            "after 1 s message 2 is given up and 3, 4 follow in order"
+            "after 1 s message 2 is given up and 3, 4 follow in order; 5 and 6, known \
+             missing since the head at 0 ms, are due too"
         );
     }
 
@@ -380,7 +584,7 @@ mod tests {
         let limits = TalkLimits::default();
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
-        inbox.on_message(t(0), 3, Value::Int(3), &limits, &mut out);
+        inbox.on_message(t(0), 3, Value::Int(3), &limits, ROOM, &mut out);
         inbox.on_head(t(0), 5, 6, &limits, &mut out);
         assert_eq!(
             out,
@@ -397,7 +601,7 @@ mod tests {
     fn the_outbox_keeps_a_bounded_tail_and_suppresses_repeat_resends() {
         let mut outbox = Outbox::default();
         for i in 1..=5 {
-            outbox.post(Value::Int(i), 3);
+            outbox.post(t(0), Value::Int(i), 3);
         }
         assert_eq!((outbox.first(), outbox.last()), (3, 5));
         assert_eq!(outbox.get(2), None);

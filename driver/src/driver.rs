@@ -22,7 +22,7 @@ use comms::{
 pub use crate::handle::Handle;
 use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
 use crate::impair::{Held, Impairment};
-use crate::incarnation::random_incarnation;
+use crate::incarnation::new_incarnation;
 use crate::socket::{open_multicast, SocketConfig, SocketError};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
@@ -377,6 +377,18 @@ impl Inner {
                     "peer restarted"
                 ),
                 Event::PeerDeparted { robot } => tracing::info!(robot, "peer departed"),
+                // The replica reports each pair at most once a second.
+                Event::IncarnationConflict {
+                    robot,
+                    current,
+                    other,
+                } => tracing::error!(
+                    robot,
+                    current = format_args!("{current:016x}"),
+                    other = format_args!("{other:016x}"),
+                    "two robots are sending with id {robot}: frames of the other incarnation \
+                     are dropped while the current one is heard"
+                ),
                 Event::FrameDropped { from, reason } => {
                     tracing::debug!(%from, %reason, "datagram dropped")
                 }
@@ -565,7 +577,7 @@ impl Driver {
         let opened = open_multicast(&config.socket)?;
         let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
         let clock = Clock::new();
-        let incarnation = config.incarnation.unwrap_or_else(random_incarnation);
+        let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
         let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
         for (key, value) in config.start_values {
             replica

@@ -1,25 +1,34 @@
-//! A fresh incarnation number for each start of a replica, from the OS's random source.
+//! A fresh incarnation number for each start of a replica. Incarnations are ordered: a
+//! later start of a robot has a larger one, so a teammate tells a restart from a replayed
+//! or stray frame of an earlier life without having heard every life in between.
 
-/// A random 64-bit incarnation. The OS's generator is the source; should it fail (it does
-/// not on Linux after early boot), the wall clock and process id still make two starts
-/// of one robot differ, which is all an incarnation has to do.
-pub(crate) fn random_incarnation() -> u64 {
-    getrandom::u64().unwrap_or_else(|_| fallback())
+/// The start time in milliseconds since the Unix epoch in the high 48 bits and 16 random
+/// bits below (two starts in one millisecond still differ). Needs the robot's clock not to
+/// go back between two starts by more than the time between them; a robot whose clock
+/// resets at boot (no RTC, no NTP yet) should get its time set before the daemon starts.
+pub(crate) fn new_incarnation() -> u64 {
+    let random = getrandom::u64().unwrap_or_else(|_| u64::from(std::process::id()));
+    comms::ordered_incarnation(unix_millis(), random)
 }
 
-#[allow(clippy::disallowed_methods)] // the I/O shell: a seed from the outside world
-fn fallback() -> u64 {
-    let wall = std::time::SystemTime::now()
+#[allow(clippy::disallowed_methods)] // the I/O shell: the start time comes from the world
+fn unix_millis() -> u64 {
+    std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or_default();
-    wall ^ (u64::from(std::process::id()) << 32)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or_default()
 }
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
-    fn two_starts_get_different_incarnations() {
-        assert_ne!(super::random_incarnation(), super::random_incarnation());
+    fn a_later_start_has_a_larger_incarnation_whatever_the_random_bits() {
+        let at = comms::ordered_incarnation;
+        assert!(at(1_000_001, 0) > at(1_000_000, u64::MAX));
+        assert_ne!(new_incarnation(), 0);
+        let (a, b) = (new_incarnation(), new_incarnation());
+        assert_ne!(a, b, "two starts differ");
     }
 }

@@ -85,6 +85,8 @@ impl From<PostError> for Rejected {
             PostError::NotOwnQueue(_) => ErrCode::WrongKind,
             PostError::TooLarge { .. } => ErrCode::TooLarge,
             PostError::TooManyQueues(_) => ErrCode::TooMany,
+            // Posting faster than the queue's retention allows: try again later.
+            PostError::RetentionFull { .. } => ErrCode::QueueFull,
         };
         Rejected {
             code,

@@ -70,8 +70,20 @@ pub enum Event {
         /// The one it has now.
         new_incarnation: u64,
     },
-    /// A robot was silent for longer than `departed_after`. Its values stay stored (and
-    /// age); arbitration should ignore stale values by their stamps.
+    /// Two incarnations of one robot id are sending at once: another robot runs with
+    /// this id (or a stray frame carried it). Frames of `other` are dropped while
+    /// `current` is heard; if `current` falls silent, `other` takes over again.
+    IncarnationConflict {
+        /// The robot id.
+        robot: u8,
+        /// The incarnation whose frames are applied.
+        current: u64,
+        /// The other live one, whose frames are dropped.
+        other: u64,
+    },
+    /// A robot was silent for longer than `departed_after`. Its values stay readable,
+    /// marked departed and ageing, for `release_departed_after`, then they are released;
+    /// arbitration should ignore stale values by their stamps.
     PeerDeparted {
         /// Its id.
         robot: u8,

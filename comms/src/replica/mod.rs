@@ -38,6 +38,7 @@ mod transmit;
 
 pub use config::{ConfigInvalid, ReplicaConfig};
 pub use events::{Destination, Event, Transmit};
+pub use peers::ordered_incarnation;
 use peers::Peer;
 pub use talk::PostError;
 
@@ -61,6 +62,10 @@ pub struct Replica {
     heads_out: BTreeSet<String>,
     nacks_out: VecDeque<(u8, String, u64, u64)>,
     outboxes: BTreeMap<String, Outbox>,
+    /// Bytes held in all talk reorder buffers (bounded by `talk.buffered_bytes_total`).
+    talk_buffered: usize,
+    /// When a frame with this robot's id and another incarnation was last reported.
+    own_conflict_reported: Option<Instant>,
     peers: BTreeMap<u8, Peer>,
     events: VecDeque<Event>,
     stats: Stats,
@@ -96,6 +101,8 @@ impl Replica {
             heads_out: BTreeSet::new(),
             nacks_out: VecDeque::new(),
             outboxes: BTreeMap::new(),
+            talk_buffered: 0,
+            own_conflict_reported: None,
             peers: BTreeMap::new(),
             events: VecDeque::new(),
             stats: Stats::default(),

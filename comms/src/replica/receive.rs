@@ -9,6 +9,7 @@ use crate::stats::DropReason;
 use crate::time::Instant;
 use crate::wire::{self, Item};
 
+use super::talk::TalkItem;
 use super::{Event, Replica};
 
 impl Replica {
@@ -45,12 +46,24 @@ impl Replica {
                 self.stats.own_frames += 1;
                 return;
             }
+            // Another robot sends with this robot's id: say so, at most once a second.
+            if self
+                .own_conflict_reported
+                .is_none_or(|t| t + Duration::from_secs(1) <= now)
+            {
+                self.own_conflict_reported = Some(now);
+                self.stats.id_conflicts += 1;
+                self.events.push_back(Event::IncarnationConflict {
+                    robot: sender,
+                    current: self.incarnation,
+                    other: frame.incarnation,
+                });
+            }
             return self.drop_frame(from, DropReason::RobotIdConflict);
         }
         if let Err(reason) = self.admit(now, sender, frame.incarnation, frame.seq) {
             return self.drop_frame(from, reason);
         }
-        let limits = self.cfg.talk.clone();
         for item in frame.items {
             match item {
                 Item::Update {
@@ -63,20 +76,10 @@ impl Replica {
                     self.apply_update(sender, frame.incarnation, &path, value, version, stamp);
                 }
                 Item::Talk { queue, seq, value } => {
-                    let mut out = std::mem::take(&mut self.deliveries);
-                    if let Some(inbox) = self.inbox(sender, &queue) {
-                        inbox.on_message(now, seq, value, &limits, &mut out);
-                    }
-                    self.hand_up(sender, &queue, &mut out);
-                    self.deliveries = out;
+                    self.on_talk_item(now, sender, &queue, TalkItem::Message { seq, value })
                 }
                 Item::TalkHead { queue, first, last } => {
-                    let mut out = std::mem::take(&mut self.deliveries);
-                    if let Some(inbox) = self.inbox(sender, &queue) {
-                        inbox.on_head(now, first, last, &limits, &mut out);
-                    }
-                    self.hand_up(sender, &queue, &mut out);
-                    self.deliveries = out;
+                    self.on_talk_item(now, sender, &queue, TalkItem::Head { first, last })
                 }
                 Item::Nack {
                     target,

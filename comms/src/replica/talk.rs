@@ -8,7 +8,7 @@ use thiserror::Error;
 
 use crate::key::{Key, KeyError, Kind, Scope};
 use crate::stats::Stats;
-use crate::talk::{Delivery, Inbox};
+use crate::talk::{Delivery, Heard, Inbox};
 use crate::time::Instant;
 use crate::value::Value;
 use crate::wire::{self, ItemRef};
@@ -37,6 +37,24 @@ pub enum PostError {
     /// This robot already has `talk.max_queues` queues.
     #[error("too many talk queues (limit {0})")]
     TooManyQueues(usize),
+    /// The queue's retention is full of messages a teammate may still be repairing
+    /// (all younger than `give_up_after`): posting now would evict one. Post again
+    /// later; the queue carries at most `retain / give_up_after` messages a second.
+    #[error("{key}: the queue's {retain} retained messages are all younger than {give_up_ms} ms; try again later")]
+    RetentionFull {
+        /// The key as given.
+        key: String,
+        /// Messages retained per queue.
+        retain: usize,
+        /// The give-up time, ms.
+        give_up_ms: u64,
+    },
+}
+
+/// A teammate's talk item, as [`Replica::on_talk_item`] takes it.
+pub(super) enum TalkItem {
+    Message { seq: u64, value: Value },
+    Head { first: u64, last: u64 },
 }
 
 impl Replica {
@@ -69,12 +87,29 @@ impl Replica {
             return Err(PostError::TooManyQueues(self.cfg.talk.max_queues));
         }
         let outbox = self.outboxes.entry(key.path().to_owned()).or_default();
-        let seq = outbox.post(value, self.cfg.talk.retain);
+        if outbox.full(now, &self.cfg.talk) {
+            self.stats.talk_refused_full += 1;
+            return Err(PostError::RetentionFull {
+                key: key.to_string(),
+                retain: self.cfg.talk.retain,
+                give_up_ms: self.cfg.talk.give_up_after.as_millis() as u64,
+            });
+        }
+        let seq = outbox.post(now, value, self.cfg.talk.retain);
         self.talk_out.push_back((key.path().to_owned(), seq));
         Ok(seq)
     }
 
-    pub(super) fn inbox(&mut self, sender: u8, queue: &str) -> Option<&mut Inbox> {
+    /// The inbox of `sender`'s `queue`, opened if new: at 1, or, while this robot is
+    /// catching up with a sender it met mid-life, at `start` (the first message or head
+    /// heard).
+    pub(super) fn inbox(
+        &mut self,
+        now: Instant,
+        sender: u8,
+        queue: &str,
+        start: u64,
+    ) -> Option<&mut Inbox> {
         let max = self.cfg.talk.max_queues;
         let peer = self.peers.get_mut(&sender)?;
         if !peer.inboxes.contains_key(queue) {
@@ -82,9 +117,48 @@ impl Replica {
                 self.stats.talk_queue_overflow += 1;
                 return None;
             }
-            peer.inboxes.insert(queue.to_owned(), Inbox::default());
+            let inbox = if peer.catch_up_until.is_some_and(|t| now < t) {
+                Inbox::starting_at(start)
+            } else {
+                Inbox::default()
+            };
+            peer.inboxes.insert(queue.to_owned(), inbox);
         }
         peer.inboxes.get_mut(queue)
+    }
+
+    /// A teammate's talk message or head: into its inbox, whatever is now deliverable
+    /// handed up, refusals counted, the reorder buffers' byte total kept.
+    pub(super) fn on_talk_item(&mut self, now: Instant, sender: u8, queue: &str, item: TalkItem) {
+        let limits = self.cfg.talk.clone();
+        let room = limits
+            .buffered_bytes_total
+            .saturating_sub(self.talk_buffered);
+        let start = match item {
+            TalkItem::Message { seq, .. } => seq,
+            TalkItem::Head { last, .. } => last.saturating_add(1),
+        };
+        let mut out = std::mem::take(&mut self.deliveries);
+        let mut heard = Heard::Taken;
+        let mut delta = (0, 0);
+        if let Some(inbox) = self.inbox(now, sender, queue, start) {
+            let before = inbox.buffered_bytes();
+            heard = match item {
+                TalkItem::Message { seq, value } => {
+                    inbox.on_message(now, seq, value, &limits, room, &mut out)
+                }
+                TalkItem::Head { first, last } => {
+                    inbox.on_head(now, first, last, &limits, &mut out)
+                }
+            };
+            delta = (before, inbox.buffered_bytes());
+        }
+        self.talk_buffered = self.talk_buffered + delta.1 - delta.0;
+        if heard == Heard::Refused {
+            self.stats.talk_refused += 1;
+        }
+        self.hand_up(sender, queue, &mut out);
+        self.deliveries = out;
     }
 
     pub(super) fn hand_up(&mut self, sender: u8, queue: &str, out: &mut Vec<Delivery>) {
@@ -130,6 +204,12 @@ impl Replica {
         // A resend within half a NACK interval already answers this request.
         let quiet = self.cfg.talk.nack_interval / 2;
         for seq in outbox.to_resend(first, last, now, quiet) {
+            // However many NACKs arrive (spoofed ones too), repairs stay within twice
+            // what was posted plus a trickle.
+            if !outbox.spend_repair(now, seq) {
+                self.stats.talk_repair_limited += 1;
+                continue;
+            }
             outbox.mark_sent(seq, now);
             self.talk_out.push_back((queue.to_owned(), seq));
             self.stats.talk_resent += 1;

@@ -408,10 +408,12 @@ fn a_lost_talk_message_is_repaired_by_nack_and_delivered_in_order() {
 fn an_unrepairable_talk_gap_is_given_up_with_an_event() {
     let mut cfg = ReplicaConfig::new(1, 7);
     cfg.talk.retain = 2;
+    // The sender gives its own receivers 1 ms: posts a millisecond apart may then evict.
+    cfg.talk.give_up_after = Duration::from_millis(1);
     let mut a = Replica::new(cfg, 11, t(0)).unwrap();
     let mut b = robot(2, 22);
     for i in 1..=5 {
-        a.post(t(0), "*.talk.q", Value::Int(i)).unwrap();
+        a.post(t(i as u64), "*.talk.q", Value::Int(i)).unwrap();
     }
     frames(&mut a); // all lost
     a.handle_timeout(t(100));

@@ -66,6 +66,13 @@ impl Replica {
                 }
             }
         }
+        // Give-ups emptied reorder buffers: recount (every inbox was visited anyway).
+        self.talk_buffered = self
+            .peers
+            .values()
+            .flat_map(|p| p.inboxes.values())
+            .map(|i| i.buffered_bytes())
+            .sum();
         for (robot, queue, mut d) in handed {
             Self::hand_up_into(&mut self.events, &mut self.stats, &mut d, robot, &queue);
         }
@@ -115,6 +122,10 @@ impl Replica {
             ("talk_delivered".into(), s.talk_delivered as i64),
             ("talk_given_up".into(), s.talk_given_up as i64),
             ("talk_resent".into(), s.talk_resent as i64),
+            ("talk_refused".into(), s.talk_refused as i64),
+            ("talk_refused_full".into(), s.talk_refused_full as i64),
+            ("talk_repair_limited".into(), s.talk_repair_limited as i64),
+            ("id_conflicts".into(), s.id_conflicts as i64),
             ("nacks_sent".into(), s.nacks_sent as i64),
             ("drops.total".into(), s.drops_total() as i64),
         ];
@@ -123,6 +134,13 @@ impl Replica {
                 .iter()
                 .map(|r| (format!("drops.{}", r.name()), s.drops(*r) as i64)),
         );
+        // Two robots sending with one id: which ids, as of their last frames.
+        values.extend(self.peers().map(|p| {
+            (
+                format!("peer.{}.conflicting", p.robot),
+                i64::from(p.conflicting),
+            )
+        }));
         values.extend(
             s.last_heard
                 .iter()
