@@ -343,3 +343,37 @@ fn completions_and_the_man_page_come_from_the_same_definitions() {
     );
     assert!(page.contains("completions") && page.contains("echo"));
 }
+
+#[test]
+fn get_with_a_maximum_age_refuses_a_stale_value() {
+    let (d, _dir) = one_daemon(7);
+    let relay = d.relay.to_string();
+    let set = run(&["set", "local.var.pose.x", "1.5", "--relay", &relay]);
+    assert!(set.status.success(), "set: {}", text(&set.stderr));
+    std::thread::sleep(Duration::from_millis(50));
+    let fresh_enough = run(&[
+        "get",
+        "local.var.pose.x",
+        "--max-age",
+        "1min",
+        "--relay",
+        &relay,
+    ]);
+    assert!(
+        fresh_enough.status.success() && text(&fresh_enough.stdout).contains("1.5"),
+        "{}",
+        text(&fresh_enough.stderr)
+    );
+    let stale = run(&[
+        "get",
+        "local.var.pose.x",
+        "--max-age",
+        "10ms",
+        "--relay",
+        &relay,
+    ]);
+    assert_eq!(stale.status.code(), Some(1), "a stale value is an error");
+    let err = text(&stale.stderr);
+    assert!(err.contains("406") && err.contains("ms old"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

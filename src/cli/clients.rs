@@ -29,6 +29,11 @@ pub struct GetArgs {
     /// With `--wait`: give up after this long (`5s`; default: wait until it appears).
     #[arg(long, requires = "wait", value_parser = duration::parse)]
     pub timeout: Option<Duration>,
+    /// Refuse a value older than this (`500ms`): an error naming its age, exit 1. Ages are
+    /// on this robot's clock since reception, less the age the sender reported; they do
+    /// not include the network transit.
+    #[arg(long, value_parser = duration::parse)]
+    pub max_age: Option<Duration>,
     #[command(flatten)]
     pub relay: RelayAddr,
 }
@@ -92,7 +97,12 @@ fn print_binding(out: &mut impl Write, b: &Binding, json: bool) -> Result<()> {
     if json {
         writeln!(out, "{}", binding_json(b))?;
     } else {
-        writeln!(out, "{} {} {} (age {} ms)", b.key, b.ty, b.value, b.age_ms)?;
+        let departed = if b.departed { ", owner departed" } else { "" };
+        writeln!(
+            out,
+            "{} {} {} (age {} ms{departed})",
+            b.key, b.ty, b.value, b.age_ms
+        )?;
     }
     Ok(())
 }
@@ -102,7 +112,7 @@ pub fn get(args: GetArgs) -> Result<()> {
     let mut c = RelayClient::connect(&args.relay.relay)?;
     let started = Instant::now();
     let b = loop {
-        match c.get(&args.key)? {
+        match c.get(&args.key, args.max_age)? {
             Some(b) => break b,
             None if !args.wait => bail!("no value for {} (wait for it with --wait)", args.key),
             None => match args.timeout {

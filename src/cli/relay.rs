@@ -181,8 +181,13 @@ impl RelayClient {
     }
 
     /// `GETV key`: the binding, or `None` when no value is bound (`ERR 404`).
-    pub fn get(&mut self, key: &str) -> Result<Option<Binding>> {
-        self.send(&format!("GETV {key}"))?;
+    /// With a maximum age, an older value is an error (`ERR 406`) naming its age, not an
+    /// answer.
+    pub fn get(&mut self, key: &str, max_age: Option<Duration>) -> Result<Option<Binding>> {
+        match max_age {
+            Some(age) => self.send(&format!("GETV {key} {}", age.as_millis()))?,
+            None => self.send(&format!("GETV {key}"))?,
+        }
         let answer = self.line()?;
         if answer.starts_with("ERR 404 ") {
             return Ok(None);
@@ -249,6 +254,7 @@ pub fn binding_json(b: &Binding) -> serde_json::Value {
         "type": b.ty,
         "value": value_json(&b.value),
         "age_ms": b.age_ms,
+        "departed": b.departed,
     })
 }
 
