@@ -16,14 +16,16 @@ use tokio::sync::Notify;
 
 use comms::relay::{Session, SessionLimits};
 use comms::{
-    ConfigInvalid, Event, Instant, Key, Kind, Replica, ReplicaConfig, Scope, SetError, Value,
+    ConfigInvalid, DropReason, Event, Instant, Key, Kind, Replica, ReplicaConfig, Scope, SetError,
+    Value,
 };
 
 pub use crate::handle::Handle;
 use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
 use crate::impair::{Held, Impairment};
 use crate::incarnation::new_incarnation;
-use crate::socket::{open_multicast, SocketConfig, SocketError};
+use crate::rate_limit::RateLimit;
+use crate::socket::{open_multicast, open_unicast, SocketConfig, SocketError};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
@@ -33,6 +35,8 @@ const RECV_BATCH: usize = 256;
 /// Copies an [`Impairment`] may hold back at once; beyond this they are dropped (and
 /// counted), so a model with huge delays cannot exhaust memory.
 const HELD_LIMIT: usize = 65_536;
+/// At most one warning per this period about frames dropped for a team-key mismatch.
+const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Everything the driver needs to start.
 #[derive(Clone, Debug)]
@@ -42,8 +46,11 @@ pub struct DriverConfig {
     /// The multicast socket.
     pub socket: SocketConfig,
     /// Teammates that also get every frame by unicast (WLAN access points often drop
-    /// or delay multicast). Duplicates are harmless. Note: on one host, unicast to a port
-    /// shared by several replicas reaches only one of them.
+    /// or delay multicast). Duplicates are harmless. With peers, a second socket bound to
+    /// `<iface>:<port>` sends to them and receives their unicast; datagrams on it from any
+    /// other address are dropped (counted in [`IoStats::unicast_refused`]). Without peers
+    /// no unicast is received at all. Note: on one host, unicast to a port shared by
+    /// several replicas reaches only one of them.
     pub peers: Vec<SocketAddr>,
     /// Values set before the first frame goes out (`config.dat`, `config-<id>.dat`).
     pub start_values: Vec<(Key, Value)>,
@@ -138,8 +145,10 @@ pub struct IoStats {
     pub recv_buffer_bytes: usize,
     /// Datagrams sent (to the group and to peers).
     pub datagrams_sent: u64,
-    /// Datagrams received.
+    /// Datagrams received (on the group socket and, with peers, the unicast socket).
     pub datagrams_received: u64,
+    /// Unicast datagrams refused because they did not come from a configured peer.
+    pub unicast_refused: u64,
     /// Sends that failed with an error other than a full buffer.
     pub send_errors: u64,
     /// Frames dropped because the send backlog was full.
@@ -157,6 +166,8 @@ pub(crate) struct Inner {
     pub(crate) clock: Clock,
     pub(crate) replica: Replica,
     socket: Rc<UdpSocket>,
+    /// The `--peer` socket (`<iface>:<port>`), only when peers are configured.
+    unicast: Option<Rc<UdpSocket>>,
     group: SocketAddr,
     peers: Vec<SocketAddr>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
@@ -182,6 +193,8 @@ pub(crate) struct Inner {
     /// Notices handed to subscribers and relay sessions so far: tells the receive loop
     /// that a task is now waiting to run.
     handed_up: u64,
+    /// Warnings about frames dropped for a team-key mismatch, rate-limited.
+    key_mismatch: RateLimit,
 }
 
 impl Inner {
@@ -245,11 +258,20 @@ impl Inner {
         }
     }
 
+    /// The socket a datagram to `to` leaves from: the unicast one for peers (when open),
+    /// the group socket otherwise.
+    fn socket_for(&self, to: SocketAddr) -> &Rc<UdpSocket> {
+        match &self.unicast {
+            Some(unicast) if to != self.group => unicast,
+            _ => &self.socket,
+        }
+    }
+
     fn send(&mut self, payload: &[u8], to: SocketAddr) {
         if !self.backlog.is_empty() {
             return self.enqueue(payload.to_vec(), to);
         }
-        match self.socket.try_send_to(payload, to) {
+        match self.socket_for(to).try_send_to(payload, to) {
             Ok(_) => self.io.datagrams_sent += 1,
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
                 self.enqueue(payload.to_vec(), to);
@@ -273,7 +295,7 @@ impl Inner {
     /// Sends what the backlog holds until the kernel refuses again.
     fn flush_backlog(&mut self) {
         while let Some((payload, to)) = self.backlog.front() {
-            match self.socket.try_send_to(payload, *to) {
+            match self.socket_for(*to).try_send_to(payload, *to) {
                 Ok(_) => self.io.datagrams_sent += 1,
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => return,
                 Err(_) => self.io.send_errors += 1,
@@ -390,7 +412,24 @@ impl Inner {
                      are dropped while the current one is heard"
                 ),
                 Event::FrameDropped { from, reason } => {
-                    tracing::debug!(%from, %reason, "datagram dropped")
+                    tracing::debug!(%from, %reason, "datagram dropped");
+                    let key_mismatch = matches!(
+                        reason,
+                        DropReason::MissingTag | DropReason::UnexpectedTag | DropReason::BadTag
+                    );
+                    if key_mismatch {
+                        let now = *now.get_or_insert_with(|| clock.now());
+                        if let Some(count) = self.key_mismatch.record(now) {
+                            tracing::warn!(
+                                count,
+                                latest_from = %from,
+                                latest_reason = %reason,
+                                "{count} frame(s) dropped for a team-key mismatch since the \
+                                 last such warning (at most one every 10 s): does every \
+                                 robot use the same --key-file?"
+                            );
+                        }
+                    }
                 }
             }
         }
@@ -567,6 +606,7 @@ impl Nudge {
 pub struct Driver {
     inner: Rc<RefCell<Inner>>,
     socket: Rc<UdpSocket>,
+    unicast: Option<Rc<UdpSocket>>,
     wake: Rc<Nudge>,
 }
 
@@ -576,6 +616,14 @@ impl Driver {
     pub fn bind(config: DriverConfig) -> Result<Driver, DriverError> {
         let opened = open_multicast(&config.socket)?;
         let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
+        let unicast = if config.peers.is_empty() {
+            None
+        } else {
+            let std_socket = open_unicast(&config.socket)?;
+            Some(Rc::new(
+                UdpSocket::from_std(std_socket).map_err(DriverError::Runtime)?,
+            ))
+        };
         let clock = Clock::new();
         let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
         let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
@@ -594,6 +642,7 @@ impl Driver {
             clock,
             replica,
             socket: socket.clone(),
+            unicast: unicast.clone(),
             group: config.socket.group.into(),
             peers: config.peers,
             backlog: VecDeque::new(),
@@ -615,6 +664,7 @@ impl Driver {
             held_order: 0,
             copies: Vec::new(),
             handed_up: 0,
+            key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
@@ -622,11 +672,13 @@ impl Driver {
             iface = %config.socket.iface,
             recv_buffer_bytes = opened.recv_buffer_granted,
             requested = config.socket.recv_buffer_bytes,
+            peers = inner.peers.len(),
             "multicast socket ready"
         );
         Ok(Driver {
             inner: Rc::new(RefCell::new(inner)),
             socket,
+            unicast,
             wake,
         })
     }
@@ -671,7 +723,12 @@ impl Driver {
         loop {
             let (deadline, backlog) = {
                 let inner = self.inner.borrow();
-                (inner.next_deadline(), !inner.backlog.is_empty())
+                // The socket the oldest waiting frame leaves from.
+                let backlog = inner
+                    .backlog
+                    .front()
+                    .map(|(_, to)| inner.socket_for(*to).clone());
+                (inner.next_deadline(), backlog)
             };
             let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
             if sleep.deadline() != at {
@@ -687,11 +744,16 @@ impl Driver {
                 if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {
                     return Poll::Ready(ready.map(|()| Cause::Readable));
                 }
+                if let Some(unicast) = &self.unicast {
+                    if let Poll::Ready(ready) = unicast.poll_recv_ready(cx) {
+                        return Poll::Ready(ready.map(|()| Cause::Readable));
+                    }
+                }
                 if sleep.as_mut().poll(cx).is_ready() {
                     return Poll::Ready(Ok(Cause::Deadline));
                 }
-                if backlog {
-                    if let Poll::Ready(ready) = self.socket.poll_send_ready(cx) {
+                if let Some(socket) = &backlog {
+                    if let Poll::Ready(ready) = socket.poll_send_ready(cx) {
                         return Poll::Ready(ready.map(|()| Cause::Writable));
                     }
                 }
@@ -728,11 +790,37 @@ impl Driver {
     /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
     /// or one of them gave a waiting task or a watch something to do; returns whether
     /// that happened.
+    ///
+    /// With peers, the group and unicast sockets take turns, so neither starves the
+    /// other; unicast from anyone but a configured peer is dropped and counted.
     fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
         let handed_before = inner.handed_up;
+        let sockets = [Some(&self.socket), self.unicast.as_ref()];
+        let mut drained = sockets.map(|s| s.is_none());
+        let mut turn = 0;
         for _ in 0..RECV_BATCH {
-            match self.socket.try_recv_from(buf) {
+            if drained[turn] {
+                turn ^= 1;
+            }
+            let (Some(socket), false) = (sockets[turn], drained[turn]) else {
+                break; // both drained
+            };
+            let unicast = turn == 1;
+            let read = socket.try_recv_from(buf);
+            if read
+                .as_ref()
+                .is_err_and(|e| e.kind() == io::ErrorKind::WouldBlock)
+            {
+                drained[turn] = true;
+            }
+            turn ^= 1;
+            match read {
+                Ok((_, from)) if unicast && !inner.peers.contains(&from) => {
+                    inner.io.datagrams_received += 1;
+                    inner.io.unicast_refused += 1;
+                    tracing::debug!(%from, "unicast from an address that is not a --peer dropped");
+                }
                 Ok((n, from)) => {
                     inner.io.datagrams_received += 1;
                     let now = inner.clock.now();
@@ -742,7 +830,7 @@ impl Driver {
                         return Ok(true);
                     }
                 }
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => continue,
                 // An ICMP error from an earlier unicast send to a `--peer` that is down
                 // surfaces here on Linux; it is no reason to stop.
                 Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,

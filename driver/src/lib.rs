@@ -2,7 +2,8 @@
 //! quinn-proto. It runs a [`comms::Replica`] over a tokio + socket2 multicast UDP socket,
 //! with its timers, relay sessions ([`serve`] is the relay's TCP side) and in-process
 //! subscribers, and it reads what the core may not: configuration files
-//! ([`load_config`]), network interfaces ([`resolve_iface`]), the OS's random source
+//! ([`load_config_files`], [`read_key_file`]: regular files only, size-limited), network
+//! interfaces ([`resolve_iface`]), the OS's random source
 //! for a replica's incarnation and the monotonic clock.
 //!
 //! **What it is not.** No protocol logic: every frame, version, talk sequence and relay
@@ -57,13 +58,18 @@ mod handle;
 mod iface;
 mod impair;
 mod incarnation;
+mod rate_limit;
 mod relay;
 mod socket;
 
-pub use config_files::load_config;
+pub use config_files::{
+    load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
+    LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
+};
 pub use driver::{Driver, DriverConfig, DriverError, IoStats};
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{resolve_iface, IfaceError};
 pub use impair::Impairment;
+pub use rate_limit::RateLimit;
 pub use relay::serve;
-pub use socket::{open_multicast, scratch_group, Opened, SocketConfig, SocketError};
+pub use socket::{open_multicast, open_unicast, scratch_group, Opened, SocketConfig, SocketError};

@@ -1,5 +1,11 @@
 //! The multicast UDP socket, set up with socket2 the way a team on one WLAN (or one
-//! laptop) needs it.
+//! laptop) needs it, and the unicast socket that `--peer` asks for.
+//!
+//! The multicast socket is bound to the group address itself (not `0.0.0.0`), with
+//! `IP_MULTICAST_ALL` off on Linux: it hears only datagrams sent to its own group and
+//! port, never unicast and never another group that shares the port. Unicast from
+//! teammates arrives on a second socket ([`open_unicast`]), opened only when peers are
+//! configured, whose datagrams the driver accepts from the listed peers alone.
 
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
@@ -90,8 +96,8 @@ pub fn scratch_group() -> io::Result<SocketAddrV4> {
 /// The socket as opened, with what the kernel granted.
 #[derive(Debug)]
 pub struct Opened {
-    /// Non-blocking, bound to `0.0.0.0:<group port>` (so teammates' `--peer` unicast
-    /// arrives too), member of the group on the interface.
+    /// Non-blocking, bound to `<group>:<port>`, member of the group on the interface:
+    /// it receives that group's datagrams only (no unicast, no other group).
     pub socket: std::net::UdpSocket,
     /// `SO_RCVBUF` as the kernel reports it (Linux doubles the request and caps it at
     /// `net.core.rmem_max`).
@@ -100,7 +106,8 @@ pub struct Opened {
 
 /// Opens the multicast socket: `SO_REUSEADDR` + `SO_REUSEPORT` (several replicas may
 /// share the port on one host: only the sender id in a frame tells them apart), a large
-/// receive buffer, bind, join, `IP_MULTICAST_IF`, TTL, loop on.
+/// receive buffer, bind to the group address and port, join, `IP_MULTICAST_ALL` off
+/// (Linux), `IP_MULTICAST_IF`, TTL, loop on.
 pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
     let group = *cfg.group.ip();
     if !group.is_multicast() {
@@ -114,7 +121,9 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
     // A refusal here is not fatal: report what we got instead.
     let _ = socket.set_recv_buffer_size(cfg.recv_buffer_bytes);
     let recv_buffer_granted = socket.recv_buffer_size().map_err(open)?;
-    let bind: SocketAddr = SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, port).into();
+    // Bound to the group: the kernel delivers only datagrams addressed to it (a unicast
+    // to this host's address or another group on the same port does not match).
+    let bind: SocketAddr = SocketAddrV4::new(group, port).into();
     socket.bind(&bind.into()).map_err(open)?;
     socket
         .join_multicast_v4(&group, &cfg.iface)
@@ -127,6 +136,10 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
         iface: cfg.iface,
         source,
     };
+    // Linux delivers a group's datagrams to every socket bound to the port whenever *any*
+    // socket of the host joined that group; off, only this socket's own memberships count.
+    #[cfg(target_os = "linux")]
+    socket.set_multicast_all_v4(false).map_err(open)?;
     socket.set_multicast_if_v4(&cfg.iface).map_err(iface)?;
     socket.set_multicast_ttl_v4(cfg.ttl).map_err(iface)?;
     socket.set_multicast_loop_v4(true).map_err(iface)?;
@@ -135,6 +148,23 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
         socket: socket.into(),
         recv_buffer_granted,
     })
+}
+
+/// Opens the unicast socket for `--peer` traffic: bound to `<iface>:<group port>`
+/// (`SO_REUSEADDR` + `SO_REUSEPORT`, a large receive buffer, non-blocking). Frames to
+/// peers leave from it, so a teammate sees them come from this address; what arrives on
+/// it is accepted by the driver only from the configured peers.
+pub fn open_unicast(cfg: &SocketConfig) -> Result<std::net::UdpSocket, SocketError> {
+    let port = cfg.group.port();
+    let open = |source| SocketError::Open { port, source };
+    let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).map_err(open)?;
+    socket.set_reuse_address(true).map_err(open)?;
+    socket.set_reuse_port(true).map_err(open)?;
+    let _ = socket.set_recv_buffer_size(cfg.recv_buffer_bytes);
+    let bind: SocketAddr = SocketAddrV4::new(cfg.iface, port).into();
+    socket.bind(&bind.into()).map_err(open)?;
+    socket.set_nonblocking(true).map_err(open)?;
+    Ok(socket.into())
 }
 
 #[cfg(test)]
@@ -168,6 +198,72 @@ mod tests {
             open_multicast(&cfg),
             Err(SocketError::Join { .. })
         ));
+    }
+
+    /// The first datagram `socket` receives (blocking, with a generous timeout).
+    fn first_received(socket: &std::net::UdpSocket) -> Vec<u8> {
+        let mut buf = [0u8; 64];
+        socket.set_nonblocking(false).unwrap();
+        socket
+            .set_read_timeout(Some(std::time::Duration::from_secs(5)))
+            .unwrap();
+        let (n, _) = socket.recv_from(&mut buf).expect("a datagram arrives");
+        buf[..n].to_vec()
+    }
+
+    // Loopback delivery happens inside `send_to`, in order: a marker sent to the group
+    // after the probe arrives after it, so "the first datagram is the marker" means the
+    // probe was not delivered, with no waiting for something not to happen.
+
+    #[test]
+    fn a_member_does_not_receive_unicast_to_its_port() {
+        let cfg = SocketConfig {
+            group: scratch_group().unwrap(),
+            ..SocketConfig::default()
+        };
+        let member = open_multicast(&cfg).unwrap().socket;
+        let tx = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        tx.send_to(b"unicast", (Ipv4Addr::LOCALHOST, cfg.group.port()))
+            .unwrap();
+        let sender = open_multicast(&cfg).unwrap().socket;
+        sender.send_to(b"marker", cfg.group).unwrap();
+        assert_eq!(first_received(&member), b"marker");
+    }
+
+    #[test]
+    fn a_member_does_not_receive_another_group_on_the_same_port() {
+        let ours = SocketConfig {
+            group: scratch_group().unwrap(),
+            ..SocketConfig::default()
+        };
+        let mut other_group = *scratch_group().unwrap().ip();
+        if other_group == *ours.group.ip() {
+            other_group = Ipv4Addr::from(u32::from(other_group) ^ 1);
+        }
+        let theirs = SocketConfig {
+            group: SocketAddrV4::new(other_group, ours.group.port()),
+            ..ours.clone()
+        };
+        let member = open_multicast(&ours).unwrap().socket;
+        // Another member of the other group on this host, on the same port.
+        let neighbour = open_multicast(&theirs).unwrap().socket;
+        neighbour.send_to(b"other group", theirs.group).unwrap();
+        assert_eq!(first_received(&neighbour), b"other group");
+        neighbour.send_to(b"marker", ours.group).unwrap();
+        assert_eq!(first_received(&member), b"marker");
+    }
+
+    #[test]
+    fn the_unicast_socket_receives_unicast_to_the_interface_and_port() {
+        let cfg = SocketConfig {
+            group: scratch_group().unwrap(),
+            ..SocketConfig::default()
+        };
+        let unicast = open_unicast(&cfg).unwrap();
+        let tx = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        tx.send_to(b"unicast", (Ipv4Addr::LOCALHOST, cfg.group.port()))
+            .unwrap();
+        assert_eq!(first_received(&unicast), b"unicast");
     }
 
     #[test]

@@ -30,7 +30,8 @@ pub struct DaemonArgs {
     /// Loopback by default, so nothing leaves this machine unless asked.
     #[arg(long, default_value = "127.0.0.1")]
     pub iface: String,
-    /// Also send every frame by unicast to this teammate (repeatable).
+    /// Also send every frame by unicast to this teammate (repeatable). Unicast is then
+    /// received on <iface>:<port> from the listed peers only; without --peer, none is.
     #[arg(long = "peer")]
     pub peers: Vec<SocketAddr>,
     /// Relay listening address: host:port, a port (on 127.0.0.1) or a host name (port
@@ -95,16 +96,26 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
         bail!("--refresh must be positive");
     }
     let mut replica = ReplicaConfig::new(id, args.team).with_refresh_period(args.refresh);
-    if let Some(file) = &args.key_file {
-        let bytes = std::fs::read(file)
-            .with_context(|| format!("cannot read key file {}", file.display()))?;
-        let key = bytes.trim_ascii_end();
-        if key.is_empty() {
-            bail!("key file {} is empty", file.display());
+    // Say what was loaded (never the key itself): a robot that cannot hear its team
+    // usually runs with another key or config than its teammates.
+    match &args.key_file {
+        Some(file) => {
+            let key = driver::read_key_file(file)?;
+            tracing::info!(
+                "team key: {} (untagged or badly tagged frames are dropped)",
+                file.display()
+            );
+            replica = replica.with_team_key(key);
         }
-        replica = replica.with_team_key(key.to_vec());
+        None => tracing::info!("team key: none (frames are not authenticated)"),
     }
-    let entries = driver::load_config(&args.config_dir, id)?;
+    let loaded = driver::load_config_files(&args.config_dir, id)?;
+    tracing::info!(
+        "config: {} ({})",
+        loaded.summary(),
+        args.config_dir.display()
+    );
+    let entries = loaded.entries;
     let mut config = DriverConfig::new(replica);
     config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
     config.socket.group = args.group;
