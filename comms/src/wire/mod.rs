@@ -97,7 +97,8 @@ pub struct Frame {
     pub team: u8,
     /// Sending robot (1..=254).
     pub sender: u8,
-    /// Sender's incarnation: random per start, so a restart is recognised at once.
+    /// Sender's incarnation: ordered by start time ([`crate::ordered_incarnation`]), so a
+    /// restart is recognised at once and an older life's frames are dropped.
     pub incarnation: u64,
     /// Sender's frame counter within this incarnation (replay protection).
     pub seq: u64,
