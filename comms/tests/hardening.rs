@@ -425,3 +425,53 @@ fn talk_at_100_per_second(seed: u64) {
         );
     }
 }
+
+/// With a key, a life this receiver never took as current cannot become current, even
+/// while the robot is silent: a recording from another day replayed frame by frame (each
+/// "fresh" to this receiver) changes nothing.
+#[test]
+fn with_a_key_a_replayed_life_never_heard_cannot_take_over_a_silent_robot() {
+    let mut old_day = robot(1, 1_000 << 16, true);
+    let mut recording = Vec::new();
+    for k in 0..20u64 {
+        old_day
+            .set(t(100 * k), "*.var.role", Value::from("old day"))
+            .unwrap();
+        old_day.handle_timeout(t(100 * k));
+        recording.extend(frames(&mut old_day));
+    }
+    let mut today = robot(1, 2_000 << 16, true);
+    today.set(t(0), "*.var.role", Value::from("today")).unwrap();
+    let mut receiver = robot(2, 3_000 << 16, true);
+    deliver(t(1), &frames(&mut today), &mut receiver);
+    // Robot 1 is switched off; the attacker replays the whole recording over 2 s.
+    for (i, f) in recording.iter().enumerate() {
+        let now = t(1_000 + 100 * i as u64);
+        receiver.handle_datagram(now, addr(), f);
+        receiver.handle_timeout(now);
+    }
+    assert_eq!(
+        value(&receiver, "1.var.role"),
+        Some(Value::from("today")),
+        "a replayed life took over"
+    );
+}
+
+/// Without a key, a robot whose clock went back at boot (no RTC) starts with a smaller
+/// incarnation than its last life; it is heard again once that last life is silent.
+#[test]
+fn without_a_key_a_robot_rebooted_with_an_earlier_clock_is_heard_again() {
+    let mut before = robot(1, 5_000 << 16, false);
+    let mut two = robot(2, 20 << 16, false);
+    before.set(t(0), "*.var.boot", Value::Int(1)).unwrap();
+    deliver(t(1), &frames(&mut before), &mut two);
+    let mut after = robot(1, 10 << 16, false);
+    for k in 1..=10u64 {
+        let now = t(100 * k);
+        after.set(now, "*.var.boot", Value::Int(2)).unwrap();
+        after.handle_timeout(now);
+        deliver(now, &frames(&mut after), &mut two);
+        two.handle_timeout(now);
+    }
+    assert_eq!(value(&two, "1.var.boot"), Some(Value::Int(2)));
+}

@@ -3,9 +3,11 @@
 //! or stray frame of an earlier life without having heard every life in between.
 
 /// The start time in milliseconds since the Unix epoch in the high 48 bits and 16 random
-/// bits below (two starts in one millisecond still differ). Needs the robot's clock not to
-/// go back between two starts by more than the time between them; a robot whose clock
-/// resets at boot (no RTC, no NTP yet) should get its time set before the daemon starts.
+/// bits below (two starts in one millisecond still differ). A robot's clock must not go
+/// back between two of its starts: without a team key, a robot whose clock did (no RTC,
+/// no NTP yet) is heard again once its previous life has been silent for the departure
+/// limit; with a key, teammates that heard its previous life refuse the "older" one, as
+/// they would a replay. Set the time before the daemon starts.
 pub(crate) fn new_incarnation() -> u64 {
     let random = getrandom::u64().unwrap_or_else(|_| u64::from(std::process::id()));
     comms::ordered_incarnation(unix_millis(), random)

@@ -17,6 +17,9 @@
 //!   `departed_after` while the older one keeps sending fresh frames, the older one is
 //!   current again. A duplicate that leaves, or one stray frame with a forged large
 //!   incarnation, therefore costs the real robot at most `departed_after` and a few frames.
+//!   Without a key the same holds for a life never heard before (a robot whose clock went
+//!   back at boot comes back that way); with a key only a life this receiver once took as
+//!   current may be current again, so a replay of a life it never took changes nothing.
 //!
 //! A receiver that has never heard a robot accepts the first incarnation it hears, even an
 //! old one replayed, and only until it hears a larger one. With a team key a replayed frame
@@ -94,6 +97,8 @@ struct OlderLife {
     fresh: u32,
     /// When a conflict with the current incarnation was last reported.
     reported: Option<Instant>,
+    /// It was this receiver's current life of the peer once (not only heard beside one).
+    was_current: bool,
 }
 
 #[derive(Debug)]
@@ -139,6 +144,7 @@ impl Peer {
             last_heard: self.last_heard,
             fresh: 0,
             reported: None,
+            was_current: true,
         };
         self.older.retain(|l| l.incarnation != incarnation);
         self.older.push_front(life);
@@ -212,7 +218,7 @@ impl Replica {
                 self.peers.get_mut(&sender).expect("just updated")
             }
             Some(peer) if incarnation < peer.incarnation => {
-                match Self::older_frame(peer, now, departed_after, incarnation, seq) {
+                match Self::older_frame(peer, now, departed_after, keyed, incarnation, seq) {
                     Older::Drop { conflict } => {
                         if let Some(live) = conflict {
                             self.stats.id_conflicts += 1;
@@ -268,6 +274,7 @@ impl Replica {
         peer: &mut Peer,
         now: Instant,
         departed_after: Duration,
+        keyed: bool,
         incarnation: u64,
         seq: u64,
     ) -> Older {
@@ -282,6 +289,7 @@ impl Replica {
                     last_heard: now,
                     fresh: 0,
                     reported: None,
+                    was_current: false,
                 });
                 if peer.older.len() > OLDER_INCARNATIONS {
                     peer.older.pop_front();
@@ -304,7 +312,14 @@ impl Replica {
             // One fresh frame may be the last of a life the network held back.
             return Older::Drop { conflict: None };
         }
-        if peer.last_heard + departed_after <= now && life.fresh >= FRESH_FRAMES_TO_RETURN {
+        // With a key, only a life this receiver once took as current may be again (a
+        // duplicate that left, a forged newer incarnation): a life it never took could be
+        // a replay from another day.
+        let may_return = life.was_current || !keyed;
+        if may_return
+            && peer.last_heard + departed_after <= now
+            && life.fresh >= FRESH_FRAMES_TO_RETURN
+        {
             return Older::Return;
         }
         peer.conflict_at = Some(now);
