@@ -104,24 +104,32 @@ pub enum DriverError {
     Io(io::Error),
 }
 
-/// The monotonic clock the driver hands to the replica: microseconds since the driver
-/// started.
+/// The monotonic clock an I/O shell hands to the replica: microseconds since it started.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Clock {
+pub struct Clock {
     origin: std::time::Instant,
 }
 
+impl Default for Clock {
+    fn default() -> Clock {
+        Clock::new()
+    }
+}
+
 impl Clock {
-    // The driver is the one place in comms that reads the clock: it is the I/O layer
-    // that hands `now` to the sans-IO replica.
+    /// A clock starting at zero now.
+    // The I/O shell is the one place that reads the clock: it hands `now` to the sans-IO
+    // replica.
     #[allow(clippy::disallowed_methods)]
-    fn new() -> Clock {
+    pub fn new() -> Clock {
         Clock {
             origin: std::time::Instant::now(),
         }
     }
 
-    pub(crate) fn now(&self) -> Instant {
+    /// Microseconds since [`Clock::new`], as the replica's time.
+    #[must_use]
+    pub fn now(&self) -> Instant {
         let us = self.origin.elapsed().as_micros();
         Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
     }

@@ -8,7 +8,7 @@
 /// no NTP yet) is heard again once its previous life has been silent for the departure
 /// limit; with a key, teammates that heard its previous life refuse the "older" one, as
 /// they would a replay. Set the time before the daemon starts.
-pub(crate) fn new_incarnation() -> u64 {
+pub fn new_incarnation() -> u64 {
     let random = getrandom::u64().unwrap_or_else(|_| u64::from(std::process::id()));
     comms::ordered_incarnation(unix_millis(), random)
 }

@@ -66,10 +66,11 @@ pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
-pub use driver::{Driver, DriverConfig, DriverError, IoStats};
+pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{resolve_iface, IfaceError};
 pub use impair::Impairment;
+pub use incarnation::new_incarnation;
 pub use rate_limit::RateLimit;
 pub use relay::serve;
 pub use socket::{open_multicast, open_unicast, scratch_group, Opened, SocketConfig, SocketError};

@@ -24,7 +24,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use comms::{Event, Instant, Replica};
-use driver::DriverConfig;
+use driver::{new_incarnation, Clock, DriverConfig};
 
 use crate::error::*;
 use crate::event::NodeEvent;
@@ -39,41 +39,6 @@ pub(crate) const STOP_CHECK: Duration = Duration::from_millis(20);
 /// The longest a send may wait for room in the kernel's send buffer; past it the frame is
 /// dropped (the periodic refresh repairs values, NACKs repair talk).
 const SEND_TIMEOUT: Duration = Duration::from_millis(50);
-
-/// The node's monotonic clock: microseconds since it started, as the driver's.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Clock {
-    origin: std::time::Instant,
-}
-
-impl Clock {
-    // The I/O shell reads the clock and hands `now` to the sans-IO replica.
-    #[allow(clippy::disallowed_methods)]
-    fn new() -> Clock {
-        Clock {
-            origin: std::time::Instant::now(),
-        }
-    }
-
-    pub(crate) fn now(&self) -> Instant {
-        let us = self.origin.elapsed().as_micros();
-        Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
-    }
-}
-
-/// A fresh incarnation: the start time in ms in the high bits, 16 random bits below
-/// (`comms::ordered_incarnation`, as the driver makes them), so a restart is later.
-fn new_incarnation() -> u64 {
-    use std::hash::BuildHasher;
-    // std seeds every `RandomState` from the OS's random source.
-    let random = std::collections::hash_map::RandomState::new().hash_one(std::process::id());
-    #[allow(clippy::disallowed_methods)] // the start time comes from the world
-    let unix_ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as u64)
-        .unwrap_or_default();
-    comms::ordered_incarnation(unix_ms, random)
-}
 
 /// Events waiting for the caller, and how it waits for them.
 #[derive(Default)]
