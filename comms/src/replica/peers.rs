@@ -206,16 +206,8 @@ impl Replica {
                     .or_insert(Peer::new(now, incarnation, seq, catch_up))
             }
             Some(peer) if incarnation > peer.incarnation => {
-                let old = peer.switch_to(now, incarnation, seq);
                 // A restart this robot witnessed: the new life's queues start at 1.
-                peer.catch_up_until = None;
-                self.flush_inboxes_of(sender);
-                self.events.push_back(Event::PeerRestarted {
-                    robot: sender,
-                    old_incarnation: old,
-                    new_incarnation: incarnation,
-                });
-                self.peers.get_mut(&sender).expect("just updated")
+                self.switch_life(now, sender, incarnation, seq, None)
             }
             Some(peer) if incarnation < peer.incarnation => {
                 match Self::older_frame(peer, now, departed_after, keyed, incarnation, seq) {
@@ -230,18 +222,8 @@ impl Replica {
                         }
                         return Err(DropReason::RetiredIncarnation);
                     }
-                    Older::Return => {
-                        let old = peer.switch_to(now, incarnation, seq);
-                        // Its queues went on while it was not current here.
-                        peer.catch_up_until = catch_up;
-                        self.flush_inboxes_of(sender);
-                        self.events.push_back(Event::PeerRestarted {
-                            robot: sender,
-                            old_incarnation: old,
-                            new_incarnation: incarnation,
-                        });
-                        self.peers.get_mut(&sender).expect("just updated")
-                    }
+                    // Its queues went on while it was not current here.
+                    Older::Return => self.switch_life(now, sender, incarnation, seq, catch_up),
                 }
             }
             Some(peer) => {
@@ -267,6 +249,28 @@ impl Replica {
             self.refresh_for_newcomer(now);
         }
         Ok(())
+    }
+
+    /// Makes `incarnation` the current life of `sender` (a restart, or an older life
+    /// back): the old life's queues are flushed, the switch reported.
+    fn switch_life(
+        &mut self,
+        now: Instant,
+        sender: u8,
+        incarnation: u64,
+        seq: u64,
+        catch_up_until: Option<Instant>,
+    ) -> &mut Peer {
+        let peer = self.peers.get_mut(&sender).expect("a known peer");
+        let old = peer.switch_to(now, incarnation, seq);
+        peer.catch_up_until = catch_up_until;
+        self.flush_inboxes_of(sender);
+        self.events.push_back(Event::PeerRestarted {
+            robot: sender,
+            old_incarnation: old,
+            new_incarnation: incarnation,
+        });
+        self.peers.get_mut(&sender).expect("a known peer")
     }
 
     /// A frame of an incarnation older than `peer`'s current one.
