@@ -8,6 +8,7 @@ use anyhow::Result;
 use clap::{ArgAction, CommandFactory, Parser, Subcommand};
 
 mod cli;
+mod monitor;
 
 /// huddle: team communication and world-model fusion for robot teams.
 #[derive(Parser, Debug)]
@@ -45,6 +46,10 @@ enum Command {
     Watch(cli::watch::WatchArgs),
     /// A daemon's counters: frames, drops by reason, peers.
     Stats(cli::clients::StatsArgs),
+    /// Record a team's traffic to a pcapng file, listen-only (never sends a frame).
+    Record(cli::record::RecordArgs),
+    /// Decode a recording through the replica code: updates as text or JSON lines.
+    Replay(cli::record::ReplayArgs),
     /// Measurements: `huddle bench comms`.
     Bench(cli::bench::BenchArgs),
     /// Print a shell completion script: `huddle completions bash > /etc/bash_completion.d/huddle`.
@@ -65,6 +70,8 @@ fn run(command: Option<Command>) -> Result<()> {
         Some(Command::Echo(args)) => cli::clients::echo(args),
         Some(Command::Watch(args)) => cli::watch::watch(args),
         Some(Command::Stats(args)) => cli::clients::stats(args),
+        Some(Command::Record(args)) => cli::record::record(args),
+        Some(Command::Replay(args)) => cli::record::replay(args),
         Some(Command::Bench(args)) => cli::bench::run(args),
         Some(Command::Completions(args)) => cli::generate::completions(args, Cli::command()),
         Some(Command::Man(args)) => cli::generate::man(args, Cli::command()),

@@ -1,0 +1,207 @@
+//! `huddle record` and `huddle replay`: a team's traffic to a pcapng file, listen-only,
+//! and back through the same replica code, as JSON lines.
+//!
+//! The file format is in `src/monitor/pcapng.rs`: pcapng with one IPv4/UDP packet per
+//! datagram and its reception time on the recording machine's clock (nanoseconds), so
+//! Wireshark and tshark open it as they are (`tshark -r match.pcapng`).
+
+use std::io::{BufWriter, Write};
+use std::net::{SocketAddr, SocketAddrV4};
+use std::path::PathBuf;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use driver::{open_multicast, resolve_iface, SocketConfig};
+
+use super::duration;
+use crate::monitor::listen::{Heard, Listener, LISTENER_ID, REPLAY_TAIL};
+use crate::monitor::pcapng::{self, Packet, Writer};
+
+/// Arguments of `huddle record`.
+#[derive(Args, Debug)]
+#[command(
+    after_help = "Listen-only: the recorder joins the group and never sends a frame. \
+                  Stop it with Ctrl-C or --duration; every datagram is on disk as it arrives."
+)]
+pub struct RecordArgs {
+    /// The team's multicast group and port.
+    #[arg(long, default_value = "224.0.0.1:2000")]
+    pub group: SocketAddrV4,
+    /// Interface to listen on: a name (`wlan0`) or its IPv4 address.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub iface: String,
+    /// Stop after this long (`30s`, `10min`); without it, until Ctrl-C.
+    #[arg(long, value_parser = duration::parse_positive)]
+    pub duration: Option<Duration>,
+    /// The pcapng file to write.
+    pub file: PathBuf,
+}
+
+/// Arguments of `huddle replay`.
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    /// A recording (`huddle record`, `huddle sim --record`, or any pcapng of the group).
+    pub file: PathBuf,
+    /// Team id of the frames (as the daemons' `--team`).
+    #[arg(long, default_value_t = 0)]
+    pub team: u8,
+    /// Team key file, when the team's frames are tagged.
+    #[arg(long)]
+    pub key_file: Option<PathBuf>,
+    /// Pace the replay at N times real time (`--speed 1`: as recorded); without it, as
+    /// fast as it decodes.
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Print every update as a JSON line: {"t", "owner", "key", "type", "value"}.
+    #[arg(long)]
+    pub json: bool,
+    /// Only packets sent to this group and port (default: every UDP packet in the file).
+    #[arg(long)]
+    pub group: Option<SocketAddrV4>,
+    /// The listener's own robot id (frames from this id are not decoded).
+    #[arg(long, default_value_t = LISTENER_ID)]
+    pub listen_id: u8,
+}
+
+/// Run `huddle record`.
+pub fn record(args: RecordArgs) -> Result<()> {
+    let iface = resolve_iface(&args.iface)?;
+    let cfg = SocketConfig {
+        group: args.group,
+        iface,
+        ..SocketConfig::default()
+    };
+    let opened = open_multicast(&cfg).with_context(|| format!("joining {}", args.group))?;
+    let file = std::fs::File::create(&args.file)
+        .with_context(|| format!("creating {}", args.file.display()))?;
+    let mut writer = Writer::new(BufWriter::new(file))
+        .with_context(|| format!("writing {}", args.file.display()))?;
+    writer.flush()?;
+    tracing::info!(
+        "recording {} on {} to {} (listen-only; receive buffer {} bytes)",
+        args.group,
+        iface,
+        args.file.display(),
+        opened.recv_buffer_granted
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let count = rt.block_on(async {
+        let socket = tokio::net::UdpSocket::from_std(opened.socket)?;
+        let deadline = args.duration.map(|d| tokio::time::Instant::now() + d);
+        let stop = async move {
+            match deadline {
+                Some(d) => tokio::time::sleep_until(d).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::pin!(stop);
+        let ctrl_c = tokio::signal::ctrl_c();
+        tokio::pin!(ctrl_c);
+        let mut buf = vec![0u8; 65_536];
+        let mut count = 0u64;
+        loop {
+            tokio::select! {
+                _ = &mut stop => break,
+                _ = &mut ctrl_c => break,
+                got = socket.recv_from(&mut buf) => {
+                    let (len, from) = got.context("receiving")?;
+                    let SocketAddr::V4(from) = from else { continue };
+                    let t_ns = SystemTime::now()
+                        .duration_since(UNIX_EPOCH)
+                        .map_or(0, |d| d.as_nanos() as u64);
+                    writer.write(&Packet { t_ns, from, to: args.group, payload: buf[..len].to_vec() })?;
+                    writer.flush()?;
+                    count += 1;
+                }
+            }
+        }
+        anyhow::Ok(count)
+    })?;
+    writer.flush()?;
+    tracing::info!("recorded {count} datagrams to {}", args.file.display());
+    Ok(())
+}
+
+/// Reads a recording and runs it through a listener, calling `each` with what was heard
+/// (paced at `speed` times real time if given). Returns the listener at the end.
+pub fn replay_file(
+    args: &ReplayArgs,
+    mut each: impl FnMut(&Listener, &[Heard]) -> Result<()>,
+) -> Result<Listener> {
+    if let Some(speed) = args.speed {
+        if !(speed.is_finite() && speed > 0.0) {
+            bail!("--speed must be a positive number, not {speed}");
+        }
+    }
+    let bytes =
+        std::fs::read(&args.file).with_context(|| format!("reading {}", args.file.display()))?;
+    let packets = pcapng::read(&bytes).with_context(|| format!("{}", args.file.display()))?;
+    let key = match &args.key_file {
+        Some(f) => Some(driver::read_key_file(f)?),
+        None => None,
+    };
+    let start_ns = packets.first().map_or(0, |p| p.t_ns);
+    let mut listener = Listener::new(args.team, key, args.listen_id, start_ns)?;
+    let started = std::time::Instant::now();
+    let mut heard = Vec::new();
+    for p in packets
+        .iter()
+        .filter(|p| args.group.is_none_or(|g| g == p.to))
+    {
+        if let Some(speed) = args.speed {
+            let due = Duration::from_secs_f64(listener.seconds(p.t_ns) / speed);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        heard.clear();
+        listener.datagram(p.t_ns, SocketAddr::V4(p.from), &p.payload, &mut heard);
+        each(&listener, &heard)?;
+    }
+    if let Some(last) = packets.last() {
+        heard.clear();
+        listener.advance(last.t_ns + REPLAY_TAIL.as_nanos() as u64, &mut heard);
+        each(&listener, &heard)?;
+    }
+    Ok(listener)
+}
+
+/// Run `huddle replay`.
+pub fn replay(args: ReplayArgs) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    let json = args.json;
+    let listener = replay_file(&args, |_, heard| {
+        for h in heard {
+            if json {
+                if let Some(line) = h.update_json() {
+                    writeln!(out, "{line}")?;
+                }
+                continue;
+            }
+            match h {
+                Heard::Update {
+                    t_s, key, value, ..
+                } => writeln!(out, "{t_s:10.3}  {key} = {value}")?,
+                Heard::Joined { t_s, robot } => writeln!(out, "{t_s:10.3}  robot {robot} joined")?,
+                Heard::Departed { t_s, robot } => {
+                    writeln!(out, "{t_s:10.3}  robot {robot} departed")?
+                }
+                Heard::Conflict { t_s, robot } => {
+                    writeln!(out, "{t_s:10.3}  two robots send as {robot}")?
+                }
+            }
+        }
+        Ok(())
+    })?;
+    out.flush()?;
+    let stats = listener.replica().stats();
+    tracing::info!(
+        "{} frames replayed, {} dropped",
+        stats.frames_in,
+        stats.drops_total()
+    );
+    Ok(())
+}

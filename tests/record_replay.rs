@@ -1,0 +1,160 @@
+//! `huddle record` and `huddle replay`: two daemons on loopback multicast (a group and port
+//! of the test's own), a listen-only recorder, and every update found in the replay.
+
+#![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
+
+mod daemon_support;
+
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use daemon_support::Daemon;
+
+fn huddle() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_huddle"));
+    c.env("RUST_LOG", "warn");
+    c
+}
+
+/// `huddle replay FILE --json`, parsed.
+fn replay_json(file: &std::path::Path) -> Vec<serde_json::Value> {
+    let out = huddle()
+        .arg("replay")
+        .arg(file)
+        .arg("--json")
+        .output()
+        .expect("run huddle replay");
+    assert!(
+        out.status.success(),
+        "replay failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each line is JSON"))
+        .collect()
+}
+
+#[test]
+fn two_daemons_recorded_and_replayed_every_update_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let group = daemon_support::scratch_group();
+    let g = group.to_string();
+    let d1 = Daemon::start(1, &g, daemon_support::free_tcp_port(), &[], dir.path());
+    let d2 = Daemon::start(2, &g, daemon_support::free_tcp_port(), &[], dir.path());
+    let file = dir.path().join("team.pcapng");
+    let mut recorder = huddle()
+        .args(["record", "--group", &g, "--iface", "127.0.0.1"])
+        .arg(&file)
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn huddle record");
+    // The recorder has joined once it has written the file's headers and heard a frame:
+    // both daemons send a heartbeat every refresh period.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !(file.exists() && std::fs::metadata(&file).unwrap().len() > 100) {
+        assert!(
+            Instant::now() < deadline,
+            "the recorder never wrote a frame"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    let (mut c1, mut c2) = (d1.client(), d2.client());
+    let expected: Vec<(&str, &str, serde_json::Value)> = vec![
+        ("1.var.ball.dist", "float", serde_json::json!(1.5)),
+        ("1.var.ball.seen", "bool", serde_json::json!(true)),
+        ("1.var.pose", "floats", serde_json::json!([1.0, -2.5, 0.25])),
+        ("2.var.name", "string", serde_json::json!("robot \"two\"")),
+        ("2.var.count", "int", serde_json::json!(41)),
+        ("2.var.count", "int", serde_json::json!(42)),
+        ("2.talk.plan", "string", serde_json::json!("pass to 1")),
+    ];
+    for line in [
+        "SETV *.var.ball.dist 1.5",
+        "SETV *.var.ball.seen true",
+        "SETV *.var.pose [1, -2.5, 0.25]",
+    ] {
+        assert_eq!(c1.ask(line), "OK", "{line}");
+    }
+    for line in [
+        r#"SETV *.var.name "robot \"two\"""#,
+        "SETV *.var.count 41",
+        "SETV *.var.count 42",
+        r#"SETV *.talk.plan "pass to 1""#,
+    ] {
+        assert_eq!(c2.ask(line), "OK", "{line}");
+    }
+
+    // Every datagram is on disk as it arrives: replay until all are there.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let lines = loop {
+        let lines = replay_json(&file);
+        let found = |(key, ty, value): &(&str, &str, serde_json::Value)| {
+            lines
+                .iter()
+                .any(|l| l["key"] == *key && l["type"] == *ty && l["value"] == *value)
+        };
+        if expected.iter().all(found) {
+            break lines;
+        }
+        let missing: Vec<_> = expected.iter().filter(|e| !found(e)).collect();
+        assert!(
+            Instant::now() < deadline,
+            "not in the replay: {missing:?}\nreplayed: {lines:#?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let _ = recorder.kill();
+    let _ = recorder.wait();
+
+    for l in &lines {
+        let owner = l["owner"].as_u64().expect("an owner");
+        let key = l["key"].as_str().expect("a key");
+        assert!(key.starts_with(&format!("{owner}.")), "{l}");
+        assert!(l["t"].as_f64().is_some_and(|t| t >= 0.0), "{l}");
+    }
+    // In the order they were set, per robot.
+    let pos = |key: &str, value: serde_json::Value| {
+        lines
+            .iter()
+            .position(|l| l["key"] == key && l["value"] == value)
+            .unwrap()
+    };
+    assert!(pos("2.var.count", 41.into()) < pos("2.var.count", 42.into()));
+    assert!(
+        pos("1.var.ball.dist", 1.5.into())
+            < pos("1.var.pose", serde_json::json!([1.0, -2.5, 0.25]))
+    );
+}
+
+#[test]
+fn a_recording_with_nothing_heard_is_valid_and_garbage_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let group = daemon_support::scratch_group().to_string();
+    let file = dir.path().join("empty.pcapng");
+    let status = huddle()
+        .args([
+            "record",
+            "--group",
+            &group,
+            "--iface",
+            "127.0.0.1",
+            "--duration",
+            "100ms",
+        ])
+        .arg(&file)
+        .status()
+        .expect("run huddle record");
+    assert!(status.success());
+    assert!(replay_json(&file).is_empty());
+
+    let junk = dir.path().join("junk.pcapng");
+    std::fs::write(&junk, b"this is not a capture at all").unwrap();
+    let out = huddle().arg("replay").arg(&junk).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("not a pcapng file"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
