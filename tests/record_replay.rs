@@ -158,3 +158,47 @@ fn a_recording_with_nothing_heard_is_valid_and_garbage_is_a_clear_error() {
     assert!(err.contains("not a pcapng file"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn a_simulated_match_is_recorded_in_the_same_format_and_replays() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("sim.pcapng");
+    let out = huddle()
+        .args([
+            "sim",
+            "--robots",
+            "3",
+            "--duration",
+            "3s",
+            "--preset",
+            "lan",
+        ])
+        .args(["--kill", "2@1s", "--json", "--record"])
+        .arg(&file)
+        .output()
+        .expect("run huddle sim");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines = replay_json(&file);
+    for robot in 1..=3 {
+        for key in ["var.world.local", "var.machine.heuristic"] {
+            let key = format!("{robot}.{key}");
+            assert!(
+                lines.iter().any(|l| l["key"] == key.as_str()),
+                "no {key} in the replay"
+            );
+        }
+    }
+    // Robot 2 was switched off at 1 s: nothing of it after that, and the replay says it
+    // departed.
+    assert!(lines
+        .iter()
+        .filter(|l| l["owner"] == 2)
+        .all(|l| l["t"].as_f64().unwrap() < 1.1));
+    let text = huddle().arg("replay").arg(&file).output().unwrap();
+    let text = String::from_utf8(text.stdout).unwrap();
+    assert!(text.contains("robot 2 departed"), "{text}");
+}

@@ -43,9 +43,9 @@ pub struct RecordArgs {
 pub struct ReplayArgs {
     /// A recording (`huddle record`, `huddle sim --record`, or any pcapng of the group).
     pub file: PathBuf,
-    /// Team id of the frames (as the daemons' `--team`).
-    #[arg(long, default_value_t = 0)]
-    pub team: u8,
+    /// Team id of the frames (as the daemons' `--team`); default: the first frame's.
+    #[arg(long)]
+    pub team: Option<u8>,
     /// Team key file, when the team's frames are tagged.
     #[arg(long)]
     pub key_file: Option<PathBuf>,
@@ -144,7 +144,11 @@ pub fn replay_file(
         None => None,
     };
     let start_ns = packets.first().map_or(0, |p| p.t_ns);
-    let mut listener = Listener::new(args.team, key, args.listen_id, start_ns)?;
+    let team = args
+        .team
+        .or_else(|| packets.iter().find_map(|p| team_of(&p.payload)))
+        .unwrap_or(0);
+    let mut listener = Listener::new(team, key, args.listen_id, start_ns)?;
     let started = std::time::Instant::now();
     let mut heard = Vec::new();
     for p in packets
@@ -167,6 +171,11 @@ pub fn replay_file(
         each(&listener, &heard)?;
     }
     Ok(listener)
+}
+
+/// The team id in a frame's plain header, if it looks like a huddle frame.
+pub fn team_of(frame: &[u8]) -> Option<u8> {
+    (0..=u8::MAX).find(|&team| comms::wire::peek_origin(frame, team).is_some())
 }
 
 /// Run `huddle replay`.

@@ -46,6 +46,21 @@ pub struct SimArgs {
     /// Print the report as one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// Write what a listener beside robot 1 hears to this pcapng file (as `huddle
+    /// record` does), for `huddle replay`.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Pace the match at N times real time (`--speed 1`: real time); without it, as fast
+    /// as it computes.
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Serve the live team monitor on this address (`127.0.0.1:8080`) while the match
+    /// runs, and after it until Ctrl-C; paced at real time unless --speed says otherwise.
+    #[arg(long, value_name = "ADDR")]
+    pub monitor: Option<std::net::SocketAddr>,
+    /// Switch robot ID off at simulated time T (it stops and falls silent): `3@20s`.
+    #[arg(long, value_name = "ID@T", value_parser = super::monitor_sim::parse_kill)]
+    pub kill: Vec<(u8, Duration)>,
 }
 
 impl Default for SimArgs {
@@ -61,6 +76,10 @@ impl Default for SimArgs {
             seed: 1,
             svg: None,
             json: false,
+            record: None,
+            speed: None,
+            monitor: None,
+            kill: Vec::new(),
         }
     }
 }
@@ -104,6 +123,9 @@ pub fn run(args: SimArgs) -> Result<()> {
         .expect("a valid template"),
     );
     let started = Instant::now();
+    if super::monitor_sim::wanted(&args) {
+        super::monitor_sim::run(&mut sim, &args, &bar)?;
+    }
     sim.run(|t_s| bar.set_position((t_s * 1e3) as u64));
     let wall_s = started.elapsed().as_secs_f64();
     bar.finish_and_clear();

@@ -4,3 +4,4 @@
 
 pub mod listen;
 pub mod pcapng;
+pub mod tap;

@@ -1,0 +1,100 @@
+//! `huddle sim` with `--record`, `--speed`, `--monitor` or `--kill`: the match stepped
+//! here rather than run in one call, so that it can be paced against the wall clock (the
+//! simulation itself never reads a clock), its traffic recorded and its robots switched
+//! off on cue.
+
+use std::io::BufWriter;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use huddle::sim::Simulation;
+use indicatif::ProgressBar;
+
+use super::duration;
+use super::sim::SimArgs;
+use crate::monitor::pcapng::Writer;
+use crate::monitor::tap::SimTap;
+
+/// `ID@T`: a robot id and a simulated time (`3@20s`).
+pub fn parse_kill(s: &str) -> Result<(u8, Duration), String> {
+    let (id, t) = s
+        .split_once('@')
+        .ok_or_else(|| format!("`{s}`: write ID@TIME, e.g. 3@20s"))?;
+    let id: u8 = id
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{id}` is not a robot id (1..=254)"))?;
+    if id == 0 {
+        return Err("robot ids start at 1".into());
+    }
+    Ok((id, duration::parse(t)?))
+}
+
+/// Whether the match needs stepping here (any of the flags that watch or pace it).
+pub fn wanted(args: &SimArgs) -> bool {
+    args.record.is_some() || args.speed.is_some() || args.monitor.is_some() || !args.kill.is_empty()
+}
+
+/// Steps `sim` to its end: paced, recorded, robots switched off as asked.
+pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()> {
+    let speed = match (args.speed, args.monitor) {
+        (Some(s), _) if !(s.is_finite() && s > 0.0) => {
+            bail!("--speed must be a positive number, not {s}")
+        }
+        (Some(s), _) => Some(s),
+        (None, Some(_)) => Some(1.0),
+        (None, None) => None,
+    };
+    for &(id, _) in &args.kill {
+        if usize::from(id) > args.robots {
+            bail!("--kill {id}@…: there are only {} robots", args.robots);
+        }
+    }
+    let mut recorder = match &args.record {
+        Some(path) => {
+            let file = std::fs::File::create(path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            Some(Writer::new(BufWriter::new(file))?)
+        }
+        None => None,
+    };
+    let mut tap = SimTap::new();
+    let mut killed = vec![false; args.kill.len()];
+    let started = Instant::now();
+    let mut steps = 0u64;
+    while !sim.finished() {
+        let t_s = sim.time_s();
+        for (k, &(id, at)) in args.kill.iter().enumerate() {
+            if !killed[k] && t_s >= at.as_secs_f64() {
+                killed[k] = true;
+                sim.kill(usize::from(id) - 1);
+            }
+        }
+        sim.step();
+        steps += 1;
+        if let Some(w) = recorder.as_mut() {
+            let mut failed = None;
+            tap.drain(sim, |p| {
+                if failed.is_none() {
+                    failed = w.write(&p).err();
+                }
+            });
+            if let Some(e) = failed {
+                return Err(e).context("writing the recording");
+            }
+        }
+        if steps.is_multiple_of(10) {
+            bar.set_position((sim.time_s() * 1e3) as u64);
+            if let Some(speed) = speed {
+                let due = Duration::from_secs_f64(sim.time_s() / speed);
+                if let Some(wait) = due.checked_sub(started.elapsed()) {
+                    std::thread::sleep(wait);
+                }
+            }
+        }
+    }
+    if let Some(mut w) = recorder {
+        w.flush().context("writing the recording")?;
+    }
+    Ok(())
+}
