@@ -12,7 +12,9 @@ use indicatif::ProgressBar;
 
 use super::duration;
 use super::sim::SimArgs;
+use crate::monitor::model::{Field, Model, Truth};
 use crate::monitor::pcapng::Writer;
+use crate::monitor::server;
 use crate::monitor::tap::SimTap;
 
 /// `ID@T`: a robot id and a simulated time (`3@20s`).
@@ -58,6 +60,24 @@ pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()
         }
         None => None,
     };
+    let monitor = match args.monitor {
+        Some(addr) => {
+            let mut model =
+                Model::new(1, None, crate::monitor::listen::LISTENER_ID, 0, "sim", None)?;
+            let f = &sim.config().field;
+            model.set_field(Field {
+                length_m: f.length_m,
+                width_m: f.width_m,
+                goal_width_m: f.goal_width_m,
+                border_m: f.border_m,
+            });
+            model.set_truth(truth(sim));
+            let shared = std::sync::Arc::new(std::sync::Mutex::new(model));
+            server::spawn(addr, shared.clone())?;
+            Some(shared)
+        }
+        None => None,
+    };
     let mut tap = SimTap::new();
     let mut killed = vec![false; args.kill.len()];
     let started = Instant::now();
@@ -72,13 +92,23 @@ pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()
         }
         sim.step();
         steps += 1;
-        if let Some(w) = recorder.as_mut() {
+        if recorder.is_some() || monitor.is_some() {
             let mut failed = None;
+            let mut model = monitor
+                .as_ref()
+                .map(|m| m.lock().unwrap_or_else(|p| p.into_inner()));
             tap.drain(sim, |p| {
-                if failed.is_none() {
+                if let Some(model) = model.as_mut() {
+                    model.datagram(p.t_ns, std::net::SocketAddr::V4(p.from), &p.payload);
+                }
+                if let (Some(w), None) = (recorder.as_mut(), &failed) {
                     failed = w.write(&p).err();
                 }
             });
+            if let Some(model) = model.as_mut() {
+                model.advance(sim.harness.now().as_nanos());
+                model.set_truth(truth(sim));
+            }
             if let Some(e) = failed {
                 return Err(e).context("writing the recording");
             }
@@ -96,5 +126,51 @@ pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()
     if let Some(mut w) = recorder {
         w.flush().context("writing the recording")?;
     }
+    if let Some(model) = monitor {
+        model.lock().unwrap_or_else(|p| p.into_inner()).finish();
+        if let Some(addr) = args.monitor {
+            tracing::info!("the match is over; the monitor stays on http://{addr}/ until Ctrl-C");
+        }
+        wait_for_ctrl_c()?;
+    }
     Ok(())
+}
+
+/// Blocks until Ctrl-C (the monitor keeps serving the last picture meanwhile).
+pub fn wait_for_ctrl_c() -> Result<()> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?
+        .block_on(tokio::signal::ctrl_c())?;
+    Ok(())
+}
+
+/// Where everything really is, for the monitor.
+fn truth(sim: &Simulation) -> Truth {
+    use huddle::field::tactics::Mode;
+    let robots = sim
+        .robots
+        .iter()
+        .zip(&sim.world.robots)
+        .map(|(r, body)| {
+            let role = match r.mode {
+                Mode::Active => "active",
+                Mode::Auxiliary => "auxiliary",
+                Mode::Inactive => "inactive",
+                Mode::Goaltend => "goalkeeper",
+            };
+            let p = body.pose;
+            (r.id, p.at.x, p.at.y, p.theta_rad, role.to_owned())
+        })
+        .collect();
+    Truth {
+        robots,
+        ball: (sim.world.ball.at.x, sim.world.ball.at.y),
+        opponents: sim
+            .world
+            .opponents
+            .iter()
+            .map(|o| (o.pose.at.x, o.pose.at.y))
+            .collect(),
+    }
 }

@@ -3,5 +3,7 @@
 //! `huddle sim --record`.
 
 pub mod listen;
+pub mod model;
 pub mod pcapng;
+pub mod server;
 pub mod tap;

@@ -1,0 +1,359 @@
+//! What the monitor shows, built from the team's frames alone: a listen-only replica
+//! ([`Listener`]) for the blackboard, peers and talk; each robot's published local world
+//! model (`n.var.world.local`: pose, covariance, ball) decoded; a global world model of
+//! the monitor's own fed every LWM (the team ball, as a teammate would fuse it); the
+//! should-I-go claims (`n.var.machine.heuristic`: cost and whether it goes); frame
+//! counters per robot (rate, loss from sequence gaps, frames sent against a budget).
+//! A simulated match adds the truth ([`Truth`]), which no robot has.
+//!
+//! [`Model::state`] is the picture as JSON, the same for `GET /state`, the page's live
+//! updates and scripts.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::net::SocketAddr;
+
+use anyhow::Result;
+use comms::arbitration::Posted;
+use comms::wire::TeamKey;
+use comms::{Pattern, Value};
+use fusion::{GlobalConfig, GlobalModel, LocalWorldModel};
+use serde_json::{json, Value as Json};
+
+use super::listen::{Heard, Listener};
+
+/// The field drawn: sizes in metres (the simulator's field by default).
+#[derive(Clone, Copy, Debug)]
+pub struct Field {
+    /// Between the goal lines.
+    pub length_m: f64,
+    /// Between the touch lines.
+    pub width_m: f64,
+    /// Goal mouth.
+    pub goal_width_m: f64,
+    /// Carpet beyond the lines.
+    pub border_m: f64,
+}
+
+impl Default for Field {
+    fn default() -> Self {
+        let f = huddle::field::FieldConfig::default();
+        Self {
+            length_m: f.length_m,
+            width_m: f.width_m,
+            goal_width_m: f.goal_width_m,
+            border_m: f.border_m,
+        }
+    }
+}
+
+/// Where everything really is (a simulated match only).
+#[derive(Clone, Debug, Default)]
+pub struct Truth {
+    /// Each robot: id, x, y (m), heading (rad), role.
+    pub robots: Vec<(u8, f64, f64, f64, String)>,
+    /// The ball: x, y (m).
+    pub ball: (f64, f64),
+    /// Opponents: x, y (m).
+    pub opponents: Vec<(f64, f64)>,
+}
+
+/// Window over which a robot's message rate is measured, seconds.
+const RATE_WINDOW_S: f64 = 2.0;
+/// Talk messages kept for the log.
+const TALK_KEPT: usize = 200;
+
+#[derive(Default)]
+struct RobotView {
+    lwm: Option<LocalWorldModel>,
+    posted: Option<Posted>,
+    pass_to: Option<i64>,
+    incarnation: u64,
+    first_seq: Option<u64>,
+    last_seq: u64,
+    received: u64,
+    arrivals: VecDeque<f64>,
+}
+
+/// The monitor's picture of the team.
+pub struct Model {
+    listener: Listener,
+    team: u8,
+    key: Option<TeamKey>,
+    gwm: GlobalModel,
+    robots: BTreeMap<u8, RobotView>,
+    talk: VecDeque<Json>,
+    truth: Option<Truth>,
+    field: Field,
+    source: String,
+    budget: Option<u64>,
+    now_ns: u64,
+    finished: bool,
+}
+
+impl Model {
+    /// A model for team `team` (with its key, if frames are tagged), its clock starting at
+    /// `start_ns`. `source` names where the frames come from (`sim`, `live`, `replay`),
+    /// `budget` is the frames each robot may send (a league's message limit), if any.
+    pub fn new(
+        team: u8,
+        key: Option<Vec<u8>>,
+        listener_id: u8,
+        start_ns: u64,
+        source: &str,
+        budget: Option<u64>,
+    ) -> Result<Self> {
+        let team_key = key.as_deref().map(TeamKey::new);
+        Ok(Self {
+            listener: Listener::new(team, key, listener_id, start_ns)?,
+            team,
+            key: team_key,
+            gwm: GlobalModel::new(listener_id, GlobalConfig::default()),
+            robots: BTreeMap::new(),
+            talk: VecDeque::new(),
+            truth: None,
+            field: Field::default(),
+            source: source.to_owned(),
+            budget,
+            now_ns: start_ns,
+            finished: false,
+        })
+    }
+
+    /// Sets the field drawn.
+    pub fn set_field(&mut self, field: Field) {
+        self.field = field;
+    }
+
+    /// Sets the truth (a simulated match).
+    pub fn set_truth(&mut self, truth: Truth) {
+        self.truth = Some(truth);
+    }
+
+    /// Marks the source as ended (a match or recording over): the picture stays.
+    pub fn finish(&mut self) {
+        self.finished = true;
+    }
+
+    /// Runs the clock to `t_ns` (departures).
+    pub fn advance(&mut self, t_ns: u64) {
+        self.now_ns = self.now_ns.max(t_ns);
+        let mut heard = Vec::new();
+        self.listener.advance(t_ns, &mut heard);
+        self.take(&heard);
+    }
+
+    /// One datagram received at `t_ns` from `from`; returns what it changed.
+    pub fn datagram(&mut self, t_ns: u64, from: SocketAddr, bytes: &[u8]) -> Vec<Heard> {
+        self.now_ns = self.now_ns.max(t_ns);
+        let t_s = self.listener.seconds(t_ns);
+        if let Ok(frame) = comms::wire::decode_frame(bytes, self.team, self.key.as_ref()) {
+            let v = self.robots.entry(frame.sender).or_default();
+            if v.incarnation != frame.incarnation {
+                v.incarnation = frame.incarnation;
+                v.first_seq = None;
+                v.received = 0;
+            }
+            if v.first_seq.is_none_or(|s| frame.seq < s) {
+                v.first_seq = Some(frame.seq);
+            }
+            v.last_seq = v.last_seq.max(frame.seq);
+            v.received += 1;
+            v.arrivals.push_back(t_s);
+            while v.arrivals.front().is_some_and(|&a| a < t_s - RATE_WINDOW_S) {
+                v.arrivals.pop_front();
+            }
+        }
+        let mut heard = Vec::new();
+        self.listener.datagram(t_ns, from, bytes, &mut heard);
+        self.take(&heard);
+        heard
+    }
+
+    fn take(&mut self, heard: &[Heard]) {
+        let now = self.listener.instant(self.now_ns);
+        let now_s = self.listener.seconds(self.now_ns);
+        for h in heard {
+            let Heard::Update {
+                t_s,
+                owner,
+                key,
+                value,
+            } = h
+            else {
+                continue;
+            };
+            let path = key.split_once(".var.").map(|(_, p)| p);
+            match (path, value) {
+                (Some("world.local"), Value::Bytes(bytes)) => {
+                    let age_s = self
+                        .listener
+                        .replica()
+                        .get(key)
+                        .ok()
+                        .flatten()
+                        .map_or(0.0, |e| e.age(now).as_secs_f64());
+                    let v = self.robots.entry(*owner).or_default();
+                    if let Ok(lwm) = LocalWorldModel::from_bytes(bytes, now_s - age_s) {
+                        v.lwm = Some(lwm);
+                    }
+                    // A malformed LWM is the sender's bug: the team ball just goes without it.
+                    let _ = self.gwm.receive(*owner, bytes, now_s, age_s);
+                }
+                (Some("machine.heuristic"), Value::Floats(f)) => {
+                    self.robots.entry(*owner).or_default().posted = Posted::from_floats(f);
+                }
+                (Some("machine.pass_to"), Value::Int(n)) => {
+                    self.robots.entry(*owner).or_default().pass_to = Some(*n);
+                }
+                _ => {}
+            }
+            if key.contains(".talk.") {
+                self.talk.push_back(json!({
+                    "t": t_s, "owner": owner, "key": key,
+                    "value": crate::cli::relay::value_json(&value.to_string()),
+                }));
+                while self.talk.len() > TALK_KEPT {
+                    self.talk.pop_front();
+                }
+            }
+        }
+    }
+
+    /// The picture as JSON: robots (id, pose, covariance, ball, role, goer, last heard,
+    /// departed, conflicting, rate, loss, budget), the team ball, the truth if known,
+    /// the blackboard and the talk log.
+    pub fn state(&self) -> Json {
+        let now = self.listener.instant(self.now_ns);
+        let now_s = self.listener.seconds(self.now_ns);
+        let replica = self.listener.replica();
+        let peers: BTreeMap<u8, comms::PeerInfo> = replica.peers().map(|p| (p.robot, p)).collect();
+        let goer = self
+            .robots
+            .iter()
+            .filter(|(id, v)| {
+                v.posted.is_some_and(|p| p.going) && peers.get(id).is_some_and(|p| p.present)
+            })
+            .map(|(id, _)| *id)
+            .min();
+        let receivers: Vec<i64> = self
+            .robots
+            .iter()
+            .filter(|(id, v)| Some(**id) == goer && v.pass_to.is_some_and(|n| n > 0))
+            .filter_map(|(_, v)| v.pass_to)
+            .collect();
+        let truth_role = |id: u8| {
+            self.truth
+                .as_ref()
+                .and_then(|t| t.robots.iter().find(|r| r.0 == id).map(|r| r.4.clone()))
+        };
+        let robots: Vec<Json> = self
+            .robots
+            .iter()
+            .map(|(&id, v)| {
+                let peer = peers.get(&id);
+                let pose = v.lwm.as_ref().map(|l| {
+                    let m = &l.pose.mean;
+                    let c = &l.pose.cov;
+                    json!({
+                        "pose": {"x": m.x, "y": m.y, "theta": m.z},
+                        "cov": [[c[(0, 0)], c[(0, 1)], c[(0, 2)]],
+                                [c[(1, 0)], c[(1, 1)], c[(1, 2)]],
+                                [c[(2, 0)], c[(2, 1)], c[(2, 2)]]],
+                        "ball": l.ball.as_ref().map(|b| {
+                            let p = b.position();
+                            let pc = b.position_cov();
+                            json!({"x": p.x, "y": p.y,
+                                   "cov": [[pc[(0, 0)], pc[(0, 1)]], [pc[(1, 0)], pc[(1, 1)]]]})
+                        }),
+                        "slc": l.slc, "lbc": l.lbc,
+                    })
+                });
+                let going = goer == Some(id);
+                let departed = peer.is_some_and(|p| !p.present);
+                let role = if departed {
+                    "departed".to_owned()
+                } else if going {
+                    "active".to_owned()
+                } else if receivers.contains(&i64::from(id)) {
+                    "auxiliary".to_owned()
+                } else if let Some(r) = truth_role(id) {
+                    r
+                } else {
+                    "inactive".to_owned()
+                };
+                let sent = v.first_seq.map_or(0, |f| v.last_seq.saturating_sub(f) + 1);
+                let loss = if sent > 0 {
+                    1.0 - (v.received.min(sent) as f64 / sent as f64)
+                } else {
+                    0.0
+                };
+                let recent = v.arrivals.iter().filter(|&&a| a >= now_s - RATE_WINDOW_S).count();
+                let rate = recent as f64 / RATE_WINDOW_S.min(now_s).max(0.1);
+                let mut r = json!({
+                    "id": id,
+                    "pose": Json::Null, "cov": Json::Null, "ball": Json::Null,
+                    "role": role,
+                    "goer": going,
+                    "h": v.posted.map(|p| p.h),
+                    "claims": v.posted.is_some_and(|p| p.going),
+                    "last_heard_s": peer.map(|p| now.saturating_duration_since(p.last_heard).as_secs_f64()),
+                    "departed": departed,
+                    "conflicting": peer.is_some_and(|p| p.conflicting),
+                    "rate_hz": rate,
+                    "loss": loss,
+                    "frames_sent": sent,
+                    "frames_received": v.received,
+                    "budget_used": self.budget.map(|b| sent as f64 / b.max(1) as f64),
+                });
+                if let (Some(p), Some(obj)) = (pose, r.as_object_mut()) {
+                    for k in ["pose", "cov", "ball", "slc", "lbc"] {
+                        obj.insert(k.into(), p[k].clone());
+                    }
+                }
+                r
+            })
+            .collect();
+        let team_ball = self.gwm.team_ball(now_s, None).map(|b| {
+            let p = b.estimate.position();
+            json!({"x": p.x, "y": p.y, "gbc": b.gbc})
+        });
+        let truth = self.truth.as_ref().map(|t| {
+            json!({
+                "robots": t.robots.iter().map(|r| json!({"id": r.0, "x": r.1, "y": r.2, "theta": r.3, "role": r.4})).collect::<Vec<_>>(),
+                "ball": {"x": t.ball.0, "y": t.ball.1},
+                "opponents": t.opponents.iter().map(|o| json!({"x": o.0, "y": o.1})).collect::<Vec<_>>(),
+            })
+        });
+        let all = Pattern::parse("#").ok();
+        let board: Vec<Json> = all
+            .iter()
+            .flat_map(|p| replica.iter(p))
+            .filter(|(k, _)| matches!(k.scope(), comms::Scope::Robot(_)))
+            .map(|(k, e)| {
+                json!({
+                    "key": k.to_string(),
+                    "owner": e.owner,
+                    "type": e.value.value_type().name(),
+                    "value": e.value.to_string(),
+                    "age_ms": e.age(now).as_secs_f64() * 1e3,
+                    "departed": replica.is_departed(e.owner),
+                })
+            })
+            .collect();
+        json!({
+            "t": now_s,
+            "source": self.source,
+            "finished": self.finished,
+            "field": {
+                "length_m": self.field.length_m, "width_m": self.field.width_m,
+                "goal_width_m": self.field.goal_width_m, "border_m": self.field.border_m,
+            },
+            "goer": goer,
+            "robots": robots,
+            "team_ball": team_ball,
+            "truth": truth,
+            "board": board,
+            "talk": self.talk.iter().collect::<Vec<_>>(),
+        })
+    }
+}
