@@ -46,6 +46,8 @@ enum Command {
     Watch(cli::watch::WatchArgs),
     /// A daemon's counters: frames, drops by reason, peers.
     Stats(cli::clients::StatsArgs),
+    /// The team monitor in the browser, live; listen-only (never sends a frame).
+    Monitor(cli::monitor::MonitorArgs),
     /// Record a team's traffic to a pcapng file, listen-only (never sends a frame).
     Record(cli::record::RecordArgs),
     /// Decode a recording through the replica code: updates as text or JSON lines.
@@ -70,6 +72,7 @@ fn run(command: Option<Command>) -> Result<()> {
         Some(Command::Echo(args)) => cli::clients::echo(args),
         Some(Command::Watch(args)) => cli::watch::watch(args),
         Some(Command::Stats(args)) => cli::clients::stats(args),
+        Some(Command::Monitor(args)) => cli::monitor::run(args),
         Some(Command::Record(args)) => cli::record::record(args),
         Some(Command::Replay(args)) => cli::record::replay(args),
         Some(Command::Bench(args)) => cli::bench::run(args),

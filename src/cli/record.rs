@@ -15,8 +15,12 @@ use clap::Args;
 use driver::{open_multicast, resolve_iface, SocketConfig};
 
 use super::duration;
-use crate::monitor::listen::{Heard, Listener, LISTENER_ID, REPLAY_TAIL};
+use std::sync::{Arc, Mutex};
+
+use crate::monitor::listen::{Heard, LISTENER_ID, REPLAY_TAIL};
+use crate::monitor::model::Model;
 use crate::monitor::pcapng::{self, Packet, Writer};
+use crate::monitor::server;
 
 /// Arguments of `huddle record`.
 #[derive(Args, Debug)]
@@ -62,6 +66,14 @@ pub struct ReplayArgs {
     /// The listener's own robot id (frames from this id are not decoded).
     #[arg(long, default_value_t = LISTENER_ID)]
     pub listen_id: u8,
+    /// Print the team ball over time instead, as the team's world model fuses it from
+    /// every robot's local world model: {"t", "x", "y", "gbc"} every 100 ms.
+    #[arg(long, conflicts_with = "json")]
+    pub world: bool,
+    /// Serve the team monitor on this address while replaying (real time unless
+    /// --speed), and after it until Ctrl-C.
+    #[arg(long, value_name = "ADDR")]
+    pub monitor: Option<SocketAddr>,
 }
 
 /// Run `huddle record`.
@@ -125,17 +137,59 @@ pub fn record(args: RecordArgs) -> Result<()> {
     Ok(())
 }
 
-/// Reads a recording and runs it through a listener, calling `each` with what was heard
-/// (paced at `speed` times real time if given). Returns the listener at the end.
+/// Reads a recording and runs it through the monitor's model (a listen-only replica and
+/// a GWM), calling `each` with what each datagram changed (paced at `speed` times real
+/// time if given; with `--monitor`, real time unless `--speed` says otherwise).
 pub fn replay_file(
     args: &ReplayArgs,
-    mut each: impl FnMut(&Listener, &[Heard]) -> Result<()>,
-) -> Result<Listener> {
-    if let Some(speed) = args.speed {
-        if !(speed.is_finite() && speed > 0.0) {
-            bail!("--speed must be a positive number, not {speed}");
+    shared: Option<&server::Shared>,
+    mut each: impl FnMut(&Model, &[Heard]) -> Result<()>,
+) -> Result<()> {
+    let speed = match args.speed {
+        Some(s) if !(s.is_finite() && s > 0.0) => {
+            bail!("--speed must be a positive number, not {s}")
         }
+        Some(s) => Some(s),
+        None if args.monitor.is_some() => Some(1.0),
+        None => None,
+    };
+    let (packets, model) = open_recording(args)?;
+    let shared = match shared {
+        Some(s) => {
+            *s.lock().unwrap_or_else(|p| p.into_inner()) = model;
+            s.clone()
+        }
+        None => Arc::new(Mutex::new(model)),
+    };
+    let started = std::time::Instant::now();
+    let lock = || shared.lock().unwrap_or_else(|p| p.into_inner());
+    for p in packets
+        .iter()
+        .filter(|p| args.group.is_none_or(|g| g == p.to))
+    {
+        if let Some(speed) = speed {
+            let due = Duration::from_secs_f64(lock().seconds_at(p.t_ns) / speed);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        let mut model = lock();
+        let heard = model.datagram(p.t_ns, SocketAddr::V4(p.from), &p.payload);
+        each(&model, &heard)?;
     }
+    if let Some(last) = packets.last() {
+        let mut model = lock();
+        let mut heard = Vec::new();
+        model.advance_heard(last.t_ns + REPLAY_TAIL.as_nanos() as u64, &mut heard);
+        each(&model, &heard)?;
+        model.finish();
+    }
+    Ok(())
+}
+
+/// The packets of a recording and a model for them (team from the first frame unless
+/// given, key file read).
+fn open_recording(args: &ReplayArgs) -> Result<(Vec<Packet>, Model)> {
     let bytes =
         std::fs::read(&args.file).with_context(|| format!("reading {}", args.file.display()))?;
     let packets = pcapng::read(&bytes).with_context(|| format!("{}", args.file.display()))?;
@@ -148,29 +202,8 @@ pub fn replay_file(
         .team
         .or_else(|| packets.iter().find_map(|p| team_of(&p.payload)))
         .unwrap_or(0);
-    let mut listener = Listener::new(team, key, args.listen_id, start_ns)?;
-    let started = std::time::Instant::now();
-    let mut heard = Vec::new();
-    for p in packets
-        .iter()
-        .filter(|p| args.group.is_none_or(|g| g == p.to))
-    {
-        if let Some(speed) = args.speed {
-            let due = Duration::from_secs_f64(listener.seconds(p.t_ns) / speed);
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
-                std::thread::sleep(wait);
-            }
-        }
-        heard.clear();
-        listener.datagram(p.t_ns, SocketAddr::V4(p.from), &p.payload, &mut heard);
-        each(&listener, &heard)?;
-    }
-    if let Some(last) = packets.last() {
-        heard.clear();
-        listener.advance(last.t_ns + REPLAY_TAIL.as_nanos() as u64, &mut heard);
-        each(&listener, &heard)?;
-    }
-    Ok(listener)
+    let model = Model::new(team, key, args.listen_id, start_ns, "replay", None)?;
+    Ok((packets, model))
 }
 
 /// The team id in a frame's plain header, if it looks like a huddle frame.
@@ -180,11 +213,38 @@ pub fn team_of(frame: &[u8]) -> Option<u8> {
 
 /// Run `huddle replay`.
 pub fn replay(args: ReplayArgs) -> Result<()> {
+    let shared = match args.monitor {
+        Some(addr) => {
+            let (_, model) = open_recording(&args)?;
+            let shared: server::Shared = Arc::new(Mutex::new(model));
+            server::spawn(addr, shared.clone())?;
+            Some(shared)
+        }
+        None => None,
+    };
     let mut out = std::io::stdout().lock();
-    let json = args.json;
-    let listener = replay_file(&args, |_, heard| {
+    let mut next_world_s = 0.0;
+    let mut frames = (0, 0);
+    replay_file(&args, shared.as_ref(), |model, heard| {
+        frames = (
+            model.replica().stats().frames_in,
+            model.replica().stats().drops_total(),
+        );
+        if args.world {
+            let t = model.t_s();
+            if t >= next_world_s {
+                next_world_s = t + WORLD_PERIOD_S;
+                if let Some((x, y, gbc)) = model.team_ball() {
+                    let line = serde_json::json!({
+                        "t": (t * 1e3).round() / 1e3, "x": x, "y": y, "gbc": gbc,
+                    });
+                    writeln!(out, "{line}")?;
+                }
+            }
+            return Ok(());
+        }
         for h in heard {
-            if json {
+            if args.json {
                 if let Some(line) = h.update_json() {
                     writeln!(out, "{line}")?;
                 }
@@ -206,11 +266,13 @@ pub fn replay(args: ReplayArgs) -> Result<()> {
         Ok(())
     })?;
     out.flush()?;
-    let stats = listener.replica().stats();
-    tracing::info!(
-        "{} frames replayed, {} dropped",
-        stats.frames_in,
-        stats.drops_total()
-    );
+    tracing::info!("{} frames replayed, {} dropped", frames.0, frames.1);
+    if let Some(addr) = args.monitor {
+        tracing::info!("the recording is over; the monitor stays on http://{addr}/ until Ctrl-C");
+        super::monitor_sim::wait_for_ctrl_c()?;
+    }
     Ok(())
 }
+
+/// How often `--world` prints the team ball, seconds of the recording.
+const WORLD_PERIOD_S: f64 = 0.1;

@@ -136,10 +136,21 @@ impl Model {
 
     /// Runs the clock to `t_ns` (departures).
     pub fn advance(&mut self, t_ns: u64) {
-        self.now_ns = self.now_ns.max(t_ns);
         let mut heard = Vec::new();
-        self.listener.advance(t_ns, &mut heard);
-        self.take(&heard);
+        self.advance_heard(t_ns, &mut heard);
+    }
+
+    /// Runs the clock to `t_ns`, adding what changed to `heard`.
+    pub fn advance_heard(&mut self, t_ns: u64, heard: &mut Vec<Heard>) {
+        self.now_ns = self.now_ns.max(t_ns);
+        let from = heard.len();
+        self.listener.advance(t_ns, heard);
+        self.take(&heard[from..]);
+    }
+
+    /// Seconds since the model's start at `t_ns`.
+    pub fn seconds_at(&self, t_ns: u64) -> f64 {
+        self.listener.seconds(t_ns)
     }
 
     /// One datagram received at `t_ns` from `from`; returns what it changed.
@@ -217,6 +228,23 @@ impl Model {
                 }
             }
         }
+    }
+
+    /// Seconds since the model's start.
+    pub fn t_s(&self) -> f64 {
+        self.listener.seconds(self.now_ns)
+    }
+
+    /// The team ball as the monitor's GWM fuses it now: x, y (m) and its confidence.
+    pub fn team_ball(&self) -> Option<(f64, f64, f64)> {
+        let b = self.gwm.team_ball(self.t_s(), None)?;
+        let p = b.estimate.position();
+        Some((p.x, p.y, b.gbc))
+    }
+
+    /// The listening replica (frames, drops).
+    pub fn replica(&self) -> &comms::Replica {
+        self.listener.replica()
     }
 
     /// The picture as JSON: robots (id, pose, covariance, ball, role, goer, last heard,
