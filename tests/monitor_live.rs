@@ -124,6 +124,12 @@ fn the_live_monitor_shows_claims_talk_and_departures_and_never_sends() {
         robot(s, 1)["departed"] == true
     });
     assert_eq!(robot(&s, 2)["departed"], false);
+
+    // A second robot started with id 2: the monitor marks robot 2 as conflicting.
+    let _twin = Daemon::start(2, &g, daemon_support::free_tcp_port(), &[], dir.path());
+    wait_state(http, "robot 2 conflicting", |s| {
+        robot(s, 2)["conflicting"] == true
+    });
 }
 
 #[test]
