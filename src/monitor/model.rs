@@ -385,3 +385,75 @@ impl Model {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use comms::{Instant, Replica, ReplicaConfig};
+
+    fn frames_of_robot_2() -> Vec<Vec<u8>> {
+        let t0 = Instant::from_micros(0);
+        let mut r = Replica::new(ReplicaConfig::new(2, 0), 7, t0).unwrap();
+        r.set(t0, "*.var.machine.heuristic", Value::Floats(vec![1.5, 1.0]))
+            .unwrap();
+        r.set(t0, "*.var.machine.pass_to", Value::Int(3)).unwrap();
+        // Not an LWM: the model must skip it, not fail.
+        r.set(t0, "*.var.world.local", Value::Bytes(vec![0x33; 75]))
+            .unwrap();
+        r.post(t0, "*.talk.plan", Value::from("go")).unwrap();
+        std::iter::from_fn(|| r.poll_transmit().map(|t| t.payload)).collect()
+    }
+
+    #[test]
+    fn a_robot_s_claims_and_talk_show_in_the_state() {
+        let mut m = Model::new(0, None, 254, 0, "test", Some(100)).unwrap();
+        let from: SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        for f in frames_of_robot_2() {
+            m.datagram(1_000_000, from, &f);
+        }
+        let s = m.state();
+        assert_eq!(s["goer"], 2);
+        let r = &s["robots"][0];
+        assert_eq!(
+            (r["id"].as_u64(), r["role"].as_str()),
+            (Some(2), Some("active"))
+        );
+        assert_eq!(r["h"], 1.5);
+        assert!(r["budget_used"].as_f64().unwrap() > 0.0);
+        assert_eq!(s["talk"][0]["value"], "go");
+        m.advance(2_000_000_000);
+        assert_eq!(m.state()["robots"][0]["departed"], true);
+        assert_eq!(m.state()["goer"], serde_json::Value::Null);
+    }
+
+    #[test]
+    fn garbage_and_flipped_frames_never_panic() {
+        let mut m = Model::new(0, None, 254, 0, "test", None).unwrap();
+        let from: SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        let frames = frames_of_robot_2();
+        let mut x: u64 = 0x2545_f491_4f6c_dd1d;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for i in 0..3000u64 {
+            let mut f = frames[(i as usize) % frames.len()].clone();
+            if i % 3 == 0 {
+                f = (0..next() % 200).map(|_| next() as u8).collect();
+            } else {
+                for _ in 0..1 + next() % 4 {
+                    let at = (next() as usize) % f.len().max(1);
+                    if let Some(b) = f.get_mut(at) {
+                        *b ^= next() as u8 | 1;
+                    }
+                }
+            }
+            m.datagram(i * 1_000_000, from, &f);
+            if i % 100 == 0 {
+                let _ = m.state().to_string();
+            }
+        }
+    }
+}
