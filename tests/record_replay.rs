@@ -43,6 +43,8 @@ fn two_daemons_recorded_and_replayed_every_update_found() {
     let g = group.to_string();
     let d1 = Daemon::start(1, &g, daemon_support::free_tcp_port(), &[], dir.path());
     let d2 = Daemon::start(2, &g, daemon_support::free_tcp_port(), &[], dir.path());
+    // Robot 254 is the id a live monitor takes: a replay picks a free one instead.
+    let d254 = Daemon::start(254, &g, daemon_support::free_tcp_port(), &[], dir.path());
     let file = dir.path().join("team.pcapng");
     let mut recorder = huddle()
         .args(["record", "--group", &g, "--iface", "127.0.0.1"])
@@ -70,7 +72,9 @@ fn two_daemons_recorded_and_replayed_every_update_found() {
         ("2.var.count", "int", serde_json::json!(41)),
         ("2.var.count", "int", serde_json::json!(42)),
         ("2.talk.plan", "string", serde_json::json!("pass to 1")),
+        ("254.var.x", "int", serde_json::json!(7)),
     ];
+    assert_eq!(d254.client().ask("SETV *.var.x 7"), "OK");
     for line in [
         "SETV *.var.ball.dist 1.5",
         "SETV *.var.ball.seen true",

@@ -63,9 +63,10 @@ pub struct ReplayArgs {
     /// Only packets sent to this group and port (default: every UDP packet in the file).
     #[arg(long)]
     pub group: Option<SocketAddrV4>,
-    /// The listener's own robot id (frames from this id are not decoded).
-    #[arg(long, default_value_t = LISTENER_ID)]
-    pub listen_id: u8,
+    /// The listener's own robot id (frames from this id are not decoded); default: the
+    /// highest id no frame in the recording comes from (254 when all are free).
+    #[arg(long)]
+    pub listen_id: Option<u8>,
     /// Print the team ball over time instead, as the team's world model fuses it from
     /// every robot's local world model: {"t", "x", "y", "gbc"} every 100 ms.
     #[arg(long, conflicts_with = "json")]
@@ -202,7 +203,17 @@ fn open_recording(args: &ReplayArgs) -> Result<(Vec<Packet>, Model)> {
         .team
         .or_else(|| packets.iter().find_map(|p| team_of(&p.payload)))
         .unwrap_or(0);
-    let model = Model::new(team, key, args.listen_id, start_ns, "replay", None)?;
+    let listen_id = args.listen_id.unwrap_or_else(|| {
+        let senders: std::collections::BTreeSet<u8> = packets
+            .iter()
+            .filter_map(|p| comms::wire::peek_origin(&p.payload, team).map(|(id, _)| id))
+            .collect();
+        (1..=LISTENER_ID)
+            .rev()
+            .find(|id| !senders.contains(id))
+            .unwrap_or(LISTENER_ID)
+    });
+    let model = Model::new(team, key, listen_id, start_ns, "replay", None)?;
     Ok((packets, model))
 }
 
