@@ -10,6 +10,7 @@
 //! checksum is 0 (none, allowed in IPv4).
 
 use std::io::{self, Write};
+use std::net::SocketAddrV4;
 
 use crate::sim::{Dest, GroupId, NodeId};
 use crate::trace::{Trace, TraceKind};
@@ -101,30 +102,49 @@ fn build_frame(
         // Link-local multicast, as the seed's 224.0.0.1, goes out with TTL 1.
         Dest::Group(g) => (group_ipv4(g), 1),
     };
-    // Oversized payloads cannot be described in 16-bit lengths; they saturate.
+    push_ipv4_udp(
+        frame,
+        SocketAddrV4::new(node_ipv4(from).into(), UDP_PORT),
+        SocketAddrV4::new(dst_ip.into(), UDP_PORT),
+        ttl,
+        seq as u16,
+        payload,
+    );
+}
+
+/// Appends an IPv4 header (no options, checksummed, identification `id`) and a UDP
+/// header (checksum 0: none, allowed in IPv4) for `payload`, then the payload. Lengths
+/// that do not fit 16 bits saturate.
+pub fn push_ipv4_udp(
+    out: &mut Vec<u8>,
+    from: SocketAddrV4,
+    to: SocketAddrV4,
+    ttl: u8,
+    id: u16,
+    payload: &[u8],
+) {
     let ip_len = u16::try_from(IPV4_HEADER + UDP_HEADER + payload.len()).unwrap_or(u16::MAX);
     let udp_len = u16::try_from(UDP_HEADER + payload.len()).unwrap_or(u16::MAX);
     let mut ip = [0u8; IPV4_HEADER];
     ip[0] = 0x45; // version 4, 5 words of header
     ip[2..4].copy_from_slice(&ip_len.to_be_bytes());
-    ip[4..6].copy_from_slice(&(seq as u16).to_be_bytes());
+    ip[4..6].copy_from_slice(&id.to_be_bytes());
     ip[8] = ttl;
     ip[9] = 17; // UDP
-    ip[12..16].copy_from_slice(&node_ipv4(from));
-    ip[16..20].copy_from_slice(&dst_ip);
+    ip[12..16].copy_from_slice(&from.ip().octets());
+    ip[16..20].copy_from_slice(&to.ip().octets());
     let checksum = ipv4_checksum(&ip);
     ip[10..12].copy_from_slice(&checksum.to_be_bytes());
-    frame.extend_from_slice(&ip);
-
-    frame.extend_from_slice(&UDP_PORT.to_be_bytes());
-    frame.extend_from_slice(&UDP_PORT.to_be_bytes());
-    frame.extend_from_slice(&udp_len.to_be_bytes());
-    frame.extend_from_slice(&0u16.to_be_bytes());
-    frame.extend_from_slice(payload);
+    out.extend_from_slice(&ip);
+    out.extend_from_slice(&from.port().to_be_bytes());
+    out.extend_from_slice(&to.port().to_be_bytes());
+    out.extend_from_slice(&udp_len.to_be_bytes());
+    out.extend_from_slice(&0u16.to_be_bytes());
+    out.extend_from_slice(payload);
 }
 
 /// The Internet checksum (RFC 1071) of a header whose checksum field is zero.
-fn ipv4_checksum(header: &[u8]) -> u16 {
+pub fn ipv4_checksum(header: &[u8]) -> u16 {
     let mut sum: u32 = header
         .chunks(2)
         .map(|w| u32::from(u16::from_be_bytes([w[0], *w.get(1).unwrap_or(&0)])))

@@ -137,35 +137,10 @@ fn push_option(opts: &mut Vec<u8>, code: u16, value: &[u8]) {
     opts.resize(opts.len().div_ceil(4) * 4, 0);
 }
 
+/// The packet as raw IPv4/UDP (netsim's headers: TTL 1, link-local multicast; no UDP
+/// checksum).
 fn build_ipv4_udp(out: &mut Vec<u8>, p: &Packet) {
-    let ip_len = u16::try_from(IPV4_HEADER + UDP_HEADER + p.payload.len()).unwrap_or(u16::MAX);
-    let udp_len = u16::try_from(UDP_HEADER + p.payload.len()).unwrap_or(u16::MAX);
-    let mut ip = [0u8; IPV4_HEADER];
-    ip[0] = 0x45;
-    ip[2..4].copy_from_slice(&ip_len.to_be_bytes());
-    ip[8] = 1; // TTL: link-local multicast
-    ip[9] = 17; // UDP
-    ip[12..16].copy_from_slice(&p.from.ip().octets());
-    ip[16..20].copy_from_slice(&p.to.ip().octets());
-    let checksum = ipv4_checksum(&ip);
-    ip[10..12].copy_from_slice(&checksum.to_be_bytes());
-    out.extend_from_slice(&ip);
-    out.extend_from_slice(&p.from.port().to_be_bytes());
-    out.extend_from_slice(&p.to.port().to_be_bytes());
-    out.extend_from_slice(&udp_len.to_be_bytes());
-    out.extend_from_slice(&0u16.to_be_bytes());
-    out.extend_from_slice(&p.payload);
-}
-
-fn ipv4_checksum(header: &[u8]) -> u16 {
-    let mut sum: u32 = header
-        .chunks(2)
-        .map(|w| u32::from(u16::from_be_bytes([w[0], *w.get(1).unwrap_or(&0)])))
-        .sum();
-    while sum > 0xffff {
-        sum = (sum & 0xffff) + (sum >> 16);
-    }
-    !(sum as u16)
+    netsim::pcap::push_ipv4_udp(out, p.from, p.to, 1, 0, &p.payload);
 }
 
 /// An interface as its description block gave it.
@@ -382,7 +357,7 @@ mod tests {
     fn the_ip_header_checksum_is_valid() {
         let mut data = Vec::new();
         build_ipv4_udp(&mut data, &sample()[0]);
-        assert_eq!(ipv4_checksum(&data[..IPV4_HEADER]), 0);
+        assert_eq!(netsim::pcap::ipv4_checksum(&data[..IPV4_HEADER]), 0);
     }
 
     #[test]
