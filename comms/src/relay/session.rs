@@ -379,14 +379,7 @@ impl Session {
     /// A teammate's talk message was delivered: pushed at once, whatever `REFR` says,
     /// as `UPD <from>.talk.<queue> type value 0` if a watch matches.
     pub fn handle_talk(&mut self, from: u8, queue: &str, value: &Value) {
-        if self.state != SessionState::Open {
-            return;
-        }
-        let matches = self
-            .watches
-            .iter()
-            .any(|w| w.matches_parts(Scope::Robot(from), Kind::Talk, queue));
-        if matches {
+        if self.watches_talk(from, queue) {
             let ty = value.value_type();
             self.push(format_args!("UPD {from}.talk.{queue} {ty} {value} 0"));
         }
@@ -396,16 +389,18 @@ impl Session {
     /// longer arrive): pushed at once, whatever `REFR` says, as
     /// `LOST <from>.talk.<queue> <first> <last>` if a watch matches.
     pub fn handle_talk_lost(&mut self, from: u8, queue: &str, first: u64, last: u64) {
-        if self.state != SessionState::Open {
-            return;
-        }
-        let matches = self
-            .watches
-            .iter()
-            .any(|w| w.matches_parts(Scope::Robot(from), Kind::Talk, queue));
-        if matches {
+        if self.watches_talk(from, queue) {
             self.push(format_args!("LOST {from}.talk.{queue} {first} {last}"));
         }
+    }
+
+    /// Whether the session is open and watches `from`'s talk queue `queue`.
+    fn watches_talk(&self, from: u8, queue: &str) -> bool {
+        self.state == SessionState::Open
+            && self
+                .watches
+                .iter()
+                .any(|w| w.matches_parts(Scope::Robot(from), Kind::Talk, queue))
     }
 
     fn push_snapshot<B: Board + ?Sized>(&mut self, now: Instant, watches: &[Pattern], board: &B) {

@@ -1,19 +1,9 @@
 //! The blackboard's bounds through the replica: forged versions, restarts, key limits.
 
-use std::net::SocketAddr;
-
+use super::tests::{addr, robot, t};
 use super::*;
 use crate::wire::FrameWriter;
 
-fn t(ms: u64) -> Instant {
-    Instant::from_micros(ms * 1000)
-}
-fn addr() -> SocketAddr {
-    SocketAddr::from(([127, 0, 0, 1], 2000))
-}
-fn robot(id: u8, incarnation: u64) -> Replica {
-    Replica::new(ReplicaConfig::new(id, 7), incarnation, t(0)).unwrap()
-}
 fn pump(now: Instant, from: &mut Replica, to: &mut Replica) {
     while let Some(tx) = from.poll_transmit() {
         to.handle_datagram(now, addr(), &tx.payload);

@@ -6,13 +6,13 @@ use crate::key::Key;
 use crate::stats::DropReason;
 use crate::wire::Item;
 
-fn t(ms: u64) -> Instant {
+pub(super) fn t(ms: u64) -> Instant {
     Instant::from_micros(ms * 1000)
 }
-fn addr() -> SocketAddr {
+pub(super) fn addr() -> SocketAddr {
     SocketAddr::from(([127, 0, 0, 1], 2000))
 }
-fn robot(id: u8, incarnation: u64) -> Replica {
+pub(super) fn robot(id: u8, incarnation: u64) -> Replica {
     Replica::new(ReplicaConfig::new(id, 7), incarnation, t(0)).unwrap()
 }
 fn frames(r: &mut Replica) -> Vec<Vec<u8>> {
