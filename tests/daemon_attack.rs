@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use comms::wire::{encode_frame, Frame, Item};
 use comms::Value;
-use daemon_support::{Client, Daemon};
+use daemon_support::Daemon;
 use driver::{open_multicast, SocketConfig};
 
 const TEAM: u8 = 7;
@@ -33,15 +33,6 @@ fn rss_kib(d: &Daemon) -> u64 {
         .find_map(|l| l.strip_prefix("VmRSS:"))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .expect("a VmRSS line")
-}
-
-fn stat(c: &mut Client, name: &str) -> i64 {
-    let answer = c.ask(&format!("GETV local.var.huddle.stats.{name}"));
-    answer
-        .split_whitespace()
-        .nth(3)
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("{name}: {answer:?}"))
 }
 
 struct Attacker {
@@ -170,7 +161,7 @@ fn an_attacker_on_an_unkeyed_lan_cannot_break_the_team_or_its_memory() {
         );
     }
     std::thread::sleep(Duration::from_millis(200));
-    let out_before = stat(&mut c1, "bytes_out");
+    let out_before = c1.stat("bytes_out");
     let nack_bytes_before = attacker.bytes;
     for _ in 0..2_000 {
         attacker.send(
@@ -187,7 +178,7 @@ fn an_attacker_on_an_unkeyed_lan_cannot_break_the_team_or_its_memory() {
     }
     std::thread::sleep(Duration::from_millis(300));
     let nack_bytes = attacker.bytes - nack_bytes_before;
-    let drawn = stat(&mut c1, "bytes_out") - out_before;
+    let drawn = c1.stat("bytes_out") - out_before;
     println!(
         "spoofed NACKs: {nack_bytes} bytes in drew {drawn} bytes out ({:.1}x) in ~1.3 s",
         drawn as f64 / nack_bytes as f64
@@ -197,8 +188,5 @@ fn an_attacker_on_an_unkeyed_lan_cannot_break_the_team_or_its_memory() {
         drawn < 2 * posted + 64 * 1024,
         "robot 1 sent {drawn} bytes for NACKs after posting {posted}"
     );
-    assert!(
-        stat(&mut c1, "talk_repair_limited") > 0,
-        "the limit was counted"
-    );
+    assert!(c1.stat("talk_repair_limited") > 0, "the limit was counted");
 }

@@ -14,7 +14,6 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use comms::relay::Binding;
 use comms::wire::{encode_frame, Frame, Item, TeamKey};
 use comms::Value;
 use driver::{open_multicast, SocketConfig};
@@ -151,11 +150,6 @@ fn until(rx: &mpsc::Receiver<String>, needle: &str) -> Vec<String> {
     }
 }
 
-fn stat(c: &mut daemon_support::Client, name: &str) -> i64 {
-    let answer = c.ask(&format!("GETV local.var.huddle.stats.{name}"));
-    Binding::parse(&answer).map_or(0, |b| b.value.parse().unwrap())
-}
-
 #[test]
 fn the_daemon_says_what_it_loaded_and_warns_once_about_key_mismatches() {
     let dir = tempfile::tempdir().unwrap();
@@ -226,7 +220,7 @@ fn the_daemon_says_what_it_loaded_and_warns_once_about_key_mismatches() {
     }
     // Once the daemon has counted all five, it has said all it will say about them.
     let deadline = Instant::now() + Duration::from_secs(20);
-    while stat(&mut c, "drops.bad_tag") < 3 || stat(&mut c, "drops.missing_tag") < 2 {
+    while c.stat("drops.bad_tag") < 3 || c.stat("drops.missing_tag") < 2 {
         assert!(Instant::now() < deadline, "the drops were never counted");
         std::thread::sleep(Duration::from_millis(20));
     }

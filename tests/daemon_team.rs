@@ -30,11 +30,6 @@ fn start(id: u8, group: SocketAddrV4, dir: &std::path::Path) -> Daemon {
     Daemon::start(id, &group.to_string(), relay_port, &args, dir)
 }
 
-fn stat(c: &mut daemon_support::Client, name: &str) -> i64 {
-    let answer = c.ask(&format!("GETV local.var.huddle.stats.{name}"));
-    Binding::parse(&answer).map_or(0, |b| b.value.parse().unwrap())
-}
-
 #[test]
 fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     let dir = tempfile::tempdir().unwrap();
@@ -110,7 +105,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     // counted, nothing else changes.
     let before: Vec<(i64, i64)> = [&mut c1, &mut c2, &mut c3]
         .into_iter()
-        .map(|c| (stat(c, "drops.bad_magic"), stat(c, "drops.bad_tag")))
+        .map(|c| (c.stat("drops.bad_magic"), c.stat("drops.bad_tag")))
         .collect();
     // The driver's own socket set-up: IP_MULTICAST_IF 127.0.0.1, TTL 1.
     let cfg = SocketConfig {
@@ -144,7 +139,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
     {
         let deadline = std::time::Instant::now() + Duration::from_secs(3);
         loop {
-            let (magic, tag) = (stat(c, "drops.bad_magic"), stat(c, "drops.bad_tag"));
+            let (magic, tag) = (c.stat("drops.bad_magic"), c.stat("drops.bad_tag"));
             if magic > magic0 && tag > tag0 {
                 assert_eq!(
                     (magic, tag),

@@ -120,6 +120,17 @@ impl Client {
         s.trim_end_matches(['\r', '\n']).to_owned()
     }
 
+    /// A daemon counter, `local.var.huddle.stats.<name>`: 0 while it is not mirrored yet
+    /// (counters appear at the first refresh).
+    pub fn stat(&mut self, name: &str) -> i64 {
+        let answer = self.ask(&format!("GETV local.var.huddle.stats.{name}"));
+        comms::relay::Binding::parse(&answer).map_or(0, |b| {
+            b.value
+                .parse()
+                .unwrap_or_else(|_| panic!("{name}: {answer:?}"))
+        })
+    }
+
     /// Sends `line` and returns the one-line answer.
     pub fn ask(&mut self, line: &str) -> String {
         self.send_raw(format!("{line}\n").as_bytes());
