@@ -102,6 +102,8 @@ pub(crate) struct Outbox {
     last: u64,
     /// Contiguous, oldest first: (seq, message, when posted, when last put on the wire).
     retained: VecDeque<(u64, Value, Instant, Option<Instant>)>,
+    /// Bytes of the retained messages (kept up to date: repairs are capped by it).
+    retained_bytes: usize,
     /// Bytes of repairs still allowed, and when that was last brought up to date.
     repair_budget: f64,
     budget_at: Option<Instant>,
@@ -122,10 +124,14 @@ impl Outbox {
     /// Numbers and keeps a new message; returns its sequence number.
     pub(crate) fn post(&mut self, now: Instant, value: Value, retain: usize) -> u64 {
         self.last += 1;
-        self.repair_budget += REPAIR_SHARE * message_bytes(&value) as f64;
+        let bytes = message_bytes(&value);
+        self.repair_budget += REPAIR_SHARE * bytes as f64;
+        self.retained_bytes += bytes;
         self.retained.push_back((self.last, value, now, None));
         while self.retained.len() > retain.max(1) {
-            self.retained.pop_front();
+            if let Some((_, evicted, _, _)) = self.retained.pop_front() {
+                self.retained_bytes -= message_bytes(&evicted);
+            }
         }
         self.last
     }
@@ -164,7 +170,7 @@ impl Outbox {
         let Some(i) = self.index(seq) else {
             return false;
         };
-        let cap = REPAIR_SHARE * self.retained_bytes() as f64 + 4.0 * REPAIR_TRICKLE_BYTES_PER_S;
+        let cap = REPAIR_SHARE * self.retained_bytes as f64 + 4.0 * REPAIR_TRICKLE_BYTES_PER_S;
         if let Some(at) = self.budget_at {
             let dt = now.saturating_duration_since(at).as_secs_f64();
             self.repair_budget += dt * REPAIR_TRICKLE_BYTES_PER_S;
@@ -177,10 +183,6 @@ impl Outbox {
         }
         self.repair_budget -= cost;
         true
-    }
-
-    fn retained_bytes(&self) -> usize {
-        self.retained.iter().map(|m| message_bytes(&m.1)).sum()
     }
 
     /// Retained messages of `first..=last` not sent within `quiet` before `now`: what to

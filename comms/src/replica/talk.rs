@@ -203,12 +203,14 @@ impl Replica {
         };
         // A resend within half a NACK interval already answers this request.
         let quiet = self.cfg.talk.nack_interval / 2;
-        for seq in outbox.to_resend(first, last, now, quiet) {
+        let wanted = outbox.to_resend(first, last, now, quiet);
+        for (i, &seq) in wanted.iter().enumerate() {
             // However many NACKs arrive (spoofed ones too), repairs stay within twice
-            // what was posted plus a trickle.
+            // what was posted plus a trickle. Once the allowance is spent the rest of
+            // the request is refused at once: a flood of NACKs costs no more work.
             if !outbox.spend_repair(now, seq) {
-                self.stats.talk_repair_limited += 1;
-                continue;
+                self.stats.talk_repair_limited += (wanted.len() - i) as u64;
+                break;
             }
             outbox.mark_sent(seq, now);
             self.talk_out.push_back((queue.to_owned(), seq));
