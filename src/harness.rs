@@ -22,7 +22,7 @@
 //! use huddle::harness::Harness;
 //! use netsim::{Preset, Sim, Time};
 //!
-//! // Three robots on a competition WLAN (20% loss, 50 ms ± 20 ms, bursts, beacons).
+//! // Three robots on a competition WLAN (20% loss in bursts, 20 ms ± 10 ms).
 //! let net = Sim::builder().preset(Preset::Competition);
 //! let mut team = Harness::new(3, net, ReplicaConfig::new(1, 7), 42).unwrap();
 //! team.set(0, &Key::parse("*.var.ball").unwrap(), Value::Floats(vec![1.0, 2.0])).unwrap();

@@ -1,5 +1,5 @@
 //! The world models inside `huddle sim`: five robots on the `competition` network (20%
-//! loss in bursts, 50 ± 20 ms, multicast held to 102.4 ms beacons), 90 s of play, seed 2.
+//! loss in bursts, 20 ± 10 ms, power save off), 90 s of play, seed 2.
 //! Every robot runs its pose EKF on its own noisy odometry and landmark sightings and its
 //! GWM from its teammates' LWMs over netsim; a centralized filter sees every sighting at
 //! once with no network. Definitions of the figures are in `huddle::sim::metrics`.

@@ -1,5 +1,6 @@
 //! Five robots on the `competition` WLAN (netsim preset: 20% loss with 100 ms bursts
-//! shared by all receivers, 50 ms ± 20 ms, multicast held to the next 102.4 ms beacon),
+//! shared by all receivers, 20 ms ± 10 ms; without loss, the power-save variant that
+//! holds multicast to the next DTIM beacon),
 //! replicating their blackboards through `huddle::harness`. Robot 4 is cut off
 //! (`Sim::isolate`) from 1.0 s to 3.0 s while everybody keeps writing, and robot 4 and
 //! robot 1 each post a talk message during the cut.
@@ -259,10 +260,11 @@ fn a_team_reconverges_after_robot_4_is_cut_off_for_two_seconds_on_a_competition_
 
 #[test]
 fn without_loss_the_team_reconverges_within_one_refresh_period_and_one_crossing() {
-    // The competition preset's delays (beacon, 50 ± 20 ms, 6 Mbit/s) without its loss.
+    // The power-save competition preset's delays (DTIM beacon, 20 ± 10 ms, 6 Mbit/s)
+    // without its loss.
     let link = netsim::LinkConfig {
         loss: 0.0,
-        ..Preset::Competition.link()
+        ..Preset::CompetitionPs.link()
     };
     let mut times = Vec::new();
     for seed in 0..SEEDS {

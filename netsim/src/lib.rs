@@ -25,8 +25,9 @@
 //!   the datagram until the returned times.
 //! - [`UplinkConfig`]: the part of the loss shared by all receivers of one transmission
 //!   (the sender's radio hop); links add the per-receiver part.
-//! - [`Preset`]: `lan`, `wlan`, `competition` (20% loss, 50 ms ± 20 ms, bursts, multicast
-//!   held to 102.4 ms beacons).
+//! - [`Preset`]: `lan`, `wlan`, `competition` (20% loss with bursts, 20 ms ± 10 ms, power
+//!   save off) and `competition-ps` (the same with multicast held to DTIM beacons every
+//!   204.8 ms).
 //! - [`Sim`]: nodes, groups, the event queue, fault verbs ([`Sim::partition`],
 //!   [`Sim::isolate`], [`Sim::repair`], [`Sim::heal`], or [`Sim::at`] for a schedule),
 //!   per-node clocks ([`NodeClock`]), statistics ([`LinkStats`]), the [`Trace`] and
@@ -87,7 +88,7 @@ pub use impairment::{
     PARETO_SHAPE,
 };
 pub use link::{DropReason, LinkModel, Verdict};
-pub use preset::{Preset, BEACON_INTERVAL};
+pub use preset::{dtim_interval, Preset, BEACON_INTERVAL, DEFAULT_DTIM_PERIOD};
 pub use sim::{Action, ActionError, Delivery, Dest, GroupId, NodeId, SendError, Sim, SimBuilder};
 pub use spec::{parse_duration, parse_probability, SpecError};
 pub use stats::LinkStats;

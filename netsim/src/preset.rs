@@ -1,4 +1,8 @@
-//! Named network conditions: `lan`, `wlan`, `competition`.
+//! Named network conditions: `lan`, `wlan`, `competition`, `competition-ps`.
+//!
+//! Each preset says where its numbers come from. What the access point does (hold
+//! group-addressed frames to a DTIM beacon, only while a station sleeps) is kept apart
+//! from what the air does (delay, loss, bursts), so the two are not stacked by accident.
 
 use std::fmt;
 use std::str::FromStr;
@@ -21,19 +25,43 @@ pub enum Preset {
     /// A quiet WLAN: 2 ms latency with heavy-tailed spikes (Pareto, scale 3 ms), 1% loss
     /// per receiver plus rare 50 ms bursts at the sender (≈ 1.5% in all), 24 Mbit/s.
     Wlan,
-    /// A crowded competition WLAN: 20% loss in all (bursts of 100 ms every ~1 s at the
-    /// sender, shared by all receivers: 10%; plus 11.1% independent per receiver),
-    /// 50 ms ± 20 ms (normal), 6 Mbit/s (the multicast basic rate), and multicast held by
-    /// the access point until the next beacon (every 102.4 ms).
+    /// A crowded competition WLAN with power save off, as robot teams run it:
+    /// - **loss 20% in all**: bursts of 100 ms about every second at the sender, shared by
+    ///   every receiver of a frame (10%: interference, a busy channel), plus 11.1%
+    ///   independent per receiver. Group-addressed 802.11 frames are neither acknowledged
+    ///   nor retried (IEEE 802.11-2020 §10.3.6: "no ACK … in response to group addressed
+    ///   frames"), so what the air loses stays lost;
+    /// - **20 ms ± 10 ms** (normal) one way: the station→AP leg is unicast, acknowledged and
+    ///   retried, and waits for a loaded channel; the AP→group leg goes at once. This is an
+    ///   assumption for a loaded cell (tens of robots and spectators' phones), not a
+    ///   measurement: `huddle sim --sweep delay` shows how every figure moves with it;
+    /// - **6 Mbit/s**: multicast goes at a basic rate (the lowest mandatory OFDM rate);
+    /// - no beacon hold: an AP buffers group traffic to the DTIM beacon only while some
+    ///   associated station is in power save (IEEE 802.11-2020 §11.2.3.6), and robot
+    ///   teams switch power save off. See [`Preset::CompetitionPs`] for when one does not.
     Competition,
+    /// [`Preset::Competition`] with a station in power save on the AP: every multicast
+    /// frame is held to the next DTIM beacon, every DTIM period × 102.4 ms (hostapd's
+    /// defaults: `beacon_int=100` TU of 1024 µs, `dtim_period=2`, so 204.8 ms; the
+    /// hold adds 102.4 ms on average). Unicast is not held.
+    CompetitionPs,
 }
 
-/// The standard 802.11 beacon interval: 100 time units of 1024 µs.
+/// The standard 802.11 beacon interval: 100 time units of 1024 µs (hostapd `beacon_int`).
 pub const BEACON_INTERVAL: Duration = Duration::from_micros(102_400);
+
+/// hostapd's default DTIM period: group traffic buffered for sleeping stations goes out
+/// after every second beacon.
+pub const DEFAULT_DTIM_PERIOD: u32 = 2;
 
 impl Preset {
     /// Every preset.
-    pub const ALL: [Preset; 3] = [Preset::Lan, Preset::Wlan, Preset::Competition];
+    pub const ALL: [Preset; 4] = [
+        Preset::Lan,
+        Preset::Wlan,
+        Preset::Competition,
+        Preset::CompetitionPs,
+    ];
 
     /// The spec-string name.
     pub fn name(self) -> &'static str {
@@ -41,6 +69,7 @@ impl Preset {
             Preset::Lan => "lan",
             Preset::Wlan => "wlan",
             Preset::Competition => "competition",
+            Preset::CompetitionPs => "competition-ps",
         }
     }
 
@@ -64,15 +93,18 @@ impl Preset {
                 ..LinkConfig::default()
             },
             Preset::Competition => LinkConfig {
-                latency: Duration::from_millis(50),
-                jitter: Duration::from_millis(20),
+                latency: Duration::from_millis(20),
+                jitter: Duration::from_millis(10),
                 jitter_dist: JitterDist::Normal,
                 // With the uplink's 10%: 1 − 0.9 · (1 − 1/9) = 20% in all.
                 loss: 1.0 / 9.0,
                 rate_bps: Some(6_000_000),
                 queue_limit: 64,
-                beacon: Some(BEACON_INTERVAL),
                 ..LinkConfig::default()
+            },
+            Preset::CompetitionPs => LinkConfig {
+                beacon: Some(dtim_interval(DEFAULT_DTIM_PERIOD)),
+                ..Preset::Competition.link()
             },
         }
     }
@@ -90,7 +122,7 @@ impl Preset {
                     loss_bad: 0.5,
                 }),
             },
-            Preset::Competition => UplinkConfig {
+            Preset::Competition | Preset::CompetitionPs => UplinkConfig {
                 loss: 0.0,
                 burst: Some(GilbertElliott::default()),
             },
@@ -107,6 +139,11 @@ impl Preset {
             ..link
         }
     }
+}
+
+/// How long multicast waits at most under a DTIM period of `period` beacons.
+pub fn dtim_interval(period: u32) -> Duration {
+    BEACON_INTERVAL * period.max(1)
 }
 
 impl fmt::Display for Preset {
@@ -141,10 +178,32 @@ mod tests {
             "competition total loss {total}"
         );
         assert!((Preset::Competition.standalone().mean_loss() - 0.2).abs() < 1e-12);
+        assert_eq!(
+            Preset::CompetitionPs.standalone().mean_loss(),
+            Preset::Competition.standalone().mean_loss(),
+            "power save changes when frames go, not whether"
+        );
         for p in Preset::ALL {
             p.link().validate().unwrap();
             p.uplink().validate().unwrap();
             assert_eq!(p.name().parse::<Preset>().unwrap(), p);
         }
+    }
+
+    #[test]
+    fn only_power_save_holds_multicast_to_the_dtim_beacon() {
+        assert_eq!(Preset::Competition.link().beacon, None);
+        assert_eq!(
+            Preset::CompetitionPs.link().beacon,
+            Some(Duration::from_micros(204_800)),
+            "hostapd defaults: DTIM period 2 × 102.4 ms"
+        );
+        assert_eq!(
+            LinkConfig {
+                beacon: None,
+                ..Preset::CompetitionPs.link()
+            },
+            Preset::Competition.link()
+        );
     }
 }

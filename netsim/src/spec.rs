@@ -5,7 +5,7 @@
 //!
 //! | key | value | meaning |
 //! |---|---|---|
-//! | `preset` | `lan`, `wlan`, `competition` | start from [`Preset::standalone`] |
+//! | `preset` | `lan`, `wlan`, `competition`, `competition-ps` | start from [`Preset::standalone`] |
 //! | `delay` (`latency`) | duration (`50ms`, `200us`, `1.5s`, `100ns`) | base delay |
 //! | `jitter` | duration | delay spread |
 //! | `dist` (`jitter-dist`) | `uniform`, `normal`, `pareto` | spread shape ([`JitterDist`]) |
@@ -54,7 +54,7 @@ pub enum SpecError {
     #[error("preset= must be the first item")]
     PresetNotFirst,
     /// The preset name is unknown.
-    #[error("unknown preset `{name}` (known: lan, wlan, competition)")]
+    #[error("unknown preset `{name}` (known: lan, wlan, competition, competition-ps)")]
     UnknownPreset {
         /// The offending name.
         name: String,

@@ -296,10 +296,10 @@ fn multicast_loss_is_shared_by_receivers_of_one_transmission_plus_a_private_part
 }
 
 #[test]
-fn the_competition_preset_loses_a_fifth_of_multicast_and_holds_it_to_beacons() {
+fn the_power_save_competition_preset_loses_a_fifth_of_multicast_and_holds_it_to_dtim_beacons() {
     let mut sim = Sim::builder()
         .seed(8)
-        .preset(Preset::Competition)
+        .preset(Preset::CompetitionPs)
         .build()
         .unwrap();
     let nodes = sim.add_nodes(5);
@@ -337,14 +337,14 @@ fn the_competition_preset_loses_a_fifth_of_multicast_and_holds_it_to_beacons() {
         "competition multicast loss {:.4}, expected 0.2 ± {tol:.4}",
         total.loss_rate()
     );
-    let beacon_ns = netsim::BEACON_INTERVAL.as_nanos() as u64;
+    let beacon_ns = netsim::dtim_interval(netsim::DEFAULT_DTIM_PERIOD).as_nanos() as u64;
     for event in sim.trace().events() {
         if let TraceKind::Deliver { from, to, .. } = &event.kind {
             if from != to {
                 assert_eq!(
                     event.at.as_nanos() % beacon_ns,
                     0,
-                    "multicast held to a beacon"
+                    "multicast held to a DTIM beacon"
                 );
             }
         }

@@ -25,9 +25,18 @@ pub struct SimArgs {
     /// Simulated duration, with its unit: `300s`, `5min`.
     #[arg(long, default_value = "300s", value_parser = duration::parse)]
     pub duration: Duration,
-    /// Network preset: lan, wlan, competition.
+    /// Network preset: lan, wlan, competition (power save off), competition-ps (multicast
+    /// held to DTIM beacons).
     #[arg(long, default_value = "competition")]
     pub preset: Preset,
+    /// DTIM period in beacons of 102.4 ms: multicast is held to every Nth beacon
+    /// (competition-ps: 2). Given with another preset, it adds the hold.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=255))]
+    pub dtim: Option<u32>,
+    /// Run the match once per point of a sweep and print one row each: `delay` (the
+    /// one-way link delay at 0, 10, 20, 50, 100 and 200 ms, jitter half of it).
+    #[arg(long, value_enum)]
+    pub sweep: Option<Sweep>,
     /// Independent loss per receiver, `20%` or `0.2` (replaces the preset's loss model).
     #[arg(long, value_parser = parse_fraction)]
     pub loss: Option<f64>,
@@ -73,6 +82,8 @@ impl Default for SimArgs {
             loss: None,
             latency: None,
             jitter: None,
+            dtim: None,
+            sweep: None,
             seed: 1,
             svg: None,
             json: false,
@@ -84,6 +95,16 @@ impl Default for SimArgs {
     }
 }
 
+/// What `--sweep` varies.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sweep {
+    /// The one-way link delay (jitter half of it).
+    Delay,
+}
+
+/// The delays `--sweep delay` runs, ms.
+const SWEEP_DELAYS_MS: [u64; 6] = [0, 10, 20, 50, 100, 200];
+
 /// `20%` or `0.2`, within 0..=1.
 fn parse_fraction(s: &str) -> Result<f64, String> {
     netsim::parse_probability("probability", s.trim()).map_err(|e| e.to_string())
@@ -94,19 +115,10 @@ pub fn run(args: SimArgs) -> Result<()> {
     if args.robots == 0 {
         bail!("--robots must be at least 1");
     }
-    let cfg = SimConfig {
-        robots: args.robots,
-        opponents: args.opponents,
-        duration_s: args.duration.as_secs_f64(),
-        network: NetworkConfig {
-            preset: args.preset,
-            loss: args.loss,
-            latency: args.latency,
-            jitter: args.jitter,
-        },
-        seed: args.seed,
-        ..SimConfig::default()
-    };
+    if let Some(sweep) = args.sweep {
+        return run_sweep(&args, sweep);
+    }
+    let cfg = config(&args);
     let mut sim = Simulation::new(cfg).context("setting up the simulation")?;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(
@@ -141,6 +153,93 @@ pub fn run(args: SimArgs) -> Result<()> {
         if let Some(path) = &args.svg {
             outln!("picture               {}", path.display());
         }
+    }
+    Ok(())
+}
+
+/// The match `args` describe.
+fn config(args: &SimArgs) -> SimConfig {
+    SimConfig {
+        robots: args.robots,
+        opponents: args.opponents,
+        duration_s: args.duration.as_secs_f64(),
+        network: NetworkConfig {
+            preset: args.preset,
+            loss: args.loss,
+            latency: args.latency,
+            jitter: args.jitter,
+            dtim_period: args.dtim,
+        },
+        seed: args.seed,
+        ..SimConfig::default()
+    }
+}
+
+/// `--sweep`: the same match at each point, two at a time (one per core), one row each
+/// (or one JSON array of reports).
+fn run_sweep(args: &SimArgs, sweep: Sweep) -> Result<()> {
+    if args.svg.is_some() || args.record.is_some() || args.monitor.is_some() {
+        bail!("--sweep runs many matches: --svg, --record and --monitor take one");
+    }
+    let configs: Vec<SimConfig> = match sweep {
+        Sweep::Delay => SWEEP_DELAYS_MS
+            .iter()
+            .map(|&ms| {
+                let mut cfg = config(args);
+                cfg.network.latency = Some(Duration::from_millis(ms));
+                cfg.network.jitter = Some(Duration::from_millis(ms) / 2);
+                cfg
+            })
+            .collect(),
+    };
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: std::sync::Mutex<Vec<Option<huddle::sim::Report>>> =
+        std::sync::Mutex::new(vec![None; configs.len()]);
+    std::thread::scope(|scope| -> Result<()> {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| -> Result<()> {
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(cfg) = configs.get(k) else {
+                            return Ok(());
+                        };
+                        let started = Instant::now();
+                        let mut sim =
+                            Simulation::new(cfg.clone()).context("setting up the simulation")?;
+                        sim.run(|_| {});
+                        let report = sim.report(started.elapsed().as_secs_f64());
+                        results.lock().expect("no worker panics")[k] = Some(report);
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            h.join().expect("a sweep worker panicked")?;
+        }
+        Ok(())
+    })?;
+    let reports: Vec<huddle::sim::Report> = results
+        .into_inner()
+        .expect("no worker panics")
+        .into_iter()
+        .flatten()
+        .collect();
+    if args.json {
+        outln!("{}", serde_json::to_string(&reports)?);
+        return Ok(());
+    }
+    outln!(
+        "huddle sim --sweep delay: {} robots, {:.0} s each, preset {}, seed {}",
+        args.robots,
+        args.duration.as_secs_f64(),
+        args.preset,
+        args.seed
+    );
+    outln!("{}", huddle::sim::SweepRow::header());
+    for r in &reports {
+        outln!("{}", huddle::sim::SweepRow(r));
     }
     Ok(())
 }

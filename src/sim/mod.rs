@@ -44,6 +44,9 @@ pub struct NetworkConfig {
     pub latency: Option<Duration>,
     /// Jitter (overrides the preset's).
     pub jitter: Option<Duration>,
+    /// DTIM period in beacons (overrides the preset's; with `competition`, which has no
+    /// power-save hold, it adds one).
+    pub dtim_period: Option<u32>,
 }
 
 fn preset_name<S: serde::Serializer>(p: &Preset, s: S) -> Result<S::Ok, S::Error> {
@@ -57,6 +60,7 @@ impl Default for NetworkConfig {
             loss: None,
             latency: None,
             jitter: None,
+            dtim_period: None,
         }
     }
 }
@@ -70,6 +74,7 @@ impl NetworkConfig {
             loss: Some(loss),
             latency: Some(latency),
             jitter: Some(jitter),
+            dtim_period: None,
         }
     }
 
@@ -88,6 +93,9 @@ impl NetworkConfig {
         }
         if let Some(j) = self.jitter {
             link.jitter = j;
+        }
+        if let Some(period) = self.dtim_period {
+            link.beacon = Some(netsim::dtim_interval(period));
         }
         (link, uplink)
     }
@@ -707,6 +715,36 @@ pub struct Report {
     /// Simulated seconds per wall-clock second (the only field that varies between runs
     /// with the same seed).
     pub sim_speed_x: f64,
+}
+
+/// One report as a row of `huddle sim --sweep` (the figures that move with the network).
+pub struct SweepRow<'a>(pub &'a Report);
+
+impl SweepRow<'_> {
+    /// The column heads.
+    pub fn header() -> &'static str {
+        "delay ms  p50 ms  p99 ms  one goer %  conflict ms / bound  team ball m  ×central  ×central+kicks  NEES"
+    }
+}
+
+impl std::fmt::Display for SweepRow<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self.0;
+        write!(
+            f,
+            "{:>8.0}  {:>6.0}  {:>6.0}  {:>10.2}  {:>8.0} / {:<6.0}  {:>11.4}  {:>8.3}  {:>14.3}  {:>5.2}",
+            r.latency_ms,
+            r.delay_p50_ms,
+            r.delay_p99_ms,
+            r.exactly_one_goer_pct,
+            r.longest_conflict_ms,
+            r.conflict_bound_ms,
+            r.team_ball_rmse_m,
+            r.rmse_ratio,
+            r.rmse_ratio_kicks,
+            r.team_ball_nees
+        )
+    }
 }
 
 impl std::fmt::Display for Report {
