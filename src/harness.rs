@@ -173,7 +173,8 @@ impl Harness {
         self.local_at(i, self.net.now())
     }
 
-    fn local_at(&self, i: usize, global: Time) -> Instant {
+    /// What robot `i`'s clock read at global time `global`.
+    pub fn local_at(&self, i: usize, global: Time) -> Instant {
         let clock = self.net.node_clock(self.nodes[i]).unwrap_or_default();
         Instant::from_micros(clock.to_local(global).as_nanos() / 1000)
     }

@@ -363,6 +363,7 @@ mod tests {
                     direction_rad: 0.0,
                     speed_sigma_mps: 0.1,
                     direction_sigma_rad: 0.05,
+                    contact_prob: 1.0,
                 });
             }
             msgs.push(sender.publish(t_s + 0.01));

@@ -35,6 +35,7 @@ fn kick() -> Kick {
         direction_rad: 0.0,
         speed_sigma_mps: 0.2,
         direction_sigma_rad: 0.08,
+        contact_prob: 1.0,
     }
 }
 

@@ -37,6 +37,10 @@ pub struct SimArgs {
     /// one-way link delay at 0, 10, 20, 50, 100 and 200 ms, jitter half of it).
     #[arg(long, value_enum)]
     pub sweep: Option<Sweep>,
+    /// Give every reference filter this acceleration noise (m²/s³) instead of its tuned
+    /// one: for tuning the references, each for its own RMSE.
+    #[arg(long, hide = true)]
+    pub reference_q: Option<f64>,
     /// Independent loss per receiver, `20%` or `0.2` (replaces the preset's loss model).
     #[arg(long, value_parser = parse_fraction)]
     pub loss: Option<f64>,
@@ -84,6 +88,7 @@ impl Default for SimArgs {
             jitter: None,
             dtim: None,
             sweep: None,
+            reference_q: None,
             seed: 1,
             svg: None,
             json: false,
@@ -171,6 +176,13 @@ fn config(args: &SimArgs) -> SimConfig {
             dtim_period: args.dtim,
         },
         seed: args.seed,
+        references: match args.reference_q {
+            Some(q) => huddle::sim::ReferenceConfig::with_q(
+                huddle::sim::WorldModelConfig::default().local.ball,
+                q,
+            ),
+            None => huddle::sim::ReferenceConfig::default(),
+        },
         ..SimConfig::default()
     }
 }

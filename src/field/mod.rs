@@ -45,9 +45,17 @@ pub struct FieldConfig {
     pub odometry_noise_frac: f64,
     /// Speed of a kick, m/s.
     pub kick_speed_mps: f64,
+    /// Standard deviation of a kick's speed, as a fraction of it (a real foot is not
+    /// exact).
+    pub kick_speed_noise_frac: f64,
     /// Standard deviation of a kick's direction, radians.
     pub kick_noise_rad: f64,
 }
+
+/// How far beyond touching (robot radius + ball radius) a robot's foot reaches, metres.
+pub const KICK_REACH_MARGIN_M: f64 = 0.08;
+/// How far off its heading a ball may lie for the foot to meet it, radians (40°).
+pub const KICK_MAX_ANGLE_RAD: f64 = 40.0 * std::f64::consts::PI / 180.0;
 
 impl Default for FieldConfig {
     fn default() -> Self {
@@ -65,6 +73,7 @@ impl Default for FieldConfig {
             camera: CameraConfig::default(),
             odometry_noise_frac: 0.05,
             kick_speed_mps: 4.0,
+            kick_speed_noise_frac: 0.05,
             kick_noise_rad: 0.08,
         }
     }
@@ -200,17 +209,24 @@ impl World {
         };
     }
 
-    /// Robot `i` tries to kick the ball toward `direction_rad`. It works only when the
-    /// ball touches the robot's front (within ±40° of its heading); returns whether it did.
+    /// Robot `i` tries to kick the ball toward `direction_rad` (as the robot believes the
+    /// field is oriented: its heading error turns the kick by as much). It works only
+    /// when the ball is within the foot's reach in front of the robot (within
+    /// [`KICK_MAX_ANGLE_RAD`] of its heading, [`KICK_REACH_MARGIN_M`] beyond touching);
+    /// the ball leaves at the kick speed with the configured speed and direction noise.
+    /// Returns whether the foot met the ball.
     pub fn kick(&mut self, i: usize, direction_rad: f64) -> bool {
         let pose = self.robots[i].pose;
         let rel = pose.to_local(self.ball.at);
-        let reach = self.cfg.kinematics.radius_m + self.cfg.ball.radius_m + 0.08;
-        if rel.norm() > reach || rel.angle().abs() > 40f64.to_radians() {
+        let reach = self.cfg.kinematics.radius_m + self.cfg.ball.radius_m + KICK_REACH_MARGIN_M;
+        if rel.norm() > reach || rel.angle().abs() > KICK_MAX_ANGLE_RAD {
             return false;
         }
-        let noise = self.cfg.kick_noise_rad * standard_normal(&mut self.robot_rngs[i]);
-        self.ball.velocity = Vec2::from_angle(direction_rad + noise) * self.cfg.kick_speed_mps;
+        let rng = &mut self.robot_rngs[i];
+        let noise = self.cfg.kick_noise_rad * standard_normal(rng);
+        let speed = self.cfg.kick_speed_mps
+            * (1.0 + self.cfg.kick_speed_noise_frac * standard_normal(rng)).max(0.0);
+        self.ball.velocity = Vec2::from_angle(direction_rad + noise) * speed;
         true
     }
 

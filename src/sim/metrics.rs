@@ -15,29 +15,36 @@
 //!
 //! And about the world models ([`FusionMetrics`]):
 //! - **team-ball sample**: at every control tick of every live robot (goalkeeper included)
-//!   while the ball is visible (as above), once that robot's GWM, the centralized filter
-//!   and the robot's network-limited reference all have a ball: that robot's team ball
-//!   predicted to the tick, the centralized estimate at the same instant, the reference's,
-//!   and the true ball.
+//!   while the ball is visible (as above), once that robot's GWM, the centralized filters
+//!   and the robot's delivery reference all have a ball: that robot's team ball
+//!   predicted to the tick, the references' estimates at the same instant, and the true
+//!   ball.
 //! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
 //!   all team-ball samples; **ratio** = team / centralized.
-//! - **centralized with kicks**: the centralized filter also told every kick of ours as it
-//!   happens (speed, direction and their σ, as the kicker reports it). The issue's
-//!   centralized filter sees sightings only; a team that reports its kicks has more, so
-//!   this is its ceiling.
-//! - **network-limited reference**: at each robot, the centralized filter fed exactly the
-//!   ball information that has reached that robot (its own sightings and kicks at once,
-//!   teammates' batches and kick reports when their messages arrive;
-//!   `fusion::NetworkLimitedBall`): what that filter makes of what the network delivered.
-//!   Team / it measures the fusion, it / centralized with kicks measures the network.
+//! - **centralized with kicks** (cK): the centralized filter also told every kick of ours
+//!   that met the ball, as it happens (speed, direction and their σ as the kicker
+//!   reports them, contact certain). The ceiling for a team that reports its kicks.
+//! - **delivery reference**: at each robot, the centralized filter fed exactly the ball
+//!   information that reached that robot (its own sightings and kick attempts at once,
+//!   teammates' batches and kick reports when their messages arrive), each placed at its
+//!   true sender time (`super::references`). Team / it measures the fusion;
+//!   it / cK measures the network.
+//! - **delayed-centralized bound**: every sighting and kick report of the team, no loss,
+//!   each exactly the run's measured median one-way delay late. Team / it compares the
+//!   fusion with the best any fusion could do over that delay.
+//! - Every reference's filter is tuned for its own RMSE (`super::ReferenceConfig`).
 //! - **blind**: the samples of robots that have not seen the ball themselves within their
 //!   ball memory (`BrainConfig::ball_memory_s`), whose team ball is what the network
 //!   brought.
 //! - **team-ball NEES**: the position NEES eᵀ P⁻¹ e (2 degrees of freedom) averaged over all
-//!   team-ball samples. Samples close in time (and different robots' team balls at one
-//!   instant) are strongly correlated, so its χ² 95% bounds are computed for one
-//!   independent sample per [`NEES_INDEPENDENT_EVERY_S`] of ball-visible time:
-//!   N = visible time / that, bounds χ²₂ₙ(0.025, 0.975) / N.
+//!   team-ball samples, and per band of the true ball speed: **still** (below
+//!   [`STILL_BELOW_MPS`]), **rolling**, **fast** (above [`FAST_ABOVE_MPS`]). Samples close in
+//!   time (and different robots' team balls at one instant) are strongly correlated, so
+//!   each χ² 95% bound is computed for the number of independent samples the series is
+//!   worth by the method of batch means ([`NEES_BATCHES`] batches of consecutive samples,
+//!   `fusion::consistency::batch_means_effective_samples`): bounds χ²₂ₙ(0.025, 0.975) / n.
+//!   **Above 99.9%**: the share of samples whose NEES exceeds χ²₂'s 99.9% point (13.8),
+//!   0.1% for an honest filter.
 //! - **pose**: every live robot's pose estimate against its true pose at each of its
 //!   control ticks: position RMSE, heading RMSE, and the average NEES (3 dof).
 
@@ -46,10 +53,12 @@ use serde::Serialize;
 /// A handover back to the previous goer within this many seconds is a flap.
 pub const FLAP_WINDOW_S: f64 = 2.0;
 
-/// Team-ball errors this far apart count as independent for the NEES bounds: several times
-/// the time a ball error takes to be forgotten (the team filter's memory is a few
-/// publish periods; a kick resets it).
-pub const NEES_INDEPENDENT_EVERY_S: f64 = 1.0;
+/// A ball slower than this is still, m/s.
+pub const STILL_BELOW_MPS: f64 = 0.1;
+/// A ball faster than this is fast, m/s (between: rolling).
+pub const FAST_ABOVE_MPS: f64 = 1.5;
+/// Batches the NEES series is cut into for its effective sample count.
+pub const NEES_BATCHES: usize = 50;
 
 /// One team-ball sample (see the module docs): squared position errors against the true
 /// ball and position NEES.
@@ -65,8 +74,10 @@ pub struct BallSample {
     pub central_nees: f64,
     /// The centralized filter that is also told every kick as it happens, m².
     pub central_kicks_sq_m2: f64,
-    /// The network-limited reference of this robot (`fusion::NetworkLimitedBall`), m².
-    pub limited_sq_m2: f64,
+    /// The delivery reference of this robot, m².
+    pub delivery_sq_m2: f64,
+    /// The true ball's speed, m/s.
+    pub speed_mps: f64,
     /// The robot has not seen the ball itself within its ball memory: what it knows came
     /// over the network.
     pub blind: bool,
@@ -83,8 +94,8 @@ pub struct ErrorSums {
     pub central_sq_m2: f64,
     /// Σ centralized with kicks, m².
     pub central_kicks_sq_m2: f64,
-    /// Σ network-limited reference, m².
-    pub limited_sq_m2: f64,
+    /// Σ delivery reference, m².
+    pub delivery_sq_m2: f64,
 }
 
 impl ErrorSums {
@@ -93,7 +104,7 @@ impl ErrorSums {
         self.team_sq_m2 += s.team_sq_m2;
         self.central_sq_m2 += s.central_sq_m2;
         self.central_kicks_sq_m2 += s.central_kicks_sq_m2;
-        self.limited_sq_m2 += s.limited_sq_m2;
+        self.delivery_sq_m2 += s.delivery_sq_m2;
     }
 
     fn rmse(&self, sum_sq_m2: f64) -> f64 {
@@ -115,9 +126,55 @@ impl ErrorSums {
         self.rmse(self.central_kicks_sq_m2)
     }
 
-    /// Network-limited reference RMSE, m.
-    pub fn limited_rmse_m(&self) -> f64 {
-        self.rmse(self.limited_sq_m2)
+    /// Delivery reference RMSE, m.
+    pub fn delivery_rmse_m(&self) -> f64 {
+        self.rmse(self.delivery_sq_m2)
+    }
+}
+
+/// The team-ball NEES of one group of samples, with the series for its effective count.
+#[derive(Debug, Clone, Default)]
+pub struct NeesSeries {
+    /// The NEES of each sample, in time order.
+    pub series: Vec<f64>,
+    /// Samples above χ²₂'s 99.9% point.
+    pub above_999: u64,
+}
+
+impl NeesSeries {
+    fn add(&mut self, nees: f64) {
+        if !nees.is_finite() {
+            return;
+        }
+        self.series.push(nees);
+        if nees > fusion::consistency::CHI2_2DOF_999 {
+            self.above_999 += 1;
+        }
+    }
+
+    /// Samples.
+    pub fn samples(&self) -> usize {
+        self.series.len()
+    }
+
+    /// Average NEES (NaN without samples).
+    pub fn mean(&self) -> f64 {
+        self.series.iter().sum::<f64>() / self.series.len() as f64
+    }
+
+    /// Share of samples above χ²₂'s 99.9% point, percent.
+    pub fn above_999_pct(&self) -> f64 {
+        100.0 * self.above_999 as f64 / self.series.len().max(1) as f64
+    }
+
+    /// Independent samples the series is worth (batch means over [`NEES_BATCHES`]
+    /// batches); for a series too short to cut, `fallback_per_sample` of its length.
+    pub fn effective_samples(&self, fallback_per_sample: f64) -> u64 {
+        let batch = self.series.len() / NEES_BATCHES;
+        fusion::consistency::batch_means_effective_samples(&self.series, batch)
+            .unwrap_or(self.series.len() as f64 * fallback_per_sample)
+            .floor()
+            .max(1.0) as u64
     }
 }
 
@@ -128,8 +185,13 @@ pub struct FusionMetrics {
     pub all: ErrorSums,
     /// The samples of robots that did not see the ball themselves.
     pub blind: ErrorSums,
-    /// Σ position NEES of the team ball.
-    pub team_nees: f64,
+    /// The team ball's NEES, all samples.
+    pub nees: NeesSeries,
+    /// … per true ball speed: still, rolling, fast.
+    pub nees_bands: [NeesSeries; 3],
+    /// The instants of the samples and the true ball there, global `(t, x, y)`, with the
+    /// team ball's squared error: for the delayed-centralized bound.
+    pub instants: Vec<((f64, f64, f64), f64)>,
     /// Σ position NEES of the centralized filter.
     pub central_nees: f64,
     /// Ball-visible seconds (for the NEES bounds).
@@ -151,7 +213,15 @@ impl FusionMetrics {
         if s.blind {
             self.blind.add(s);
         }
-        self.team_nees += s.team_nees;
+        self.nees.add(s.team_nees);
+        let band = if s.speed_mps < STILL_BELOW_MPS {
+            0
+        } else if s.speed_mps <= FAST_ABOVE_MPS {
+            1
+        } else {
+            2
+        };
+        self.nees_bands[band].add(s.team_nees);
         self.central_nees += s.central_nees;
     }
 
@@ -170,7 +240,7 @@ impl FusionMetrics {
 
     /// Average team-ball NEES.
     pub fn team_nees(&self) -> f64 {
-        self.team_nees / self.all.samples as f64
+        self.nees.mean()
     }
 
     /// Average centralized NEES.
@@ -178,9 +248,16 @@ impl FusionMetrics {
         self.central_nees / self.all.samples as f64
     }
 
-    /// Independent samples the NEES bounds are computed for.
+    /// Independent samples the whole NEES series is worth (batch means).
     pub fn nees_independent_samples(&self) -> u64 {
-        (self.visible_s / NEES_INDEPENDENT_EVERY_S).floor().max(1.0) as u64
+        self.nees.effective_samples(1.0)
+    }
+
+    /// Independent samples of a band: its own batch means, or for a band too short to
+    /// cut, its share of the whole series' count.
+    pub fn band_independent_samples(&self, band: usize) -> u64 {
+        let per_sample = self.nees_independent_samples() as f64 / self.nees.samples().max(1) as f64;
+        self.nees_bands[band].effective_samples(per_sample)
     }
 
     /// χ² 95% bounds of the average 2-dof NEES over [`Self::nees_independent_samples`]
@@ -404,17 +481,32 @@ mod tests {
     }
 
     #[test]
-    fn the_team_ball_nees_bounds_are_for_one_sample_per_second_of_visible_time() {
-        // 300 s of ball-visible time: 300 independent 2-dof samples. χ²₆₀₀(0.025) =
-        // 534.02, χ²₆₀₀(0.975) = 669.77 (exact, by the incomplete gamma function).
-        let f = FusionMetrics {
-            visible_s: 300.5,
-            ..FusionMetrics::default()
-        };
-        assert_eq!(f.nees_independent_samples(), 300);
-        let (lo, hi) = f.nees_bounds();
-        assert!((lo - 534.02 / 300.0).abs() < 0.001, "{lo}");
-        assert!((hi - 669.77 / 300.0).abs() < 0.001, "{hi}");
+    fn the_team_ball_nees_bounds_count_a_correlated_series_by_its_batch_means() {
+        // 600 independent NEES values, each held for 25 robot ticks (a team ball that
+        // changes slowly): 15,000 samples worth about 600, and the bounds are for those.
+        let mut f = FusionMetrics::default();
+        let mut state = 7u64;
+        for _ in 0..600 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            let u = ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+            let nees = -2.0 * u.ln(); // χ²₂
+            for _ in 0..25 {
+                f.nees.add(nees);
+            }
+        }
+        let n = f.nees_independent_samples();
+        assert!(
+            (300..=1200).contains(&n),
+            "15,000 samples of 600 values: worth {n} independent ones"
+        );
+        assert_eq!(f.nees_bounds(), fusion::consistency::nees_bounds(2, n));
+        assert!(
+            f.nees.above_999_pct() < 1.0,
+            "χ²₂ values rarely pass the 99.9% point: {}%",
+            f.nees.above_999_pct()
+        );
     }
 
     #[test]

@@ -14,6 +14,7 @@
 
 pub mod metrics;
 pub mod perception;
+pub mod references;
 pub mod robot;
 pub mod svg;
 
@@ -30,7 +31,8 @@ use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use crate::harness::{Harness, HarnessError};
 pub use metrics::{BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
-pub use robot::{BrainConfig, Robot, TickInput, WorldModelConfig};
+pub use references::{DelayedCentral, DeliveryReference, Publications, ReferenceConfig};
+pub use robot::{BrainConfig, Percepts, Robot, TickInput, TickOutput, WorldModelConfig};
 
 /// The network the team plays on: a netsim preset with optional overrides.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -136,6 +138,9 @@ pub struct SimConfig {
     pub field: FieldConfig,
     /// How robots sense and play.
     pub brain: BrainConfig,
+    /// The references' filters (each tuned for its own RMSE).
+    #[serde(skip)]
+    pub references: ReferenceConfig,
     /// Arbitration parameters.
     #[serde(skip)]
     pub arbitration: ArbitrationParams,
@@ -161,6 +166,7 @@ impl Default for SimConfig {
             seed: 1,
             field: FieldConfig::default(),
             brain: BrainConfig::default(),
+            references: ReferenceConfig::default(),
             arbitration: ArbitrationParams::default(),
             compensate_latency: true,
             refresh_period: Duration::from_millis(100),
@@ -223,9 +229,21 @@ pub struct Simulation {
     pub fusion: FusionMetrics,
     /// The reference: one ball filter fed every robot's sightings at once, no network.
     pub central: CentralizedBall,
-    /// The same fed every kick as well, as it happens: the ceiling for a team that reports
-    /// its kicks (as huddle's robots do).
+    /// The same told every kick that met the ball, as it happens (cK): the ceiling for a
+    /// team that reports its kicks.
     pub central_kicks: CentralizedBall,
+    /// Per robot: the centralized filter fed what that robot received, at true times.
+    pub delivery: Vec<DeliveryReference>,
+    /// The delayed-centralized bound's record.
+    pub delayed: DelayedCentral,
+    /// When each robot published each LWM version (global seconds).
+    pub publications: Publications,
+    /// Kick attempts the robots swung, and how many met the ball.
+    pub kick_attempts: u64,
+    /// Kicks that met the ball.
+    pub kick_contacts: u64,
+    /// Shots and passes that met the ball.
+    pub contacts: robot::PlayCounts,
     /// Who went when.
     pub timeline: Timeline,
     /// Field snapshots for the picture.
@@ -310,8 +328,13 @@ impl Simulation {
                 )
             })
             .collect();
-        let central = CentralizedBall::new(world_model.local.ball);
-        let central_kicks = central.clone();
+        let central = CentralizedBall::new(cfg.references.central);
+        let central_kicks = CentralizedBall::new(cfg.references.central_kicks);
+        let delivery = (0..n)
+            .map(|_| {
+                DeliveryReference::new(cfg.references.delivery, n, world_model.global.stale_after_s)
+            })
+            .collect();
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
         let replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
@@ -329,6 +352,12 @@ impl Simulation {
             fusion: FusionMetrics::default(),
             central,
             central_kicks,
+            delivery,
+            delayed: DelayedCentral::default(),
+            publications: Publications::new(n),
+            kick_attempts: 0,
+            kick_contacts: 0,
+            contacts: robot::PlayCounts::default(),
             snapshots: Vec::new(),
             homes,
             holders,
@@ -365,7 +394,9 @@ impl Simulation {
                     continue;
                 };
                 let now = self.harness.local_now(i);
-                if let Some((key, value)) = self.robots[i].redecide(t, replica.blackboard(), now) {
+                if let Some((key, value)) =
+                    self.robots[i].redecide(robot::seconds(now), replica.blackboard(), now)
+                {
                     self.harness
                         .set(i, &key, value)
                         .expect("robots only write their own valid keys");
@@ -379,30 +410,35 @@ impl Simulation {
             let Some(replica) = self.harness.replica(i) else {
                 continue;
             };
+            // The robot's senses: all it gets of the world.
+            let percepts = Percepts {
+                frame: self.world.look(i),
+                odometry: self.world.read_odometry(i),
+            };
+            let local_now = self.harness.local_now(i);
             let input = TickInput {
-                t_s: t,
-                local_now: self.harness.local_now(i),
+                local_now,
+                percepts,
                 board: replica.blackboard(),
                 homes: &self.homes,
                 holders: &self.holders,
             };
-            let writes = self.robots[i].tick(&mut self.world, &self.cfg.brain, input);
-            for (key, value) in writes {
+            let out = self.robots[i].tick(self.world.config(), &self.cfg.brain, input);
+            if let Some(cmd) = out.command {
+                self.world.command_believed(i, cmd, &out.believed);
+            }
+            for (key, value) in out.writes {
+                let lwm = key.path() == "world.local";
                 // Our own keys of valid shape: a refusal would be a bug worth seeing.
                 self.harness
                     .set(i, &key, value)
                     .expect("robots only write their own valid keys");
+                if lwm {
+                    self.record_publication(i, t);
+                }
             }
-            let r = &self.robots[i];
-            if let Some(s) = &r.ball_sighting {
-                self.central.sighting(t, r.lwm.pose(), s);
-                self.central_kicks.sighting(t, r.lwm.pose(), s);
-            }
-            if let Some(kick) = &r.kicked {
-                // A kick is a control input the team knows, like the sightings: this
-                // reference has it as it happens, with no network in between.
-                self.central_kicks.kick(&fusion::Kick { t_s: t, ..*kick });
-            }
+            self.judge_kick(i, t, out.kick.as_ref());
+            self.feed_references(i, t);
             ticked.push(i);
         }
         self.harness.flush();
@@ -414,9 +450,11 @@ impl Simulation {
             for i in 0..self.robots.len() {
                 let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6 + dt;
                 self.robots[i].forget_ball(now_s);
+                self.delivery[i].forget(now_s);
             }
             self.central.forget();
             self.central_kicks.forget();
+            self.delayed.forget(t + dt);
         }
         self.step += 1;
         let t_end = self.time_s();
@@ -443,6 +481,74 @@ impl Simulation {
                 ball: self.world.ball.at,
             });
         }
+    }
+
+    /// Robot `i` published its LWM at global `t_s`: remember which version that was, for
+    /// the delivery references' true times.
+    fn record_publication(&mut self, i: usize, t_s: f64) {
+        let id = self.robots[i].id;
+        if let Some(e) = self
+            .harness
+            .replica(i)
+            .and_then(|r| r.blackboard().get(&robot::world_local_of(id)))
+        {
+            self.publications.record(i, e.version, t_s);
+        }
+    }
+
+    /// The world carries out robot `i`'s kick attempt, turned by the robot's heading error
+    /// as its motion is; the references that are told kicks hear of it.
+    fn judge_kick(&mut self, i: usize, t_s: f64, attempt: Option<&robot::KickAttempt>) {
+        let Some(a) = attempt else {
+            return;
+        };
+        self.kick_attempts += 1;
+        let truth = self.world.robots[i].pose.theta_rad;
+        let off = fusion::wrap_angle(truth - self.robots[i].pose_belief.theta_rad);
+        let met = self.world.kick(i, a.direction_rad + off);
+        // The team knows the attempt (the kicker's report, its contact odds included).
+        self.delayed.kick(&fusion::Kick { t_s, ..a.report });
+        if met {
+            self.kick_contacts += 1;
+            if a.receiver != 0 {
+                self.contacts.passes += 1;
+            } else {
+                self.contacts.shots += 1;
+            }
+            // cK is told every kick that met the ball, as it happens, for sure.
+            self.central_kicks.kick(&fusion::Kick {
+                t_s,
+                contact_prob: 1.0,
+                ..a.report
+            });
+        }
+    }
+
+    /// Robot `i`'s sighting and kick into the references, and what its replica received
+    /// into its delivery reference.
+    fn feed_references(&mut self, i: usize, t_s: f64) {
+        let r = &self.robots[i];
+        let now_s = robot::seconds(self.harness.local_now(i));
+        if let Some(s) = &r.ball_sighting {
+            self.central.sighting(t_s, r.lwm.pose(), s);
+            self.central_kicks.sighting(t_s, r.lwm.pose(), s);
+            self.delayed.sighting(t_s, r.lwm.pose(), s);
+            self.delivery[i].own_sighting(&r.lwm.field_observation(now_s, s));
+        }
+        if let Some(kick) = &r.kicked {
+            self.delivery[i].own_kick(kick);
+        }
+        let Some(replica) = self.harness.replica(i) else {
+            return;
+        };
+        let harness = &self.harness;
+        let publications = &self.publications;
+        self.delivery[i].receive(i, replica.blackboard(), now_s, |j, version| {
+            let sent = publications.sent_at(j, version)?;
+            Some(robot::seconds(
+                harness.local_at(i, Time::from_secs_f64(sent)),
+            ))
+        });
     }
 
     /// The world-model figures at `t_s` for the robots that ticked then (see
@@ -472,11 +578,11 @@ impl Simulation {
             }
             let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6;
             let own = r.lwm.ball_at(now_s);
-            let (Some(team), Some(c), Some(ck), Some(limited)) = (
+            let (Some(team), Some(c), Some(ck), Some(delivery)) = (
                 r.gwm.team_ball(now_s, own.as_ref()),
                 central,
                 central_kicks,
-                r.reference.estimate_at(now_s),
+                self.delivery[i].estimate_at(now_s),
             ) else {
                 continue;
             };
@@ -494,9 +600,11 @@ impl Simulation {
                 central_sq_m2: ce,
                 central_nees: pos_nees(&c),
                 central_kicks_sq_m2: (ck.position() - truth).norm_squared(),
-                limited_sq_m2: (limited.position() - truth).norm_squared(),
+                delivery_sq_m2: (delivery.position() - truth).norm_squared(),
+                speed_mps: self.world.ball.velocity.norm(),
                 blind: r.ball.is_none(),
             });
+            self.fusion.instants.push(((t_s, truth.x, truth.y), te));
         }
     }
 
@@ -514,7 +622,9 @@ impl Simulation {
 
     /// Switch robot `i` off (it stops and falls silent).
     pub fn kill(&mut self, i: usize) {
-        self.robots[i].kill(&mut self.world);
+        let stop = self.robots[i].kill();
+        let believed = self.robots[i].pose_belief;
+        self.world.command_believed(i, stop, &believed);
         self.harness.kill(i);
     }
 
@@ -535,6 +645,37 @@ impl Simulation {
             }
         };
         let simulated_s = self.time_s();
+        let delayed = self.delayed.squared_errors(
+            self.cfg.references.delayed,
+            delay_p50.as_secs_f64(),
+            &self
+                .fusion
+                .instants
+                .iter()
+                .map(|&(at, _)| at)
+                .collect::<Vec<_>>(),
+        );
+        let (mut team_sq, mut delayed_sq, mut delayed_n) = (0.0, 0.0, 0u64);
+        for (&(_, te), d) in self.fusion.instants.iter().zip(&delayed) {
+            if let Some(d) = d {
+                team_sq += te;
+                delayed_sq += d;
+                delayed_n += 1;
+            }
+        }
+        let delayed_rmse = (delayed_sq / delayed_n as f64).sqrt();
+        let team_rmse_on_delayed = (team_sq / delayed_n as f64).sqrt();
+        let band = |k: usize| {
+            let n = f.band_independent_samples(k);
+            let (lo, hi) = fusion::consistency::nees_bounds(2, n);
+            NeesBand {
+                nees: round3(f.nees_bands[k].mean()),
+                bounds: [round3(lo), round3(hi)],
+                samples: f.nees_bands[k].samples() as u64,
+                independent_samples: n,
+                above_999_pct: round3(f.nees_bands[k].above_999_pct()),
+            }
+        };
         Report {
             robots: self.cfg.robots,
             duration_s: simulated_s,
@@ -561,26 +702,36 @@ impl Simulation {
             flaps_per_min: round3(m.flaps_per_min()),
             goals_for: self.world.goals_for,
             goals_against: self.world.goals_against,
-            shots: self.robots.iter().map(|r| r.counts.shots).sum(),
-            passes: self.robots.iter().map(|r| r.counts.passes).sum(),
+            shots: self.contacts.shots,
+            passes: self.contacts.passes,
+            kick_attempts: self.kick_attempts,
+            kick_contact_pct: round3(
+                100.0 * self.kick_contacts as f64 / self.kick_attempts.max(1) as f64,
+            ),
             frames_sent: net.sent,
             frames_delivered: net.delivered,
             frames_lost: net.lost_total(),
             team_ball_rmse_m: round4(f.all.team_rmse_m()),
             centralized_rmse_m: round4(f.all.central_rmse_m()),
             rmse_ratio: round3(f.all.team_rmse_m() / f.all.central_rmse_m()),
-            network_limited_rmse_m: round4(f.all.limited_rmse_m()),
-            fusion_ratio: round3(f.all.team_rmse_m() / f.all.limited_rmse_m()),
-            network_ratio: round3(f.all.limited_rmse_m() / f.all.central_kicks_rmse_m()),
+            delivery_rmse_m: round4(f.all.delivery_rmse_m()),
+            delivery_ratio: round3(f.all.team_rmse_m() / f.all.delivery_rmse_m()),
+            network_ratio: round3(f.all.delivery_rmse_m() / f.all.central_kicks_rmse_m()),
+            delayed_centralized_rmse_m: round4(delayed_rmse),
+            delayed_centralized_ratio: round3(team_rmse_on_delayed / delayed_rmse),
             centralized_kicks_rmse_m: round4(f.all.central_kicks_rmse_m()),
             rmse_ratio_kicks: round3(f.all.team_rmse_m() / f.all.central_kicks_rmse_m()),
             blind_samples: f.blind.samples,
             blind_team_ball_rmse_m: round4(f.blind.team_rmse_m()),
             blind_centralized_rmse_m: round4(f.blind.central_rmse_m()),
-            blind_network_limited_rmse_m: round4(f.blind.limited_rmse_m()),
+            blind_delivery_rmse_m: round4(f.blind.delivery_rmse_m()),
             team_ball_nees: round3(f.team_nees()),
             team_ball_nees_bounds: [round3(nees_lo), round3(nees_hi)],
             team_ball_nees_samples: f.nees_independent_samples(),
+            team_ball_nees_above_999_pct: round3(f.nees.above_999_pct()),
+            team_ball_nees_still: band(0),
+            team_ball_nees_rolling: band(1),
+            team_ball_nees_fast: band(2),
             centralized_nees: round3(f.central_nees()),
             team_ball_samples: f.samples(),
             pose_rmse_m: round4(f.pose_rmse_m()),
@@ -655,10 +806,14 @@ pub struct Report {
     pub goals_for: u32,
     /// Goals against us.
     pub goals_against: u32,
-    /// Shots kicked.
+    /// Shots that met the ball.
     pub shots: u32,
-    /// Passes kicked.
+    /// Passes that met the ball.
     pub passes: u32,
+    /// Kicks the robots swung (each reported to the team with its kicker's odds).
+    pub kick_attempts: u64,
+    /// The share of them that met the ball, percent.
+    pub kick_contact_pct: f64,
     /// Frames sent into the network (one per multicast transmission per receiver).
     pub frames_sent: u64,
     /// Frames delivered.
@@ -673,35 +828,47 @@ pub struct Report {
     pub centralized_rmse_m: f64,
     /// team_ball_rmse_m / centralized_rmse_m.
     pub rmse_ratio: f64,
-    /// The centralized filter that also knows every kick as it happens, m: the ceiling for
-    /// a team that reports its kicks, as huddle's robots do (the centralized filter
-    /// sees sightings only).
+    /// The centralized filter that also knows every kick that met the ball as it happens
+    /// (cK), m: the ceiling for a team that reports its kicks.
     pub centralized_kicks_rmse_m: f64,
     /// team_ball_rmse_m / centralized_kicks_rmse_m.
     pub rmse_ratio_kicks: f64,
-    /// The network-limited reference at the same instants, m: at each robot, the
-    /// centralized filter fed exactly the ball information that had reached it (see
-    /// [`metrics`]); what the centralized filter makes of what this network delivered.
-    pub network_limited_rmse_m: f64,
-    /// team_ball_rmse_m / network_limited_rmse_m: what the fusion itself costs.
-    pub fusion_ratio: f64,
-    /// network_limited_rmse_m / centralized_kicks_rmse_m: what the network costs (both know
-    /// the kicks; the reference only once their reports arrive).
+    /// The delivery reference at the same instants, m: at each robot, the centralized
+    /// filter fed exactly the ball information that reached it, each piece at its true
+    /// sender time (see [`metrics`]).
+    pub delivery_rmse_m: f64,
+    /// team_ball_rmse_m / delivery_rmse_m: what the fusion itself costs.
+    pub delivery_ratio: f64,
+    /// delivery_rmse_m / centralized_kicks_rmse_m: what the network costs.
     pub network_ratio: f64,
+    /// The delayed-centralized bound, m: every sighting and kick report, no loss, each
+    /// exactly the median delay (`delay_p50_ms`) late.
+    pub delayed_centralized_rmse_m: f64,
+    /// team_ball_rmse_m / delayed_centralized_rmse_m (over the samples where the bound has
+    /// a ball).
+    pub delayed_centralized_ratio: f64,
     /// Samples of robots that had not seen the ball themselves within their ball memory.
     pub blind_samples: u64,
     /// Team-ball RMSE over those samples, m.
     pub blind_team_ball_rmse_m: f64,
     /// Centralized RMSE over those samples, m.
     pub blind_centralized_rmse_m: f64,
-    /// Network-limited reference RMSE over those samples, m.
-    pub blind_network_limited_rmse_m: f64,
+    /// Delivery reference RMSE over those samples, m.
+    pub blind_delivery_rmse_m: f64,
     /// Average position NEES (2 dof) of the team ball over the same samples.
     pub team_ball_nees: f64,
     /// Its χ² 95% bounds for `team_ball_nees_samples` independent samples.
     pub team_ball_nees_bounds: [f64; 2],
-    /// Independent samples the bounds assume (one per second of ball-visible time).
+    /// Independent samples the bounds assume (batch means of the NEES series).
     pub team_ball_nees_samples: u64,
+    /// Share of samples above χ²₂'s 99.9% point, percent (0.1 for an honest filter).
+    pub team_ball_nees_above_999_pct: f64,
+    /// The team-ball NEES while the true ball is still.
+    pub team_ball_nees_still: NeesBand,
+    /// … rolling.
+    pub team_ball_nees_rolling: NeesBand,
+    /// … fast.
+    pub team_ball_nees_fast: NeesBand,
     /// Average position NEES of the centralized filter.
     pub centralized_nees: f64,
     /// Team-ball samples (robot ticks) behind the RMSEs.
@@ -715,6 +882,21 @@ pub struct Report {
     /// Simulated seconds per wall-clock second (the only field that varies between runs
     /// with the same seed).
     pub sim_speed_x: f64,
+}
+
+/// The team-ball NEES over one band of true ball speeds (see [`metrics`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NeesBand {
+    /// Average position NEES (2 dof).
+    pub nees: f64,
+    /// Its χ² 95% bounds for `independent_samples`.
+    pub bounds: [f64; 2],
+    /// Samples in the band.
+    pub samples: u64,
+    /// Independent samples they are worth (batch means).
+    pub independent_samples: u64,
+    /// Share above χ²₂'s 99.9% point, percent.
+    pub above_999_pct: f64,
 }
 
 /// One report as a row of `huddle sim --sweep` (the figures that move with the network).
@@ -783,8 +965,8 @@ impl std::fmt::Display for Report {
         )?;
         writeln!(
             f,
-            "play                  {} shots, {} passes, goals {}–{}",
-            self.shots, self.passes, self.goals_for, self.goals_against
+            "play                  {} shots, {} passes, goals {}–{}; {} kicks swung, {:.0}% met the ball",
+            self.shots, self.passes, self.goals_for, self.goals_against, self.kick_attempts, self.kick_contact_pct
         )?;
         writeln!(
             f,
@@ -803,15 +985,20 @@ impl std::fmt::Display for Report {
         )?;
         writeln!(
             f,
-            "  network-limited     {:>9.4} m  (centralized fed what reached each robot: fusion costs ×{:.3}, the network ×{:.3})",
-            self.network_limited_rmse_m, self.fusion_ratio, self.network_ratio
+            "  delivery reference  {:>9.4} m  (centralized fed what reached each robot, at true times: fusion costs ×{:.3}, the network ×{:.3})",
+            self.delivery_rmse_m, self.delivery_ratio, self.network_ratio
         )?;
         writeln!(
             f,
-            "  robots blind to it  {:>9.4} m  (centralized {:.4} m, network-limited {:.4} m; {} robot ticks)",
+            "  delayed centralized {:>9.4} m  (every sighting {:.0} ms late, no loss: team ×{:.3})",
+            self.delayed_centralized_rmse_m, self.delay_p50_ms, self.delayed_centralized_ratio
+        )?;
+        writeln!(
+            f,
+            "  robots blind to it  {:>9.4} m  (centralized {:.4} m, delivery {:.4} m; {} robot ticks)",
             self.blind_team_ball_rmse_m,
             self.blind_centralized_rmse_m,
-            self.blind_network_limited_rmse_m,
+            self.blind_delivery_rmse_m,
             self.blind_samples
         )?;
         writeln!(
@@ -822,6 +1009,22 @@ impl std::fmt::Display for Report {
             self.team_ball_nees_bounds[1],
             self.team_ball_nees_samples,
             self.centralized_nees
+        )?;
+        for (name, b) in [
+            ("still", &self.team_ball_nees_still),
+            ("rolling", &self.team_ball_nees_rolling),
+            ("fast", &self.team_ball_nees_fast),
+        ] {
+            writeln!(
+                f,
+                "  {name:<8}            {:>9.3}    (bounds [{:.3}, {:.3}] for {} of {} samples; {:.2}% above the 99.9% point)",
+                b.nees, b.bounds[0], b.bounds[1], b.independent_samples, b.samples, b.above_999_pct
+            )?;
+        }
+        writeln!(
+            f,
+            "  above 99.9% point   {:>9.3} %  (0.1% for an honest filter)",
+            self.team_ball_nees_above_999_pct
         )?;
         writeln!(
             f,

@@ -5,7 +5,12 @@
 //! blackboard writes (returned by [`Robot::tick`]), so the replica and the simulated
 //! network carry it.
 //!
-//! A robot has no truth. Its pose is its local world model's (`fusion::LocalModel`: a pose
+//! A robot has no truth, by construction: this module never sees the simulator's
+//! [`World`](crate::field::World). A tick takes [`Percepts`] (its camera frame and its
+//! odometry, as the simulator made them) and its own clock, and returns a [`TickOutput`]:
+//! blackboard writes, a motion command and maybe a kick attempt, which the simulator
+//! carries out. Whether a kick met the ball is for the world to find out; the robot
+//! reports the attempt with its own probability of contact. Its pose is its local world model's (`fusion::LocalModel`: a pose
 //! EKF on its noisy odometry and landmark sightings), its ball is its own ball EKF, and the
 //! team ball is its global world model's (`fusion::GlobalModel`), fused from the LWMs its
 //! teammates publish as `*.var.world.local` and its replica hands it with receiver-side
@@ -20,13 +25,12 @@
 
 use comms::arbitration::{self, heuristic, Arbiter, ArbitrationParams, BallView, Decision, Posted};
 use comms::{Blackboard, Instant, Key, Scope, Value};
-use fusion::nalgebra::{Matrix3, Vector3};
+use fusion::nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use fusion::{
-    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, Heard, Kick, LocalConfig,
-    LocalModel, NetworkLimitedBall, PoseNoise, TeamBall,
+    BallFilterConfig, BallSighting, GlobalConfig, GlobalModel, Kick, LocalConfig, LocalModel,
+    PoseNoise, TeamBall,
 };
 use serde::Serialize;
-use std::collections::BTreeMap;
 use std::time::Duration;
 
 use super::perception;
@@ -36,7 +40,7 @@ use crate::field::body::{MotionCommand, Odometry};
 use crate::field::camera::Frame;
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::tactics::{self, choose_play, mode, Mode, PassParams, Play};
-use crate::field::{FieldConfig, World};
+use crate::field::{FieldConfig, KICK_MAX_ANGLE_RAD, KICK_REACH_MARGIN_M};
 
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub fn pass_to_key() -> Key {
@@ -52,17 +56,14 @@ fn world_local_key() -> Key {
 }
 
 /// A robot clock reading in seconds.
-fn seconds(t: Instant) -> f64 {
+pub fn seconds(t: Instant) -> f64 {
     t.as_micros() as f64 * 1e-6
 }
 
-fn world_local_of(id: u8) -> Key {
+/// The key robot `id`'s LWM is held under on a teammate's blackboard.
+pub fn world_local_of(id: u8) -> Key {
     Key::new(Scope::Robot(id), comms::Kind::Var, "world.local").expect("a valid key")
 }
-
-/// How long the network-limited reference keeps observations re-orderable: above the
-/// worst delay plus the two repeats' reach (as the GWM's commit lag).
-const REFERENCE_WINDOW_S: f64 = 0.5;
 
 /// How the robots' world models are set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,6 +82,9 @@ pub struct WorldModelConfig {
     /// σ of a kick's speed as the kicker reports it (its direction σ is the field's kick
     /// noise), m/s.
     pub kick_speed_sigma_mps: f64,
+    /// A robot lined up for a kick swings only if its own estimate gives at least this
+    /// probability that the ball is within its foot's reach.
+    pub kick_min_contact_prob: f64,
 }
 
 impl Default for WorldModelConfig {
@@ -116,9 +120,10 @@ impl Default for WorldModelConfig {
             start_sigma_m: 0.05,
             start_sigma_rad: 0.05,
             push_sigma_m: 0.005,
-            // The field's kicks leave at exactly `kick_speed_mps`; a real foot does not,
-            // and the ball may graze the robot as it leaves: 5%.
+            // The field's kicks leave at `kick_speed_mps` give or take the field's speed
+            // noise (5%), as a real foot does: the kicker reports the same σ.
             kick_speed_sigma_mps: 0.2,
+            kick_min_contact_prob: 0.5,
         }
     }
 }
@@ -169,17 +174,53 @@ impl Default for BrainConfig {
 pub struct BallBelief {
     /// Its own ball EKF's position now, field frame, metres.
     pub at: Vec2,
-    /// When it was last seen, seconds of simulated time.
+    /// When it was last seen, seconds on the robot's clock.
     pub seen_at_s: f64,
 }
 
-/// Counts of what the active robots did.
+/// Counts of what the active robots tried (whether the foot met the ball is the world's
+/// business: see the simulation's counts).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct PlayCounts {
-    /// Shots kicked.
+    /// Shots attempted.
     pub shots: u32,
-    /// Passes kicked.
+    /// Passes attempted.
     pub passes: u32,
+}
+
+/// What a robot's sensors gave it this tick: all it knows of the world outside itself.
+#[derive(Debug, Clone, Default)]
+pub struct Percepts {
+    /// The camera frame.
+    pub frame: Frame,
+    /// Odometry measured over the latest control period.
+    pub odometry: Odometry,
+}
+
+/// A kick the robot swings: the direction it aims, the receiver (0: a shot), and what it
+/// told the team (with its own probability of contact).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KickAttempt {
+    /// Field-frame direction, rad, as the robot believes the field is oriented.
+    pub direction_rad: f64,
+    /// The pass receiver, 0 for a shot.
+    pub receiver: i64,
+    /// The report it published.
+    pub report: Kick,
+}
+
+/// What a tick hands back to the simulator.
+#[derive(Debug, Clone)]
+pub struct TickOutput {
+    /// Blackboard writes to make through the robot's replica.
+    pub writes: Vec<(Key, Value)>,
+    /// The motion command, worked out in the field frame as the robot believes it is
+    /// posed (`None`: carry on with the previous one).
+    pub command: Option<MotionCommand>,
+    /// The pose it believes (the frame `command` is meant in).
+    pub believed: Pose,
+    /// A kick it swings, if any.
+    pub kick: Option<KickAttempt>,
 }
 
 /// One of our robots.
@@ -205,12 +246,7 @@ pub struct Robot {
     pub gwm: GlobalModel,
     /// The team ball at its latest tick.
     pub team_ball: Option<TeamBall>,
-    /// The yardstick of its team ball: the centralized filter fed exactly the ball
-    /// information that reached this robot (measurement only; it never steers play).
-    pub reference: NetworkLimitedBall,
-    /// Per teammate: what the reference has taken from its messages.
-    reference_heard: BTreeMap<u8, Heard>,
-    /// The kick it made at its latest tick, if any.
+    /// The kick it attempted at its latest tick, if any.
     pub kicked: Option<Kick>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
     pub ball_sighting: Option<BallSighting>,
@@ -239,10 +275,10 @@ pub struct Robot {
 
 /// Everything a tick needs from outside the robot.
 pub struct TickInput<'a> {
-    /// Simulated time now, seconds.
-    pub t_s: f64,
     /// The robot's own clock now (its replica's clock).
     pub local_now: Instant,
+    /// What its sensors gave it.
+    pub percepts: Percepts,
     /// Its replica's blackboard.
     pub board: &'a Blackboard,
     /// The formation's home spots for the field positions.
@@ -280,8 +316,6 @@ impl Robot {
             ball: None,
             lwm: LocalModel::new(world_model.local, start),
             gwm: GlobalModel::new(id, world_model.global),
-            reference: NetworkLimitedBall::new(world_model.local.ball, REFERENCE_WINDOW_S),
-            reference_heard: BTreeMap::new(),
             kicked: None,
             team_ball: None,
             ball_sighting: None,
@@ -318,20 +352,20 @@ impl Robot {
         self.alive && self.arbiter.going()
     }
 
-    /// One control tick: sense, decide, act. Returns the blackboard writes to make
-    /// through the robot's replica.
+    /// One control tick: sense, decide, act. `field` is what the robot knows of the field
+    /// beforehand (its geometry, its own body and sensors' calibration).
     pub fn tick(
         &mut self,
-        world: &mut World,
+        field: &FieldConfig,
         cfg: &BrainConfig,
-        input: TickInput<'_>,
-    ) -> Vec<(Key, Value)> {
-        let i = usize::from(self.id - 1);
-        let t = input.t_s;
+        mut input: TickInput<'_>,
+    ) -> TickOutput {
+        let t = seconds(input.local_now);
         self.kicked = None;
-        self.frame = world.look(i);
-        self.odometry = world.read_odometry(i);
-        let lwm_bytes = self.perceive(world.config(), cfg, &input);
+        let percepts = std::mem::take(&mut input.percepts);
+        self.frame = percepts.frame;
+        self.odometry = percepts.odometry;
+        let lwm_bytes = self.perceive(field, cfg, &input);
         if self.frame.opponent_goal_in_view {
             self.goal_seen_at_s = Some(t);
         }
@@ -373,12 +407,17 @@ impl Robot {
         if let Some(bytes) = lwm_bytes {
             writes.push((world_local_key(), bytes));
         }
-        let receiver = self.act(world, cfg, &input);
+        let (receiver, command, kick) = self.act(field, cfg, &input);
         if receiver != self.pass_to_posted {
             self.pass_to_posted = receiver;
             writes.push((pass_to_key(), Value::Int(receiver)));
         }
-        writes
+        TickOutput {
+            writes,
+            command,
+            believed: self.pose_belief,
+            kick,
+        }
     }
 
     /// Run the arbitration on the current cost and what the replica has heard.
@@ -393,7 +432,8 @@ impl Robot {
 
     /// Between control ticks: decide again on the latest cost with whatever the replica
     /// heard since (a robot reacts to a teammate's claim when it arrives, not at its next
-    /// camera frame). Returns the write to make if its claim changed.
+    /// camera frame); `t_s` is the robot's clock in seconds. Returns the write to make if
+    /// its claim changed.
     pub fn redecide(
         &mut self,
         t_s: f64,
@@ -436,13 +476,11 @@ impl Robot {
         self.ball_sighting = self.frame.ball.map(|s| perception::ball_sighting(&cam, &s));
         if let Some(s) = &self.ball_sighting {
             self.lwm.ball_sighting(now_s, s);
-            self.reference
-                .observe(&self.lwm.field_observation(now_s, s));
-            self.ball_seen_at_s = Some(input.t_s);
+            self.ball_seen_at_s = Some(now_s);
         }
         let recent = self
             .ball_seen_at_s
-            .filter(|&seen| input.t_s - seen <= cfg.ball_memory_s);
+            .filter(|&seen| now_s - seen <= cfg.ball_memory_s);
         let own = self.lwm.ball_at(now_s);
         self.ball = recent.and_then(|seen_at_s| {
             own.map(|b| BallBelief {
@@ -468,11 +506,9 @@ impl Robot {
                 // A malformed message is the sender's bug; the GWM just does not take it.
                 if let Ok(lwm) = self.gwm.decode(bytes, now_s, age_s) {
                     self.gwm.ingest(id, &lwm, now_s);
-                    self.reference_receive(id, &lwm);
                 }
             }
         }
-        self.reference.settle(now_s);
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
         self.team_ball = self
@@ -480,21 +516,6 @@ impl Robot {
             .team_ball(now_s, own.as_ref())
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
         msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
-    }
-
-    /// A teammate's LWM into the reference: each batch and kick once, the repeats of lost
-    /// messages included (as the GWM takes them).
-    fn reference_receive(&mut self, id: u8, lwm: &fusion::LocalWorldModel) {
-        let heard = self.reference_heard.entry(id).or_default();
-        let Some(missed) = heard.take(lwm, self.gwm.config().stale_after_s) else {
-            return;
-        };
-        for obs in missed.into_iter().flatten().chain(lwm.observation) {
-            self.reference.observe(&obs);
-        }
-        if let Some(kick) = heard.kick(lwm) {
-            self.reference.kick(&kick);
-        }
     }
 
     /// The team ball if there is a usable one, else the robot's own.
@@ -505,27 +526,32 @@ impl Robot {
     }
 
     /// Move (and maybe kick) according to the mode; returns the pass receiver to
-    /// announce (0: none).
-    fn act(&mut self, world: &mut World, cfg: &BrainConfig, input: &TickInput<'_>) -> i64 {
-        let i = usize::from(self.id - 1);
-        let field = *world.config();
+    /// announce (0: none), the motion command and a kick attempt.
+    fn act(
+        &mut self,
+        field: &FieldConfig,
+        cfg: &BrainConfig,
+        input: &TickInput<'_>,
+    ) -> (i64, Option<MotionCommand>, Option<KickAttempt>) {
+        let now_s = seconds(input.local_now);
         let top = field.kinematics.top_speed_mps;
         let pose = self.pose_belief;
         let ball = self.best_ball();
         let own_ball = self.ball.map(|b| b.at);
-        let my_home = |k: usize| behaviour::flexible_home(&field, input.homes[k], ball);
+        let my_home = |k: usize| behaviour::flexible_home(field, input.homes[k], ball);
         let cmd = match (self.mode, self.position) {
-            (_, Position::Goalkeeper) => behaviour::keep_goal(&field, &pose, ball, top),
+            (_, Position::Goalkeeper) => behaviour::keep_goal(field, &pose, ball, top),
             (Mode::Active, Position::Field(k)) => {
                 // Its own ball, relative to its own pose: the geometry the camera measured.
+                // No ball at all: it carries on as it was.
                 let Some(b) = own_ball.or(ball) else {
-                    return 0;
+                    return (0, None, None);
                 };
                 let goal = field.opponent_goal();
                 let receivers: Vec<(u8, Vec2)> = behaviour::receivers_of(input.homes, k)
                     .into_iter()
                     .map(|j| {
-                        let at = behaviour::flexible_home(&field, input.homes[j], ball);
+                        let at = behaviour::flexible_home(field, input.homes[j], ball);
                         (input.holders[j], at)
                     })
                     .collect();
@@ -544,35 +570,40 @@ impl Robot {
                     }
                     Play::Shoot { .. } => (goal, 0),
                 };
-                let action = behaviour::approach_and_push(&field, &pose, b, aim, top);
-                world.command_believed(i, action.motion, &pose);
+                let action = behaviour::approach_and_push(field, &pose, b, aim, top);
                 let in_range = receiver != 0 || b.distance(goal) <= cfg.shoot_range_m;
                 let direction_rad = (aim - b).angle();
-                if action.lined_up
-                    && in_range
-                    && input.t_s >= self.kick_ready_at_s
-                    && world.kick(i, direction_rad)
-                {
-                    // The robot knows what it just did: its ball, and soon its team's, turns
-                    // with the kick instead of waiting to see it.
-                    let kick = Kick {
-                        t_s: seconds(input.local_now),
-                        speed_mps: field.kick_speed_mps,
-                        direction_rad,
-                        speed_sigma_mps: cfg.world_model.kick_speed_sigma_mps,
-                        direction_sigma_rad: field.kick_noise_rad,
-                    };
-                    self.lwm.kick(&kick);
-                    self.reference.kick(&kick);
-                    self.kicked = Some(kick);
-                    self.kick_ready_at_s = input.t_s + cfg.kick_cooldown_s;
-                    if receiver != 0 {
-                        self.counts.passes += 1;
-                    } else {
-                        self.counts.shots += 1;
+                let mut attempt = None;
+                if action.lined_up && in_range && now_s >= self.kick_ready_at_s {
+                    let contact_prob = self.contact_probability(field, now_s);
+                    if contact_prob >= cfg.world_model.kick_min_contact_prob {
+                        // The robot knows what it just tried: its ball, and soon its
+                        // team's, turns with the kick (weighted by its own odds that the
+                        // foot met the ball) instead of waiting to see it.
+                        let kick = Kick {
+                            t_s: now_s,
+                            speed_mps: field.kick_speed_mps,
+                            direction_rad,
+                            speed_sigma_mps: cfg.world_model.kick_speed_sigma_mps,
+                            direction_sigma_rad: field.kick_noise_rad,
+                            contact_prob,
+                        };
+                        self.lwm.kick(&kick);
+                        self.kicked = Some(kick);
+                        self.kick_ready_at_s = now_s + cfg.kick_cooldown_s;
+                        if receiver != 0 {
+                            self.counts.passes += 1;
+                        } else {
+                            self.counts.shots += 1;
+                        }
+                        attempt = Some(KickAttempt {
+                            direction_rad,
+                            receiver,
+                            report: kick,
+                        });
                     }
                 }
-                return receiver;
+                return (receiver, Some(action.motion), attempt);
             }
             (Mode::Auxiliary, Position::Field(k)) => match ball {
                 // The intended receiver meets a ball that comes its way.
@@ -584,8 +615,40 @@ impl Robot {
             (_, Position::Field(k)) => behaviour::hold(&pose, my_home(k), ball, top),
         };
         self.play = None;
-        world.command_believed(i, cmd, &pose);
-        0
+        (0, Some(cmd), None)
+    }
+
+    /// The robot's own probability that its foot would meet the ball now: its ball
+    /// estimate relative to its pose estimate, both uncertainties included, against its
+    /// foot's reach (range and opening angle; its own body's geometry). Range and the
+    /// lateral margin are taken as independent normals.
+    fn contact_probability(&self, field: &FieldConfig, now_s: f64) -> f64 {
+        let Some(ball) = self.lwm.ball_at(now_s) else {
+            return 0.0;
+        };
+        let pose = self.lwm.pose();
+        // The simulator's heading (x forward), from fusion's (y forward).
+        let (sin, cos) = perception::from_fusion_pose(pose).theta_rad.sin_cos();
+        // Field → robot frame, x forward.
+        let rot = Matrix2::new(cos, sin, -sin, cos);
+        let d_field = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
+        let rel = rot * d_field;
+        let cov_field = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
+        let mut cov = rot * cov_field * rot.transpose();
+        // The heading's σ moves the ball sideways by its distance.
+        cov[(1, 1)] += rel.norm_squared() * pose.cov[(2, 2)];
+        let reach = field.kinematics.radius_m + field.ball.radius_m + KICK_REACH_MARGIN_M;
+        let d = rel.norm();
+        let along = if d > 1e-9 {
+            rel / d
+        } else {
+            Vector2::new(1.0, 0.0)
+        };
+        let sigma_d = (along.transpose() * cov * along)[(0, 0)].max(1e-12).sqrt();
+        let p_range = fusion::consistency::normal_cdf((reach - d) / sigma_d);
+        let lateral_room = rel.x.max(0.0) * KICK_MAX_ANGLE_RAD.tan() - rel.y.abs();
+        let p_angle = fusion::consistency::normal_cdf(lateral_room / cov[(1, 1)].max(1e-12).sqrt());
+        (p_range * p_angle).clamp(0.0, 1.0)
     }
 
     /// The game controller says the ball was put back for a kick-off (`now_s` on the
@@ -593,29 +656,52 @@ impl Robot {
     pub fn forget_ball(&mut self, now_s: f64) {
         self.lwm.forget_ball();
         self.gwm.forget_ball(now_s);
-        self.reference.forget(now_s);
         self.ball = None;
         self.ball_seen_at_s = None;
         self.team_ball = None;
     }
 
-    /// Switch the robot off: it stops where it is and falls silent.
-    pub fn kill(&mut self, world: &mut World) {
+    /// Switch the robot off: it falls silent. Returns the command that stops it where it
+    /// is (in the frame of [`Robot::pose_belief`]).
+    pub fn kill(&mut self) -> MotionCommand {
         self.alive = false;
-        world.command_believed(
-            usize::from(self.id - 1),
-            MotionCommand {
-                velocity: Vec2::default(),
-                heading_rad: self.pose_belief.theta_rad,
-            },
-            &self.pose_belief,
-        );
+        MotionCommand {
+            velocity: Vec2::default(),
+            heading_rad: self.pose_belief.theta_rad,
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn robot_code_cannot_reach_the_field_truth() {
+        // The boundary is structural: a tick gets `Percepts` and its own clock, never the
+        // simulator's world. This keeps a future change from quietly reaching for it.
+        let code: String = include_str!("robot.rs")
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let words: Vec<&str> = code
+            .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+            .collect();
+        let world = concat!("Wor", "ld");
+        assert!(
+            !words.contains(&world),
+            "robot.rs names `{world}` outside its docs: robot code must not see the truth"
+        );
+        let w = concat!("wor", "ld");
+        for reach in [" {w}.", "({w}.", "&{w}.", "mut {w}"].map(|p| p.replace("{w}", w)) {
+            assert!(
+                !code.contains(reach.as_str()),
+                "robot.rs reaches into a world value: `{reach}`"
+            );
+        }
+    }
+
     use comms::wire::{FrameWriter, ItemRef, TeamKey};
 
     #[test]
@@ -640,6 +726,7 @@ mod tests {
             direction_rad: 0.3,
             speed_sigma_mps: 0.2,
             direction_sigma_rad: 0.08,
+            contact_prob: 1.0,
         });
         let msg = lwm.publish(0.13);
         assert!(msg.kick.is_some() && msg.earlier.iter().all(Option::is_some));

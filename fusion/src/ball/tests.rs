@@ -239,6 +239,7 @@ fn a_kick_sets_the_velocity_and_keeps_the_position() {
         direction_rad: std::f64::consts::FRAC_PI_2,
         speed_sigma_mps: 0.2,
         direction_sigma_rad: 0.08,
+        contact_prob: 1.0,
     };
     let kicked = resting.kicked(&model, &kick);
     let before = resting.predict_to(&model, 2.1);
@@ -264,5 +265,32 @@ fn a_kick_sets_the_velocity_and_keeps_the_position() {
         resting.kicked(&still, &kick).mean,
         resting.predict_to(&still, 2.1).mean,
         "a static model has no velocity to kick"
+    );
+
+    // A kick the kicker gives even odds: the mixture of kicked and untouched.
+    let unsure = Kick {
+        contact_prob: 0.5,
+        ..kick
+    };
+    let mixed = resting.kicked(&model, &unsure);
+    let expect_v = (Vector2::new(0.0, 4.0) + before.velocity()) * 0.5;
+    assert!(
+        (mixed.velocity() - expect_v).norm() < 1e-12,
+        "halfway between the foot's and the ball's own velocity"
+    );
+    let d = Vector2::new(0.0, 4.0) - before.velocity();
+    let mixed_vv = mixed.cov.fixed_view::<2, 2>(2, 2).into_owned();
+    let expect_vv = (v_cov + before.cov.fixed_view::<2, 2>(2, 2)) * 0.5 + d * d.transpose() * 0.25;
+    assert!(
+        (mixed_vv - expect_vv).norm() < 1e-12,
+        "the spread between the two outcomes is in the covariance: {mixed_vv}"
+    );
+    assert!(
+        mixed.cov.cholesky().is_some(),
+        "a mixture's covariance is positive definite"
+    );
+    assert!(
+        (mixed.position_cov() - before.position_cov()).norm() < 1e-12,
+        "a kick moves no ball at its instant"
     );
 }

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! off  size  field
-//!  0    1    version (high nibble, = 3) | flags: bit0 ball present, bit1 observation
+//!  0    1    version (high nibble, = 4) | flags: bit0 ball present, bit1 observation
 //!            present, bit2 / bit3 the batch of message seq−1 / seq−2 present
 //!  1    2    seq u16
 //!  3    6    pose x, y (i16 mm), θ (i16, π/32768 rad)
@@ -16,7 +16,9 @@
 //! 37    4    observation x, y (i16 mm)
 //! 41    4    observation σx, σy (u16 log, finer)
 //! 45    1    observation ρ (i8)
-//! 46    2    observation age before the message time (u16 ms)
+//! 46    2    observation age before the message time (low 12 bits, ms, ≤ 4.095 s); the
+//!            top 4 bits of the message's own batch carry the kick's contact probability
+//!            c (p = (c + 1)/16), those of the repeated batches are 0
 //! 48   11    the batch of message seq−1 again, same layout as 37..48
 //! 59   11    the batch of message seq−2 again
 //! 70    1    kick: bit7 present, bits 6–5 its number (mod 4), bits 4–0 its age before
@@ -58,7 +60,10 @@ use thiserror::Error;
 
 /// Bytes of an encoded LWM.
 pub const LWM_WIRE_LEN: usize = 75;
-const VERSION: u8 = 3;
+/// Version 4 added the kick's contact probability (top bits of byte 47).
+const VERSION: u8 = 4;
+/// Where the contact probability's 4 bits sit: the high byte of the own batch's age.
+const CONTACT_AT: usize = OBSERVATION_AT[0] + 10;
 const KICK_AT: usize = 70;
 const KICK_PRESENT: u8 = 0x80;
 const KICK_AGE_STEP_S: f64 = 0.005;
@@ -159,7 +164,7 @@ fn put_observation(
     put_u16(b, at + 6, codes[1] as u16);
     b[at + 8] = rho[0] as u8;
     let age = t_s - obs.t_s;
-    if !age.is_finite() || !(-1e-9..=65.0).contains(&age) {
+    if !age.is_finite() || !(-1e-9..=4.095).contains(&age) {
         return Err(EncodeError::OutOfRange {
             field: "observation age",
         });
@@ -177,7 +182,7 @@ fn get_observation(b: &[u8], at: usize, t_s: f64) -> Result<FieldObservation, De
         });
     }
     Ok(FieldObservation {
-        t_s: t_s - get_u16(b, at + 9) as f64 / 1000.0,
+        t_s: t_s - (get_u16(b, at + 9) & 0x0fff) as f64 / 1000.0,
         position: Vector2::new(
             get_i16(b, at) as f64 / 1000.0,
             get_i16(b, at + 2) as f64 / 1000.0,
@@ -224,6 +229,8 @@ fn put_kick(b: &mut [u8], report: &KickReport, t_s: f64) -> Result<(), EncodeErr
         "kick direction σ",
     )?;
     b[KICK_AT] = KICK_PRESENT | ((report.number & 3) << 5) | age as u8;
+    let contact = (k.contact_prob * 16.0).round().clamp(1.0, 16.0) as u8 - 1;
+    b[CONTACT_AT] |= contact << 4;
     b[KICK_AT + 1] = speed as u8;
     b[KICK_AT + 2] = (direction % 256) as u8;
     Ok(())
@@ -245,6 +252,7 @@ fn get_kick(b: &[u8], t_s: f64) -> Option<KickReport> {
             ),
             speed_sigma_mps: code.decode(b[KICK_AT + 3] as u32),
             direction_sigma_rad: code.decode(b[KICK_AT + 4] as u32),
+            contact_prob: f64::from((b[CONTACT_AT] >> 4) + 1) / 16.0,
         },
     })
 }

@@ -56,6 +56,7 @@ fn sample() -> LocalWorldModel {
                 direction_rad: -2.5,
                 speed_sigma_mps: 0.2,
                 direction_sigma_rad: 0.08,
+                contact_prob: 1.0,
             },
         }),
     }
@@ -67,8 +68,13 @@ fn fixture_round_trips_within_one_quantum_and_never_shrinks_a_covariance() {
     let bytes = lwm.to_bytes().unwrap();
     assert_eq!(bytes.len(), 75);
     assert_eq!(
-        bytes[0], 0x3b,
-        "version 3, ball, observation and the seq−2 batch present"
+        bytes[0], 0x4b,
+        "version 4, ball, observation and the seq−2 batch present"
+    );
+    assert_eq!(
+        bytes[47] >> 4,
+        15,
+        "a kick the kicker is sure of: contact code 15, p = 16/16"
     );
     assert_eq!(
         &bytes[70..73],
@@ -138,6 +144,7 @@ fn a_kick_that_cannot_be_carried_is_an_error_not_a_wrong_message() {
                 direction_rad: 0.0,
                 speed_sigma_mps: 0.1,
                 direction_sigma_rad: 0.1,
+                contact_prob: 1.0,
             },
         })
     };
@@ -173,6 +180,7 @@ fn a_kick_that_cannot_be_carried_is_an_error_not_a_wrong_message() {
     lwm.kick = None;
     let bytes = lwm.to_bytes().unwrap();
     assert_eq!(&bytes[70..], &[0; 5], "no kick: five zero bytes");
+    assert_eq!(bytes[47] >> 4, 0, "and no contact bits");
     assert_eq!(LocalWorldModel::from_bytes(&bytes, 0.0).unwrap().kick, None);
 }
 
@@ -187,17 +195,17 @@ fn bad_length_version_and_correlations_are_typed_errors() {
         })
     );
     let mut v = bytes;
-    v[0] = 0x2b;
+    v[0] = 0x3b;
     assert_eq!(
         LocalWorldModel::from_bytes(&v, 0.0),
-        Err(DecodeError::Version { got: 2 }),
-        "a version-2 sender's 70 bytes padded: refused, not misread"
+        Err(DecodeError::Version { got: 3 }),
+        "a version-3 sender's 75 bytes padded: refused, not misread"
     );
     let mut v = bytes;
-    v[0] = 0x4b;
+    v[0] = 0x5b;
     assert_eq!(
         LocalWorldModel::from_bytes(&v, 0.0),
-        Err(DecodeError::Version { got: 4 })
+        Err(DecodeError::Version { got: 5 })
     );
     let mut v = bytes;
     v[12..15].copy_from_slice(&[127, 127, 0x81]); // ρxy = 1, ρxθ = 1, ρyθ = −1
@@ -221,7 +229,7 @@ proptest! {
     #[test]
     fn any_75_bytes_decode_to_finite_pd_covariances_or_an_error(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform32(any::<u8>()), end in proptest::array::uniform16(any::<u8>()), flags in 0u8..16) {
         let mut all = [0u8; LWM_WIRE_LEN];
-        bytes[0] = 0x30 | flags;
+        bytes[0] = 0x40 | flags;
         all[..32].copy_from_slice(&bytes);
         all[32..64].copy_from_slice(&tail);
         all[64..].copy_from_slice(&end[..11]);
@@ -252,7 +260,7 @@ proptest! {
             lbc: 0.5,
             observation: Some(FieldObservation { t_s: 5.0 - age, position: Vector2::new(x, y), cov: spd::<2>(&e[7..], scale) }),
             earlier: [Some(FieldObservation { t_s: 4.9 - age, position: Vector2::new(y, x), cov: spd::<2>(&e[9..], scale) }), None],
-            kick: Some(KickReport { number: 1, kick: Kick { t_s: 5.0 - age * 0.15, speed_mps: v.abs() / 2.0, direction_rad: th, speed_sigma_mps: scale.sqrt(), direction_sigma_rad: scale.sqrt() } }),
+            kick: Some(KickReport { number: 1, kick: Kick { t_s: 5.0 - age * 0.15, speed_mps: v.abs() / 2.0, direction_rad: th, speed_sigma_mps: scale.sqrt(), direction_sigma_rad: scale.sqrt(), contact_prob: 1.0 } }),
         };
         let back = LocalWorldModel::from_bytes(&lwm.to_bytes().unwrap(), 5.0).unwrap();
         prop_assert!(covers(&back.pose.cov, &lwm.pose.cov));
