@@ -41,6 +41,10 @@ pub struct SimArgs {
     /// one: for tuning the references, each for its own RMSE.
     #[arg(long, hide = true)]
     pub reference_q: Option<f64>,
+    /// Give the robots' ball filters (LWM and GWM) this acceleration noise (m²/s³): for
+    /// tuning the team's filter.
+    #[arg(long, hide = true)]
+    pub team_q: Option<f64>,
     /// Independent loss per receiver, `20%` or `0.2` (replaces the preset's loss model).
     #[arg(long, value_parser = parse_fraction)]
     pub loss: Option<f64>,
@@ -89,6 +93,7 @@ impl Default for SimArgs {
             dtim: None,
             sweep: None,
             reference_q: None,
+            team_q: None,
             seed: 1,
             svg: None,
             json: false,
@@ -164,7 +169,14 @@ pub fn run(args: SimArgs) -> Result<()> {
 
 /// The match `args` describe.
 fn config(args: &SimArgs) -> SimConfig {
+    let mut brain = huddle::sim::BrainConfig::default();
+    if let Some(q) = args.team_q {
+        let wm = &mut brain.world_model;
+        wm.local.ball = huddle::sim::references::with_accel_noise(wm.local.ball, q);
+        wm.global.ball = wm.local.ball.model;
+    }
     SimConfig {
+        brain,
         robots: args.robots,
         opponents: args.opponents,
         duration_s: args.duration.as_secs_f64(),
