@@ -69,6 +69,7 @@ pub struct Harness {
     events: Vec<VecDeque<Event>>,
     keep_events: bool,
     rng: ChaCha8Rng,
+    max_payload: usize,
 }
 
 impl Harness {
@@ -100,6 +101,7 @@ impl Harness {
             events: vec![VecDeque::new(); n],
             keep_events: true,
             rng: ChaCha8Rng::seed_from_u64(0),
+            max_payload: 0,
         };
         for i in 0..n {
             // Ordered like the driver's: a later start has a larger incarnation.
@@ -205,6 +207,21 @@ impl Harness {
         }
     }
 
+    /// Robot `i` writes `key = value` now with priority ([`Replica::set_priority`]: under
+    /// a budget it may draw on the reserve at once).
+    pub fn set_priority(&mut self, i: usize, key: &Key, value: Value) -> Result<(), SetError> {
+        let now = self.local_now(i);
+        match self.replicas[i].as_mut() {
+            Some(r) => r.set_priority(now, key, value),
+            None => Ok(()),
+        }
+    }
+
+    /// The largest frame any robot has sent so far, bytes.
+    pub fn max_payload(&self) -> usize {
+        self.max_payload
+    }
+
     /// Keep each replica's events for [`Harness::drain_events`] (default) or drop them
     /// (long runs that do not look at them).
     pub fn keep_events(&mut self, keep: bool) {
@@ -245,6 +262,7 @@ impl Harness {
                 continue;
             };
             while let Some(t) = r.poll_transmit() {
+                self.max_payload = self.max_payload.max(t.payload.len());
                 // A known node and group: sending cannot fail.
                 let _ = self
                     .net

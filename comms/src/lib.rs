@@ -146,8 +146,8 @@ pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
 pub use replica::{
-    ordered_incarnation, ConfigInvalid, Destination, Event, PostError, Replica, ReplicaConfig,
-    Transmit,
+    ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ConfigInvalid, Destination, Event,
+    PostError, Replica, ReplicaConfig, Transmit,
 };
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;

@@ -33,6 +33,15 @@ pub struct SimArgs {
     /// (competition-ps: 2). Given with another preset, it adds the hold.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=255))]
     pub dtim: Option<u32>,
+    /// The team's message budget: `spl` (1200 per 20-minute game, 128-byte frames),
+    /// `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`); shared equally by the
+    /// robots, a tenth of each share kept for priority items. Default: none.
+    #[arg(long)]
+    pub budget: Option<comms::BudgetSpec>,
+    /// When robots send: every (each control tick), baseline (B-Human-style thresholds),
+    /// voi (value of information).
+    #[arg(long, value_enum, default_value = "every")]
+    pub policy: huddle::sim::policy::SendPolicy,
     /// Run the match once per point of a sweep and print one row each: `delay` (the
     /// one-way link delay at 0, 10, 20, 50, 100 and 200 ms, jitter half of it).
     #[arg(long, value_enum)]
@@ -91,6 +100,8 @@ impl Default for SimArgs {
             latency: None,
             jitter: None,
             dtim: None,
+            budget: None,
+            policy: huddle::sim::policy::SendPolicy::Every,
             sweep: None,
             reference_q: None,
             team_q: None,
@@ -169,7 +180,10 @@ pub fn run(args: SimArgs) -> Result<()> {
 
 /// The match `args` describe.
 fn config(args: &SimArgs) -> SimConfig {
-    let mut brain = huddle::sim::BrainConfig::default();
+    let mut brain = huddle::sim::BrainConfig {
+        send_policy: args.policy,
+        ..huddle::sim::BrainConfig::default()
+    };
     if let Some(q) = args.team_q {
         let wm = &mut brain.world_model;
         wm.local.ball = huddle::sim::references::with_accel_noise(wm.local.ball, q);
@@ -188,6 +202,7 @@ fn config(args: &SimArgs) -> SimConfig {
             dtim_period: args.dtim,
         },
         seed: args.seed,
+        budget: args.budget,
         references: match args.reference_q {
             Some(q) => huddle::sim::ReferenceConfig::with_q(
                 huddle::sim::WorldModelConfig::default().local.ball,

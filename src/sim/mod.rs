@@ -14,6 +14,7 @@
 
 pub mod metrics;
 pub mod perception;
+pub mod policy;
 pub mod references;
 pub mod robot;
 pub mod svg;
@@ -49,6 +50,16 @@ pub struct NetworkConfig {
     /// DTIM period in beacons (overrides the preset's; with `competition`, which has no
     /// power-save hold, it adds one).
     pub dtim_period: Option<u32>,
+}
+
+fn budget_name<S: serde::Serializer>(
+    b: &Option<comms::BudgetSpec>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    match b {
+        Some(b) => s.serialize_str(&b.to_string()),
+        None => s.serialize_none(),
+    }
 }
 
 fn preset_name<S: serde::Serializer>(p: &Preset, s: S) -> Result<S::Ok, S::Error> {
@@ -144,6 +155,9 @@ pub struct SimConfig {
     /// Arbitration parameters.
     #[serde(skip)]
     pub arbitration: ArbitrationParams,
+    /// A league's message budget for the team (shared equally by the robots), or none.
+    #[serde(serialize_with = "budget_name")]
+    pub budget: Option<comms::BudgetSpec>,
     /// Set the arbitration's latency compensation to the network's expected delay (as a
     /// team would configure `latency_ms` for its WLAN), unless it is set already.
     pub compensate_latency: bool,
@@ -167,6 +181,7 @@ impl Default for SimConfig {
             field: FieldConfig::default(),
             brain: BrainConfig::default(),
             references: ReferenceConfig::default(),
+            budget: None,
             arbitration: ArbitrationParams::default(),
             compensate_latency: true,
             refresh_period: Duration::from_millis(100),
@@ -305,10 +320,20 @@ impl Simulation {
             .collect();
         let world = World::new(cfg.field, &starts, cfg.opponents, cfg.seed);
         let mut params = cfg.arbitration;
+        let mut world_model = cfg.brain.world_model;
+        let budget = cfg.budget.map(|b| b.share(n));
+        if let Some(b) = budget {
+            // A robot's messages come `interval` apart at best: what it said last holds
+            // until it says otherwise (a goer change goes at once, from the reserve).
+            let interval = b.game.as_secs_f64() / b.messages.max(1) as f64;
+            let hold = Duration::from_secs_f64(3.0 * interval);
+            params.stale_after = params.stale_after.max(hold);
+            world_model.global.stale_after_s =
+                world_model.global.stale_after_s.max(hold.as_secs_f64());
+        }
         if cfg.compensate_latency && params.latency_compensation.is_zero() {
             params.latency_compensation = cfg.network.expected_delay();
         }
-        let mut world_model = cfg.brain.world_model;
         if cfg.compensate_latency && world_model.global.transit_s == 0.0 {
             // The same figure the team configures for arbitration: the WLAN's mean delay.
             world_model.global.transit_s = cfg.network.expected_delay().as_secs_f64();
@@ -337,7 +362,19 @@ impl Simulation {
             .collect();
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
-        let replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
+        let mut replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
+        if let (Some(spec), Some(b)) = (cfg.budget, budget) {
+            replica.budget = Some(b);
+            if let Some(limit) = spec.payload_limit {
+                replica.mtu = limit;
+            }
+            // Silence is the norm under a budget: a teammate is gone after three of its
+            // message intervals, not three refresh periods.
+            let interval = b.game.as_secs_f64() / b.messages.max(1) as f64;
+            replica.departed_after = replica
+                .departed_after
+                .max(Duration::from_secs_f64(3.0 * interval + 10.0));
+        }
         let mut harness = Harness::new(n, net, replica, cfg.seed)?;
         harness.keep_events(false);
         let period = cfg.brain.control_period_s;
@@ -397,8 +434,9 @@ impl Simulation {
                 if let Some((key, value)) =
                     self.robots[i].redecide(robot::seconds(now), replica.blackboard(), now)
                 {
+                    // A goer change: priority under a budget.
                     self.harness
-                        .set(i, &key, value)
+                        .set_priority(i, &key, value)
                         .expect("robots only write their own valid keys");
                 }
                 continue;
@@ -430,9 +468,12 @@ impl Simulation {
             for (key, value) in out.writes {
                 let lwm = key.path() == "world.local";
                 // Our own keys of valid shape: a refusal would be a bug worth seeing.
-                self.harness
-                    .set(i, &key, value)
-                    .expect("robots only write their own valid keys");
+                if out.priority {
+                    self.harness.set_priority(i, &key, value)
+                } else {
+                    self.harness.set(i, &key, value)
+                }
+                .expect("robots only write their own valid keys");
                 if lwm {
                     self.record_publication(i, t);
                 }
@@ -676,7 +717,20 @@ impl Simulation {
                 above_999_pct: round3(f.nees_bands[k].above_999_pct()),
             }
         };
+        let per_robot: Vec<u64> = (0..self.robots.len())
+            .map(|i| self.harness.replica(i).map_or(0, |r| r.stats().frames_out))
+            .collect();
+        let budget_left = (0..self.robots.len())
+            .filter_map(|i| self.harness.replica(i)?.budget_status())
+            .map(|(_, left)| left)
+            .reduce(|a, b| a + b);
         Report {
+            budget: self.cfg.budget.map(|b| b.to_string()),
+            policy: self.cfg.brain.send_policy,
+            team_messages_sent: per_robot.iter().sum(),
+            messages_per_robot: per_robot,
+            max_payload_bytes: self.harness.max_payload(),
+            budget_left,
             robots: self.cfg.robots,
             duration_s: simulated_s,
             preset: self.cfg.network.preset.name().to_string(),
@@ -759,6 +813,18 @@ fn round4(x: f64) -> f64 {
 /// definitions of *ball visible*, *goer*, *handover* and *flap*.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
+    /// The team's message budget (`None`: no limit).
+    pub budget: Option<String>,
+    /// The robots' sending policy.
+    pub policy: policy::SendPolicy,
+    /// Frames (messages) the whole team sent.
+    pub team_messages_sent: u64,
+    /// … per robot.
+    pub messages_per_robot: Vec<u64>,
+    /// The largest frame any robot sent, bytes (header, items and tag).
+    pub max_payload_bytes: usize,
+    /// Messages the team had left of its budget at the end.
+    pub budget_left: Option<u64>,
     /// Robots on our team.
     pub robots: usize,
     /// Simulated seconds.
@@ -972,6 +1038,16 @@ impl std::fmt::Display for Report {
             f,
             "network               {} frames sent, {} delivered, {} lost",
             self.frames_sent, self.frames_delivered, self.frames_lost
+        )?;
+        writeln!(
+            f,
+            "messages              {} by the team ({:?} per robot), largest {} B; budget {}, {} left; policy {:?}",
+            self.team_messages_sent,
+            self.messages_per_robot,
+            self.max_payload_bytes,
+            self.budget.as_deref().unwrap_or("none"),
+            self.budget_left.map_or("–".to_string(), |l| l.to_string()),
+            self.policy
         )?;
         writeln!(
             f,

@@ -162,6 +162,8 @@ pub struct BrainConfig {
     /// The world models.
     #[serde(skip)]
     pub world_model: WorldModelConfig,
+    /// When the robot tells the team what it knows.
+    pub send_policy: super::policy::SendPolicy,
 }
 
 impl Default for BrainConfig {
@@ -175,6 +177,7 @@ impl Default for BrainConfig {
             team_ball_min_gbc: 0.25,
             pass: PassParams::default(),
             world_model: WorldModelConfig::default(),
+            send_policy: super::policy::SendPolicy::Every,
         }
     }
 }
@@ -224,6 +227,8 @@ pub struct KickAttempt {
 pub struct TickOutput {
     /// Blackboard writes to make through the robot's replica.
     pub writes: Vec<(Key, Value)>,
+    /// They carry a goer change or a kick: under a budget they may use its reserve.
+    pub priority: bool,
     /// The motion command, worked out in the field frame as the robot believes it is
     /// posed (`None`: carry on with the previous one).
     pub command: Option<MotionCommand>,
@@ -281,6 +286,8 @@ pub struct Robot {
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
     heard: Vec<Option<(u64, u64)>>,
+    /// What it last told the team, for the sending policy.
+    policy: super::policy::PolicyState,
 }
 
 /// Everything a tick needs from outside the robot.
@@ -344,6 +351,7 @@ impl Robot {
             kick_ready_at_s: 0.0,
             decided_at_s: 0.0,
             heard: vec![None; team],
+            policy: Default::default(),
         }
     }
 
@@ -418,12 +426,26 @@ impl Robot {
             writes.push((world_local_key(), bytes));
         }
         let (receiver, command, kick) = self.act(field, cfg, &input);
+        let now = super::policy::Now {
+            t_s: t,
+            pose: self.pose_belief,
+            ball: self.ball.and(self.lwm.ball_at(t)),
+            going: self.arbiter.going(),
+            team_ball_stale: self.team_ball.is_none(),
+            kicked: kick.is_some(),
+            model: &cfg.world_model.local.ball.model,
+        };
+        let send = self.policy.decide(cfg.send_policy, &now);
+        if send.is_none() {
+            writes.clear();
+        }
         if receiver != self.pass_to_posted {
             self.pass_to_posted = receiver;
             writes.push((pass_to_key(), Value::Int(receiver)));
         }
         TickOutput {
             writes,
+            priority: send == Some(true),
             command,
             believed: self.pose_belief,
             kick,
@@ -455,7 +477,11 @@ impl Robot {
         }
         let was = self.arbiter.going();
         let (_, posted) = self.decide(t_s, board, local_now);
-        (posted.going != was).then(|| (arbitration::heuristic_key(), Value::from(posted)))
+        let changed = posted.going != was;
+        if changed {
+            self.policy.sent_going(posted.going);
+        }
+        changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))
     }
 
     /// The world models' part of a tick: odometry and landmarks into the pose EKF, the ball

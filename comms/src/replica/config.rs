@@ -41,6 +41,10 @@ pub struct ReplicaConfig {
     /// A departed robot's values stay readable (the relay marks them `departed`) this
     /// long after its departure, then they are released (default 60 s).
     pub release_departed_after: Duration,
+    /// A message budget ([`crate::Budget`]): frames are counted and paced, the
+    /// periodic refresh only fills frames that go anyway, and no frame goes beyond it.
+    /// `None` (the default): no limit. A league's payload limit is the `mtu`.
+    pub budget: Option<super::Budget>,
 }
 
 impl ReplicaConfig {
@@ -58,6 +62,7 @@ impl ReplicaConfig {
             max_remote_bindings: 65536,
             max_local_bindings: 65536,
             release_departed_after: Duration::from_secs(60),
+            budget: None,
         }
     }
 

@@ -28,6 +28,7 @@ use crate::time::Instant;
 use crate::value::Value;
 use crate::wire::{self, ItemRef, TeamKey};
 
+mod budget;
 mod config;
 mod events;
 mod peers;
@@ -36,6 +37,7 @@ mod talk;
 mod timers;
 mod transmit;
 
+pub use budget::{Budget, BudgetParseError, BudgetSpec};
 pub use config::{ConfigInvalid, ReplicaConfig};
 pub use events::{Destination, Event, Transmit};
 pub use peers::ordered_incarnation;
@@ -70,6 +72,10 @@ pub struct Replica {
     events: VecDeque<Event>,
     stats: Stats,
     deliveries: Vec<Delivery>,
+    /// The message budget in use, if the configuration has one.
+    budget: Option<budget::BudgetState>,
+    /// Own global paths set with priority and not sent since.
+    urgent: BTreeSet<String>,
 }
 
 impl Replica {
@@ -82,6 +88,7 @@ impl Replica {
         now: Instant,
     ) -> Result<Replica, ConfigInvalid> {
         config.validate()?;
+        let config_budget = config.budget;
         let mut board = Blackboard::with_limits(config.robot_id, config.board_limits());
         board.set_incarnation(incarnation);
         board.advance_clock(now);
@@ -107,6 +114,8 @@ impl Replica {
             events: VecDeque::new(),
             stats: Stats::default(),
             deliveries: Vec::new(),
+            budget: config_budget.map(|b| budget::BudgetState::new(b, now)),
+            urgent: BTreeSet::new(),
         })
     }
 
@@ -188,11 +197,12 @@ impl Replica {
         let scope = self.board.storage_scope(key)?;
         let global = scope != Scope::Local;
         if global {
+            let (version, age_us) = self.widest_version_and_age();
             let bytes = wire::item_len(ItemRef::Update {
                 path: key.path(),
                 value: &value,
-                version: u64::MAX,
-                age_us: u64::MAX,
+                version,
+                age_us,
             });
             if bytes + self.frame_overhead() > self.cfg.mtu {
                 return Err(SetError::TooLarge {
@@ -207,6 +217,30 @@ impl Replica {
             self.dirty.insert(key.path().to_owned());
         }
         Ok(())
+    }
+
+    /// [`Replica::set_key`] for an item that must not wait for the budget's pacing (a
+    /// goer change, a kick, a referee event): the next frame draws on the budget's reserve
+    /// if the ordinary allowance is not open. Without a budget it is `set_key`.
+    pub fn set_priority(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
+        self.set_key(now, key, value)?;
+        if self.budget.is_some() && key.scope() != Scope::Local {
+            self.urgent.insert(key.path().to_owned());
+        }
+        Ok(())
+    }
+
+    /// The game clock: at `now`, `remaining` of play are left (the GameController's
+    /// remaining time). The budget paces over it; without a budget it is ignored.
+    pub fn set_game_clock(&mut self, now: Instant, remaining: Duration) {
+        if let Some(b) = &mut self.budget {
+            b.set_clock(now, remaining);
+        }
+    }
+
+    /// With a budget: messages sent so far and left.
+    pub fn budget_status(&self) -> Option<(u64, u64)> {
+        self.budget.as_ref().map(|b| (b.sent(), b.left()))
     }
 
     /// The binding for `key` (see [`Blackboard::get`]; `*.var.x` is the newest copy).

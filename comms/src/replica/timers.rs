@@ -177,6 +177,14 @@ impl Replica {
                 }
             }
         }
+        // Changed values held back by the budget's pacing go when it opens.
+        if let Some(b) = &self.budget {
+            if !self.dirty.is_empty() {
+                if let Some(t) = b.next_ordinary(self.now) {
+                    next = next.min(t.max(self.now));
+                }
+            }
+        }
         Some(next)
     }
 }

@@ -6,17 +6,40 @@ use crate::key::Scope;
 use crate::time::{duration_to_micros, Instant};
 use crate::wire::{FrameWriter, ItemRef, HEADER_LEN, TAG_LEN};
 
+use super::budget::Class;
 use super::{Destination, Replica, Transmit};
 
 impl Replica {
-    /// Bytes a frame spends besides its items, at worst.
+    /// Bytes a frame spends besides its items, at worst. Under a budget the frame
+    /// counter is at most the budget's messages (< 2¹⁶: a 3-byte varint) and a frame holds
+    /// fewer than 251 items (a 1-byte count): a league's 128 bytes are not spent on room
+    /// for counters that cannot grow that far.
     pub(super) fn frame_overhead(&self) -> usize {
-        HEADER_LEN + 9 + 3 + if self.key.is_some() { TAG_LEN } else { 0 }
+        let tag = if self.key.is_some() { TAG_LEN } else { 0 };
+        match &self.budget {
+            Some(b) if b.budget.messages < 1 << 16 => HEADER_LEN + 3 + 1 + tag,
+            _ => HEADER_LEN + 9 + 3 + tag,
+        }
+    }
+
+    /// The widest version and age an update item may carry: under a budget, ages are
+    /// clamped to 2³² µs (71 minutes: "old") and versions assumed below 2³² (a robot
+    /// setting one key at 100 Hz gets there in 16 months), 5-byte varints instead of 9.
+    pub(super) fn widest_version_and_age(&self) -> (u64, u64) {
+        if self.budget.is_some() {
+            (u64::from(u32::MAX), u64::from(u32::MAX))
+        } else {
+            (u64::MAX, u64::MAX)
+        }
     }
 
     /// The next frame to send, at most `mtu` bytes: NACKs, talk messages, changed
     /// values, the periodic refresh and talk heads, in that order of priority. Ages in it
     /// are measured to the latest `now` given to any input.
+    ///
+    /// With a budget, only NACKs, talk messages and changed values start a frame, and only
+    /// when the budget allows one (a priority item may draw on the reserve); the refresh
+    /// and talk heads ride along in the room left.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
         let pending = !(self.nacks_out.is_empty()
             && self.talk_out.is_empty()
@@ -26,6 +49,23 @@ impl Replica {
         if !pending && !self.heartbeat_due {
             return None;
         }
+        let class = match &self.budget {
+            None => None,
+            Some(b) => {
+                let news = !(self.nacks_out.is_empty()
+                    && self.talk_out.is_empty()
+                    && self.dirty.is_empty());
+                let class = if self.dirty.iter().any(|p| self.urgent.contains(p)) {
+                    Class::Priority
+                } else {
+                    Class::Ordinary
+                };
+                if !news || !b.allows(self.now, class) {
+                    return None;
+                }
+                Some(class)
+            }
+        };
         let me = Scope::Robot(self.cfg.robot_id);
         let now = self.now;
         let mut w = FrameWriter::new(
@@ -36,6 +76,7 @@ impl Replica {
             self.cfg.mtu,
             self.key.as_ref(),
         );
+        let age_cap = self.widest_version_and_age().1;
         let mut full = false;
         while let Some((target, queue, first, last)) = self.nacks_out.front() {
             if !w.push(ItemRef::Nack {
@@ -73,19 +114,21 @@ impl Replica {
                 break;
             };
             if let Some(e) = self.board.get_stored(me, path) {
-                if !w.push(update_ref(path, e, now)) {
+                if !w.push(update_ref(path, e, now, age_cap)) {
                     full = true;
                     break;
                 }
             }
-            self.dirty.pop_first();
+            if let Some(sent) = self.dirty.pop_first() {
+                self.urgent.remove(&sent);
+            }
         }
         while !full {
             let Some(path) = self.refresh_queue.front() else {
                 break;
             };
             if let Some(e) = self.board.get_stored(me, path) {
-                if !self.dirty.contains(path) && !w.push(update_ref(path, e, now)) {
+                if !self.dirty.contains(path) && !w.push(update_ref(path, e, now, age_cap)) {
                     full = true;
                     break;
                 }
@@ -118,6 +161,9 @@ impl Replica {
             }
         }
         self.heartbeat_due = false;
+        if let (Some(b), Some(class)) = (&mut self.budget, class) {
+            b.spend(now, class);
+        }
         self.seq += 1;
         let payload = w.finish();
         self.stats.frames_out += 1;
@@ -129,11 +175,11 @@ impl Replica {
     }
 }
 
-fn update_ref<'a>(path: &'a str, e: &'a Entry, now: Instant) -> ItemRef<'a> {
+fn update_ref<'a>(path: &'a str, e: &'a Entry, now: Instant, age_cap: u64) -> ItemRef<'a> {
     ItemRef::Update {
         path,
         value: &e.value,
         version: e.version,
-        age_us: duration_to_micros(e.age(now)),
+        age_us: duration_to_micros(e.age(now)).min(age_cap),
     }
 }
