@@ -70,6 +70,7 @@ pub struct Harness {
     keep_events: bool,
     rng: ChaCha8Rng,
     max_payload: usize,
+    unicast: bool,
 }
 
 impl Harness {
@@ -102,6 +103,7 @@ impl Harness {
             keep_events: true,
             rng: ChaCha8Rng::seed_from_u64(0),
             max_payload: 0,
+            unicast: false,
         };
         for i in 0..n {
             // Ordered like the driver's: a later start has a larger incarnation.
@@ -217,6 +219,14 @@ impl Harness {
         }
     }
 
+    /// Send every frame by unicast to each teammate instead of to the group (`huddle
+    /// daemon --transport unicast`): an access point does not hold unicast to the DTIM
+    /// beacon. (netsim does not model the MAC's retries of unicast, so its loss is the
+    /// link's, which flatters multicast, not unicast.)
+    pub fn set_unicast(&mut self, on: bool) {
+        self.unicast = on;
+    }
+
     /// The largest frame any robot has sent so far, bytes.
     pub fn max_payload(&self) -> usize {
         self.max_payload
@@ -263,10 +273,20 @@ impl Harness {
             };
             while let Some(t) = r.poll_transmit() {
                 self.max_payload = self.max_payload.max(t.payload.len());
-                // A known node and group: sending cannot fail.
-                let _ = self
-                    .net
-                    .send(self.nodes[i], Dest::Group(self.group), t.payload);
+                // Known nodes and group: sending cannot fail.
+                if self.unicast {
+                    for (j, &to) in self.nodes.iter().enumerate() {
+                        if j != i {
+                            let _ = self
+                                .net
+                                .send(self.nodes[i], Dest::Node(to), t.payload.clone());
+                        }
+                    }
+                } else {
+                    let _ = self
+                        .net
+                        .send(self.nodes[i], Dest::Group(self.group), t.payload);
+                }
             }
             if self.keep_events {
                 while let Some(e) = r.poll_event() {

@@ -42,6 +42,9 @@ pub struct SimArgs {
     /// voi (value of information).
     #[arg(long, value_enum, default_value = "every")]
     pub policy: huddle::sim::policy::SendPolicy,
+    /// How frames travel: multicast, broadcast (SPL), unicast (one copy per teammate).
+    #[arg(long, value_enum, default_value = "multicast")]
+    pub transport: huddle::sim::Transport,
     /// Run the match once per point of a sweep and print one row each: `delay` (the
     /// one-way link delay at 0, 10, 20, 50, 100 and 200 ms, jitter half of it).
     #[arg(long, value_enum)]
@@ -102,6 +105,7 @@ impl Default for SimArgs {
             dtim: None,
             budget: None,
             policy: huddle::sim::policy::SendPolicy::Every,
+            transport: huddle::sim::Transport::Multicast,
             sweep: None,
             reference_q: None,
             team_q: None,
@@ -203,6 +207,7 @@ fn config(args: &SimArgs) -> SimConfig {
         },
         seed: args.seed,
         budget: args.budget,
+        transport: args.transport,
         references: match args.reference_q {
             Some(q) => huddle::sim::ReferenceConfig::with_q(
                 huddle::sim::WorldModelConfig::default().local.ball,

@@ -132,6 +132,21 @@ impl NetworkConfig {
     }
 }
 
+/// How frames travel (`huddle daemon --transport`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Transport {
+    /// To the team's multicast group (held to the DTIM beacon under power save).
+    #[default]
+    Multicast,
+    /// UDP broadcast (the SPL's rule): group-addressed for the air and the access point,
+    /// so in netsim the same as multicast.
+    Broadcast,
+    /// One unicast copy to each teammate: not held to the beacon; each copy is a frame
+    /// on the air (and would be a message against a league's count).
+    Unicast,
+}
+
 /// Everything a simulated match depends on.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SimConfig {
@@ -155,6 +170,8 @@ pub struct SimConfig {
     /// Arbitration parameters.
     #[serde(skip)]
     pub arbitration: ArbitrationParams,
+    /// How frames travel.
+    pub transport: Transport,
     /// A league's message budget for the team (shared equally by the robots), or none.
     #[serde(serialize_with = "budget_name")]
     pub budget: Option<comms::BudgetSpec>,
@@ -182,6 +199,7 @@ impl Default for SimConfig {
             brain: BrainConfig::default(),
             references: ReferenceConfig::default(),
             budget: None,
+            transport: Transport::Multicast,
             arbitration: ArbitrationParams::default(),
             compensate_latency: true,
             refresh_period: Duration::from_millis(100),
@@ -198,7 +216,16 @@ impl SimConfig {
     /// heard the new one yet) plus two refresh periods (a lost update is repeated at the
     /// next refresh at the latest, and the old goer acts at its next control tick).
     pub fn conflict_bound(&self) -> Duration {
-        self.network.expected_delay() + self.refresh_period * 2
+        self.expected_delay() + self.refresh_period * 2
+    }
+
+    /// The mean one-way delay frames take with this transport: unicast is not held to
+    /// the beacon.
+    pub fn expected_delay(&self) -> Duration {
+        match self.transport {
+            Transport::Unicast => self.network.latency(),
+            Transport::Multicast | Transport::Broadcast => self.network.expected_delay(),
+        }
     }
 }
 
@@ -332,11 +359,11 @@ impl Simulation {
                 world_model.global.stale_after_s.max(hold.as_secs_f64());
         }
         if cfg.compensate_latency && params.latency_compensation.is_zero() {
-            params.latency_compensation = cfg.network.expected_delay();
+            params.latency_compensation = cfg.expected_delay();
         }
         if cfg.compensate_latency && world_model.global.transit_s == 0.0 {
             // The same figure the team configures for arbitration: the WLAN's mean delay.
-            world_model.global.transit_s = cfg.network.expected_delay().as_secs_f64();
+            world_model.global.transit_s = cfg.expected_delay().as_secs_f64();
         }
         let robots = positions
             .iter()
@@ -376,6 +403,7 @@ impl Simulation {
                 .max(Duration::from_secs_f64(3.0 * interval + 10.0));
         }
         let mut harness = Harness::new(n, net, replica, cfg.seed)?;
+        harness.set_unicast(cfg.transport == Transport::Unicast);
         harness.keep_events(false);
         let period = cfg.brain.control_period_s;
         let next_tick_s = (0..n).map(|i| period * i as f64 / n as f64).collect();
@@ -681,7 +709,7 @@ impl Simulation {
         let (delay_p50, delay_p99) = match net.delay_percentiles(&[0.5, 0.99])[..] {
             [p50, p99] => (p50, p99),
             _ => {
-                let d = self.cfg.network.expected_delay();
+                let d = self.cfg.expected_delay();
                 (d, d)
             }
         };
@@ -727,6 +755,7 @@ impl Simulation {
         Report {
             budget: self.cfg.budget.map(|b| b.to_string()),
             policy: self.cfg.brain.send_policy,
+            transport: self.cfg.transport,
             team_messages_sent: per_robot.iter().sum(),
             messages_per_robot: per_robot,
             max_payload_bytes: self.harness.max_payload(),
@@ -817,6 +846,8 @@ pub struct Report {
     pub budget: Option<String>,
     /// The robots' sending policy.
     pub policy: policy::SendPolicy,
+    /// How frames travelled.
+    pub transport: Transport,
     /// Frames (messages) the whole team sent.
     pub team_messages_sent: u64,
     /// … per robot.
