@@ -75,14 +75,21 @@ pub fn broadcast_address(iface: Ipv4Addr) -> Result<Ipv4Addr, IfaceError> {
         if v4.ip != iface {
             continue;
         }
-        // A /31 or /32 has no broadcast address even if the kernel lists one.
-        return match v4.broadcast {
-            Some(brd) if v4.prefixlen < 31 && brd != iface => Ok(brd),
-            _ => Err(IfaceError::NoBroadcast {
+        // A /31 or /32 has no broadcast address even if the kernel lists one, nor has a
+        // point-to-point link.
+        if v4.prefixlen >= 31 || interface.is_p2p() {
+            return Err(IfaceError::NoBroadcast {
                 name: interface.name,
                 addr: iface,
-            }),
-        };
+            });
+        }
+        // An address added without `brd` (`ip addr add 10.0.1.12/16 dev wlan0`) lists
+        // none, yet the kernel routes the subnet's all-ones address as its broadcast
+        // (`ip route show table local`): that is the one.
+        return Ok(v4
+            .broadcast
+            .filter(|brd| *brd != iface)
+            .unwrap_or_else(|| Ipv4Addr::from(u32::from(iface) | !u32::from(v4.netmask))));
     }
     Err(IfaceError::NotLocal(iface))
 }
@@ -113,6 +120,17 @@ mod tests {
                 Ipv4Addr::new(127, 255, 255, 255),
                 "{lo}"
             );
+        }
+        // Whatever interfaces this machine has (nothing is sent): each address with a
+        // `brd` gets that one.
+        for interface in if_addrs::get_if_addrs().unwrap() {
+            if let if_addrs::IfAddr::V4(v4) = &interface.addr {
+                if let (Some(brd), false) = (v4.broadcast, v4.ip.is_loopback()) {
+                    if v4.prefixlen < 31 && !interface.is_p2p() {
+                        assert_eq!(broadcast_address(v4.ip).unwrap(), brd, "{interface:?}");
+                    }
+                }
+            }
         }
         // 192.0.2.1 (TEST-NET-1) is no address of this machine.
         assert!(matches!(
