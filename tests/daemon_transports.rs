@@ -2,7 +2,8 @@
 //!
 //! - loopback: three daemons broadcast to 127.255.255.255 on a port of the test's own and
 //!   replicate values every way, with no drop counted for their own echoes; a listen-only
-//!   `huddle record --transport broadcast` hears them; three daemons with `--transport
+//!   `huddle record --transport broadcast` hears them, and so does a live `huddle
+//!   monitor --transport broadcast`; three daemons with `--transport
 //!   unicast` (127.0.0.1, .2, .3, one port, each listing the other two) do the same;
 //! - start-up: unicast without `--peer`, `--group` with broadcast, an unusable
 //!   `--broadcast` are one clear line each, not a panic;
@@ -118,7 +119,11 @@ fn three_broadcast_daemons_on_loopback_replicate_and_a_recorder_hears_them() {
         .arg("--json")
         .output()
         .expect("run huddle replay");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let lines = String::from_utf8(out.stdout).unwrap();
     for key in ["1.var.pos", "2.var.pos", "3.var.pos", "2.var.last"] {
         assert!(
@@ -139,11 +144,94 @@ fn three_broadcast_daemons_on_loopback_replicate_and_a_recorder_hears_them() {
     );
 }
 
+/// `GET /state` of a monitor, as JSON (`None` while it is not up).
+fn monitor_state(addr: std::net::SocketAddr) -> Option<serde_json::Value> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).ok()?;
+    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    write!(
+        s,
+        "GET /state HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .ok()?;
+    let mut text = String::new();
+    s.read_to_string(&mut text).ok()?;
+    serde_json::from_str(text.split_once("\r\n\r\n")?.1).ok()
+}
+
+#[test]
+fn a_live_monitor_hears_a_broadcast_team() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_udp_port().to_string();
+    let net = [
+        "--transport",
+        "broadcast",
+        "--port",
+        &port,
+        "--iface",
+        "127.0.0.1",
+    ];
+    let extra = ["--refresh", "50ms", "--team", "7"];
+    let d1 = Daemon::start_on(1, &net, free_tcp_port(), &extra, dir.path());
+    let _d2 = Daemon::start_on(2, &net, free_tcp_port(), &extra, dir.path());
+    let http: std::net::SocketAddr = format!("127.0.0.1:{}", free_tcp_port()).parse().unwrap();
+    struct Killed(std::process::Child);
+    impl Drop for Killed {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let _monitor = Killed(
+        huddle()
+            .args([
+                "monitor",
+                "--transport",
+                "broadcast",
+                "--port",
+                &port,
+                "--team",
+                "7",
+            ])
+            .args(["--iface", "127.0.0.1", "--http", &http.to_string()])
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("spawn huddle monitor"),
+    );
+    assert_eq!(d1.client().ask("SETV *.var.ball.dist 2.25"), "OK");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut last = None;
+    loop {
+        if let Some(s) = monitor_state(http) {
+            let board = s["board"].as_array().cloned().unwrap_or_default();
+            let robots = s["robots"].as_array().cloned().unwrap_or_default();
+            let has_robot = |id: u64| robots.iter().any(|r| r["id"] == id);
+            if has_robot(1)
+                && has_robot(2)
+                && board
+                    .iter()
+                    .any(|b| b["key"] == "1.var.ball.dist" && b["value"] == 2.25)
+            {
+                break;
+            }
+            last = Some(s);
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the monitor never showed both robots and 1.var.ball.dist: {last:?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// Waits until the recorder has written its headers and a frame.
 fn wait_until_recorded(file: &Path) {
     let deadline = Instant::now() + Duration::from_secs(20);
     while !(file.exists() && std::fs::metadata(file).unwrap().len() > 100) {
-        assert!(Instant::now() < deadline, "the recorder never wrote a frame");
+        assert!(
+            Instant::now() < deadline,
+            "the recorder never wrote a frame"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -177,7 +265,15 @@ fn daemon_fails(args: &[&str]) -> String {
     let dir = tempfile::tempdir().unwrap();
     let relay = format!("127.0.0.1:{}", free_tcp_port());
     let out = huddle()
-        .args(["daemon", "--id", "1", "--relay", &relay, "--iface", "127.0.0.1"])
+        .args([
+            "daemon",
+            "--id",
+            "1",
+            "--relay",
+            &relay,
+            "--iface",
+            "127.0.0.1",
+        ])
         .arg("--config-dir")
         .arg(dir.path())
         .args(args)
@@ -203,7 +299,14 @@ fn transport_mistakes_are_one_clear_line_at_start_up() {
             "has none: give the port with --port",
         ),
         (
-            &["--transport", "broadcast", "--port", &port, "--broadcast", "255.255.255.255"],
+            &[
+                "--transport",
+                "broadcast",
+                "--port",
+                &port,
+                "--broadcast",
+                "255.255.255.255",
+            ],
             "255.255.255.255 cannot be the broadcast address",
         ),
         (
@@ -323,7 +426,11 @@ fn two_hosts_on_a_veth_pair_replicate_over_broadcast_and_over_unicast() {
             .env("RUST_LOG", "warn")
             .output()
             .expect("huddle record in a namespace");
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let replay = huddle()
             .arg("replay")
             .arg(&file)
@@ -341,8 +448,18 @@ fn two_hosts_on_a_veth_pair_replicate_over_broadcast_and_over_unicast() {
     {
         let peer = |i: usize| format!("{}:10007", ADDRESSES[i]);
         let (p0, p1) = (peer(1), peer(0));
-        let _d0 = ns_daemon(&ns, 0, &["--transport", "unicast", "--peer", &p0], dir.path());
-        let _d1 = ns_daemon(&ns, 1, &["--transport", "unicast", "--peer", &p1], dir.path());
+        let _d0 = ns_daemon(
+            &ns,
+            0,
+            &["--transport", "unicast", "--peer", &p0],
+            dir.path(),
+        );
+        let _d1 = ns_daemon(
+            &ns,
+            1,
+            &["--transport", "unicast", "--peer", &p1],
+            dir.path(),
+        );
         values_cross_the_veth(&ns, "unicast");
     }
 }

@@ -40,7 +40,11 @@ pub enum Transport {
 
 impl Transport {
     /// Every transport, in `--help` order.
-    pub const ALL: [Transport; 3] = [Transport::Multicast, Transport::Broadcast, Transport::Unicast];
+    pub const ALL: [Transport; 3] = [
+        Transport::Multicast,
+        Transport::Broadcast,
+        Transport::Unicast,
+    ];
 
     /// The name on the command line.
     pub fn name(self) -> &'static str {

@@ -144,7 +144,10 @@ mod tests {
         let cfg = args(TransportKind::Multicast)
             .socket_config(lo, Some(7))
             .unwrap();
-        assert_eq!((cfg.transport, cfg.group), (Transport::Multicast, DEFAULT_GROUP));
+        assert_eq!(
+            (cfg.transport, cfg.group),
+            (Transport::Multicast, DEFAULT_GROUP)
+        );
         for kind in [TransportKind::Broadcast, TransportKind::Unicast] {
             let cfg = args(kind).socket_config(lo, Some(7)).unwrap();
             assert_eq!(cfg.group.port(), 10_007, "{kind:?}");
