@@ -210,7 +210,7 @@ fn a_live_monitor_hears_a_broadcast_team() {
                 && has_robot(2)
                 && board
                     .iter()
-                    .any(|b| b["key"] == "1.var.ball.dist" && b["value"] == 2.25)
+                    .any(|b| b["key"] == "1.var.ball.dist" && b["value"] == "2.25")
             {
                 break;
             }
@@ -403,7 +403,7 @@ fn two_hosts_on_a_veth_pair_replicate_over_broadcast_and_over_unicast() {
     let ns = match NetnsPair::create("tr") {
         Ok(ns) => ns,
         Err(reason) => {
-            eprintln!("SKIPPED two_hosts_on_a_veth_pair_...: {reason}");
+            eprintln!("SKIPPED two_hosts_on_a_veth_pair_replicate_over_broadcast_and_over_unicast: {reason}");
             return;
         }
     };
