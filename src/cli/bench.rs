@@ -787,7 +787,11 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let r = &report;
         outln!(
             "loopback {} ping-pong ({} round trips each, pinning {:?}, reply by {:?}, {} build)",
-            r.transport, args.rounds, r.pin, r.reply, r.build
+            r.transport,
+            args.rounds,
+            r.pin,
+            r.reply,
+            r.build
         );
         outln!(
             "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",
