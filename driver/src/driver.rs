@@ -25,7 +25,7 @@ use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
 use crate::impair::{Held, Impairment};
 use crate::incarnation::new_incarnation;
 use crate::rate_limit::RateLimit;
-use crate::socket::{open_multicast, open_unicast, SocketConfig, SocketError};
+use crate::socket::{open, open_unicast, SocketConfig, SocketError, Transport};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
@@ -37,13 +37,16 @@ const RECV_BATCH: usize = 256;
 const HELD_LIMIT: usize = 65_536;
 /// At most one warning per this period about frames dropped for a team-key mismatch.
 const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+/// At most one warning per this period about sends the OS refused.
+const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Everything the driver needs to start.
 #[derive(Clone, Debug)]
 pub struct DriverConfig {
     /// The replica's settings (robot and team id, refresh period, MTU, key, talk).
     pub replica: ReplicaConfig,
-    /// The multicast socket.
+    /// The team's socket: transport (multicast, broadcast, unicast), group or port,
+    /// interface.
     pub socket: SocketConfig,
     /// Teammates that also get every frame by unicast (WLAN access points often drop
     /// or delay multicast). Duplicates are harmless. With peers, a second socket bound to
@@ -51,6 +54,10 @@ pub struct DriverConfig {
     /// other address are dropped (counted in [`IoStats::unicast_refused`]). Without peers
     /// no unicast is received at all. Note: on one host, unicast to a port shared by
     /// several replicas reaches only one of them.
+    ///
+    /// With [`Transport::Unicast`] the peers are the only destinations and the only
+    /// accepted senders, on the one socket bound to `<iface>:<port>`; at least one is
+    /// needed.
     pub peers: Vec<SocketAddr>,
     /// Values set before the first frame goes out (`config.dat`, `config-<id>.dat`).
     pub start_values: Vec<(Key, Value)>,
@@ -82,9 +89,12 @@ impl DriverConfig {
 /// Why the driver could not start.
 #[derive(Debug, Error)]
 pub enum DriverError {
-    /// The multicast socket could not be set up.
+    /// The team's socket could not be set up.
     #[error(transparent)]
     Socket(#[from] SocketError),
+    /// [`Transport::Unicast`] without a peer: no frame would go anywhere.
+    #[error("the unicast transport sends to each --peer only, and none is given")]
+    NoPeers,
     /// The replica configuration is invalid.
     #[error("invalid replica configuration: {0}")]
     Replica(#[from] ConfigInvalid),
@@ -151,13 +161,14 @@ pub(crate) struct SessionSlot {
 pub struct IoStats {
     /// `SO_RCVBUF` granted by the kernel.
     pub recv_buffer_bytes: usize,
-    /// Datagrams sent (to the group and to peers).
+    /// Datagrams sent (to the group or broadcast address, and to peers).
     pub datagrams_sent: u64,
-    /// Datagrams received (on the group socket and, with peers, the unicast socket).
+    /// Datagrams received (on the team's socket and, with peers, the unicast socket).
     pub datagrams_received: u64,
     /// Unicast datagrams refused because they did not come from a configured peer.
     pub unicast_refused: u64,
-    /// Sends that failed with an error other than a full buffer.
+    /// Sends that failed with an error other than a full buffer (a peer or network
+    /// unreachable, a broadcast refused): logged, at most one warning per 10 s.
     pub send_errors: u64,
     /// Frames dropped because the send backlog was full.
     pub send_backlog_drops: u64,
@@ -174,9 +185,11 @@ pub(crate) struct Inner {
     pub(crate) clock: Clock,
     pub(crate) replica: Replica,
     socket: Rc<UdpSocket>,
-    /// The `--peer` socket (`<iface>:<port>`), only when peers are configured.
+    /// The `--peer` socket (`<iface>:<port>`), only when peers are configured and the
+    /// transport is not unicast (then `socket` is that socket).
     unicast: Option<Rc<UdpSocket>>,
-    group: SocketAddr,
+    /// The group or broadcast address every frame goes to; `None` with unicast.
+    destination: Option<SocketAddr>,
     peers: Vec<SocketAddr>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
     pub(crate) subscribers: Vec<Weak<RefCell<SubQueue>>>,
@@ -203,6 +216,8 @@ pub(crate) struct Inner {
     handed_up: u64,
     /// Warnings about frames dropped for a team-key mismatch, rate-limited.
     key_mismatch: RateLimit,
+    /// Warnings about sends the OS refused, rate-limited.
+    send_failures: RateLimit,
 }
 
 impl Inner {
@@ -210,12 +225,13 @@ impl Inner {
     pub(crate) fn pump(&mut self) {
         while let Some(transmit) = self.replica.poll_transmit() {
             let payload = transmit.payload;
-            let group = self.group;
             for i in 0..self.peers.len() {
                 let peer = self.peers[i];
                 self.emit(&payload, peer);
             }
-            self.emit(&payload, group);
+            if let Some(destination) = self.destination {
+                self.emit(&payload, destination);
+            }
         }
         self.dispatch_events();
     }
@@ -267,11 +283,27 @@ impl Inner {
     }
 
     /// The socket a datagram to `to` leaves from: the unicast one for peers (when open),
-    /// the group socket otherwise.
+    /// the team's socket otherwise.
     fn socket_for(&self, to: SocketAddr) -> &Rc<UdpSocket> {
         match &self.unicast {
-            Some(unicast) if to != self.group => unicast,
+            Some(unicast) if Some(to) != self.destination => unicast,
             _ => &self.socket,
+        }
+    }
+
+    /// Counts a send the OS refused and says so, at most once per
+    /// [`SEND_WARNING_PERIOD`]: a peer that is down must not flood the log.
+    fn send_failed(&mut self, to: SocketAddr, error: &io::Error) {
+        self.io.send_errors += 1;
+        tracing::debug!(%to, %error, "send failed");
+        if let Some(count) = self.send_failures.record(self.clock.now()) {
+            tracing::warn!(
+                count,
+                latest_to = %to,
+                latest_error = %error,
+                "{count} send(s) refused by the OS since the last such warning (at most one \
+                 every 10 s)"
+            );
         }
     }
 
@@ -285,10 +317,7 @@ impl Inner {
                 self.enqueue(payload.to_vec(), to);
                 self.wake.notify_one();
             }
-            Err(e) => {
-                self.io.send_errors += 1;
-                tracing::debug!(%to, error = %e, "send failed");
-            }
+            Err(e) => self.send_failed(to, &e),
         }
     }
 
@@ -303,10 +332,11 @@ impl Inner {
     /// Sends what the backlog holds until the kernel refuses again.
     fn flush_backlog(&mut self) {
         while let Some((payload, to)) = self.backlog.front() {
-            match self.socket_for(*to).try_send_to(payload, *to) {
+            let to = *to;
+            match self.socket_for(to).try_send_to(payload, to) {
                 Ok(_) => self.io.datagrams_sent += 1,
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => return,
-                Err(_) => self.io.send_errors += 1,
+                Err(e) => self.send_failed(to, &e),
             }
             self.backlog.pop_front();
         }
@@ -615,16 +645,25 @@ pub struct Driver {
     inner: Rc<RefCell<Inner>>,
     socket: Rc<UdpSocket>,
     unicast: Option<Rc<UdpSocket>>,
+    /// `socket` takes datagrams from peers only (the unicast transport).
+    peers_only: bool,
     wake: Rc<Nudge>,
 }
 
 impl Driver {
-    /// Opens the socket, joins the group and starts the replica with the start values.
-    /// Call it inside a tokio runtime (the socket registers with its reactor).
+    /// Opens the transport's socket (joining the group for multicast) and starts the
+    /// replica with the start values. Call it inside a tokio runtime (the socket
+    /// registers with its reactor).
     pub fn bind(config: DriverConfig) -> Result<Driver, DriverError> {
-        let opened = open_multicast(&config.socket)?;
+        let transport = config.socket.transport;
+        let peers_only = transport == Transport::Unicast;
+        if peers_only && config.peers.is_empty() {
+            return Err(DriverError::NoPeers);
+        }
+        let opened = open(&config.socket)?;
+        let destination = opened.destination.map(SocketAddr::V4);
         let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
-        let unicast = if config.peers.is_empty() {
+        let unicast = if config.peers.is_empty() || peers_only {
             None
         } else {
             let std_socket = open_unicast(&config.socket)?;
@@ -651,7 +690,7 @@ impl Driver {
             replica,
             socket: socket.clone(),
             unicast: unicast.clone(),
-            group: config.socket.group.into(),
+            destination,
             peers: config.peers,
             backlog: VecDeque::new(),
             subscribers: Vec::new(),
@@ -673,20 +712,24 @@ impl Driver {
             copies: Vec::new(),
             handed_up: 0,
             key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
+            send_failures: RateLimit::new(SEND_WARNING_PERIOD),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
-            group = %config.socket.group,
+            %transport,
+            to = %destination.map_or_else(|| "each peer".to_owned(), |d| d.to_string()),
+            port = config.socket.group.port(),
             iface = %config.socket.iface,
             recv_buffer_bytes = opened.recv_buffer_granted,
             requested = config.socket.recv_buffer_bytes,
             peers = inner.peers.len(),
-            "multicast socket ready"
+            "{transport} socket ready"
         );
         Ok(Driver {
             inner: Rc::new(RefCell::new(inner)),
             socket,
             unicast,
+            peers_only,
             wake,
         })
     }
@@ -799,8 +842,9 @@ impl Driver {
     /// or one of them gave a waiting task or a watch something to do; returns whether
     /// that happened.
     ///
-    /// With peers, the group and unicast sockets take turns, so neither starves the
-    /// other; unicast from anyone but a configured peer is dropped and counted.
+    /// With peers, the team's and the unicast socket take turns, so neither starves the
+    /// other; unicast from anyone but a configured peer is dropped and counted (with the
+    /// unicast transport, on its one socket).
     fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
         let mut inner = self.inner.borrow_mut();
         let handed_before = inner.handed_up;
@@ -814,7 +858,7 @@ impl Driver {
             let (Some(socket), false) = (sockets[turn], drained[turn]) else {
                 break; // both drained
             };
-            let unicast = turn == 1;
+            let unicast = turn == 1 || self.peers_only;
             let read = socket.try_recv_from(buf);
             if read
                 .as_ref()
@@ -841,7 +885,17 @@ impl Driver {
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => continue,
                 // An ICMP error from an earlier unicast send to a `--peer` that is down
                 // surfaces here on Linux; it is no reason to stop.
-                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::ConnectionRefused
+                            | io::ErrorKind::HostUnreachable
+                            | io::ErrorKind::NetworkUnreachable
+                    ) =>
+                {
+                    tracing::debug!(error = %e, "an earlier send was not delivered");
+                    continue;
+                }
                 Err(e) => return Err(DriverError::Io(e)),
             }
         }

@@ -1,10 +1,14 @@
 //! driver: huddle's I/O shell around the sans-IO `comms` core, as quinn is around
-//! quinn-proto. It runs a [`comms::Replica`] over a tokio + socket2 multicast UDP socket,
-//! with its timers, relay sessions ([`serve`] is the relay's TCP side) and in-process
+//! quinn-proto. It runs a [`comms::Replica`] over a tokio + socket2 UDP socket, with its
+//! timers, relay sessions ([`serve`] is the relay's TCP side) and in-process
 //! subscribers, and it reads what the core may not: configuration files
 //! ([`load_config_files`], [`read_key_file`]: regular files only, size-limited), network
 //! interfaces ([`resolve_iface`]), the OS's random source
 //! for a replica's incarnation and the monotonic clock.
+//!
+//! Frames reach the team by one of three [`Transport`]s, as leagues require: multicast
+//! to a group (the default, the seed's), UDP broadcast to the interface's broadcast
+//! address (RoboCup SPL: port 10000 + team), or unicast to each listed peer only.
 //!
 //! **What it is not.** No protocol logic: every frame, version, talk sequence and relay
 //! reply is decided by `comms`, which netsim also drives in virtual time, so a test in
@@ -68,9 +72,12 @@ pub use config_files::{
 };
 pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
-pub use iface::{resolve_iface, IfaceError};
+pub use iface::{broadcast_address, resolve_iface, IfaceError};
 pub use impair::Impairment;
 pub use incarnation::new_incarnation;
 pub use rate_limit::RateLimit;
 pub use relay::serve;
-pub use socket::{open_multicast, open_unicast, scratch_group, Opened, SocketConfig, SocketError};
+pub use socket::{
+    broadcast_destination, open, open_broadcast, open_multicast, open_unicast, scratch_group,
+    Opened, SocketConfig, SocketError, Transport,
+};

@@ -1,11 +1,18 @@
-//! The multicast UDP socket, set up with socket2 the way a team on one WLAN (or one
-//! laptop) needs it, and the unicast socket that `--peer` asks for.
+//! The team's UDP sockets, set up with socket2 the way a team on one WLAN (or one
+//! laptop) needs it: one per [`Transport`] (multicast, broadcast, unicast), and the
+//! unicast socket that `--peer` asks for.
 //!
 //! The multicast socket is bound to the group address itself (not `0.0.0.0`), with
 //! `IP_MULTICAST_ALL` off on Linux: it hears only datagrams sent to its own group and
 //! port, never unicast and never another group that shares the port. Unicast from
 //! teammates arrives on a second socket ([`open_unicast`]), opened only when peers are
 //! configured, whose datagrams the driver accepts from the listed peers alone.
+//!
+//! The broadcast socket is built the same way, bound to the interface's broadcast
+//! address (RoboCup SPL: `10.0.255.255:10000 + team`): it hears the team's broadcasts
+//! (its own included, which the replica recognises by sender and incarnation) and no
+//! unicast. The unicast transport has no group at all: its one socket is the `--peer`
+//! socket.
 
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
@@ -13,11 +20,59 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 use socket2::{Domain, Protocol, Socket, Type};
 use thiserror::Error;
 
+use crate::iface::{broadcast_address, IfaceError};
+
+/// How frames reach the team. Leagues differ: the MSL's RtDB multicasts, the SPL requires
+/// UDP broadcast to port 10000 + team, and on a WLAN whose access point loses or holds
+/// group frames, unicast to each teammate is what gets through (the MAC retries unicast,
+/// and an access point does not hold it for the DTIM beacon).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Transport {
+    /// Every frame to the multicast group ([`SocketConfig::group`]).
+    #[default]
+    Multicast,
+    /// Every frame to the interface's broadcast address (or
+    /// [`SocketConfig::broadcast`]) on the port of [`SocketConfig::group`].
+    Broadcast,
+    /// Every frame to each peer only; no group, no broadcast. Needs peers.
+    Unicast,
+}
+
+impl Transport {
+    /// Every transport, in `--help` order.
+    pub const ALL: [Transport; 3] = [
+        Transport::Multicast,
+        Transport::Broadcast,
+        Transport::Unicast,
+    ];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Transport::Multicast => "multicast",
+            Transport::Broadcast => "broadcast",
+            Transport::Unicast => "unicast",
+        }
+    }
+}
+
+impl std::fmt::Display for Transport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// How the socket is opened.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SocketConfig {
-    /// Multicast group and port (the seed's `224.0.0.1:2000` by default).
+    /// Multicast, broadcast or unicast.
+    pub transport: Transport,
+    /// Multicast group and port (the seed's `224.0.0.1:2000` by default). With the
+    /// other transports only the port is used.
     pub group: SocketAddrV4,
+    /// Broadcast address for [`Transport::Broadcast`]; `None`: the interface's
+    /// (`127.255.255.255` on loopback, see [`crate::broadcast_address`]).
+    pub broadcast: Option<Ipv4Addr>,
     /// The interface's IPv4 address: `IP_MULTICAST_IF` and the membership. Default
     /// `127.0.0.1`, so nothing leaves the machine unless an interface is named.
     pub iface: Ipv4Addr,
@@ -30,7 +85,9 @@ pub struct SocketConfig {
 impl Default for SocketConfig {
     fn default() -> SocketConfig {
         SocketConfig {
+            transport: Transport::Multicast,
             group: SocketAddrV4::new(Ipv4Addr::new(224, 0, 0, 1), 2000),
+            broadcast: None,
             iface: Ipv4Addr::LOCALHOST,
             ttl: 1,
             recv_buffer_bytes: 4 << 20,
@@ -38,12 +95,23 @@ impl Default for SocketConfig {
     }
 }
 
-/// Why the multicast socket could not be set up.
+/// Why the team's socket could not be set up.
 #[derive(Debug, Error)]
 pub enum SocketError {
     /// The group address is not an IPv4 multicast address.
     #[error("{0} is not an IPv4 multicast address (224.0.0.0/4)")]
     NotMulticast(Ipv4Addr),
+    /// The broadcast address given is unusable: multicast, unspecified, or the limited
+    /// broadcast `255.255.255.255`, which leaves by whichever interface the routing
+    /// table picks rather than the one named.
+    #[error(
+        "{0} cannot be the broadcast address: give the interface's directed broadcast \
+         address (e.g. 10.0.255.255), or leave it out to use the interface's"
+    )]
+    NotBroadcast(Ipv4Addr),
+    /// The interface has no broadcast address, or is not an interface of this host.
+    #[error(transparent)]
+    Iface(#[from] IfaceError),
     /// Creating, configuring or binding the socket failed.
     #[error("cannot open a UDP socket on port {port}: {source}")]
     Open {
@@ -96,12 +164,69 @@ pub fn scratch_group() -> io::Result<SocketAddrV4> {
 /// The socket as opened, with what the kernel granted.
 #[derive(Debug)]
 pub struct Opened {
-    /// Non-blocking, bound to `<group>:<port>`, member of the group on the interface:
-    /// it receives that group's datagrams only (no unicast, no other group).
+    /// Non-blocking. Multicast: bound to `<group>:<port>`, member of the group on the
+    /// interface: it receives that group's datagrams only (no unicast, no other group).
+    /// Broadcast: bound to `<broadcast address>:<port>`, `SO_BROADCAST` on. Unicast:
+    /// bound to `<iface>:<port>` (see [`open_unicast`]).
     pub socket: std::net::UdpSocket,
     /// `SO_RCVBUF` as the kernel reports it (Linux doubles the request and caps it at
     /// `net.core.rmem_max`).
     pub recv_buffer_granted: usize,
+    /// Where every frame goes: the group, or the broadcast address, and the port;
+    /// `None` for unicast (to each peer only).
+    pub destination: Option<SocketAddrV4>,
+}
+
+/// Opens the socket of `cfg.transport`: [`open_multicast`], [`open_broadcast`] or, for
+/// unicast, a socket like [`open_unicast`]'s that does not share its port.
+pub fn open(cfg: &SocketConfig) -> Result<Opened, SocketError> {
+    match cfg.transport {
+        Transport::Multicast => open_multicast(cfg),
+        Transport::Broadcast => open_broadcast(cfg),
+        // The transport's only socket: a second replica on this port would silently
+        // take half the unicast, so the port is not shared (a clear "in use" instead).
+        Transport::Unicast => unicast_opened(cfg, false),
+    }
+}
+
+/// The broadcast address `cfg` sends to: [`SocketConfig::broadcast`] if set (checked),
+/// else the interface's.
+pub fn broadcast_destination(cfg: &SocketConfig) -> Result<SocketAddrV4, SocketError> {
+    let address = match cfg.broadcast {
+        Some(address) => {
+            if address.is_multicast() || address.is_unspecified() || address.is_broadcast() {
+                return Err(SocketError::NotBroadcast(address));
+            }
+            address
+        }
+        None => broadcast_address(cfg.iface)?,
+    };
+    Ok(SocketAddrV4::new(address, cfg.group.port()))
+}
+
+/// Opens the broadcast socket: `SO_BROADCAST` (without it Linux refuses the send with
+/// `EACCES`), `SO_REUSEADDR` + `SO_REUSEPORT` (replicas on one host share the port), a
+/// large receive buffer, bound to the broadcast address and port, so that it hears the
+/// team's broadcasts and no unicast. Frames leave by the interface whose subnet the
+/// address belongs to (the kernel's broadcast route), from that interface's address.
+pub fn open_broadcast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
+    let destination = broadcast_destination(cfg)?;
+    let port = destination.port();
+    let open = |source| SocketError::Open { port, source };
+    let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).map_err(open)?;
+    socket.set_reuse_address(true).map_err(open)?;
+    socket.set_reuse_port(true).map_err(open)?;
+    socket.set_broadcast(true).map_err(open)?;
+    let _ = socket.set_recv_buffer_size(cfg.recv_buffer_bytes);
+    let recv_buffer_granted = socket.recv_buffer_size().map_err(open)?;
+    let bind: SocketAddr = destination.into();
+    socket.bind(&bind.into()).map_err(open)?;
+    socket.set_nonblocking(true).map_err(open)?;
+    Ok(Opened {
+        socket: socket.into(),
+        recv_buffer_granted,
+        destination: Some(destination),
+    })
 }
 
 /// Opens the multicast socket: `SO_REUSEADDR` + `SO_REUSEPORT` (several replicas may
@@ -147,6 +272,7 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
     Ok(Opened {
         socket: socket.into(),
         recv_buffer_granted,
+        destination: Some(cfg.group),
     })
 }
 
@@ -155,16 +281,28 @@ pub fn open_multicast(cfg: &SocketConfig) -> Result<Opened, SocketError> {
 /// peers leave from it, so a teammate sees them come from this address; what arrives on
 /// it is accepted by the driver only from the configured peers.
 pub fn open_unicast(cfg: &SocketConfig) -> Result<std::net::UdpSocket, SocketError> {
+    unicast_opened(cfg, true).map(|opened| opened.socket)
+}
+
+/// The unicast socket on `<iface>:<port>`; `shared`: `SO_REUSEADDR` + `SO_REUSEPORT`.
+fn unicast_opened(cfg: &SocketConfig, shared: bool) -> Result<Opened, SocketError> {
     let port = cfg.group.port();
     let open = |source| SocketError::Open { port, source };
     let socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).map_err(open)?;
-    socket.set_reuse_address(true).map_err(open)?;
-    socket.set_reuse_port(true).map_err(open)?;
+    if shared {
+        socket.set_reuse_address(true).map_err(open)?;
+        socket.set_reuse_port(true).map_err(open)?;
+    }
     let _ = socket.set_recv_buffer_size(cfg.recv_buffer_bytes);
+    let recv_buffer_granted = socket.recv_buffer_size().map_err(open)?;
     let bind: SocketAddr = SocketAddrV4::new(cfg.iface, port).into();
     socket.bind(&bind.into()).map_err(open)?;
     socket.set_nonblocking(true).map_err(open)?;
-    Ok(socket.into())
+    Ok(Opened {
+        socket: socket.into(),
+        recv_buffer_granted,
+        destination: None,
+    })
 }
 
 #[cfg(test)]
@@ -264,6 +402,89 @@ mod tests {
         tx.send_to(b"unicast", (Ipv4Addr::LOCALHOST, cfg.group.port()))
             .unwrap();
         assert_eq!(first_received(&unicast), b"unicast");
+    }
+
+    fn broadcast_cfg() -> SocketConfig {
+        SocketConfig {
+            transport: Transport::Broadcast,
+            group: scratch_group().unwrap(),
+            ..SocketConfig::default()
+        }
+    }
+
+    #[test]
+    fn broadcast_on_loopback_reaches_every_socket_on_the_port_and_no_unicast() {
+        let cfg = broadcast_cfg();
+        let a = open(&cfg).unwrap();
+        let b = open(&cfg).unwrap();
+        let to = SocketAddrV4::new(Ipv4Addr::new(127, 255, 255, 255), cfg.group.port());
+        assert_eq!(a.destination, Some(to));
+        // A unicast to the port on 127.0.0.1 is not for the broadcast sockets.
+        let tx = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        tx.send_to(b"unicast", (Ipv4Addr::LOCALHOST, cfg.group.port()))
+            .unwrap();
+        a.socket.send_to(b"hello", to).unwrap();
+        // Both hear it, the sender too (its own echo, from 127.0.0.1:<port>).
+        for s in [&b.socket, &a.socket] {
+            let mut buf = [0u8; 16];
+            s.set_nonblocking(false).unwrap();
+            s.set_read_timeout(Some(std::time::Duration::from_secs(2)))
+                .unwrap();
+            let (n, from) = s.recv_from(&mut buf).expect("the broadcast arrives");
+            assert_eq!(&buf[..n], b"hello");
+            assert_eq!(
+                from,
+                SocketAddr::from((Ipv4Addr::LOCALHOST, cfg.group.port()))
+            );
+        }
+    }
+
+    #[test]
+    fn without_so_broadcast_the_kernel_refuses_a_broadcast() {
+        // Why open_broadcast sets it: EACCES otherwise (and the driver counts that).
+        let tx = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        let err = tx
+            .send_to(b"x", (Ipv4Addr::new(127, 255, 255, 255), 9))
+            .unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::PermissionDenied, "{err}");
+    }
+
+    #[test]
+    fn unusable_broadcast_addresses_are_clear_errors() {
+        for bad in ["255.255.255.255", "0.0.0.0", "239.1.2.3"] {
+            let cfg = SocketConfig {
+                broadcast: Some(bad.parse().unwrap()),
+                ..broadcast_cfg()
+            };
+            let err = open(&cfg).unwrap_err();
+            assert!(matches!(err, SocketError::NotBroadcast(_)), "{bad}: {err}");
+            assert!(err.to_string().contains(bad), "{err}");
+        }
+        let cfg = SocketConfig {
+            iface: Ipv4Addr::new(192, 0, 2, 1),
+            ..broadcast_cfg()
+        };
+        let err = open(&cfg).unwrap_err();
+        assert!(
+            matches!(err, SocketError::Iface(IfaceError::NotLocal(_))),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_unicast_transport_does_not_share_its_port() {
+        let cfg = SocketConfig {
+            transport: Transport::Unicast,
+            group: scratch_group().unwrap(),
+            ..SocketConfig::default()
+        };
+        let first = open(&cfg).unwrap();
+        assert_eq!(first.destination, None);
+        let err = open(&cfg).unwrap_err();
+        assert!(
+            matches!(&err, SocketError::Open { source, .. } if source.kind() == io::ErrorKind::AddrInUse),
+            "{err}"
+        );
     }
 
     #[test]

@@ -7,7 +7,10 @@
 //! tasks awaiting subscriptions instead):
 //! p50/p99 of each and their ratio; (c) sustained updates/s from A to B with the loss
 //! rate; (d) resident memory of a spawned daemon holding 10,000 keys.
-//! Everything sends on loopback only (IP_MULTICAST_IF 127.0.0.1, TTL 1).
+//! Everything sends on loopback only (IP_MULTICAST_IF 127.0.0.1, TTL 1). `--transport
+//! broadcast` runs (a)–(c) over broadcast to 127.255.255.255 instead, `--transport
+//! unicast` between 127.0.0.1 and 127.0.0.2 (each robot's only peer is the other), the
+//! baselines on the same transport.
 
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -17,13 +20,14 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use comms::{ReplicaConfig, Value};
-use driver::{open_multicast, Driver, DriverConfig, Handle, Notice, SocketConfig};
+use driver::{Driver, DriverConfig, Handle, Notice, SocketConfig, Transport};
 use huddle::summary::percentile;
 use nix::sched::{sched_setaffinity, CpuSet};
 use nix::unistd::Pid;
 use serde::Serialize;
 
 use super::relay::RelayClient;
+use super::transport::TransportKind;
 
 /// `huddle bench ...`
 #[derive(Args, Debug)]
@@ -64,6 +68,11 @@ pub struct CommsArgs {
     /// First of the four UDP ports used (each test its own group and port).
     #[arg(long, default_value_t = 38900)]
     pub port: u16,
+    /// The transport of the ping-pongs (raw, tokio and huddle alike) and the throughput
+    /// run, on loopback: multicast, broadcast (127.255.255.255) or unicast (127.0.0.1 ↔
+    /// 127.0.0.2).
+    #[arg(long, value_enum, default_value_t = TransportKind::Multicast)]
+    pub transport: TransportKind,
 }
 
 /// A count of at least one (no measurement is made of nothing).
@@ -131,6 +140,7 @@ pub struct CommsReport {
     pub tokio_p50_ratio: f64,
     pub pin: Pin,
     pub reply: Reply,
+    pub transport: &'static str,
     pub updates_per_s: f64,
     pub updates_sent: u64,
     pub updates_applied: u64,
@@ -145,6 +155,42 @@ pub struct CommsReport {
 
 fn group(port: u16, last: u8) -> SocketAddrV4 {
     SocketAddrV4::new(Ipv4Addr::new(239, 255, 39, last), port)
+}
+
+/// Robot `id`'s loopback address with the unicast transport: 127.0.0.<id>.
+fn unicast_iface(id: u8) -> Ipv4Addr {
+    Ipv4Addr::new(127, 0, 0, id)
+}
+
+/// The socket of robot `id` (1 or 2) on `transport`, on loopback; for unicast, the
+/// other robot is its one peer.
+fn socket_config(id: u8, g: SocketAddrV4, transport: Transport) -> SocketConfig {
+    SocketConfig {
+        transport,
+        group: g,
+        iface: match transport {
+            Transport::Unicast => unicast_iface(id),
+            _ => Ipv4Addr::LOCALHOST,
+        },
+        ..SocketConfig::default()
+    }
+}
+
+/// The two ends of a raw ping-pong on `transport`: each one's blocking socket (with
+/// the driver's socket options) and where it sends.
+fn raw_ends(g: SocketAddrV4, transport: Transport) -> Result<[(UdpSocket, SocketAddr); 2]> {
+    let end = |id: u8| -> Result<(UdpSocket, SocketAddr)> {
+        let opened = driver::open(&socket_config(id, g, transport))?;
+        let to = match opened.destination {
+            Some(to) => SocketAddr::V4(to),
+            None => SocketAddr::from((unicast_iface(3 - id), g.port())),
+        };
+        let s = opened.socket;
+        s.set_nonblocking(false)?;
+        s.set_read_timeout(Some(Duration::from_secs(2)))?;
+        Ok((s, to))
+    };
+    Ok([end(1)?, end(2)?])
 }
 
 /// p50 and p99 in microseconds of round trips.
@@ -195,19 +241,13 @@ fn echo(datagram: &mut [u8]) -> Echo {
 }
 
 /// (a): two threads, blocking sockets on one group and port; each skips its own echoes.
-fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
-    let cfg = SocketConfig {
-        group: g,
-        ..SocketConfig::default()
-    };
-    let open = || -> Result<UdpSocket> {
-        let s = open_multicast(&cfg)?.socket;
-        s.set_nonblocking(false)?;
-        s.set_read_timeout(Some(Duration::from_secs(2)))?;
-        Ok(s)
-    };
-    let (a, b) = (open()?, open()?);
-    let to: SocketAddr = g.into();
+fn raw_ping_pong(
+    g: SocketAddrV4,
+    rounds: usize,
+    pin: Pin,
+    transport: Transport,
+) -> Result<Vec<f64>> {
+    let [(a, to), (b, back)] = raw_ends(g, transport)?;
     let ponger = std::thread::spawn(move || -> Result<()> {
         pin.apply(1);
         let mut buf = [0u8; 64];
@@ -215,7 +255,7 @@ fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
             let (n, _) = b.recv_from(&mut buf)?;
             match echo(&mut buf[..n]) {
                 Echo::Reply => {
-                    b.send_to(&buf[..n], to)?;
+                    b.send_to(&buf[..n], back)?;
                 }
                 Echo::Quit => return Ok(()),
                 Echo::Ignore => {}
@@ -269,13 +309,15 @@ where
 
 /// (a'): the raw ping-pong over tokio sockets, same socket options, threads and runtime
 /// set-up as the replicas: the floor that "the cost of tokio" sets for (b).
-fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>> {
-    let cfg = SocketConfig {
-        group: g,
-        ..SocketConfig::default()
-    };
-    let (a, b) = (open_multicast(&cfg)?.socket, open_multicast(&cfg)?.socket);
-    let to: SocketAddr = g.into();
+fn tokio_ping_pong(
+    g: SocketAddrV4,
+    rounds: usize,
+    pin: Pin,
+    transport: Transport,
+) -> Result<Vec<f64>> {
+    let [(a, to), (b, back)] = raw_ends(g, transport)?;
+    a.set_nonblocking(true)?;
+    b.set_nonblocking(true)?;
     let ponger = on_runtime_thread(pin, 1, move || async move {
         let b = tokio::net::UdpSocket::from_std(b)?;
         let mut buf = [0u8; 64];
@@ -283,7 +325,7 @@ fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>>
             let (n, _) = b.recv_from(&mut buf).await?;
             match echo(&mut buf[..n]) {
                 Echo::Reply => {
-                    b.send_to(&buf[..n], to).await?;
+                    b.send_to(&buf[..n], back).await?;
                 }
                 Echo::Quit => return Ok(()),
                 Echo::Ignore => {}
@@ -323,7 +365,7 @@ fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin) -> Result<Vec<f64>>
 /// the driver stops when `f` returns.
 fn on_driver_thread<T: Send + 'static, F, Fut>(
     id: u8,
-    g: SocketAddrV4,
+    (g, transport): (SocketAddrV4, Transport),
     refresh: Duration,
     pin: Pin,
     f: F,
@@ -340,7 +382,10 @@ where
         let local = tokio::task::LocalSet::new();
         local.block_on(&rt, async move {
             let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0).with_refresh_period(refresh));
-            cfg.socket.group = g;
+            cfg.socket = socket_config(id, g, transport);
+            if transport == Transport::Unicast {
+                cfg.peers = vec![SocketAddr::from((unicast_iface(3 - id), g.port()))];
+            }
             let driver = Driver::bind(cfg)?;
             let handle = driver.handle();
             let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
@@ -367,7 +412,12 @@ async fn next_value(sub: &mut driver::Subscription) -> Result<Value> {
 
 /// (b): ping on robot 1, pong on robot 2, each on its own thread; both robots' software
 /// reacts as `reply` says.
-fn huddle_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin, reply: Reply) -> Result<Vec<f64>> {
+fn huddle_ping_pong(
+    g: (SocketAddrV4, Transport),
+    rounds: usize,
+    pin: Pin,
+    reply: Reply,
+) -> Result<Vec<f64>> {
     let ready = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
     let (r2, d2) = (ready.clone(), done.clone());
@@ -519,7 +569,7 @@ struct Throughput {
 /// producer paced by its control loop would be), so the figure is what B sustains.
 /// Frames are counted from the moment both ends hear each other (a frame sent before B
 /// joined the group is no loss).
-fn throughput(g: SocketAddrV4, updates: u64, pin: Pin) -> Result<Throughput> {
+fn throughput(g: (SocketAddrV4, Transport), updates: u64, pin: Pin) -> Result<Throughput> {
     const KEYS: u64 = 1000;
     const WINDOW: u64 = 40_000;
     let applied = Arc::new(AtomicU64::new(0));
@@ -679,16 +729,18 @@ pub fn run(args: BenchArgs) -> Result<()> {
     // this shared machine falls on all three alike.
     const BLOCKS: usize = 5;
     let per_block = args.rounds.div_ceil(BLOCKS);
+    let transport = Transport::from(args.transport);
     let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());
     for block in 0..BLOCKS {
         say(&format!(
             "ping-pong block {} of {BLOCKS}: raw, tokio, huddle...",
             block + 1
         ));
-        raw.extend(raw_ping_pong(group(args.port, 1), per_block, args.pin)?);
-        bare.extend(tokio_ping_pong(group(args.port, 1), per_block, args.pin)?);
+        let g = group(args.port, 1);
+        raw.extend(raw_ping_pong(g, per_block, args.pin, transport)?);
+        bare.extend(tokio_ping_pong(g, per_block, args.pin, transport)?);
         hud.extend(huddle_ping_pong(
-            group(args.port + 1, 2),
+            (group(args.port + 1, 2), transport),
             per_block,
             args.pin,
             args.reply,
@@ -698,7 +750,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let (tokio_p50, tokio_p99) = summarize(bare);
     let (h_p50, h_p99) = summarize(hud);
     say("sustained updates A -> B...");
-    let tp = throughput(group(args.port + 2, 3), args.updates, args.pin)?;
+    let tp = throughput((group(args.port + 2, 3), transport), args.updates, args.pin)?;
     say("daemon resident memory with 10,000 keys...");
     let rss = rss_with_10k_keys(group(args.port + 3, 4), args.port + 4)?;
     let report = CommsReport {
@@ -713,6 +765,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         tokio_p50_ratio: tokio_p50 / raw_p50,
         pin: args.pin,
         reply: args.reply,
+        transport: transport.name(),
         updates_per_s: tp.updates_per_s,
         updates_sent: tp.updates_sent,
         updates_applied: tp.updates_applied,
@@ -733,8 +786,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
     } else {
         let r = &report;
         outln!(
-            "loopback multicast ping-pong ({} round trips each, pinning {:?}, reply by {:?}, {} build)",
-            args.rounds, r.pin, r.reply, r.build
+            "loopback {} ping-pong ({} round trips each, pinning {:?}, reply by {:?}, {} build)",
+            r.transport,
+            args.rounds,
+            r.pin,
+            r.reply,
+            r.build
         );
         outln!(
             "  raw UDP           p50 {:7.1} us   p99 {:7.1} us",

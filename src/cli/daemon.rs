@@ -1,7 +1,8 @@
-//! `huddle daemon`: one robot's replica on the team's multicast group, with the relay
-//! port for programs in any language (isocrob-2000's Proxy and Relay μAgents).
+//! `huddle daemon`: one robot's replica on the team's multicast group (or broadcast
+//! port, or unicast peers: `--transport`), with the relay port for programs in any
+//! language (isocrob-2000's Proxy and Relay μAgents).
 
-use std::net::{SocketAddr, SocketAddrV4};
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -10,6 +11,7 @@ use clap::Args;
 
 use super::duration;
 use super::relay::RelayTarget;
+use super::transport::TransportArgs;
 use comms::ReplicaConfig;
 use driver::{resolve_iface, Driver, DriverConfig};
 use huddle::impair::LinkImpairment;
@@ -23,16 +25,18 @@ pub struct DaemonArgs {
     /// Team id: frames of other teams are dropped.
     #[arg(long, default_value_t = 0)]
     pub team: u8,
-    /// Multicast group and port (the seed's default; teams use their own, e.g. 239.x).
-    #[arg(long, default_value = "224.0.0.1:2000")]
-    pub group: SocketAddrV4,
-    /// Interface, by name (wlan0) or IPv4 address: membership and IP_MULTICAST_IF.
-    /// Loopback by default, so nothing leaves this machine unless asked.
+    /// --transport, --group, --port, --broadcast.
+    #[command(flatten)]
+    pub transport: TransportArgs,
+    /// Interface, by name (wlan0) or IPv4 address: multicast membership and
+    /// IP_MULTICAST_IF, the broadcast address, the unicast address. Loopback by
+    /// default, so nothing leaves this machine unless asked.
     #[arg(long, default_value = "127.0.0.1")]
     pub iface: String,
-    /// Also send every frame by unicast to this teammate (repeatable). Unicast is then
-    /// received on <iface>:<port> from the listed peers only; without --peer, none is.
-    #[arg(long = "peer")]
+    /// Also send every frame by unicast to this teammate (repeatable); with --transport
+    /// unicast, to these only (then at least one is needed). Unicast is received on
+    /// <iface>:<port> from the listed peers only; without --peer, none is.
+    #[arg(long = "peer", value_name = "ADDR:PORT")]
     pub peers: Vec<SocketAddr>,
     /// Relay listening address: host:port, a port (on 127.0.0.1) or a host name (port
     /// 2001); any other than loopback must be given explicitly.
@@ -118,10 +122,13 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     let entries = loaded.entries;
     let mut config = DriverConfig::new(replica);
     config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
-    config.socket.group = args.group;
-    config.socket.iface = resolve_iface(&args.iface)?;
+    let iface = resolve_iface(&args.iface)?;
+    config.socket = args.transport.socket_config(iface, Some(args.team))?;
     config.socket.ttl = args.ttl;
     config.peers = args.peers.clone();
+    if config.socket.transport == driver::Transport::Unicast && config.peers.is_empty() {
+        bail!("--transport unicast sends to each --peer only: give at least one --peer ADDR:PORT");
+    }
     Ok(config)
 }
 

@@ -27,6 +27,7 @@ pub mod monitor_sim;
 pub mod record;
 pub mod relay;
 pub mod sim;
+pub mod transport;
 pub mod watch;
 
 use std::io::IsTerminal;

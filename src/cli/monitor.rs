@@ -2,15 +2,16 @@
 //! listen-only member of the team's group: it joins, decodes every robot's frames
 //! (world models, should-I-go claims, stats, talk) and never sends one.
 
-use std::net::{SocketAddr, SocketAddrV4};
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use driver::{open_multicast, resolve_iface, SocketConfig};
+use driver::resolve_iface;
 
+use super::transport::{listening_on, TransportArgs};
 use crate::monitor::listen::LISTENER_ID;
 use crate::monitor::model::Model;
 use crate::monitor::server;
@@ -18,15 +19,17 @@ use crate::monitor::server;
 /// Arguments of `huddle monitor`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Listen-only: the monitor joins the group and never sends a frame (no \
+    after_help = "Listen-only: the monitor joins the group (or listens on the broadcast \
+                  port, with --transport broadcast) and never sends a frame (no \
                   heartbeat, no repair requests), so the team's budget and its members' \
-                  peer tables are untouched. Open the printed address in a browser; \
+                  peer tables are untouched. With --transport unicast it hears what the \
+                  robots send it as one of their --peer addresses. Open the printed address in a browser; \
                   GET /state gives the same picture as JSON."
 )]
 pub struct MonitorArgs {
-    /// The team's multicast group and port.
-    #[arg(long, default_value = "224.0.0.1:2000")]
-    pub group: SocketAddrV4,
+    /// --transport, --group, --port, --broadcast: as the team's daemons.
+    #[command(flatten)]
+    pub transport: TransportArgs,
     /// Interface to listen on: a name (`wlan0`) or its IPv4 address.
     #[arg(long, default_value = "127.0.0.1")]
     pub iface: String,
@@ -55,20 +58,12 @@ pub fn run(args: MonitorArgs) -> Result<()> {
         Some(f) => Some(driver::read_key_file(f)?),
         None => None,
     };
-    let cfg = SocketConfig {
-        group: args.group,
-        iface,
-        ..SocketConfig::default()
-    };
-    let opened = open_multicast(&cfg).with_context(|| format!("joining {}", args.group))?;
+    let cfg = args.transport.socket_config(iface, Some(args.team))?;
+    let opened = driver::open(&cfg).with_context(|| listening_on(&cfg))?;
     let model = Model::new(args.team, key, args.listen_id, 0, "live", args.budget)?;
     let shared: server::Shared = Arc::new(Mutex::new(model));
     server::spawn(args.http, shared.clone())?;
-    tracing::info!(
-        "listening to {} on {} (listen-only: nothing is sent)",
-        args.group,
-        iface
-    );
+    tracing::info!("{} (listen-only: nothing is sent)", listening_on(&cfg));
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;

@@ -12,9 +12,10 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use driver::{open_multicast, resolve_iface, SocketConfig};
+use driver::resolve_iface;
 
 use super::duration;
+use super::transport::{listening_on, TransportArgs};
 use std::sync::{Arc, Mutex};
 
 use crate::monitor::listen::{Heard, LISTENER_ID, REPLAY_TAIL};
@@ -25,13 +26,14 @@ use crate::monitor::server;
 /// Arguments of `huddle record`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Listen-only: the recorder joins the group and never sends a frame. \
+    after_help = "Listen-only: the recorder joins the group (or listens on the broadcast \
+                  port, --transport broadcast --port N) and never sends a frame. \
                   Stop it with Ctrl-C or --duration; every datagram is on disk as it arrives."
 )]
 pub struct RecordArgs {
-    /// The team's multicast group and port.
-    #[arg(long, default_value = "224.0.0.1:2000")]
-    pub group: SocketAddrV4,
+    /// --transport, --group, --port, --broadcast: as the team's daemons.
+    #[command(flatten)]
+    pub transport: TransportArgs,
     /// Interface to listen on: a name (`wlan0`) or its IPv4 address.
     #[arg(long, default_value = "127.0.0.1")]
     pub iface: String,
@@ -80,21 +82,20 @@ pub struct ReplayArgs {
 /// Run `huddle record`.
 pub fn record(args: RecordArgs) -> Result<()> {
     let iface = resolve_iface(&args.iface)?;
-    let cfg = SocketConfig {
-        group: args.group,
-        iface,
-        ..SocketConfig::default()
-    };
-    let opened = open_multicast(&cfg).with_context(|| format!("joining {}", args.group))?;
+    let cfg = args.transport.socket_config(iface, None)?;
+    let opened = driver::open(&cfg).with_context(|| listening_on(&cfg))?;
+    // The address the team's frames were sent to, as the recording's destination.
+    let to = opened
+        .destination
+        .unwrap_or(SocketAddrV4::new(iface, cfg.group.port()));
     let file = std::fs::File::create(&args.file)
         .with_context(|| format!("creating {}", args.file.display()))?;
     let mut writer = Writer::new(BufWriter::new(file))
         .with_context(|| format!("writing {}", args.file.display()))?;
     writer.flush()?;
     tracing::info!(
-        "recording {} on {} to {} (listen-only; receive buffer {} bytes)",
-        args.group,
-        iface,
+        "recording: {}, to {} (listen-only; receive buffer {} bytes)",
+        listening_on(&cfg),
         args.file.display(),
         opened.recv_buffer_granted
     );
@@ -125,7 +126,7 @@ pub fn record(args: RecordArgs) -> Result<()> {
                     let t_ns = SystemTime::now()
                         .duration_since(UNIX_EPOCH)
                         .map_or(0, |d| d.as_nanos() as u64);
-                    writer.write(&Packet { t_ns, from, to: args.group, payload: buf[..len].to_vec() })?;
+                    writer.write(&Packet { t_ns, from, to, payload: buf[..len].to_vec() })?;
                     writer.flush()?;
                     count += 1;
                 }

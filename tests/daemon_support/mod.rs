@@ -1,5 +1,6 @@
 //! Shared by the daemon and relay tests: spawn the built `huddle daemon` on loopback
-//! multicast, and talk raw relay bytes to it.
+//! multicast (or another transport, still on loopback), talk raw relay bytes to it, and
+//! (`netns`) build a pair of network namespaces for tests that need two hosts.
 #![allow(dead_code)] // each test file uses a different part
 
 use std::io::{BufRead, BufReader, Read, Write};
@@ -7,6 +8,8 @@ use std::net::{SocketAddr, SocketAddrV4, TcpListener, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+pub mod netns;
 
 /// A multicast group and port of this test's own, so that two runs of the suite on one
 /// host never hear each other (see `driver::scratch_group`).
@@ -39,10 +42,25 @@ impl Daemon {
         extra: &[&str],
         config_dir: &Path,
     ) -> Daemon {
+        let net = ["--group", group, "--iface", "127.0.0.1"];
+        Daemon::start_on(id, &net, relay_port, extra, config_dir)
+    }
+
+    /// Starts robot `id` with the network arguments `net` (`--transport`, `--iface`,
+    /// `--port`, `--group`...: the test's own, always loopback) and its relay on
+    /// `relay_port`, and waits until the relay answers.
+    pub fn start_on(
+        id: u8,
+        net: &[&str],
+        relay_port: u16,
+        extra: &[&str],
+        config_dir: &Path,
+    ) -> Daemon {
         let relay: SocketAddr = format!("127.0.0.1:{relay_port}").parse().unwrap();
         let child = Command::new(env!("CARGO_BIN_EXE_huddle"))
-            .args(["daemon", "--id", &id.to_string(), "--group", group])
-            .args(["--iface", "127.0.0.1", "--relay", &relay.to_string()])
+            .args(["daemon", "--id", &id.to_string()])
+            .args(net)
+            .args(["--relay", &relay.to_string()])
             .arg("--config-dir")
             .arg(config_dir)
             .args(extra)
