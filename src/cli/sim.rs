@@ -102,10 +102,7 @@ fn parse_outage(s: &str) -> Result<(Duration, Duration), String> {
     let (d, at) = s
         .split_once('@')
         .ok_or_else(|| format!("outage {s:?}: expected DURATION@START, e.g. 30s@120s"))?;
-    Ok((
-        duration::parse(d.trim())?,
-        duration::parse(at.trim())?,
-    ))
+    Ok((duration::parse(d.trim())?, duration::parse(at.trim())?))
 }
 
 impl Default for SimArgs {
