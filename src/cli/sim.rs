@@ -90,6 +90,35 @@ pub struct SimArgs {
     /// Switch robot ID off at simulated time T (it stops and falls silent): `3@20s`.
     #[arg(long, value_name = "ID@T", value_parser = super::monitor_sim::parse_kill)]
     pub kill: Vec<(u8, Duration)>,
+    /// A WLAN outage, DURATION@START: every link down for DURATION from START (`30s@120s`).
+    /// The report adds the outage's arbitration figures.
+    #[arg(long, value_name = "DURATION@START", value_parser = parse_outage)]
+    pub outage: Option<(Duration, Duration)>,
+    /// Fall back on sound when the radio is stale: each robot sounds its claim as tones
+    /// in its own slot and decides on what its microphone's decoder hears.
+    #[arg(long)]
+    pub acoustic: bool,
+    /// Tone length of the acoustic messages (`150ms`; 60 ms to 5 s).
+    #[arg(long, value_parser = duration::parse)]
+    pub tone: Option<Duration>,
+    /// The crowd's noise as the in-band SNR of one robot's sound heard 1 m away, dB.
+    #[arg(long, value_name = "DB", allow_hyphen_values = true)]
+    pub crowd_snr: Option<f64>,
+    /// The room's reverberation time T60 (`1s`).
+    #[arg(long, value_parser = duration::parse)]
+    pub t60: Option<Duration>,
+    /// Distance at which the room's reverberant field is as loud as a robot's direct
+    /// sound, m.
+    #[arg(long, value_name = "M")]
+    pub critical_distance: Option<f64>,
+}
+
+/// `30s@120s`: an outage of 30 s starting at 120 s.
+fn parse_outage(s: &str) -> Result<(Duration, Duration), String> {
+    let (d, at) = s
+        .split_once('@')
+        .ok_or_else(|| format!("outage {s:?}: expected DURATION@START, e.g. 30s@120s"))?;
+    Ok((duration::parse(d.trim())?, duration::parse(at.trim())?))
 }
 
 impl Default for SimArgs {
@@ -116,6 +145,12 @@ impl Default for SimArgs {
             speed: None,
             monitor: None,
             kill: Vec::new(),
+            outage: None,
+            acoustic: false,
+            tone: None,
+            crowd_snr: None,
+            t60: None,
+            critical_distance: None,
         }
     }
 }
@@ -208,6 +243,31 @@ fn config(args: &SimArgs) -> SimConfig {
         seed: args.seed,
         budget: args.budget,
         transport: args.transport,
+        outage: args
+            .outage
+            .map(|(d, at)| huddle::sim::acoustic::OutageConfig {
+                start_s: at.as_secs_f64(),
+                duration_s: d.as_secs_f64(),
+            }),
+        acoustic: {
+            let mut a = huddle::sim::acoustic::AcousticConfig {
+                enabled: args.acoustic,
+                ..Default::default()
+            };
+            if let Some(t) = args.tone {
+                a.tone_s = t.as_secs_f64();
+            }
+            if let Some(snr) = args.crowd_snr {
+                a.crowd_snr_db_at_1m = snr;
+            }
+            if let Some(m) = args.critical_distance {
+                a.critical_distance_m = m;
+            }
+            if let Some(t) = args.t60 {
+                a.t60_s = t.as_secs_f64();
+            }
+            a
+        },
         references: match args.reference_q {
             Some(q) => huddle::sim::ReferenceConfig::with_q(
                 huddle::sim::WorldModelConfig::default().local.ball,

@@ -12,6 +12,7 @@
 //! [`Robot::tick`]: each tick has the robot's camera [`Frame`](crate::field::camera::Frame),
 //! its [`Odometry`](crate::field::body::Odometry) and its replica's blackboard.
 
+pub mod acoustic;
 pub mod metrics;
 pub mod perception;
 pub mod policy;
@@ -185,6 +186,11 @@ pub struct SimConfig {
     pub physics_dt_s: f64,
     /// Keep a snapshot of the field every this many seconds for the SVG (0: none).
     pub snapshot_every_s: f64,
+    // --- WLAN outage and the acoustic fallback (see `acoustic`) ---
+    /// A WLAN outage (all links down), if any.
+    pub outage: Option<acoustic::OutageConfig>,
+    /// The acoustic fallback and its room.
+    pub acoustic: acoustic::AcousticConfig,
 }
 
 impl Default for SimConfig {
@@ -205,6 +211,8 @@ impl Default for SimConfig {
             refresh_period: Duration::from_millis(100),
             physics_dt_s: 0.01,
             snapshot_every_s: 0.25,
+            outage: None,
+            acoustic: acoustic::AcousticConfig::default(),
         }
     }
 }
@@ -295,6 +303,11 @@ pub struct Simulation {
     next_tick_s: Vec<f64>,
     step: u64,
     next_snapshot_s: f64,
+    // --- WLAN outage and the acoustic fallback (see `acoustic`) ---
+    /// The room, when the fallback is on.
+    acoustic: Option<acoustic::AcousticChannel>,
+    /// Arbitration figures inside the outage window.
+    outage_metrics: Metrics,
 }
 
 impl Simulation {
@@ -407,7 +420,7 @@ impl Simulation {
         harness.keep_events(false);
         let period = cfg.brain.control_period_s;
         let next_tick_s = (0..n).map(|i| period * i as f64 / n as f64).collect();
-        Ok(Self {
+        let mut sim = Self {
             timeline: Timeline::new(n),
             cfg,
             world,
@@ -429,7 +442,11 @@ impl Simulation {
             next_tick_s,
             step: 0,
             next_snapshot_s: 0.0,
-        })
+            acoustic: None,
+            outage_metrics: Metrics::default(),
+        };
+        sim.setup_fallback()?;
+        Ok(sim)
     }
 
     /// The configuration.
@@ -452,6 +469,7 @@ impl Simulation {
         let dt = self.cfg.physics_dt_s;
         let t = self.time_s();
         self.harness.run_until(Time::from_secs_f64(t));
+        self.acoustic_step(t);
         let mut ticked = Vec::new();
         for i in 0..self.robots.len() {
             if self.next_tick_s[i] > t + 1e-9 {
@@ -538,6 +556,7 @@ impl Simulation {
             .map(|r| r.id)
             .collect();
         self.metrics.sample(t_end, dt, visible, &goers);
+        self.sample_outage(t_end, visible, &goers);
         self.timeline
             .sample(t_end, visible, self.robots.iter().map(Robot::going));
         if self.cfg.snapshot_every_s > 0.0 && t_end >= self.next_snapshot_s {
@@ -825,6 +844,7 @@ impl Simulation {
             } else {
                 0.0
             },
+            outage: self.outage_report(),
         }
     }
 }
@@ -979,6 +999,9 @@ pub struct Report {
     /// Simulated seconds per wall-clock second (the only field that varies between runs
     /// with the same seed).
     pub sim_speed_x: f64,
+    /// The outage and the acoustic fallback (flattened; absent without an outage).
+    #[serde(flatten)]
+    pub outage: Option<acoustic::OutageReport>,
 }
 
 /// The team-ball NEES over one band of true ball speeds (see [`metrics`]).
@@ -1138,6 +1161,9 @@ impl std::fmt::Display for Report {
             "pose                  {:>9.4} m RMSE, heading {:.4} rad RMSE, NEES {:.3} (3 dof)",
             self.pose_rmse_m, self.heading_rmse_rad, self.pose_nees
         )?;
+        if let Some(o) = &self.outage {
+            writeln!(f, "{o}")?;
+        }
         write!(
             f,
             "speed                 {:>9.0} × real time",

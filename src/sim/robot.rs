@@ -288,6 +288,8 @@ pub struct Robot {
     heard: Vec<Option<(u64, u64)>>,
     /// What it last told the team, for the sending policy.
     policy: super::policy::PolicyState,
+    /// The acoustic fallback, when the team uses it (see [`super::acoustic`]).
+    pub sound: Option<super::acoustic::SoundFallback>,
 }
 
 /// Everything a tick needs from outside the robot.
@@ -352,6 +354,7 @@ impl Robot {
             decided_at_s: 0.0,
             heard: vec![None; team],
             policy: Default::default(),
+            sound: None,
         }
     }
 
@@ -454,7 +457,8 @@ impl Robot {
 
     /// Run the arbitration on the current cost and what the replica has heard.
     fn decide(&mut self, t_s: f64, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
-        let heard = arbitration::heard(board, local_now);
+        let mut heard = arbitration::heard(board, local_now);
+        self.merge_sound(t_s, &mut heard);
         let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
         self.decided_at_s = t_s;
         let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
@@ -482,6 +486,33 @@ impl Robot {
             self.policy.sent_going(posted.going);
         }
         changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))
+    }
+
+    /// The acoustic fallback's part of a decision: teammates whose radio claims are stale
+    /// count with what this robot's own decoder heard from them.
+    fn merge_sound(&mut self, t_s: f64, heard: &mut Vec<arbitration::Candidate>) {
+        let stale_after = self.arbiter.params().stale_after;
+        if let Some(sound) = &mut self.sound {
+            sound.merge(self.id, heard, t_s, stale_after);
+        }
+    }
+
+    /// What this robot sounds if its slot begins now: its claim while the radio is stale.
+    pub fn sound_claim(&self) -> Option<audio::Message> {
+        let sound = self.sound.as_ref().filter(|_| self.alive)?;
+        let posted = Posted {
+            h: self.h,
+            going: self.arbiter.going(),
+        };
+        sound.claim(self.id, posted)
+    }
+
+    /// A message this robot's microphone decoder produced, its start and end on this
+    /// robot's clock, s.
+    pub fn hear_sound(&mut self, message: &audio::Message, start_s: f64, end_s: f64) {
+        if let (Some(sound), true) = (&mut self.sound, self.alive) {
+            sound.hear(self.id, message, start_s, end_s);
+        }
     }
 
     /// The world models' part of a tick: odometry and landmarks into the pose EKF, the ball

@@ -1,0 +1,800 @@
+//! The fallback over sound: when the WLAN fails, robots sound their should-I-go claims as
+//! Cerberus tones and each hears what its own microphone's decoder makes of the room.
+//!
+//! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
+//! robot sounds only in its own slot of a repeating cycle on the team's (radio-synchronised)
+//! clock: the slot a message started in says who sent it, and the sender basic is free to
+//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]) that covers the
+//! longest flight across the field (about 35 ms) and the decoder's start-time error.
+//!
+//! **Claim.** A short message carries 3 × 21 = 63 values ([`encode_claim`]): 0 = "no ball,
+//! no claim", 1–31 = "not going" with the cost h in one of 31 bins of
+//! [`COST_BIN_M`] from −0.5 m, 32–62 = "going" with its bin. The robot's (h, going) is what
+//! the radio posts, so the arbitration decides on the same kind of data either way.
+//!
+//! **Channel** ([`AcousticChannel`], the simulator's side; robots never see it). Each robot
+//! has a loudspeaker and a microphone at its true position. For every listener, every
+//! sounding robot's PCM arrives delayed by distance / 343 m/s and attenuated as 1/r (from
+//! 1 m); the room adds a diffuse reverberant field (a Schroeder reverberator, T60
+//! configurable, its level equal to the direct sound's at the critical distance, so it does
+//! not fall with distance) and the crowd adds speech babble (`audio::channel::Babble`) at
+//! a level given as the in-band SNR of one robot's sound heard at 1 m. The mix goes into
+//! the listener's own streaming `audio::Decoder`; two robots sounding together collide as
+//! the decoder makes of the sum. A robot's own sound is mixed in too, and ignored by its
+//! slot.
+
+use audio::channel::{Babble, Source};
+use audio::{Decoder, DecoderConfig, Detection, Encoder, EncoderConfig, Message, Sender};
+use std::time::Duration;
+
+use comms::arbitration::{Candidate, Posted};
+use serde::Serialize;
+
+/// Speed of sound, m/s.
+pub const SPEED_OF_SOUND_MPS: f64 = 343.0;
+/// Sample rate of the acoustic channel, Hz.
+pub const SAMPLE_RATE_HZ: u32 = 16_000;
+/// Width of one cost bin, m.
+pub const COST_BIN_M: f64 = 0.3;
+/// Cost at the bottom of bin 0, m (h can be as low as k1 = −0.5 m at the ball).
+pub const COST_FLOOR_M: f64 = -0.5;
+/// Cost bins per going state.
+pub const COST_BINS: u16 = 31;
+/// Values a short message carries when the slot names the sender (3 sender basics × 21).
+pub const CLAIM_VALUES: u16 = 63;
+
+/// How the fallback is set up.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AcousticConfig {
+    /// Whether robots use the fallback (sound their claims when the radio is stale and
+    /// decide on what they hear).
+    pub enabled: bool,
+    /// Tone (frame) duration, s.
+    pub tone_s: f64,
+    /// Silence after each tone before the next slot, s.
+    pub guard_s: f64,
+    /// In-band SNR of one robot's sound heard 1 m away, against the crowd's babble, dB.
+    pub crowd_snr_db_at_1m: f64,
+    /// The room's reverberation time, s.
+    pub t60_s: f64,
+    /// Distance at which the direct sound equals the reverberant field, m (default 8 m:
+    /// r_c ≈ 0.057·√(Q·V/T60) for a 10,000 m³ hall, Q = 2, T60 = 1 s).
+    pub critical_distance_m: f64,
+    /// Teammates' acoustic claims older than this many cycles are dropped.
+    pub stale_cycles: f64,
+}
+
+impl Default for AcousticConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            // 100 ms: the decoder decodes 100 ms tones at 0 dB, and the far side of the
+            // field is still ~5 dB over the crowd; shorter claims mean fresher claims
+            // (measured on seeds 101–103: 150 and 250 ms did worse).
+            tone_s: 0.1,
+            // The decoder's end test listens half a tone past the end: the next slot must
+            // start later than that, plus the longest flight across the field (~35 ms).
+            guard_s: 0.08,
+            crowd_snr_db_at_1m: 25.0,
+            t60_s: 1.0,
+            critical_distance_m: 8.0,
+            stale_cycles: 2.0,
+        }
+    }
+}
+
+impl AcousticConfig {
+    /// One slot, s.
+    pub fn slot_s(&self) -> f64 {
+        self.tone_s + self.guard_s
+    }
+}
+
+/// A WLAN outage: every link down from `start_s` for `duration_s`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OutageConfig {
+    /// When it starts, s of simulated time.
+    pub start_s: f64,
+    /// How long it lasts, s.
+    pub duration_s: f64,
+}
+
+impl OutageConfig {
+    /// Whether `t_s` falls inside it.
+    pub fn contains(&self, t_s: f64) -> bool {
+        t_s >= self.start_s && t_s < self.start_s + self.duration_s
+    }
+}
+
+/// Who sounds when: a cycle of one slot per field player, on the team clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlotPlan {
+    /// The first field player's id (slot 0).
+    pub first_id: u8,
+    /// Slots in a cycle (field players).
+    pub slots: u8,
+    /// One slot, s.
+    pub slot_s: f64,
+}
+
+impl SlotPlan {
+    /// One cycle, s.
+    pub fn cycle_s(&self) -> f64 {
+        self.slot_s * f64::from(self.slots)
+    }
+
+    /// The slot robot `id` sounds in, if it has one.
+    pub fn slot_of(&self, id: u8) -> Option<u8> {
+        let k = id.checked_sub(self.first_id)?;
+        (k < self.slots).then_some(k)
+    }
+
+    /// Whether robot `id`'s slot begins in `[t_s, t_s + dt_s)`.
+    pub fn starts_in(&self, id: u8, t_s: f64, dt_s: f64) -> bool {
+        let Some(k) = self.slot_of(id) else {
+            return false;
+        };
+        let offset = f64::from(k) * self.slot_s;
+        // The latest slot start before the end of the step, then whether the step holds it.
+        let n = ((t_s + dt_s - 1e-9 - offset) / self.cycle_s()).floor();
+        let start = offset + n * self.cycle_s();
+        start >= t_s - 1e-9
+    }
+
+    /// Who sent a message heard to start at `start_s` (the flight and the decoder's
+    /// error make it a little late; the nearest slot start at or before it wins).
+    pub fn sender_at(&self, start_s: f64) -> Option<u8> {
+        // Up to 40 ms of flight and error are expected; anything within half a slot of a
+        // slot start is attributed to it.
+        let k = ((start_s - 0.02) / self.slot_s).round();
+        if !k.is_finite() || k < 0.0 {
+            return None;
+        }
+        let slot = (k as u64 % u64::from(self.slots)) as u8;
+        Some(self.first_id + slot)
+    }
+}
+
+/// A robot's side of the fallback: the slot plan it shares with its team, and the claims
+/// its own microphone's decoder gave it. Robot code holds this; it never sees the room.
+#[derive(Debug, Clone)]
+pub struct SoundFallback {
+    plan: SlotPlan,
+    stale_s: f64,
+    no_ball_cost: f64,
+    /// Per teammate (index = id − 1): its latest claim heard by sound and when the
+    /// message ended, on this robot's clock (s).
+    claims: Vec<Option<(Posted, f64)>>,
+    /// Whether some teammate with a slot had no fresh radio claim at the last decision.
+    radio_stale: bool,
+}
+
+impl SoundFallback {
+    /// The fallback for a team of `team` robots sounding on `plan`.
+    pub fn new(plan: SlotPlan, cfg: &AcousticConfig, team: usize, no_ball_cost: f64) -> Self {
+        Self {
+            plan,
+            stale_s: cfg.stale_cycles * plan.cycle_s(),
+            no_ball_cost,
+            claims: vec![None; team],
+            radio_stale: false,
+        }
+    }
+
+    /// The team's slot plan.
+    pub fn plan(&self) -> &SlotPlan {
+        &self.plan
+    }
+
+    /// A message robot `me`'s decoder produced, started at `start_s` and ended at `end_s`
+    /// on `me`'s clock. Its own slot and long messages are ignored.
+    pub fn hear(&mut self, me: u8, message: &Message, start_s: f64, end_s: f64) {
+        let Some(from) = self.plan.sender_at(start_s) else {
+            return;
+        };
+        if from == me {
+            return;
+        }
+        let (Some(posted), Some(slot)) = (
+            decode_claim(message, self.no_ball_cost),
+            self.claims.get_mut(usize::from(from) - 1),
+        ) else {
+            return;
+        };
+        *slot = Some((posted, end_s));
+    }
+
+    /// Put the fresh acoustic claims of teammates whose radio claims are stale (or
+    /// missing) into `heard`, the candidates robot `me` decides on at `now_s`. An acoustic
+    /// claim's age is scaled so that `stale_after` stands for the acoustic limit
+    /// (`stale_cycles` cycles), which is what the arbitration's cut-off means for it.
+    pub fn merge(&mut self, me: u8, heard: &mut Vec<Candidate>, now_s: f64, stale_after: Duration) {
+        let fresh = |c: &Candidate| c.age <= stale_after;
+        self.radio_stale = (0..self.plan.slots)
+            .map(|k| self.plan.first_id + k)
+            .filter(|&id| id != me)
+            .any(|id| !heard.iter().any(|c| c.robot == id && fresh(c)));
+        for (i, claim) in self.claims.iter().enumerate() {
+            let Some((posted, end_s)) = *claim else {
+                continue;
+            };
+            let id = (i + 1) as u8;
+            let age_s = (now_s - end_s).max(0.0);
+            if id == me || age_s > self.stale_s || heard.iter().any(|c| c.robot == id && fresh(c)) {
+                continue;
+            }
+            heard.retain(|c| c.robot != id);
+            heard.push(Candidate {
+                robot: id,
+                posted,
+                age: stale_after.mul_f64(age_s / self.stale_s),
+            });
+        }
+    }
+
+    /// What robot `me` sounds in its slot: its claim, while some teammate's radio claim
+    /// is stale; nothing otherwise (or when it has no slot).
+    pub fn claim(&self, me: u8, posted: Posted) -> Option<Message> {
+        (self.radio_stale && self.plan.slot_of(me).is_some())
+            .then(|| encode_claim(posted, self.no_ball_cost))
+    }
+}
+
+/// The message that carries a claim (see the module docs for the values).
+pub fn encode_claim(posted: Posted, no_ball_cost: f64) -> Message {
+    let value = if !(posted.h.is_finite() && posted.h < no_ball_cost) {
+        0
+    } else {
+        let bin = ((posted.h - COST_FLOOR_M) / COST_BIN_M)
+            .floor()
+            .clamp(0.0, f64::from(COST_BINS - 1)) as u16;
+        1 + bin + if posted.going { COST_BINS } else { 0 }
+    };
+    let sender = Sender::from_index((value / 21) as u8).expect("value < 63");
+    Message::short(sender, (value % 21) as u8).expect("data < 21")
+}
+
+/// The claim a message carries (bin centres), or `None` for a long message.
+pub fn decode_claim(message: &Message, no_ball_cost: f64) -> Option<Posted> {
+    let Message::Short { sender, data } = *message else {
+        return None;
+    };
+    let value = u16::from(sender.index()) * 21 + u16::from(data);
+    if value == 0 || value >= CLAIM_VALUES {
+        return Some(Posted {
+            h: no_ball_cost,
+            going: false,
+        });
+    }
+    let going = value > COST_BINS;
+    let bin = (value - 1) % COST_BINS;
+    Some(Posted {
+        h: COST_FLOOR_M + (f64::from(bin) + 0.5) * COST_BIN_M,
+        going,
+    })
+}
+
+/// Schroeder's reverberator: four combs in parallel, two all-passes in series; the comb
+/// feedback gives the configured T60; the output is scaled so that its energy per unit
+/// input energy is `level²`.
+#[derive(Debug, Clone)]
+struct Reverb {
+    combs: Vec<(Vec<f32>, usize, f32)>,
+    allpasses: Vec<(Vec<f32>, usize)>,
+    out_gain: f32,
+}
+
+impl Reverb {
+    fn new(t60_s: f64, level: f64) -> Self {
+        let fs = f64::from(SAMPLE_RATE_HZ);
+        // Mutually prime lengths (about 30–40 ms) so the echoes do not pile up.
+        let comb_len = [487usize, 541, 593, 631];
+        let mut energy = 0.0;
+        let combs = comb_len
+            .iter()
+            .map(|&n| {
+                let g = 10f64.powf(-3.0 * n as f64 / (t60_s.max(0.05) * fs));
+                energy += 1.0 / (1.0 - g * g);
+                (vec![0.0f32; n], 0usize, g as f32)
+            })
+            .collect();
+        let allpasses = [173usize, 59]
+            .iter()
+            .map(|&n| (vec![0.0f32; n], 0usize))
+            .collect();
+        Self {
+            combs,
+            allpasses,
+            out_gain: (level / energy.sqrt()) as f32,
+        }
+    }
+
+    fn process(&mut self, x: f32) -> f32 {
+        let mut y = 0.0f32;
+        for (buf, i, g) in &mut self.combs {
+            let out = buf[*i];
+            buf[*i] = x + *g * out;
+            *i = (*i + 1) % buf.len();
+            y += out;
+        }
+        for (buf, i) in &mut self.allpasses {
+            let d = buf[*i];
+            let v = y + 0.7 * d;
+            buf[*i] = v;
+            *i = (*i + 1) % buf.len();
+            y = d - 0.7 * v;
+        }
+        y * self.out_gain
+    }
+}
+
+/// One message in the air, for the statistics.
+#[derive(Debug, Clone, Copy)]
+struct Sounded {
+    /// Robot index of the sender.
+    from: usize,
+    /// Per listener: first and one-past-last sample of the direct sound.
+    arrival: [(u64, u64); 16],
+    value: Message,
+}
+
+/// What one listener's decoder produced, with who it is attributed to by the slot plan.
+#[derive(Debug, Clone, Copy)]
+pub struct Heard {
+    /// Listener (robot index).
+    pub listener: usize,
+    /// The detection, times in seconds of the channel's clock (simulated time).
+    pub detection: Detection,
+}
+
+/// Counters of the channel.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct AcousticStats {
+    /// Messages sounded.
+    pub sounded: u64,
+    /// Detections that match a message a teammate sounded in the slot they were heard in.
+    pub decoded: u64,
+    /// Detections that match nothing sounded then (a wrong value, sender or slot).
+    pub wrong: u64,
+    /// Receptions (message × listener other than its sender) whose direct sound
+    /// overlapped another message's at that listener.
+    pub collided: u64,
+    /// Receptions in all.
+    pub receptions: u64,
+}
+
+/// The room: every robot's loudspeaker and microphone, and each microphone's decoder.
+pub struct AcousticChannel {
+    encoder: Encoder,
+    listeners: Vec<Listener>,
+    sounded: Vec<Sounded>,
+    /// Samples already pushed to the decoders.
+    cursor: u64,
+    /// Decoder's window of start times in which a detection may match a message, samples.
+    tolerance: u64,
+    /// The figures so far.
+    pub stats: AcousticStats,
+    critical_gain: f32,
+}
+
+struct Listener {
+    decoder: Decoder,
+    /// Direct sound to come, from `cursor` on.
+    direct: Vec<f32>,
+    /// Input to the reverberator to come, from `cursor` on.
+    diffuse: Vec<f32>,
+    reverb: Reverb,
+    crowd: Babble,
+}
+
+/// Why the channel could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum AcousticError {
+    /// The codec refused the tone duration.
+    #[error("acoustic codec: {0}")]
+    Codec(String),
+    /// Too many robots for the statistics' fixed arrays.
+    #[error("the acoustic channel takes at most 16 robots, not {0}")]
+    Robots(usize),
+}
+
+impl AcousticChannel {
+    /// A room with `robots` robots, deterministic for `seed`.
+    pub fn new(cfg: &AcousticConfig, robots: usize, seed: u64) -> Result<Self, AcousticError> {
+        if robots > 16 {
+            return Err(AcousticError::Robots(robots));
+        }
+        let encoder = Encoder::new(EncoderConfig {
+            sample_rate_hz: SAMPLE_RATE_HZ,
+            tone_duration_s: cfg.tone_s,
+            ..EncoderConfig::default()
+        })
+        .map_err(|e| AcousticError::Codec(e.to_string()))?;
+        let dec = DecoderConfig {
+            sample_rate_hz: SAMPLE_RATE_HZ,
+            tone_duration_s: cfg.tone_s,
+            ..DecoderConfig::default()
+        };
+        // The crowd level: one robot's sound at 1 m over the babble is the configured SNR
+        // (babble is speech, nearly all of its power inside the 500–4000 Hz band).
+        let probe = encoder.encode_f32(&encode_claim(
+            Posted {
+                h: 1.0,
+                going: true,
+            },
+            1000.0,
+        ));
+        let signal_power = audio::channel::power(&probe);
+        let crowd_rms = (signal_power / 10f64.powf(cfg.crowd_snr_db_at_1m / 10.0)).sqrt();
+        let listeners = (0..robots)
+            .map(|i| {
+                Ok(Listener {
+                    decoder: Decoder::new(dec.clone())
+                        .map_err(|e| AcousticError::Codec(e.to_string()))?,
+                    direct: Vec::new(),
+                    diffuse: Vec::new(),
+                    reverb: Reverb::new(cfg.t60_s, 1.0),
+                    crowd: Babble::new(
+                        seed.wrapping_mul(0x9e37_79b9).wrapping_add(i as u64),
+                        SAMPLE_RATE_HZ,
+                        6,
+                        crowd_rms,
+                    ),
+                })
+            })
+            .collect::<Result<Vec<_>, AcousticError>>()?;
+        Ok(Self {
+            encoder,
+            listeners,
+            sounded: Vec::new(),
+            cursor: 0,
+            tolerance: (0.5 * cfg.slot_s() * f64::from(SAMPLE_RATE_HZ)) as u64,
+            stats: AcousticStats::default(),
+            critical_gain: (1.0 / cfg.critical_distance_m.max(0.1)) as f32,
+        })
+    }
+
+    /// Simulated time the decoders have heard up to, s.
+    pub fn time_s(&self) -> f64 {
+        self.cursor as f64 / f64::from(SAMPLE_RATE_HZ)
+    }
+
+    /// Robot `from` sounds `message` now (at the channel's cursor) from `positions[from]`;
+    /// `positions` are every robot's true positions, m.
+    pub fn sound(&mut self, from: usize, message: &Message, positions: &[(f64, f64)]) {
+        let pcm = self.encoder.encode_f32(message);
+        let fs = f64::from(SAMPLE_RATE_HZ);
+        let mut arrival = [(0u64, 0u64); 16];
+        for (j, l) in self.listeners.iter_mut().enumerate() {
+            let (dx, dy) = (
+                positions[j].0 - positions[from].0,
+                positions[j].1 - positions[from].1,
+            );
+            let r = (dx * dx + dy * dy).sqrt();
+            let delay = (r / SPEED_OF_SOUND_MPS * fs).round() as usize;
+            let gain = (1.0 / r.max(1.0)) as f32;
+            let end = delay + pcm.len();
+            if l.direct.len() < end {
+                l.direct.resize(end, 0.0);
+                l.diffuse.resize(end, 0.0);
+            }
+            for (k, &s) in pcm.iter().enumerate() {
+                l.direct[delay + k] += gain * s;
+                l.diffuse[delay + k] += self.critical_gain * s;
+            }
+            arrival[j] = (self.cursor + delay as u64, self.cursor + end as u64);
+        }
+        self.stats.sounded += 1;
+        // Collisions: receptions whose direct sounds overlap at a listener.
+        for other in &self.sounded {
+            let n = self.listeners.len();
+            for (j, (&(a0, a1), &(b0, b1))) in
+                arrival[..n].iter().zip(&other.arrival[..n]).enumerate()
+            {
+                if a0 < b1 && b0 < a1 {
+                    if j != from {
+                        self.stats.collided += 1;
+                    }
+                    if j != other.from {
+                        self.stats.collided += 1;
+                    }
+                }
+            }
+        }
+        self.stats.receptions += self.listeners.len() as u64 - 1;
+        self.sounded.push(Sounded {
+            from,
+            arrival,
+            value: *message,
+        });
+    }
+
+    /// Let the room play until `t_s`: every listener's microphone signal (direct sound,
+    /// reverberation, crowd) into its decoder. Returns what the decoders produced.
+    pub fn advance_to(&mut self, t_s: f64) -> Vec<Heard> {
+        let to = (t_s * f64::from(SAMPLE_RATE_HZ)).round() as u64;
+        let mut heard = Vec::new();
+        if to <= self.cursor {
+            return heard;
+        }
+        let n = (to - self.cursor) as usize;
+        let mut block = vec![0.0f32; n];
+        for (j, l) in self.listeners.iter_mut().enumerate() {
+            block.iter_mut().for_each(|x| *x = 0.0);
+            l.crowd.add_to(&mut block);
+            let take = n.min(l.direct.len());
+            for (k, x) in block.iter_mut().enumerate() {
+                let (d, w) = if k < take {
+                    (l.direct[k], l.diffuse[k])
+                } else {
+                    (0.0, 0.0)
+                };
+                *x += d + l.reverb.process(w);
+            }
+            l.direct.drain(..take);
+            l.diffuse.drain(..take);
+            l.decoder.push_f32(&block);
+            while let Some(d) = l.decoder.poll_message() {
+                heard.push(Heard {
+                    listener: j,
+                    detection: d,
+                });
+            }
+        }
+        self.cursor = to;
+        for h in &heard {
+            let start = (h.detection.start_s * f64::from(SAMPLE_RATE_HZ)) as u64;
+            let matched = self.sounded.iter().any(|s| {
+                s.from != h.listener
+                    && s.value == h.detection.message
+                    && s.arrival[h.listener].0.abs_diff(start) <= self.tolerance
+            });
+            if matched {
+                self.stats.decoded += 1;
+            } else if !self.sounded.iter().any(|s| {
+                s.from == h.listener && s.arrival[h.listener].0.abs_diff(start) <= self.tolerance
+            }) {
+                self.stats.wrong += 1;
+            }
+        }
+        // Forget messages long past (kept a few seconds for matching late detections).
+        let keep_after = to.saturating_sub(u64::from(SAMPLE_RATE_HZ) * 5);
+        self.sounded
+            .retain(|s| s.arrival.iter().any(|&(_, end)| end >= keep_after));
+        heard
+    }
+}
+
+/// The simulator's side: the outage on the network, the room, and the outage's figures.
+impl super::Simulation {
+    /// Schedule the outage and set up the room (called once from `Simulation::new`).
+    pub(super) fn setup_fallback(&mut self) -> Result<(), super::SimError> {
+        if let Some(o) = self.cfg.outage {
+            if !(o.start_s.is_finite()
+                && o.duration_s.is_finite()
+                && o.start_s >= 0.0
+                && o.duration_s >= 0.0)
+            {
+                return Err(super::SimError::Config(format!("bad outage {o:?}")));
+            }
+            let (from, to) = (
+                netsim::Time::from_secs_f64(o.start_s),
+                netsim::Time::from_secs_f64(o.start_s + o.duration_s),
+            );
+            for i in 0..self.robots.len() {
+                let node = self.harness.node(i);
+                let net = self.harness.net_mut();
+                net.at(from, netsim::Action::Isolate(node))
+                    .and_then(|()| net.at(to, netsim::Action::Rejoin(node)))
+                    .map_err(|e| super::SimError::Config(format!("outage: {e}")))?;
+            }
+        }
+        let cfg = self.cfg.acoustic;
+        if !cfg.enabled {
+            return Ok(());
+        }
+        let with_keeper = self.robots.len() >= 3;
+        let plan = SlotPlan {
+            first_id: if with_keeper { 2 } else { 1 },
+            slots: (self.robots.len() - usize::from(with_keeper)) as u8,
+            slot_s: cfg.slot_s(),
+        };
+        let team = self.robots.len();
+        for r in &mut self.robots {
+            let no_ball = r.arbiter.params().no_ball_cost;
+            r.sound = Some(SoundFallback::new(plan, &cfg, team, no_ball));
+        }
+        self.acoustic = Some(
+            AcousticChannel::new(&cfg, team, self.cfg.seed)
+                .map_err(|e| super::SimError::Config(e.to_string()))?,
+        );
+        Ok(())
+    }
+
+    /// The room up to `t_s`: robots whose slot begins now sound their claims, and each
+    /// robot hears what its decoder made of its microphone's signal so far.
+    pub(super) fn acoustic_step(&mut self, t_s: f64) {
+        let Some(channel) = &mut self.acoustic else {
+            return;
+        };
+        for h in channel.advance_to(t_s) {
+            let i = h.listener;
+            let local = |s: f64| {
+                super::robot::seconds(self.harness.local_at(i, netsim::Time::from_secs_f64(s)))
+            };
+            let (start, end) = (local(h.detection.start_s), local(h.detection.end_s));
+            self.robots[i].hear_sound(&h.detection.message, start, end);
+        }
+        let dt = self.cfg.physics_dt_s;
+        let positions: Vec<(f64, f64)> = self
+            .world
+            .robots
+            .iter()
+            .map(|b| (b.pose.at.x, b.pose.at.y))
+            .collect();
+        for i in 0..self.robots.len() {
+            let r = &self.robots[i];
+            let due = r
+                .sound
+                .as_ref()
+                .is_some_and(|s| s.plan().starts_in(r.id, t_s, dt));
+            if let Some(message) = due.then(|| r.sound_claim()).flatten() {
+                channel.sound(i, &message, &positions);
+            }
+        }
+    }
+
+    /// One metrics sample of the outage window.
+    pub(super) fn sample_outage(&mut self, t_s: f64, visible: bool, goers: &[u8]) {
+        if self
+            .cfg
+            .outage
+            .is_some_and(|o| o.contains(t_s - self.cfg.physics_dt_s))
+        {
+            self.outage_metrics
+                .sample(t_s, self.cfg.physics_dt_s, visible, goers);
+        }
+    }
+
+    /// The outage's figures for the report, when there was one.
+    pub(super) fn outage_report(&self) -> Option<OutageReport> {
+        let o = self.cfg.outage?;
+        let m = &self.outage_metrics;
+        let s = self.acoustic.as_ref().map(|c| c.stats).unwrap_or_default();
+        Some(OutageReport {
+            outage_start_s: o.start_s,
+            outage_duration_s: o.duration_s,
+            outage_acoustic: self.cfg.acoustic.enabled,
+            outage_ball_visible_s: round3(m.visible_s),
+            outage_exactly_one_goer_pct: round3(m.exactly_one_pct()),
+            outage_conflict_pct: round3(m.conflict_pct()),
+            outage_no_goer_pct: round3(m.no_goer_pct()),
+            acoustic_tone_ms: round3(self.cfg.acoustic.tone_s * 1e3),
+            acoustic_sounded: s.sounded,
+            acoustic_receptions: s.receptions,
+            acoustic_decoded: s.decoded,
+            acoustic_wrong: s.wrong,
+            acoustic_collided: s.collided,
+        })
+    }
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// The outage's part of the report (flattened into it; absent without `--outage`).
+/// Percentages are of the ball-visible time inside the outage window.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutageReport {
+    /// When the outage started, s.
+    pub outage_start_s: f64,
+    /// How long it lasted, s.
+    pub outage_duration_s: f64,
+    /// Whether the acoustic fallback was on.
+    pub outage_acoustic: bool,
+    /// Ball-visible time inside the outage, s.
+    pub outage_ball_visible_s: f64,
+    /// Share of it with exactly one goer, percent.
+    pub outage_exactly_one_goer_pct: f64,
+    /// Share with two or more goers, percent.
+    pub outage_conflict_pct: f64,
+    /// Share with no goer, percent.
+    pub outage_no_goer_pct: f64,
+    /// Tone length of the fallback's messages, ms.
+    pub acoustic_tone_ms: f64,
+    /// Messages sounded (whole match).
+    pub acoustic_sounded: u64,
+    /// Receptions (messages × teammates listening).
+    pub acoustic_receptions: u64,
+    /// Receptions decoded right (value and slot).
+    pub acoustic_decoded: u64,
+    /// Detections that matched nothing sounded.
+    pub acoustic_wrong: u64,
+    /// Receptions overlapped by another message at the listener.
+    pub acoustic_collided: u64,
+}
+
+impl std::fmt::Display for OutageReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "outage                {:>9.1} s from {:.1} s, all links down; acoustic fallback {}",
+            self.outage_duration_s,
+            self.outage_start_s,
+            if self.outage_acoustic { "on" } else { "off" }
+        )?;
+        writeln!(
+            f,
+            "  exactly one goer    {:>9.2} %  of {:.1} s ball-visible outage time (two or more {:.2} %, none {:.2} %)",
+            self.outage_exactly_one_goer_pct,
+            self.outage_ball_visible_s,
+            self.outage_conflict_pct,
+            self.outage_no_goer_pct
+        )?;
+        write!(
+            f,
+            "  acoustic            {:>9} sounded ({:.0} ms tones), {} of {} receptions decoded, {} wrong, {} collided",
+            self.acoustic_sounded,
+            self.acoustic_tone_ms,
+            self.acoustic_decoded,
+            self.acoustic_receptions,
+            self.acoustic_wrong,
+            self.acoustic_collided
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_claim_survives_its_message_within_a_bin() {
+        for going in [false, true] {
+            for k in 0..40 {
+                let h = -0.5 + 0.25 * f64::from(k);
+                let p = Posted { h, going };
+                let back = decode_claim(&encode_claim(p, 1000.0), 1000.0).unwrap();
+                assert_eq!(back.going, going, "h {h}");
+                if h < 8.5 {
+                    assert!(
+                        (back.h - h).abs() <= COST_BIN_M / 2.0 + 1e-9,
+                        "h {h} → {}",
+                        back.h
+                    );
+                }
+            }
+        }
+        let none = decode_claim(
+            &encode_claim(
+                Posted {
+                    h: 1000.0,
+                    going: false,
+                },
+                1000.0,
+            ),
+            1000.0,
+        )
+        .unwrap();
+        assert_eq!(none.h, 1000.0, "no ball stays no ball");
+    }
+
+    #[test]
+    fn the_slot_names_the_sender() {
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: 0.21,
+        };
+        for id in 2..=5u8 {
+            let k = f64::from(id - 2);
+            assert!(plan.starts_in(id, 3.0 * plan.cycle_s() + k * 0.21, 0.01));
+            assert_eq!(
+                plan.sender_at(7.0 * plan.cycle_s() + k * 0.21 + 0.03),
+                Some(id)
+            );
+        }
+        assert!(!plan.starts_in(1, 0.0, 0.01), "the goalkeeper has no slot");
+    }
+}
