@@ -52,8 +52,10 @@
 
 #![forbid(unsafe_code)]
 
+pub mod audio;
 mod config_files;
 mod driver;
+mod guard;
 mod handle;
 mod iface;
 mod impair;
@@ -67,6 +69,7 @@ pub use config_files::{
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
 pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
+pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{resolve_iface, IfaceError};
 pub use impair::Impairment;
