@@ -436,7 +436,14 @@ impl Audio {
             None => None,
         };
         let guard = if config.input.is_some() || config.output.is_some() {
-            Some(say_guard(handle, &config, speaker.clone(), shared.clone()))
+            let check = say_check(&config, speaker.clone(), shared.clone());
+            let guard = handle
+                .guard(&config.say_key, check)
+                .map_err(|e| AudioError::SayKey {
+                    key: config.say_key.clone(),
+                    why: e.to_string(),
+                })?;
+            Some(guard)
         } else {
             None
         };
@@ -489,12 +496,11 @@ fn check_heard_key(handle: &Handle, key: &str) -> Result<(), AudioError> {
 }
 
 /// The check in front of `SETV <say key>`: a message, and room in the queue.
-fn say_guard(
-    handle: &Handle,
+fn say_check(
     config: &AudioConfig,
     speaker: Option<SyncSender<Message>>,
     shared: Arc<Shared>,
-) -> Guard {
+) -> impl FnMut(&Value) -> Result<(), Rejected> + 'static {
     let queue = config.queue;
     let per_message = config.tone_duration;
     let gap = config.gap;
@@ -535,9 +541,7 @@ fn say_guard(
             }),
         }
     };
-    let guard = handle.guard(&config.say_key, check);
-    // The key was parsed above.
-    guard.unwrap_or_else(|_| unreachable!("say key checked in Audio::start"))
+    check
 }
 
 /// On the driver's thread: writes each heard message, and mirrors the counters whenever
