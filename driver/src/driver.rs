@@ -20,6 +20,7 @@ use comms::{
     Value,
 };
 
+use crate::guard::{GuardSlot, GuardedBoard};
 pub use crate::handle::Handle;
 use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
 use crate::impair::{Held, Impairment};
@@ -199,6 +200,8 @@ pub(crate) struct Inner {
     pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
     /// Reactions are running further up the stack.
     pub(crate) reacting: bool,
+    /// Checks in front of relay clients' writes of some keys ([`Handle::guard`]).
+    pub(crate) guards: Vec<Weak<GuardSlot>>,
     pub(crate) subscriber_backlog: usize,
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
     next_session: u64,
@@ -524,7 +527,12 @@ impl Inner {
             return;
         };
         let timer_before = slot.session.poll_timeout();
-        slot.session.handle_input(now, bytes, &mut self.replica);
+        self.guards.retain(|g| g.strong_count() > 0);
+        let mut board = GuardedBoard {
+            replica: &mut self.replica,
+            guards: &self.guards,
+        };
+        slot.session.handle_input(now, bytes, &mut board);
         if slot.session.poll_timeout() != timer_before {
             self.wake.notify_one();
         }
@@ -697,6 +705,7 @@ impl Driver {
             watches: Vec::new(),
             reactions: VecDeque::new(),
             reacting: false,
+            guards: Vec::new(),
             subscriber_backlog: config.subscriber_backlog.max(1),
             sessions: BTreeMap::new(),
             next_session: 0,

@@ -12,7 +12,8 @@ use comms::{
     Value,
 };
 
-use crate::driver::{Inner, IoStats};
+use crate::driver::{Clock, Inner, IoStats};
+use crate::guard::{Guard, GuardSlot};
 
 /// Something a subscription reports.
 #[derive(Clone, Debug, PartialEq)]
@@ -294,6 +295,32 @@ impl Handle {
         });
         self.inner.borrow_mut().watches.push(Rc::downgrade(&slot));
         Ok(Watch { _slot: slot })
+    }
+
+    /// Puts `check` in front of every relay client's `SETV` of exactly `key` (as the
+    /// client writes it, e.g. `local.var.audio.say`): `Ok` lets the write through, `Err`
+    /// becomes the client's `ERR` line and nothing is written. It turns a key into a
+    /// command with validated arguments. The check runs inside the driver's turn with
+    /// the shared state borrowed: it must be short and must not use a [`Handle`]. Writes
+    /// through [`Handle::set`] are not checked (the program calls its own code). It stops
+    /// when the returned [`Guard`] is dropped.
+    pub fn guard(
+        &self,
+        key: &str,
+        check: impl FnMut(&Value) -> Result<(), comms::relay::Rejected> + 'static,
+    ) -> Result<Guard, KeyError> {
+        let key = Key::parse(key)?;
+        let slot = Rc::new(GuardSlot {
+            key,
+            check: RefCell::new(Box::new(check)),
+        });
+        self.inner.borrow_mut().guards.push(Rc::downgrade(&slot));
+        Ok(Guard::new(slot))
+    }
+
+    /// The driver's clock, for threads that stamp what they observe on its timeline.
+    pub fn clock(&self) -> Clock {
+        self.inner.borrow().clock
     }
 
     /// The counters and peers.

@@ -31,6 +31,11 @@
 //! applied the change: an answer set from it is on the wire before the driver reads the
 //! next datagram, which is the lowest latency this driver offers.
 //!
+//! When the radio fails, [`audio::Audio`] lets the daemon speak and listen with the
+//! 72-tone codec over raw PCM pipes to shell commands (`arecord`, `aplay`, files): heard
+//! messages become blackboard writes, and a relay client's `SETV local.var.audio.say`
+//! is checked by a write guard ([`Handle::guard`]) and queued for the loudspeaker.
+//!
 //! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
 //! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
 //! model): lost datagrams are never sent, the others wait in a queue released by the
@@ -56,8 +61,10 @@
 
 #![forbid(unsafe_code)]
 
+pub mod audio;
 mod config_files;
 mod driver;
+mod guard;
 mod handle;
 mod iface;
 mod impair;
@@ -71,6 +78,7 @@ pub use config_files::{
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
 pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
+pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{broadcast_address, resolve_iface, IfaceError};
 pub use impair::Impairment;

@@ -304,6 +304,20 @@ pub fn stats(args: StatsArgs) -> Result<()> {
             format!(" ({})", drops.join(", "))
         }
     )?;
+    // Only a daemon that speaks or listens (`--audio-in`, `--audio-out`) has these.
+    let audio: Vec<String> = all
+        .iter()
+        .filter_map(|b| {
+            Some(format!(
+                "{} {}",
+                stat_name(b).strip_prefix("audio.")?,
+                b.value
+            ))
+        })
+        .collect();
+    if !audio.is_empty() {
+        writeln!(out, "audio {}", audio.join("  "))?;
+    }
     for b in &all {
         if let Some(robot) = stat_name(b)
             .strip_prefix("peer.")

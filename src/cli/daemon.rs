@@ -65,6 +65,89 @@ pub struct DaemonArgs {
     /// of one team lose different frames and a rerun draws the same fates).
     #[arg(long, value_name = "N")]
     pub impair_seed: Option<u64>,
+    #[command(flatten)]
+    pub audio: AudioFlags,
+}
+
+/// The daemon's acoustic messaging (`huddle daemon --audio-in … --audio-out …`).
+#[derive(Args, Debug, Clone)]
+#[command(next_help_heading = "Acoustic messaging")]
+pub struct AudioFlags {
+    /// Listen: run CMD with `sh -c` and decode its stdout as raw mono s16le PCM at
+    /// --audio-rate (`arecord -t raw -f S16_LE -r 16000 -c 1`, `cat msg.raw`,
+    /// `sox msg.wav -t raw -r 16000 -e signed -b 16 -c 1 -`). Each decoded message is
+    /// written once to --audio-heard as the string `seq=N kind=short|long sender=S
+    /// data=D start_us=T snr_db=X` (T: when it began, µs on this daemon's clock, as the
+    /// stats' last_heard_us). See --audio-in-restart for when CMD ends.
+    #[arg(long, value_name = "CMD")]
+    pub audio_in: Option<String>,
+    /// Speak: run CMD with `sh -c` once and write raw mono s16le PCM to its stdin
+    /// (`aplay -t raw -f S16_LE -r 16000 -c 1`, `cat > said.raw`). A relay client says a
+    /// message with `SETV local.var.audio.say "short 1 7"` (`[short|long] SENDER DATA`,
+    /// SENDER 0-2, DATA 0-20 short or 0-440 long): an invalid one is ERR 412, a full
+    /// queue ERR 430. Messages sound one at a time in order, each followed by
+    /// --audio-gap of silence: one per frames x --audio-tone + --audio-gap (2 s for a
+    /// short, 3 s for a long message at the defaults). If CMD exits, the message being
+    /// written is lost (counted) and CMD restarts for the next one (backoff 1 s .. 30 s).
+    #[arg(long, value_name = "CMD")]
+    pub audio_out: Option<String>,
+    /// Sample rate of both pipes, Hz.
+    #[arg(long, value_name = "HZ", default_value_t = 16_000)]
+    pub audio_rate: u32,
+    /// Tone duration (one frame) the team uses, as `huddle audio --duration`.
+    #[arg(long, value_name = "DURATION", default_value = "1s", value_parser = duration::parse_positive)]
+    pub audio_tone: Duration,
+    /// Silence after each message said.
+    #[arg(long, value_name = "DURATION", default_value = "1s", value_parser = duration::parse)]
+    pub audio_gap: Duration,
+    /// Messages that may wait to be said besides the one sounding.
+    #[arg(long, value_name = "N", default_value_t = 8)]
+    pub audio_queue: usize,
+    /// Key of heard messages: `*.var.audio.heard` (the team sees what this robot heard)
+    /// or `local.var.audio.heard` (this robot only).
+    #[arg(long, value_name = "KEY", default_value = "*.var.audio.heard")]
+    pub audio_heard: String,
+    /// When --audio-in's command runs again after it ends: `on-failure` (non-zero
+    /// status, signal, or it cannot start; status 0 is the end of the stream, e.g. a
+    /// file played once), `always`, `never`. Restarts wait 1 s, doubling to 30 s (back
+    /// to 1 s after a run of 30 s). Counters: `huddle stats` (audio.*).
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = RestartFlag::OnFailure)]
+    pub audio_in_restart: RestartFlag,
+}
+
+/// `--audio-in-restart`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RestartFlag {
+    /// After a failure only.
+    OnFailure,
+    /// After every end.
+    Always,
+    /// Never.
+    Never,
+}
+
+impl AudioFlags {
+    /// The driver's audio configuration, if audio is asked for.
+    pub fn config(&self) -> Option<driver::audio::AudioConfig> {
+        if self.audio_in.is_none() && self.audio_out.is_none() {
+            return None;
+        }
+        Some(driver::audio::AudioConfig {
+            input: self.audio_in.clone(),
+            output: self.audio_out.clone(),
+            sample_rate_hz: self.audio_rate,
+            tone_duration: self.audio_tone,
+            gap: self.audio_gap,
+            queue: self.audio_queue,
+            heard_key: self.audio_heard.clone(),
+            say_key: "local.var.audio.say".into(),
+            restart: match self.audio_in_restart {
+                RestartFlag::OnFailure => driver::audio::Restart::OnFailure,
+                RestartFlag::Always => driver::audio::Restart::Always,
+                RestartFlag::Never => driver::audio::Restart::Never,
+            },
+        })
+    }
 }
 
 /// The `--impair` model, if asked for, seeded by `--impair-seed` or the robot id.
@@ -167,6 +250,20 @@ pub fn run(args: DaemonArgs) -> Result<()> {
             driver.set_impairment(Some(Box::new(model)));
         }
         let handle = driver.handle();
+        let _audio = match args.audio.config() {
+            Some(config) => {
+                let audio = driver::audio::Audio::start(&handle, config.clone())
+                    .context("starting audio")?;
+                tracing::info!(
+                    input = config.input.as_deref().unwrap_or("-"),
+                    output = config.output.as_deref().unwrap_or("-"),
+                    heard = %config.heard_key,
+                    "audio: listening and speaking through pipes"
+                );
+                Some(audio)
+            }
+            None => None,
+        };
         tracing::info!(
             robot = handle.robot_id(),
             relay = %args.relay,
