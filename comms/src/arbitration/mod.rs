@@ -6,6 +6,21 @@
 //! robot has heard, so robots that have heard the same agree; the only disagreement left
 //! is the network's delay, which the hysteresis margin keeps to the rare real handovers.
 //!
+//! Bursty loss (and multicast held to power-save beacons) keeps one robot's claims from the
+//! others for hundreds of milliseconds. Two rules keep that from making two goers:
+//! - **silence is not giving up**: a claim to be going counts for
+//!   [`ArbitrationParams::silent_goer_after`] (1 s), far beyond the normal staleness,
+//!   while a goer that gives up says so and frees the ball at once;
+//! - **a claim must be acknowledged**: a robot that claims the ball from a goer backs off
+//!   if the goer still claims in a post it made after the claim should have reached it
+//!   ([`ArbitrationParams::ack_margin`]), and waits for the goer to let go. The incumbent
+//!   keeps the ball until it has heard its successor.
+//!
+//! Ages are receiver-side, so a post is estimated to have been made one transit later
+//! than it was; the acknowledgement wait allows for that (two latencies). With ages that
+//! include each frame's transit the estimate is exact and the rule only errs on the safe
+//! side (it waits up to one latency longer than it must).
+//!
 //! The seed's heuristic, with units (metres):
 //!
 //! ```text
