@@ -654,10 +654,10 @@ pub struct Report {
     pub longest_conflict_ms: f64,
     /// When it started, seconds.
     pub longest_conflict_at_s: f64,
-    /// The bound it stays under: the longest claim gap ([`Report::longest_claim_gap_ms`])
-    /// + the measured one-way delay's 99th percentile (all delivered frames) + one control
-    /// period, ms. Why it holds: a conflict starts when a robot B claims the ball while
-    /// another, A, still goes. It ends when A hears a post B made after claiming and
+    /// The bound it stays under, ms: the longest claim gap
+    /// ([`Report::longest_claim_gap_ms`]) plus the measured one-way delay's 99th
+    /// percentile (all delivered frames) plus one control period. Why it holds: a
+    /// conflict starts when a robot B claims the ball while another, A, still goes. It ends when A hears a post B made after claiming and
     /// yields (within one gap + one delay of the claim, then A's next decision, at most
     /// a control period later), or earlier when B backs off (A still claims in a post
     /// made after B's claim should have reached it:
