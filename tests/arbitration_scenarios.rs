@@ -156,11 +156,13 @@ fn the_seeds_example_two_robots_equally_far_the_one_facing_the_goal_goes() {
 }
 
 #[test]
-fn a_goer_that_dies_is_replaced_within_the_staleness_limit() {
+fn a_goer_that_dies_is_replaced_within_the_silent_goer_limit() {
     // Three robots at 1.0, 1.5 and 2.0 m; robot 1 goes. At 5 s it dies (its replica
-    // stops sending). Its last value ages out after the staleness limit, counted from
-    // when its teammates received it, so the replacement must come within one latency
-    // + the staleness limit + one control tick.
+    // stops sending). Its last claim said it was going, and a silent goer is not taken
+    // for one that gave up: the claim holds the ball for `silent_goer_after` (a burst
+    // must not make two goers), counted from when its teammates received it. So the
+    // replacement comes within one latency + that limit + one control tick, and not
+    // before the normal staleness limit.
     let net = net(0.1, 50);
     let p = params_for(&net);
     let costs = [1.0, 1.5, 2.0];
@@ -178,11 +180,15 @@ fn a_goer_that_dies_is_replaced_within_the_staleness_limit() {
         .find(|(_, g)| g == &vec![2])
         .map(|(t, _)| t - 5.0)
         .expect("robot 2 must take over");
-    let limit = (net.latency() + p.stale_after + TICK + SAMPLE).as_secs_f64();
+    let limit = (net.latency() + p.silent_goer_after + TICK + SAMPLE).as_secs_f64();
     eprintln!("dead goer replaced after {replaced_at:.3} s (limit {limit:.3} s)");
     assert!(
         replaced_at <= limit,
         "replaced after {replaced_at:.3} s, limit {limit:.3} s"
+    );
+    assert!(
+        replaced_at > p.stale_after.as_secs_f64(),
+        "replaced after {replaced_at:.3} s: a silent goer holds the ball past the staleness limit"
     );
     assert!(
         after.iter().all(|(_, g)| !g.contains(&3)),

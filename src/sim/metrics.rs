@@ -301,6 +301,9 @@ pub struct Metrics {
     pub handovers: u64,
     /// Number of flaps.
     pub flaps: u64,
+    /// The oldest a live teammate's claim was when a live robot decided on it, seconds:
+    /// the longest the network kept one robot's claims from another.
+    pub longest_claim_gap_s: f64,
     conflict_run_s: f64,
     conflict_start_s: f64,
     lone_goer: Option<u8>,
@@ -348,6 +351,11 @@ impl Metrics {
                 }
             }
         }
+    }
+
+    /// A live robot decided on a live teammate's claim `age_s` old.
+    pub fn claim_age(&mut self, age_s: f64) {
+        self.longest_claim_gap_s = self.longest_claim_gap_s.max(age_s);
     }
 
     fn end_conflict(&mut self) {

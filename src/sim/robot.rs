@@ -273,6 +273,9 @@ pub struct Robot {
     pub h: f64,
     /// The team decision as it sees it.
     pub decision: Decision,
+    /// The teammates' claims it decided on last, those with a ball (cost below the
+    /// no-ball cost): (robot, receiver-side age).
+    pub claim_ages: Vec<(u8, Duration)>,
     /// Its CMUnited mode.
     pub mode: Mode,
     /// The play it has chosen while active.
@@ -345,6 +348,7 @@ impl Robot {
                 goer: None,
                 goer_cost: f64::INFINITY,
             },
+            claim_ages: Vec::new(),
             mode: Mode::Inactive,
             play: None,
             counts: PlayCounts::default(),
@@ -463,6 +467,13 @@ impl Robot {
         self.decided_at_s = t_s;
         let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
         self.decision = decision;
+        self.claim_ages.clear();
+        self.claim_ages.extend(
+            heard
+                .iter()
+                .filter(|c| c.robot != self.id && c.posted.h < self.arbiter.params().no_ball_cost)
+                .map(|c| (c.robot, c.age)),
+        );
         (decision, posted)
     }
 

@@ -6,6 +6,21 @@
 //! robot has heard, so robots that have heard the same agree; the only disagreement left
 //! is the network's delay, which the hysteresis margin keeps to the rare real handovers.
 //!
+//! Bursty loss (and multicast held to power-save beacons) keeps one robot's claims from the
+//! others for hundreds of milliseconds. Two rules keep that from making two goers:
+//! - **silence is not giving up**: a claim to be going counts for
+//!   [`ArbitrationParams::silent_goer_after`] (1 s), far beyond the normal staleness,
+//!   while a goer that gives up says so and frees the ball at once;
+//! - **a claim must be acknowledged**: a robot that claims the ball from a goer backs off
+//!   if the goer still claims in a post it made after the claim should have reached it
+//!   ([`ArbitrationParams::ack_margin`]), and waits for the goer to let go. The incumbent
+//!   keeps the ball until it has heard its successor.
+//!
+//! Ages are receiver-side, so a post is estimated to have been made one transit later
+//! than it was; the acknowledgement wait allows for that (two latencies). With ages that
+//! include each frame's transit the estimate is exact and the rule only errs on the safe
+//! side (it waits up to one latency longer than it must).
+//!
 //! The seed's heuristic, with units (metres):
 //!
 //! ```text
@@ -17,7 +32,7 @@
 //! the opponent goal, and `k1 < 0` (metres) is how much facing the goal is worth: with
 //! `k1 = -0.5`, facing the goal is as good as being half a metre closer.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
 use thiserror::Error;
@@ -39,6 +54,10 @@ pub mod config_keys {
     pub const HYSTERESIS_M: &str = "local.var.machine.config.hysteresis_m";
     /// Staleness limit, milliseconds.
     pub const STALE_MS: &str = "local.var.machine.config.stale_ms";
+    /// Margin of a new claim's acknowledgement, milliseconds.
+    pub const ACK_MARGIN_MS: &str = "local.var.machine.config.ack_margin_ms";
+    /// How long a silent goer's claim still holds the ball, milliseconds.
+    pub const SILENT_GOER_MS: &str = "local.var.machine.config.silent_goer_ms";
     /// Tie band between two claims, metres.
     pub const TIE_M: &str = "local.var.machine.config.tie_m";
     /// Expected one-way latency of the team network, milliseconds.
@@ -64,8 +83,26 @@ pub struct ArbitrationParams {
     /// themselves ahead, and without the band both would keep going as long as the race
     /// lasts.
     pub tie_m: f64,
-    /// Values older than this (receiver-side age) do not count.
+    /// Values older than this (receiver-side age) do not count, except a claim to be
+    /// going (see [`ArbitrationParams::silent_goer_after`]).
     pub stale_after: Duration,
+    /// A claim to be going counts this long (receiver-side age) instead of
+    /// `stale_after`. Why: silence is not giving up. A goer that falls silent (its frames
+    /// lost in a burst, or held to a beacon) is still driving at the ball; taking the ball
+    /// from it after the normal staleness makes two goers for as long as the silence
+    /// lasts. A goer that gives up says so (`going = false`, or the no-ball cost), which
+    /// frees the ball at once, so only a dead or cut-off goer is waited for this long. It
+    /// should cover the longest silence the network is expected to produce (bursts of up
+    /// to about a second) and be at least `stale_after`.
+    pub silent_goer_after: Duration,
+    /// A robot that claims the ball from a goer waits for the goer to let go; if the goer
+    /// still claims in a post made more than two `latency_compensation`s plus this margin
+    /// after the new claim (time for the claim to reach it and its release to come back),
+    /// the goer has not heard the claim (the new claimant's frames are being lost) or
+    /// disagrees, and the new claimant backs off until the goer lets go. Why: otherwise
+    /// both go for as long as the new claimant's silence lasts. The margin covers the
+    /// jitter and the goer's reaction (a control period or two).
+    pub ack_margin: Duration,
     /// A robot that (re)starts listens this long before it may go.
     pub listen_for: Duration,
     /// The team network's expected one-way latency. A robot hears its teammates' costs
@@ -91,6 +128,11 @@ impl Default for ArbitrationParams {
             tie_m: 0.15,
             // Three refresh periods of the default 100 ms.
             stale_after: Duration::from_millis(300),
+            // The competition network's bursts last 100 ms on average, exponentially
+            // distributed: one over 1 s is a 1-in-20,000 event (e^-10).
+            silent_goer_after: Duration::from_millis(1000),
+            // Two control periods of 40 ms.
+            ack_margin: Duration::from_millis(80),
             // One refresh period: by then every teammate has re-sent its cost once.
             listen_for: Duration::from_millis(100),
             latency_compensation: Duration::ZERO,
@@ -181,7 +223,7 @@ impl Decision {
 /// values agree.
 ///
 /// Not counted: values older than [`ArbitrationParams::stale_after`] (receiver-side age),
-/// non-finite costs, and costs at or above [`ArbitrationParams::no_ball_cost`]. That last
+/// claims to be going older than [`ArbitrationParams::silent_goer_after`], non-finite costs, and costs at or above [`ArbitrationParams::no_ball_cost`]. That last
 /// rule is huddle's reading of the seed: a robot that does not see the ball has nothing to
 /// approach (it searches instead), so when nobody sees the ball nobody goes, rather than
 /// the lowest id "going" to a ball it cannot see and then fighting the robot that first
@@ -190,10 +232,7 @@ impl Decision {
 /// `candidates` should include the deciding robot itself (its current `h`, its current
 /// `going`, age zero).
 pub fn decide(params: &ArbitrationParams, candidates: &[Candidate]) -> Decision {
-    let counted = |c: &&Candidate| {
-        let h = c.posted.h;
-        c.age <= params.stale_after && h.is_finite() && h < params.no_ball_cost
-    };
+    let counted = |c: &&Candidate| params.counts(c);
     let cost = |c: &Candidate| {
         if c.posted.going {
             c.posted.h - params.hysteresis_m
@@ -250,6 +289,14 @@ pub struct Arbiter {
     /// What this robot posted lately, for comparing like with like (see
     /// [`ArbitrationParams::latency_compensation`]).
     history: VecDeque<(Duration, f64)>,
+    /// When this robot's current claim began (its clock).
+    claimed_at: Option<Duration>,
+    /// Per teammate whose claim to be going counts: since when it has claimed, as far as
+    /// this robot knows (when the claim was first heard, less its age).
+    claiming_since: BTreeMap<u8, Duration>,
+    /// The goer this robot backed off from: it does not claim while that goer's claim
+    /// counts (see [`ArbitrationParams::ack_margin`]).
+    deferring_to: Option<u8>,
 }
 
 impl Arbiter {
@@ -263,6 +310,9 @@ impl Arbiter {
             going: false,
             clock: Duration::ZERO,
             history: VecDeque::new(),
+            claimed_at: None,
+            claiming_since: BTreeMap::new(),
+            deferring_to: None,
         }
     }
 
@@ -284,6 +334,12 @@ impl Arbiter {
     /// Whether this robot decided to go at its last tick.
     pub fn going(&self) -> bool {
         self.going
+    }
+
+    /// The goer this robot has backed off from, if any: its claim to the ball was not
+    /// acknowledged (see [`ArbitrationParams::ack_margin`]).
+    pub fn deferring_to(&self) -> Option<u8> {
+        self.deferring_to
     }
 
     /// Whether this robot is still listening after its start.
@@ -323,7 +379,14 @@ impl Arbiter {
             age: Duration::ZERO,
         });
         let decision = decide(&self.params, &all);
-        self.going = !self.goalkeeper && !self.listening() && decision.should_go(self.me);
+        self.track_claims(&all);
+        let wants = !self.goalkeeper && !self.listening() && decision.should_go(self.me);
+        self.going = wants && !self.unacknowledged(&all);
+        if !self.going {
+            self.claimed_at = None;
+        } else if self.claimed_at.is_none() {
+            self.claimed_at = Some(self.clock);
+        }
         let posted = Posted {
             h: own_h,
             going: self.going,
@@ -332,6 +395,56 @@ impl Arbiter {
             self.history.push_back((self.clock, own_h));
         }
         (decision, posted)
+    }
+
+    /// Keep `claiming_since` up to date: a teammate's counted claim to be going is known
+    /// to have begun at the latest when it was first heard, less its age.
+    fn track_claims(&mut self, all: &[Candidate]) {
+        let (me, clock, params) = (self.me, self.clock, self.params);
+        let going = |c: &Candidate| c.robot != me && c.posted.going && params.counts(c);
+        self.claiming_since
+            .retain(|r, _| all.iter().any(|c| c.robot == *r && going(c)));
+        for c in all.iter().filter(|c| going(c)) {
+            self.claiming_since
+                .entry(c.robot)
+                .or_insert(clock.saturating_sub(c.age));
+        }
+        if let Some(g) = self.deferring_to {
+            if !self.claiming_since.contains_key(&g) {
+                // The goer let go (or fell silent beyond the silent-goer limit).
+                self.deferring_to = None;
+            }
+        }
+    }
+
+    /// Whether this robot must not go although `decide` says so: it backed off from a
+    /// goer that still claims, or its own claim has not been acknowledged by a goer that
+    /// claimed before it (that goer still claims in a post made after the claim should
+    /// have reached it and its release come back). The incumbent keeps the ball; the new
+    /// claimant takes it when the incumbent lets go.
+    fn unacknowledged(&mut self, all: &[Candidate]) -> bool {
+        if self.deferring_to.is_some() {
+            return true;
+        }
+        let Some(since) = self.claimed_at else {
+            return false;
+        };
+        let wait = self.params.latency_compensation * 2 + self.params.ack_margin;
+        let older = all.iter().find(|c| {
+            c.robot != self.me
+                && c.posted.going
+                && c.age <= self.params.stale_after
+                && self
+                    .claiming_since
+                    .get(&c.robot)
+                    .is_some_and(|&s| s < since)
+                && self.clock.saturating_sub(c.age) >= since + wait
+        });
+        if let Some(c) = older {
+            self.deferring_to = Some(c.robot);
+            return true;
+        }
+        false
     }
 
     /// This robot's own cost as its teammates see it now: what it posted one expected
@@ -445,6 +558,18 @@ fn check(key: &'static str, value: f64, ok: bool, rule: &'static str) -> Result<
 }
 
 impl ArbitrationParams {
+    /// Whether `decide` counts this candidate: fresh (a claim to be going for longer), and
+    /// with a finite cost below the no-ball cost.
+    pub fn counts(&self, c: &Candidate) -> bool {
+        let limit = if c.posted.going {
+            self.stale_after.max(self.silent_goer_after)
+        } else {
+            self.stale_after
+        };
+        let h = c.posted.h;
+        c.age <= limit && h.is_finite() && h < self.no_ball_cost
+    }
+
     /// The parameters from `local.var.machine.config.*` on `board` (the seed's
     /// configuration files end up there), each missing key taken from `defaults`.
     pub fn from_blackboard(
@@ -468,6 +593,15 @@ impl ArbitrationParams {
         if let Some(v) = number(board, STALE_MS)? {
             p.stale_after =
                 Duration::from_secs_f64(check(STALE_MS, v, v > 0.0, "must be > 0")? / 1000.0);
+        }
+        if let Some(v) = number(board, ACK_MARGIN_MS)? {
+            p.ack_margin = Duration::from_secs_f64(
+                check(ACK_MARGIN_MS, v, v >= 0.0, "must be >= 0")? / 1000.0,
+            );
+        }
+        if let Some(v) = number(board, SILENT_GOER_MS)? {
+            p.silent_goer_after =
+                Duration::from_secs_f64(check(SILENT_GOER_MS, v, v > 0.0, "must be > 0")? / 1000.0);
         }
         if let Some(v) = number(board, LATENCY_MS)? {
             p.latency_compensation =

@@ -48,10 +48,14 @@ fn ties_go_to_the_lower_robot_id_whatever_the_order_heard() {
 #[test]
 fn stale_values_do_not_count() {
     let p = ArbitrationParams::default();
-    let mut dead = fresh(1, 0.1, true);
+    let mut dead = fresh(1, 0.1, false);
     dead.age = p.stale_after + Duration::from_millis(1);
     let d = decide(&p, &[dead, fresh(2, 3.0, false)]);
     assert_eq!(d.goer, Some(2), "a silent robot's old cost must not win");
+    let mut dead_goer = fresh(1, 0.1, true);
+    dead_goer.age = p.silent_goer_after + Duration::from_millis(1);
+    let d = decide(&p, &[dead_goer, fresh(2, 3.0, false)]);
+    assert_eq!(d.goer, Some(2), "nor a goer silent past silent_goer_after");
 }
 
 #[test]
@@ -172,6 +176,8 @@ fn parameters_come_from_the_configuration_keys_and_bad_ones_are_refused() {
     };
     set(&mut board, config_keys::K1_M, Value::Float(-0.8));
     set(&mut board, config_keys::STALE_MS, Value::Int(450));
+    set(&mut board, config_keys::SILENT_GOER_MS, Value::Int(1500));
+    set(&mut board, config_keys::ACK_MARGIN_MS, Value::Float(60.0));
     set(
         &mut board,
         config_keys::ROLE,
@@ -180,6 +186,8 @@ fn parameters_come_from_the_configuration_keys_and_bad_ones_are_refused() {
     let p = ArbitrationParams::from_blackboard(&board, ArbitrationParams::default()).unwrap();
     assert_eq!(p.k1_m, -0.8);
     assert_eq!(p.stale_after, Duration::from_millis(450));
+    assert_eq!(p.silent_goer_after, Duration::from_millis(1500));
+    assert_eq!(p.ack_margin, Duration::from_millis(60));
     assert_eq!(
         p.hysteresis_m,
         ArbitrationParams::default().hysteresis_m,
@@ -277,5 +285,158 @@ fn with_latency_compensation_both_ends_of_a_handover_switch_together() {
     assert!(
         start >= 24,
         "robot 2 claims one latency after its cost dropped, at {start}"
+    );
+}
+
+#[test]
+fn a_silent_goer_keeps_the_ball_longer_than_a_silent_bystander() {
+    // Robot 1's last post said it was going at 1.0 m; robot 2 is at 2.0 m.
+    let p = ArbitrationParams::default();
+    let claim = |age_ms: u64, going: bool| Candidate {
+        robot: 1,
+        posted: Posted { h: 1.0, going },
+        age: Duration::from_millis(age_ms),
+    };
+    let me = fresh(2, 2.0, false);
+    let d = decide(&p, &[claim(800, true), me]);
+    assert_eq!(
+        d.goer,
+        Some(1),
+        "silent for 0.8 s: still the goer, not gone"
+    );
+    let d = decide(&p, &[claim(1100, true), me]);
+    assert_eq!(d.goer, Some(2), "silent past silent_goer_after: gone");
+    let d = decide(&p, &[claim(400, false), me]);
+    assert_eq!(
+        d.goer,
+        Some(2),
+        "a bystander's claim is stale after stale_after"
+    );
+}
+
+/// Two robots, each hearing the other's posts one `delay_ticks` late unless a lost tick
+/// drops them; the receiver-side age grows while nothing arrives. Ticks of 10 ms.
+struct Pair {
+    arbiters: [Arbiter; 2],
+    sent: [Vec<Posted>; 2],
+    /// Per receiver: the latest post heard and the tick it arrived at.
+    heard: [Option<(Posted, usize)>; 2],
+    delay_ticks: usize,
+}
+
+const PAIR_TICK: Duration = Duration::from_millis(10);
+
+impl Pair {
+    fn new(p: ArbitrationParams, delay_ticks: usize) -> Pair {
+        Pair {
+            arbiters: [Arbiter::new(1, false, p), Arbiter::new(2, false, p)],
+            sent: [Vec::new(), Vec::new()],
+            heard: [None, None],
+            delay_ticks,
+        }
+    }
+
+    /// Tick `k` with costs `h`; `lost(from)` drops robot `from`'s post arriving now.
+    /// Returns who is going.
+    fn tick(&mut self, k: usize, h: [f64; 2], lost: impl Fn(usize) -> bool) -> [bool; 2] {
+        for to in 0..2 {
+            let from = 1 - to;
+            if let Some(i) = self.sent[from].len().checked_sub(self.delay_ticks) {
+                if !lost(from) {
+                    self.heard[to] = Some((self.sent[from][i], k));
+                }
+            }
+        }
+        let mut going = [false; 2];
+        for me in 0..2 {
+            let heard: Vec<Candidate> = self.heard[me]
+                .map(|(posted, at)| Candidate {
+                    robot: (2 - me) as u8,
+                    posted,
+                    age: PAIR_TICK * (k - at) as u32,
+                })
+                .into_iter()
+                .collect();
+            let (_, posted) = self.arbiters[me].tick(PAIR_TICK, h[me], &heard);
+            self.sent[me].push(posted);
+            going[me] = posted.going;
+        }
+        going
+    }
+}
+
+fn unacknowledged_claim(ack_margin: Duration) -> (usize, Option<usize>, bool) {
+    // Robot 1 goes at 2.0 m. At tick 50 robot 2's cost drops to 1.0 m, but everything
+    // robot 2 sends from tick 50 to 100 is lost (a 500 ms burst at its sender); robot 1's
+    // posts get through. Latency 50 ms.
+    let p = ArbitrationParams {
+        listen_for: Duration::ZERO,
+        latency_compensation: Duration::from_millis(50),
+        ack_margin,
+        ..Default::default()
+    };
+    let mut pair = Pair::new(p, 5);
+    let (mut both, mut deferred_at, mut end) = (0, None, [false; 2]);
+    for k in 0..200 {
+        let h2 = if k < 50 { 3.0 } else { 1.0 };
+        let going = pair.tick(k, [2.0, h2], |from| from == 1 && (55..105).contains(&k));
+        if going == [true, true] {
+            both += 1;
+        }
+        if deferred_at.is_none() && pair.arbiters[1].deferring_to() == Some(1) {
+            deferred_at = Some(k);
+        }
+        end = going;
+    }
+    (both, deferred_at, end == [false, true])
+}
+
+#[test]
+fn a_claim_the_goer_does_not_acknowledge_is_withdrawn_until_the_goer_lets_go() {
+    let p = ArbitrationParams::default();
+    let (both, deferred_at, handed_over) = unacknowledged_claim(p.ack_margin);
+    // Robot 2 claims one latency after its drop (tick 55) and waits two latencies plus
+    // the margin (180 ms) for robot 1's release: then it backs off.
+    let limit = (2 * 50 + p.ack_margin.as_millis() as usize) / 10 + 2;
+    assert!(
+        both <= limit,
+        "two goers for {both} ticks, limit {limit} (backed off at {deferred_at:?})"
+    );
+    assert!(deferred_at.is_some(), "robot 2 backs off");
+    assert!(
+        handed_over,
+        "once robot 1 hears robot 2 again, robot 2 goes alone"
+    );
+    // Without the rule, both go for as long as robot 2's burst lasts.
+    let (both_without, _, _) = unacknowledged_claim(Duration::from_secs(10));
+    assert!(
+        both_without >= 45,
+        "without the acknowledgement rule two goers for {both_without} ticks"
+    );
+}
+
+#[test]
+fn a_goer_that_gives_up_frees_the_ball_at_once_and_a_silent_one_does_not() {
+    // Robot 1 goes at 1.0 m, robot 2 waits at 2.0 m. From tick 50 robot 1's frames are
+    // lost for 600 ms (it keeps going: silence); at tick 150 robot 1 loses the ball
+    // and says so (the no-ball cost).
+    let p = ArbitrationParams {
+        listen_for: Duration::ZERO,
+        ..Default::default()
+    };
+    let mut pair = Pair::new(p, 2);
+    let mut first_go_2 = None;
+    for k in 0..200 {
+        let h1 = if k < 150 { 1.0 } else { p.no_ball_cost };
+        let going = pair.tick(k, [h1, 2.0], |from| from == 0 && (50..110).contains(&k));
+        if (20..150).contains(&k) {
+            assert_eq!(going, [true, false], "tick {k}: robot 1 keeps the ball");
+        } else if going[1] && first_go_2.is_none() {
+            first_go_2 = Some(k);
+        }
+    }
+    assert!(
+        first_go_2.is_some_and(|k| k <= 150 + 2 + 1),
+        "robot 2 takes over one latency after the give-up, at {first_go_2:?}"
     );
 }
