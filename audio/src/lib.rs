@@ -62,7 +62,7 @@ mod significance;
 mod tones;
 mod wav;
 
-pub use decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
+pub use decoder::{TRACE, Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};
 pub use tones::{

@@ -12,8 +12,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use audio::channel::{power, white_sigma_for_in_band_snr, Source, WhiteNoise};
 use audio::evaluation::{
-    es_n0_db, run_false_alarm_trial, run_snr_trial, run_whistle_over_messages, Interference,
-    SnrOutcome, SnrTrial,
+    es_n0_db, run_false_alarm_trial, run_room_false_alarm_trial, run_room_trial, run_snr_trial,
+    run_whistle_over_messages, Interference, RoomNoise, RoomTrial, SnrOutcome, SnrTrial,
 };
 use audio::{
     i16_to_s16le, read_wav, write_wav_f32, write_wav_i16, Decoder, DecoderConfig, Detection,
@@ -82,6 +82,9 @@ enum AudioCommand {
         /// Messages per SNR row.
         #[arg(long, default_value_t = 1000)]
         messages: usize,
+        /// Which tables to run.
+        #[arg(long, value_enum, default_value_t = EvalSection::All)]
+        section: EvalSection,
     },
 }
 
@@ -102,6 +105,17 @@ struct MessageArgs {
     /// Tone duration (`1s`, `250ms`).
     #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
     duration: Duration,
+}
+
+/// Which part of `huddle audio eval` to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum EvalSection {
+    /// Every table.
+    All,
+    /// The dry tables (white noise, long messages, short tones, false messages, speed).
+    Dry,
+    /// The reverberant-hall tables.
+    Rooms,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -191,7 +205,8 @@ pub fn run(args: AudioArgs) -> Result<()> {
             noise_time,
             seed,
             messages,
-        } => eval(noise_time.as_secs_f64() / 3600.0, seed, messages),
+            section,
+        } => eval(noise_time.as_secs_f64() / 3600.0, seed, messages, section),
     }
 }
 
@@ -283,9 +298,16 @@ fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) -> Result<()
     Ok(())
 }
 
-fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
+fn eval(hours: f64, seed: u64, messages: usize, section: EvalSection) -> Result<()> {
     let started = Instant::now();
     outln!("huddle audio eval — seed {seed}, {messages} messages per row, 16 kHz");
+    if section != EvalSection::Dry {
+        eval_rooms(hours, seed, messages)?;
+    }
+    if section == EvalSection::Rooms {
+        outln!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
     outln!("in-band SNR = message power / noise power inside 500–4000 Hz (white noise);");
     outln!("Es/N0 = energy of one short message (six tones × tone duration) / noise PSD.");
     outln!();
@@ -484,6 +506,78 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         );
     }
     outln!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The reverberant-hall table: T60 × in-band SNR × white or babble, short messages,
+/// senders' clocks off by up to ±0.5%, and false messages in reverberant babble.
+fn eval_rooms(hours: f64, seed: u64, messages: usize) -> Result<()> {
+    outln!();
+    outln!("Reverberant hall (image sources + diffuse tail, 300–6000 Hz, clocks ±0.5%), 1 s tones, short:");
+    outln!(
+        "{:>6} {:>7} {:>6} {:>6} {:>9} {:>7} {:>5} {:>7} {:>7} {:>7}",
+        "T60 s",
+        "noise",
+        "SNR dB",
+        "sent",
+        "correct",
+        "wrong",
+        "extra",
+        "delay50",
+        "delay95",
+        "t0err95"
+    );
+    let mut worst_wrong = 0.0f64;
+    let mut targets = Vec::new();
+    for (i, t60) in [0.3, 0.6, 1.2, 2.0].into_iter().enumerate() {
+        for (j, noise) in [RoomNoise::White, RoomNoise::Babble].into_iter().enumerate() {
+            for (k, snr) in [10.0, 0.0, -6.0].into_iter().enumerate() {
+                let row_seed = seed.wrapping_add(1000 + 100 * i as u64 + 10 * j as u64 + k as u64);
+                let out = run_room_trial(&RoomTrial::new(row_seed, t60, snr, noise, messages))?;
+                outln!(
+                    "{t60:>6.1} {:>7} {snr:>6.1} {:>6} {:>8.2}% {:>6.2}% {:>5} {:>7.0} {:>7.0} {:>7.0}",
+                    noise.name(),
+                    out.sent,
+                    100.0 * out.correct_share(),
+                    100.0 * out.wrong_share(),
+                    out.spurious,
+                    1000.0 * percentile(&out.delays_s, 0.5),
+                    1000.0 * percentile(&out.delays_s, 0.95),
+                    1000.0 * percentile(&out.start_errors_s, 0.95),
+                );
+                worst_wrong = worst_wrong.max(out.wrong_share());
+                if noise == RoomNoise::Babble && snr == 0.0 && (t60 == 1.2 || t60 == 2.0) {
+                    targets.push((t60, out.correct_share()));
+                }
+            }
+        }
+    }
+    let fa = run_room_false_alarm_trial(1.2, hours, seed.wrapping_add(1900));
+    outln!(
+        "  reverberant babble (T60 1.2 s): {} false in {:.2} h",
+        fa.false_messages,
+        fa.hours
+    );
+    let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
+    for (t60, c) in targets {
+        let goal = if t60 < 1.5 { 0.99 } else { 0.95 };
+        outln!(
+            "  T60 {t60:.1} s, babble 0 dB       {:>7.2}%   target >= {:.0}%      {}",
+            100.0 * c,
+            100.0 * goal,
+            verdict(c >= goal)
+        );
+    }
+    outln!(
+        "  worst wrong share, room rows   {:>7.2}%   target <= 0.1%     {}",
+        100.0 * worst_wrong,
+        verdict(worst_wrong <= 0.001)
+    );
+    outln!(
+        "  false messages, room babble    {:>8}   target 0           {}",
+        fa.false_messages,
+        verdict(fa.false_messages == 0)
+    );
     Ok(())
 }
 

@@ -42,40 +42,73 @@ const END_BOUND_NATS: f64 = 7.0;
 /// heard anyway.
 const END_CONTINUE_NATS: f64 = 12.0;
 
-/// Evidence, summed over windows, that the tracked frame continues after the slot end.
+/// Reverberation times (s) of the "stopped" hypotheses: a tone that stops in a hall goes
+/// on as a reverberant tail whose power decays by 60 dB in T60, so "stopped" is tested
+/// as the best of these decays (dry first) against "continues". A tail slower than the
+/// slowest still decays by 9 dB within the test's half-slot horizon, while a
+/// continuation holds its level.
+pub(super) const TAIL_T60_S: [f64; 5] = [0.0, 0.4, 0.8, 1.5, 2.5];
+/// Number of "stopped" hypotheses.
+const TAILS: usize = TAIL_T60_S.len();
+
+/// Expected power share, after the slot end, of a stopped tone's reverberant tail in a
+/// window whose centre lies `tau_s` seconds after the end and that holds `after` of the
+/// next slot's Hann area, for each of [`TAIL_T60_S`]: the tail power decays as
+/// e^(−ln(10⁶) τ / T60) (all of the slot's level taken as reverberant: the worst case).
+pub(super) fn tail_shares(after: f64, tau_s: f64) -> [f64; TAILS] {
+    std::array::from_fn(|m| {
+        let t60 = TAIL_T60_S[m];
+        if t60 <= 0.0 {
+            0.0
+        } else {
+            after * after * (-(1e6f64).ln() * tau_s.max(0.0) / t60).exp()
+        }
+    })
+}
+
+/// Evidence, summed over windows, that the tracked frame continues after the slot end,
+/// against each "stopped" hypothesis (one per tail decay of [`TAIL_T60_S`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Evidence {
     /// From the sender's tones.
-    llr: f64,
+    llr: [f64; TAILS],
     /// From each data basic's tones (a second frame sounds one, which one unknown).
-    data_llr: [f64; DATA_VALUES as usize],
+    data_llr: [[f64; DATA_VALUES as usize]; TAILS],
 }
 
 impl Evidence {
     fn new() -> Self {
         Evidence {
-            llr: 0.0,
-            data_llr: [0.0; DATA_VALUES as usize],
+            llr: [0.0; TAILS],
+            data_llr: [[0.0; DATA_VALUES as usize]; TAILS],
         }
     }
 
-    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio).
+    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio),
+    /// against the "stopped" hypothesis that explains the windows best: "continues" must
+    /// beat every tail decay, "stopped" needs one to beat the continuation.
     fn total(&self) -> f64 {
-        let best_data = self
-            .data_llr
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        self.llr + best_data
+        (0..TAILS)
+            .map(|m| {
+                let best_data = self.data_llr[m]
+                    .iter()
+                    .copied()
+                    .fold(f64::NEG_INFINITY, f64::max);
+                self.llr[m] + best_data
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Adds one window's evidence: the window holds `before` of the ended slot's Hann area
-    /// and `after` of the next slot's, and `power(k)` is tone `k`'s normalised power in it.
+    /// and `after` of the next slot's, `tails` are the reverberant tail's shares under
+    /// each "stopped" hypothesis ([`tail_shares`]), and `power(k)` is tone `k`'s
+    /// normalised power in it.
     fn add_window(
         &mut self,
         c: &Continuation,
         before: f64,
         after: f64,
+        tails: &[f64; TAILS],
         power: impl Fn(usize) -> f64,
     ) {
         let t = c.tracking;
@@ -94,13 +127,16 @@ impl Evidence {
             // normalise each frame's peak). A louder continuation only strengthens the
             // evidence.
             let level = t.level[k] * c.ratio;
-            let ended = level * before * before;
+            let r = power(k);
             let continued = level * (before * before + CONTINUATION_SHARE * after * after);
-            self.llr += llr(power(k), ended, continued);
+            for (acc, tail) in self.llr.iter_mut().zip(tails) {
+                let ended = level * (before * before + tail);
+                *acc += llr(r, ended, continued);
+            }
         }
         // A second frame also sounds one data basic, which one unknown: its evidence
         // enters as the best of the 21, doubling what the sender alone gives.
-        for (d, acc) in self.data_llr.iter_mut().enumerate() {
+        for d in 0..DATA_VALUES as usize {
             let same = d as u8 == c.current_data;
             for k in basic_tones(SENDER_COUNT + d) {
                 let level = if same && t.present[k] {
@@ -111,9 +147,20 @@ impl Evidence {
                 if level <= 0.0 {
                     continue;
                 }
-                let ended = if same { level * before * before } else { 0.0 };
-                let continued = ended + CONTINUATION_SHARE * level * after * after;
-                *acc += llr(power(k), ended, continued);
+                let r = power(k);
+                for (m, tail) in tails.iter().enumerate() {
+                    let ended = if same {
+                        level * (before * before + tail)
+                    } else {
+                        0.0
+                    };
+                    let continued = if same {
+                        level * (before * before + CONTINUATION_SHARE * after * after)
+                    } else {
+                        CONTINUATION_SHARE * level * after * after
+                    };
+                    self.data_llr[m][d] += llr(r, ended, continued);
+                }
             }
         }
     }
@@ -349,8 +396,9 @@ impl Decoder {
             let before = hann_share_inside(s, len as f64, slot_start, slot_end);
             let after = hann_share_inside(s, len as f64, slot_end, slot_end + slot_len);
             let powers = tone_powers(&y, &coefs);
+            let tails = tail_shares(after, (s + 0.5 * len as f64 - slot_end) / rate);
             st.evidence
-                .add_window(&c, before, after, |k| powers[k] / normaliser(k));
+                .add_window(&c, before, after, &tails, |k| powers[k] / normaliser(k));
             st.next += 1;
             let evidence = effective(st);
             let at = end as f64;
@@ -403,7 +451,8 @@ impl Decoder {
             let after = hann_share_inside(start, window_len, slot_end, slot_end + slot_len);
             // Same normalisation as the slot, so levels compare directly even where the
             // per-window noise estimate jumps.
-            test.windows.add_window(c, before, after, |k| {
+            let tails = tail_shares(after, (start + 0.5 * window_len - slot_end) / self.rate());
+            test.windows.add_window(c, before, after, &tails, |k| {
                 f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise
             });
             let evidence = test.windows.total();

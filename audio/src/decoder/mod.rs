@@ -124,10 +124,21 @@ mod windows;
 #[cfg(test)]
 mod tests;
 
+/// TEMP diagnostics.
+pub static TRACE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+macro_rules! trace {
+    ($($a:tt)*) => {
+        if crate::decoder::TRACE.load(std::sync::atomic::Ordering::Relaxed) {
+            eprintln!($($a)*);
+        }
+    };
+}
+pub(crate) use trace;
+
 use std::collections::VecDeque;
 
 use crate::analysis::{Analyzer, Geometry};
-use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+use crate::tones::{Message, Sender, TONE_COUNT};
 
 use end_test::ShortWindow;
 use noise_floor::NoiseFloor;
@@ -216,8 +227,9 @@ pub struct Decoder {
     floor: u64,
     run: Option<Run>,
     tracking: Option<Tracking>,
-    /// A frame that kept sounding too long: ignored until it stops.
-    blocked: Option<(Frame, usize, f64, u32)>,
+    /// A frame that kept sounding too long, or whose transmission was just decided (its
+    /// reverberant tail): ignored until it falls quiet.
+    blocked: Option<search::Blocked>,
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,

@@ -53,17 +53,18 @@ impl Decoder {
             return;
         }
         let j = best.1;
-        let (frame, _) = Self::apply_rules(
+        let (frame, _p) = Self::apply_rules(
             &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
             count,
             P_TONE,
             P_TONE,
         );
+        super::trace!("detect w={} e={:.0} thr={:.0} frame {:?} present {:?}", self.windows_seen, best.0, threshold, frame, (0..TONE_COUNT).filter(|&k| _p[k]).collect::<Vec<_>>());
         let Some(frame) = frame else {
             self.run = None;
             return;
         };
-        if matches!(self.blocked, Some((b, ..)) if b == frame) {
+        if matches!(self.blocked, Some(b) if b.frame == frame) {
             self.run = None;
             return;
         }
@@ -80,21 +81,41 @@ impl Decoder {
         }
     }
 
-    /// Unblocks a frame that sounded too long once its tones have fallen quiet in two
-    /// windows in a row.
+    /// Unblocks a blocked frame once its tones have fallen below its quiet level in two
+    /// windows in a row, or at its deadline.
     pub(super) fn update_blocked(&mut self) {
-        let Some((frame, scale, level, quiet)) = self.blocked else {
+        let Some(b) = self.blocked else {
             return;
         };
         let Some(rec) = self.history.back() else {
             return;
         };
-        let x = Self::excess(rec, scale, &frame.tones());
-        let quiet = if x < 0.25 * level { quiet + 1 } else { 0 };
-        self.blocked = if quiet >= 2 {
+        let x = Self::excess(rec, b.scale, &b.frame.tones());
+        let quiet = if x < b.quiet_below { b.quiet + 1 } else { 0 };
+        let expired = b.until.is_some_and(|u| rec.start >= u);
+        self.blocked = if quiet >= 2 || expired {
+            // The windows summed so far hold the frame's loud tail: integrate afresh from
+            // here unless another frame is already being found.
+            if self.run.is_none() && self.tracking.is_none() {
+                let start = rec.start;
+                self.reset_sliding(start);
+            }
             None
         } else {
-            Some((frame, scale, level, quiet))
+            Some(Blocked { quiet, ..b })
         };
     }
+}
+
+/// A frame the search skips (see [`Decoder::update_blocked`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blocked {
+    pub(super) frame: Frame,
+    pub(super) scale: usize,
+    /// Six-tone excess per window below which a window counts as quiet.
+    pub(super) quiet_below: f64,
+    /// Quiet windows in a row so far.
+    pub(super) quiet: u32,
+    /// Window start (sample) from which the block lifts regardless.
+    pub(super) until: Option<u64>,
 }

@@ -2,8 +2,15 @@
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
 use super::end_test::EndTest;
+use super::search::Blocked;
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+
+/// Share of a decided frame's level its tail must fall below before the search looks for
+/// that frame again (−25 dB).
+const TAIL_QUIET: f64 = 0.003;
+/// Six-tone excess per window that counts as noise (2.5 σ of six Exp(1) powers).
+const TAIL_NOISE_EXCESS: f64 = 6.1;
 
 /// The transmission being followed.
 #[derive(Clone, Debug)]
@@ -51,6 +58,7 @@ impl Decoder {
         let Some(onset) = self.estimate_onset(frame, scale) else {
             return;
         };
+        super::trace!("track {:?} onset {:.3} at {:.3}", frame, onset / self.rate(), self.latest_window_end() / self.rate());
         self.tracking = Some(Tracking {
             sender: frame.sender,
             data: [frame.data, frame.data],
@@ -107,6 +115,7 @@ impl Decoder {
         next.present = slot.present;
         next.noise = slot.noise;
         if first && self.continues_earlier_frame(&next, a) {
+            super::trace!("  continues earlier frame");
             self.end_transmission(b, false);
             return Step::Wait;
         }
@@ -142,6 +151,7 @@ impl Decoder {
         };
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
+        super::trace!("end test slot {} continues {continues}", test.slot);
         match (test.slot, continues) {
             (1, false) => {
                 let message = Message::Short {
@@ -193,14 +203,36 @@ impl Decoder {
     /// Closes the tracked transmission at `end`; `too_long` blocks its frame until it stops.
     fn end_transmission(&mut self, end: f64, too_long: bool) {
         if let Some(t) = self.tracking.take() {
-            if too_long {
+            // Also after a decided transmission: in a hall its frame goes on as a
+            // reverberant tail, which the search would find again (and fail on), so the
+            // frame is not searched for until it has fallen quiet.
+            if too_long || t.level.iter().any(|&l| l > 0.0) {
                 let frame = Frame {
                     sender: t.sender,
                     data: t.data[1],
                 };
                 let tones = frame.tones();
                 let level: f64 = tones.iter().map(|&k| t.level[k]).sum();
-                self.blocked = Some((frame, t.scale, level, 0));
+                self.blocked = Some(if too_long {
+                    Blocked {
+                        frame,
+                        scale: t.scale,
+                        quiet_below: 0.25 * level,
+                        quiet: 0,
+                        until: None,
+                    }
+                } else {
+                    // A tail is quiet 25 dB down or within noise (2.5 σ of six tones'
+                    // excess); the same frame sent again (by the protocol at least half a
+                    // tone later) is searched for again after a tone at the latest.
+                    Blocked {
+                        frame,
+                        scale: t.scale,
+                        quiet_below: (TAIL_QUIET * level).max(TAIL_NOISE_EXCESS),
+                        quiet: 0,
+                        until: Some((end + self.geometry.slot_samples).max(0.0) as u64),
+                    }
+                });
             }
         }
         self.reset_sliding(end.max(0.0).floor() as u64);

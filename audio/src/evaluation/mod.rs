@@ -4,6 +4,10 @@
 //! flat for any length) and scores what comes out. No clock is read here: the caller
 //! times a trial if it wants a speed.
 
+mod room;
+
+pub use room::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
+
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
