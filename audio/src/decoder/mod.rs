@@ -230,6 +230,8 @@ pub struct Decoder {
     /// A frame that kept sounding too long, or whose transmission was just decided (its
     /// reverberant tail): ignored until it falls quiet.
     blocked: Option<search::Blocked>,
+    /// The frame of the last decided transmission, while its tail may still sound.
+    recent: Option<search::Recent>,
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,
@@ -288,6 +290,7 @@ impl Decoder {
             run: None,
             tracking: None,
             blocked: None,
+            recent: None,
             failed_slot: None,
             output: VecDeque::new(),
             eof: false,

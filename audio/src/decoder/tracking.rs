@@ -2,7 +2,7 @@
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
 use super::end_test::EndTest;
-use super::search::Blocked;
+use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
 
@@ -11,6 +11,10 @@ use crate::tones::{Frame, Message, Sender, TONE_COUNT};
 const TAIL_QUIET: f64 = 0.003;
 /// Six-tone excess per window that counts as noise (2.5 σ of six Exp(1) powers).
 const TAIL_NOISE_EXCESS: f64 = 6.1;
+
+/// How long after a decided transmission's end its frame found again at a fraction of
+/// its level counts as its tail, slots (a tail of T60 2.5 s is −72 dB by then).
+const RECENT_SLOTS: f64 = 3.0;
 
 /// The transmission being followed.
 #[derive(Clone, Debug)]
@@ -222,15 +226,21 @@ impl Decoder {
                         until: None,
                     }
                 } else {
+                    self.recent = Some(Recent {
+                        frame,
+                        level,
+                        until: (end + RECENT_SLOTS * self.geometry.slot_samples).max(0.0) as u64,
+                    });
                     // A tail is quiet 25 dB down or within noise (2.5 σ of six tones'
                     // excess); the same frame sent again (by the protocol at least half a
-                    // tone later) is searched for again after a tone at the latest.
+                    // tone later) is searched for from then on at the latest (the decay
+                    // check keeps the search off the tail that may still sound).
                     Blocked {
                         frame,
                         scale: t.scale,
                         quiet_below: (TAIL_QUIET * level).max(TAIL_NOISE_EXCESS),
                         quiet: 0,
-                        until: Some((end + self.geometry.slot_samples).max(0.0) as u64),
+                        until: Some((end + 0.5 * self.geometry.slot_samples).max(0.0) as u64),
                     }
                 });
             }

@@ -179,6 +179,7 @@ pub fn run_room_trial(trial: &RoomTrial) -> Result<SnrOutcome, TrialError> {
                 matched: false,
             });
             out.sent += 1;
+            crate::decoder::trace!("SENT {m:?} at {:.3} err {error:.4}", start as f64 / rate_f + delay);
             block.extend(x.iter().map(|v| v * gain));
         }
         room.process(&mut block);
