@@ -106,10 +106,14 @@ impl Decoder {
     /// missing it is the lesser harm.
     pub(super) fn continues_earlier_frame(&self, t: &Tracking, a: f64) -> bool {
         let slot_len = self.geometry.slot_samples;
+        // A second frame starts where the first ended; a frame that started well inside
+        // the failed slot (found again after it, see `Decoder::decide_slot`) is not one.
+        let window_len = self.geometry.window_len as f64;
         let follows_failed = matches!(
             self.failed_slot,
             Some((sender, end)) if sender == t.sender
-                && a - end < SPRT_HORIZON * slot_len + self.geometry.window_len as f64
+                && a - end > -window_len
+                && a - end < SPRT_HORIZON * slot_len + window_len
         );
         follows_failed || self.sender_sounded_before(t)
     }

@@ -14,6 +14,13 @@ const NEIGHBOUR_LEAKAGE: f64 = 0.01;
 /// than that; a real tone that weak would be lost anyway (and the 2-of-3 vote covers one).
 const DYNAMIC_RANGE: f64 = 0.003_162;
 
+/// More tones present than this (a frame's six and a few of noise) is a crowd (see
+/// [`Decoder::apply_rules`]).
+const CROWD: usize = 10;
+/// In a crowd, a tone counts as present only within this share of the fourth loudest
+/// tone's excess (−10 dB).
+const CROWD_RANGE: f64 = 0.1;
+
 impl Decoder {
     /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
     /// at `p_tone`; when several sender (or data) basics have 2 of 3 tones present, the
@@ -40,6 +47,21 @@ impl Decoder {
             present[k] = sums[k] >= threshold
                 && excess >= NEIGHBOUR_LEAKAGE * left.max(right)
                 && excess >= DYNAMIC_RANGE * loudest;
+        }
+        // A crowd of present tones is not noise of the kind the thresholds assume: babble's
+        // voiced harmonics and formants, or a hall's reverberant smear, lift many tones
+        // above the Gamma quantile at once. Then only tones within CROWD_RANGE of the
+        // frame's loudest four (the least a 2-of-3 vote on two basics rests on) count:
+        // the message's own tones stand far above such a background.
+        if present.iter().filter(|&&p| p).count() > CROWD {
+            let mut excess: Vec<f64> = (0..TONE_COUNT).map(|k| sums[k] - n).collect();
+            excess.sort_unstable_by(|a, b| b.total_cmp(a));
+            let reference = excess[3].max(0.0);
+            for k in 0..TONE_COUNT {
+                if sums[k] - n < CROWD_RANGE * reference {
+                    present[k] = false;
+                }
+            }
         }
         let mut senders = Vec::new();
         let mut data = Vec::new();

@@ -143,7 +143,7 @@ impl Decoder {
             // The windows summed so far hold the frame's loud tail: integrate afresh from
             // here (from the deadline, where the same frame may start again) unless
             // another frame is already being found.
-            if self.run.is_none() && self.tracking.is_none() {
+            if b.fresh_start && self.run.is_none() && self.tracking.is_none() {
                 let start = expired.unwrap_or(rec.start);
                 self.reset_sliding(start);
             }
@@ -165,4 +165,7 @@ pub(super) struct Blocked {
     pub(super) quiet: u32,
     /// Window start (sample) from which the block lifts regardless.
     pub(super) until: Option<u64>,
+    /// Integration restarts when the block lifts (the windows summed hold the frame's
+    /// tail).
+    pub(super) fresh_start: bool,
 }

@@ -107,7 +107,30 @@ impl Decoder {
         }
         let Some(slot) = self.confirm_slot(t, a, b) else {
             self.failed_slot = Some((t.sender, b));
-            self.end_transmission(b, false);
+            if first {
+                // A first slot that fails was someone else's sound (babble, a tail, a
+                // burst) or a frame found at the wrong onset: the search resumes just
+                // after its onset rather than after the slot, so a message that began
+                // during it is still found with its own onset; the failed frame itself
+                // is skipped until the slot's end.
+                let frame = Frame {
+                    sender: t.sender,
+                    data: t.data[0],
+                };
+                self.tracking = None;
+                self.blocked = Some(Blocked {
+                    frame,
+                    scale: t.scale,
+                    quiet_below: 0.0,
+                    quiet: 0,
+                    until: Some(b.max(0.0) as u64),
+                    fresh_start: false,
+                });
+                let resume = a + self.geometry.window_len as f64;
+                self.reset_sliding(resume.max(0.0).floor() as u64);
+            } else {
+                self.end_transmission(b, false);
+            }
             return Step::Wait;
         };
         let mut next = t.clone();
@@ -224,6 +247,7 @@ impl Decoder {
                         quiet_below: 0.25 * level,
                         quiet: 0,
                         until: None,
+                        fresh_start: true,
                     }
                 } else {
                     self.recent = Some(Recent {
@@ -241,6 +265,7 @@ impl Decoder {
                         quiet_below: (TAIL_QUIET * level).max(TAIL_NOISE_EXCESS),
                         quiet: 0,
                         until: Some((end + 0.5 * self.geometry.slot_samples).max(0.0) as u64),
+                        fresh_start: true,
                     }
                 });
             }
