@@ -42,66 +42,95 @@ const END_BOUND_NATS: f64 = 7.0;
 /// heard anyway.
 const END_CONTINUE_NATS: f64 = 12.0;
 
-/// Reverberation times (s) of the "stopped" hypotheses: a tone that stops in a hall goes
-/// on as a reverberant tail whose power decays by 60 dB in T60, so "stopped" is tested
-/// as the best of these decays (dry first) against "continues". A tail slower than the
-/// slowest still decays by 9 dB within the test's half-slot horizon, while a
+/// The "stopped" hypotheses, as (reverberation time s, leftover share). A tone that stops
+/// in a hall goes on as a reverberant tail whose power decays by 60 dB in T60; over
+/// babble, the talkers' harmonics keep putting power on the sender's tones after it
+/// stopped, far more than the noise model allows, which a leftover at a share of the
+/// tone's level stands for. "Stopped" is the best of these (dry first) against
+/// "continues": a tail slower than the slowest still decays by 9 dB within the test's
+/// half-slot horizon, and a leftover is 8 dB below the continuation level, while a
 /// continuation holds its level.
-pub(super) const TAIL_T60_S: [f64; 5] = [0.0, 0.4, 0.8, 1.5, 2.5];
+pub(super) const STOP_HYPOTHESES: [(f64, f64); 7] = [
+    (0.0, 0.0),
+    (0.4, 0.0),
+    (0.8, 0.0),
+    (1.5, 0.0),
+    (2.5, 0.0),
+    (0.0, 0.1),
+    (1.5, 0.1),
+];
 /// Number of "stopped" hypotheses.
-const TAILS: usize = TAIL_T60_S.len();
+const TAILS: usize = STOP_HYPOTHESES.len();
+/// Levels of the "continues" hypothesis, as shares of the slot's level: the conservative
+/// [`CONTINUATION_SHARE`], and the full level (against which a slow tail is told apart
+/// only once it has decayed).
+const CONTINUATION_SHARES: [f64; 2] = [CONTINUATION_SHARE, 1.0];
+/// Number of continuation levels.
+const CONTINUATIONS: usize = CONTINUATION_SHARES.len();
 
-/// Expected power share, after the slot end, of a stopped tone's reverberant tail in a
+/// Expected power share of a stopped tone (its reverberant tail and any leftover) in a
 /// window whose centre lies `tau_s` seconds after the end and that holds `after` of the
-/// next slot's Hann area, for each of [`TAIL_T60_S`]: the tail power decays as
+/// next slot's Hann area, for each of [`STOP_HYPOTHESES`]: the tail power decays as
 /// e^(−ln(10⁶) τ / T60) (all of the slot's level taken as reverberant: the worst case).
 pub(super) fn tail_shares(after: f64, tau_s: f64) -> [f64; TAILS] {
     std::array::from_fn(|m| {
-        let t60 = TAIL_T60_S[m];
-        if t60 <= 0.0 {
+        let (t60, leftover) = STOP_HYPOTHESES[m];
+        let tail = if t60 <= 0.0 {
             0.0
         } else {
-            after * after * (-(1e6f64).ln() * tau_s.max(0.0) / t60).exp()
-        }
+            (-(1e6f64).ln() * tau_s.max(0.0) / t60).exp()
+        };
+        after * after * (tail + leftover)
     })
 }
 
+/// Leftover share of each "stopped" hypothesis (for tones that were not sounding).
+fn leftover_shares(after: f64) -> [f64; TAILS] {
+    std::array::from_fn(|m| after * after * STOP_HYPOTHESES[m].1)
+}
+
 /// Evidence, summed over windows, that the tracked frame continues after the slot end,
-/// against each "stopped" hypothesis (one per tail decay of [`TAIL_T60_S`]).
+/// against each "stopped" hypothesis of [`STOP_HYPOTHESES`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Evidence {
-    /// From the sender's tones.
-    llr: [f64; TAILS],
+    /// From the sender's tones, `[continuation level][stop hypothesis]`.
+    llr: [[f64; TAILS]; CONTINUATIONS],
     /// From each data basic's tones (a second frame sounds one, which one unknown).
-    data_llr: [[f64; DATA_VALUES as usize]; TAILS],
+    data_llr: [[[f64; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
 }
 
 impl Evidence {
     fn new() -> Self {
         Evidence {
-            llr: [0.0; TAILS],
-            data_llr: [[0.0; DATA_VALUES as usize]; TAILS],
+            llr: [[0.0; TAILS]; CONTINUATIONS],
+            data_llr: [[[0.0; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
         }
     }
 
     /// The sender's evidence plus the best data basic's (a generalised likelihood ratio),
-    /// against the "stopped" hypothesis that explains the windows best: "continues" must
-    /// beat every tail decay, "stopped" needs one to beat the continuation.
+    /// for the continuation level that explains the windows best, against the "stopped"
+    /// hypothesis that explains them best: "continues" must beat every stop hypothesis,
+    /// "stopped" needs one to beat every continuation level (a slow tail and a
+    /// continuation at full level look alike at first; neither decides then).
     fn total(&self) -> f64 {
         (0..TAILS)
             .map(|m| {
-                let best_data = self.data_llr[m]
-                    .iter()
-                    .copied()
-                    .fold(f64::NEG_INFINITY, f64::max);
-                self.llr[m] + best_data
+                (0..CONTINUATIONS)
+                    .map(|c| {
+                        let best_data = self.data_llr[c][m]
+                            .iter()
+                            .copied()
+                            .fold(f64::NEG_INFINITY, f64::max);
+                        self.llr[c][m] + best_data
+                    })
+                    .fold(f64::NEG_INFINITY, f64::max)
             })
             .fold(f64::INFINITY, f64::min)
     }
 
     /// Adds one window's evidence: the window holds `before` of the ended slot's Hann area
-    /// and `after` of the next slot's, `tails` are the reverberant tail's shares under
-    /// each "stopped" hypothesis ([`tail_shares`]), and `power(k)` is tone `k`'s
+    /// and `after` of the next slot's, `tails` are the stopped tone's shares under each
+    /// "stopped" hypothesis ([`tail_shares`]), and `power(k)` is tone `k`'s
     /// normalised power in it.
     fn add_window(
         &mut self,
@@ -122,20 +151,22 @@ impl Evidence {
             if !t.present[k] || t.level[k] <= 0.0 {
                 continue;
             }
-            // Continuation modelled conservatively: an unknown phase at the slot edge
-            // (powers add) and the second frame up to 2.2 dB quieter (another encoder may
-            // normalise each frame's peak). A louder continuation only strengthens the
-            // evidence.
+            // Continuation at [`CONTINUATION_SHARE`] (conservative: an unknown phase at
+            // the slot edge, and the second frame up to 2.2 dB quieter, as another
+            // encoder may normalise each frame's peak) or at the full level.
             let level = t.level[k] * c.ratio;
             let r = power(k);
-            let continued = level * (before * before + CONTINUATION_SHARE * after * after);
-            for (acc, tail) in self.llr.iter_mut().zip(tails) {
-                let ended = level * (before * before + tail);
-                *acc += llr(r, ended, continued);
+            for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                let continued = level * (before * before + share * after * after);
+                for (acc, tail) in self.llr[ci].iter_mut().zip(tails) {
+                    let ended = level * (before * before + tail);
+                    *acc += llr(r, ended, continued);
+                }
             }
         }
         // A second frame also sounds one data basic, which one unknown: its evidence
         // enters as the best of the 21, doubling what the sender alone gives.
+        let leftovers = leftover_shares(after);
         for d in 0..DATA_VALUES as usize {
             let same = d as u8 == c.current_data;
             for k in basic_tones(SENDER_COUNT + d) {
@@ -148,18 +179,20 @@ impl Evidence {
                     continue;
                 }
                 let r = power(k);
-                for (m, tail) in tails.iter().enumerate() {
-                    let ended = if same {
-                        level * (before * before + tail)
-                    } else {
-                        0.0
-                    };
-                    let continued = if same {
-                        level * (before * before + CONTINUATION_SHARE * after * after)
-                    } else {
-                        CONTINUATION_SHARE * level * after * after
-                    };
-                    self.data_llr[m][d] += llr(r, ended, continued);
+                for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                    for (m, (tail, leftover)) in tails.iter().zip(&leftovers).enumerate() {
+                        let ended = if same {
+                            level * (before * before + tail)
+                        } else {
+                            level * leftover
+                        };
+                        let continued = if same {
+                            level * (before * before + share * after * after)
+                        } else {
+                            share * level * after * after
+                        };
+                        self.data_llr[ci][m][d] += llr(r, ended, continued);
+                    }
                 }
             }
         }
