@@ -138,6 +138,7 @@ pub(crate) use trace;
 use std::collections::VecDeque;
 
 use crate::analysis::{Analyzer, Geometry};
+use crate::team::{TeamMessage, TeamPlan};
 use crate::tones::{Message, Sender, TONE_COUNT};
 
 use end_test::ShortWindow;
@@ -158,6 +159,9 @@ pub struct DecoderConfig {
     pub tone_duration_s: f64,
     /// Largest relative frequency error tolerated between sender and receiver clocks.
     pub max_frequency_error: f64,
+    /// The team plan the senders use: messages it cannot have sent are dropped (see
+    /// [`TeamPlan`]; [`Detection::team_message`] reads a detection under it).
+    pub team: TeamPlan,
 }
 
 impl Default for DecoderConfig {
@@ -166,6 +170,7 @@ impl Default for DecoderConfig {
             sample_rate_hz: 16_000,
             tone_duration_s: 1.0,
             max_frequency_error: 0.006,
+            team: TeamPlan::Three,
         }
     }
 }
@@ -202,6 +207,14 @@ pub struct Detection {
     pub frequency_scale: f64,
     /// Estimated signal-to-noise ratio per tone in one analysis window, dB.
     pub tone_snr_db: f64,
+}
+
+impl Detection {
+    /// The message as the team plan `plan` reads it (robot, short or long, value), `None`
+    /// if that plan cannot have sent it.
+    pub fn team_message(&self, plan: TeamPlan) -> Option<TeamMessage> {
+        plan.decode(&self.message)
+    }
 }
 
 /// The streaming decoder. Push samples in any block size with [`Decoder::push_f32`] or

@@ -217,6 +217,11 @@ impl Decoder {
                 .map(|k| t.level[k])
                 .collect(),
         );
+        if self.config.team.decode(&message).is_none() {
+            // Not a message of the team's plan (e.g. data 20, or a long message across
+            // two banks of the six-robot plan): someone else's, or a wrong decision.
+            return;
+        }
         self.output.push_back(Detection {
             message,
             start_s: t.onset / rate,

@@ -158,7 +158,7 @@ pub fn run_room_trial(trial: &RoomTrial) -> Result<SnrOutcome, TrialError> {
         let gap_s = rng.random_range(0.6..1.4) * tone_s.max(0.25);
         segments.push((
             (gap_s * rate_f) as usize,
-            Some(random_message(&mut rng, trial.long_share)),
+            Some(random_message(&mut rng, trial.long_share, trial.decoder.team)),
         ));
     }
     segments.push((
@@ -179,7 +179,6 @@ pub fn run_room_trial(trial: &RoomTrial) -> Result<SnrOutcome, TrialError> {
                 matched: false,
             });
             out.sent += 1;
-            crate::decoder::trace!("SENT {m:?} at {:.3} err {error:.4}", start as f64 / rate_f + delay);
             block.extend(x.iter().map(|v| v * gain));
         }
         room.process(&mut block);
