@@ -20,6 +20,8 @@ const CROWD: usize = 10;
 /// In a crowd, a tone counts as present only within this share of the fourth loudest
 /// tone's excess (−10 dB).
 const CROWD_RANGE: f64 = 0.1;
+/// A rival basic counts only with its vote at least this share of the top basic's (−6 dB).
+const RIVAL_RANGE: f64 = 0.25;
 
 impl Decoder {
     /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
@@ -82,6 +84,12 @@ impl Decoder {
                 .filter(|&&k| present[k] && sums[k] >= rival_threshold)
                 .count()
         };
+        // The excess of the weaker of a basic's two loudest tones: what its vote rests on.
+        let vote = |b: usize| {
+            let mut e = basic_tones(b).map(|k| sums[k] - n);
+            e.sort_unstable_by(|x, y| y.total_cmp(x));
+            e[1]
+        };
         for group in [&mut senders, &mut data] {
             if group.len() > 1 {
                 let top = group
@@ -89,7 +97,14 @@ impl Decoder {
                     .copied()
                     .max_by(|&a, &b| basic_sum(a).total_cmp(&basic_sum(b)))
                     .unwrap_or(0);
-                group.retain(|&b| b == top || strong_votes(b) >= 2);
+                // A rival also needs its 2-of-3 vote within RIVAL_RANGE of the top
+                // basic's: under babble, harmonics give some basic two strong tones now
+                // and then, far below a real second transmitter (which sounds at full
+                // level, or is lost under the first anyway).
+                let top_vote = vote(top);
+                group.retain(|&b| {
+                    b == top || (strong_votes(b) >= 2 && vote(b) >= RIVAL_RANGE * top_vote)
+                });
             }
         }
         let frame = match (senders.as_slice(), data.as_slice()) {
