@@ -67,10 +67,10 @@ mod team;
 mod tones;
 mod wav;
 
-pub use decoder::{TRACE, Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
+pub use decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
-pub use team::{TeamError, TeamMessage, TeamPlan};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};
+pub use team::{TeamError, TeamMessage, TeamPlan};
 pub use tones::{
     basic_tones, tone_frequency_hz, Frame, Message, MessageError, Sender, BASIC_COUNT, DATA_VALUES,
     HIGHEST_TONE_HZ, LONG_VALUES, LOWEST_TONE_HZ, SENDER_COUNT, TONE_COUNT,

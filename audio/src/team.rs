@@ -244,9 +244,16 @@ mod tests {
         }
         // What the six-robot plan cannot have sent: data 20, and frames in two banks.
         let six = TeamPlan::Six;
-        assert_eq!(six.decode(&Message::short(Sender::Goalkeeper, 20).unwrap()), None);
+        assert_eq!(
+            six.decode(&Message::short(Sender::Goalkeeper, 20).unwrap()),
+            None
+        );
         let mixed = Message::long(Sender::Goalkeeper, 21 * 3 + 14).unwrap();
-        assert_eq!(six.decode(&mixed), None, "banks 0 and 1 in one long message");
+        assert_eq!(
+            six.decode(&mixed),
+            None,
+            "banks 0 and 1 in one long message"
+        );
         // Robot 4 is the left attacker's basic in bank 1.
         let m = six
             .encode(TeamMessage {

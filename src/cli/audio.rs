@@ -13,7 +13,8 @@ use anyhow::{bail, Context, Result};
 use audio::channel::{power, white_sigma_for_in_band_snr, Source, WhiteNoise};
 use audio::evaluation::{
     es_n0_db, run_false_alarm_trial, run_room_false_alarm_trial, run_room_trial,
-    run_snr_trial_team, run_whistle_over_messages, Interference, RoomNoise, RoomTrial, SnrOutcome, SnrTrial,
+    run_snr_trial_team, run_whistle_over_messages, Interference, RoomNoise, RoomTrial, SnrOutcome,
+    SnrTrial,
 };
 use audio::{
     i16_to_s16le, read_wav, write_wav_f32, write_wav_i16, Decoder, DecoderConfig, Detection,
@@ -226,7 +227,13 @@ pub fn run(args: AudioArgs) -> Result<()> {
             messages,
             section,
             team,
-        } => eval(noise_time.as_secs_f64() / 3600.0, seed, messages, section, team),
+        } => eval(
+            noise_time.as_secs_f64() / 3600.0,
+            seed,
+            messages,
+            section,
+            team,
+        ),
     }
 }
 
@@ -375,15 +382,18 @@ fn eval(
     );
     outln!("{:>70}", "(ms)     (ms)    (ms)");
     let trial = |snr_db: f64, tone_s: f64, n: usize, long_share: f64, s: u64| {
-        run_snr_trial_team(&SnrTrial {
-            seed: s,
-            snr_db,
-            messages: n,
-            tone_duration_s: tone_s,
-            sample_rate_hz: 16_000,
-            long_share,
-            frequency_error: 0.0,
-        }, team)
+        run_snr_trial_team(
+            &SnrTrial {
+                seed: s,
+                snr_db,
+                messages: n,
+                tone_duration_s: tone_s,
+                sample_rate_hz: 16_000,
+                long_share,
+                frequency_error: 0.0,
+            },
+            team,
+        )
     };
     // Figures the closing summary compares with the targets.
     let mut worst_wrong = 0.0f64;
@@ -581,7 +591,10 @@ fn eval_rooms(hours: f64, seed: u64, messages: usize, team: TeamPlan) -> Result<
     let mut worst_wrong = 0.0f64;
     let mut targets = Vec::new();
     for (i, t60) in [0.3, 0.6, 1.2, 2.0].into_iter().enumerate() {
-        for (j, noise) in [RoomNoise::White, RoomNoise::Babble].into_iter().enumerate() {
+        for (j, noise) in [RoomNoise::White, RoomNoise::Babble]
+            .into_iter()
+            .enumerate()
+        {
             for (k, snr) in [10.0, 0.0, -6.0].into_iter().enumerate() {
                 let row_seed = seed.wrapping_add(1000 + 100 * i as u64 + 10 * j as u64 + k as u64);
                 let mut trial = RoomTrial::new(row_seed, t60, snr, noise, messages);

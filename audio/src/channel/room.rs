@@ -114,11 +114,7 @@ impl RoomSpec {
                         image(nz, src[2], dims[2]),
                     ];
                     let r = distance(img, mic).max(0.5);
-                    add_tap(
-                        &mut h,
-                        r / SPEED_OF_SOUND,
-                        beta.powi(n) * direct / r,
-                    );
+                    add_tap(&mut h, r / SPEED_OF_SOUND, beta.powi(n) * direct / r);
                 }
             }
         }
@@ -195,7 +191,8 @@ impl Biquad {
         let (mut x1, mut x2, mut y1, mut y2) = (0.0, 0.0, 0.0, 0.0);
         for v in x {
             let x0 = f64::from(*v);
-            let y0 = self.b[0] * x0 + self.b[1] * x1 + self.b[2] * x2 - self.a[0] * y1 - self.a[1] * y2;
+            let y0 =
+                self.b[0] * x0 + self.b[1] * x1 + self.b[2] * x2 - self.a[0] * y1 - self.a[1] * y2;
             x2 = x1;
             x1 = x0;
             y2 = y1;

@@ -77,16 +77,13 @@ impl Decoder {
             noise,
         } = self.integrate_slot(t.scale, a, b)?;
         let (frame, present) = Self::apply_rules(&sums, count, P_TONE_CONFIRM, P_TONE_RIVAL);
-        super::trace!("confirm t={:.3} rules {:?} present {:?}", a / self.rate(), frame, (0..TONE_COUNT).filter(|&k| present[k]).collect::<Vec<_>>());
         let frame = frame.filter(|f| f.sender == t.sender).filter(|f| {
             let energy: f64 = f.tones().iter().map(|&k| sums[k]).sum();
             energy >= self.frame_threshold(count, P_FRAME_CONFIRM)
         })?;
-        let st = self.sounds_through_slot(frame, &present, t.scale, a, b);
-        let stray = Self::has_stray_tone(frame, &present, &level, &sums, count);
-        let off = self.has_off_grid_tone(frame, &present, t.scale, a, b);
-        super::trace!("  through {st} stray {stray} offgrid {off}");
-        let ours = st && !stray && !off;
+        let ours = self.sounds_through_slot(frame, &present, t.scale, a, b)
+            && !Self::has_stray_tone(frame, &present, &level, &sums, count)
+            && !self.has_off_grid_tone(frame, &present, t.scale, a, b);
         ours.then_some(SlotDecision {
             frame,
             present,

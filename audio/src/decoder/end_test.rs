@@ -59,6 +59,8 @@ pub(super) const STOP_HYPOTHESES: [(f64, f64); 7] = [
     (0.0, 0.1),
     (1.5, 0.1),
 ];
+/// Longest tail hypothesis, in tone durations: 60 dB / 9 dB × the half-slot horizon.
+const MAX_T60_PER_TONE: f64 = 3.3;
 /// Number of "stopped" hypotheses.
 const TAILS: usize = STOP_HYPOTHESES.len();
 /// Levels of the "continues" hypothesis, as shares of the slot's level: the conservative
@@ -72,10 +74,14 @@ const CONTINUATIONS: usize = CONTINUATION_SHARES.len();
 /// window whose centre lies `tau_s` seconds after the end and that holds `after` of the
 /// next slot's Hann area, for each of [`STOP_HYPOTHESES`]: the tail power decays as
 /// e^(−ln(10⁶) τ / T60) (all of the slot's level taken as reverberant: the worst case).
-pub(super) fn tail_shares(after: f64, tau_s: f64) -> [f64; TAILS] {
+///
+/// A tail that cannot decay by 9 dB within the test's horizon (T60 over
+/// [`MAX_T60_PER_TONE`] tone durations) cannot be told from a continuation at all: such
+/// a hypothesis falls back to no tail (short tones are decided as in a dry room).
+pub(super) fn tail_shares(after: f64, tau_s: f64, tone_s: f64) -> [f64; TAILS] {
     std::array::from_fn(|m| {
         let (t60, leftover) = STOP_HYPOTHESES[m];
-        let tail = if t60 <= 0.0 {
+        let tail = if t60 <= 0.0 || t60 > MAX_T60_PER_TONE * tone_s {
             0.0
         } else {
             (-(1e6f64).ln() * tau_s.max(0.0) / t60).exp()
@@ -141,6 +147,10 @@ impl Evidence {
         power: impl Fn(usize) -> f64,
     ) {
         let t = c.tracking;
+        // A tail still within a factor of two of a continuation's level says nothing
+        // either way in this window: at high SNR the clipped evidence would otherwise
+        // follow whichever model the (imperfectly measured) level happens to sit nearer.
+        let alike = |tail: f64, share: f64| tail > 0.5 * share * after * after;
         // Clipped: at high SNR a small level mismatch (fades, a phase step, room echo)
         // must not swamp the evidence of other windows.
         let llr = |r: f64, ended: f64, continued: f64| {
@@ -159,6 +169,9 @@ impl Evidence {
             for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
                 let continued = level * (before * before + share * after * after);
                 for (acc, tail) in self.llr[ci].iter_mut().zip(tails) {
+                    if alike(*tail, *share) {
+                        continue;
+                    }
                     let ended = level * (before * before + tail);
                     *acc += llr(r, ended, continued);
                 }
@@ -181,6 +194,9 @@ impl Evidence {
                 let r = power(k);
                 for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
                     for (m, (tail, leftover)) in tails.iter().zip(&leftovers).enumerate() {
+                        if same && alike(*tail, *share) {
+                            continue;
+                        }
                         let ended = if same {
                             level * (before * before + tail)
                         } else {
@@ -429,7 +445,11 @@ impl Decoder {
             let before = hann_share_inside(s, len as f64, slot_start, slot_end);
             let after = hann_share_inside(s, len as f64, slot_end, slot_end + slot_len);
             let powers = tone_powers(&y, &coefs);
-            let tails = tail_shares(after, (s + 0.5 * len as f64 - slot_end) / rate);
+            let tails = tail_shares(
+                after,
+                (s + 0.5 * len as f64 - slot_end) / rate,
+                self.config.tone_duration_s,
+            );
             st.evidence
                 .add_window(&c, before, after, &tails, |k| powers[k] / normaliser(k));
             st.next += 1;
@@ -484,7 +504,11 @@ impl Decoder {
             let after = hann_share_inside(start, window_len, slot_end, slot_end + slot_len);
             // Same normalisation as the slot, so levels compare directly even where the
             // per-window noise estimate jumps.
-            let tails = tail_shares(after, (start + 0.5 * window_len - slot_end) / self.rate());
+            let tails = tail_shares(
+                after,
+                (start + 0.5 * window_len - slot_end) / self.rate(),
+                self.config.tone_duration_s,
+            );
             test.windows.add_window(c, before, after, &tails, |k| {
                 f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise
             });

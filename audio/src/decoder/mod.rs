@@ -124,17 +124,6 @@ mod windows;
 #[cfg(test)]
 mod tests;
 
-/// TEMP diagnostics.
-pub static TRACE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-macro_rules! trace {
-    ($($a:tt)*) => {
-        if crate::decoder::TRACE.load(std::sync::atomic::Ordering::Relaxed) {
-            eprintln!($($a)*);
-        }
-    };
-}
-pub(crate) use trace;
-
 use std::collections::VecDeque;
 
 use crate::analysis::{Analyzer, Geometry};

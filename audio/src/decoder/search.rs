@@ -19,6 +19,8 @@ pub(super) const P_FRAME: f64 = 1e-6;
 /// A newest window below this share of the summed windows' mean excess is a decaying
 /// tail, not a sounding frame (see [`Decoder::decaying`]).
 const DECAYING_SHARE: f64 = 0.8;
+/// Least windows per tone for the decay check (about half a second of tone).
+const DECAYING_MIN_WINDOWS: usize = 6;
 /// Noise allowance of the decay check, standard deviations of six tones' excess.
 const DECAYING_NOISE_Z: f64 = 2.0;
 
@@ -73,13 +75,12 @@ impl Decoder {
             return;
         }
         let j = best.1;
-        let (frame, _p) = Self::apply_rules(
+        let (frame, _) = Self::apply_rules(
             &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
             count,
             P_TONE,
             P_TONE,
         );
-        super::trace!("detect w={} e={:.0} thr={:.0} frame {:?} present {:?}", self.windows_seen, best.0, threshold, frame, (0..TONE_COUNT).filter(|&k| _p[k]).collect::<Vec<_>>());
         let Some(frame) = frame else {
             self.run = None;
             return;
@@ -124,7 +125,11 @@ impl Decoder {
         let tail_of_recent = self.recent.is_some_and(|r| {
             r.frame == frame && newest.start < r.until && latest < RECENT_TAIL_SHARE * r.level
         });
-        tail_of_recent || latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt()
+        // Tones only a few windows long end within the search's two-window run, so
+        // their newest window is past their peak as a matter of course: no decay test.
+        let long_tone = self.geometry.slot_windows >= DECAYING_MIN_WINDOWS;
+        tail_of_recent
+            || (long_tone && latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt())
     }
 
     /// Unblocks a blocked frame once its tones have fallen below its quiet level in two

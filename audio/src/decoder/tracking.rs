@@ -62,7 +62,6 @@ impl Decoder {
         let Some(onset) = self.estimate_onset(frame, scale) else {
             return;
         };
-        super::trace!("track {:?} onset {:.3} at {:.3}", frame, onset / self.rate(), self.latest_window_end() / self.rate());
         self.tracking = Some(Tracking {
             sender: frame.sender,
             data: [frame.data, frame.data],
@@ -142,7 +141,6 @@ impl Decoder {
         next.present = slot.present;
         next.noise = slot.noise;
         if first && self.continues_earlier_frame(&next, a) {
-            super::trace!("  continues earlier frame");
             self.end_transmission(b, false);
             return Step::Wait;
         }
@@ -178,7 +176,6 @@ impl Decoder {
         };
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
-        super::trace!("end test slot {} continues {continues}", test.slot);
         match (test.slot, continues) {
             (1, false) => {
                 let message = Message::Short {

@@ -10,7 +10,9 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{finish_and_score, random_message, shifted, Sent, SnrOutcome, TrialError, SIGNAL_POWER};
+use super::{
+    finish_and_score, random_message, shifted, Sent, SnrOutcome, TrialError, SIGNAL_POWER,
+};
 use crate::channel::{in_band_power, Babble, Convolver, RoomSpec, Source, WhiteNoise};
 use crate::decoder::{Decoder, DecoderConfig};
 use crate::encoder::{Encoder, EncoderConfig};
@@ -158,7 +160,11 @@ pub fn run_room_trial(trial: &RoomTrial) -> Result<SnrOutcome, TrialError> {
         let gap_s = rng.random_range(0.6..1.4) * tone_s.max(0.25);
         segments.push((
             (gap_s * rate_f) as usize,
-            Some(random_message(&mut rng, trial.long_share, trial.decoder.team)),
+            Some(random_message(
+                &mut rng,
+                trial.long_share,
+                trial.decoder.team,
+            )),
         ));
     }
     segments.push((
