@@ -23,6 +23,10 @@
 //! pipes (`arecord … | huddle audio listen`). It never reads a clock; time is the sample
 //! count.
 //!
+//! **Teams of up to six.** [`TeamPlan::Six`] maps six robots onto the same frames (sender
+//! basic × data bank, 10 values per frame); [`DecoderConfig::team`] selects it (the
+//! seed's three-robot plan is the default). See the `team` module.
+//!
 //! **In-band SNR** (used throughout the docs, tests and `eval`): the signal's mean power
 //! over its duration divided by the noise power inside 500–4000 Hz. For white noise of
 //! variance σ² at rate `fs` the latter is `σ² · 3500 / (fs / 2)`.
@@ -59,12 +63,14 @@ mod encoder;
 pub mod evaluation;
 mod pcm;
 mod significance;
+mod team;
 mod tones;
 mod wav;
 
 pub use decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};
+pub use team::{TeamError, TeamMessage, TeamPlan};
 pub use tones::{
     basic_tones, tone_frequency_hz, Frame, Message, MessageError, Sender, BASIC_COUNT, DATA_VALUES,
     HIGHEST_TONE_HZ, LONG_VALUES, LOWEST_TONE_HZ, SENDER_COUNT, TONE_COUNT,

@@ -12,12 +12,13 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use audio::channel::{power, white_sigma_for_in_band_snr, Source, WhiteNoise};
 use audio::evaluation::{
-    es_n0_db, run_false_alarm_trial, run_snr_trial, run_whistle_over_messages, Interference,
-    SnrOutcome, SnrTrial,
+    es_n0_db, run_false_alarm_trial, run_room_false_alarm_trial, run_room_trial,
+    run_snr_trial_team, run_whistle_over_messages, Interference, RoomNoise, RoomTrial, SnrOutcome,
+    SnrTrial,
 };
 use audio::{
     i16_to_s16le, read_wav, write_wav_f32, write_wav_i16, Decoder, DecoderConfig, Detection,
-    Encoder, EncoderConfig, Message, S16leDecoder, Sender,
+    Encoder, EncoderConfig, Message, S16leDecoder, Sender, TeamMessage, TeamPlan,
 };
 use clap::{Args, Subcommand, ValueEnum};
 
@@ -57,6 +58,9 @@ enum AudioCommand {
         /// Tone duration the senders use (`1s`, `250ms`).
         #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
         duration: Duration,
+        /// Team plan the senders use (`three`: the seed's, `six`: up to six robots).
+        #[arg(long, default_value_t = TeamPlan::Three)]
+        team: TeamPlan,
     },
     /// Decode raw s16le mono PCM from stdin as it arrives (`arecord … | huddle audio listen`).
     Listen {
@@ -69,6 +73,9 @@ enum AudioCommand {
         /// One JSON object per line.
         #[arg(long)]
         json: bool,
+        /// Team plan the senders use (`three`: the seed's, `six`: up to six robots).
+        #[arg(long, default_value_t = TeamPlan::Three)]
+        team: TeamPlan,
     },
     /// Robustness report: decode rates vs SNR, false messages per hour, whistle, speed,
     /// delay, shortest tone. Seeded and reproducible.
@@ -82,26 +89,47 @@ enum AudioCommand {
         /// Messages per SNR row.
         #[arg(long, default_value_t = 1000)]
         messages: usize,
+        /// Which tables to run.
+        #[arg(long, value_enum, default_value_t = EvalSection::All)]
+        section: EvalSection,
+        /// Team plan of the messages sent and decoded (`three` or `six`).
+        #[arg(long, default_value_t = TeamPlan::Three)]
+        team: TeamPlan,
     },
 }
 
 #[derive(Args, Debug)]
 struct MessageArgs {
-    /// Sender: 0 goalkeeper, 1 left attacker, 2 right attacker.
+    /// Sender: 0 goalkeeper, 1 left attacker, 2 right attacker (`--team six`: robot 0–5).
     #[arg(long)]
     sender: u8,
-    /// Data value of a short message, 0–20.
+    /// Data value of a short message, 0–20 (`--team six`: 0–9).
     #[arg(long, conflicts_with = "long")]
-    data: Option<u8>,
-    /// Value of a long message, 0–440 (two frames: 21·first + second).
+    data: Option<u16>,
+    /// Value of a long message, 0–440 (two frames: 21·first + second; `--team six`:
+    /// 0–99, 10·first + second).
     #[arg(long)]
     long: Option<u16>,
+    /// Team plan (`three`: the seed's 3 senders; `six`: up to 6 robots, fewer values).
+    #[arg(long, default_value_t = TeamPlan::Three)]
+    team: TeamPlan,
     /// Sample rate, Hz.
     #[arg(long, default_value_t = 16_000)]
     rate: u32,
     /// Tone duration (`1s`, `250ms`).
     #[arg(long, default_value = "1s", value_parser = duration::parse_positive)]
     duration: Duration,
+}
+
+/// Which part of `huddle audio eval` to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum EvalSection {
+    /// Every table.
+    All,
+    /// The dry tables (white noise, long messages, short tones, false messages, speed).
+    Dry,
+    /// The reverberant-hall tables.
+    Rooms,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -112,13 +140,16 @@ enum SampleFormat {
 
 impl MessageArgs {
     fn message(&self) -> Result<Message> {
-        let sender = Sender::from_index(self.sender)
-            .with_context(|| format!("sender {} is not 0, 1 or 2", self.sender))?;
-        Ok(match (self.data, self.long) {
-            (Some(d), None) => Message::short(sender, d)?,
-            (None, Some(v)) => Message::long(sender, v)?,
+        let (long, value) = match (self.data, self.long) {
+            (Some(d), None) => (false, d),
+            (None, Some(v)) => (true, v),
             _ => bail!("give either --data D (short) or --long VALUE (long)"),
-        })
+        };
+        Ok(self.team.encode(TeamMessage {
+            robot: self.sender,
+            long,
+            value,
+        })?)
     }
 
     fn encoder(&self) -> Result<Encoder> {
@@ -159,6 +190,7 @@ pub fn run(args: AudioArgs) -> Result<()> {
             input,
             json,
             duration,
+            team,
         } => {
             let file =
                 File::open(&input).with_context(|| format!("opening {}", input.display()))?;
@@ -167,18 +199,19 @@ pub fn run(args: AudioArgs) -> Result<()> {
             let mut d = Decoder::new(DecoderConfig {
                 sample_rate_hz: rec.sample_rate_hz,
                 tone_duration_s: duration.as_secs_f64(),
+                team,
                 ..DecoderConfig::default()
             })?;
             let mut out = std::io::stdout().lock();
             for block in rec.samples.chunks(4096) {
                 d.push_f32(block);
                 while let Some(m) = d.poll_message() {
-                    print_detection(&mut out, &m, json)?;
+                    print_detection(&mut out, &m, json, team)?;
                 }
             }
             d.finish();
             while let Some(m) = d.poll_message() {
-                print_detection(&mut out, &m, json)?;
+                print_detection(&mut out, &m, json, team)?;
             }
             Ok(())
         }
@@ -186,12 +219,21 @@ pub fn run(args: AudioArgs) -> Result<()> {
             rate,
             duration,
             json,
-        } => listen(rate, duration.as_secs_f64(), json),
+            team,
+        } => listen(rate, duration.as_secs_f64(), json, team),
         AudioCommand::Eval {
             noise_time,
             seed,
             messages,
-        } => eval(noise_time.as_secs_f64() / 3600.0, seed, messages),
+            section,
+            team,
+        } => eval(
+            noise_time.as_secs_f64() / 3600.0,
+            seed,
+            messages,
+            section,
+            team,
+        ),
     }
 }
 
@@ -202,16 +244,26 @@ fn send_raw(enc: &Encoder, m: &Message) -> Result<()> {
     Ok(())
 }
 
-fn print_detection(out: &mut impl Write, d: &Detection, json: bool) -> Result<()> {
+/// One detection as a line. Under the seed's plan `sender` is the sender basic and `data`
+/// the value; under `--team six` they are the robot (0–5) and its value, and the JSON
+/// also carries `"team": "six"`.
+fn print_detection(out: &mut impl Write, d: &Detection, json: bool, team: TeamPlan) -> Result<()> {
+    // The decoder drops what its plan cannot have sent, so this always reads.
+    let Some(tm) = d.team_message(team) else {
+        return Ok(());
+    };
     if json {
-        let v = serde_json::json!({
+        let mut v = serde_json::json!({
             "t": (d.start_s * 1000.0).round() / 1000.0,
             "kind": d.message.kind(),
-            "sender": d.message.sender().index(),
-            "data": d.message.value(),
+            "sender": tm.robot,
+            "data": tm.value,
         });
+        if team != TeamPlan::Three {
+            v["team"] = serde_json::Value::from(team.name());
+        }
         writeln!(out, "{v}")?;
-    } else {
+    } else if team == TeamPlan::Three {
         writeln!(
             out,
             "{:9.3}s  {:5}  sender {} ({})  data {:3}",
@@ -221,15 +273,25 @@ fn print_detection(out: &mut impl Write, d: &Detection, json: bool) -> Result<()
             d.message.sender(),
             d.message.value()
         )?;
+    } else {
+        writeln!(
+            out,
+            "{:9.3}s  {:5}  robot {}  data {:3}",
+            d.start_s,
+            d.message.kind(),
+            tm.robot,
+            tm.value
+        )?;
     }
     out.flush()?;
     Ok(())
 }
 
-fn listen(rate: u32, duration: f64, json: bool) -> Result<()> {
+fn listen(rate: u32, duration: f64, json: bool, team: TeamPlan) -> Result<()> {
     let mut d = Decoder::new(DecoderConfig {
         sample_rate_hz: rate,
         tone_duration_s: duration,
+        team,
         ..DecoderConfig::default()
     })?;
     let mut stdin = std::io::stdin().lock();
@@ -248,12 +310,12 @@ fn listen(rate: u32, duration: f64, json: bool) -> Result<()> {
         pcm.push(&bytes[..n], &mut samples);
         d.push_i16(&samples);
         while let Some(m) = d.poll_message() {
-            print_detection(&mut out, &m, json)?;
+            print_detection(&mut out, &m, json, team)?;
         }
     }
     d.finish();
     while let Some(m) = d.poll_message() {
-        print_detection(&mut out, &m, json)?;
+        print_detection(&mut out, &m, json, team)?;
     }
     if pcm.has_pending_byte() {
         eprintln!("note: input ended in the middle of a sample (odd byte count)");
@@ -283,9 +345,24 @@ fn snr_row(label: &str, snr_db: f64, tone_s: f64, out: &SnrOutcome) -> Result<()
     Ok(())
 }
 
-fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
+fn eval(
+    hours: f64,
+    seed: u64,
+    messages: usize,
+    section: EvalSection,
+    team: TeamPlan,
+) -> Result<()> {
     let started = Instant::now();
-    outln!("huddle audio eval — seed {seed}, {messages} messages per row, 16 kHz");
+    outln!(
+        "huddle audio eval — seed {seed}, {messages} messages per row, 16 kHz, team plan {team}"
+    );
+    if section != EvalSection::Dry {
+        eval_rooms(hours, seed, messages, team)?;
+    }
+    if section == EvalSection::Rooms {
+        outln!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
     outln!("in-band SNR = message power / noise power inside 500–4000 Hz (white noise);");
     outln!("Es/N0 = energy of one short message (six tones × tone duration) / noise PSD.");
     outln!();
@@ -305,15 +382,18 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     );
     outln!("{:>70}", "(ms)     (ms)    (ms)");
     let trial = |snr_db: f64, tone_s: f64, n: usize, long_share: f64, s: u64| {
-        run_snr_trial(&SnrTrial {
-            seed: s,
-            snr_db,
-            messages: n,
-            tone_duration_s: tone_s,
-            sample_rate_hz: 16_000,
-            long_share,
-            frequency_error: 0.0,
-        })
+        run_snr_trial_team(
+            &SnrTrial {
+                seed: s,
+                snr_db,
+                messages: n,
+                tone_duration_s: tone_s,
+                sample_rate_hz: 16_000,
+                long_share,
+                frequency_error: 0.0,
+            },
+            team,
+        )
     };
     // Figures the closing summary compares with the targets.
     let mut worst_wrong = 0.0f64;
@@ -354,15 +434,18 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
     }
     outln!();
     outln!("1 s tones, short, sender 0.5% sharp:");
-    let out = run_snr_trial(&SnrTrial {
-        seed: seed.wrapping_add(200),
-        snr_db: -13.0,
-        messages: messages / 2,
-        tone_duration_s: 1.0,
-        sample_rate_hz: 16_000,
-        long_share: 0.0,
-        frequency_error: 0.005,
-    })?;
+    let out = run_snr_trial_team(
+        &SnrTrial {
+            seed: seed.wrapping_add(200),
+            snr_db: -13.0,
+            messages: messages / 2,
+            tone_duration_s: 1.0,
+            sample_rate_hz: 16_000,
+            long_share: 0.0,
+            frequency_error: 0.005,
+        },
+        team,
+    )?;
     snr_row("+0.5%", -13.0, 1.0, &out)?;
     worst_wrong = worst_wrong.max(out.wrong_share());
 
@@ -484,6 +567,83 @@ fn eval(hours: f64, seed: u64, messages: usize) -> Result<()> {
         );
     }
     outln!("(eval took {:.1} s)", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The reverberant-hall table: T60 × in-band SNR × white or babble, short messages,
+/// senders' clocks off by up to ±0.5%, and false messages in reverberant babble.
+fn eval_rooms(hours: f64, seed: u64, messages: usize, team: TeamPlan) -> Result<()> {
+    outln!();
+    outln!("Reverberant hall (image sources + diffuse tail, 300–6000 Hz, clocks ±0.5%), 1 s tones, short:");
+    outln!(
+        "{:>6} {:>7} {:>6} {:>6} {:>9} {:>7} {:>5} {:>7} {:>7} {:>7}",
+        "T60 s",
+        "noise",
+        "SNR dB",
+        "sent",
+        "correct",
+        "wrong",
+        "extra",
+        "delay50",
+        "delay95",
+        "t0err95"
+    );
+    let mut worst_wrong = 0.0f64;
+    let mut targets = Vec::new();
+    for (i, t60) in [0.3, 0.6, 1.2, 2.0].into_iter().enumerate() {
+        for (j, noise) in [RoomNoise::White, RoomNoise::Babble]
+            .into_iter()
+            .enumerate()
+        {
+            for (k, snr) in [10.0, 0.0, -6.0].into_iter().enumerate() {
+                let row_seed = seed.wrapping_add(1000 + 100 * i as u64 + 10 * j as u64 + k as u64);
+                let mut trial = RoomTrial::new(row_seed, t60, snr, noise, messages);
+                trial.decoder.team = team;
+                let out = run_room_trial(&trial)?;
+                outln!(
+                    "{t60:>6.1} {:>7} {snr:>6.1} {:>6} {:>8.2}% {:>6.2}% {:>5} {:>7.0} {:>7.0} {:>7.0}",
+                    noise.name(),
+                    out.sent,
+                    100.0 * out.correct_share(),
+                    100.0 * out.wrong_share(),
+                    out.spurious,
+                    1000.0 * percentile(&out.delays_s, 0.5),
+                    1000.0 * percentile(&out.delays_s, 0.95),
+                    1000.0 * percentile(&out.start_errors_s, 0.95),
+                );
+                worst_wrong = worst_wrong.max(out.wrong_share());
+                if noise == RoomNoise::Babble && snr == 0.0 && (t60 == 1.2 || t60 == 2.0) {
+                    targets.push((t60, out.correct_share()));
+                }
+            }
+        }
+    }
+    let fa = run_room_false_alarm_trial(1.2, hours, seed.wrapping_add(1900));
+    outln!(
+        "  reverberant babble (T60 1.2 s): {} false in {:.2} h",
+        fa.false_messages,
+        fa.hours
+    );
+    let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
+    for (t60, c) in targets {
+        let goal = if t60 < 1.5 { 0.99 } else { 0.95 };
+        outln!(
+            "  T60 {t60:.1} s, babble 0 dB       {:>7.2}%   target >= {:.0}%      {}",
+            100.0 * c,
+            100.0 * goal,
+            verdict(c >= goal)
+        );
+    }
+    outln!(
+        "  worst wrong share, room rows   {:>7.2}%   target <= 0.1%     {}",
+        100.0 * worst_wrong,
+        verdict(worst_wrong <= 0.001)
+    );
+    outln!(
+        "  false messages, room babble    {:>8}   target 0           {}",
+        fa.false_messages,
+        verdict(fa.false_messages == 0)
+    );
     Ok(())
 }
 

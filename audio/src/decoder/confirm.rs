@@ -48,6 +48,11 @@ const STRAY_OVER_VOTE: f64 = 10.0;
 /// makes the slot someone else's signal (see [`Decoder::has_stray_tone`]).
 const STRAY_SHARE: f64 = 0.7;
 
+/// Shares of the frame's level a leftover tail before the onset may have (see
+/// [`Decoder::sender_sounded_before`]): 0, −20, −15 and −10 dB, all well below the
+/// [`CONTINUATION_SHARE`] a first frame that was missed would sound at.
+const LEFTOVER_SHARES: [f64; 4] = [0.0, 0.01, 0.03, 0.1];
+
 /// A slot that passed its decision.
 pub(super) struct SlotDecision {
     /// The frame it sounds.
@@ -98,10 +103,14 @@ impl Decoder {
     /// missing it is the lesser harm.
     pub(super) fn continues_earlier_frame(&self, t: &Tracking, a: f64) -> bool {
         let slot_len = self.geometry.slot_samples;
+        // A second frame starts where the first ended; a frame that started well inside
+        // the failed slot (found again after it, see `Decoder::decide_slot`) is not one.
+        let window_len = self.geometry.window_len as f64;
         let follows_failed = matches!(
             self.failed_slot,
             Some((sender, end)) if sender == t.sender
-                && a - end < SPRT_HORIZON * slot_len + self.geometry.window_len as f64
+                && a - end > -window_len
+                && a - end < SPRT_HORIZON * slot_len + window_len
         );
         follows_failed || self.sender_sounded_before(t)
     }
@@ -113,7 +122,10 @@ impl Decoder {
         let window_len = self.geometry.window_len as f64;
         let slot_len = self.geometry.slot_samples;
         let onset = t.onset;
-        let mut llr = 0.0;
+        // "Silent" allows a leftover at a few small shares of the level: in a hall the
+        // sender's previous message (at least half a tone earlier, by the protocol) may
+        // still be heard as a decaying tail, which is not the sender sounding on.
+        let mut llr = [0.0; LEFTOVER_SHARES.len()];
         for w in &self.history {
             let start = w.start as f64;
             if start + window_len < onset - SPRT_HORIZON * slot_len {
@@ -129,13 +141,15 @@ impl Decoder {
                     continue;
                 }
                 let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
-                let silent = t.level[k] * after * after;
                 let sounding = t.level[k] * (after * after + CONTINUATION_SHARE * before * before);
-                llr += (ln_tone_likelihood(r, sounding) - ln_tone_likelihood(r, silent))
-                    .clamp(-LLR_CLIP, LLR_CLIP);
+                for (acc, share) in llr.iter_mut().zip(LEFTOVER_SHARES) {
+                    let silent = t.level[k] * (after * after + share * before * before);
+                    *acc += (ln_tone_likelihood(r, sounding) - ln_tone_likelihood(r, silent))
+                        .clamp(-LLR_CLIP, LLR_CLIP);
+                }
             }
         }
-        llr > SPRT_BOUND / 3.0
+        llr.into_iter().fold(f64::INFINITY, f64::min) > SPRT_BOUND / 3.0
     }
 
     /// Whether the frame's tones sound through the whole slot: the excess power of its

@@ -42,43 +42,115 @@ const END_BOUND_NATS: f64 = 7.0;
 /// heard anyway.
 const END_CONTINUE_NATS: f64 = 12.0;
 
-/// Evidence, summed over windows, that the tracked frame continues after the slot end.
+/// The "stopped" hypotheses, as (reverberation time s, leftover share). A tone that stops
+/// in a hall goes on as a reverberant tail whose power decays by 60 dB in T60; over
+/// babble, the talkers' harmonics keep putting power on the sender's tones after it
+/// stopped, far more than the noise model allows, which a leftover at a share of the
+/// tone's level stands for. "Stopped" is the best of these (dry first) against
+/// "continues": a tail slower than the slowest still decays by 9 dB within the test's
+/// half-slot horizon, and a leftover is 8 dB below the continuation level, while a
+/// continuation holds its level.
+pub(super) const STOP_HYPOTHESES: [(f64, f64); 7] = [
+    (0.0, 0.0),
+    (0.4, 0.0),
+    (0.8, 0.0),
+    (1.5, 0.0),
+    (2.5, 0.0),
+    (0.0, 0.1),
+    (1.5, 0.1),
+];
+/// Longest tail hypothesis, in tone durations: 60 dB / 9 dB × the half-slot horizon.
+const MAX_T60_PER_TONE: f64 = 3.3;
+/// Number of "stopped" hypotheses.
+const TAILS: usize = STOP_HYPOTHESES.len();
+/// Levels of the "continues" hypothesis, as shares of the slot's level: the conservative
+/// [`CONTINUATION_SHARE`], and the full level (against which a slow tail is told apart
+/// only once it has decayed).
+const CONTINUATION_SHARES: [f64; 2] = [CONTINUATION_SHARE, 1.0];
+/// Number of continuation levels.
+const CONTINUATIONS: usize = CONTINUATION_SHARES.len();
+
+/// Expected power share of a stopped tone (its reverberant tail and any leftover) in a
+/// window whose centre lies `tau_s` seconds after the end and that holds `after` of the
+/// next slot's Hann area, for each of [`STOP_HYPOTHESES`]: the tail power decays as
+/// e^(−ln(10⁶) τ / T60) (all of the slot's level taken as reverberant: the worst case).
+///
+/// A tail that cannot decay by 9 dB within the test's horizon (T60 over
+/// [`MAX_T60_PER_TONE`] tone durations) cannot be told from a continuation at all: such
+/// a hypothesis falls back to no tail (short tones are decided as in a dry room).
+pub(super) fn tail_shares(after: f64, tau_s: f64, tone_s: f64) -> [f64; TAILS] {
+    std::array::from_fn(|m| {
+        let (t60, leftover) = STOP_HYPOTHESES[m];
+        let tail = if t60 <= 0.0 || t60 > MAX_T60_PER_TONE * tone_s {
+            0.0
+        } else {
+            (-(1e6f64).ln() * tau_s.max(0.0) / t60).exp()
+        };
+        after * after * (tail + leftover)
+    })
+}
+
+/// Leftover share of each "stopped" hypothesis (for tones that were not sounding).
+fn leftover_shares(after: f64) -> [f64; TAILS] {
+    std::array::from_fn(|m| after * after * STOP_HYPOTHESES[m].1)
+}
+
+/// Evidence, summed over windows, that the tracked frame continues after the slot end,
+/// against each "stopped" hypothesis of [`STOP_HYPOTHESES`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Evidence {
-    /// From the sender's tones.
-    llr: f64,
+    /// From the sender's tones, `[continuation level][stop hypothesis]`.
+    llr: [[f64; TAILS]; CONTINUATIONS],
     /// From each data basic's tones (a second frame sounds one, which one unknown).
-    data_llr: [f64; DATA_VALUES as usize],
+    data_llr: [[[f64; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
 }
 
 impl Evidence {
     fn new() -> Self {
         Evidence {
-            llr: 0.0,
-            data_llr: [0.0; DATA_VALUES as usize],
+            llr: [[0.0; TAILS]; CONTINUATIONS],
+            data_llr: [[[0.0; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
         }
     }
 
-    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio).
+    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio),
+    /// for the continuation level that explains the windows best, against the "stopped"
+    /// hypothesis that explains them best: "continues" must beat every stop hypothesis,
+    /// "stopped" needs one to beat every continuation level (a slow tail and a
+    /// continuation at full level look alike at first; neither decides then).
     fn total(&self) -> f64 {
-        let best_data = self
-            .data_llr
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        self.llr + best_data
+        (0..TAILS)
+            .map(|m| {
+                (0..CONTINUATIONS)
+                    .map(|c| {
+                        let best_data = self.data_llr[c][m]
+                            .iter()
+                            .copied()
+                            .fold(f64::NEG_INFINITY, f64::max);
+                        self.llr[c][m] + best_data
+                    })
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Adds one window's evidence: the window holds `before` of the ended slot's Hann area
-    /// and `after` of the next slot's, and `power(k)` is tone `k`'s normalised power in it.
+    /// and `after` of the next slot's, `tails` are the stopped tone's shares under each
+    /// "stopped" hypothesis ([`tail_shares`]), and `power(k)` is tone `k`'s
+    /// normalised power in it.
     fn add_window(
         &mut self,
         c: &Continuation,
         before: f64,
         after: f64,
+        tails: &[f64; TAILS],
         power: impl Fn(usize) -> f64,
     ) {
         let t = c.tracking;
+        // A tail still within a factor of two of a continuation's level says nothing
+        // either way in this window: at high SNR the clipped evidence would otherwise
+        // follow whichever model the (imperfectly measured) level happens to sit nearer.
+        let alike = |tail: f64, share: f64| tail > 0.5 * share * after * after;
         // Clipped: at high SNR a small level mismatch (fades, a phase step, room echo)
         // must not swamp the evidence of other windows.
         let llr = |r: f64, ended: f64, continued: f64| {
@@ -89,18 +161,26 @@ impl Evidence {
             if !t.present[k] || t.level[k] <= 0.0 {
                 continue;
             }
-            // Continuation modelled conservatively: an unknown phase at the slot edge
-            // (powers add) and the second frame up to 2.2 dB quieter (another encoder may
-            // normalise each frame's peak). A louder continuation only strengthens the
-            // evidence.
+            // Continuation at [`CONTINUATION_SHARE`] (conservative: an unknown phase at
+            // the slot edge, and the second frame up to 2.2 dB quieter, as another
+            // encoder may normalise each frame's peak) or at the full level.
             let level = t.level[k] * c.ratio;
-            let ended = level * before * before;
-            let continued = level * (before * before + CONTINUATION_SHARE * after * after);
-            self.llr += llr(power(k), ended, continued);
+            let r = power(k);
+            for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                let continued = level * (before * before + share * after * after);
+                for (acc, tail) in self.llr[ci].iter_mut().zip(tails) {
+                    if alike(*tail, *share) {
+                        continue;
+                    }
+                    let ended = level * (before * before + tail);
+                    *acc += llr(r, ended, continued);
+                }
+            }
         }
         // A second frame also sounds one data basic, which one unknown: its evidence
         // enters as the best of the 21, doubling what the sender alone gives.
-        for (d, acc) in self.data_llr.iter_mut().enumerate() {
+        let leftovers = leftover_shares(after);
+        for d in 0..DATA_VALUES as usize {
             let same = d as u8 == c.current_data;
             for k in basic_tones(SENDER_COUNT + d) {
                 let level = if same && t.present[k] {
@@ -111,9 +191,25 @@ impl Evidence {
                 if level <= 0.0 {
                     continue;
                 }
-                let ended = if same { level * before * before } else { 0.0 };
-                let continued = ended + CONTINUATION_SHARE * level * after * after;
-                *acc += llr(power(k), ended, continued);
+                let r = power(k);
+                for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                    for (m, (tail, leftover)) in tails.iter().zip(&leftovers).enumerate() {
+                        if same && alike(*tail, *share) {
+                            continue;
+                        }
+                        let ended = if same {
+                            level * (before * before + tail)
+                        } else {
+                            level * leftover
+                        };
+                        let continued = if same {
+                            level * (before * before + share * after * after)
+                        } else {
+                            share * level * after * after
+                        };
+                        self.data_llr[ci][m][d] += llr(r, ended, continued);
+                    }
+                }
             }
         }
     }
@@ -349,8 +445,13 @@ impl Decoder {
             let before = hann_share_inside(s, len as f64, slot_start, slot_end);
             let after = hann_share_inside(s, len as f64, slot_end, slot_end + slot_len);
             let powers = tone_powers(&y, &coefs);
+            let tails = tail_shares(
+                after,
+                (s + 0.5 * len as f64 - slot_end) / rate,
+                self.config.tone_duration_s,
+            );
             st.evidence
-                .add_window(&c, before, after, |k| powers[k] / normaliser(k));
+                .add_window(&c, before, after, &tails, |k| powers[k] / normaliser(k));
             st.next += 1;
             let evidence = effective(st);
             let at = end as f64;
@@ -403,7 +504,12 @@ impl Decoder {
             let after = hann_share_inside(start, window_len, slot_end, slot_end + slot_len);
             // Same normalisation as the slot, so levels compare directly even where the
             // per-window noise estimate jumps.
-            test.windows.add_window(c, before, after, |k| {
+            let tails = tail_shares(
+                after,
+                (start + 0.5 * window_len - slot_end) / self.rate(),
+                self.config.tone_duration_s,
+            );
+            test.windows.add_window(c, before, after, &tails, |k| {
                 f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise
             });
             let evidence = test.windows.total();

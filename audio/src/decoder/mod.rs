@@ -127,7 +127,8 @@ mod tests;
 use std::collections::VecDeque;
 
 use crate::analysis::{Analyzer, Geometry};
-use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+use crate::team::{TeamMessage, TeamPlan};
+use crate::tones::{Message, Sender, TONE_COUNT};
 
 use end_test::ShortWindow;
 use noise_floor::NoiseFloor;
@@ -147,6 +148,9 @@ pub struct DecoderConfig {
     pub tone_duration_s: f64,
     /// Largest relative frequency error tolerated between sender and receiver clocks.
     pub max_frequency_error: f64,
+    /// The team plan the senders use: messages it cannot have sent are dropped (see
+    /// [`TeamPlan`]; [`Detection::team_message`] reads a detection under it).
+    pub team: TeamPlan,
 }
 
 impl Default for DecoderConfig {
@@ -155,6 +159,7 @@ impl Default for DecoderConfig {
             sample_rate_hz: 16_000,
             tone_duration_s: 1.0,
             max_frequency_error: 0.006,
+            team: TeamPlan::Three,
         }
     }
 }
@@ -193,6 +198,14 @@ pub struct Detection {
     pub tone_snr_db: f64,
 }
 
+impl Detection {
+    /// The message as the team plan `plan` reads it (robot, short or long, value), `None`
+    /// if that plan cannot have sent it.
+    pub fn team_message(&self, plan: TeamPlan) -> Option<TeamMessage> {
+        plan.decode(&self.message)
+    }
+}
+
 /// The streaming decoder. Push samples in any block size with [`Decoder::push_f32`] or
 /// [`Decoder::push_i16`]; after each push, drain [`Decoder::poll_message`] until `None`.
 /// At the end of a stream call [`Decoder::finish`] and drain again.
@@ -216,8 +229,11 @@ pub struct Decoder {
     floor: u64,
     run: Option<Run>,
     tracking: Option<Tracking>,
-    /// A frame that kept sounding too long: ignored until it stops.
-    blocked: Option<(Frame, usize, f64, u32)>,
+    /// A frame that kept sounding too long, or whose transmission was just decided (its
+    /// reverberant tail): ignored until it falls quiet.
+    blocked: Option<search::Blocked>,
+    /// The frame of the last decided transmission, while its tail may still sound.
+    recent: Option<search::Recent>,
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,
@@ -276,6 +292,7 @@ impl Decoder {
             run: None,
             tracking: None,
             blocked: None,
+            recent: None,
             failed_slot: None,
             output: VecDeque::new(),
             eof: false,

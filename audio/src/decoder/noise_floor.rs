@@ -6,6 +6,8 @@ use crate::tones::{basic_tones, Frame, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
 
 /// Powers above this multiple of the floor do not update the shape (a signal, not noise).
 const SHAPE_GATE: f64 = 4.0;
+/// Share of the tones (the quietest) whose mean sets the level (see [`NoiseFloor::update`]).
+const KEEP: f64 = 0.85;
 /// Slowest shape adaptation rate per window (time constant 256 windows, 16–33 s).
 const SHAPE_RATE: f64 = 1.0 / 256.0;
 /// The quietest noise assumed: quantisation noise of a 20-bit recording. Without it a
@@ -59,11 +61,22 @@ impl NoiseFloor {
         }
         let ratios = &mut ratios[..m.max(1)];
         let m = ratios.len();
-        let mid = m / 2;
-        let (_, median, _) = ratios.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-        // E[X_(mid+1) of m] for Exp(1) = Σ_{j=0}^{mid} 1/(m − j).
-        let expected: f64 = (0..=mid).map(|j| 1.0 / (m - j) as f64).sum();
-        let measured = *median / expected;
+        // The mean of the lowest KEEP share of the tones, over that statistic's
+        // expectation under noise alone (E[X_(i) of m] for Exp(1) = Σ_{j<i} 1/(m − j)).
+        // Under Gaussian noise it reads the level like the median does; under babble,
+        // whose voiced harmonics make a few tones of each window far louder than the
+        // rest, the median sits far below the mean, and every harmonic would pass for a
+        // tone; the trimmed mean takes in most of the spread and still drops the peaks.
+        let keep = ((KEEP * m as f64).round() as usize).clamp(1, m);
+        ratios.sort_unstable_by(|a, b| a.total_cmp(b));
+        let sum: f64 = ratios[..keep].iter().sum();
+        let mut order = 0.0;
+        let mut expected = 0.0;
+        for i in 0..keep {
+            order += 1.0 / (m - i) as f64;
+            expected += order;
+        }
+        let measured = sum / expected;
         let instant = measured.max(self.minimum);
         self.level = if self.level <= 0.0 {
             instant

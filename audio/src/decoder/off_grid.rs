@@ -20,6 +20,9 @@ const PEAK_LOUD: f64 = 100.0;
 /// frame's loud tones agree with one scale to a small fraction of this; another codec's
 /// tones passing near ours are off by their own hertz or more.
 const PEAK_TOLERANCE_HZ: f64 = 0.5;
+/// Share of the slot skipped before the frequency checks (see
+/// [`Decoder::has_off_grid_tone`]).
+const STEADY_FROM: f64 = 0.25;
 
 impl Decoder {
     /// Whether a present tone of `frame` sits off the frame's common frequency scale: its
@@ -43,6 +46,10 @@ impl Decoder {
         let mut sums = vec![[0.0f64; 6]; scales];
         let mut margins = [[0.0f64; 2]; 6];
         let mut count = 0usize;
+        // On the steady part of the slot: in a hall its first windows also hold the
+        // reverberant tail of whatever sounded before, possibly the same tones from a
+        // sender whose clock is off by another amount.
+        let a = a + STEADY_FROM * (b - a);
         for w in &self.history {
             if hann_share_inside(w.start as f64, window_len, a, b) >= 0.9 {
                 for (j, row) in sums.iter_mut().enumerate() {

@@ -14,6 +14,15 @@ const NEIGHBOUR_LEAKAGE: f64 = 0.01;
 /// than that; a real tone that weak would be lost anyway (and the 2-of-3 vote covers one).
 const DYNAMIC_RANGE: f64 = 0.003_162;
 
+/// More tones present than this (a frame's six and a few of noise) is a crowd (see
+/// [`Decoder::apply_rules`]).
+const CROWD: usize = 10;
+/// In a crowd, a tone counts as present only within this share of the fourth loudest
+/// tone's excess (−10 dB).
+const CROWD_RANGE: f64 = 0.1;
+/// A rival basic counts only with its vote at least this share of the top basic's (−6 dB).
+const RIVAL_RANGE: f64 = 0.25;
+
 impl Decoder {
     /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
     /// at `p_tone`; when several sender (or data) basics have 2 of 3 tones present, the
@@ -41,6 +50,21 @@ impl Decoder {
                 && excess >= NEIGHBOUR_LEAKAGE * left.max(right)
                 && excess >= DYNAMIC_RANGE * loudest;
         }
+        // A crowd of present tones is not noise of the kind the thresholds assume: babble's
+        // voiced harmonics and formants, or a hall's reverberant smear, lift many tones
+        // above the Gamma quantile at once. Then only tones within CROWD_RANGE of the
+        // frame's loudest four (the least a 2-of-3 vote on two basics rests on) count:
+        // the message's own tones stand far above such a background.
+        if present.iter().filter(|&&p| p).count() > CROWD {
+            let mut excess: Vec<f64> = (0..TONE_COUNT).map(|k| sums[k] - n).collect();
+            excess.sort_unstable_by(|a, b| b.total_cmp(a));
+            let reference = excess[3].max(0.0);
+            for k in 0..TONE_COUNT {
+                if sums[k] - n < CROWD_RANGE * reference {
+                    present[k] = false;
+                }
+            }
+        }
         let mut senders = Vec::new();
         let mut data = Vec::new();
         for b in 0..BASIC_COUNT {
@@ -60,6 +84,12 @@ impl Decoder {
                 .filter(|&&k| present[k] && sums[k] >= rival_threshold)
                 .count()
         };
+        // The excess of the weaker of a basic's two loudest tones: what its vote rests on.
+        let vote = |b: usize| {
+            let mut e = basic_tones(b).map(|k| sums[k] - n);
+            e.sort_unstable_by(|x, y| y.total_cmp(x));
+            e[1]
+        };
         for group in [&mut senders, &mut data] {
             if group.len() > 1 {
                 let top = group
@@ -67,7 +97,14 @@ impl Decoder {
                     .copied()
                     .max_by(|&a, &b| basic_sum(a).total_cmp(&basic_sum(b)))
                     .unwrap_or(0);
-                group.retain(|&b| b == top || strong_votes(b) >= 2);
+                // A rival also needs its 2-of-3 vote within RIVAL_RANGE of the top
+                // basic's: under babble, harmonics give some basic two strong tones now
+                // and then, far below a real second transmitter (which sounds at full
+                // level, or is lost under the first anyway).
+                let top_vote = vote(top);
+                group.retain(|&b| {
+                    b == top || (strong_votes(b) >= 2 && vote(b) >= RIVAL_RANGE * top_vote)
+                });
             }
         }
         let frame = match (senders.as_slice(), data.as_slice()) {

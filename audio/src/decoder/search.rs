@@ -16,6 +16,28 @@ pub(super) const P_TONE: f64 = 1e-2;
 /// Per-window false-alarm probability of the frame-energy detector (before the rules).
 pub(super) const P_FRAME: f64 = 1e-6;
 
+/// A newest window below this share of the summed windows' mean excess is a decaying
+/// tail, not a sounding frame (see [`Decoder::decaying`]).
+const DECAYING_SHARE: f64 = 0.8;
+/// Least windows per tone for the decay check (about half a second of tone).
+const DECAYING_MIN_WINDOWS: usize = 6;
+/// Noise allowance of the decay check, standard deviations of six tones' excess.
+const DECAYING_NOISE_Z: f64 = 2.0;
+
+/// A frame just decided found again at less than this share of its level (−10 dB) is its
+/// tail (see [`Decoder::decaying`]).
+const RECENT_TAIL_SHARE: f64 = 0.1;
+
+/// The frame of the last decided transmission, for [`Decoder::decaying`].
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Recent {
+    pub(super) frame: Frame,
+    /// Its six tones' per-window excess when it was decided.
+    pub(super) level: f64,
+    /// Window start (sample) from which it is forgotten (a tail is gone by then).
+    pub(super) until: u64,
+}
+
 /// The same valid frame found in consecutive windows.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Run {
@@ -63,7 +85,7 @@ impl Decoder {
             self.run = None;
             return;
         };
-        if matches!(self.blocked, Some((b, ..)) if b == frame) {
+        if matches!(self.blocked, Some(b) if b.frame == frame) {
             self.run = None;
             return;
         }
@@ -75,26 +97,80 @@ impl Decoder {
             _ => Run { frame, count: 1 },
         };
         self.run = Some(run);
-        if run.count >= 2 {
+        if run.count >= 2 && !self.decaying(frame, j, count) {
             self.start_tracking(frame, j);
         }
     }
 
-    /// Unblocks a frame that sounded too long once its tones have fallen quiet in two
-    /// windows in a row.
+    /// Whether `frame`'s energy at `scale` is dying away rather than sounding: the newest
+    /// window holds less than [`DECAYING_SHARE`] of the mean per-window excess of the
+    /// `count` windows summed (beyond the noise's spread). A message's onset is rising or
+    /// steady there; a reverberant tail (of a message already decided, or of one whose
+    /// start was missed) decays. The search just waits: a real frame passes a window later.
+    fn decaying(&self, frame: Frame, scale: usize, count: usize) -> bool {
+        let Some(newest) = self.history.back() else {
+            return false;
+        };
+        let tones = frame.tones();
+        let n = count.max(1) as f64;
+        let mean = (tones
+            .iter()
+            .map(|&k| self.sliding[scale * TONE_COUNT + k])
+            .sum::<f64>()
+            - 6.0 * n)
+            / n;
+        let latest = Self::excess(newest, scale, &tones);
+        // The frame just decided, far below the level it was decided at: its tail (the
+        // same robot sending it again sounds at about the same level).
+        let tail_of_recent = self.recent.is_some_and(|r| {
+            r.frame == frame && newest.start < r.until && latest < RECENT_TAIL_SHARE * r.level
+        });
+        // Tones only a few windows long end within the search's two-window run, so
+        // their newest window is past their peak as a matter of course: no decay test.
+        let long_tone = self.geometry.slot_windows >= DECAYING_MIN_WINDOWS;
+        tail_of_recent
+            || (long_tone && latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt())
+    }
+
+    /// Unblocks a blocked frame once its tones have fallen below its quiet level in two
+    /// windows in a row, or at its deadline.
     pub(super) fn update_blocked(&mut self) {
-        let Some((frame, scale, level, quiet)) = self.blocked else {
+        let Some(b) = self.blocked else {
             return;
         };
         let Some(rec) = self.history.back() else {
             return;
         };
-        let x = Self::excess(rec, scale, &frame.tones());
-        let quiet = if x < 0.25 * level { quiet + 1 } else { 0 };
-        self.blocked = if quiet >= 2 {
+        let x = Self::excess(rec, b.scale, &b.frame.tones());
+        let quiet = if x < b.quiet_below { b.quiet + 1 } else { 0 };
+        let expired = b.until.filter(|&u| rec.start >= u);
+        self.blocked = if quiet >= 2 || expired.is_some() {
+            // The windows summed so far hold the frame's loud tail: integrate afresh from
+            // here (from the deadline, where the same frame may start again) unless
+            // another frame is already being found.
+            if b.fresh_start && self.run.is_none() && self.tracking.is_none() {
+                let start = expired.unwrap_or(rec.start);
+                self.reset_sliding(start);
+            }
             None
         } else {
-            Some((frame, scale, level, quiet))
+            Some(Blocked { quiet, ..b })
         };
     }
+}
+
+/// A frame the search skips (see [`Decoder::update_blocked`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blocked {
+    pub(super) frame: Frame,
+    pub(super) scale: usize,
+    /// Six-tone excess per window below which a window counts as quiet.
+    pub(super) quiet_below: f64,
+    /// Quiet windows in a row so far.
+    pub(super) quiet: u32,
+    /// Window start (sample) from which the block lifts regardless.
+    pub(super) until: Option<u64>,
+    /// Integration restarts when the block lifts (the windows summed hold the frame's
+    /// tail).
+    pub(super) fresh_start: bool,
 }

@@ -4,7 +4,7 @@
 use super::end_test::tone_powers;
 use super::*;
 use crate::encoder::{Encoder, EncoderConfig};
-use crate::tones::tone_frequency_hz;
+use crate::tones::{tone_frequency_hz, Frame};
 
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();

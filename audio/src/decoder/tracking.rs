@@ -2,8 +2,19 @@
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
 use super::end_test::EndTest;
+use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
+
+/// Share of a decided frame's level its tail must fall below before the search looks for
+/// that frame again (−25 dB).
+const TAIL_QUIET: f64 = 0.003;
+/// Six-tone excess per window that counts as noise (2.5 σ of six Exp(1) powers).
+const TAIL_NOISE_EXCESS: f64 = 6.1;
+
+/// How long after a decided transmission's end its frame found again at a fraction of
+/// its level counts as its tail, slots (a tail of T60 2.5 s is −72 dB by then).
+const RECENT_SLOTS: f64 = 3.0;
 
 /// The transmission being followed.
 #[derive(Clone, Debug)]
@@ -95,7 +106,30 @@ impl Decoder {
         }
         let Some(slot) = self.confirm_slot(t, a, b) else {
             self.failed_slot = Some((t.sender, b));
-            self.end_transmission(b, false);
+            if first {
+                // A first slot that fails was someone else's sound (babble, a tail, a
+                // burst) or a frame found at the wrong onset: the search resumes just
+                // after its onset rather than after the slot, so a message that began
+                // during it is still found with its own onset; the failed frame itself
+                // is skipped until the slot's end.
+                let frame = Frame {
+                    sender: t.sender,
+                    data: t.data[0],
+                };
+                self.tracking = None;
+                self.blocked = Some(Blocked {
+                    frame,
+                    scale: t.scale,
+                    quiet_below: 0.0,
+                    quiet: 0,
+                    until: Some(b.max(0.0) as u64),
+                    fresh_start: false,
+                });
+                let resume = a + self.geometry.window_len as f64;
+                self.reset_sliding(resume.max(0.0).floor() as u64);
+            } else {
+                self.end_transmission(b, false);
+            }
             return Step::Wait;
         };
         let mut next = t.clone();
@@ -180,6 +214,11 @@ impl Decoder {
                 .map(|k| t.level[k])
                 .collect(),
         );
+        if self.config.team.decode(&message).is_none() {
+            // Not a message of the team's plan (e.g. data 20, or a long message across
+            // two banks of the six-robot plan): someone else's, or a wrong decision.
+            return;
+        }
         self.output.push_back(Detection {
             message,
             start_s: t.onset / rate,
@@ -193,14 +232,44 @@ impl Decoder {
     /// Closes the tracked transmission at `end`; `too_long` blocks its frame until it stops.
     fn end_transmission(&mut self, end: f64, too_long: bool) {
         if let Some(t) = self.tracking.take() {
-            if too_long {
+            // Also after a decided transmission: in a hall its frame goes on as a
+            // reverberant tail, which the search would find again (and fail on), so the
+            // frame is not searched for until it has fallen quiet.
+            if too_long || t.level.iter().any(|&l| l > 0.0) {
                 let frame = Frame {
                     sender: t.sender,
                     data: t.data[1],
                 };
                 let tones = frame.tones();
                 let level: f64 = tones.iter().map(|&k| t.level[k]).sum();
-                self.blocked = Some((frame, t.scale, level, 0));
+                self.blocked = Some(if too_long {
+                    Blocked {
+                        frame,
+                        scale: t.scale,
+                        quiet_below: 0.25 * level,
+                        quiet: 0,
+                        until: None,
+                        fresh_start: true,
+                    }
+                } else {
+                    self.recent = Some(Recent {
+                        frame,
+                        level,
+                        until: (end + RECENT_SLOTS * self.geometry.slot_samples).max(0.0) as u64,
+                    });
+                    // A tail is quiet 25 dB down or within noise (2.5 σ of six tones'
+                    // excess); the same frame sent again (by the protocol at least half a
+                    // tone later) is searched for from then on at the latest (the decay
+                    // check keeps the search off the tail that may still sound).
+                    Blocked {
+                        frame,
+                        scale: t.scale,
+                        quiet_below: (TAIL_QUIET * level).max(TAIL_NOISE_EXCESS),
+                        quiet: 0,
+                        until: Some((end + 0.5 * self.geometry.slot_samples).max(0.0) as u64),
+                        fresh_start: true,
+                    }
+                });
             }
         }
         self.reset_sliding(end.max(0.0).floor() as u64);

@@ -4,6 +4,10 @@
 //! flat for any length) and scores what comes out. No clock is read here: the caller
 //! times a trial if it wants a speed.
 
+mod room;
+
+pub use room::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
+
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -13,6 +17,7 @@ use crate::channel::{
 };
 use crate::decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection};
 use crate::encoder::{Encoder, EncoderConfig, EncoderConfigError};
+use crate::team::{TeamMessage, TeamPlan};
 use crate::tones::{Message, Sender, DATA_VALUES, LONG_VALUES};
 
 /// Why a trial cannot run.
@@ -84,7 +89,20 @@ pub fn es_n0_db(snr_db: f64, tone_duration_s: f64) -> f64 {
     snr_db + 10.0 * (3500.0 * tone_duration_s).log10()
 }
 
-fn random_message(rng: &mut ChaCha8Rng, long_share: f64) -> Message {
+fn random_message(rng: &mut ChaCha8Rng, long_share: f64, team: TeamPlan) -> Message {
+    if team != TeamPlan::Three {
+        let robot = rng.random_range(0..team.robots());
+        let long = rng.random_bool(long_share.clamp(0.0, 1.0));
+        let max = if long {
+            team.long_values()
+        } else {
+            team.short_values()
+        };
+        let value = rng.random_range(0..max);
+        return team
+            .encode(TeamMessage { robot, long, value })
+            .expect("drawn within the plan");
+    }
     let sender = Sender::ALL[rng.random_range(0..3usize)];
     if rng.random_bool(long_share.clamp(0.0, 1.0)) {
         Message::Long {
@@ -149,6 +167,11 @@ fn finish_and_score(
 
 /// Sends `trial.messages` random messages separated by random gaps through white noise.
 pub fn run_snr_trial(trial: &SnrTrial) -> Result<SnrOutcome, TrialError> {
+    run_snr_trial_team(trial, TeamPlan::Three)
+}
+
+/// [`run_snr_trial`] with messages of the team plan `team`, decoded under it.
+pub fn run_snr_trial_team(trial: &SnrTrial, team: TeamPlan) -> Result<SnrOutcome, TrialError> {
     let mut rng = ChaCha8Rng::seed_from_u64(trial.seed);
     let rate = trial.sample_rate_hz;
     let encoder = Encoder::new(EncoderConfig {
@@ -160,6 +183,7 @@ pub fn run_snr_trial(trial: &SnrTrial) -> Result<SnrOutcome, TrialError> {
     let mut decoder = Decoder::new(DecoderConfig {
         sample_rate_hz: rate,
         tone_duration_s: trial.tone_duration_s,
+        team,
         ..DecoderConfig::default()
     })?;
     let sigma = white_sigma_for_in_band_snr(SIGNAL_POWER, trial.snr_db, rate);
@@ -177,7 +201,7 @@ pub fn run_snr_trial(trial: &SnrTrial) -> Result<SnrOutcome, TrialError> {
         let gap_s = rng.random_range(0.6..1.4) * trial.tone_duration_s.max(0.25);
         segments.push((
             (gap_s * rate_f) as usize,
-            Some(random_message(&mut rng, trial.long_share)),
+            Some(random_message(&mut rng, trial.long_share, team)),
         ));
     }
     segments.push((
@@ -345,7 +369,7 @@ pub fn run_whistle_over_messages(messages: usize, seed: u64) -> SnrOutcome {
         let gap = rng.random_range(16_000..24_000usize);
         let mut block = vec![0.0f32; gap];
         if i < messages {
-            let m = random_message(&mut rng, 0.0);
+            let m = random_message(&mut rng, 0.0, TeamPlan::Three);
             let x = encoder.encode_f32(&m);
             let gain = (SIGNAL_POWER / power(&x)).sqrt() as f32;
             let start = t + gap as u64;

@@ -4,6 +4,10 @@
 //! All sources *add* into a buffer ([`Source::add_to`]) so they can be mixed. Levels are
 //! RMS amplitudes (full scale 1.0).
 
+mod room;
+
+pub use room::{band_limit, in_band_power, Convolver, RoomSpec};
+
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
