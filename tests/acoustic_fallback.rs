@@ -32,19 +32,21 @@ fn dry_room() -> AcousticConfig {
     }
 }
 
-/// Sound `messages` (robot index, message) at 0.5 s and listen until 2 s.
+/// Sound `messages` (robot index, message) at 1.5 s and listen until 3 s. The decoders
+/// hear the room's background for 1.5 s first: the decoder's noise floor (a trimmed mean
+/// that follows speech) needs more than half a second of it before it trusts a tone.
 fn sound_once(
     room: &AcousticConfig,
     positions: &[(f64, f64)],
     messages: &[(usize, audio::Message)],
 ) -> (Vec<Heard>, AcousticChannel) {
     let mut ch = AcousticChannel::new(room, positions.len(), 7).expect("a valid room");
-    let mut heard = ch.advance_to(0.5);
+    let mut heard = ch.advance_to(1.5);
     for (from, m) in messages {
         ch.sound(*from, m, positions);
     }
-    let mut t = 0.5;
-    while t < 2.0 {
+    let mut t = 1.5;
+    while t < 3.0 {
         t += 0.01;
         heard.extend(ch.advance_to(t));
     }
@@ -76,8 +78,8 @@ fn a_teammate_5_m_away_decodes_the_claim_one_flight_time_late() {
     assert!(back.going && (back.h - 2.3).abs() <= 0.15, "claim {back:?}");
     let flight = 5.0 / SPEED_OF_SOUND_MPS;
     assert!(
-        (near.start_s - (0.5 + flight)).abs() < 0.02,
-        "heard from {:.4} s, sounded at 0.5 s + {flight:.4} s flight",
+        (near.start_s - (1.5 + flight)).abs() < 0.02,
+        "heard from {:.4} s, sounded at 1.5 s + {flight:.4} s flight",
         near.start_s
     );
     let far = at(2);
