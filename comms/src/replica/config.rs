@@ -41,6 +41,15 @@ pub struct ReplicaConfig {
     /// A departed robot's values stay readable (the relay marks them `departed`) this
     /// long after its departure, then they are released (default 60 s).
     pub release_departed_after: Duration,
+    /// Estimate each teammate's clock from the stamps and echoes in its frames and add
+    /// each frame's own transit to the ages of its values (default on). Off: every frame
+    /// is taken to have travelled `default_transit` (ages leave the transit out, as
+    /// before version 3 of the wire format, when that is zero).
+    pub clock_sync: bool,
+    /// The transit assumed for a frame from a teammate whose clock is not estimated yet
+    /// (its first round trip), or with `clock_sync` off (default 0: until the first echo,
+    /// ages leave the transit out).
+    pub default_transit: Duration,
 }
 
 impl ReplicaConfig {
@@ -58,6 +67,8 @@ impl ReplicaConfig {
             max_remote_bindings: 65536,
             max_local_bindings: 65536,
             release_departed_after: Duration::from_secs(60),
+            clock_sync: true,
+            default_transit: Duration::ZERO,
         }
     }
 
@@ -95,6 +106,9 @@ impl ReplicaConfig {
         if self.refresh_period.is_zero() || self.departed_after.is_zero() {
             return Err(ConfigInvalid::Period);
         }
+        if self.default_transit > super::clock::MAX_TRANSIT {
+            return Err(ConfigInvalid::DefaultTransit(self.default_transit));
+        }
         let t = &self.talk;
         if t.retain == 0 || t.window == 0 || t.max_queues == 0 {
             return Err(ConfigInvalid::TalkLimits);
@@ -115,6 +129,9 @@ pub enum ConfigInvalid {
     /// A zero refresh period or departure limit.
     #[error("refresh period and departure limit must be positive")]
     Period,
+    /// A default transit beyond the largest believed (1 s).
+    #[error("default transit {0:?} is over a second")]
+    DefaultTransit(Duration),
     /// Talk limits of zero.
     #[error("talk retain, window and max_queues must be at least 1")]
     TalkLimits,
