@@ -254,4 +254,6 @@ impl Replica {
 #[cfg(test)]
 mod bounds_tests;
 #[cfg(test)]
+mod clock_tests;
+#[cfg(test)]
 mod tests;
