@@ -97,7 +97,7 @@ fn run(seed: u64, dtim_hold: bool, clock_sync: bool) -> Placement {
     let mut next_set: Vec<Time> = (0..ROBOTS)
         .map(|_| Time::from_micros(rng.random_range(0..100_000)))
         .collect();
-    let mut counter = vec![0i64; ROBOTS];
+    let mut counter = [0i64; ROBOTS];
     // The last stamp each receiver reported for each sender's value.
     let mut seen: BTreeMap<(usize, usize), (i64, comms::Instant)> = BTreeMap::new();
     let mut errors_ms = Vec::new();
