@@ -50,6 +50,7 @@ impl Attacker {
             sender,
             incarnation,
             seq: self.seq,
+            clock: Default::default(),
             items,
         };
         let bytes = encode_frame(&frame, None);

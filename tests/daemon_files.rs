@@ -202,6 +202,7 @@ fn the_daemon_says_what_it_loaded_and_warns_once_about_key_mismatches() {
         sender: 9,
         incarnation: 1,
         seq,
+        clock: Default::default(),
         items: vec![Item::Update {
             path: "x".into(),
             value: Value::Int(1),

@@ -120,6 +120,7 @@ fn three_daemons_share_values_talk_restarts_and_drop_bad_frames() {
         sender: 9,
         incarnation: 1,
         seq: 1,
+        clock: Default::default(),
         items: vec![Item::Update {
             path: "ball.dist".into(),
             value: Value::Float(99.0),

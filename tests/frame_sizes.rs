@@ -4,14 +4,16 @@
 //! the exact sizes so a change to either format shows up here, and say where the keyed
 //! frame does not fit (packing it into 128 bytes is a later issue).
 //!
-//! A frame is the 14-byte header, the seq and item-count varints and, when keyed, a
+//! A frame is the 18-byte header (with the 4-byte send stamp of wire format 3), the
+//! 5-byte echo of one teammate's frame when the sender has heard one (nearly every frame
+//! of a team; not a lone robot's), the seq and item-count varints and, when keyed, a
 //! 16-byte tag; the update adds 1 byte of item index, the path, the value (tag, length,
 //! bytes) and the version and age varints. A varint is 1 byte below 251, 3 below 2^16,
 //! 5 below 2^32, else 9, so the same model costs more as a match's counters grow.
 
 use std::time::Duration;
 
-use comms::wire::{decode_frame, FrameWriter, ItemRef, TeamKey};
+use comms::wire::{decode_frame, Echo, FrameClock, FrameWriter, ItemRef, TeamKey, ECHO_LEN};
 use comms::{Instant, Key, Replica, ReplicaConfig, Value};
 use fusion::nalgebra::{Matrix2, Vector2, Vector3};
 use fusion::{BallSighting, LocalConfig, LocalModel, Odometry, PoseEstimate, LWM_WIRE_LEN};
@@ -69,12 +71,13 @@ fn replica_frame(keyed: bool, ticks: u64) -> Vec<u8> {
 fn the_first_world_model_frame_of_a_match() {
     let (plain, keyed) = (replica_frame(false, 1).len(), replica_frame(true, 1).len());
     assert_eq!(
-        plain, 108,
-        "the first world-model frame (seq 2, version 1, age 0) is 108 bytes without a key"
+        plain, 112,
+        "the first world-model frame of a lone robot (seq 2, version 1, age 0, no echo) is \
+         112 bytes without a key"
     );
     assert_eq!(
-        keyed, 124,
-        "and 124 bytes with the 16-byte tag: within SPL's {SPL_MESSAGE_LIMIT}"
+        keyed, 128,
+        "and 128 bytes with the 16-byte tag: exactly SPL's {SPL_MESSAGE_LIMIT}"
     );
 }
 
@@ -86,12 +89,12 @@ fn a_world_model_frame_ten_minutes_into_a_match() {
         replica_frame(true, ticks).len(),
     );
     assert_eq!(
-        plain, 112,
-        "after 10 min at 30 Hz (seq and version 3-byte varints) the frame is 112 bytes without a key"
+        plain, 116,
+        "after 10 min at 30 Hz (seq and version 3-byte varints) the frame is 116 bytes without a key"
     );
     assert_eq!(
-        keyed, 128,
-        "and 128 bytes with the tag: exactly SPL's {SPL_MESSAGE_LIMIT}, no byte to spare"
+        keyed, 132,
+        "and 132 bytes with the tag: over SPL's {SPL_MESSAGE_LIMIT} by the send stamp's 4 bytes"
     );
 }
 
@@ -104,6 +107,15 @@ fn a_keyed_world_model_frame_with_wider_counters_does_not_fit_the_spl_limit() {
     let key = TeamKey::new(&TEAM_KEY);
     let frame = |key: Option<&TeamKey>| {
         let mut w = FrameWriter::new(7, 3, u64::MAX, 1 << 31, 1200, key);
+        // In a team, the frame echoes a teammate's (see the wire docs).
+        w.set_clock(FrameClock {
+            stamp_us: 0x8000_0000,
+            echo: Some(Echo {
+                target: 1,
+                seq16: 0xffff,
+                hold_10us: 3_300,
+            }),
+        });
         assert!(w.push(ItemRef::Update {
             path: path.path(),
             value: &model,
@@ -114,12 +126,52 @@ fn a_keyed_world_model_frame_with_wider_counters_does_not_fit_the_spl_limit() {
     };
     let (plain, keyed) = (frame(None), frame(Some(&key)));
     assert_eq!(
-        plain, 116,
-        "a world-model frame with these counters is 116 bytes without a key"
+        plain,
+        116 + 4 + ECHO_LEN,
+        "a world-model frame with these counters is 125 bytes without a key: 116 in \
+         format 2, plus the 4-byte send stamp and the 5-byte echo"
     );
     assert_eq!(
-        keyed, 132,
-        "and 132 bytes with the 16-byte tag: over SPL's {SPL_MESSAGE_LIMIT}-byte message \
+        keyed, 141,
+        "and 141 bytes with the 16-byte tag: over SPL's {SPL_MESSAGE_LIMIT}-byte message \
          limit (packing the keyed world model into 128 bytes is a later issue)"
+    );
+}
+
+#[test]
+fn in_a_team_the_world_model_frame_carries_an_echo() {
+    // Robot 3 has heard robot 1, so its next frame echoes robot 1's: 5 bytes more than a
+    // lone robot's first frame.
+    let mut r3 = Replica::new(
+        ReplicaConfig::new(3, 7).with_team_key(TEAM_KEY),
+        0x5eed_5eed_5eed_5eed,
+        Instant::ZERO,
+    )
+    .expect("valid");
+    r3.handle_timeout(Instant::ZERO);
+    while r3.poll_transmit().is_some() {}
+    let cfg = ReplicaConfig::new(1, 7).with_team_key(TEAM_KEY);
+    let mut r1 = Replica::new(cfg, 1, Instant::ZERO).expect("valid");
+    r1.handle_timeout(Instant::ZERO);
+    let now = Instant::from_micros(20_000);
+    let from = std::net::SocketAddr::from(([127, 0, 0, 1], 2000));
+    while let Some(t) = r1.poll_transmit() {
+        r3.handle_datagram(now, from, &t.payload);
+    }
+    let now = Instant::from_micros(33_333);
+    r3.set(now, WORLD_LOCAL_KEY, world_model())
+        .expect("own key");
+    let bytes = r3
+        .poll_transmit()
+        .expect("a changed value goes out")
+        .payload;
+    let frame = decode_frame(&bytes, 7, Some(&TeamKey::new(&TEAM_KEY))).expect("valid");
+    let echo = frame.clock.echo.expect("robot 1 is echoed");
+    assert_eq!((echo.target, echo.hold_us()), (1, 13_330));
+    assert_eq!(
+        bytes.len(),
+        128 + ECHO_LEN,
+        "the first keyed world-model frame with an echo is 133 bytes, over SPL's \
+         {SPL_MESSAGE_LIMIT}"
     );
 }

@@ -30,11 +30,33 @@
 //!
 //! # What goes over the wire
 //!
-//! A frame (see [`wire`]) carries a 14-byte header (magic, version, flags, team, sender,
-//! incarnation), a sequence number and items: updates `(path, value, version, age)`, talk
-//! messages, talk heads and NACKs, and optionally a 16-byte truncated HMAC-SHA256 tag. The
-//! receiver stamps an update at *reception time − reported age* on its own clock, so no
-//! clocks are compared and a re-sent old value never looks fresh. Versions count per
+//! A frame (see [`wire`]) carries an 18-byte header (magic, version, flags, team, sender,
+//! incarnation, send stamp), optionally a 5-byte echo of one teammate's frame, a sequence
+//! number and items: updates `(path, value, version, age)`, talk messages, talk heads and
+//! NACKs, and optionally a 16-byte truncated HMAC-SHA256 tag. The receiver stamps an
+//! update at *reception time − the frame's transit − reported age* on its own clock, so
+//! no robot compares clocks in the API and a re-sent old value never looks fresh.
+//!
+//! **Shared time.** The transit is estimated per frame from the traffic itself, NTP-style
+//! with no extra message and no server: every frame carries the sender's clock at send (a
+//! u32 of microseconds, wrapping every 71.6 minutes) and echoes one teammate (rotating to
+//! the one whose echo is oldest): which of its frames was heard last and how long it was
+//! held. Each robot so measures round trips to every teammate and keeps, per teammate, an
+//! estimate of that teammate's clock offset and drift against its own (shortest round
+//! trip per second over the last minute, a weighted line fit); a frame's transit is then
+//! its reception minus its send stamp brought to this robot's clock. So ages read through
+//! [`Blackboard`], `get`, the relay's `GETV`/`VAL`/`UPD` and the C API include the time on
+//! the air, queues and an access point's beacon hold, frame by frame. Until a teammate's
+//! first echo comes back (one round trip) its frames are taken to have travelled
+//! `ReplicaConfig::default_transit` (default 0: the age then leaves the transit out, as
+//! before); `ReplicaConfig::clock_sync = false` keeps that for good. The estimate is
+//! internal; [`PeerInfo`] shows it for diagnostics (offset, drift, round trip, samples).
+//! What it cannot remove is a path's asymmetry: half the difference between the two
+//! directions' delays in the shortest round trips (a few ms on a WLAN; more when an
+//! access point holds multicast to DTIM beacons, see `tests/shared_time.rs`). Echoes
+//! naming a frame not sent recently, with a round trip outside 0..1 s, or far from the
+//! estimate are refused and counted; a send stamp implying a transit outside −50 ms..1 s
+//! falls back to the default. Versions count per
 //! (owner, key) within an owner's incarnation: older updates never overwrite newer ones.
 //! Incarnations are ordered (a later start has a larger one, see [`ordered_incarnation`]):
 //! a larger one is a restart, accepted at once; frames of a smaller one are dropped. Every own global value is re-sent each `refresh_period` (default 100 ms),
@@ -42,8 +64,9 @@
 //! (default 300 ms) is reported departed. A robot heard for the first time, again after
 //! departing, or restarted gets an extra full refresh at once (unless one went out in
 //! the last quarter period), so a healed partition or a reboot does not wait for the
-//! schedule. A frame's overhead is the 14-byte header, the seq and item-count varints (1
-//! to 9 bytes each, growing with the counters) and the 16-byte tag when keyed; each update
+//! schedule. A frame's overhead is the 18-byte header, the 5-byte echo (on most frames
+//! of a team), the seq and item-count varints (1 to 9 bytes each, growing with the
+//! counters) and the 16-byte tag when keyed; each update
 //! adds its path, value, version and age ([`wire`] has the exact sizes).
 //!
 //! `talk` queues (`*.talk.q`) deliver each message to every teammate exactly once and in
@@ -110,7 +133,11 @@
 //! let cost = robot2.get("1.var.machine.heuristic").unwrap().expect("replicated");
 //! assert_eq!(cost.value, Value::Float(2.5));
 //! assert_eq!(cost.owner, 1);
-//! assert_eq!(cost.age(t1), Duration::ZERO, "stamped at reception minus the sender's age");
+//! assert_eq!(
+//!     cost.age(t1),
+//!     Duration::ZERO,
+//!     "stamped at reception − the sender's age − the default transit (0): no echo yet"
+//! );
 //! assert!(robot2.get("1.var.debug").unwrap().is_none());
 //! // `*` reads the newest copy of any owner.
 //! assert_eq!(robot2.get("*.var.machine.heuristic").unwrap().unwrap().owner, 1);

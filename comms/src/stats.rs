@@ -2,6 +2,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
+use std::time::Duration;
 
 use crate::time::Instant;
 use crate::wire::DecodeError;
@@ -144,6 +145,19 @@ pub struct Stats {
     /// Times two live incarnations of one robot id were heard (reported at most once a
     /// second per pair): a second robot runs with a teammate's id.
     pub id_conflicts: u64,
+    /// Echoes of this robot's frames used for a teammate's clock estimate.
+    pub clock_samples: u64,
+    /// Echoes refused: naming a frame not sent recently, or a round trip below zero or
+    /// over a second.
+    pub clock_echoes_rejected: u64,
+    /// Echoes that disagreed with the estimate by more than their round trip allows.
+    pub clock_outliers: u64,
+    /// Frames whose send stamp gave an impossible transit (far below zero or over a
+    /// second): stamped with the default transit instead.
+    pub clock_stamps_implausible: u64,
+    /// Frames stamped with the default transit because no estimate existed yet (or
+    /// `clock_sync` is off).
+    pub transit_defaulted: u64,
     /// Last time each robot was heard (on this robot's clock).
     pub last_heard: BTreeMap<u8, Instant>,
     drops: [u64; DropReason::ALL.len()],
@@ -181,4 +195,14 @@ pub struct PeerInfo {
     /// An older incarnation of this id is sending beside the current one (two robots
     /// share the id), as of its last frames.
     pub conflicting: bool,
+    /// Its clock minus this robot's now, in microseconds, as estimated from echoes
+    /// (modulo 2^32 µs, read as signed: ±35 minutes); `None` before the first echo.
+    /// Diagnostics only: values are stamped through it, never compared with it.
+    pub clock_offset_us: Option<i64>,
+    /// The fitted drift of its clock against this robot's, ppm.
+    pub clock_drift_ppm: Option<f64>,
+    /// The shortest round trip among the estimate's recent samples.
+    pub round_trip: Option<Duration>,
+    /// Echo samples that went into the estimate (this life of the peer).
+    pub clock_samples: u64,
 }

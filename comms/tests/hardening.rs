@@ -125,6 +125,7 @@ fn one_stray_frame_with_a_forged_incarnation_locks_nobody_out() {
         sender: 1,
         incarnation: u64::MAX,
         seq: 1,
+        clock: Default::default(),
         items: vec![],
     };
     two.handle_datagram(t(5), addr(), &encode_frame(&stray, None));
@@ -218,6 +219,7 @@ fn spoofed_nacks_cannot_make_a_robot_send_more_than_twice_what_it_posted() {
             sender: 9,
             incarnation: 9 << 16,
             seq: i + 1,
+            clock: Default::default(),
             items: vec![Item::Nack {
                 target: 1,
                 queue: "q".into(),
@@ -261,6 +263,7 @@ fn a_forged_talk_head_neither_silences_a_queue_nor_inflates_the_losses() {
         sender: 1,
         incarnation: 10 << 16,
         seq: 1_000,
+        clock: Default::default(),
         items: vec![Item::TalkHead {
             queue: "q".into(),
             first: 1 << 62,

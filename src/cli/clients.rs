@@ -30,8 +30,8 @@ pub struct GetArgs {
     #[arg(long, requires = "wait", value_parser = duration::parse)]
     pub timeout: Option<Duration>,
     /// Refuse a value older than this (`500ms`): an error naming its age, exit 1. Ages are
-    /// on this robot's clock since reception, less the age the sender reported; they do
-    /// not include the network transit.
+    /// on this robot's clock: since reception, plus the frame's estimated network transit
+    /// and the age the sender reported.
     #[arg(long, value_parser = duration::parse)]
     pub max_age: Option<Duration>,
     #[command(flatten)]

@@ -373,10 +373,8 @@ impl Simulation {
         if cfg.compensate_latency && params.latency_compensation.is_zero() {
             params.latency_compensation = cfg.expected_delay();
         }
-        if cfg.compensate_latency && world_model.global.transit_s == 0.0 {
-            // The same figure the team configures for arbitration: the WLAN's mean delay.
-            world_model.global.transit_s = cfg.expected_delay().as_secs_f64();
-        }
+        // No transit for the GWM to subtract: comms' ages include each frame's own
+        // transit, estimated from the traffic (wire format 3), so `transit_s` stays 0.
         let robots = positions
             .iter()
             .zip(&starts)

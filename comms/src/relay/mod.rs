@@ -25,10 +25,12 @@
 //!   [`crate::literal`] (strings double-quoted with escapes; floats parse back to the
 //!   same bits).
 //! - `age_ms` is whole milliseconds since the value was set, on **this** robot's clock:
-//!   for a teammate's value, the time since it arrived plus the age the sender reported
-//!   (the time since it was set on the sender's clock). It does **not** include the
-//!   network transit, which no robot measures: a value 3 ms on the air reads 3 ms
-//!   younger than it is. No two clocks are ever compared.
+//!   for a teammate's value, the time since it arrived plus its frame's transit plus the
+//!   age the sender reported (the time since it was set on the sender's clock). The
+//!   transit is estimated per frame from the send stamps and echoes teammates' frames
+//!   carry (see the crate docs, "Shared time"); until a teammate's first echo returns it
+//!   is the replica's `default_transit` (0 unless configured). No client compares two
+//!   clocks.
 //! - After the age, a line may carry flag words (letters only; clients skip flags they
 //!   do not know, as [`Binding::parse`] does). `departed`: the owner has been silent for
 //!   longer than the departure limit (300 ms by default), so the value is old news

@@ -45,6 +45,15 @@ pub struct ReplicaConfig {
     /// periodic refresh only fills frames that go anyway, and no frame goes beyond it.
     /// `None` (the default): no limit. A league's payload limit is the `mtu`.
     pub budget: Option<super::Budget>,
+    /// Estimate each teammate's clock from the stamps and echoes in its frames and add
+    /// each frame's own transit to the ages of its values (default on). Off: every frame
+    /// is taken to have travelled `default_transit` (ages leave the transit out, as
+    /// before version 3 of the wire format, when that is zero).
+    pub clock_sync: bool,
+    /// The transit assumed for a frame from a teammate whose clock is not estimated yet
+    /// (its first round trip), or with `clock_sync` off (default 0: until the first echo,
+    /// ages leave the transit out).
+    pub default_transit: Duration,
 }
 
 impl ReplicaConfig {
@@ -63,6 +72,8 @@ impl ReplicaConfig {
             max_local_bindings: 65536,
             release_departed_after: Duration::from_secs(60),
             budget: None,
+            clock_sync: true,
+            default_transit: Duration::ZERO,
         }
     }
 
@@ -100,6 +111,9 @@ impl ReplicaConfig {
         if self.refresh_period.is_zero() || self.departed_after.is_zero() {
             return Err(ConfigInvalid::Period);
         }
+        if self.default_transit > super::clock::MAX_TRANSIT {
+            return Err(ConfigInvalid::DefaultTransit(self.default_transit));
+        }
         let t = &self.talk;
         if t.retain == 0 || t.window == 0 || t.max_queues == 0 {
             return Err(ConfigInvalid::TalkLimits);
@@ -120,6 +134,9 @@ pub enum ConfigInvalid {
     /// A zero refresh period or departure limit.
     #[error("refresh period and departure limit must be positive")]
     Period,
+    /// A default transit beyond the largest believed (1 s).
+    #[error("default transit {0:?} is over a second")]
+    DefaultTransit(Duration),
     /// Talk limits of zero.
     #[error("talk retain, window and max_queues must be at least 1")]
     TalkLimits,

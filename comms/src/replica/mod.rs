@@ -6,6 +6,8 @@
 //! - `config.rs`: [`ReplicaConfig`], and [`ConfigInvalid`] for one that cannot work;
 //! - `events.rs`: what comes out: [`Event`]s, and [`Transmit`]s with their [`Destination`];
 //! - `receive.rs`: [`Replica::handle_datagram`]: a received frame checked and applied;
+//! - `clock.rs`: shared time from the traffic: each teammate's clock estimated from the
+//!   send stamps and echoes its frames carry, and from it each frame's transit;
 //! - `peers.rs`: the peer table: joins, restarts (incarnations, the retired ones whose
 //!   late frames are dropped) and the replay window of keyed teams;
 //! - `talk.rs`: posting to own talk queues, delivering teammates' messages in order, NACK
@@ -29,6 +31,7 @@ use crate::value::Value;
 use crate::wire::{self, ItemRef, TeamKey};
 
 mod budget;
+mod clock;
 mod config;
 mod events;
 mod peers;
@@ -69,6 +72,8 @@ pub struct Replica {
     /// When a frame with this robot's id and another incarnation was last reported.
     own_conflict_reported: Option<Instant>,
     peers: BTreeMap<u8, Peer>,
+    /// Own recent frames (seq, send time), for teammates' echoes.
+    sent: clock::SentLog,
     events: VecDeque<Event>,
     stats: Stats,
     deliveries: Vec<Delivery>,
@@ -111,6 +116,7 @@ impl Replica {
             talk_buffered: 0,
             own_conflict_reported: None,
             peers: BTreeMap::new(),
+            sent: clock::SentLog::default(),
             events: VecDeque::new(),
             stats: Stats::default(),
             deliveries: Vec::new(),
@@ -281,5 +287,7 @@ impl Replica {
 
 #[cfg(test)]
 mod bounds_tests;
+#[cfg(test)]
+mod clock_tests;
 #[cfg(test)]
 mod tests;

@@ -34,6 +34,7 @@ use crate::stats::{DropReason, PeerInfo};
 use crate::talk::Inbox;
 use crate::time::Instant;
 
+use super::clock::PeerClock;
 use super::{Event, Replica};
 
 /// The incarnation of a replica started at `start_ms` (milliseconds on a clock that does
@@ -117,6 +118,8 @@ pub(super) struct Peer {
     pub(super) catch_up_until: Option<Instant>,
     /// The last time an older incarnation was heard live beside the current one.
     conflict_at: Option<Instant>,
+    /// Echo bookkeeping and the estimate of its clock (of the current life).
+    pub(super) clock: PeerClock,
 }
 
 impl Peer {
@@ -132,6 +135,7 @@ impl Peer {
             inboxes: BTreeMap::new(),
             catch_up_until,
             conflict_at: None,
+            clock: PeerClock::default(),
         }
     }
 
@@ -152,6 +156,8 @@ impl Peer {
         self.incarnation = incarnation;
         self.highest_seq = seq;
         self.replay = ReplayWindow::default();
+        // A new life restarts its clock's origin (and its frame numbers).
+        self.clock = PeerClock::default();
         self.present = true;
         self.last_heard = now;
         old
@@ -179,6 +185,10 @@ impl Replica {
             conflicting: p
                 .conflict_at
                 .is_some_and(|t| p.last_heard.saturating_duration_since(t) < live_within),
+            clock_offset_us: p.clock.estimate.offset_us(self.now),
+            clock_drift_ppm: p.clock.estimate.drift_ppm(),
+            round_trip: p.clock.estimate.min_round_trip(),
+            clock_samples: p.clock.estimate.samples(),
         })
     }
 

@@ -7,8 +7,9 @@ use std::time::Duration;
 
 use crate::stats::DropReason;
 use crate::time::Instant;
-use crate::wire::{self, Item};
+use crate::wire::{self, FrameClock, Item};
 
+use super::clock::{SampleOutcome, IMPLAUSIBLE_MARGIN, MAX_TRANSIT};
 use super::talk::TalkItem;
 use super::{Event, Replica};
 
@@ -64,6 +65,7 @@ impl Replica {
         if let Err(reason) = self.admit(now, sender, frame.incarnation, frame.seq) {
             return self.drop_frame(from, reason);
         }
+        let transit = self.on_frame_clock(now, sender, frame.seq, &frame.clock);
         for item in frame.items {
             match item {
                 Item::Update {
@@ -72,7 +74,10 @@ impl Replica {
                     version,
                     age_us,
                 } => {
-                    let stamp = now.saturating_sub(Duration::from_micros(age_us));
+                    // Set `age` before the frame left, which was `transit` ago.
+                    let stamp = now
+                        .saturating_sub(transit)
+                        .saturating_sub(Duration::from_micros(age_us));
                     self.apply_update(sender, frame.incarnation, &path, value, version, stamp);
                 }
                 Item::Talk { queue, seq, value } => {
@@ -90,5 +95,52 @@ impl Replica {
                 Item::Nack { .. } => {}
             }
         }
+    }
+}
+
+impl Replica {
+    /// The timing part of an admitted frame: remember it for the next echo to `sender`,
+    /// feed an echo of our own frame to the estimate of `sender`'s clock, and return the
+    /// frame's transit (estimated, or the configured default).
+    fn on_frame_clock(
+        &mut self,
+        now: Instant,
+        sender: u8,
+        seq: u64,
+        clock: &FrameClock,
+    ) -> Duration {
+        let Some(peer) = self.peers.get_mut(&sender) else {
+            return self.cfg.default_transit;
+        };
+        peer.clock.heard = Some((seq, now));
+        if let Some(echo) = clock.echo.filter(|e| e.target == self.cfg.robot_id) {
+            let outcome = match self.sent.sent_at(echo.seq16) {
+                Some(t1) => peer
+                    .clock
+                    .estimate
+                    .add_echo(t1, echo.hold_us(), clock.stamp_us, now),
+                None => SampleOutcome::Rejected,
+            };
+            match outcome {
+                SampleOutcome::Used => self.stats.clock_samples += 1,
+                SampleOutcome::Rejected => self.stats.clock_echoes_rejected += 1,
+                SampleOutcome::Outlier => self.stats.clock_outliers += 1,
+            }
+        }
+        let estimated = if self.cfg.clock_sync {
+            peer.clock.estimate.transit_us(clock.stamp_us, now)
+        } else {
+            None
+        };
+        let Some(transit_us) = estimated else {
+            self.stats.transit_defaulted += 1;
+            return self.cfg.default_transit;
+        };
+        let plausible = -(IMPLAUSIBLE_MARGIN.as_micros() as f64)..=MAX_TRANSIT.as_micros() as f64;
+        if !plausible.contains(&transit_us) {
+            self.stats.clock_stamps_implausible += 1;
+            return self.cfg.default_transit;
+        }
+        Duration::from_micros(transit_us.max(0.0).round() as u64)
     }
 }

@@ -127,6 +127,17 @@ impl Replica {
             ("talk_repair_limited".into(), s.talk_repair_limited as i64),
             ("id_conflicts".into(), s.id_conflicts as i64),
             ("nacks_sent".into(), s.nacks_sent as i64),
+            ("clock_samples".into(), s.clock_samples as i64),
+            (
+                "clock_echoes_rejected".into(),
+                s.clock_echoes_rejected as i64,
+            ),
+            ("clock_outliers".into(), s.clock_outliers as i64),
+            (
+                "clock_stamps_implausible".into(),
+                s.clock_stamps_implausible as i64,
+            ),
+            ("transit_defaulted".into(), s.transit_defaulted as i64),
             ("drops.total".into(), s.drops_total() as i64),
         ];
         values.extend(

@@ -4,9 +4,13 @@
 use crate::blackboard::Entry;
 use crate::key::Scope;
 use crate::time::{duration_to_micros, Instant};
-use crate::wire::{FrameWriter, ItemRef, HEADER_LEN, TAG_LEN};
+use crate::wire::{
+    Echo, FrameClock, FrameWriter, ItemRef, ECHO_HOLD_UNIT_US, ECHO_LEN, HEADER_LEN,
+    MAX_ECHO_HOLD_US, TAG_LEN,
+};
 
 use super::budget::Class;
+use super::clock::stamp_of;
 use super::{Destination, Replica, Transmit};
 
 impl Replica {
@@ -17,8 +21,8 @@ impl Replica {
     pub(super) fn frame_overhead(&self) -> usize {
         let tag = if self.key.is_some() { TAG_LEN } else { 0 };
         match &self.budget {
-            Some(b) if b.budget.messages < 1 << 16 => HEADER_LEN + 3 + 1 + tag,
-            _ => HEADER_LEN + 9 + 3 + tag,
+            Some(b) if b.budget.messages < 1 << 16 => HEADER_LEN + ECHO_LEN + 3 + 1 + tag,
+            _ => HEADER_LEN + ECHO_LEN + 9 + 3 + tag,
         }
     }
 
@@ -31,6 +35,32 @@ impl Replica {
         } else {
             (u64::MAX, u64::MAX)
         }
+    }
+
+    /// The echo for the next frame: of the present teammates heard recently enough for
+    /// the hold to fit, the one whose echo went out longest ago (never first, then the
+    /// lowest id). Marks it echoed at `now`.
+    fn next_echo(&mut self, now: Instant) -> Option<Echo> {
+        let (&robot, peer) = self
+            .peers
+            .iter_mut()
+            .filter(|(_, p)| p.present)
+            .filter(|(_, p)| {
+                p.clock.heard.is_some_and(|(_, at)| {
+                    duration_to_micros(now.saturating_duration_since(at))
+                        <= u64::from(MAX_ECHO_HOLD_US)
+                })
+            })
+            .min_by_key(|(_, p)| p.clock.echoed_at)?;
+        let (seq, heard_at) = peer.clock.heard?;
+        peer.clock.echoed_at = Some(now);
+        let hold_us = duration_to_micros(now.saturating_duration_since(heard_at));
+        let hold_10us = (hold_us + u64::from(ECHO_HOLD_UNIT_US) / 2) / u64::from(ECHO_HOLD_UNIT_US);
+        Some(Echo {
+            target: robot,
+            seq16: seq as u16,
+            hold_10us: u16::try_from(hold_10us).unwrap_or(u16::MAX),
+        })
     }
 
     /// The next frame to send, at most `mtu` bytes: NACKs, talk messages, changed
@@ -68,6 +98,7 @@ impl Replica {
         };
         let me = Scope::Robot(self.cfg.robot_id);
         let now = self.now;
+        let echo = self.next_echo(now);
         let mut w = FrameWriter::new(
             self.cfg.team_id,
             self.cfg.robot_id,
@@ -77,6 +108,10 @@ impl Replica {
             self.key.as_ref(),
         );
         let age_cap = self.widest_version_and_age().1;
+        w.set_clock(FrameClock {
+            stamp_us: stamp_of(now),
+            echo,
+        });
         let mut full = false;
         while let Some((target, queue, first, last)) = self.nacks_out.front() {
             if !w.push(ItemRef::Nack {
@@ -165,6 +200,7 @@ impl Replica {
             b.spend(now, class);
         }
         self.seq += 1;
+        self.sent.record(self.seq, now);
         let payload = w.finish();
         self.stats.frames_out += 1;
         self.stats.bytes_out += payload.len() as u64;

@@ -6,7 +6,8 @@ use thiserror::Error;
 use super::auth::TeamKey;
 use super::codec;
 use super::{
-    Frame, Item, FLAG_TAGGED, HEADER_LEN, MAGIC, MAX_FRAME_LEN, MAX_TALK_SEQ, TAG_LEN, VERSION,
+    Echo, Frame, FrameClock, Item, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN, MAGIC,
+    MAX_FRAME_LEN, MAX_TALK_SEQ, TAG_LEN, VERSION,
 };
 use crate::key::{validate_path, ROBOT_IDS};
 
@@ -74,7 +75,7 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
         return Err(DecodeError::UnknownVersion(bytes[2]));
     }
     let flags = bytes[3];
-    if flags & !FLAG_TAGGED != 0 {
+    if flags & !(FLAG_TAGGED | FLAG_ECHO) != 0 {
         return Err(DecodeError::Malformed(format!(
             "unknown flags {flags:#04x}"
         )));
@@ -103,6 +104,23 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
     }
     let mut incarnation = [0u8; 8];
     incarnation.copy_from_slice(&bytes[6..14]);
+    let stamp_us = u32::from_le_bytes([bytes[14], bytes[15], bytes[16], bytes[17]]);
+    let (echo, body) = if flags & FLAG_ECHO != 0 {
+        let Some((e, rest)) = body.split_first_chunk::<ECHO_LEN>() else {
+            return Err(DecodeError::TooShort);
+        };
+        if !ROBOT_IDS.contains(&e[0]) {
+            return Err(DecodeError::Malformed(format!("echo target {}", e[0])));
+        }
+        let echo = Echo {
+            target: e[0],
+            seq16: u16::from_le_bytes([e[1], e[2]]),
+            hold_10us: u16::from_le_bytes([e[3], e[4]]),
+        };
+        (Some(echo), rest)
+    } else {
+        (None, body)
+    };
     let (seq, items, used) = codec::decode_body(body)?;
     if used != body.len() {
         return Err(DecodeError::Malformed(format!(
@@ -118,6 +136,7 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
         sender,
         incarnation: u64::from_le_bytes(incarnation),
         seq,
+        clock: FrameClock { stamp_us, echo },
         items,
     })
 }

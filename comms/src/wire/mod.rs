@@ -3,14 +3,28 @@
 //! ```text
 //! offset  size  field
 //! 0       2     magic "HD"
-//! 2       1     format version (2)
-//! 3       1     flags: bit 0 = an HMAC tag follows the body; other bits must be 0
+//! 2       1     format version (3)
+//! 3       1     flags: bit 0 = an HMAC tag follows the body; bit 1 = an echo follows
+//!               the header; other bits must be 0
 //! 4       1     team id
 //! 5       1     sender robot id (1..=254)
 //! 6       8     sender incarnation, u64 little-endian (random per start)
-//! 14      ..    body: seq (varint u64), items (varint count, then each item)
+//! 14      4     send stamp: the sender's clock when the frame was built, microseconds,
+//!               u32 little-endian, wrapping every 2^32 µs (71.6 minutes)
+//! 18      5     echo (only if flag bit 1): target robot id (u8), the low 16 bits of the
+//!               seq of the target's frame heard last (u16 LE), and how long the sender
+//!               held it before this frame, in units of 10 µs (u16 LE, at most 655.35 ms)
+//! 18|23   ..    body: seq (varint u64), items (varint count, then each item)
 //! end-16  16    tag (only if flag bit 0): HMAC-SHA256 over bytes [0, end-16), truncated
 //! ```
+//!
+//! The stamp and the echo are the four NTP timestamps spread over ordinary traffic (no
+//! extra message, no server): robot A's frame leaves at t1 (its stamp), B hears it at t2,
+//! B's next frame leaves at t3 (its stamp) echoing A's frame and the hold t3 − t2, and A
+//! hears that at t4. A then knows the round trip (t4 − t1) − (t3 − t2) and B's clock
+//! offset ((t2 − t1) + (t3 − t4)) / 2 (the replica's `clock` module keeps the estimate).
+//! A frame echoes one teammate, the one whose echo is oldest, so the cost is 4 bytes per
+//! frame plus 5 when an echo rides along.
 //!
 //! Items (varint variant index, then the fields in order):
 //!
@@ -29,7 +43,7 @@
 //!
 //! # A frame's size
 //!
-//! Overhead per frame: the 14-byte header, the seq and item-count varints (1 to 9 bytes
+//! Overhead per frame: the 18-byte header, the 5-byte echo when present, the seq and item-count varints (1 to 9 bytes
 //! each) and, with a team key, the 16-byte tag. Per update item: 1 byte of item index,
 //! the path (length varint and bytes), the value (1 tag byte, then its encoding; `Bytes`
 //! adds a length varint), and the version and age varints (1 to 9 bytes each). So the
@@ -71,11 +85,18 @@ pub use writer::{encode_frame, item_len, value_len, varint_len, FrameWriter};
 
 /// The first two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"HD";
-/// The format version this code speaks. Version 2: `Floats` elements are f64 (8 bytes);
-/// version 1 carried f32 and is dropped ([`DecodeError::UnknownVersion`]) rather than misread.
-pub const VERSION: u8 = 2;
-/// Bytes before the body.
-pub const HEADER_LEN: usize = 14;
+/// The format version this code speaks. Version 3: the header carries a send stamp and
+/// may be followed by an echo ([`FrameClock`]). Version 2 (no stamp) and version 1
+/// (`Floats` as f32) are dropped ([`DecodeError::UnknownVersion`]) rather than misread.
+pub const VERSION: u8 = 3;
+/// Bytes of the fixed header (the echo, when present, follows it).
+pub const HEADER_LEN: usize = 18;
+/// Bytes of an echo.
+pub const ECHO_LEN: usize = 5;
+/// Longest hold an echo can carry (u16 in units of 10 µs).
+pub const MAX_ECHO_HOLD_US: u32 = u16::MAX as u32 * ECHO_HOLD_UNIT_US;
+/// The unit of an echo's hold, in microseconds.
+pub const ECHO_HOLD_UNIT_US: u32 = 10;
 /// Bytes of the truncated HMAC-SHA256 tag (128 bits).
 pub const TAG_LEN: usize = 16;
 /// Largest frame ever decoded (the largest UDP payload over IPv4).
@@ -89,6 +110,37 @@ pub const MIN_MTU: usize = 64;
 pub const MAX_TALK_SEQ: u64 = 1 << 62;
 
 const FLAG_TAGGED: u8 = 1;
+const FLAG_ECHO: u8 = 2;
+
+/// The timing part of a frame: the sender's clock at send and, optionally, an echo of
+/// one teammate's frame (see the module docs for how a receiver uses them).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameClock {
+    /// The sender's clock when the frame was built, in microseconds, wrapping at 2^32.
+    pub stamp_us: u32,
+    /// An echo of the frame last heard from one teammate.
+    pub echo: Option<Echo>,
+}
+
+/// An echo: "the last frame I heard from `target` was its frame `seq16`, and I held it
+/// `hold` before sending this one".
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Echo {
+    /// The teammate whose frame is echoed (1..=254).
+    pub target: u8,
+    /// The low 16 bits of that frame's seq.
+    pub seq16: u16,
+    /// Time from its reception to this frame's stamp, in units of
+    /// [`ECHO_HOLD_UNIT_US`] (10 µs), on the sender's clock.
+    pub hold_10us: u16,
+}
+
+impl Echo {
+    /// The hold in microseconds.
+    pub fn hold_us(&self) -> u32 {
+        u32::from(self.hold_10us) * ECHO_HOLD_UNIT_US
+    }
+}
 
 /// A decoded frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -102,6 +154,8 @@ pub struct Frame {
     pub incarnation: u64,
     /// Sender's frame counter within this incarnation (replay protection).
     pub seq: u64,
+    /// The sender's send stamp and echo.
+    pub clock: FrameClock,
     /// The payload.
     pub items: Vec<Item>,
 }

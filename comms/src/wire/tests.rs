@@ -11,6 +11,14 @@ fn sample() -> Frame {
         sender: 3,
         incarnation: 0x0102_0304_0506_0708,
         seq: 300,
+        clock: FrameClock {
+            stamp_us: 0x1234_5678,
+            echo: Some(Echo {
+                target: 5,
+                seq16: 0x0102,
+                hold_10us: 0x0304,
+            }),
+        },
         items: vec![
             Item::Update {
                 path: "ball.dist".into(),
@@ -66,11 +74,15 @@ fn sample() -> Frame {
 // editing the fixture, or robots running different builds stop understanding each other.
 const GOLDEN: &str = concat!(
     "4844",
-    "02",
-    "00",
+    "03", // format version 3: send stamps and echoes
+    "02", // flags: an echo follows the header
     "07",
     "03",
-    "0807060504030201", // header
+    "0807060504030201",
+    "78563412", // header: send stamp 0x12345678 µs
+    "05",
+    "0201",
+    "0403", // echo: robot 5's frame ...0x0102, held 0x0304 × 10 µs
     "fb2c01",
     "08", // seq 300, 8 items
     "00",
@@ -175,13 +187,18 @@ fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
     let key = TeamKey::new(b"team key");
     let frame = Frame {
         items: vec![],
+        clock: FrameClock {
+            stamp_us: 0x1234_5678,
+            echo: None,
+        },
         ..sample()
     };
     let bytes = encode_frame(&frame, Some(&key));
     assert_eq!(
         hex(&bytes),
-        "4844020107030807060504030201fb2c01009915b4974aa18a41138775daccb1e5bb",
-        "header with flag 1, seq, 0 items, 16-byte tag (checked against Python's hmac)"
+        "484403010703080706050403020178563412fb2c010099560cde6deefcc7399a0c168688ff92",
+        "header with flag 1 (no echo), stamp, seq, 0 items, 16-byte tag (checked against \
+         Python's hmac)"
     );
     assert_eq!(decode_frame(&bytes, 7, Some(&key)), Ok(frame));
 }
@@ -189,9 +206,9 @@ fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
 // Frozen bytes for every varint width (1, 3, 5 and 9 bytes) and the zigzag of a signed
 // integer: the part of the format a replacement encoder is most likely to get wrong.
 const GOLDEN_VARINTS: &str = concat!(
-    "4844020007030807060504030201", // header
-    "fdffffffffffffffff",           // seq u64::MAX
-    "04",                           // 4 items
+    "4844030007030807060504030201ffffffff", // header, stamp u32::MAX, no echo
+    "fdffffffffffffffff",                   // seq u64::MAX
+    "04",                                   // 4 items
     "00",
     "0176",
     "00",
@@ -218,6 +235,10 @@ const GOLDEN_VARINTS: &str = concat!(
 fn golden_bytes_freeze_every_varint_width() {
     let frame = Frame {
         seq: u64::MAX,
+        clock: FrameClock {
+            stamp_us: u32::MAX,
+            echo: None,
+        },
         items: vec![
             Item::Update {
                 path: "v".into(),
@@ -266,11 +287,12 @@ fn bad_frames_are_told_apart() {
         decode_frame(b"XX0123456789abcdef", 7, None),
         Err(DecodeError::BadMagic)
     );
-    let mut v3 = plain.clone();
-    v3[2] = 3;
+    let mut v2 = plain.clone();
+    v2[2] = 2;
     assert_eq!(
-        decode_frame(&v3, 7, None),
-        Err(DecodeError::UnknownVersion(3))
+        decode_frame(&v2, 7, None),
+        Err(DecodeError::UnknownVersion(2)),
+        "a version 2 frame has no send stamp: refused, not misread"
     );
     assert_eq!(
         decode_frame(&plain, 8, None),
@@ -332,6 +354,7 @@ fn a_bad_path_or_a_huge_claimed_length_is_malformed_not_a_panic_or_an_allocation
     let mut bytes = encode_frame(
         &Frame {
             items: vec![],
+            clock: FrameClock::default(),
             ..sample()
         },
         None,
@@ -424,15 +447,28 @@ pub(crate) fn any_frame() -> impl Strategy<Value = Frame> {
         1..=254u8,
         any::<u64>(),
         any::<u64>(),
+        any_clock(),
         proptest::collection::vec(any_item(), 0..8),
     )
-        .prop_map(|(team, sender, incarnation, seq, items)| Frame {
+        .prop_map(|(team, sender, incarnation, seq, clock, items)| Frame {
             team,
             sender,
             incarnation,
             seq,
+            clock,
             items,
         })
+}
+
+fn any_clock() -> impl Strategy<Value = FrameClock> {
+    let echo =
+        (1..=254u8, any::<u16>(), any::<u16>()).prop_map(|(target, seq16, hold_10us)| Echo {
+            target,
+            seq16,
+            hold_10us,
+        });
+    (any::<u32>(), proptest::option::of(echo))
+        .prop_map(|(stamp_us, echo)| FrameClock { stamp_us, echo })
 }
 
 proptest! {
@@ -449,6 +485,25 @@ proptest! {
         let mut sink = Vec::new();
         prop_assert!(super::codec::encode_item(item.as_ref(), &mut sink));
         prop_assert_eq!(item_len(item.as_ref()), sink.len());
+    }
+
+    #[test]
+    fn an_echo_names_a_robot_and_fits_before_the_body(frame in any_frame(), target in prop_oneof![Just(0u8), Just(255u8)], cut in 0..ECHO_LEN) {
+        let with_echo = Frame {
+            clock: FrameClock {
+                echo: Some(Echo { target: 1, seq16: 2, hold_10us: 3 }),
+                ..frame.clock
+            },
+            ..frame
+        };
+        let mut bytes = encode_frame(&with_echo, None);
+        bytes[HEADER_LEN] = target;
+        prop_assert!(matches!(
+            decode_frame(&bytes, with_echo.team, None),
+            Err(DecodeError::Malformed(_))
+        ), "echo target {} is no robot", target);
+        bytes.truncate(HEADER_LEN + cut);
+        prop_assert_eq!(decode_frame(&bytes, with_echo.team, None), Err(DecodeError::TooShort));
     }
 
     #[test]

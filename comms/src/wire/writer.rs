@@ -2,7 +2,10 @@
 
 use super::auth::TeamKey;
 use super::codec;
-use super::{Frame, ItemRef, FLAG_TAGGED, HEADER_LEN, MAGIC, TAG_LEN, VERSION};
+use super::{
+    Frame, FrameClock, ItemRef, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN, MAGIC, TAG_LEN,
+    VERSION,
+};
 use crate::value::Value;
 
 /// Bytes a varint takes for `v`.
@@ -19,6 +22,7 @@ pub fn varint_len(v: u64) -> usize {
 #[derive(Debug)]
 pub struct FrameWriter<'k> {
     header: [u8; HEADER_LEN],
+    echo: Option<[u8; ECHO_LEN]>,
     seq: u64,
     items: Vec<u8>,
     count: usize,
@@ -27,7 +31,8 @@ pub struct FrameWriter<'k> {
 }
 
 impl<'k> FrameWriter<'k> {
-    /// A writer for a frame of at most `budget` bytes (tag included).
+    /// A writer for a frame of at most `budget` bytes (tag included), with a send stamp
+    /// of 0 and no echo until [`FrameWriter::set_clock`].
     pub fn new(
         team: u8,
         sender: u8,
@@ -45,6 +50,7 @@ impl<'k> FrameWriter<'k> {
         header[6..14].copy_from_slice(&incarnation.to_le_bytes());
         FrameWriter {
             header,
+            echo: None,
             seq,
             items: Vec::with_capacity(budget.min(2048)),
             count: 0,
@@ -53,9 +59,28 @@ impl<'k> FrameWriter<'k> {
         }
     }
 
+    /// Sets the frame's send stamp and echo (call before pushing items: an echo takes
+    /// [`ECHO_LEN`] bytes of the budget).
+    pub fn set_clock(&mut self, clock: FrameClock) {
+        self.header[14..18].copy_from_slice(&clock.stamp_us.to_le_bytes());
+        self.echo = clock.echo.map(|e| {
+            let mut b = [0u8; ECHO_LEN];
+            b[0] = e.target;
+            b[1..3].copy_from_slice(&e.seq16.to_le_bytes());
+            b[3..5].copy_from_slice(&e.hold_10us.to_le_bytes());
+            b
+        });
+        if self.echo.is_some() {
+            self.header[3] |= FLAG_ECHO;
+        } else {
+            self.header[3] &= !FLAG_ECHO;
+        }
+    }
+
     fn total_len(&self, items_len: usize, count: usize) -> usize {
         let tag = if self.key.is_some() { TAG_LEN } else { 0 };
-        HEADER_LEN + varint_len(self.seq) + varint_len(count as u64) + items_len + tag
+        let echo = if self.echo.is_some() { ECHO_LEN } else { 0 };
+        HEADER_LEN + echo + varint_len(self.seq) + varint_len(count as u64) + items_len + tag
     }
 
     /// Frame size so far.
@@ -85,6 +110,9 @@ impl<'k> FrameWriter<'k> {
     pub fn finish(self) -> Vec<u8> {
         let mut out = Vec::with_capacity(self.len());
         out.extend_from_slice(&self.header);
+        if let Some(echo) = &self.echo {
+            out.extend_from_slice(echo);
+        }
         codec::encode_varint(self.seq, &mut out);
         codec::encode_varint(self.count as u64, &mut out);
         out.extend_from_slice(&self.items);
@@ -140,6 +168,7 @@ pub fn encode_frame(frame: &Frame, key: Option<&TeamKey>) -> Vec<u8> {
         usize::MAX,
         key,
     );
+    w.set_clock(frame.clock);
     for item in &frame.items {
         w.push(item.as_ref());
     }
