@@ -31,6 +31,7 @@ fn frame_from(sender: u8) -> Vec<u8> {
         sender,
         incarnation: 1,
         seq: 1,
+        clock: Default::default(),
         items: vec![Item::Update {
             path: "x".into(),
             value: Value::Int(i64::from(sender)),
