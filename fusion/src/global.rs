@@ -31,10 +31,10 @@ pub struct GlobalConfig {
     pub dissent_window_s: f64,
     /// With no accepted observation for this long, a single dissenter may restart the ball.
     pub support_timeout_s: f64,
-    /// The network's mean one-way transit time (s), added to every received message's
-    /// age: a receiver-side age counts from the moment the frame left the sender, so
-    /// without this every teammate's information would be placed `transit_s` too late.
-    /// See the crate docs, *Time*.
+    /// A one-way transit time (s) added to every received message's age, for ages that
+    /// count from the moment the frame left the sender. comms' ages include each frame's
+    /// own estimated transit (wire format 3), so with comms this is 0 (the default). See
+    /// the crate docs, *Time*.
     pub transit_s: f64,
     /// The robot's own observations that must fail the gate in a row (agreeing with each
     /// other, unopposed) before its own camera restarts the team ball; 0 turns it off.

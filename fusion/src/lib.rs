@@ -88,17 +88,16 @@
 //! silent, the team ball is the robot's own ([`TeamBallSource::OwnFallback`]).
 //!
 //! # Time
-//! A teammate's message is placed at *reception − receiver-side age − transit*. comms'
-//! receiver-side age counts from the moment the frame left the sender, so it leaves out
-//! the time on the air; on a competition WLAN whose access point holds multicast to the
-//! next 102.4 ms beacon that is ~100 ms on average, enough to place every teammate's
-//! sightings of a ball rolling at 2 m/s 0.2 m behind. [`GlobalConfig::transit_s`] adds the
-//! network's mean one-way delay, the same figure a team configures for its arbitration
-//! (`latency_ms`). Measuring it in-band (an NTP-like echo of a teammate's sequence number
-//! with its hold time) would make it self-calibrating; with a beacon hold the per-frame
-//! delay is uniform over the beacon interval anyway, so what remains after the mean is
-//! removed is zero-mean timing noise (σ ≈ 30 ms) that no echo could remove: the mean is
-//! what matters, and the team knows it.
+//! A teammate's message is placed at *reception − receiver-side age − transit*. Since wire
+//! format 3, comms' receiver-side age already includes each frame's own transit: every
+//! frame carries its send stamp and echoes a teammate's last frame with its hold time, so
+//! each replica estimates every teammate's clock offset and drift (NTP-style, from traffic
+//! already sent) and stamps a value at reception − that frame's transit − the sender's
+//! age. Measured on a competition WLAN (20 ± 10 ms, bursty loss, clocks seconds apart and
+//! drifting up to 200 ppm): placement error mean 0.0–0.1 ms, σ 2.3–2.8 ms; with a DTIM hold
+//! of 204.8 ms, mean 2.4–3.3 ms, σ 7 ms, against +62 ms and σ 36 ms when only a mean transit
+//! was subtracted (`tests/shared_time.rs`). So [`GlobalConfig::transit_s`] is 0 for ages
+//! from comms; it remains for ages from elsewhere that leave the transit out.
 //!
 //! # Redundancy
 //! Each message repeats the batches of the two messages before it. A receiver's blackboard
@@ -124,18 +123,20 @@
 //! the kick's velocity, rolled forward by the model, into the current track (gated).
 //!
 //! # What limits the team ball
-//! `huddle sim` measures the team ball against two references (its figures are in
-//! `huddle sim --json`): [`CentralizedBall`], one filter that sees every robot's sightings
-//! at once with no network, and, at every robot, a [`NetworkLimitedBall`]: the centralized
-//! filter fed exactly the ball information that has reached that robot (its own sightings
-//! and kicks at once, each teammate's batches and kick reports when they arrive, late ones
-//! slotted in by time), that is, what the centralized filter itself makes of what this
-//! network delivered. The team ball over the network-limited reference measures the
-//! fusion; the network-limited reference over the centralized filter measures the network.
+//! `huddle sim` measures the team ball against references, each tuned for its own RMSE
+//! (its figures are in `huddle sim --json`): [`CentralizedBall`], one filter that sees every
+//! robot's sightings at once with no network (and told every kick that met the ball, cK);
+//! at every robot, a *delivery reference* built on [`NetworkLimitedBall`]: the centralized
+//! filter fed exactly the ball information that reached that robot (its own sightings and
+//! kick reports at once, each teammate's batches and kick reports when they arrive), each
+//! piece at its true sender time; and a *delayed-centralized bound* (every sighting the
+//! median delay late, no loss). The team ball over the delivery reference measures the
+//! fusion; the delivery reference over cK measures the network.
 //! [`consistency::nees_bounds`] gives the χ² bounds that NEES is held to. What sets the gap:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
 //!   lags a rolling ball, and a kick-off that teleports the ball leaves every filter on the
-//!   old one; `transit_s` and `forget_ball` remove both;
+//!   old one; ages that include each frame's transit (comms' wire format 3) and
+//!   `forget_ball` remove both;
 //! - *the centralized filter is not delayed*: nearly all of the gap is the short time after
 //!   each kick, bounce or shove, when a robot that does not see the ball itself has only
 //!   its teammates' sightings, a network delay old, to go by, while the centralized filter

@@ -71,7 +71,7 @@ pub struct WorldModelConfig {
     /// The LWM: pose EKF and ball EKF. Q and R of the pose EKF are replaced per reading
     /// from the field's noise figures ([`perception`]).
     pub local: LocalConfig,
-    /// The GWM (its `transit_s` is set from the network by the simulation).
+    /// The GWM (`transit_s` 0: comms' ages include each frame's transit).
     pub global: GlobalConfig,
     /// σ of the start pose a robot is told (it is put on its spot by hand), m.
     pub start_sigma_m: f64,
