@@ -52,6 +52,16 @@ pub struct DaemonArgs {
     /// Refresh period of every global value (`100ms`, `1s`).
     #[arg(long, default_value = "100ms", value_parser = duration::parse_positive)]
     pub refresh: Duration,
+    /// The team's message budget: `spl` (1200 per 20-minute game, frames of at most 128
+    /// bytes), `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`). This robot
+    /// spends its equal share (see --team-size), paced over the game from the daemon's
+    /// start, a tenth kept for priority items; frames never exceed the league's payload
+    /// and a value that cannot fit one is refused at SETV. Default: no budget.
+    #[arg(long, value_name = "SPEC")]
+    pub budget: Option<comms::BudgetSpec>,
+    /// Robots sharing the --budget.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(1..=254))]
+    pub team_size: u8,
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
@@ -183,6 +193,32 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
         bail!("--refresh must be positive");
     }
     let mut replica = ReplicaConfig::new(id, args.team).with_refresh_period(args.refresh);
+    if let Some(spec) = args.budget {
+        let share = spec.share(usize::from(args.team_size));
+        if share.messages == 0 {
+            bail!(
+                "--budget {spec}: a share of 0 messages for each of {} robots",
+                args.team_size
+            );
+        }
+        replica.budget = Some(share);
+        if let Some(limit) = spec.payload_limit {
+            replica.mtu = replica.mtu.min(limit);
+        }
+        // Silence is the norm under a budget: a teammate is gone after three of its
+        // message intervals, not three refresh periods.
+        let interval = share.game / u32::try_from(share.messages).unwrap_or(u32::MAX);
+        replica.departed_after = replica
+            .departed_after
+            .max(interval * 3 + Duration::from_secs(10));
+        tracing::info!(
+            "budget: {spec}: this robot's share {} messages per {:?} ({} reserved), frames ≤ {} B",
+            share.messages,
+            share.game,
+            share.reserve,
+            replica.mtu
+        );
+    }
     // Say what was loaded (never the key itself): a robot that cannot hear its team
     // usually runs with another key or config than its teammates.
     match &args.key_file {
