@@ -198,7 +198,7 @@ enum Recorded {
 
 /// The delayed-centralized bound, computed once the run's median delay is known: the
 /// run's sightings and kick reports are recorded as they happen, with the instants the
-/// team ball was judged at, and [`DelayedCentral::rmse_m`] replays them.
+/// team ball was judged at, and [`DelayedCentral::squared_errors`] replays them.
 #[derive(Debug, Clone, Default)]
 pub struct DelayedCentral {
     /// Sightings and kick reports in time order (global seconds).

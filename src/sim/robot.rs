@@ -21,7 +21,7 @@
 //! - everything else that needs the ball (formation, goalkeeper, the pass receiver, a goer
 //!   that lost sight of it) uses the **team ball**, which is better than any one robot's;
 //! - motion commands are meant in the robot's own frame: the world turns them into field
-//!   motion with the robot's true heading ([`World::command_believed`]).
+//!   motion with the robot's true heading ([`World::command_believed`](crate::field::World::command_believed)).
 
 use comms::arbitration::{self, heuristic, Arbiter, ArbitrationParams, BallView, Decision, Posted};
 use comms::{Blackboard, Instant, Key, Scope, Value};

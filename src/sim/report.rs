@@ -1,0 +1,334 @@
+//! What `huddle sim` reports: the [`Report`] (also the `--json` object), its text form,
+//! and a sweep's rows.
+
+use serde::Serialize;
+
+use super::{acoustic, policy, Transport};
+
+/// What `huddle sim` reports (also its `--json` object). Percentages are of ball-visible
+/// time; per-minute rates are per minute of ball-visible time. See [`metrics`](super::metrics) for the
+/// definitions of *ball visible*, *goer*, *handover* and *flap*.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// The team's message budget (`None`: no limit).
+    pub budget: Option<String>,
+    /// The robots' sending policy.
+    pub policy: policy::SendPolicy,
+    /// How frames travelled.
+    pub transport: Transport,
+    /// Frames (messages) the whole team sent.
+    pub team_messages_sent: u64,
+    /// … per robot.
+    pub messages_per_robot: Vec<u64>,
+    /// The largest frame any robot sent, bytes (header, items and tag).
+    pub max_payload_bytes: usize,
+    /// Messages the team had left of its budget at the end.
+    pub budget_left: Option<u64>,
+    /// Robots on our team.
+    pub robots: usize,
+    /// Simulated seconds.
+    pub duration_s: f64,
+    /// Network preset.
+    pub preset: String,
+    /// Mean loss per receiver, percent.
+    pub loss_pct: f64,
+    /// One-way latency, ms.
+    pub latency_ms: f64,
+    /// Jitter, ms.
+    pub jitter_ms: f64,
+    /// The seed.
+    pub seed: u64,
+    /// Seconds during which at least one field player saw the ball.
+    pub ball_visible_s: f64,
+    /// The same as a share of the match, percent.
+    pub ball_visible_pct: f64,
+    /// Share of ball-visible time with exactly one goer, percent.
+    pub exactly_one_goer_pct: f64,
+    /// Share with two or more goers, percent.
+    pub conflict_pct: f64,
+    /// Share with no goer, percent.
+    pub no_goer_pct: f64,
+    /// Longest stretch with two or more goers, ms.
+    pub longest_conflict_ms: f64,
+    /// When it started, seconds.
+    pub longest_conflict_at_s: f64,
+    /// The bound it stays under, ms: the longest claim gap
+    /// ([`Report::longest_claim_gap_ms`]) plus the measured one-way delay's 99th
+    /// percentile (all delivered frames) plus one control period. Why it holds: a
+    /// conflict starts when a robot B claims the ball while another, A, still goes. It ends when A hears a post B made after claiming and
+    /// yields (within one gap + one delay of the claim, then A's next decision, at most
+    /// a control period later), or earlier when B backs off (A still claims in a post
+    /// made after B's claim should have reached it:
+    /// `comms::arbitration::ArbitrationParams::ack_margin`). A goer that merely fell
+    /// silent keeps the ball for `silent_goer_after` (1 s), so a burst shorter than that
+    /// starts no conflict; a longer one can, and the gap term covers it. The bound
+    /// assumes A and B agree once each has heard the other's posts of the same instant
+    /// (what the latency compensation is for), and a delay within the p99.
+    pub conflict_bound_ms: f64,
+    /// The oldest a live teammate's claim was when a live robot decided on it, ms: the
+    /// longest the network kept one robot's claims from another (bursts, beacon holds).
+    pub longest_claim_gap_ms: f64,
+    /// Median one-way delay of the frames delivered, ms.
+    pub delay_p50_ms: f64,
+    /// 99th percentile of it, ms.
+    pub delay_p99_ms: f64,
+    /// Handovers (the lone goer changed).
+    pub handovers: u64,
+    /// Handovers per minute of ball-visible time.
+    pub handovers_per_min: f64,
+    /// Flaps (A → B → A within two seconds).
+    pub flaps: u64,
+    /// Flaps per minute of ball-visible time.
+    pub flaps_per_min: f64,
+    /// Goals we scored.
+    pub goals_for: u32,
+    /// Goals against us.
+    pub goals_against: u32,
+    /// Shots that met the ball.
+    pub shots: u32,
+    /// Passes that met the ball.
+    pub passes: u32,
+    /// Kicks the robots swung (each reported to the team with its kicker's odds).
+    pub kick_attempts: u64,
+    /// The share of them that met the ball, percent.
+    pub kick_contact_pct: f64,
+    /// Frames sent into the network (one per multicast transmission per receiver).
+    pub frames_sent: u64,
+    /// Frames delivered.
+    pub frames_delivered: u64,
+    /// Frames lost.
+    pub frames_lost: u64,
+    /// Team-ball RMSE against the true ball, m: every live robot's GWM team ball at each of
+    /// its control ticks while the ball is visible (see [`metrics`](super::metrics)).
+    pub team_ball_rmse_m: f64,
+    /// The same for the centralized filter (every robot's sightings, no network) at the
+    /// same instants, m.
+    pub centralized_rmse_m: f64,
+    /// team_ball_rmse_m / centralized_rmse_m.
+    pub rmse_ratio: f64,
+    /// The centralized filter that also knows every kick that met the ball as it happens
+    /// (cK), m: the ceiling for a team that reports its kicks.
+    pub centralized_kicks_rmse_m: f64,
+    /// team_ball_rmse_m / centralized_kicks_rmse_m.
+    pub rmse_ratio_kicks: f64,
+    /// The delivery reference at the same instants, m: at each robot, the centralized
+    /// filter fed exactly the ball information that reached it, each piece at its true
+    /// sender time (see [`metrics`](super::metrics)).
+    pub delivery_rmse_m: f64,
+    /// team_ball_rmse_m / delivery_rmse_m: what the fusion itself costs.
+    pub delivery_ratio: f64,
+    /// delivery_rmse_m / centralized_kicks_rmse_m: what the network costs.
+    pub network_ratio: f64,
+    /// The delayed-centralized bound, m: every sighting and kick report, no loss, each
+    /// exactly the median delay (`delay_p50_ms`) late.
+    pub delayed_centralized_rmse_m: f64,
+    /// team_ball_rmse_m / delayed_centralized_rmse_m (over the samples where the bound has
+    /// a ball).
+    pub delayed_centralized_ratio: f64,
+    /// Samples of robots that had not seen the ball themselves within their ball memory.
+    pub blind_samples: u64,
+    /// Team-ball RMSE over those samples, m.
+    pub blind_team_ball_rmse_m: f64,
+    /// Centralized RMSE over those samples, m.
+    pub blind_centralized_rmse_m: f64,
+    /// Delivery reference RMSE over those samples, m.
+    pub blind_delivery_rmse_m: f64,
+    /// Average position NEES (2 dof) of the team ball over the same samples.
+    pub team_ball_nees: f64,
+    /// Its χ² 95% bounds for `team_ball_nees_samples` independent samples.
+    pub team_ball_nees_bounds: [f64; 2],
+    /// Independent samples the bounds assume (batch means of the NEES series).
+    pub team_ball_nees_samples: u64,
+    /// Share of samples above χ²₂'s 99.9% point, percent (0.1 for an honest filter).
+    pub team_ball_nees_above_999_pct: f64,
+    /// The team-ball NEES while the true ball is still.
+    pub team_ball_nees_still: NeesBand,
+    /// … rolling.
+    pub team_ball_nees_rolling: NeesBand,
+    /// … fast.
+    pub team_ball_nees_fast: NeesBand,
+    /// Average position NEES of the centralized filter.
+    pub centralized_nees: f64,
+    /// Team-ball samples (robot ticks) behind the RMSEs.
+    pub team_ball_samples: u64,
+    /// Pose position RMSE of every robot's pose EKF at each of its ticks, m.
+    pub pose_rmse_m: f64,
+    /// Heading RMSE, rad.
+    pub heading_rmse_rad: f64,
+    /// Average pose NEES (3 dof).
+    pub pose_nees: f64,
+    /// Simulated seconds per wall-clock second (the only field that varies between runs
+    /// with the same seed).
+    pub sim_speed_x: f64,
+    /// The outage and the acoustic fallback (flattened; absent without an outage).
+    #[serde(flatten)]
+    pub outage: Option<acoustic::OutageReport>,
+}
+
+/// The team-ball NEES over one band of true ball speeds (see [`metrics`](super::metrics)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NeesBand {
+    /// Average position NEES (2 dof).
+    pub nees: f64,
+    /// Its χ² 95% bounds for `independent_samples`.
+    pub bounds: [f64; 2],
+    /// Samples in the band.
+    pub samples: u64,
+    /// Independent samples they are worth (batch means).
+    pub independent_samples: u64,
+    /// Share above χ²₂'s 99.9% point, percent.
+    pub above_999_pct: f64,
+}
+
+/// One report as a row of `huddle sim --sweep` (the figures that move with the network).
+pub struct SweepRow<'a>(pub &'a Report);
+
+impl SweepRow<'_> {
+    /// The column heads.
+    pub fn header() -> &'static str {
+        "delay ms  p50 ms  p99 ms  one goer %  conflict ms / bound  team ball m  ×central  ×central+kicks  NEES"
+    }
+}
+
+impl std::fmt::Display for SweepRow<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self.0;
+        write!(
+            f,
+            "{:>8.0}  {:>6.0}  {:>6.0}  {:>10.2}  {:>8.0} / {:<6.0}  {:>11.4}  {:>8.3}  {:>14.3}  {:>5.2}",
+            r.latency_ms,
+            r.delay_p50_ms,
+            r.delay_p99_ms,
+            r.exactly_one_goer_pct,
+            r.longest_conflict_ms,
+            r.conflict_bound_ms,
+            r.team_ball_rmse_m,
+            r.rmse_ratio,
+            r.rmse_ratio_kicks,
+            r.team_ball_nees
+        )
+    }
+}
+
+impl std::fmt::Display for Report {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "huddle sim: {} robots, {:.0} s simulated, network {} (loss {:.1}%, latency {:.0} ms ± {:.0} ms), seed {}",
+            self.robots, self.duration_s, self.preset, self.loss_pct, self.latency_ms, self.jitter_ms, self.seed
+        )?;
+        writeln!(
+            f,
+            "ball visible          {:>9.1} s  ({:.1}% of the match)",
+            self.ball_visible_s, self.ball_visible_pct
+        )?;
+        writeln!(
+            f,
+            "exactly one goer      {:>9.2} %  of ball-visible time",
+            self.exactly_one_goer_pct
+        )?;
+        writeln!(f, "two or more goers     {:>9.2} %", self.conflict_pct)?;
+        writeln!(f, "no goer               {:>9.2} %", self.no_goer_pct)?;
+        writeln!(
+            f,
+            "longest conflict      {:>9.0} ms (at {:.1} s; bound = longest claim gap {:.0} ms + p99 delay {:.0} ms + control period = {:.0} ms; median delay {:.0} ms)",
+            self.longest_conflict_ms, self.longest_conflict_at_s, self.longest_claim_gap_ms, self.delay_p99_ms, self.conflict_bound_ms, self.delay_p50_ms
+        )?;
+        writeln!(
+            f,
+            "handovers             {:>9.2} /min ({} in all)",
+            self.handovers_per_min, self.handovers
+        )?;
+        writeln!(
+            f,
+            "flaps                 {:>9.2} /min ({} in all)",
+            self.flaps_per_min, self.flaps
+        )?;
+        writeln!(
+            f,
+            "play                  {} shots, {} passes, goals {}–{}; {} kicks swung, {:.0}% met the ball",
+            self.shots, self.passes, self.goals_for, self.goals_against, self.kick_attempts, self.kick_contact_pct
+        )?;
+        writeln!(
+            f,
+            "network               {} frames sent, {} delivered, {} lost",
+            self.frames_sent, self.frames_delivered, self.frames_lost
+        )?;
+        writeln!(
+            f,
+            "messages              {} by the team ({:?} per robot), largest {} B; budget {}, {} left; policy {:?}",
+            self.team_messages_sent,
+            self.messages_per_robot,
+            self.max_payload_bytes,
+            self.budget.as_deref().unwrap_or("none"),
+            self.budget_left.map_or("–".to_string(), |l| l.to_string()),
+            self.policy
+        )?;
+        writeln!(
+            f,
+            "team ball RMSE        {:>9.4} m  (centralized {:.4} m, ratio {:.3}; {} robot ticks)",
+            self.team_ball_rmse_m, self.centralized_rmse_m, self.rmse_ratio, self.team_ball_samples
+        )?;
+        writeln!(
+            f,
+            "  centralized + kicks {:>9.4} m  (also told every kick at once; ratio {:.3})",
+            self.centralized_kicks_rmse_m, self.rmse_ratio_kicks
+        )?;
+        writeln!(
+            f,
+            "  delivery reference  {:>9.4} m  (centralized fed what reached each robot, at true times: fusion costs ×{:.3}, the network ×{:.3})",
+            self.delivery_rmse_m, self.delivery_ratio, self.network_ratio
+        )?;
+        writeln!(
+            f,
+            "  delayed centralized {:>9.4} m  (every sighting {:.0} ms late, no loss: team ×{:.3})",
+            self.delayed_centralized_rmse_m, self.delay_p50_ms, self.delayed_centralized_ratio
+        )?;
+        writeln!(
+            f,
+            "  robots blind to it  {:>9.4} m  (centralized {:.4} m, delivery {:.4} m; {} robot ticks)",
+            self.blind_team_ball_rmse_m,
+            self.blind_centralized_rmse_m,
+            self.blind_delivery_rmse_m,
+            self.blind_samples
+        )?;
+        writeln!(
+            f,
+            "team ball NEES        {:>9.3}    (χ² 95% bounds [{:.3}, {:.3}] for {} independent samples; centralized {:.3})",
+            self.team_ball_nees,
+            self.team_ball_nees_bounds[0],
+            self.team_ball_nees_bounds[1],
+            self.team_ball_nees_samples,
+            self.centralized_nees
+        )?;
+        for (name, b) in [
+            ("still", &self.team_ball_nees_still),
+            ("rolling", &self.team_ball_nees_rolling),
+            ("fast", &self.team_ball_nees_fast),
+        ] {
+            writeln!(
+                f,
+                "  {name:<8}            {:>9.3}    (bounds [{:.3}, {:.3}] for {} of {} samples; {:.2}% above the 99.9% point)",
+                b.nees, b.bounds[0], b.bounds[1], b.independent_samples, b.samples, b.above_999_pct
+            )?;
+        }
+        writeln!(
+            f,
+            "  above 99.9% point   {:>9.3} %  (0.1% for an honest filter)",
+            self.team_ball_nees_above_999_pct
+        )?;
+        writeln!(
+            f,
+            "pose                  {:>9.4} m RMSE, heading {:.4} rad RMSE, NEES {:.3} (3 dof)",
+            self.pose_rmse_m, self.heading_rmse_rad, self.pose_nees
+        )?;
+        if let Some(o) = &self.outage {
+            writeln!(f, "{o}")?;
+        }
+        write!(
+            f,
+            "speed                 {:>9.0} × real time",
+            self.sim_speed_x
+        )
+    }
+}
