@@ -656,8 +656,12 @@ fn throughput(g: (SocketAddrV4, Transport), updates: u64, pin: Pin) -> Result<Th
     })
 }
 
-/// (d): spawn `huddle daemon`, write 10,000 global keys through its relay, read VmRSS.
+/// (d): spawn `huddle daemon`, write 10,000 keys through its relay, read VmRSS. A robot
+/// holds at most 4,096 own global values (`ReplicaConfig::max_bindings_per_owner`:
+/// teammates would refuse more), so 4,000 of the keys are global (each
+/// replicated and refreshed) and the other 6,000 `local`.
 fn rss_with_10k_keys(g: SocketAddrV4, relay_port: u16) -> Result<f64> {
+    const GLOBAL_KEYS: usize = 4_000;
     let dir = std::env::temp_dir().join(format!("huddle-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let relay: SocketAddr = format!("127.0.0.1:{relay_port}").parse()?;
@@ -691,7 +695,9 @@ fn rss_with_10k_keys(g: SocketAddrV4, relay_port: u16) -> Result<f64> {
         for chunk in 0..100 {
             let mut batch = String::new();
             for k in 0..100 {
-                batch += &format!("SETV *.var.bench.key{:05} {}\n", chunk * 100 + k, k);
+                let n = chunk * 100 + k;
+                let scope = if n < GLOBAL_KEYS { "*" } else { "local" };
+                batch += &format!("SETV {scope}.var.bench.key{n:05} {k}\n");
             }
             client.send(batch.trim_end())?;
             for _ in 0..100 {
