@@ -201,16 +201,7 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
                 args.team_size
             );
         }
-        replica.budget = Some(share);
-        if let Some(limit) = spec.payload_limit {
-            replica.mtu = replica.mtu.min(limit);
-        }
-        // Silence is the norm under a budget: a teammate is gone after three of its
-        // message intervals, not three refresh periods.
-        let interval = share.game / u32::try_from(share.messages).unwrap_or(u32::MAX);
-        replica.departed_after = replica
-            .departed_after
-            .max(interval * 3 + Duration::from_secs(10));
+        replica = replica.with_budget(&spec, usize::from(args.team_size));
         tracing::info!(
             "budget: {spec}: this robot's share {} messages per {:?} ({} reserved), frames ≤ {} B",
             share.messages,

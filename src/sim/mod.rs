@@ -366,8 +366,7 @@ impl Simulation {
         if let Some(b) = budget {
             // A robot's messages come `interval` apart at best: what it said last holds
             // until it says otherwise (a goer change goes at once, from the reserve).
-            let interval = b.game.as_secs_f64() / b.messages.max(1) as f64;
-            let hold = Duration::from_secs_f64(3.0 * interval);
+            let hold = b.interval() * 3;
             params.stale_after = params.stale_after.max(hold);
             world_model.global.stale_after_s =
                 world_model.global.stale_after_s.max(hold.as_secs_f64());
@@ -402,17 +401,8 @@ impl Simulation {
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
         let mut replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
-        if let (Some(spec), Some(b)) = (cfg.budget, budget) {
-            replica.budget = Some(b);
-            if let Some(limit) = spec.payload_limit {
-                replica.mtu = limit;
-            }
-            // Silence is the norm under a budget: a teammate is gone after three of its
-            // message intervals, not three refresh periods.
-            let interval = b.game.as_secs_f64() / b.messages.max(1) as f64;
-            replica.departed_after = replica
-                .departed_after
-                .max(Duration::from_secs_f64(3.0 * interval + 10.0));
+        if let Some(spec) = &cfg.budget {
+            replica = replica.with_budget(spec, n);
         }
         let mut harness = Harness::new(n, net, replica, cfg.seed)?;
         harness.set_unicast(cfg.transport == Transport::Unicast);
@@ -511,7 +501,7 @@ impl Simulation {
                 self.world.command_believed(i, cmd, &out.believed);
             }
             for (key, value) in out.writes {
-                let lwm = key.path() == "world.local";
+                let lwm = key == robot::world_local_key();
                 // Our own keys of valid shape: a refusal would be a bug worth seeing.
                 if out.priority {
                     self.harness.set_priority(i, &key, value)

@@ -50,8 +50,8 @@ pub fn pass_to_key() -> Key {
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
 pub const WORLD_LOCAL_KEY: &str = "*.var.world.local";
 
-/// The key robot `id`'s LWM arrives under.
-fn world_local_key() -> Key {
+/// The key every robot publishes its LWM to ([`WORLD_LOCAL_KEY`]).
+pub fn world_local_key() -> Key {
     Key::parse(WORLD_LOCAL_KEY).expect("a valid key")
 }
 

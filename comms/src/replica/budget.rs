@@ -127,6 +127,13 @@ pub struct Budget {
     pub reserve: u64,
 }
 
+impl Budget {
+    /// The time between two messages when they are spread evenly over the game.
+    pub fn interval(&self) -> Duration {
+        self.game / u32::try_from(self.messages.max(1)).unwrap_or(u32::MAX)
+    }
+}
+
 /// Which allowance a frame draws on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Class {

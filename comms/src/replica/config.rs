@@ -84,6 +84,22 @@ impl ReplicaConfig {
         self
     }
 
+    /// Spends `robots`' equal share of the league's `spec`: the budget, frames within the
+    /// league's payload (the MTU lowered to it), and a teammate taken for departed only
+    /// after three of its message intervals (plus 10 s), not three refresh periods:
+    /// under a budget silence is the norm.
+    pub fn with_budget(mut self, spec: &super::BudgetSpec, robots: usize) -> ReplicaConfig {
+        let share = spec.share(robots);
+        if let Some(limit) = spec.payload_limit {
+            self.mtu = self.mtu.min(limit);
+        }
+        self.departed_after = self
+            .departed_after
+            .max(share.interval() * 3 + Duration::from_secs(10));
+        self.budget = Some(share);
+        self
+    }
+
     /// Sets the team key.
     pub fn with_team_key(mut self, key: impl Into<Vec<u8>>) -> ReplicaConfig {
         self.team_key = Some(key.into());
