@@ -2,36 +2,20 @@
 //! unicast only from its `--peer`s, and float vectors cross relay → wire → relay as f64.
 //! Everything sends on 127.0.0.0/8 only, to a group and port of the test's own.
 
+mod support;
+
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::Duration;
 
-use comms::wire::{encode_frame, Frame, Item};
 use comms::{ReplicaConfig, Value};
 use driver::{open_multicast, scratch_group, Driver, DriverConfig, Notice, SocketConfig};
+use support::frame_from;
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 
 fn config(id: u8, group: SocketAddrV4) -> DriverConfig {
     let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
     cfg.socket.group = group;
     cfg
-}
-
-/// A frame from `sender` (team 0, no key) setting `sender.var.x`.
-fn frame_from(sender: u8) -> Vec<u8> {
-    let frame = Frame {
-        team: 0,
-        sender,
-        incarnation: 1,
-        seq: 1,
-        clock: Default::default(),
-        items: vec![Item::Update {
-            path: "x".into(),
-            value: Value::Int(i64::from(sender)),
-            version: 1,
-            age_us: 0,
-        }],
-    };
-    encode_frame(&frame, None)
 }
 
 /// A plain socket on a loopback address of its own choosing.

@@ -4,12 +4,14 @@
 //! stranger, and keep going when the OS refuses a send. Everything stays on
 //! 127.0.0.0/8, on a port of the test's own.
 
+mod support;
+
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::Duration;
 
-use comms::wire::{encode_frame, Frame, Item};
 use comms::{ReplicaConfig, Value};
 use driver::{scratch_group, Driver, DriverConfig, DriverError, Handle, Notice, Transport};
+use support::frame_from;
 
 fn config(id: u8, transport: Transport, port: u16, iface: [u8; 4]) -> DriverConfig {
     let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
@@ -22,24 +24,6 @@ fn config(id: u8, transport: Transport, port: u16, iface: [u8; 4]) -> DriverConf
 /// A port no other test uses (the kernel's pick).
 fn free_port() -> u16 {
     scratch_group().expect("a free UDP port").port()
-}
-
-/// A frame from `sender` (team 0, no key) setting `sender.var.x`.
-fn frame_from(sender: u8) -> Vec<u8> {
-    let frame = Frame {
-        team: 0,
-        sender,
-        incarnation: 1,
-        seq: 1,
-        clock: Default::default(),
-        items: vec![Item::Update {
-            path: "x".into(),
-            value: Value::Int(i64::from(sender)),
-            version: 1,
-            age_us: 0,
-        }],
-    };
-    encode_frame(&frame, None)
 }
 
 /// Waits (with a generous cap) until `key` holds `value` on the subscription.
