@@ -9,6 +9,7 @@ use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use std::collections::BTreeMap;
+use std::ops::Deref;
 
 /// Settings of a [`GlobalModel`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,6 +48,14 @@ pub struct GlobalConfig {
     /// (m), before both positions' uncertainty is added: the robot's radius, the ball's,
     /// and the reach of a foot.
     pub kick_reach_m: f64,
+    /// Sparse messages (a league's message budget): a teammate whose messages come more
+    /// than this far apart (s) is taken by its ball *track*, not by the sighting batches
+    /// its messages carry. Under a budget a message carries the batch of one control tick
+    /// (what was batched between messages was never sent), while the track holds every
+    /// sighting the teammate made. The track's new information since its previous message
+    /// is fused (see `track_measurement`), so nothing is counted twice. `None`: batches
+    /// only (the default; messages every control tick).
+    pub track_after_s: Option<f64>,
 }
 
 impl Default for GlobalConfig {
@@ -64,6 +73,7 @@ impl Default for GlobalConfig {
             own_restart_after: 2,
             teammate_restart_after: 3,
             kick_reach_m: 0.5,
+            track_after_s: None,
         }
     }
 }
@@ -104,6 +114,9 @@ pub struct GlobalStats {
     pub kicks: u64,
     /// Kicks refused: the kicker was not within reach of the team ball.
     pub kicks_refused: u64,
+    /// Teammates' tracks taken for their new information (sparse messages, see
+    /// [`GlobalConfig::track_after_s`]).
+    pub tracks: u64,
 }
 
 /// Where a [`TeamBall`] came from.
@@ -163,7 +176,7 @@ pub struct GlobalModel {
     committed: Option<BallEstimate>,
     /// Observations not yet committed, in time order, and the state after each
     /// (checkpoints, so that a late arrival replays only what follows it).
-    pending: Vec<FieldObservation>,
+    pending: Vec<Measured>,
     after: Vec<BallEstimate>,
     head: Option<BallEstimate>,
     last_support_t_s: f64,
@@ -173,7 +186,7 @@ pub struct GlobalModel {
     last_accepted_obs_t_s: f64,
     /// Every robot's rejected observations not yet older than the committed ball: after
     /// a restart, those that agree with the new track are fused at their own times.
-    rejected: Vec<FieldObservation>,
+    rejected: Vec<Measured>,
     /// The track as it was before the latest restart, so that a kick whose report arrives
     /// after the cameras already restarted the ball can rewind to it (see `kicked`).
     rewind: Option<Rewind>,
@@ -186,10 +199,58 @@ struct Rewind {
     /// The restarted track begins here.
     restart_t_s: f64,
     committed: BallEstimate,
-    pending: Vec<FieldObservation>,
+    pending: Vec<Measured>,
     after: Vec<BallEstimate>,
     head: Option<BallEstimate>,
-    rejected: Vec<FieldObservation>,
+    rejected: Vec<Measured>,
+}
+
+/// One piece of ball information for the team track: a position batch (what a camera
+/// saw), or the new information in a teammate's track (sparse messages), whose position
+/// part gates, challenges and orders it like a batch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Measured {
+    obs: FieldObservation,
+    /// The whole state (x, y, vx, vy) measured, with its covariance, when it came from a
+    /// track; `obs` is then its position part.
+    state: Option<(Vector4<f64>, Matrix4<f64>)>,
+}
+
+impl Deref for Measured {
+    type Target = FieldObservation;
+    fn deref(&self) -> &FieldObservation {
+        &self.obs
+    }
+}
+
+impl From<FieldObservation> for Measured {
+    fn from(obs: FieldObservation) -> Self {
+        Measured { obs, state: None }
+    }
+}
+
+impl Measured {
+    /// `est` updated by this measurement at its time (`None`: it could not be applied).
+    fn apply(&self, model: &BallModel, est: &BallEstimate) -> Option<BallEstimate> {
+        let Some((z, r)) = self.state else {
+            return update(model, est, &self.obs, None).ok().map(|(e, _)| e);
+        };
+        let prior = est.predict_to(model, self.obs.t_s);
+        let u = kalman::update(
+            &prior.mean,
+            &prior.cov,
+            &(z - prior.mean),
+            &Matrix4::identity(),
+            &r,
+            None,
+        )
+        .ok()?;
+        Some(BallEstimate {
+            t_s: prior.t_s,
+            mean: u.mean,
+            cov: (u.cov + u.cov.transpose()) * 0.5,
+        })
+    }
 }
 
 impl GlobalModel {
@@ -258,6 +319,8 @@ impl GlobalModel {
             rejected_run: Vec::new(),
             heard: Heard::default(),
         });
+        let first = rec.heard == Heard::default();
+        let previous = rec.lwm;
         let Some(missed) = rec.heard.take(lwm, self.config.stale_after_s) else {
             self.stats.duplicates += 1;
             return Ingest::Duplicate;
@@ -265,15 +328,36 @@ impl GlobalModel {
         rec.lwm = *lwm;
         rec.received_t_s = now_s;
 
-        // Oldest first, so that the filter sees them in time order: the repeats of
-        // messages lost in between, then the message's own batch.
-        for obs in missed.into_iter().flatten() {
-            self.stats.recovered += 1;
-            self.observe(robot, &obs, lwm, now_s);
-        }
-        let result = match lwm.observation {
-            None => Ingest::NoObservation,
-            Some(obs) => self.observe(robot, &obs, lwm, now_s),
+        let sparse = robot != self.own_id
+            && self
+                .config
+                .track_after_s
+                .is_some_and(|gap| first || lwm.t_s - previous.t_s > gap);
+        let result = if sparse {
+            // What the teammate's track learnt since its previous message (its batches
+            // hold one tick of it).
+            let before = (!first)
+                .then_some(previous)
+                .filter(|p| lwm.kick.is_none_or(|k| k.kick.t_s <= p.t_s) && p.t_s < lwm.t_s);
+            let model = self.config.ball;
+            match track_measurement(&model, before.and_then(|p| p.ball).as_ref(), lwm) {
+                None => Ingest::NoObservation,
+                Some(m) => {
+                    self.stats.tracks += 1;
+                    self.observe(robot, &m, lwm, now_s)
+                }
+            }
+        } else {
+            // Oldest first, so that the filter sees them in time order: the repeats of
+            // messages lost in between, then the message's own batch.
+            for obs in missed.into_iter().flatten() {
+                self.stats.recovered += 1;
+                self.observe(robot, &obs.into(), lwm, now_s);
+            }
+            match lwm.observation {
+                None => Ingest::NoObservation,
+                Some(obs) => self.observe(robot, &obs.into(), lwm, now_s),
+            }
         };
         let rec = self.robots.get_mut(&robot).expect("record inserted above");
         if let Some(kick) = rec.heard.kick(lwm) {
@@ -287,11 +371,12 @@ impl GlobalModel {
     fn observe(
         &mut self,
         robot: u8,
-        obs: &FieldObservation,
+        measured: &Measured,
         lwm: &LocalWorldModel,
         now_s: f64,
     ) -> Ingest {
         let model = self.config.ball;
+        let obs = &measured.obs;
         if obs.t_s < self.forgotten_before_t_s {
             self.stats.late += 1;
             return Ingest::Late;
@@ -331,7 +416,7 @@ impl GlobalModel {
             rec.last_rejected_t_s = Some(now_s);
             self.stats.rejected += 1;
             let at = self.rejected.partition_point(|p| p.t_s <= obs.t_s);
-            self.rejected.insert(at, *obs);
+            self.rejected.insert(at, *measured);
             self.challenge(robot, obs, now_s);
             return Ingest::Rejected(d2);
         }
@@ -340,19 +425,19 @@ impl GlobalModel {
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(obs.t_s);
         self.stats.accepted += 1;
-        self.insert_pending(obs, &prior);
+        self.insert_pending(measured, &prior);
         Ingest::Accepted(d2)
     }
 
     /// Fuses `obs` (which passed the gate against `prior`, the state at its time) into the
     /// pending observations and replays the ones after it.
-    fn insert_pending(&mut self, obs: &FieldObservation, prior: &BallEstimate) {
+    fn insert_pending(&mut self, obs: &Measured, prior: &BallEstimate) {
         let model = self.config.ball;
         let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
         self.pending.insert(at, *obs);
         // `prior` is the state just before this observation: update it, then carry the
         // observations after it (arrived earlier, made later) forward from there.
-        let next = update(&model, prior, obs, None).map_or(*prior, |(e, _)| e);
+        let next = obs.apply(&model, prior).unwrap_or(*prior);
         self.after.insert(at, next);
         self.replay_from(at + 1, next);
     }
@@ -362,7 +447,7 @@ impl GlobalModel {
     fn replay_from(&mut self, from: usize, mut state: BallEstimate) {
         let model = self.config.ball;
         for k in from..self.pending.len() {
-            if let Ok((e, _)) = update(&model, &state, &self.pending[k], None) {
+            if let Some(e) = self.pending[k].apply(&model, &state) {
                 state = e;
             }
             self.after[k] = state;
@@ -515,7 +600,7 @@ impl GlobalModel {
             self.kick_velocity(kick, &committed);
             return;
         };
-        let mut late: Vec<FieldObservation> = Vec::new();
+        let mut late: Vec<Measured> = Vec::new();
         if let Some(mut rw) = rewind {
             // Back to the track as it was up to the kick; everything seen since the kick
             // (by either track, fused or not) is gated again against the kicked one.
@@ -625,7 +710,7 @@ impl GlobalModel {
     /// rejected) is gated against the new track and fused at its own time.
     fn restart_with(&mut self, fresh: BallEstimate, now_s: f64) {
         let model = self.config.ball;
-        let mut since: Vec<FieldObservation> = self
+        let mut since: Vec<Measured> = self
             .pending
             .iter()
             .chain(self.rejected.iter())
@@ -794,6 +879,83 @@ impl GlobalModel {
         let b = self.robots.get(&id)?.lwm.ball?;
         Some(b.predict_to(&self.config.ball, now_s).position())
     }
+}
+
+/// The information a teammate's track gained since its previous message, as a measurement
+/// of the whole state at the new message's time: the new track's information minus what
+/// the previous track, rolled forward, already held (the receiver took that one before).
+/// Exact for a track that only filtered sightings in between; the process noise added
+/// meanwhile makes it slightly generous. Directions where the track learnt nothing (a
+/// teammate that did not see the ball, rounding on the wire) carry no information; `None`
+/// when none is left. Without a previous track (the first message, a kick or a restart in
+/// between) the new track is taken whole.
+fn track_measurement(
+    model: &BallModel,
+    previous: Option<&BallEstimate>,
+    lwm: &LocalWorldModel,
+) -> Option<Measured> {
+    /// Below this share of what the new track holds in a direction, a direction learnt
+    /// nothing new (the wire rounds covariances to a few per cent).
+    const NEW_SHARE: f64 = 0.05;
+    /// Variance of a direction that carries no information, m² or m²/s².
+    const NO_INFORMATION_VAR: f64 = 1e6;
+    let track = lwm.ball?;
+    if !track
+        .mean
+        .iter()
+        .chain(track.cov.iter())
+        .all(|v| v.is_finite())
+    {
+        return None;
+    }
+    let info_new = track.cov.try_inverse()?;
+    let mut info = info_new;
+    let mut info_vec = info_new * track.mean;
+    if let Some(prev) = previous {
+        let rolled = prev.predict_to(model, track.t_s);
+        // A track that jumped away from where the previous one rolled to restarted on a
+        // moved ball: nothing of the previous one is in it.
+        let continues = kalman::mahalanobis_sq(
+            &(track.position() - rolled.position()),
+            &(rolled.position_cov() + track.position_cov()),
+        )
+        .is_some_and(|d2| d2 <= 13.82);
+        if let (true, Some(info_old)) = (continues, rolled.cov.try_inverse()) {
+            info -= info_old;
+            info_vec -= info_old * rolled.mean;
+        }
+    }
+    let info = (info + info.transpose()) * 0.5;
+    let eig = info.symmetric_eigen();
+    let mut cov = Matrix4::zeros();
+    let mut mean = Vector4::zeros();
+    let mut any = false;
+    for k in 0..4 {
+        let v = eig.eigenvectors.column(k).into_owned();
+        let held = v.dot(&(info_new * v));
+        let lambda = eig.eigenvalues[k];
+        // Along v: the measured coordinate and its variance.
+        let (coordinate, var) = if lambda.is_finite() && lambda > NEW_SHARE * held {
+            any = true;
+            (v.dot(&info_vec) / lambda, 1.0 / lambda)
+        } else {
+            (v.dot(&track.mean), NO_INFORMATION_VAR)
+        };
+        mean += v * coordinate;
+        cov += v * v.transpose() * var;
+    }
+    if !any || !mean.iter().chain(cov.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    let cov = (cov + cov.transpose()) * 0.5;
+    Some(Measured {
+        obs: FieldObservation {
+            t_s: track.t_s,
+            position: Vector2::new(mean.x, mean.y),
+            cov: cov.fixed_view::<2, 2>(0, 0).into_owned(),
+        },
+        state: Some((mean, cov)),
+    })
 }
 
 /// The product of two independent Gaussian estimates of the same state at the same time.

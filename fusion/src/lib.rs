@@ -217,4 +217,4 @@ pub use pose::{
     predict as pose_predict, update_landmark, update_range_bearing, LandmarkSighting, Odometry,
     PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting,
 };
-pub use wire::{DecodeError, EncodeError, LWM_WIRE_LEN};
+pub use wire::{DecodeError, EncodeError, LWM_COMPACT_LEN, LWM_WIRE_LEN};

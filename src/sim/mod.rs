@@ -370,6 +370,8 @@ impl Simulation {
             params.stale_after = params.stale_after.max(hold);
             world_model.global.stale_after_s =
                 world_model.global.stale_after_s.max(hold.as_secs_f64());
+            // Each message carries one tick's sightings; the sender's track holds them all.
+            world_model.global.track_after_s = Some(0.0);
         }
         if cfg.compensate_latency && params.latency_compensation.is_zero() {
             params.latency_compensation = cfg.expected_delay();
@@ -493,12 +495,19 @@ impl Simulation {
                 local_now,
                 percepts,
                 board: replica.blackboard(),
+                world_model_waiting: replica.is_pending(&robot::world_local_key()),
+                budget_headroom: replica.budget_headroom(),
                 homes: &self.homes,
                 holders: &self.holders,
             };
             let out = self.robots[i].tick(self.world.config(), &self.cfg.brain, input);
             if let Some(cmd) = out.command {
                 self.world.command_believed(i, cmd, &out.believed);
+            }
+            if out.withdraw {
+                self.harness.withdraw(i, &robot::world_local_key());
+                self.harness
+                    .withdraw(i, &comms::arbitration::heuristic_key());
             }
             for (key, value) in out.writes {
                 let lwm = key == robot::world_local_key();

@@ -23,12 +23,18 @@ use serde::Serialize;
 
 use crate::field::geometry::Pose;
 
-/// The VOI policy's threshold, in σ of the teammates' prediction error.
+/// The VOI policy's threshold, in σ of the robot's own ball estimate.
 pub const VOI_SIGMAS: f64 = 3.0;
+/// Frames the VOI policy keeps in hand under a budget: below this headroom it asks only
+/// for what cannot wait (a ball further off what teammates believe).
+pub const VOI_SPARE: i64 = 3;
+/// Ball error teammates tolerate under the VOI policy, metres: a blind robot walks to a
+/// ball it is told about and looks, so half a metre costs it little.
+pub const VOI_BALL_TOLERANCE_M: f64 = 0.5;
 /// The VOI policy sends at least this often, seconds.
 pub const VOI_HEARTBEAT_S: f64 = 10.0;
 /// Pose change teammates tolerate under the VOI policy: metres, radians.
-pub const VOI_POSE_TOLERANCE: (f64, f64) = (0.5, 0.35);
+pub const VOI_POSE_TOLERANCE: (f64, f64) = (2.0, std::f64::consts::PI);
 
 /// Which sending policy robots use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default, clap::ValueEnum)]
@@ -50,12 +56,33 @@ struct Sent {
     pose: Pose,
     ball: Option<BallEstimate>,
     going: bool,
+    cost: f64,
+    h: f64,
+}
+
+/// What the policy asks of the robot at a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Nothing to send.
+    Quiet,
+    /// Write the world model (newest) for the next frame; `priority` for a goer change
+    /// or a kick report.
+    Send {
+        /// Under a budget it may draw on the reserve at once.
+        priority: bool,
+    },
+    /// A world model written earlier still waits for a frame (the budget's pacing holds
+    /// it) and is no longer worth one: take it back.
+    Withdraw,
 }
 
 /// A robot's sending state.
 #[derive(Debug, Clone, Default)]
 pub struct PolicyState {
+    /// What teammates were last told (the last world model that went out).
     last: Option<Sent>,
+    /// The world model written last, while it waits for a frame.
+    pending: Option<Sent>,
     /// A kick whose report has not been sent yet.
     kick_pending: bool,
 }
@@ -77,28 +104,70 @@ pub struct Now<'a> {
     pub kicked: bool,
     /// The ball model teammates predict with.
     pub model: &'a BallModel,
+    /// The freshest ball track a teammate has told the team (its last message's).
+    pub told: Option<BallEstimate>,
+    /// Its cost to go to the ball as the arbitration weighs it (eq. 19, less the
+    /// hysteresis margin while it goes).
+    pub cost: f64,
+    /// Its cost as posted (eq. 19).
+    pub h: f64,
+    /// The lowest such cost among teammates, as heard (`None`: no teammate counts).
+    pub rival_cost: Option<f64>,
+    /// Under a budget: frames its pacing would let go now (`comms::Replica::
+    /// budget_headroom`); `None` without one.
+    pub headroom: Option<i64>,
 }
 
 impl PolicyState {
-    /// Whether to send this tick: `None` no, `Some(priority)` yes.
-    pub fn decide(&mut self, policy: SendPolicy, now: &Now<'_>) -> Option<bool> {
+    /// What to do this tick. `waiting`: the world model written last has not gone out
+    /// yet (a budget's pacing holds it).
+    pub fn decide(&mut self, policy: SendPolicy, now: &Now<'_>, waiting: bool) -> Action {
         self.kick_pending |= now.kicked;
+        if !waiting {
+            // It went out since the previous tick: that is what teammates now hold.
+            if let Some(sent) = self.pending.take() {
+                self.last = Some(sent);
+            }
+        }
         let decision = match policy {
             SendPolicy::Every => Some(self.urgent(now)),
             SendPolicy::Baseline => self.baseline(now),
             SendPolicy::Voi => self.voi(now),
         };
-        if decision.is_some() {
-            self.last = Some(Sent {
-                t_s: now.t_s,
-                pose: now.pose,
-                ball: now.ball,
-                going: now.going,
-            });
-            // A kick made at this very tick is in the next LWM: it stays pending.
-            self.kick_pending = now.kicked;
+        let state = Sent {
+            t_s: now.t_s,
+            pose: now.pose,
+            ball: now.ball,
+            going: now.going,
+            cost: now.cost,
+            h: now.h,
+        };
+        match decision {
+            Some(priority) => {
+                self.pending = Some(state);
+                // A kick made at this very tick is in the next LWM: it stays pending.
+                self.kick_pending = now.kicked;
+                Action::Send { priority }
+            }
+            // VOI re-weighs a waiting message at every tick (a teammate may have told the
+            // team meanwhile); B-Human's limiter sends its newest once it decided to.
+            None if waiting => match policy {
+                SendPolicy::Voi => {
+                    self.pending = None;
+                    Action::Withdraw
+                }
+                _ => {
+                    self.pending = Some(state);
+                    Action::Send { priority: false }
+                }
+            },
+            None => Action::Quiet,
         }
-        decision
+    }
+
+    /// The cost teammates last heard from this robot (`None` before its first message).
+    pub fn told_cost(&self) -> Option<f64> {
+        self.last.map(|l| l.h)
     }
 
     /// The robot sent a goer change between ticks (with priority).
@@ -142,28 +211,60 @@ impl PolicyState {
         if self.urgent(now) {
             return Some(true);
         }
-        if now.t_s - last.t_s >= VOI_HEARTBEAT_S {
+        // Teammates decide who goes on the cost this robot last told them: news when
+        // its cost now would turn that decision (it would beat the best teammate where
+        // it did not, or no longer beat it).
+        if let Some(rival) = now.rival_cost {
+            if (last.cost < rival) != (now.cost < rival) {
+                return Some(false);
+            }
+        }
+        // Under a budget running short, only what cannot wait asks for a frame, so a few
+        // stay in hand for the moment the ball moves unforeseen.
+        // A robot that sees no ball has the least to tell: it waits for twice the spare.
+        let needed = if now.ball.is_some() {
+            VOI_SPARE
+        } else {
+            2 * VOI_SPARE
+        };
+        let spare = now.headroom.is_none_or(|h| h >= needed);
+        let tolerance = match now.headroom {
+            Some(h) if h < 1 => VOI_BALL_TOLERANCE_M * 3.0,
+            Some(h) if h < VOI_SPARE => VOI_BALL_TOLERANCE_M * 2.0,
+            _ => VOI_BALL_TOLERANCE_M,
+        };
+        if spare && now.t_s - last.t_s >= VOI_HEARTBEAT_S {
             return Some(false);
         }
         let (tol_m, tol_rad) = VOI_POSE_TOLERANCE;
-        if last.pose.at.distance(now.pose.at) > tol_m
-            || fusion::wrap_angle(last.pose.theta_rad - now.pose.theta_rad).abs() > tol_rad
+        if spare
+            && (last.pose.at.distance(now.pose.at) > tol_m
+                || fusion::wrap_angle(last.pose.theta_rad - now.pose.theta_rad).abs() > tol_rad)
         {
             return Some(false);
         }
+        // What the team was told last about the ball, by this robot or a teammate.
+        let told = match (last.ball, now.told) {
+            (Some(a), Some(b)) => Some(if a.t_s >= b.t_s { a } else { b }),
+            (a, b) => a.or(b),
+        };
         match (last.ball, now.ball) {
             (None, None) => None,
-            // Teammates believe I see a ball I lost, or do not know one I see.
-            (Some(_), None) | (None, Some(_)) => Some(false),
-            (Some(sent), Some(mine)) => {
-                let predicted = sent.predict_to(now.model, now.t_s);
+            // Teammates believe I see a ball I lost.
+            (Some(_), None) => spare.then_some(false),
+            (_, Some(mine)) => {
+                let Some(told) = told else {
+                    return Some(false);
+                };
+                // Teammates' belief: the last told track rolled forward by the model.
+                let predicted = told.predict_to(now.model, now.t_s);
                 let e = mine.position() - predicted.position();
-                let s = predicted.position_cov() + mine.position_cov();
-                let d2 = s.cholesky().map_or(f64::INFINITY, |c| e.dot(&c.solve(&e)));
-                // Vaguer by far: teammates' σ more than three times mine and over 0.5 m.
-                let vague = predicted.position_cov().trace()
-                    > (9.0 * mine.position_cov().trace()).max(0.25);
-                (d2 > VOI_SIGMAS * VOI_SIGMAS || vague).then_some(false)
+                // Along the error, my σ and the told track's σ when it was told (not the
+                // model's growing prediction σ: whether the prediction holds is the point).
+                let dir = e / e.norm().max(1e-9);
+                let cov = mine.position_cov() + told.position_cov();
+                let sigma = dir.dot(&(cov * dir)).max(0.0).sqrt();
+                (e.norm() > (VOI_SIGMAS * sigma).max(tolerance)).then_some(false)
             }
         }
     }

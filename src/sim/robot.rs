@@ -34,6 +34,7 @@ use serde::Serialize;
 use std::time::Duration;
 
 use super::perception;
+use super::policy::Action;
 
 use crate::field::behaviour::{self, Position};
 use crate::field::body::{MotionCommand, Odometry};
@@ -229,6 +230,9 @@ pub struct TickOutput {
     pub writes: Vec<(Key, Value)>,
     /// They carry a goer change or a kick: under a budget they may use its reserve.
     pub priority: bool,
+    /// Take back the world model (and cost) still waiting for a frame: no longer worth
+    /// one.
+    pub withdraw: bool,
     /// The motion command, worked out in the field frame as the robot believes it is
     /// posed (`None`: carry on with the previous one).
     pub command: Option<MotionCommand>,
@@ -259,6 +263,12 @@ pub struct Robot {
     pub lwm: LocalModel,
     /// Its global world model.
     pub gwm: GlobalModel,
+    /// Messages are sparse (a league's budget): publish the compact LWM, which leaves room
+    /// for the arbitration's cost in a 128-byte frame (teammates take the track, not the
+    /// batches).
+    compact: bool,
+    /// The lowest effective cost among teammates at the latest decision.
+    rival_cost: Option<f64>,
     /// The team ball at its latest tick.
     pub team_ball: Option<TeamBall>,
     /// The kick it attempted at its latest tick, if any.
@@ -303,6 +313,13 @@ pub struct TickInput<'a> {
     pub percepts: Percepts,
     /// Its replica's blackboard.
     pub board: &'a Blackboard,
+    /// Its last world model written still waits for a frame (a budget's pacing holds
+    /// it): the robot writes its newest again, so the frame carries what it knows when it
+    /// goes rather than when it decided to send.
+    pub world_model_waiting: bool,
+    /// Its replica's budget headroom (`comms::Replica::budget_headroom`), if it has a
+    /// budget.
+    pub budget_headroom: Option<i64>,
     /// The formation's home spots for the field positions.
     pub homes: &'a [Vec2],
     /// Robot id holding each field position.
@@ -338,6 +355,8 @@ impl Robot {
             ball: None,
             lwm: LocalModel::new(world_model.local, start),
             gwm: GlobalModel::new(id, world_model.global),
+            compact: world_model.global.track_after_s.is_some(),
+            rival_cost: None,
             kicked: None,
             team_ball: None,
             ball_sighting: None,
@@ -441,9 +460,26 @@ impl Robot {
             team_ball_stale: self.team_ball.is_none(),
             kicked: kick.is_some(),
             model: &cfg.world_model.local.ball.model,
+            // What teammates last told the team about the ball: the freshest track heard.
+            told: self
+                .gwm
+                .teammates(t)
+                .iter()
+                .filter_map(|m| m.lwm.ball)
+                .max_by(|a, b| a.t_s.total_cmp(&b.t_s)),
+            headroom: input.budget_headroom,
+            cost: self.arbiter.params().effective_cost(&posted),
+            h: posted.h,
+            rival_cost: self.rival_cost,
         };
-        let send = self.policy.decide(cfg.send_policy, &now);
-        if send.is_none() {
+        let action = self
+            .policy
+            .decide(cfg.send_policy, &now, input.world_model_waiting);
+        if self.compact {
+            // Sparse messages: decide on the cost teammates hold (see `set_told_cost`).
+            self.arbiter.set_told_cost(self.policy.told_cost());
+        }
+        if !matches!(action, Action::Send { .. }) {
             writes.clear();
         }
         if receiver != self.pass_to_posted {
@@ -452,7 +488,8 @@ impl Robot {
         }
         TickOutput {
             writes,
-            priority: send == Some(true),
+            priority: action == (Action::Send { priority: true }),
+            withdraw: action == Action::Withdraw,
             command,
             believed: self.pose_belief,
             kick,
@@ -467,6 +504,12 @@ impl Robot {
         self.decided_at_s = t_s;
         let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
         self.decision = decision;
+        let params = *self.arbiter.params();
+        self.rival_cost = heard
+            .iter()
+            .filter(|c| c.robot != self.id && params.counts(c))
+            .map(|c| params.effective_cost(&c.posted))
+            .min_by(f64::total_cmp);
         self.claim_ages.clear();
         self.claim_ages.extend(
             heard
@@ -593,7 +636,13 @@ impl Robot {
             .gwm
             .team_ball(now_s, own.as_ref())
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
-        msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+        if self.compact {
+            msg.to_compact_bytes()
+                .ok()
+                .map(|b| Value::Bytes(b.to_vec()))
+        } else {
+            msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+        }
     }
 
     /// The team ball if there is a usable one, else the robot's own.

@@ -233,13 +233,7 @@ impl Decision {
 /// `going`, age zero).
 pub fn decide(params: &ArbitrationParams, candidates: &[Candidate]) -> Decision {
     let counted = |c: &&Candidate| params.counts(c);
-    let cost = |c: &Candidate| {
-        if c.posted.going {
-            c.posted.h - params.hysteresis_m
-        } else {
-            c.posted.h
-        }
-    };
+    let cost = |c: &Candidate| params.effective_cost(&c.posted);
     let mut best: Option<(f64, u8, bool)> = None;
     for c in candidates.iter().filter(counted) {
         let k = cost(c);
@@ -297,9 +291,21 @@ pub struct Arbiter {
     /// The goer this robot backed off from: it does not claim while that goer's claim
     /// counts (see [`ArbitrationParams::ack_margin`]).
     deferring_to: Option<u8>,
+    /// The cost its teammates last heard from it, when messages are sparse (see
+    /// [`Arbiter::set_told_cost`]).
+    told: Option<f64>,
 }
 
 impl Arbiter {
+    /// Sparse messages (a league's budget): the cost teammates last heard from this
+    /// robot. It then decides on that cost, as they do, rather than on its own newer one,
+    /// so that every robot weighs the same numbers and they agree on one goer; a sending
+    /// policy sends the newer cost when it would turn the decision. `None`: decide on the
+    /// own current cost (messages every control period).
+    pub fn set_told_cost(&mut self, told: Option<f64>) {
+        self.told = told.filter(|h| h.is_finite());
+    }
+
     /// A robot `me` that starts now. A goalkeeper never competes.
     pub fn new(me: u8, goalkeeper: bool, params: ArbitrationParams) -> Self {
         Self {
@@ -313,6 +319,7 @@ impl Arbiter {
             claimed_at: None,
             claiming_since: BTreeMap::new(),
             deferring_to: None,
+            told: None,
         }
     }
 
@@ -364,8 +371,12 @@ impl Arbiter {
         // Own cost as the team sees it now; own claim as it stands (a robot knows what
         // it decided, and a claim that flips back one latency later would make the goer
         // oscillate with a period of about one latency).
+        let seen = self.own_cost_seen(own_h);
         let own = Posted {
-            h: self.own_cost_seen(own_h),
+            h: match self.told {
+                Some(told) if !self.goalkeeper => told,
+                _ => seen,
+            },
             going: self.going,
         };
         let mut all: Vec<Candidate> = heard
@@ -560,6 +571,16 @@ fn check(key: &'static str, value: f64, ok: bool, rule: &'static str) -> Result<
 impl ArbitrationParams {
     /// Whether `decide` counts this candidate: fresh (a claim to be going for longer), and
     /// with a finite cost below the no-ball cost.
+    /// A posted cost as [`decide`] weighs it: lowered by the hysteresis margin while the
+    /// robot says it is going.
+    pub fn effective_cost(&self, posted: &Posted) -> f64 {
+        if posted.going {
+            posted.h - self.hysteresis_m
+        } else {
+            posted.h
+        }
+    }
+
     pub fn counts(&self, c: &Candidate) -> bool {
         let limit = if c.posted.going {
             self.stale_after.max(self.silent_goer_after)

@@ -10,6 +10,15 @@
 //! Pacing: a frame of ordinary items may go once `remaining game time / ordinary messages
 //! left` has passed since the previous ordinary frame, so what is not spent early is
 //! spread over the rest of the game, and the last messages are not spent before the end.
+//!
+//! Pooling ([`Budget::team`], the default of [`BudgetSpec::share`]): a robot with nothing
+//! to say leaves its share to teammates that have. Every frame carries its sender's frame
+//! counter, so each replica knows how many frames each teammate has sent up to the last
+//! one it heard; the team's frames are paced along one line over the game (its messages
+//! less the reserve and a margin, see [`TeamPool`]). A robot under its equal share of the
+//! line may send whenever the team is under it; one over its share (borrowing what others
+//! left) only while the team is at least one frame per robot under it, so that robots
+//! under their share go first and several borrowers deciding at once cannot overrun it.
 //! Priority items ([`crate::Replica::set_priority`]: a goer change, a kick, a referee
 //! event) may go at once while the reserve lasts. The game clock is an input: by default
 //! the game starts when the replica does; [`crate::Replica::set_game_clock`] sets the
@@ -49,13 +58,19 @@ impl BudgetSpec {
     };
 
     /// One robot's share in a team of `robots`: an equal part of the messages, a tenth
-    /// of it (at least one) kept for priority items.
+    /// of it (at least one) kept for priority items, and the rest pooled with the team's
+    /// (see the module docs; [`Budget::split`] keeps to the equal part alone).
     pub fn share(&self, robots: usize) -> Budget {
-        let messages = self.team_messages / robots.max(1) as u64;
+        let robots = robots.max(1) as u64;
+        let messages = self.team_messages / robots;
         Budget {
             messages,
             game: self.game,
             reserve: (messages / 10).max(1).min(messages),
+            team: Some(TeamPool {
+                messages: self.team_messages,
+                robots,
+            }),
         }
     }
 }
@@ -125,9 +140,35 @@ pub struct Budget {
     pub game: Duration,
     /// Of them, kept for frames with priority items.
     pub reserve: u64,
+    /// The team's budget, when the robots pool their ordinary messages (`None`: this
+    /// robot spends its `messages` alone).
+    pub team: Option<TeamPool>,
+}
+
+/// A team's pooled budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TeamPool {
+    /// Messages the whole team may send over the game.
+    pub messages: u64,
+    /// Robots in the team.
+    pub robots: u64,
+}
+
+impl TeamPool {
+    /// Frames kept back from the pooled line: the robots' reserves are drawn on top of
+    /// it, and three frames per robot cover teammates' frames not heard yet (lost, or on
+    /// their way) and borrowers that decide at once.
+    fn margin(&self, reserve: u64) -> u64 {
+        reserve * self.robots + 3 * self.robots
+    }
 }
 
 impl Budget {
+    /// The same share spent alone: no pooling with the team.
+    pub fn split(self) -> Budget {
+        Budget { team: None, ..self }
+    }
+
     /// The time between two messages when they are spread evenly over the game.
     pub fn interval(&self) -> Duration {
         self.game / u32::try_from(self.messages.max(1)).unwrap_or(u32::MAX)
@@ -154,6 +195,8 @@ pub(crate) struct BudgetState {
     /// Frames drawn on the reserve.
     sent_reserve: u64,
     last_ordinary: Option<Instant>,
+    /// Frames teammates have sent, by the frame counters heard (pooled budgets).
+    heard: u64,
 }
 
 impl BudgetState {
@@ -165,7 +208,36 @@ impl BudgetState {
             sent_ordinary: 0,
             sent_reserve: 0,
             last_ordinary: None,
+            heard: 0,
         }
+    }
+
+    /// Teammates have sent `frames` in all, as far as this robot has heard.
+    pub(crate) fn set_heard(&mut self, frames: u64) {
+        self.heard = frames;
+    }
+
+    /// The team's frames so far, as far as this robot knows.
+    pub(crate) fn team_sent(&self) -> u64 {
+        self.sent + self.heard
+    }
+
+    /// The share of the game played at `now`, in [0, 1].
+    fn played(&self, now: Instant) -> f64 {
+        let game = self.budget.game.as_secs_f64();
+        if game <= 0.0 {
+            return 1.0;
+        }
+        ((game - self.remaining(now).as_secs_f64()) / game).clamp(0.0, 1.0)
+    }
+
+    /// When the share of the game played reaches `share` (now, if it has).
+    fn when_played(&self, now: Instant, share: f64) -> Option<Instant> {
+        if share > 1.0 {
+            return None;
+        }
+        let wait = (share - self.played(now)) * self.budget.game.as_secs_f64();
+        Some(now + Duration::from_secs_f64(wait.max(0.0)))
     }
 
     /// The game clock says `remaining` at `now`.
@@ -179,9 +251,16 @@ impl BudgetState {
         left.saturating_sub(now.saturating_duration_since(at))
     }
 
-    /// Messages left in all.
+    /// Messages left in all: this robot's, or with a pool the team's (as far as this
+    /// robot has heard).
     pub(crate) fn left(&self) -> u64 {
-        self.budget.messages.saturating_sub(self.sent)
+        match self.budget.team {
+            None => self.budget.messages.saturating_sub(self.sent),
+            Some(team) => {
+                let cap = team.messages - team.margin(0) / 2;
+                cap.saturating_sub(self.team_sent())
+            }
+        }
     }
 
     /// Messages sent so far.
@@ -196,6 +275,9 @@ impl BudgetState {
 
     /// When the next ordinary frame may go (`None`: never again this game).
     pub(crate) fn next_ordinary(&self, now: Instant) -> Option<Instant> {
+        if let Some(team) = self.budget.team {
+            return self.next_pooled(now, team);
+        }
         let left = self.ordinary_left();
         if left == 0 {
             return None;
@@ -205,6 +287,61 @@ impl BudgetState {
         };
         let gap = self.remaining(now) / u32::try_from(left).unwrap_or(u32::MAX);
         Some(last + gap)
+    }
+
+    /// Pooled: the team's line over the game, `line(p) = ⌊usable · p⌋ + 1` frames by the
+    /// time a share `p` of it is played, and this robot's equal share of it likewise.
+    fn next_pooled(&self, now: Instant, team: TeamPool) -> Option<Instant> {
+        let usable = team
+            .messages
+            .saturating_sub(team.margin(self.budget.reserve));
+        // This robot's equal part of the team's line (not of its own share less its
+        // reserve: the parts must add up to the line, or the last robot to decide starves).
+        let own_usable = usable / team.robots.max(1);
+        if usable == 0 || self.left() == 0 {
+            return None;
+        }
+        // The line passes `k` frames once ⌊usable · p⌋ ≥ k, i.e. at p = k / usable.
+        let team_at = |k: u64| self.when_played(now, k as f64 / usable as f64);
+        let within_share = if own_usable == 0 {
+            None
+        } else {
+            self.when_played(now, self.sent as f64 / own_usable as f64)
+        };
+        // Within its share: once the team line passes the team's frames and its own line
+        // passes its own.
+        let as_owner = match (team_at(self.team_sent()), within_share) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            _ => None,
+        };
+        // Borrowing: once the team line is a frame per robot ahead.
+        let as_borrower = team_at(self.team_sent() + team.robots);
+        match (as_owner, as_borrower) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Ordinary frames the pacing would let go at `now` before it holds one back: the
+    /// team's line less the team's frames (pooled), or this robot's own line less its
+    /// frames. Negative while the pacing holds frames back. A sending policy keeps a few
+    /// in hand for what cannot wait (a ball that suddenly moves) by asking little of a
+    /// budget running short.
+    pub(crate) fn headroom(&self, now: Instant) -> i64 {
+        let played = self.played(now);
+        let line = |usable: u64| (usable as f64 * played).floor() as i64 + 1;
+        match self.budget.team {
+            Some(team) => {
+                let usable = team
+                    .messages
+                    .saturating_sub(team.margin(self.budget.reserve));
+                line(usable) - self.team_sent() as i64
+            }
+            None => {
+                let usable = self.budget.messages.saturating_sub(self.budget.reserve);
+                line(usable) - self.sent_ordinary as i64
+            }
+        }
     }
 
     /// Whether a frame of `class` may go now.
@@ -278,6 +415,7 @@ mod tests {
             messages: 10,
             game: Duration::from_secs(10),
             reserve: 2,
+            team: None,
         };
         let mut b = BudgetState::new(budget, at(0));
         let mut sent_at = Vec::new();
@@ -312,6 +450,7 @@ mod tests {
             messages: 101,
             game: Duration::from_secs(100),
             reserve: 1,
+            team: None,
         };
         let mut b = BudgetState::new(budget, at(0));
         // Silent for 50 s, then eager: 100 ordinary messages over the last 50 s.
@@ -374,6 +513,7 @@ mod replica_tests {
             messages: 24,
             game: Duration::from_secs(24),
             reserve: 4,
+            team: None,
         };
         let (frames, r) = run(budget, 30_000, &[]);
         assert_eq!(
@@ -394,6 +534,7 @@ mod replica_tests {
             messages: 10,
             game: Duration::from_secs(10),
             reserve: 2,
+            team: None,
         };
         let (frames, r) = run(budget, 12_000, &[500, 600, 5_500]);
         assert!(
@@ -416,7 +557,7 @@ mod replica_tests {
     fn half_a_game_of_an_spl_robot_that_always_has_news_spends_half_its_share() {
         // An SPL robot of five: 240 messages per 1200 s, 24 reserved; a goer change every
         // second asks for the reserve far more often than it lasts.
-        let budget = crate::BudgetSpec::SPL.share(5);
+        let budget = crate::BudgetSpec::SPL.share(5).split();
         let priority: Vec<u64> = (0..600_000).step_by(1000).collect();
         let (frames, r) = run(budget, 600_000, &priority);
         let ordinary_half = (240 - 24) / 2;
@@ -435,6 +576,7 @@ mod replica_tests {
                 messages: 10,
                 game: Duration::from_secs(10),
                 reserve: 1,
+                team: None,
             }),
             mtu: 128,
             ..ReplicaConfig::new(3, 1)
@@ -444,5 +586,113 @@ mod replica_tests {
             .set(at(0), "*.var.image", Value::Bytes(vec![0; 120]))
             .expect_err("120 bytes of value cannot fit a 128-byte frame");
         assert!(err.to_string().contains("128"), "{err}");
+    }
+
+    /// Five replicas of one team on a lossless network (every frame reaches every other
+    /// replica at once) for `until_ms`; robot `i` has news every 10 ms when
+    /// `chatty(i, ms)`. Returns the frames each sent.
+    fn team(budget: Budget, until_ms: u64, chatty: impl Fn(usize, u64) -> bool) -> Vec<u64> {
+        let mut team: Vec<Replica> = (0..5)
+            .map(|i| {
+                let cfg = ReplicaConfig {
+                    budget: Some(budget),
+                    mtu: 128,
+                    ..ReplicaConfig::new(i as u8 + 1, 1)
+                };
+                Replica::new(cfg, 100 + i as u64, at(0)).unwrap()
+            })
+            .collect();
+        let x = Key::parse("*.var.x").unwrap();
+        let mut sent = vec![0u64; 5];
+        let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        for ms in (0..until_ms).step_by(10) {
+            for i in 0..5 {
+                team[i].handle_timeout(at(ms));
+                if chatty(i, ms) {
+                    team[i].set_key(at(ms), &x, Value::Int(ms as i64)).unwrap();
+                }
+                while let Some(t) = team[i].poll_transmit() {
+                    sent[i] += 1;
+                    for (j, other) in team.iter_mut().enumerate() {
+                        if j != i {
+                            other.handle_datagram(at(ms), from, &t.payload);
+                        }
+                    }
+                }
+            }
+        }
+        sent
+    }
+
+    #[test]
+    fn a_pooled_team_lends_the_silent_robots_share_to_the_one_with_news() {
+        // SPL rules over 100 s: 100 messages for the team. Robot 1 always has news; the
+        // others only every 20 s.
+        let spec = crate::BudgetSpec {
+            team_messages: 100,
+            game: Duration::from_secs(100),
+            payload_limit: Some(128),
+        };
+        let sent = team(spec.share(5), 100_000, |i, ms| i == 0 || ms % 20_000 == 0);
+        let total: u64 = sent.iter().sum();
+        assert!(total <= 100, "never beyond the team's budget: {sent:?}");
+        assert!(
+            sent[0] >= 50,
+            "robot 1 spends what the quiet ones leave, far beyond its 20: {sent:?}"
+        );
+        // The same robots, each kept to its own share.
+        let split = team(spec.share(5).split(), 100_000, |i, ms| {
+            i == 0 || ms % 20_000 == 0
+        });
+        assert!(split[0] <= 20, "alone, robot 1 has its share: {split:?}");
+    }
+
+    #[test]
+    fn a_pooled_team_where_everyone_has_news_shares_the_budget_about_equally() {
+        let spec = crate::BudgetSpec {
+            team_messages: 200,
+            game: Duration::from_secs(100),
+            payload_limit: Some(128),
+        };
+        let sent = team(spec.share(5), 100_000, |_, _| true);
+        let total: u64 = sent.iter().sum();
+        assert!(total <= 200, "never beyond the team's budget: {sent:?}");
+        assert!(total >= 150, "and most of it spent: {sent:?}");
+        let (lo, hi) = (sent.iter().min().unwrap(), sent.iter().max().unwrap());
+        assert!(
+            hi - lo <= 8,
+            "no robot starves the others (robots under their share go first): {sent:?}"
+        );
+    }
+
+    #[test]
+    fn a_forged_frame_counter_cannot_use_up_a_pooled_budget() {
+        let spec = crate::BudgetSpec {
+            team_messages: 100,
+            game: Duration::from_secs(100),
+            payload_limit: Some(128),
+        };
+        let cfg = ReplicaConfig {
+            budget: Some(spec.share(5)),
+            mtu: 128,
+            ..ReplicaConfig::new(1, 1)
+        };
+        let mut r = Replica::new(cfg, 1, at(0)).unwrap();
+        // A frame from "robot 7" numbered 1,000,000.
+        let mut w = crate::wire::FrameWriter::new(1, 7, 9, 1_000_000, 128, None);
+        w.push(crate::wire::ItemRef::Update {
+            path: "7.var.x",
+            value: &Value::Int(1),
+            version: 1,
+            age_us: 0,
+        });
+        let forged = w.finish();
+        let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        r.handle_datagram(at(0), from, &forged);
+        let (_, left) = r.budget_status().unwrap();
+        assert!(
+            left >= 100 - 15 - 6,
+            "one frame heard counts for at most 6, whatever its counter says: {left} left"
+        );
     }
 }

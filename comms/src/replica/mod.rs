@@ -33,6 +33,7 @@ use crate::wire::{self, ItemRef, TeamKey};
 mod budget;
 mod clock;
 mod config;
+mod dirty;
 mod events;
 mod peers;
 mod receive;
@@ -61,7 +62,7 @@ pub struct Replica {
     /// When the last full refresh (periodic, or for a joining peer) was queued.
     last_full_refresh: Option<Instant>,
     heartbeat_due: bool,
-    dirty: BTreeSet<String>,
+    dirty: dirty::DirtyQueue,
     refresh_queue: VecDeque<String>,
     talk_out: VecDeque<(String, u64)>,
     heads_out: BTreeSet<String>,
@@ -107,7 +108,7 @@ impl Replica {
             next_refresh: now,
             last_full_refresh: None,
             heartbeat_due: false,
-            dirty: BTreeSet::new(),
+            dirty: dirty::DirtyQueue::default(),
             refresh_queue: VecDeque::new(),
             talk_out: VecDeque::new(),
             heads_out: BTreeSet::new(),
@@ -148,6 +149,7 @@ impl Replica {
     fn advance(&mut self, now: Instant) {
         self.now = self.now.max(now);
         self.board.advance_clock(now);
+        self.note_team_frames();
     }
 
     /// Applies one received update (stamped on this robot's clock) and counts it.
@@ -220,7 +222,7 @@ impl Replica {
         }
         self.board.write(now, key, value)?;
         if global {
-            self.dirty.insert(key.path().to_owned());
+            self.dirty.insert(key.path());
         }
         Ok(())
     }
@@ -244,7 +246,39 @@ impl Replica {
         }
     }
 
-    /// With a budget: messages sent so far and left.
+    /// Whether this robot's value at `key` changed and waits for a frame (a budget's
+    /// pacing holds it): a caller that wants the newest value to go, not the one it had
+    /// when it decided to send, sets it again until this is false.
+    pub fn is_pending(&self, key: &Key) -> bool {
+        self.dirty.contains(key.path())
+    }
+
+    /// With a budget: ordinary frames its pacing would let go now before it holds one
+    /// back (negative while it holds frames back); see [`Budget`].
+    pub fn budget_headroom(&self) -> Option<i64> {
+        self.budget.as_ref().map(|b| b.headroom(self.now))
+    }
+
+    /// Takes back this robot's changed value at `key` while it waits for a frame: it
+    /// stays on the blackboard (and in the refresh) but no longer asks for a frame of its
+    /// own. For a sending policy that re-weighs a held message (a teammate told the team
+    /// meanwhile). Whether it was waiting.
+    pub fn withdraw(&mut self, key: &Key) -> bool {
+        self.urgent.remove(key.path());
+        self.dirty.remove(key.path())
+    }
+
+    /// Tells a pooled budget how many frames teammates have sent.
+    fn note_team_frames(&mut self) {
+        if let Some(b) = &mut self.budget {
+            if b.budget.team.is_some() {
+                b.set_heard(self.peers.values().map(Peer::frames_sent).sum());
+            }
+        }
+    }
+
+    /// With a budget: messages this robot sent so far, and messages left (its own, or
+    /// with a pooled budget the team's as far as this robot has heard).
     pub fn budget_status(&self) -> Option<(u64, u64)> {
         self.budget.as_ref().map(|b| (b.sent(), b.left()))
     }

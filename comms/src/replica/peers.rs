@@ -123,6 +123,16 @@ pub(super) struct Peer {
 }
 
 impl Peer {
+    /// Frames this peer has sent, by the highest frame counters heard from each of its
+    /// lives (a pooled budget counts every one). A counter is the sender's word, so it
+    /// counts for at most twice the frames actually heard, plus four: a forged frame with
+    /// a huge counter cannot use up the team's budget, while losses of up to half a
+    /// teammate's frames are still counted in full.
+    pub(super) fn frames_sent(&self) -> u64 {
+        let claimed = self.highest_seq + self.older.iter().map(|o| o.highest_seq).sum::<u64>();
+        claimed.min(self.frames.saturating_mul(2).saturating_add(4))
+    }
+
     fn new(now: Instant, incarnation: u64, seq: u64, catch_up_until: Option<Instant>) -> Peer {
         Peer {
             incarnation,

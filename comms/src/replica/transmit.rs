@@ -79,6 +79,7 @@ impl Replica {
         if !pending && !self.heartbeat_due {
             return None;
         }
+        self.note_team_frames();
         let class = match &self.budget {
             None => None,
             Some(b) => {
@@ -144,19 +145,33 @@ impl Replica {
             }
             self.talk_out.pop_front();
         }
-        while !full {
-            let Some(path) = self.dirty.first() else {
+        // Priority items first, then the longest waiting. One that does not fit keeps its
+        // place at the head of the line while a few smaller ones behind it may still go.
+        let urgent: Vec<String> = self.urgent.iter().cloned().collect();
+        for path in urgent {
+            match self.board.get_stored(me, &path) {
+                Some(e) if !w.push(update_ref(&path, e, now, age_cap)) => full = true,
+                _ => {
+                    self.dirty.remove(&path);
+                    self.urgent.remove(&path);
+                }
+            }
+        }
+        let mut i = 0;
+        let mut skipped = 0;
+        while skipped < MAX_SKIPPED {
+            let Some(path) = self.dirty.get(i) else {
                 break;
             };
             if let Some(e) = self.board.get_stored(me, path) {
                 if !w.push(update_ref(path, e, now, age_cap)) {
                     full = true;
-                    break;
+                    skipped += 1;
+                    i += 1;
+                    continue;
                 }
             }
-            if let Some(sent) = self.dirty.pop_first() {
-                self.urgent.remove(&sent);
-            }
+            self.dirty.remove_at(i);
         }
         while !full {
             let Some(path) = self.refresh_queue.front() else {
@@ -210,6 +225,9 @@ impl Replica {
         })
     }
 }
+
+/// Changed values that did not fit a frame, after which it is sent as it is.
+const MAX_SKIPPED: usize = 4;
 
 fn update_ref<'a>(path: &'a str, e: &'a Entry, now: Instant, age_cap: u64) -> ItemRef<'a> {
     ItemRef::Update {

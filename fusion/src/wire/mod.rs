@@ -35,6 +35,14 @@
 //! A comms frame carrying the 75 bytes alone is at most 128 bytes (the SPL's message limit)
 //! whatever its counters. An HMAC tag adds 16, which takes a keyed team's frame past 128
 //! (to 144 at most).
+//!
+//! **The compact form** ([`LocalWorldModel::to_compact_bytes`], [`LWM_COMPACT_LEN`] = 43
+//! bytes, version 5) carries no observation batches: bytes 0..37 as above (flag bits 1–3
+//! clear), the kick block (70..75 above) at 37..42, and the kick's contact probability
+//! in the high nibble of byte 42. It is for sparse messages (a league's message budget),
+//! where a receiver takes the sender's ball track rather than its batches (the GWM's
+//! `track_after_s`), and it leaves room in a 128-byte frame for the arbitration's cost.
+//! [`LocalWorldModel::from_bytes`] reads both forms.
 //! The kick's speed and direction steps are added to its σ's (the time step, ≤ 2.5 ms, is
 //! not: 1 cm at 4 m/s).
 //!
@@ -60,6 +68,14 @@ use thiserror::Error;
 
 /// Bytes of an encoded LWM.
 pub const LWM_WIRE_LEN: usize = 75;
+/// Bytes of an LWM in the compact form (no observation batches).
+pub const LWM_COMPACT_LEN: usize = 43;
+/// The compact form's version.
+const COMPACT_VERSION: u8 = 5;
+/// Where the compact form keeps the fixed part, the kick block and the contact nibble.
+const COMPACT_FIXED: usize = 37;
+const COMPACT_KICK_AT: usize = 37;
+const COMPACT_CONTACT_AT: usize = 42;
 /// Version 4 added the kick's contact probability (top bits of byte 47).
 const VERSION: u8 = 4;
 /// Where the contact probability's 4 bits sit: the high byte of the own batch's age.
@@ -91,7 +107,7 @@ pub enum EncodeError {
 /// Why [`crate::LocalWorldModel::from_bytes`] rejected a message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum DecodeError {
-    /// The message is not [`LWM_WIRE_LEN`] bytes long.
+    /// The message is neither [`LWM_WIRE_LEN`] nor [`LWM_COMPACT_LEN`] bytes long.
     #[error("LWM message is {got} bytes, expected {expected}")]
     Length {
         /// Bytes required.
@@ -99,6 +115,10 @@ pub enum DecodeError {
         /// Bytes received.
         got: usize,
     },
+    /// A compact message sets bits its form does not have (batch flags, the low nibble
+    /// of its contact byte).
+    #[error("compact LWM message sets bits its form does not have")]
+    Compact,
     /// The version nibble is not one this decoder knows.
     #[error("unknown LWM version {got}")]
     Version {
@@ -329,9 +349,43 @@ impl LocalWorldModel {
         Ok(b)
     }
 
-    /// Decodes a received LWM whose snapshot holds at `t_s` on the receiver's clock
-    /// (reception time minus the age reported with it). Safe on untrusted bytes.
+    /// The compact wire form (see the module docs): the snapshot and the kick, no
+    /// observation batches.
+    pub fn to_compact_bytes(&self) -> Result<[u8; LWM_COMPACT_LEN], EncodeError> {
+        let bare = LocalWorldModel {
+            observation: None,
+            earlier: [None; 2],
+            ..*self
+        };
+        let full = bare.to_bytes()?;
+        let mut b = [0u8; LWM_COMPACT_LEN];
+        b[..COMPACT_FIXED].copy_from_slice(&full[..COMPACT_FIXED]);
+        b[0] = (COMPACT_VERSION << 4) | (full[0] & FLAG_BALL);
+        b[COMPACT_KICK_AT..COMPACT_KICK_AT + 5].copy_from_slice(&full[KICK_AT..KICK_AT + 5]);
+        b[COMPACT_CONTACT_AT] = full[CONTACT_AT] & 0xf0;
+        Ok(b)
+    }
+
+    /// Decodes a received LWM, in either form, whose snapshot holds at `t_s` on the
+    /// receiver's clock (reception time minus the age reported with it). Safe on
+    /// untrusted bytes.
     pub fn from_bytes(bytes: &[u8], t_s: f64) -> Result<LocalWorldModel, DecodeError> {
+        if bytes.len() == LWM_COMPACT_LEN {
+            let c = bytes;
+            if c[0] >> 4 != COMPACT_VERSION {
+                return Err(DecodeError::Version { got: c[0] >> 4 });
+            }
+            if c[0] & !FLAG_BALL & 0x0f != 0 || c[COMPACT_CONTACT_AT] & 0x0f != 0 {
+                return Err(DecodeError::Compact);
+            }
+            // Back to the full layout, with no batches, and decoded as one.
+            let mut b = [0u8; LWM_WIRE_LEN];
+            b[..COMPACT_FIXED].copy_from_slice(&c[..COMPACT_FIXED]);
+            b[0] = (VERSION << 4) | (c[0] & FLAG_BALL);
+            b[KICK_AT..KICK_AT + 5].copy_from_slice(&c[COMPACT_KICK_AT..COMPACT_KICK_AT + 5]);
+            b[CONTACT_AT] = c[COMPACT_CONTACT_AT];
+            return Self::from_bytes(&b, t_s);
+        }
         if bytes.len() != LWM_WIRE_LEN {
             return Err(DecodeError::Length {
                 expected: LWM_WIRE_LEN,

@@ -273,3 +273,68 @@ proptest! {
         prop_assert!((k1.t_s - k0.t_s).abs() <= 0.0025 + 1e-9);
     }
 }
+
+#[test]
+fn the_compact_form_is_the_snapshot_and_the_kick_without_batches() {
+    let lwm = sample();
+    let full = lwm.to_bytes().unwrap();
+    let compact = lwm.to_compact_bytes().unwrap();
+    assert_eq!(compact.len(), 43);
+    assert_eq!(compact[0], 0x51, "version 5, ball present, no batch flags");
+    assert_eq!(&compact[1..37], &full[1..37], "the snapshot, byte for byte");
+    assert_eq!(&compact[37..42], &full[70..75], "the kick block");
+    assert_eq!(compact[42], 0xf0, "contact code 15 in the high nibble");
+    let back = LocalWorldModel::from_bytes(&compact, 20.0).unwrap();
+    let expected = LocalWorldModel::from_bytes(&full, 20.0).unwrap();
+    assert_eq!(
+        back,
+        LocalWorldModel {
+            observation: None,
+            earlier: [None; 2],
+            ..expected
+        },
+        "decodes to the full form less its batches"
+    );
+    assert_eq!(back.kick.unwrap().kick.contact_prob, 1.0);
+}
+
+#[test]
+fn a_compact_message_with_bits_its_form_does_not_have_is_refused() {
+    let compact = sample().to_compact_bytes().unwrap();
+    let mut v = compact;
+    v[0] |= 0x02;
+    assert_eq!(
+        LocalWorldModel::from_bytes(&v, 0.0),
+        Err(DecodeError::Compact),
+        "a batch flag with no batch to read"
+    );
+    let mut v = compact;
+    v[42] |= 0x01;
+    assert_eq!(
+        LocalWorldModel::from_bytes(&v, 0.0),
+        Err(DecodeError::Compact)
+    );
+    let mut v = compact;
+    v[0] = 0x41;
+    assert_eq!(
+        LocalWorldModel::from_bytes(&v, 0.0),
+        Err(DecodeError::Version { got: 4 }),
+        "43 bytes are version 5 or nothing"
+    );
+}
+
+proptest! {
+    #[test]
+    fn any_43_bytes_decode_to_finite_pd_covariances_or_an_error(head in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform11(any::<u8>())) {
+        let mut all = [0u8; LWM_COMPACT_LEN];
+        all[..32].copy_from_slice(&head);
+        all[32..].copy_from_slice(&tail);
+        all[0] = 0x50 | (head[0] & 1);
+        all[42] &= 0xf0;
+        if let Ok(lwm) = LocalWorldModel::from_bytes(&all, 1.0) {
+            prop_assert!(lwm.observation.is_none() && lwm.earlier == [None; 2]);
+            prop_assert!(lwm.pose.cov.cholesky().is_some());
+            if let Some(b) = lwm.ball { prop_assert!(b.cov.cholesky().is_some() && b.mean.iter().all(|v| v.is_finite())); }
+        }
+    }
+}

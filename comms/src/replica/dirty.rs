@@ -1,0 +1,90 @@
+//! Changed values waiting for a frame.
+
+use std::collections::{BTreeSet, VecDeque};
+
+/// Changed values waiting for a frame, in the order they first changed; a value set again
+/// while it waits keeps its place. The value that has waited longest goes first, so a
+/// large value that did not fit beside others (a world model beside an arbitration cost
+/// in a 128-byte league frame) goes at the head of the next frame instead of being
+/// starved by small values set again at every tick.
+#[derive(Debug, Default)]
+pub(super) struct DirtyQueue {
+    order: VecDeque<String>,
+    members: BTreeSet<String>,
+}
+
+impl DirtyQueue {
+    /// Marks `path` changed (a no-op if it already waits).
+    pub(super) fn insert(&mut self, path: &str) {
+        if !self.members.contains(path) {
+            self.members.insert(path.to_owned());
+            self.order.push_back(path.to_owned());
+        }
+    }
+
+    pub(super) fn is_empty(&self) -> bool {
+        self.order.is_empty()
+    }
+
+    pub(super) fn contains(&self, path: &str) -> bool {
+        self.members.contains(path)
+    }
+
+    /// The waiting paths, longest-waiting first.
+    pub(super) fn iter(&self) -> impl Iterator<Item = &String> {
+        self.order.iter()
+    }
+
+    /// The `i`-th waiting path.
+    pub(super) fn get(&self, i: usize) -> Option<&String> {
+        self.order.get(i)
+    }
+
+    /// Takes the `i`-th waiting path out of the queue.
+    pub(super) fn remove_at(&mut self, i: usize) -> Option<String> {
+        let path = self.order.remove(i)?;
+        self.members.remove(&path);
+        Some(path)
+    }
+
+    /// Takes `path` out of the queue, wherever it waits.
+    pub(super) fn remove(&mut self, path: &str) -> bool {
+        if !self.members.remove(path) {
+            return false;
+        }
+        if let Some(i) = self.order.iter().position(|p| p == path) {
+            self.order.remove(i);
+        }
+        true
+    }
+
+    pub(super) fn pop_first(&mut self) -> Option<String> {
+        self.remove_at(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_value_set_again_keeps_its_place_and_the_longest_waiting_goes_first() {
+        let mut q = DirtyQueue::default();
+        q.insert("world.local");
+        q.insert("machine.heuristic");
+        q.insert("world.local");
+        let order: Vec<&String> = q.iter().collect();
+        assert_eq!(order, ["world.local", "machine.heuristic"]);
+        assert!(q.remove("world.local"));
+        q.insert("world.local");
+        let order: Vec<&String> = q.iter().collect();
+        assert_eq!(
+            order,
+            ["machine.heuristic", "world.local"],
+            "sent and set again: to the back of the line"
+        );
+        assert_eq!(q.pop_first().as_deref(), Some("machine.heuristic"));
+        assert_eq!(q.iter().count(), 1);
+        assert!(!q.contains("machine.heuristic"));
+    }
+}
