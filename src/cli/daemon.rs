@@ -62,6 +62,12 @@ pub struct DaemonArgs {
     /// Robots sharing the --budget.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u8).range(1..=254))]
     pub team_size: u8,
+    /// Pool the --budget with the team: a robot with nothing to say leaves its share to
+    /// teammates that have, each knowing the team's spending from teammates' frame
+    /// counters. Only when every robot of the team runs huddle with the same --budget:
+    /// the frames of a teammate that does not count (other software) use up the pool.
+    #[arg(long, requires = "budget")]
+    pub budget_pool: bool,
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
@@ -202,6 +208,9 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
             );
         }
         replica = replica.with_budget(&spec, usize::from(args.team_size));
+        if !args.budget_pool {
+            replica.budget = replica.budget.map(comms::Budget::split);
+        }
         tracing::info!(
             "budget: {spec}: this robot's share {} messages per {:?} ({} reserved), frames ≤ {} B",
             share.messages,

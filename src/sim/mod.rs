@@ -780,10 +780,12 @@ impl Simulation {
         let per_robot: Vec<u64> = (0..self.robots.len())
             .map(|i| self.harness.replica(i).map_or(0, |r| r.stats().frames_out))
             .collect();
-        let budget_left = (0..self.robots.len())
-            .filter_map(|i| self.harness.replica(i)?.budget_status())
-            .map(|(_, left)| left)
-            .reduce(|a, b| a + b);
+        // The league counts the team's frames: what is left of the team's messages.
+        let team_sent: u64 = per_robot.iter().sum();
+        let budget_left = self
+            .cfg
+            .budget
+            .map(|spec| spec.team_messages.saturating_sub(team_sent));
         Report {
             budget: self.cfg.budget.map(|b| b.to_string()),
             policy: self.cfg.brain.send_policy,

@@ -7,16 +7,24 @@
 //! - [`SendPolicy::Baseline`]: B-Human's hand limiter as its team reports describe it: at
 //!   least 1 s between messages, and then only when the robot moved ≥ 300 mm or turned
 //!   ≥ 5°, its ball moved ≥ 300 mm (or appeared or vanished), its role (going or not)
-//!   changed, or its team ball is stale.
+//!   changed, or its team ball is stale. Once it decided to send, it sends its newest
+//!   state when the budget lets the frame go.
 //! - [`SendPolicy::Voi`] (huddle's): value of information. The robot runs, for itself,
-//!   the predictor its teammates run on its last message — its last sent ball estimate
-//!   rolled forward by the ball model — and sends when what it knows now differs from
-//!   that prediction by more than [`VOI_SIGMAS`] σ (of the prediction and its own
-//!   estimate together), when the prediction has grown vaguer than what it knows by far
-//!   (teammates have lost track of a ball it sees), when it moved or turned more than
-//!   teammates can tolerate for formation and passes, and otherwise once every
-//!   [`VOI_HEARTBEAT_S`] so teammates know it is alive. A kick and a goer change go with
-//!   priority (the replica may spend its reserve on them at once), under both policies.
+//!   the predictor its teammates run: the last ball track anyone told the team (itself or
+//!   a teammate) rolled forward by the ball model. It sends when its own ball is off that
+//!   prediction by more than [`VOI_SIGMAS`] σ (its own and the told track's) *and* its
+//!   message would move teammates' belief by more than they tolerate
+//!   ([`VOI_BALL_TOLERANCE_M`]; a Kalman step of their predicted σ against its own, so a
+//!   robot far from the ball, seeing it vaguely, stays quiet); when its cost would turn
+//!   the team's decision of who goes; while two robots claim the ball (once a second);
+//!   when it moved more than teammates tolerate; and once every [`VOI_HEARTBEAT_S`]. It
+//!   re-weighs a message the budget holds back at every tick and withdraws it when a
+//!   teammate told the team meanwhile. Under a budget running short it keeps
+//!   [`VOI_SPARE`] frames in hand (the tolerance grows, pose and heartbeat wait), so a
+//!   ball that moves unforeseen goes out at once.
+//! - Under both: a kick and a goer change go with priority (the replica may spend its
+//!   reserve on them at once), and under a budget a goer's claim goes again before
+//!   teammates would drop it (`keepalive_s`).
 
 use fusion::{BallEstimate, BallModel};
 use serde::Serialize;
@@ -25,6 +33,8 @@ use crate::field::geometry::Pose;
 
 /// The VOI policy's threshold, in σ of the robot's own ball estimate.
 pub const VOI_SIGMAS: f64 = 3.0;
+/// While two robots claim the ball, the VOI policy repeats its claim this often, s.
+pub const VOI_CONFLICT_REPEAT_S: f64 = 1.0;
 /// Frames the VOI policy keeps in hand under a budget: below this headroom it asks only
 /// for what cannot wait (a ball further off what teammates believe).
 pub const VOI_SPARE: i64 = 3;
@@ -111,6 +121,13 @@ pub struct Now<'a> {
     pub cost: f64,
     /// Its cost as posted (eq. 19).
     pub h: f64,
+    /// Under a budget: teammates drop what this robot said once it is twice this old
+    /// (s); a goer's claim goes again before then, under either policy (a goer pinned at
+    /// a ball that moves nowhere would otherwise fall silent, be dropped, and go on
+    /// unaware beside the next goer).
+    pub keepalive_s: Option<f64>,
+    /// A teammate also claims to be going, as heard.
+    pub rival_going: bool,
     /// The lowest such cost among teammates, as heard (`None`: no teammate counts).
     pub rival_cost: Option<f64>,
     /// Under a budget: frames its pacing would let go now (`comms::Replica::
@@ -171,10 +188,19 @@ impl PolicyState {
     }
 
     /// The robot sent a goer change between ticks (with priority).
-    pub fn sent_going(&mut self, going: bool) {
+    pub fn sent_going(&mut self, going: bool, h: f64, cost: f64) {
         if let Some(last) = &mut self.last {
             last.going = going;
+            last.h = h;
+            last.cost = cost;
         }
+    }
+
+    /// A goer whose claim is about to be dropped by teammates says it again, with
+    /// priority (a robot that does not go loses nothing much when its cost is dropped).
+    fn keepalive(&self, now: &Now<'_>) -> Option<bool> {
+        let (last, keepalive) = (self.last?, now.keepalive_s?);
+        (now.going && now.t_s - last.t_s >= keepalive).then_some(true)
     }
 
     /// A goer change or a kick report waiting: priority.
@@ -189,6 +215,9 @@ impl PolicyState {
         };
         if self.urgent(now) {
             return Some(true);
+        }
+        if let Some(keepalive) = self.keepalive(now) {
+            return Some(keepalive);
         }
         if now.t_s - last.t_s < 1.0 {
             return None;
@@ -211,6 +240,9 @@ impl PolicyState {
         if self.urgent(now) {
             return Some(true);
         }
+        if let Some(keepalive) = self.keepalive(now) {
+            return Some(keepalive);
+        }
         // Teammates decide who goes on the cost this robot last told them: news when
         // its cost now would turn that decision (it would beat the best teammate where
         // it did not, or no longer beat it).
@@ -218,6 +250,12 @@ impl PolicyState {
             if (last.cost < rival) != (now.cost < rival) {
                 return Some(false);
             }
+        }
+        // Two goers: one of them has not heard the other's latest (a lost frame). Saying
+        // it again, at most once a second and from the reserve (it is a goer's claim),
+        // lets both decide on the same numbers.
+        if now.going && now.rival_going && now.t_s - last.t_s >= VOI_CONFLICT_REPEAT_S {
+            return Some(true);
         }
         // Under a budget running short, only what cannot wait asks for a frame, so a few
         // stay in hand for the moment the ball moves unforeseen.
@@ -259,12 +297,17 @@ impl PolicyState {
                 // Teammates' belief: the last told track rolled forward by the model.
                 let predicted = told.predict_to(now.model, now.t_s);
                 let e = mine.position() - predicted.position();
-                // Along the error, my σ and the told track's σ when it was told (not the
-                // model's growing prediction σ: whether the prediction holds is the point).
+                // Along the error: is it real (beyond my σ and the told track's σ when
+                // it was told), and how far would my message move teammates' belief (a
+                // Kalman step: their predicted σ against mine)? A robot far from the ball,
+                // seeing it vaguely, moves a well-told belief little.
                 let dir = e / e.norm().max(1e-9);
-                let cov = mine.position_cov() + told.position_cov();
-                let sigma = dir.dot(&(cov * dir)).max(0.0).sqrt();
-                (e.norm() > (VOI_SIGMAS * sigma).max(tolerance)).then_some(false)
+                let along = |p: fusion::nalgebra::Matrix2<f64>| dir.dot(&(p * dir)).max(0.0);
+                let (mine_var, told_var) = (along(mine.position_cov()), along(told.position_cov()));
+                let significant = e.norm() > VOI_SIGMAS * (mine_var + told_var).sqrt();
+                let theirs = along(predicted.position_cov());
+                let shift = e.norm() * theirs / (theirs + mine_var).max(1e-12);
+                (significant && shift > tolerance).then_some(false)
             }
         }
     }

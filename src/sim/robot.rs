@@ -269,6 +269,8 @@ pub struct Robot {
     compact: bool,
     /// The lowest effective cost among teammates at the latest decision.
     rival_cost: Option<f64>,
+    /// … and whether one of them claimed to be going.
+    rival_going: bool,
     /// The team ball at its latest tick.
     pub team_ball: Option<TeamBall>,
     /// The kick it attempted at its latest tick, if any.
@@ -357,6 +359,7 @@ impl Robot {
             gwm: GlobalModel::new(id, world_model.global),
             compact: world_model.global.track_after_s.is_some(),
             rival_cost: None,
+            rival_going: false,
             kicked: None,
             team_ball: None,
             ball_sighting: None,
@@ -471,6 +474,10 @@ impl Robot {
             cost: self.arbiter.params().effective_cost(&posted),
             h: posted.h,
             rival_cost: self.rival_cost,
+            rival_going: self.rival_going,
+            keepalive_s: self
+                .compact
+                .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
         };
         let action = self
             .policy
@@ -505,11 +512,15 @@ impl Robot {
         let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
         self.decision = decision;
         let params = *self.arbiter.params();
-        self.rival_cost = heard
-            .iter()
-            .filter(|c| c.robot != self.id && params.counts(c))
+        let rivals = || {
+            heard
+                .iter()
+                .filter(|c| c.robot != self.id && params.counts(c))
+        };
+        self.rival_cost = rivals()
             .map(|c| params.effective_cost(&c.posted))
             .min_by(f64::total_cmp);
+        self.rival_going = rivals().any(|c| c.posted.going);
         self.claim_ages.clear();
         self.claim_ages.extend(
             heard
@@ -537,7 +548,11 @@ impl Robot {
         let (_, posted) = self.decide(t_s, board, local_now);
         let changed = posted.going != was;
         if changed {
-            self.policy.sent_going(posted.going);
+            let cost = self.arbiter.params().effective_cost(&posted);
+            self.policy.sent_going(posted.going, posted.h, cost);
+            if self.compact {
+                self.arbiter.set_told_cost(self.policy.told_cost());
+            }
         }
         changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))
     }

@@ -155,11 +155,13 @@ pub struct TeamPool {
 }
 
 impl TeamPool {
-    /// Frames kept back from the pooled line: the robots' reserves are drawn on top of
-    /// it, and three frames per robot cover teammates' frames not heard yet (lost, or on
-    /// their way) and borrowers that decide at once.
-    fn margin(&self, reserve: u64) -> u64 {
-        reserve * self.robots + 3 * self.robots
+    /// Frames kept back from the pooled line: three per robot, for teammates' frames not
+    /// heard yet (lost, or on their way) and robots that decide at once. Priority frames
+    /// count on the line like any other (so ordinary ones wait after them) and may go
+    /// beyond it, from each robot's paced reserve, up to half the margin short of the
+    /// team's messages: the team never spends more than its budget.
+    fn margin(&self) -> u64 {
+        3 * self.robots
     }
 }
 
@@ -197,7 +199,15 @@ pub(crate) struct BudgetState {
     last_ordinary: Option<Instant>,
     /// Frames teammates have sent, by the frame counters heard (pooled budgets).
     heard: u64,
+    /// Pooled: this robot's credit on its equal part, in frames, as of the share of the
+    /// game `.1` (it accrues with play, up to [`OWNER_CREDIT_MAX`]).
+    credit: (f64, f64),
 }
+
+/// Frames of its equal part a pooled robot may save up: what it leaves beyond this goes to
+/// teammates that borrow, and a robot that borrowed owes nothing (so the robot with the
+/// most to say, the one at the ball, is never starved for having said much).
+const OWNER_CREDIT_MAX: f64 = 2.0;
 
 impl BudgetState {
     pub(crate) fn new(budget: Budget, start: Instant) -> Self {
@@ -209,6 +219,7 @@ impl BudgetState {
             sent_reserve: 0,
             last_ordinary: None,
             heard: 0,
+            credit: (1.0, 0.0),
         }
     }
 
@@ -257,7 +268,7 @@ impl BudgetState {
         match self.budget.team {
             None => self.budget.messages.saturating_sub(self.sent),
             Some(team) => {
-                let cap = team.messages - team.margin(0) / 2;
+                let cap = team.messages - team.margin() / 2;
                 cap.saturating_sub(self.team_sent())
             }
         }
@@ -292,9 +303,7 @@ impl BudgetState {
     /// Pooled: the team's line over the game, `line(p) = ⌊usable · p⌋ + 1` frames by the
     /// time a share `p` of it is played, and this robot's equal share of it likewise.
     fn next_pooled(&self, now: Instant, team: TeamPool) -> Option<Instant> {
-        let usable = team
-            .messages
-            .saturating_sub(team.margin(self.budget.reserve));
+        let usable = team.messages.saturating_sub(team.margin());
         // This robot's equal part of the team's line (not of its own share less its
         // reserve: the parts must add up to the line, or the last robot to decide starves).
         let own_usable = usable / team.robots.max(1);
@@ -303,13 +312,16 @@ impl BudgetState {
         }
         // The line passes `k` frames once ⌊usable · p⌋ ≥ k, i.e. at p = k / usable.
         let team_at = |k: u64| self.when_played(now, k as f64 / usable as f64);
-        let within_share = if own_usable == 0 {
+        let credit = self.credit_at(now, own_usable);
+        let within_share = if credit >= 1.0 {
+            Some(now)
+        } else if own_usable == 0 {
             None
         } else {
-            self.when_played(now, self.sent as f64 / own_usable as f64)
+            self.when_played(now, self.played(now) + (1.0 - credit) / own_usable as f64)
         };
-        // Within its share: once the team line passes the team's frames and its own line
-        // passes its own.
+        // On its own credit: once the team line passes the team's frames and it has a
+        // frame's credit.
         let as_owner = match (team_at(self.team_sent()), within_share) {
             (Some(a), Some(b)) => Some(a.max(b)),
             _ => None,
@@ -322,6 +334,12 @@ impl BudgetState {
         }
     }
 
+    /// Pooled: this robot's credit on its equal part at `now`, frames.
+    fn credit_at(&self, now: Instant, own_usable: u64) -> f64 {
+        let (credit, at) = self.credit;
+        (credit + own_usable as f64 * (self.played(now) - at).max(0.0)).min(OWNER_CREDIT_MAX)
+    }
+
     /// Ordinary frames the pacing would let go at `now` before it holds one back: the
     /// team's line less the team's frames (pooled), or this robot's own line less its
     /// frames. Negative while the pacing holds frames back. A sending policy keeps a few
@@ -332,9 +350,7 @@ impl BudgetState {
         let line = |usable: u64| (usable as f64 * played).floor() as i64 + 1;
         match self.budget.team {
             Some(team) => {
-                let usable = team
-                    .messages
-                    .saturating_sub(team.margin(self.budget.reserve));
+                let usable = team.messages.saturating_sub(team.margin());
                 line(usable) - self.team_sent() as i64
             }
             None => {
@@ -368,6 +384,12 @@ impl BudgetState {
     /// A frame of `class` went at `now`.
     pub(crate) fn spend(&mut self, now: Instant, class: Class) {
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
+        if let Some(team) = self.budget.team {
+            // Every frame draws on the credit while there is some; borrowing owes nothing.
+            let own_usable = team.messages.saturating_sub(team.margin()) / team.robots.max(1);
+            let credit = self.credit_at(now, own_usable);
+            self.credit = ((credit - 1.0).max(0.0), self.played(now));
+        }
         self.sent += 1;
         if class == Class::Ordinary || ordinary {
             self.sent_ordinary += 1;
