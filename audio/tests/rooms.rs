@@ -6,7 +6,10 @@
 use std::process::Command;
 
 use audio::channel::{in_band_power, power, Convolver, RoomSpec, Source, WhiteNoise};
-use audio::evaluation::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
+use audio::evaluation::{
+    run_false_alarm_trial, run_room_false_alarm_trial, run_room_trial, Interference, RoomNoise,
+    RoomTrial,
+};
 use audio::{
     read_wav, write_wav_f32, Decoder, DecoderConfig, Detection, Encoder, EncoderConfig, Message,
     Sender, TeamMessage, TeamPlan,
@@ -108,24 +111,26 @@ fn short_messages_decode_in_a_reverberant_hall_full_of_talkers() {
     }
 }
 
-/// Known failure, left for the next round: in a T60 1.2 s hall at 10 dB, 2 of 24 long
-/// messages come out wrong (the end test after the first frame stops on a continuing
-/// sender in some rooms). The room rows of `huddle audio eval` are short messages.
+/// Long messages in a hall: the second frame's data tones may reach the microphone far
+/// below the first frame's (each tone has its own room response), which once made the end
+/// test stop on a sender that plainly went on, reporting a wrong short. A long message may
+/// be lost when the end cannot be told, never cut short.
 #[test]
-#[ignore = "known failure: 2 of 24 long messages wrong in a T60 1.2 s hall"]
 fn a_long_message_is_not_cut_short_by_its_own_tail() {
-    let mut trial = RoomTrial::new(73, 1.2, 10.0, RoomNoise::White, 24);
-    trial.long_share = 1.0;
-    let out = run_room_trial(&trial).unwrap();
-    assert_eq!(
-        out.wrong, 0,
-        "a long message reported as a short (or garbled)"
-    );
-    assert!(
-        out.correct >= 21,
-        "{} of 24 long messages decoded",
-        out.correct
-    );
+    for seed in [73u64, 80] {
+        let mut trial = RoomTrial::new(seed, 1.2, 10.0, RoomNoise::White, 24);
+        trial.long_share = 1.0;
+        let out = run_room_trial(&trial).unwrap();
+        assert_eq!(
+            out.wrong, 0,
+            "seed {seed}: a long message reported as a short (or garbled)"
+        );
+        assert!(
+            out.correct >= 20,
+            "seed {seed}: {} of 24 long messages decoded",
+            out.correct
+        );
+    }
 }
 
 #[test]
@@ -133,7 +138,54 @@ fn minutes_of_reverberant_babble_say_nothing() {
     let out = run_room_false_alarm_trial(1.5, 0.05, 74);
     assert_eq!(
         out.false_messages, 0,
-        "false messages in 3 min of reverberant babble"
+        "false messages in 3 min of reverberant babble: {:?}",
+        out.detections
+    );
+}
+
+/// Twenty minutes of six talkers, in a T60 1.2 s hall and dry, at the level of a message:
+/// nothing may be reported. Babble is the structured sound the Gaussian false-alarm
+/// argument does not cover (see the decoder docs); seeds 81 and 82 are not among those
+/// `huddle audio eval` reports.
+#[test]
+fn twenty_minutes_of_babble_in_a_hall_and_dry_say_nothing() {
+    let hall = run_room_false_alarm_trial(1.2, 1.0 / 3.0, 81);
+    assert_eq!(
+        hall.false_messages, 0,
+        "false messages in 20 min of reverberant babble: {:?}",
+        hall.detections
+    );
+    let dry = run_false_alarm_trial(Interference::Babble, 1.0 / 3.0, 82);
+    assert_eq!(
+        dry.false_messages, 0,
+        "false messages in 20 min of dry babble: {:?}",
+        dry.detections
+    );
+}
+
+/// The false-message row at full length: ten hours each of reverberant (T60 1.2 s
+/// and 2.0 s) and dry babble, no message may be reported. Takes about ten minutes in
+/// release: `cargo test --release -p audio --test rooms -- --ignored ten_hours`.
+///
+/// Known failure at this commit: the T60 2.0 s hall (seed 84) reports 1 false message
+/// in 10 h (a frame of tones barely above the floor, 0 dB per window); the T60 1.2 s
+/// hall (seed 83) reports none. `huddle audio eval` shows the reported seeds' figures.
+#[test]
+#[ignore = "ten hours of audio per row; known failure: 1 false in 10 h at T60 2.0 s"]
+fn ten_hours_of_babble_in_halls_and_dry_say_nothing() {
+    let mut heard = Vec::new();
+    for (t60, seed) in [(1.2, 83u64), (2.0, 84)] {
+        let out = run_room_false_alarm_trial(t60, 10.0, seed);
+        heard.push((format!("T60 {t60} s hall, seed {seed}"), out.detections));
+    }
+    let dry = run_false_alarm_trial(Interference::Babble, 10.0, 85);
+    heard.push(("dry, seed 85".to_string(), dry.detections));
+    for (row, detections) in &heard {
+        eprintln!("{row}: {} false in 10 h", detections.len());
+    }
+    assert!(
+        heard.iter().all(|(_, d)| d.is_empty()),
+        "false messages in 10 h of babble: {heard:?}"
     );
 }
 

@@ -48,6 +48,31 @@ const STRAY_OVER_VOTE: f64 = 10.0;
 /// makes the slot someone else's signal (see [`Decoder::has_stray_tone`]).
 const STRAY_SHARE: f64 = 0.7;
 
+/// Per-tone false-alarm probability of "present" in one half of a slot (see
+/// [`Decoder::votes_hold_in_each_half`]): lenient, as the test is there to find a tone
+/// that is absent from half of the slot, not to tell a tone from noise.
+const P_HALF_TONE: f64 = 0.2;
+
+/// Tones on each side whose slot sums give a tone's local background (see
+/// [`Decoder::votes_stand_above_their_neighbours`]): ±150 Hz, about a formant's width.
+const NEIGHBOURHOOD: usize = 3;
+
+/// Standard deviations of its noise-only spread a neighbourhood's level must exceed the
+/// floor by before it raises a tone's threshold.
+const LOCAL_Z: f64 = 2.5;
+
+/// Share of the slot at each end left out of the dropout count (see
+/// [`Decoder::votes_sound_steadily`]): the onset is known to some tens of milliseconds, and
+/// a window straddling a misplaced edge reads low for that reason alone.
+const STEADY_EDGE: f64 = 0.1;
+/// Least median window (noise mean 1) of a steady vote tone (see
+/// [`Decoder::votes_sound_steadily`]): the median of a dozen noise windows (ln 2 on
+/// average) exceeds it about once in twenty slots, that of a tone of excess 1 most of
+/// the time, while a tone whose energy came in a few bursts sits at the floor there.
+const MEDIAN_PRESENT: f64 = 1.3;
+/// Least probability, under a steady tone, of as many dropouts as a vote tone shows.
+const P_DROPOUTS: f64 = 1e-3;
+
 /// Shares of the frame's level a leftover tail before the onset may have (see
 /// [`Decoder::sender_sounded_before`]): 0, −20, −15 and −10 dB, all well below the
 /// [`CONTINUATION_SHARE`] a first frame that was missed would sound at.
@@ -82,6 +107,9 @@ impl Decoder {
             energy >= self.frame_threshold(count, P_FRAME_CONFIRM)
         })?;
         let ours = self.sounds_through_slot(frame, &present, t.scale, a, b)
+            && self.votes_hold_in_each_half(frame, &present, t.scale, a, b)
+            && Self::votes_stand_above_their_neighbours(frame, &present, &sums, count)
+            && self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b)
             && !Self::has_stray_tone(frame, &present, &level, &sums, count)
             && !self.has_off_grid_tone(frame, &present, t.scale, a, b);
         ours.then_some(SlotDecision {
@@ -196,6 +224,186 @@ impl Decoder {
             .all(|h| h.0 >= MIN_HALF_SHARE * total * h.1 as f64 / count as f64)
     }
 
+    /// Whether each half of the slot `[a, b)` gives the frame's two basics their 2-of-3
+    /// votes on its own: two of each basic's tones `present` in the slot are present in
+    /// the half too (at the lenient [`P_HALF_TONE`]).
+    ///
+    /// A message's six tones are steady: each sounds through its whole slot. Babble (dry
+    /// or in a hall) assembles a frame from harmonics that each sound for a syllable, a
+    /// fraction of a slot: summed over the slot they pass for tones, yet in one half of it
+    /// a tone a vote rests on is not there at all. [`Decoder::sounds_through_slot`] looks
+    /// at the frame's energy as a whole, which bursts of different tones at different
+    /// times satisfy; this looks at each vote. A real frame's tone misses a half only when
+    /// noise pulls its half-sum below the Gamma quantile at [`P_HALF_TONE`], and a vote
+    /// fails only when two of its three tones do (at the lowest operating SNR about 1e-4
+    /// per basic and half).
+    fn votes_hold_in_each_half(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        if b - a < 4.0 * window_len {
+            // Halves of a window or two: their windows overlap the other half, and the
+            // few windows hold too little evidence for a per-half vote.
+            return true;
+        }
+        let mid = 0.5 * (a + b);
+        [(a, mid), (mid, b)].into_iter().all(|(from, to)| {
+            let Some(half) = self.integrate_slot(scale, from, to) else {
+                return true;
+            };
+            let own = frame.tones();
+            let mut background: Vec<f64> = (0..TONE_COUNT)
+                .filter(|k| !own.contains(k))
+                .map(|k| half.sums[k])
+                .collect();
+            background.sort_unstable_by(|x, y| x.total_cmp(y));
+            let rank = ((1.0 - P_HALF_TONE) * background.len() as f64) as usize;
+            let above_most = background
+                .get(rank.min(background.len().saturating_sub(1)))
+                .copied()
+                .unwrap_or(0.0);
+            let threshold = gamma_upper_quantile(half.count as f64, P_HALF_TONE).max(above_most);
+            [
+                frame.sender.index() as usize,
+                SENDER_COUNT + usize::from(frame.data),
+            ]
+            .into_iter()
+            .all(|basic| {
+                basic_tones(basic)
+                    .iter()
+                    .filter(|&&k| present[k] && half.sums[k] >= threshold)
+                    .count()
+                    >= 2
+            })
+        })
+    }
+
+    /// Whether each of the frame's basics has two `present` tones that also stand out of
+    /// their own neighbourhood: a tone's slot sum must pass the Gamma quantile at
+    /// [`P_TONE_CONFIRM`] scaled by the level of the tones around it (the median slot sum
+    /// of the non-frame tones within [`NEIGHBOURHOOD`] tones, over its noise-only
+    /// expectation, when above 1).
+    ///
+    /// The noise floor is one level for the band times a slowly learnt shape. Speech puts
+    /// its energy where its formants are, for a syllable at a time, and a hall smears it
+    /// over a second: over a slot, whole regions of the band sit several times above the
+    /// floor, and any tone there passes the Gamma test. A message's tone stands above its
+    /// neighbours, which sound only the background; a region of babble does not. Under
+    /// white noise the neighbours read the floor and the test is the Gamma test again.
+    fn votes_stand_above_their_neighbours(
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        sums: &[f64; TONE_COUNT],
+        count: usize,
+    ) -> bool {
+        let own = frame.tones();
+        let n = count.max(1) as f64;
+        let threshold = gamma_upper_quantile(n, P_TONE_CONFIRM);
+        let stands_out = |k: usize| {
+            let around: Vec<f64> = (k.saturating_sub(NEIGHBOURHOOD)..=k + NEIGHBOURHOOD)
+                .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
+                .map(|j| sums[j])
+                .collect();
+            // The median of m Gamma(n) sums over n spreads by about 1.25 / √(m n) under
+            // noise alone: only a level beyond that spread is the neighbourhood's own.
+            let spread = 1.25 / ((around.len().max(1) as f64) * n).sqrt();
+            let local = (median(around) / n - LOCAL_Z * spread).max(1.0);
+            sums[k] >= threshold * local
+        };
+        [
+            frame.sender.index() as usize,
+            SENDER_COUNT + usize::from(frame.data),
+        ]
+        .into_iter()
+        .all(|basic| {
+            basic_tones(basic)
+                .iter()
+                .filter(|&&k| present[k] && stands_out(k))
+                .count()
+                >= 2
+        })
+    }
+
+    /// Whether each of the frame's basics has two `present` tones that sound steadily
+    /// through the slot: a steady tone at level λ (per window, noise mean 1) reads below
+    /// the noise mean in a window with probability `p(λ) = P(r < 1)` (the non-central χ²
+    /// of [`ln_tone_likelihood`]), small once λ is a few times the noise; more such
+    /// dropouts among the slot's central windows than a binomial at `p(λ)` allows at
+    /// [`P_DROPOUTS`] mean the tone's energy came in bursts, not from a tone.
+    ///
+    /// Babble that happens to dwell on a few of our tones (a talker's harmonic held for a
+    /// syllable, smeared by a hall) sums over a slot to what looks like a frame of weak
+    /// tones, standing above their neighbours; in between its bursts each of them falls
+    /// to the floor, which a tone never does. Its level is taken from the median window
+    /// (bursts of babble on a real tone do not lift it) and relative to its neighbourhood
+    /// (see [`Decoder::votes_stand_above_their_neighbours`]), so a real tone in a loud
+    /// region of babble is judged against that region.
+    #[allow(clippy::too_many_arguments)]
+    fn votes_sound_steadily(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        sums: &[f64; TONE_COUNT],
+        count: usize,
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        if b - a < 4.0 * window_len {
+            return true;
+        }
+        let own = frame.tones();
+        let n = count.max(1) as f64;
+        let (from, to) = (a + STEADY_EDGE * (b - a), b - STEADY_EDGE * (b - a));
+        let windows: Vec<&super::windows::WindowRecord> = self
+            .history
+            .iter()
+            .filter(|w| hann_share_inside(w.start as f64, window_len, from, to) >= 0.9)
+            .collect();
+        if windows.len() < 4 {
+            return true;
+        }
+        let steady = |k: usize| {
+            let around: Vec<f64> = (k.saturating_sub(NEIGHBOURHOOD)..=k + NEIGHBOURHOOD)
+                .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
+                .map(|j| sums[j])
+                .collect();
+            let spread = 1.25 / ((around.len().max(1) as f64) * n).sqrt();
+            let raised = median(around.clone()) / n - LOCAL_Z * spread;
+            let local = (median(around) / n).max(1.0);
+            let r: Vec<f64> = windows
+                .iter()
+                .map(|w| f64::from(w.r[scale * TONE_COUNT + k]) / local)
+                .collect();
+            let lambda = (median(r.clone()) - 1.0).max(0.0);
+            let dropouts = r.iter().filter(|&&x| x < 1.0).count();
+            let tail = binomial_upper_tail(r.len(), dropouts, probability_below_noise_mean(lambda));
+            // Where the neighbourhood stands above the floor (speech around), the median
+            // window must also show the tone: a tone made of a few bursts has a median at
+            // the floor, and at that level of λ its dropouts are no surprise.
+            let median_shows = raised <= 1.0 || median(r.clone()) >= MEDIAN_PRESENT;
+            tail >= P_DROPOUTS && median_shows
+        };
+        [
+            frame.sender.index() as usize,
+            SENDER_COUNT + usize::from(frame.data),
+        ]
+        .into_iter()
+        .all(|basic| {
+            basic_tones(basic)
+                .iter()
+                .filter(|&&k| present[k] && steady(k))
+                .count()
+                >= 2
+        })
+    }
+
     /// Whether a tone outside the frame sounds about as loud as the frame's own tones
     /// ([`STRAY_SHARE`] of their median excess), or far louder than a tone a 2-of-3 vote
     /// rests on ([`STRAY_OVER_VOTE`]): the mark of someone else's multi-tone signal that
@@ -231,4 +439,33 @@ impl Decoder {
                 && (level[k] >= STRAY_SHARE * median || level[k] >= STRAY_OVER_VOTE * weakest_vote)
         })
     }
+}
+
+/// `P(r < 1)` for the normalised power `r` of a steady tone of excess `lambda` in noise of
+/// mean 1 (Simpson's rule on the non-central χ² density, 32 intervals).
+pub(super) fn probability_below_noise_mean(lambda: f64) -> f64 {
+    let steps = 32;
+    let h = 1.0 / steps as f64;
+    let density = |r: f64| ln_tone_likelihood(r, lambda).exp();
+    let mut sum = density(0.0) + density(1.0);
+    for i in 1..steps {
+        sum += density(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    (sum * h / 3.0).clamp(0.0, 1.0)
+}
+
+/// `P(X ≥ k)` for `X ~ Binomial(n, p)`.
+pub(super) fn binomial_upper_tail(n: usize, k: usize, p: f64) -> f64 {
+    let p = p.clamp(0.0, 1.0);
+    let mut term = (1.0 - p).powi(n as i32); // P(X = 0)
+    let mut below = 0.0;
+    for i in 0..k.min(n + 1) {
+        below += term;
+        // P(X = i + 1) from P(X = i).
+        term *= (n - i) as f64 / (i + 1) as f64 * p / (1.0 - p).max(1e-300);
+    }
+    if k > n {
+        return 0.0;
+    }
+    (1.0 - below).clamp(0.0, 1.0)
 }

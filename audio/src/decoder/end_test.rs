@@ -69,6 +69,15 @@ const TAILS: usize = STOP_HYPOTHESES.len();
 const CONTINUATION_SHARES: [f64; 2] = [CONTINUATION_SHARE, 1.0];
 /// Number of continuation levels.
 const CONTINUATIONS: usize = CONTINUATION_SHARES.len();
+/// Levels of a second frame's data basic, as shares of the first slot's typical tone
+/// level (0, −7 and −14 dB). In a hall each tone reaches the microphone at its own level
+/// (the room's response at a single frequency varies by ±10 dB and more from tone to
+/// tone), so a second frame's data tones may sound far below the first frame's: tested
+/// only at the typical level, they read as "not there", and a long message whose sender
+/// plainly went on would be cut to a wrong short.
+const DATA_LEVELS: [f64; 3] = [1.0, 0.2, 0.04];
+/// Number of data levels.
+const DATA_LEVEL_COUNT: usize = DATA_LEVELS.len();
 
 /// Expected power share of a stopped tone (its reverberant tail and any leftover) in a
 /// window whose centre lies `tau_s` seconds after the end and that holds `after` of the
@@ -101,30 +110,46 @@ fn leftover_shares(after: f64) -> [f64; TAILS] {
 pub(super) struct Evidence {
     /// From the sender's tones, `[continuation level][stop hypothesis]`.
     llr: [[f64; TAILS]; CONTINUATIONS],
-    /// From each data basic's tones (a second frame sounds one, which one unknown).
-    data_llr: [[[f64; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
+    /// From each data basic's tones (a second frame sounds one, which one unknown, at
+    /// one of [`DATA_LEVELS`]), `[continuation level][stop hypothesis][data level][d]`.
+    data_llr: [[[[f64; DATA_VALUES as usize]; DATA_LEVEL_COUNT]; TAILS]; CONTINUATIONS],
 }
 
 impl Evidence {
     fn new() -> Self {
         Evidence {
             llr: [[0.0; TAILS]; CONTINUATIONS],
-            data_llr: [[[0.0; DATA_VALUES as usize]; TAILS]; CONTINUATIONS],
+            data_llr: [[[[0.0; DATA_VALUES as usize]; DATA_LEVEL_COUNT]; TAILS]; CONTINUATIONS],
         }
     }
 
-    /// The sender's evidence plus the best data basic's (a generalised likelihood ratio),
+    /// The evidence against "stopped": [`Evidence::total`] with the second frame's data
+    /// basic at any level of [`DATA_LEVELS`]. "Stopped" must beat a continuation whose
+    /// data tones sound far below the first frame's, too: in a hall they may.
+    fn against_stop(&self) -> f64 {
+        self.total_over(DATA_LEVEL_COUNT)
+    }
+
+    /// The sender's evidence plus the best data basic's at the typical level (a
+    /// generalised likelihood ratio),
     /// for the continuation level that explains the windows best, against the "stopped"
     /// hypothesis that explains them best: "continues" must beat every stop hypothesis,
     /// "stopped" needs one to beat every continuation level (a slow tail and a
     /// continuation at full level look alike at first; neither decides then).
     fn total(&self) -> f64 {
+        self.total_over(1)
+    }
+
+    /// [`Evidence::total`] with the second frame's data basic at any of the first
+    /// `levels` of [`DATA_LEVELS`].
+    fn total_over(&self, levels: usize) -> f64 {
         (0..TAILS)
             .map(|m| {
                 (0..CONTINUATIONS)
                     .map(|c| {
-                        let best_data = self.data_llr[c][m]
+                        let best_data = self.data_llr[c][m][..levels]
                             .iter()
+                            .flatten()
                             .copied()
                             .fold(f64::NEG_INFINITY, f64::max);
                         self.llr[c][m] + best_data
@@ -192,25 +217,69 @@ impl Evidence {
                     continue;
                 }
                 let r = power(k);
-                for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
-                    for (m, (tail, leftover)) in tails.iter().zip(&leftovers).enumerate() {
-                        if same && alike(*tail, *share) {
-                            continue;
+                if same {
+                    // The same data basic goes on at the level it was measured at, at
+                    // every data level alike.
+                    for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                        for (m, tail) in tails.iter().enumerate() {
+                            if alike(*tail, *share) {
+                                continue;
+                            }
+                            let ended = level * (before * before + tail);
+                            let continued = level * (before * before + share * after * after);
+                            let x = llr(r, ended, continued);
+                            for acc in &mut self.data_llr[ci][m] {
+                                acc[d] += x;
+                            }
                         }
-                        let ended = if same {
-                            level * (before * before + tail)
-                        } else {
-                            level * leftover
-                        };
-                        let continued = if same {
-                            level * (before * before + share * after * after)
-                        } else {
-                            share * level * after * after
-                        };
-                        self.data_llr[ci][m][d] += llr(r, ended, continued);
+                    }
+                    continue;
+                }
+                // Another data basic: "stopped" leaves at most a leftover (per stop
+                // hypothesis), "continues" sounds it at a share and a data level; each
+                // likelihood once, then their differences.
+                let ended: [f64; TAILS] =
+                    std::array::from_fn(|m| ln_tone_likelihood(r, level * leftovers[m]));
+                for (ci, share) in CONTINUATION_SHARES.iter().enumerate() {
+                    for (li, factor) in DATA_LEVELS.iter().enumerate() {
+                        let continued =
+                            ln_tone_likelihood(r, factor * share * level * after * after);
+                        for (m, e) in ended.iter().enumerate() {
+                            self.data_llr[ci][m][li][d] +=
+                                (continued - e).clamp(-LLR_CLIP, LLR_CLIP);
+                        }
                     }
                 }
             }
+        }
+    }
+}
+
+/// The end test's verdict on a slot's end.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum EndVerdict {
+    /// The sender stopped: the message ends with this slot.
+    Stopped,
+    /// The sender goes on: a second frame follows.
+    Continues,
+    /// Neither can be told with the confidence a report needs: the sender's tones went on
+    /// but no data basic did at the level of the first frame, or the evidence leans to
+    /// "continues" too weakly. Reporting a short could be a wrong message, so nothing is
+    /// reported.
+    Unclear,
+}
+
+impl EndVerdict {
+    /// The verdict of a lean (the horizon reached or the stream ended undecided): "continues"
+    /// above `bound`, "stopped" when even the weakest continuation leans no further than
+    /// that, else unclear.
+    fn lean(evidence: &Evidence, bound: f64, effective: impl Fn(f64) -> f64) -> Self {
+        if effective(evidence.total()) > bound {
+            EndVerdict::Continues
+        } else if effective(evidence.against_stop()) <= bound {
+            EndVerdict::Stopped
+        } else {
+            EndVerdict::Unclear
         }
     }
 }
@@ -359,7 +428,7 @@ impl Decoder {
         &self,
         t: &Tracking,
         test: &mut EndTest,
-    ) -> Option<(bool, Option<f64>)> {
+    ) -> Option<(EndVerdict, Option<f64>)> {
         let c = Continuation {
             tracking: t,
             current_data: t.data[usize::from(test.slot.clamp(1, 2) - 1)],
@@ -377,7 +446,7 @@ impl Decoder {
             }
         }
         self.window_end_test(&c, test)
-            .map(|continues| (continues, None))
+            .map(|verdict| (verdict, None))
     }
 
     /// The short/long test after a slot's end, on short Hann windows
@@ -399,7 +468,7 @@ impl Decoder {
         c: &Continuation,
         slot_end: f64,
         st: &mut EndWindows,
-    ) -> Option<(bool, f64)> {
+    ) -> Option<(EndVerdict, f64)> {
         let t = c.tracking;
         let window_len = self.geometry.window_len as f64;
         let slot_len = self.geometry.slot_samples;
@@ -420,7 +489,7 @@ impl Decoder {
             2.0 * (2.0 * std::f64::consts::PI * tone_frequency_hz(k) * scale / rate).cos()
         });
         let normaliser = |k: usize| (t.noise * self.noise.shape[k] * ratio).max(1e-300);
-        let effective = |st: &EndWindows| self.short_window.effective(st.evidence.total(), st.next);
+        let effective = |st: &EndWindows, x: f64| self.short_window.effective(x, st.next);
         loop {
             let start = first + u64::from(st.next) * hop;
             let end = start + len as u64;
@@ -431,7 +500,9 @@ impl Decoder {
                 }
                 if self.eof {
                     let at = self.analyzer.samples_pushed() as f64;
-                    return Some((effective(st) > END_BOUND_NATS / 3.0, at));
+                    let verdict =
+                        EndVerdict::lean(&st.evidence, END_BOUND_NATS / 3.0, |x| effective(st, x));
+                    return Some((verdict, at));
                 }
                 return None;
             };
@@ -453,15 +524,20 @@ impl Decoder {
             st.evidence
                 .add_window(&c, before, after, &tails, |k| powers[k] / normaliser(k));
             st.next += 1;
-            let evidence = effective(st);
+            let evidence = effective(st, st.evidence.total());
             let at = end as f64;
             // "Continues" rests on the best of 21 data basics: a union over them costs
             // ln 21 (the stop side needs no such allowance: the true one is among them).
+            // The lean at the horizon also weighs a second frame whose data tones sound far
+            // below the first frame's (see `DATA_LEVELS`): that is where a long message in
+            // a hall was cut short. Here "stopped" keeps the typical-level test, which
+            // reports a stop within a few windows (weak data hypotheses, each near
+            // neither side, would only slow it).
             if evidence >= END_CONTINUE_NATS + (DATA_VALUES as f64).ln() {
-                return Some((true, at));
+                return Some((EndVerdict::Continues, at));
             }
             if evidence <= -END_BOUND_NATS {
-                return Some((false, at));
+                return Some((EndVerdict::Stopped, at));
             }
             if at >= slot_end + SPRT_HORIZON * slot_len {
                 st.out_of_time = true;
@@ -476,7 +552,7 @@ impl Decoder {
     /// out of time undecided (at low SNR the short windows' lean is the noisier one) or
     /// the stream ends. Out of time, a long message continues with no gap, so its
     /// evidence comes early and strong: a weak lean is a stop.
-    fn window_end_test(&self, c: &Continuation, test: &mut EndTest) -> Option<bool> {
+    fn window_end_test(&self, c: &Continuation, test: &mut EndTest) -> Option<EndVerdict> {
         let t = c.tracking;
         let window_len = self.geometry.window_len as f64;
         let slot_len = self.geometry.slot_samples;
@@ -512,20 +588,19 @@ impl Decoder {
             test.windows.add_window(c, before, after, &tails, |k| {
                 f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise
             });
-            let evidence = test.windows.total();
-            if fallback && evidence >= SPRT_BOUND {
-                verdict = Some(true);
-            } else if fallback && evidence <= -SPRT_BOUND {
-                verdict = Some(false);
+            if fallback && test.windows.total() >= SPRT_BOUND {
+                verdict = Some(EndVerdict::Continues);
+            } else if fallback && test.windows.against_stop() <= -SPRT_BOUND {
+                verdict = Some(EndVerdict::Stopped);
             } else if lean_here && start + window_len >= slot_end + SPRT_HORIZON * slot_len {
-                verdict = Some(evidence > SPRT_BOUND / 3.0);
+                verdict = Some(EndVerdict::lean(&test.windows, SPRT_BOUND / 3.0, |x| x));
             }
             if verdict.is_some() {
                 break;
             }
         }
         if verdict.is_none() && self.eof && lean_here {
-            verdict = Some(test.windows.total() > SPRT_BOUND / 3.0);
+            verdict = Some(EndVerdict::lean(&test.windows, SPRT_BOUND / 3.0, |x| x));
         }
         verdict
     }

@@ -259,3 +259,73 @@ fn two_senders_at_once_is_not_a_message() {
         "two sender basics must be rejected: {got:?}"
     );
 }
+
+#[test]
+fn a_long_message_whose_second_data_is_faint_is_never_cut_to_a_short() {
+    // In a hall each tone reaches the microphone at its own level: here the second frame's
+    // data tones arrive 16 dB below everything else, the sender's tones go on at full
+    // level. The end test after the first frame must not call that "stopped" (a short
+    // would be a wrong message): the long message, or nothing.
+    let rate = 16_000.0;
+    let first = Frame {
+        sender: Sender::RightAttacker,
+        data: 19,
+    };
+    let second = Frame {
+        sender: Sender::RightAttacker,
+        data: 8,
+    };
+    let tone = |k: usize, n: usize, gain: f64| {
+        gain * (2.0 * std::f64::consts::PI * tone_frequency_hz(k) * n as f64 / rate).sin()
+    };
+    let mut x = vec![0.0f32; 16_000];
+    for n in 0..32_000usize {
+        let frame = if n < 16_000 { first } else { second };
+        let s: f64 = frame
+            .tones()
+            .iter()
+            .map(|&k| {
+                // Sender basics are 0–2, data basics 3–23, in each third of the tones.
+                let data = k % 24 >= 3;
+                tone(
+                    k,
+                    n,
+                    if data && n >= 16_000 {
+                        0.05 * 0.158
+                    } else {
+                        0.05
+                    },
+                )
+            })
+            .sum();
+        x.push(s as f32);
+    }
+    x.extend(vec![0.0f32; 24_000]);
+    let sigma = crate::channel::white_sigma_for_in_band_snr(0.0075, 10.0, 16_000);
+    crate::channel::Source::add_to(&mut crate::channel::WhiteNoise::new(15, sigma), &mut x);
+    let got = decode_all(DecoderConfig::default(), &x, 1000);
+    assert!(
+        got.iter()
+            .all(|d| matches!(d.message, Message::Long { .. })),
+        "a short reported for a long message: {got:?}"
+    );
+}
+
+#[test]
+fn dropout_statistics_match_their_distributions() {
+    use super::confirm::{binomial_upper_tail, probability_below_noise_mean};
+    // No tone: the power is Exp(1), P(r < 1) = 1 − 1/e.
+    let p0 = probability_below_noise_mean(0.0);
+    assert!((p0 - (1.0 - (-1.0f64).exp())).abs() < 1e-4, "{p0}");
+    // A loud tone almost never reads below the noise mean; the probability falls with λ.
+    let p = [1.0, 4.0, 9.0, 16.0].map(probability_below_noise_mean);
+    assert!(p.windows(2).all(|w| w[1] < w[0]), "{p:?}");
+    assert!(p[3] < 1e-4, "{p:?}");
+    // Binomial tails: P(X ≥ 0) = 1, P(X ≥ n + 1) = 0, P(X ≥ 2) for Bin(3, 0.5) = 1/2.
+    assert_eq!(binomial_upper_tail(12, 0, 0.3), 1.0);
+    assert_eq!(binomial_upper_tail(3, 4, 0.3), 0.0);
+    assert!((binomial_upper_tail(3, 2, 0.5) - 0.5).abs() < 1e-12);
+    // Bin(12, 0.01) ≥ 3: 2.0562e-4.
+    let t = binomial_upper_tail(12, 3, 0.01);
+    assert!((t / 2.0562e-4 - 1.0).abs() < 0.01, "{t}");
+}

@@ -1,7 +1,7 @@
 //! Following a found frame to a report: decide its first slot, run the end test, decide a
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
-use super::end_test::EndTest;
+use super::end_test::{EndTest, EndVerdict};
 use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
@@ -177,7 +177,12 @@ impl Decoder {
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
         match (test.slot, continues) {
-            (1, false) => {
+            (_, EndVerdict::Unclear) => {
+                // Stopped or not cannot be told: a short would possibly be a long message
+                // cut short, and a second slot is not worth deciding on such evidence.
+                self.end_transmission(slot_end, false);
+            }
+            (1, EndVerdict::Stopped) => {
                 let message = Message::Short {
                     sender: t.sender,
                     data: t.data[0],
@@ -185,12 +190,12 @@ impl Decoder {
                 self.report(t, message, slot_end, decided_at);
                 self.end_transmission(slot_end, false);
             }
-            (1, true) => {
+            (1, EndVerdict::Continues) => {
                 if let Some(tr) = self.tracking.as_mut() {
                     tr.stage = Stage::Slot2;
                 }
             }
-            (_, false) => {
+            (_, EndVerdict::Stopped) => {
                 let value = 21 * u16::from(t.data[0]) + u16::from(t.data[1]);
                 let message = Message::Long {
                     sender: t.sender,
@@ -199,7 +204,7 @@ impl Decoder {
                 self.report(t, message, slot_end, decided_at);
                 self.end_transmission(slot_end, false);
             }
-            (_, true) => {
+            (_, EndVerdict::Continues) => {
                 self.end_transmission(slot_end, true);
             }
         }

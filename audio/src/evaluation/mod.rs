@@ -302,6 +302,8 @@ pub struct FalseAlarmOutcome {
     pub hours: f64,
     /// Messages reported (all false: nothing was sent).
     pub false_messages: usize,
+    /// What was reported, in order (each one false).
+    pub detections: Vec<Detection>,
     /// Samples decoded.
     pub samples: u64,
 }
@@ -325,7 +327,7 @@ pub fn run_false_alarm_trial(kind: Interference, hours: f64, seed: u64) -> False
     };
     let total = (hours * 3600.0 * f64::from(rate)) as u64;
     let mut done = 0u64;
-    let mut false_messages = 0;
+    let mut detections = Vec::new();
     let mut block = vec![0.0f32; rate as usize];
     while done < total {
         let n = (total - done).min(u64::from(rate)) as usize;
@@ -335,18 +337,15 @@ pub fn run_false_alarm_trial(kind: Interference, hours: f64, seed: u64) -> False
             s.add_to(&mut block);
         }
         decoder.push_f32(&block);
-        while decoder.poll_message().is_some() {
-            false_messages += 1;
-        }
+        detections.extend(std::iter::from_fn(|| decoder.poll_message()));
         done += n as u64;
     }
     decoder.finish();
-    while decoder.poll_message().is_some() {
-        false_messages += 1;
-    }
+    detections.extend(std::iter::from_fn(|| decoder.poll_message()));
     FalseAlarmOutcome {
         hours,
-        false_messages,
+        false_messages: detections.len(),
+        detections,
         samples: done,
     }
 }

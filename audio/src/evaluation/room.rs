@@ -210,7 +210,7 @@ pub fn run_room_false_alarm_trial(t60_s: f64, hours: f64, seed: u64) -> super::F
     let mut background = RoomBackground::new(RoomNoise::Babble, seed, t60_s, rate, SIGNAL_POWER);
     let total = (hours * 3600.0 * f64::from(rate)) as u64;
     let mut done = 0u64;
-    let mut false_messages = 0;
+    let mut detections = Vec::new();
     let mut block = vec![0.0f32; rate as usize];
     while done < total {
         let n = (total - done).min(u64::from(rate)) as usize;
@@ -218,18 +218,15 @@ pub fn run_room_false_alarm_trial(t60_s: f64, hours: f64, seed: u64) -> super::F
         block.iter_mut().for_each(|x| *x = 0.0);
         background.add_to(&mut block);
         decoder.push_f32(&block);
-        while decoder.poll_message().is_some() {
-            false_messages += 1;
-        }
+        detections.extend(std::iter::from_fn(|| decoder.poll_message()));
         done += n as u64;
     }
     decoder.finish();
-    while decoder.poll_message().is_some() {
-        false_messages += 1;
-    }
+    detections.extend(std::iter::from_fn(|| decoder.poll_message()));
     super::FalseAlarmOutcome {
         hours,
-        false_messages,
+        false_messages: detections.len(),
+        detections,
         samples: done,
     }
 }
