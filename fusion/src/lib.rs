@@ -199,8 +199,8 @@ mod wire;
 
 pub use ball::{
     field_observation, field_observation_shared, initial_estimate, update as ball_update,
-    BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate,
-    CentralizedBall, FieldObservation, Kick, NetworkLimitedBall,
+    BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate, Boards,
+    CentralizedBall, FieldBall, FieldObservation, Kick, NetworkLimitedBall,
 };
 pub use confidence::{pose_confidence, position_confidence, REFERENCE_RADIUS_M};
 pub use geometry::{

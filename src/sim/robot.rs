@@ -42,6 +42,21 @@ use crate::field::geometry::{Pose, Vec2};
 use crate::field::tactics::{self, choose_play, mode, Mode, PassParams, Play};
 use crate::field::{FieldConfig, KICK_MAX_ANGLE_RAD, KICK_REACH_MARGIN_M};
 
+/// Where a teammate is and how it moves, from its messages.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TeammateMotion {
+    /// The time and place its velocity was last measured to (field frame).
+    anchor: (f64, Vector2<f64>),
+    /// That velocity, m/s.
+    velocity: Vector2<f64>,
+    /// Its latest pose's place.
+    at: Vector2<f64>,
+}
+
+/// A teammate's velocity is measured between its messages' poses at least this far apart,
+/// s.
+const TEAMMATE_VELOCITY_BASELINE_S: f64 = 0.2;
+
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub fn pass_to_key() -> Key {
     Key::parse(tactics::PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
@@ -85,31 +100,60 @@ pub struct WorldModelConfig {
     /// A robot lined up for a kick swings only if its own estimate gives at least this
     /// probability that the ball is within its foot's reach.
     pub kick_min_contact_prob: f64,
+    /// A ball a body walks into leaves at this multiple of the closing speed along the
+    /// contact normal (0: the robot does not report its pushes).
+    pub push_gain: f64,
+    /// At most one push report per this long, s (a dribble is a push every few ticks; the
+    /// LWM carries one kick report at a time).
+    pub push_report_interval_s: f64,
+    /// While a body (this robot, a teammate where its last message put it, an opponent its
+    /// camera sees) is within this of touching the team ball, m, …
+    pub contact_margin_m: f64,
+    /// … the team ball's position σ is widened per axis by `push_gain` × the body's speed
+    /// towards the ball × this, s: the push it may have had that the robot has not heard of
+    /// yet (a teammate's report is a network delay away; an opponent's is never coming).
+    /// An opponent counts at its top speed (nobody measures its velocity).
+    pub contact_horizon_s: f64,
+    /// A push is reported when the robot's own odds that its body touched the ball are at
+    /// least this.
+    pub push_min_contact_prob: f64,
 }
 
 impl Default for WorldModelConfig {
     fn default() -> Self {
-        // The field's ball slows by 0.5/s drag plus 0.6 m/s² rolling friction: at the
-        // 0.5–2 m/s it mostly rolls at, an exponential decay of about 1/s fits (the drag
-        // alone would predict stopping balls rolling on, by metres over a network delay).
-        // The acceleration noise covers the rest: pushes, bounces, kicks that missed. It
-        // was tuned for the team ball's RMSE on seeds 101–110 (`huddle sim --team-q Q`;
-        // the reports use seeds 1–12), 10 seeds each:
+        Self::for_field(&FieldConfig::default())
+    }
+}
+
+impl WorldModelConfig {
+    /// The world models of a team that plays on `field`: its ball model knows the field's
+    /// boards and the friction law the team calibrated on its carpet.
+    pub fn for_field(field: &FieldConfig) -> Self {
+        // The ball as a team would calibrate it on its carpet: 0.5/s drag plus 0.6 m/s²
+        // rolling deceleration, bouncing off the boards with e = 0.5 (σ 0.1: boards and
+        // balls vary), and acceleration noise for what nobody reports (opponents' shoves,
+        // bodies the ball glances off): q(s) = q₀ + q₁ s. Our own pushes are reported like
+        // kicks (`push_gain`). Tuned on seeds 101–110 (`huddle sim --team-q-still Q0
+        // --team-q-speed Q1`; the reports use seeds 1–12), `competition`, 10 seeds each:
         //
-        //   q     team RMSE  NEES   still  rolling  fast   > 99.9% point
-        //   0.85  0.0619 m   1.64   1.70   1.27     3.16   1.73%
-        //   1.5   0.0601 m   1.27   2.10   0.96     2.05   0.72%
-        //   2.5   0.0567 m   1.03   1.22   0.84     1.70   0.46%
-        //   4.0   0.0597 m   0.95   1.80   0.74     1.37   0.22%
-        //
-        // No one q puts every speed band inside its χ² bounds: a rolling ball is
-        // predictable (underconfident at any q that covers the rest), a fast one is not
-        // (bounces and shoves the model does not know).
+        // TUNING-TABLE
         let ball = BallFilterConfig {
-            model: fusion::BallModel::Rolling {
-                friction_per_s: 1.0,
-                accel_noise_m2_per_s3: 2.5,
-            },
+            pose_error_sharing: 2.0,
+            model: fusion::BallModel::Field(fusion::FieldBall {
+                drag_per_s: field.ball.drag_per_s,
+                rolling_decel_mps2: field.ball.rolling_decel_mps2,
+                still_accel_noise_m2_per_s3: 0.05,
+                accel_noise_per_speed: 5.0,
+                still_below_mps: 0.0,
+                boards: Some(fusion::Boards::around(
+                    field.length_m,
+                    field.width_m,
+                    field.border_m,
+                    field.ball.radius_m,
+                    field.ball.restitution,
+                    0.1,
+                )),
+            }),
             ..BallFilterConfig::default()
         };
         Self {
@@ -134,6 +178,13 @@ impl Default for WorldModelConfig {
             // noise (5%), as a real foot does: the kicker reports the same σ.
             kick_speed_sigma_mps: 0.2,
             kick_min_contact_prob: 0.5,
+            // A ball a body walks into leaves at 1.2× the closing speed (the team's
+            // calibration of its robots' bodies and ball).
+            push_gain: 1.2,
+            push_report_interval_s: 0.08,
+            push_min_contact_prob: 0.3,
+            contact_margin_m: 0.1,
+            contact_horizon_s: 0.1,
         }
     }
 }
@@ -259,8 +310,11 @@ pub struct Robot {
     pub lwm: LocalModel,
     /// Its global world model.
     pub gwm: GlobalModel,
-    /// The team ball at its latest tick.
+    /// The team ball at its latest tick (when its GBC is high enough to use).
     pub team_ball: Option<TeamBall>,
+    /// The team ball at its latest tick whatever its GBC, as the robot holds it (widened
+    /// at contact, see [`WorldModelConfig::contact_horizon_s`]).
+    pub team_ball_held: Option<TeamBall>,
     /// The kick it attempted at its latest tick, if any.
     pub kicked: Option<Kick>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
@@ -286,9 +340,13 @@ pub struct Robot {
     pub alive: bool,
     pass_to_posted: i64,
     kick_ready_at_s: f64,
+    push_reported_at_s: f64,
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
     heard: Vec<Option<(u64, u64)>>,
+    /// Per teammate (index = id − 1): the time and place of the message its velocity was
+    /// last measured to, and that velocity (field frame).
+    teammate_motion: Vec<Option<TeammateMotion>>,
     /// What it last told the team, for the sending policy.
     policy: super::policy::PolicyState,
     /// The acoustic fallback, when the team uses it (see [`super::acoustic`]).
@@ -340,6 +398,7 @@ impl Robot {
             gwm: GlobalModel::new(id, world_model.global),
             kicked: None,
             team_ball: None,
+            team_ball_held: None,
             ball_sighting: None,
             goal_seen_at_s: None,
             ball_seen_at_s: None,
@@ -355,8 +414,10 @@ impl Robot {
             alive: true,
             pass_to_posted: 0,
             kick_ready_at_s: 0.0,
+            push_reported_at_s: f64::NEG_INFINITY,
             decided_at_s: 0.0,
             heard: vec![None; team],
+            teammate_motion: vec![None; team],
             policy: Default::default(),
             sound: None,
         }
@@ -587,13 +648,125 @@ impl Robot {
                 }
             }
         }
+        if let Some(push) = self.push_report(field, cfg, now_s) {
+            // Its own ball, and with the next message its team's, turns with the push
+            // instead of several sightings later (as with a kick).
+            self.lwm.kick(&push);
+            self.kicked = Some(push);
+            self.push_reported_at_s = now_s;
+        }
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
-        self.team_ball = self
+        self.track_teammates(now_s);
+        self.team_ball_held = self
             .gwm
             .team_ball(now_s, own.as_ref())
+            .map(|b| self.widened_at_contact(field, cfg, b));
+        self.team_ball = self
+            .team_ball_held
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
         msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+    }
+
+    /// Each teammate's velocity from its messages' poses at least
+    /// [`TEAMMATE_VELOCITY_BASELINE_S`] apart (over one message interval a pose's noise
+    /// would swamp it; what the GWM keeps is the latest pose only).
+    fn track_teammates(&mut self, now_s: f64) {
+        for t in self.gwm.teammates(now_s) {
+            let Some(slot) = usize::from(t.id)
+                .checked_sub(1)
+                .and_then(|k| self.teammate_motion.get_mut(k))
+            else {
+                continue;
+            };
+            let (t_s, at) = (t.lwm.t_s, Vector2::new(t.pose.mean.x, t.pose.mean.y));
+            *slot = Some(match *slot {
+                Some(m) if t_s >= m.anchor.0 && t_s - m.anchor.0 < TEAMMATE_VELOCITY_BASELINE_S => {
+                    TeammateMotion { at, ..m }
+                }
+                Some(m) if t_s > m.anchor.0 && t_s - m.anchor.0 < 4.0 * TEAMMATE_VELOCITY_BASELINE_S => {
+                    TeammateMotion {
+                        anchor: (t_s, at),
+                        velocity: (at - m.anchor.1) / (t_s - m.anchor.0),
+                        at,
+                    }
+                }
+                _ => TeammateMotion {
+                    anchor: (t_s, at),
+                    velocity: Vector2::zeros(),
+                    at,
+                },
+            });
+        }
+    }
+
+    /// Its own velocity over the latest control period, field frame: odometry turned by
+    /// the heading halfway through it.
+    fn own_velocity(&self, cfg: &BrainConfig) -> Vector2<f64> {
+        let o = &self.odometry;
+        let heading = self.pose_belief.theta_rad - 0.5 * o.turn_rad;
+        let moved = Vec2::new(o.forward_m, o.left_m).rotate(heading);
+        Vector2::new(moved.x, moved.y) / cfg.control_period_s
+    }
+
+    /// `ball` with its position variance widened while a body is at it and moving into
+    /// it: the robot itself (its odometry), a teammate where its latest message put it (its
+    /// velocity between its last two), an opponent its camera sees now (at its top speed).
+    /// A body there pushes the ball at moments nobody has told this robot of yet: by
+    /// `push_gain` × its closing speed (its velocity less the ball's, along the line
+    /// between them) × [`WorldModelConfig::contact_horizon_s`] per body.
+    /// Only the estimate the robot holds is widened, not the filter's state (a push, once
+    /// seen or reported, is in it).
+    fn widened_at_contact(
+        &self,
+        field: &FieldConfig,
+        cfg: &BrainConfig,
+        mut ball: TeamBall,
+    ) -> TeamBall {
+        let wm = &cfg.world_model;
+        if wm.contact_horizon_s <= 0.0 {
+            return ball;
+        }
+        let (at, v_ball) = (ball.estimate.position(), ball.estimate.velocity());
+        let reach = |radius: f64| radius + field.ball.radius_m + wm.contact_margin_m;
+        // σ of the unheard push of a body at `p` moving at `v`, if it is at the ball.
+        let sigma = |p: Vector2<f64>, v: Vector2<f64>, radius: f64| {
+            let rel = at - p;
+            let d = rel.norm();
+            if d > reach(radius) || d < 1e-9 {
+                return 0.0;
+            }
+            wm.push_gain * (v - v_ball).dot(&(rel / d)).max(0.0) * wm.contact_horizon_s
+        };
+        let own = self.lwm.pose();
+        let ours = field.kinematics.radius_m;
+        let mut var = sigma(
+            Vector2::new(own.mean.x, own.mean.y),
+            self.own_velocity(cfg),
+            ours,
+        )
+        .powi(2);
+        for (k, m) in self.teammate_motion.iter().enumerate() {
+            if crate::harness::robot_id(k) == self.id {
+                continue;
+            }
+            if let Some(m) = m {
+                var += sigma(m.at, m.velocity, ours).powi(2);
+            }
+        }
+        let top = field.opponent_kinematics.top_speed_mps;
+        for s in &self.frame.opponents {
+            let p = perception::to_fusion_point(self.pose_belief.to_field(s.local()));
+            // Its velocity is unknown: as if it came straight at the ball at top speed.
+            let towards = (at - p).try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * top;
+            var += sigma(p, towards, field.opponent_kinematics.radius_m).powi(2);
+        }
+        if var > 0.0 {
+            ball.estimate.cov[(0, 0)] += var;
+            ball.estimate.cov[(1, 1)] += var;
+            ball.gbc = fusion::position_confidence(&ball.estimate.position_cov());
+        }
+        ball
     }
 
     /// The team ball if there is a usable one, else the robot's own.
@@ -694,6 +867,63 @@ impl Robot {
         };
         self.play = None;
         (0, Some(cmd), None)
+    }
+
+    /// A push of the ball by the robot's own body over the latest control period, as the
+    /// robot knows it: its own velocity from odometry, its own ball estimate relative to
+    /// its own pose. When the ball is at its body (its odds of touching, from both
+    /// estimates' uncertainty, at least [`WorldModelConfig::push_min_contact_prob`]) and
+    /// the body closed in on it, the ball takes `push_gain` × the closing speed along the
+    /// contact normal: reported as a [`Kick`] with those odds as its contact probability,
+    /// so every filter takes it as the mixture "pushed or not". Opponents' pushes are not
+    /// known to anyone: the ball model's noise covers them.
+    fn push_report(&self, field: &FieldConfig, cfg: &BrainConfig, now_s: f64) -> Option<Kick> {
+        let wm = &cfg.world_model;
+        if wm.push_gain <= 0.0 || now_s - self.push_reported_at_s < wm.push_report_interval_s {
+            return None;
+        }
+        // Only a ball it has seen itself lately: a remembered one is not where it walks.
+        self.ball?;
+        let ball = self.lwm.ball_at(now_s)?;
+        let pose = self.lwm.pose();
+        let rel = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
+        let d = rel.norm();
+        if d < 1e-6 {
+            return None;
+        }
+        let n = rel / d;
+        let v_body = self.own_velocity(cfg);
+        let v_ball = ball.velocity();
+        let closing = (v_body - v_ball).dot(&n);
+        if closing <= 0.0 {
+            return None;
+        }
+        let touch = field.kinematics.radius_m + field.ball.radius_m;
+        let cov = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
+        let sigma_d = (n.transpose() * cov * n)[(0, 0)].max(1e-12).sqrt();
+        let contact_prob = fusion::consistency::normal_cdf((touch - d) / sigma_d).clamp(0.0, 1.0);
+        if contact_prob < wm.push_min_contact_prob || contact_prob <= 0.0 {
+            return None;
+        }
+        let gained = n * (wm.push_gain * closing);
+        let v_after = v_ball + gained;
+        let across = Vector2::new(-n.y, n.x);
+        let sigma_across = (across.transpose() * cov * across)[(0, 0)].max(0.0).sqrt();
+        // The contact normal is as uncertain as the ball's place around the body; the
+        // speed as the ball's own velocity and the closing speed (odometry's 5%, the
+        // body's acceleration within the period).
+        let speed_sigma = (0.5 * (ball.cov[(2, 2)] + ball.cov[(3, 3)])
+            + (0.25 * gained.norm()).powi(2))
+        .sqrt()
+        .max(0.05);
+        Some(Kick {
+            t_s: now_s,
+            speed_mps: v_after.norm(),
+            direction_rad: v_after.y.atan2(v_after.x),
+            speed_sigma_mps: speed_sigma,
+            direction_sigma_rad: (sigma_across / touch).clamp(0.05, 1.0),
+            contact_prob,
+        })
     }
 
     /// The robot's own probability that its foot would meet the ball now: its ball
