@@ -328,6 +328,7 @@ fn tune_team_ball(wm: &mut huddle::sim::WorldModelConfig, spec: &str) {
             ("push", _) if v == 0.0 => wm.push_gain = 0.0,
             ("push_prob", _) => wm.push_min_contact_prob = v,
             ("push_every", _) => wm.push_report_interval_s = v,
+            ("push_min", _) => wm.push_min_change_mps = v,
             ("contact_horizon", _) => wm.contact_horizon_s = v,
             ("contact_margin", _) => wm.contact_margin_m = v,
             _ => tracing::warn!("--team-ball: {item:?} not applied"),

@@ -115,8 +115,11 @@ pub struct WorldModelConfig {
     /// An opponent counts at its top speed (nobody measures its velocity).
     pub contact_horizon_s: f64,
     /// A push is reported when the robot's own odds that its body touched the ball are at
-    /// least this.
+    /// least this …
     pub push_min_contact_prob: f64,
+    /// … and it changes the ball's velocity by at least this, m/s (a dribble's small
+    /// pushes are followed by the sightings; each report restarts teammates' team balls).
+    pub push_min_change_mps: f64,
 }
 
 impl Default for WorldModelConfig {
@@ -183,6 +186,7 @@ impl WorldModelConfig {
             push_gain: 1.2,
             push_report_interval_s: 0.08,
             push_min_contact_prob: 0.3,
+            push_min_change_mps: 0.0,
             contact_margin_m: 0.1,
             contact_horizon_s: 0.1,
         }
@@ -906,6 +910,9 @@ impl Robot {
             return None;
         }
         let gained = n * (wm.push_gain * closing);
+        if gained.norm() < wm.push_min_change_mps {
+            return None;
+        }
         let v_after = v_ball + gained;
         let across = Vector2::new(-n.y, n.x);
         let sigma_across = (across.transpose() * cov * across)[(0, 0)].max(0.0).sqrt();
@@ -1011,6 +1018,103 @@ mod tests {
     }
 
     use comms::wire::{FrameWriter, ItemRef, TeamKey};
+
+    /// A robot at the origin facing +x that has watched the ball lie still at `range_m`
+    /// straight ahead for a second, and moved `forward_m` over its latest control period.
+    fn robot_at_a_still_ball(range_m: f64, forward_m: f64) -> (Robot, FieldConfig, BrainConfig) {
+        let (field, cfg) = (FieldConfig::default(), BrainConfig::default());
+        let mut r = Robot::new(
+            2,
+            Position::Field(0),
+            ArbitrationParams::default(),
+            Pose::default(),
+            &cfg.world_model,
+            5,
+        );
+        let seen = perception::ball_sighting(
+            &field.camera,
+            &crate::field::camera::Sighting {
+                range_m,
+                bearing_rad: 0.0,
+            },
+        );
+        for k in 0..25 {
+            r.lwm.ball_sighting(0.04 * k as f64, &seen);
+        }
+        r.ball = Some(BallBelief {
+            at: Vec2::new(range_m, 0.0),
+            seen_at_s: 0.96,
+        });
+        r.odometry = Odometry {
+            forward_m,
+            left_m: 0.0,
+            turn_rad: 0.0,
+        };
+        (r, field, cfg)
+    }
+
+    #[test]
+    fn a_robot_that_walks_into_the_ball_reports_the_push_like_a_kick() {
+        // Touching is 0.2 m (body) + 0.05 m (ball); the ball lies 0.24 m ahead and the robot
+        // closed in at 0.5 m/s: the ball leaves straight ahead at 1.2 × 0.5 m/s.
+        let (r, field, cfg) = robot_at_a_still_ball(0.24, 0.02);
+        let push = r
+            .push_report(&field, &cfg, 0.96)
+            .expect("a body at the ball moving into it pushes it");
+        assert!(push.is_valid(), "{push:?}");
+        assert!(
+            (push.speed_mps - 0.6).abs() < 0.05,
+            "1.2 × the closing speed: {push:?}"
+        );
+        assert!(push.direction_rad.abs() < 0.05, "along the contact normal: {push:?}");
+        assert!(
+            push.contact_prob > 0.5 && push.contact_prob <= 1.0,
+            "the ball is more likely than not at the body: {push:?}"
+        );
+        // The robot's own ball turns with it at once.
+        let mut lwm = r.lwm.clone();
+        lwm.kick(&push);
+        let v = lwm.ball_at(0.96).unwrap().velocity();
+        assert!(v.x > 0.3, "own ball rolls on after the push: {v}");
+
+        // Not at the ball, backing away from it, or standing still: nothing to report.
+        let (far, ..) = robot_at_a_still_ball(0.6, 0.02);
+        assert_eq!(far.push_report(&field, &cfg, 0.96), None, "30 cm short of it");
+        let (back, ..) = robot_at_a_still_ball(0.24, -0.02);
+        assert_eq!(back.push_report(&field, &cfg, 0.96), None, "moving away");
+        let (still, ..) = robot_at_a_still_ball(0.24, 0.0);
+        assert_eq!(still.push_report(&field, &cfg, 0.96), None, "standing");
+        // Reports switched off.
+        let mut off = cfg;
+        off.world_model.push_gain = 0.0;
+        assert_eq!(r.push_report(&field, &off, 0.96), None);
+    }
+
+    #[test]
+    fn the_team_ball_is_widened_while_a_body_closes_in_on_it() {
+        // The same robot and ball: walking into it widens the held team ball by
+        // push_gain × closing speed × the horizon; standing next to it does not.
+        let (r, field, cfg) = robot_at_a_still_ball(0.24, 0.02);
+        let own = r.lwm.ball_at(0.96).unwrap();
+        let ball = TeamBall {
+            estimate: own,
+            gbc: fusion::position_confidence(&own.position_cov()),
+            source: fusion::TeamBallSource::OwnFallback,
+        };
+        let wide = r.widened_at_contact(&field, &cfg, ball);
+        let sigma = 1.2 * 0.5 * cfg.world_model.contact_horizon_s;
+        let added = wide.estimate.cov[(0, 0)] - own.cov[(0, 0)];
+        assert!(
+            (added - sigma * sigma).abs() < 0.2 * sigma * sigma,
+            "added {added} m², expected about {}",
+            sigma * sigma
+        );
+        assert!(wide.gbc < ball.gbc, "a wider ball is a less confident one");
+        let (standing, ..) = robot_at_a_still_ball(0.24, 0.0);
+        let same = standing.widened_at_contact(&field, &cfg, ball);
+        assert_eq!(same.estimate.cov, own.cov, "a body that stands still pushes nothing");
+    }
+
 
     #[test]
     fn a_robots_world_model_fits_the_spl_message_limit_even_with_a_kick() {

@@ -8,11 +8,11 @@
 //! bisection finds it), rolls to it, reflects, and rolls on. P goes through the jump by its
 //! saltation matrix: for a board across x (at x = H), a ball that was δ further along x
 //! hit δ/vₓ earlier and is now e·δ short of where the mean is, and its normal velocity
-//! error turns over and shrinks by e: x and vₓ rows both scale by −e,
-//! `Ξ = diag(−e, 1, −e, 1)` (exact for the drag-only law, whose deceleration is linear in
-//! v; the rolling deceleration's change of direction at the bounce adds terms of order
-//! μ/s that are left out). The restitution's own uncertainty σₑ adds (σₑ vₓ)² to vₓ's
-//! variance.
+//! error turns over and shrinks by e: `Ξ = diag(−e, 1, −e, 1)` for the drag-only law,
+//! plus, since the rolling deceleration pulls along a direction the bounce turns, the
+//! velocity rows of x's column get (a⁺ − R a⁻)/vₓ (the general saltation matrix
+//! `R + (f⁺ − R f⁻) ∂g / (∂g f⁻)` with the board g = x − H and R the reset's Jacobian).
+//! The restitution's own uncertainty σₑ adds (σₑ vₓ)² to vₓ's variance.
 
 use super::motion::{friction_propagate, friction_roll};
 use nalgebra::{Matrix4, Vector4};
@@ -96,6 +96,7 @@ impl Boards {
         &self,
         axis: usize,
         crossed: bool,
+        mu: f64,
         mean: &mut Vector4<f64>,
         F: &mut Matrix4<f64>,
         Q: &mut Matrix4<f64>,
@@ -109,6 +110,17 @@ impl Boards {
         if crossed {
             xi[(axis, axis)] = -e;
             xi[(axis + 2, axis + 2)] = -e;
+            // The rolling deceleration pulls along the direction of motion, which the
+            // bounce turns: (a⁺ − R a⁻)/vₙ into the normal-position column (the drag
+            // terms cancel).
+            let other = 1 - axis;
+            let v_t = mean[other + 2];
+            let (before, after) = (v_normal.hypot(v_t), (e * v_normal).hypot(v_t));
+            if before > 0.0 && after > 0.0 && v_normal != 0.0 {
+                let (inv_b, inv_a) = (1.0 / before, 1.0 / after);
+                xi[(axis + 2, axis)] = -mu * e * (inv_b - inv_a);
+                xi[(other + 2, axis)] = -mu * v_t * (inv_a - inv_b) / v_normal;
+            }
         } else {
             xi[(axis + 2, axis + 2)] = -1.0;
         }
@@ -170,7 +182,7 @@ impl FieldBall {
             // A mean already beyond a board and moving out (a sighting's noise put it
             // there): it has bounced.
             if let Some(axis) = boards.outward(&mean) {
-                boards.reflect(axis, false, &mut mean, &mut F, &mut Q);
+                boards.reflect(axis, false, mu, &mut mean, &mut F, &mut Q);
                 continue;
             }
             let Some((axis, to_board)) = boards.distance_to_board(&mean) else {
@@ -197,7 +209,7 @@ impl FieldBall {
             mean = m;
             F = f * F;
             Q = f * Q * f.transpose() + q;
-            boards.reflect(axis, true, &mut mean, &mut F, &mut Q);
+            boards.reflect(axis, true, mu, &mut mean, &mut F, &mut Q);
             left -= t_hit;
         }
         let (m, f, q) = step(&mean, left);
