@@ -16,8 +16,9 @@
 //! And about the world models ([`FusionMetrics`]):
 //! - **team-ball sample**: at every control tick of every live robot (goalkeeper included)
 //!   while the ball is visible (as above), once that robot's GWM, the centralized filters
-//!   and the robot's delivery reference all have a ball: that robot's team ball
-//!   predicted to the tick, the references' estimates at the same instant, and the true
+//!   and the robot's delivery reference all have a ball: that robot's team ball as it
+//!   holds it at the tick (the GWM's, widened while a body closes in on it: see
+//!   `WorldModelConfig::contact_horizon_s`), the references' estimates at the same instant, and the true
 //!   ball.
 //! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
 //!   all team-ball samples; **ratio** = team / centralized.
