@@ -586,8 +586,8 @@ impl Simulation {
         let cfg = *self.world.config();
         let dt = self.cfg.physics_dt_s;
         let speed = before.velocity.norm();
-        let slowed = (speed * (1.0 - cfg.ball.drag_per_s * dt) - cfg.ball.rolling_decel_mps2 * dt)
-            .max(0.0);
+        let slowed =
+            (speed * (1.0 - cfg.ball.drag_per_s * dt) - cfg.ball.rolling_decel_mps2 * dt).max(0.0);
         let rolled = if speed > 0.0 {
             before.velocity * (slowed / speed)
         } else {

@@ -374,7 +374,10 @@ fn a_bounce_reflects_the_gaussian_and_its_jacobian_is_the_derivative() {
             f.column(j)
         );
     }
-    assert!(f[(0, 0)] < 0.0 && f[(2, 2)] < 0.0, "x and vx turn over: {f}");
+    assert!(
+        f[(0, 0)] < 0.0 && f[(2, 2)] < 0.0,
+        "x and vx turn over: {f}"
+    );
     // The restitution's σ widens the normal velocity, not the tangential one.
     let unsure = field_model(Some(Boards {
         restitution_sigma: 0.1,
@@ -408,7 +411,11 @@ fn a_mean_already_beyond_the_board_is_put_back_without_shrinking_p() {
         cov: Matrix4::from_diagonal(&Vector4::new(4e-4, 4e-4, 0.01, 0.01)),
     };
     let next = est.predict_to(&model, 0.04);
-    assert!(next.mean.x <= boards.half_x_m && next.mean.z < 0.0, "{}", next.mean);
+    assert!(
+        next.mean.x <= boards.half_x_m && next.mean.z < 0.0,
+        "{}",
+        next.mean
+    );
     assert!(next.cov[(0, 0)] >= est.cov[(0, 0)], "{}", next.cov);
 }
 
@@ -420,7 +427,10 @@ fn a_still_ball_is_predicted_tighter_than_a_fast_one() {
         mean: Vector4::new(0.0, 0.0, v, 0.0),
         cov: Matrix4::from_diagonal(&Vector4::new(1e-4, 1e-4, 1e-4, 1e-4)),
     };
-    let (still, fast) = (at(0.0).predict_to(&model, 0.1), at(3.0).predict_to(&model, 0.1));
+    let (still, fast) = (
+        at(0.0).predict_to(&model, 0.1),
+        at(3.0).predict_to(&model, 0.1),
+    );
     // q = 0.05 at rest, 15.05 at 3 m/s.
     assert!(
         fast.cov[(1, 1)] > 50.0 * (still.cov[(1, 1)] - 1e-4),
