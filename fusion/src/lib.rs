@@ -49,6 +49,12 @@
 //! white acceleration noise; the exact discretisation is in [`BallModel`]'s docs
 //! (see [`BallModel::transition`]). [`BallEstimate::predict_to`] predicts to any future time
 //! (the goalie's interception query). The seed's static model is [`BallModel::Static`].
+//! [`BallModel::Field`] ([`FieldBall`]) is the ball a team calibrates on its own carpet:
+//! drag plus a constant rolling deceleration (nonlinear mean, Jacobian at the mean), the
+//! boards it bounces off ([`Boards`]: the mean reflected at the instant it meets a board,
+//! P through the bounce's saltation matrix, the restitution's σ added), and acceleration
+//! noise that grows with the speed, so a ball at rest is not predicted as loosely as one
+//! that was just kicked.
 //! A sighting in robot coordinates becomes a field-frame position with
 //! R = Rot R_l Rotᵀ + J P_pose Jᵀ, J the Jacobian of the robot→field transform with respect
 //! to the pose ([`field_observation`]), so a poorly localised robot reports a wide ball.
@@ -147,12 +153,12 @@
 //!   can take the team ball past a centralized filter that sees only sightings;
 //! - *lost messages*: the repeats (see Redundancy) recover the batches a beacon hold and
 //!   the blackboard's newest-copy rule would otherwise lose;
-//! - *the ball model*: [`BallModel::Friction`] models the field's own drag plus rolling
+//! - *the ball model*: [`BallModel::Field`] models the field's own drag plus rolling
 //!   friction exactly (nonlinear mean, Jacobian linearised at √(s² + tr P_vv) so a ball at
-//!   rest keeps a fresh track's velocity variance), but the centralized filter gains as
-//!   much from it as the team ball: the delay, not the friction law, sets the ratio, so the
-//!   linear [`BallModel::Rolling`] serves; its acceleration noise is what trades accuracy
-//!   against an honest NEES, and kick reports are what let a smaller one stay honest;
+//!   rest keeps a fresh track's velocity variance) and its boards; every reference gets the
+//!   same model (each with its own noise), so it moves the RMSEs, not the ratios much.
+//!   Its speed-dependent acceleration noise is what trades accuracy against an honest
+//!   NEES, and kick (and push) reports are what let a smaller one stay honest;
 //! - *overconfidence from correlated pose errors*: `pose_error_sharing` (see
 //!   [`field_observation_shared`]) keeps the centralized filter's and the team's NEES near
 //!   their degrees of freedom.
@@ -199,8 +205,8 @@ mod wire;
 
 pub use ball::{
     field_observation, field_observation_shared, initial_estimate, update as ball_update,
-    BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate,
-    CentralizedBall, FieldObservation, Kick, NetworkLimitedBall,
+    BallEstimate, BallFilter, BallFilterConfig, BallModel, BallSighting, BallUpdate, Boards,
+    CentralizedBall, FieldBall, FieldObservation, Kick, NetworkLimitedBall,
 };
 pub use confidence::{pose_confidence, position_confidence, REFERENCE_RADIUS_M};
 pub use geometry::{

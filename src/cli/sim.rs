@@ -53,10 +53,20 @@ pub struct SimArgs {
     /// one: for tuning the references, each for its own RMSE.
     #[arg(long, hide = true)]
     pub reference_q: Option<f64>,
-    /// Give the robots' ball filters (LWM and GWM) this acceleration noise (m²/s³): for
-    /// tuning the team's filter.
+    /// Give every reference filter this growth of its acceleration noise per m/s of speed
+    /// (with `--reference-q` as the noise at rest): for tuning the references.
+    #[arg(long, hide = true)]
+    pub reference_q_speed: Option<f64>,
+    /// Give the robots the ball model before the field model, for comparison: the rolling
+    /// model (exponential decay 1/s, no boards) with this acceleration noise (m²/s³),
+    /// pose-error sharing 10, no push reports, no widening at contact.
     #[arg(long, hide = true)]
     pub team_q: Option<f64>,
+    /// Tune the robots' field ball model: comma-separated `q0=…` (noise at rest, m²/s³),
+    /// `q1=…` (its growth per m/s), `sharing=…` (pose-error sharing k), `rest_sigma=…`,
+    /// `boards=0|1`, `push=0|1` (own pushes reported), `push_prob=…`, `push_every=…` (s).
+    #[arg(long, hide = true)]
+    pub team_ball: Option<String>,
     /// Independent loss per receiver, `20%` or `0.2` (replaces the preset's loss model).
     #[arg(long, value_parser = parse_fraction)]
     pub loss: Option<f64>,
@@ -137,7 +147,9 @@ impl Default for SimArgs {
             transport: huddle::sim::Transport::Multicast,
             sweep: None,
             reference_q: None,
+            reference_q_speed: None,
             team_q: None,
+            team_ball: None,
             seed: 1,
             svg: None,
             json: false,
@@ -225,8 +237,17 @@ fn config(args: &SimArgs) -> SimConfig {
     };
     if let Some(q) = args.team_q {
         let wm = &mut brain.world_model;
-        wm.local.ball = huddle::sim::references::with_accel_noise(wm.local.ball, q);
+        wm.local.ball.model = fusion::BallModel::Rolling {
+            friction_per_s: 1.0,
+            accel_noise_m2_per_s3: q,
+        };
+        wm.local.ball.pose_error_sharing = 10.0;
+        wm.push_gain = 0.0;
+        wm.contact_horizon_s = 0.0;
         wm.global.ball = wm.local.ball.model;
+    }
+    if let Some(spec) = &args.team_ball {
+        tune_team_ball(&mut brain.world_model, spec);
     }
     SimConfig {
         brain,
@@ -272,11 +293,48 @@ fn config(args: &SimArgs) -> SimConfig {
             Some(q) => huddle::sim::ReferenceConfig::with_q(
                 huddle::sim::WorldModelConfig::default().local.ball,
                 q,
+                args.reference_q_speed.unwrap_or(0.0),
             ),
             None => huddle::sim::ReferenceConfig::default(),
         },
         ..SimConfig::default()
     }
+}
+
+/// `--team-ball`'s tuning settings (a hidden flag: an unknown or malformed one is ignored
+/// with a warning).
+fn tune_team_ball(wm: &mut huddle::sim::WorldModelConfig, spec: &str) {
+    for item in spec.split(',').filter(|s| !s.trim().is_empty()) {
+        let Some((k, v)) = item.split_once('=') else {
+            tracing::warn!("--team-ball: {item:?} is not key=value");
+            continue;
+        };
+        let Ok(v) = v.trim().parse::<f64>() else {
+            tracing::warn!("--team-ball: {item:?} is not a number");
+            continue;
+        };
+        let model = &mut wm.local.ball.model;
+        match (k.trim(), model) {
+            ("q0", fusion::BallModel::Field(f)) => f.still_accel_noise_m2_per_s3 = v,
+            ("q1", fusion::BallModel::Field(f)) => f.accel_noise_per_speed = v,
+            ("s0", fusion::BallModel::Field(f)) => f.still_below_mps = v,
+            ("rest_sigma", fusion::BallModel::Field(f)) => {
+                if let Some(b) = &mut f.boards {
+                    b.restitution_sigma = v;
+                }
+            }
+            ("boards", fusion::BallModel::Field(f)) if v == 0.0 => f.boards = None,
+            ("sharing", _) => wm.local.ball.pose_error_sharing = v,
+            ("push", _) if v == 0.0 => wm.push_gain = 0.0,
+            ("push_prob", _) => wm.push_min_contact_prob = v,
+            ("push_every", _) => wm.push_report_interval_s = v,
+            ("push_min", _) => wm.push_min_change_mps = v,
+            ("contact_horizon", _) => wm.contact_horizon_s = v,
+            ("contact_margin", _) => wm.contact_margin_m = v,
+            _ => tracing::warn!("--team-ball: {item:?} not applied"),
+        }
+    }
+    wm.global.ball = wm.local.ball.model;
 }
 
 /// `--sweep`: the same match at each point, two at a time (one per core), one row each

@@ -16,8 +16,9 @@
 //! And about the world models ([`FusionMetrics`]):
 //! - **team-ball sample**: at every control tick of every live robot (goalkeeper included)
 //!   while the ball is visible (as above), once that robot's GWM, the centralized filters
-//!   and the robot's delivery reference all have a ball: that robot's team ball
-//!   predicted to the tick, the references' estimates at the same instant, and the true
+//!   and the robot's delivery reference all have a ball: that robot's team ball as it
+//!   holds it at the tick (the GWM's, widened while a body closes in on it: see
+//!   `WorldModelConfig::contact_horizon_s`), the references' estimates at the same instant, and the true
 //!   ball.
 //! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
 //!   all team-ball samples; **ratio** = team / centralized.
@@ -45,6 +46,11 @@
 //!   `fusion::consistency::batch_means_effective_samples`): bounds χ²₂ₙ(0.025, 0.975) / n.
 //!   **Above 99.9%**: the share of samples whose NEES exceeds χ²₂'s 99.9% point (13.8),
 //!   0.1% for an honest filter.
+//! - **NEES by cause**: each team-ball sample is put down to the latest event that changed
+//!   the true ball's motion other than friction within [`CAUSE_WINDOW_S`] before it
+//!   ([`BallEvent`]: a kick that met the ball, a bounce off the boards, a push by one of our
+//!   robots or by an opponent; none within the window: **quiet**), so the samples above
+//!   the 99.9% point can be counted per cause.
 //! - **pose**: every live robot's pose estimate against its true pose at each of its
 //!   control ticks: position RMSE, heading RMSE, and the average NEES (3 dof).
 
@@ -59,6 +65,55 @@ pub const STILL_BELOW_MPS: f64 = 0.1;
 pub const FAST_ABOVE_MPS: f64 = 1.5;
 /// Batches the NEES series is cut into for its effective sample count.
 pub const NEES_BATCHES: usize = 50;
+/// A team-ball sample is put down to the latest ball event at most this long before it, s.
+pub const CAUSE_WINDOW_S: f64 = 1.0;
+
+/// What changed the true ball's motion other than friction (the simulator's truth, for
+/// the NEES tail's causes; robots never see it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BallEvent {
+    /// No event within [`CAUSE_WINDOW_S`].
+    Quiet,
+    /// One of our kicks met the ball.
+    Kick,
+    /// The ball bounced off the boards.
+    Bounce,
+    /// One of our robots pushed it (walked into it).
+    OurPush,
+    /// An opponent pushed it.
+    OpponentPush,
+}
+
+impl BallEvent {
+    /// Every cause, in the report's order.
+    pub const ALL: [BallEvent; 5] = [
+        BallEvent::Quiet,
+        BallEvent::Kick,
+        BallEvent::Bounce,
+        BallEvent::OurPush,
+        BallEvent::OpponentPush,
+    ];
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// The team-ball NEES of the samples put down to one cause.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CauseSums {
+    /// Samples.
+    pub samples: u64,
+    /// Σ NEES.
+    pub nees_sum: f64,
+    /// Samples above χ²₂'s 99.9% point.
+    pub above_999: u64,
+    /// … of those, how long after the event: within 0.1 s, 0.1–0.3 s, later.
+    pub above_999_after: [u64; 3],
+    /// … of those, at the robot whose kick or push it was.
+    pub above_999_at_actor: u64,
+}
 
 /// One team-ball sample (see the module docs): squared position errors against the true
 /// ball and position NEES.
@@ -81,6 +136,12 @@ pub struct BallSample {
     /// The robot has not seen the ball itself within its ball memory: what it knows came
     /// over the network.
     pub blind: bool,
+    /// The latest ball event within [`CAUSE_WINDOW_S`].
+    pub cause: BallEvent,
+    /// How long before the sample it happened, s.
+    pub cause_age_s: f64,
+    /// The sample is at the robot whose kick or push it was.
+    pub at_actor: bool,
 }
 
 /// Squared-error sums of one group of team-ball samples.
@@ -189,6 +250,8 @@ pub struct FusionMetrics {
     pub nees: NeesSeries,
     /// … per true ball speed: still, rolling, fast.
     pub nees_bands: [NeesSeries; 3],
+    /// … per cause ([`BallEvent::ALL`]'s order).
+    pub by_cause: [CauseSums; 5],
     /// The instants of the samples and the true ball there, global `(t, x, y)`, with the
     /// team ball's squared error: for the delayed-centralized bound.
     pub instants: Vec<((f64, f64, f64), f64)>,
@@ -222,6 +285,23 @@ impl FusionMetrics {
             2
         };
         self.nees_bands[band].add(s.team_nees);
+        if s.team_nees.is_finite() {
+            let c = &mut self.by_cause[s.cause.index()];
+            c.samples += 1;
+            c.nees_sum += s.team_nees;
+            if s.team_nees > fusion::consistency::CHI2_2DOF_999 {
+                c.above_999 += 1;
+                let k = if s.cause_age_s < 0.1 {
+                    0
+                } else if s.cause_age_s < 0.3 {
+                    1
+                } else {
+                    2
+                };
+                c.above_999_after[k] += 1;
+                c.above_999_at_actor += u64::from(s.at_actor);
+            }
+        }
         self.central_nees += s.central_nees;
     }
 

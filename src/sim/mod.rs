@@ -33,9 +33,9 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use crate::harness::{Harness, HarnessError};
-pub use metrics::{BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
+pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{DelayedCentral, DeliveryReference, Publications, ReferenceConfig};
-pub use report::{NeesBand, Report, SweepRow};
+pub use report::{NeesBand, NeesCause, Report, SweepRow};
 pub use robot::{BrainConfig, Percepts, Robot, TickInput, TickOutput, WorldModelConfig};
 
 /// The network the team plays on: a netsim preset with optional overrides.
@@ -304,6 +304,13 @@ pub struct Simulation {
     next_tick_s: Vec<f64>,
     step: u64,
     next_snapshot_s: f64,
+    /// The latest event that changed the true ball's motion (global s), for the NEES
+    /// tail's causes.
+    ball_event: (f64, BallEvent),
+    /// Whose kick or push it was (robot index).
+    ball_event_by: Option<usize>,
+    /// A kick met the ball during this step (robot index).
+    kick_met: Option<usize>,
     // --- WLAN outage and the acoustic fallback (see `acoustic`) ---
     /// The room, when the fallback is on.
     acoustic: Option<acoustic::AcousticChannel>,
@@ -433,6 +440,9 @@ impl Simulation {
             next_tick_s,
             step: 0,
             next_snapshot_s: 0.0,
+            ball_event: (f64::NEG_INFINITY, BallEvent::Quiet),
+            ball_event_by: None,
+            kick_met: None,
             acoustic: None,
             outage_metrics: Metrics::default(),
         };
@@ -523,13 +533,20 @@ impl Simulation {
                 }
             }
             self.judge_kick(i, t, out.kick.as_ref());
+            if let (None, Some(push)) = (&out.kick, &self.robots[i].kicked) {
+                // A push the robot reported: the team knows it as it knows a kick.
+                self.delayed.kick(&fusion::Kick { t_s: t, ..*push });
+            }
             self.feed_references(i, t);
             ticked.push(i);
         }
         self.harness.flush();
         self.sample_claim_ages();
         self.sample_world_models(t, &ticked);
-        if self.world.step(dt).is_some() {
+        let ball_before = self.world.ball;
+        let goal = self.world.step(dt);
+        self.note_ball_event(t + dt, &ball_before);
+        if goal.is_some() {
             // The referee puts the ball back on the centre spot and the game controller
             // tells every robot: the ball they tracked is gone.
             // It happened during this step, after every sighting made at its start.
@@ -570,6 +587,59 @@ impl Simulation {
         }
     }
 
+    /// What changed the ball's motion during the step that ended at `t_s`, other than
+    /// friction (the truth, for the metrics only): a kick that met it, the boards, or the
+    /// body it now touches.
+    fn note_ball_event(&mut self, t_s: f64, before: &crate::field::ball::Ball) {
+        let kicked = self.kick_met.take();
+        let cfg = *self.world.config();
+        let dt = self.cfg.physics_dt_s;
+        let speed = before.velocity.norm();
+        let slowed =
+            (speed * (1.0 - cfg.ball.drag_per_s * dt) - cfg.ball.rolling_decel_mps2 * dt).max(0.0);
+        let rolled = if speed > 0.0 {
+            before.velocity * (slowed / speed)
+        } else {
+            before.velocity
+        };
+        let ball = self.world.ball;
+        let mut by = kicked;
+        let event = if kicked.is_some() {
+            BallEvent::Kick
+        } else if (ball.velocity - rolled).norm() < 1e-3 {
+            return;
+        } else {
+            let (hx, hy) = (
+                cfg.length_m / 2.0 + cfg.border_m - cfg.ball.radius_m,
+                cfg.width_m / 2.0 + cfg.border_m - cfg.ball.radius_m,
+            );
+            let touches = |at: Vec2, r: f64| at.distance(ball.at) <= r + cfg.ball.radius_m + 1e-6;
+            // A body pressing the ball into the boards is a push, not a bounce.
+            by = self
+                .world
+                .robots
+                .iter()
+                .position(|b| touches(b.pose.at, cfg.kinematics.radius_m));
+            if by.is_some() {
+                BallEvent::OurPush
+            } else if self
+                .world
+                .opponents
+                .iter()
+                .any(|b| touches(b.pose.at, cfg.opponent_kinematics.radius_m))
+            {
+                BallEvent::OpponentPush
+            } else if ball.at.x.abs() >= hx - 1e-9 || ball.at.y.abs() >= hy - 1e-9 {
+                BallEvent::Bounce
+            } else {
+                // The kick-off put it back: no team ball survives that.
+                return;
+            }
+        };
+        self.ball_event = (t_s, event);
+        self.ball_event_by = by;
+    }
+
     /// Robot `i` published its LWM at global `t_s`: remember which version that was, for
     /// the delivery references' true times.
     fn record_publication(&mut self, i: usize, t_s: f64) {
@@ -596,6 +666,7 @@ impl Simulation {
         // The team knows the attempt (the kicker's report, its contact odds included).
         self.delayed.kick(&fusion::Kick { t_s, ..a.report });
         if met {
+            self.kick_met = Some(i);
             self.kick_contacts += 1;
             if a.receiver != 0 {
                 self.contacts.passes += 1;
@@ -678,9 +749,8 @@ impl Simulation {
                 continue;
             }
             let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6;
-            let own = r.lwm.ball_at(now_s);
             let (Some(team), Some(c), Some(ck), Some(delivery)) = (
-                r.gwm.team_ball(now_s, own.as_ref()),
+                r.team_ball_held,
                 central,
                 central_kicks,
                 self.delivery[i].estimate_at(now_s),
@@ -693,6 +763,12 @@ impl Simulation {
                     .cholesky()
                     .map_or(f64::NAN, |ch| e.dot(&ch.solve(&e)))
             };
+            // The team ball the robot holds from its tick (the same instant: ticks and
+            // samples share the step).
+            let mut team = team;
+            team.estimate = team
+                .estimate
+                .predict_to(&self.cfg.brain.world_model.global.ball, now_s);
             let te = (team.estimate.position() - truth).norm_squared();
             let ce = (c.position() - truth).norm_squared();
             self.fusion.ball(&BallSample {
@@ -704,6 +780,13 @@ impl Simulation {
                 delivery_sq_m2: (delivery.position() - truth).norm_squared(),
                 speed_mps: self.world.ball.velocity.norm(),
                 blind: r.ball.is_none(),
+                cause: if t_s - self.ball_event.0 <= metrics::CAUSE_WINDOW_S {
+                    self.ball_event.1
+                } else {
+                    BallEvent::Quiet
+                },
+                cause_age_s: t_s - self.ball_event.0,
+                at_actor: self.ball_event_by == Some(i),
             });
             self.fusion.instants.push(((t_s, truth.x, truth.y), te));
         }
@@ -777,6 +860,21 @@ impl Simulation {
                 above_999_pct: round3(f.nees_bands[k].above_999_pct()),
             }
         };
+        let all_samples = f.nees.samples().max(1) as f64;
+        let by_cause = BallEvent::ALL
+            .iter()
+            .zip(&f.by_cause)
+            .map(|(&cause, c)| NeesCause {
+                cause,
+                samples: c.samples,
+                nees: round3(c.nees_sum / c.samples.max(1) as f64),
+                above_999_pct_of_all: round3(100.0 * c.above_999 as f64 / all_samples),
+                above_999_pct_after: c
+                    .above_999_after
+                    .map(|n| round3(100.0 * n as f64 / all_samples)),
+                above_999_pct_at_actor: round3(100.0 * c.above_999_at_actor as f64 / all_samples),
+            })
+            .collect();
         let per_robot: Vec<u64> = (0..self.robots.len())
             .map(|i| self.harness.replica(i).map_or(0, |r| r.stats().frames_out))
             .collect();
@@ -853,6 +951,7 @@ impl Simulation {
             team_ball_nees_still: band(0),
             team_ball_nees_rolling: band(1),
             team_ball_nees_fast: band(2),
+            team_ball_nees_by_cause: by_cause,
             centralized_nees: round3(f.central_nees()),
             team_ball_samples: f.samples(),
             pose_rmse_m: round4(f.pose_rmse_m()),

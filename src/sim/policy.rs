@@ -41,6 +41,9 @@ pub const VOI_SPARE: i64 = 3;
 /// Ball error teammates tolerate under the VOI policy, metres: a blind robot walks to a
 /// ball it is told about and looks, so half a metre costs it little.
 pub const VOI_BALL_TOLERANCE_M: f64 = 0.5;
+/// The GWM's gate (χ²₂ at 99.9%, `WorldModelConfig`): a message this far off what
+/// teammates believe restarts their team ball rather than nudging it.
+pub const VOI_GATE_CHI2: f64 = 13.82;
 /// The VOI policy sends at least this often, seconds.
 pub const VOI_HEARTBEAT_S: f64 = 10.0;
 /// Pose change teammates tolerate under the VOI policy: metres, radians.
@@ -306,7 +309,13 @@ impl PolicyState {
                 let (mine_var, told_var) = (along(mine.position_cov()), along(told.position_cov()));
                 let significant = e.norm() > VOI_SIGMAS * (mine_var + told_var).sqrt();
                 let theirs = along(predicted.position_cov());
-                let shift = e.norm() * theirs / (theirs + mine_var).max(1e-12);
+                let total = (theirs + mine_var).max(1e-12);
+                // Beyond their gate teammates restart on it: the belief moves all the way.
+                let shift = if e.norm_squared() / total > VOI_GATE_CHI2 {
+                    e.norm()
+                } else {
+                    e.norm() * theirs / total
+                };
                 (significant && shift > tolerance).then_some(false)
             }
         }

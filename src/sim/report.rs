@@ -147,6 +147,9 @@ pub struct Report {
     pub team_ball_nees_rolling: NeesBand,
     /// … fast.
     pub team_ball_nees_fast: NeesBand,
+    /// The team-ball NEES per cause: the latest event that changed the true ball's motion
+    /// within a second before the sample ([`metrics::BallEvent`], `quiet`: none).
+    pub team_ball_nees_by_cause: Vec<NeesCause>,
     /// Average position NEES of the centralized filter.
     pub centralized_nees: f64,
     /// Team-ball samples (robot ticks) behind the RMSEs.
@@ -178,6 +181,25 @@ pub struct NeesBand {
     pub independent_samples: u64,
     /// Share above χ²₂'s 99.9% point, percent.
     pub above_999_pct: f64,
+}
+
+/// The team-ball NEES of the samples put down to one cause (see
+/// [`metrics`](super::metrics)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NeesCause {
+    /// The cause.
+    pub cause: super::BallEvent,
+    /// Samples.
+    pub samples: u64,
+    /// Their average position NEES (2 dof).
+    pub nees: f64,
+    /// Their samples above χ²₂'s 99.9% point, as a percentage of **all** team-ball samples
+    /// (the causes' shares add up to `team_ball_nees_above_999_pct`).
+    pub above_999_pct_of_all: f64,
+    /// … of them, within 0.1 s of the event, 0.1–0.3 s, later (% of all samples).
+    pub above_999_pct_after: [f64; 3],
+    /// … of them, at the robot whose kick or push it was (% of all samples).
+    pub above_999_pct_at_actor: f64,
 }
 
 /// One report as a row of `huddle sim --sweep` (the figures that move with the network).

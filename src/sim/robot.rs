@@ -43,6 +43,21 @@ use crate::field::geometry::{Pose, Vec2};
 use crate::field::tactics::{self, choose_play, mode, Mode, PassParams, Play};
 use crate::field::{FieldConfig, KICK_MAX_ANGLE_RAD, KICK_REACH_MARGIN_M};
 
+/// Where a teammate is and how it moves, from its messages.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TeammateMotion {
+    /// The time and place its velocity was last measured to (field frame).
+    anchor: (f64, Vector2<f64>),
+    /// That velocity, m/s.
+    velocity: Vector2<f64>,
+    /// Its latest pose's place.
+    at: Vector2<f64>,
+}
+
+/// A teammate's velocity is measured between its messages' poses at least this far apart,
+/// s.
+const TEAMMATE_VELOCITY_BASELINE_S: f64 = 0.2;
+
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub fn pass_to_key() -> Key {
     Key::parse(tactics::PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
@@ -86,31 +101,87 @@ pub struct WorldModelConfig {
     /// A robot lined up for a kick swings only if its own estimate gives at least this
     /// probability that the ball is within its foot's reach.
     pub kick_min_contact_prob: f64,
+    /// A ball a body walks into leaves at this multiple of the closing speed along the
+    /// contact normal (0: the robot does not report its pushes).
+    pub push_gain: f64,
+    /// At most one push report per this long, s (a dribble is a push every few ticks; the
+    /// LWM carries one kick report at a time).
+    pub push_report_interval_s: f64,
+    /// While a body (this robot, a teammate where its last message put it, an opponent its
+    /// camera sees) is within this of touching the team ball, m, …
+    pub contact_margin_m: f64,
+    /// … the team ball's position σ is widened per axis by `push_gain` × the body's speed
+    /// towards the ball × this, s: the push it may have had that the robot has not heard of
+    /// yet (a teammate's report is a network delay away; an opponent's is never coming).
+    /// An opponent counts at its top speed (nobody measures its velocity).
+    pub contact_horizon_s: f64,
+    /// A push is reported when the robot's own odds that its body touched the ball are at
+    /// least this …
+    pub push_min_contact_prob: f64,
+    /// … and it changes the ball's velocity by at least this, m/s (a dribble's small
+    /// pushes are followed by the sightings; each report restarts teammates' team balls).
+    pub push_min_change_mps: f64,
 }
 
 impl Default for WorldModelConfig {
     fn default() -> Self {
-        // The field's ball slows by 0.5/s drag plus 0.6 m/s² rolling friction: at the
-        // 0.5–2 m/s it mostly rolls at, an exponential decay of about 1/s fits (the drag
-        // alone would predict stopping balls rolling on, by metres over a network delay).
-        // The acceleration noise covers the rest: pushes, bounces, kicks that missed. It
-        // was tuned for the team ball's RMSE on seeds 101–110 (`huddle sim --team-q Q`;
-        // the reports use seeds 1–12), 10 seeds each:
+        Self::for_field(&FieldConfig::default())
+    }
+}
+
+impl WorldModelConfig {
+    /// The world models of a team that plays on `field`: its ball model knows the field's
+    /// boards and the friction law the team calibrated on its carpet.
+    pub fn for_field(field: &FieldConfig) -> Self {
+        // The ball as a team would calibrate it on its carpet: 0.5/s drag plus 0.6 m/s²
+        // rolling deceleration, bouncing off the boards with e = 0.5 (σ 0.1: boards and
+        // balls vary), and acceleration noise for what nobody reports (opponents' shoves,
+        // a body the ball glances off): q(s) = q₀ + q₁ s. Our own pushes are reported like
+        // kicks, and the team ball a robot holds is widened while a body closes in on it
+        // (`contact_horizon_s`). The pose-error sharing k sets how much of R is pose
+        // error; with k = 10 (the rolling model's) a still ball was underconfident at any q.
+        // Tuned on seeds 101–110 (`huddle sim --team-ball q0=…,q1=…,sharing=…`, hidden;
+        // `--team-q 2.5` is the model before), `competition`, 10 seeds each: team RMSE
+        // (root mean square over the seeds), NEES pooled over the samples, per band of the
+        // true speed (bounds about [1.8, 2.2] per seed), samples above χ²₂'s 99.9% point,
+        // median delivery ratio:
         //
-        //   q     team RMSE  NEES   still  rolling  fast   > 99.9% point
-        //   0.85  0.0619 m   1.64   1.70   1.27     3.16   1.73%
-        //   1.5   0.0601 m   1.27   2.10   0.96     2.05   0.72%
-        //   2.5   0.0567 m   1.03   1.22   0.84     1.70   0.46%
-        //   4.0   0.0597 m   0.95   1.80   0.74     1.37   0.22%
+        //   model                              RMSE    NEES  still  rolling  fast  >99.9%  deliv
+        //   rolling, q 2.5, k 10 (before)      0.0550  1.03  0.88   0.89     1.72  0.54%   1.004
+        //   field, q0 .05 q1 5, k 10, bare     0.0523  1.01  0.76   0.88     1.66  0.58%   0.962
+        //   … k 2                              0.0506  1.50  1.31   1.30     2.39  0.88%   0.977
+        //   … k 2, push reports                0.0475  1.31  1.24   1.15     2.02  0.64%   1.039
+        //   … k 2, pushes, widening 0.1 s      0.0480  1.00  1.07   0.88     1.51  0.33%   1.039
+        //   … the same, q1 3                   0.0469  1.09  1.04   0.92     1.78  0.43%   1.010
+        //   … the same, q1 8                   0.0495  0.92  0.94   0.82     1.34  0.21%   1.079
+        //   … the same, widening 0.05 s        0.0475  1.09  1.11   0.95     1.65  0.35%   1.039
+        //   … the same, widening 0.15 s        0.0485  0.95  0.98   0.82     1.46  0.33%   1.035
+        //   … the same, k 3                    0.0476  0.89  0.88   0.77     1.38  0.27%   1.035
+        //   … the same, no boards              0.0517  1.02  1.05   0.88     1.57  0.31%   1.086
+        //   … the same, k 1.5 (chosen)         0.0474  1.05  1.11   0.91     1.60  0.30%   1.025
         //
-        // No one q puts every speed band inside its χ² bounds: a rolling ball is
-        // predictable (underconfident at any q that covers the rest), a fast one is not
-        // (bounces and shoves the model does not know).
+        // No setting puts every band inside its bounds: what stays above the 99.9% point
+        // is the first 0.1 s after a teammate's kick or push, before its report arrives
+        // (`team_ball_nees_by_cause` in the report), and covering it widens every other
+        // sample; a still ball stays underconfident (about 1.0–1.1 with no event within a
+        // second) even at k = 1.
         let ball = BallFilterConfig {
-            model: fusion::BallModel::Rolling {
-                friction_per_s: 1.0,
-                accel_noise_m2_per_s3: 2.5,
-            },
+            pose_error_sharing: 1.5,
+            model: fusion::BallModel::Field(fusion::FieldBall {
+                drag_per_s: field.ball.drag_per_s,
+                rolling_decel_mps2: field.ball.rolling_decel_mps2,
+                still_accel_noise_m2_per_s3: 0.05,
+                accel_noise_per_speed: 5.0,
+                still_below_mps: 0.0,
+                boards: Some(fusion::Boards::around(
+                    field.length_m,
+                    field.width_m,
+                    field.border_m,
+                    field.ball.radius_m,
+                    field.ball.restitution,
+                    0.1,
+                )),
+            }),
             ..BallFilterConfig::default()
         };
         Self {
@@ -135,6 +206,14 @@ impl Default for WorldModelConfig {
             // noise (5%), as a real foot does: the kicker reports the same σ.
             kick_speed_sigma_mps: 0.2,
             kick_min_contact_prob: 0.5,
+            // A ball a body walks into leaves at 1.2× the closing speed (the team's
+            // calibration of its robots' bodies and ball).
+            push_gain: 1.2,
+            push_report_interval_s: 0.08,
+            push_min_contact_prob: 0.3,
+            push_min_change_mps: 0.0,
+            contact_margin_m: 0.1,
+            contact_horizon_s: 0.1,
         }
     }
 }
@@ -271,8 +350,11 @@ pub struct Robot {
     rival_cost: Option<f64>,
     /// … and whether one of them claimed to be going.
     rival_going: bool,
-    /// The team ball at its latest tick.
+    /// The team ball at its latest tick (when its GBC is high enough to use).
     pub team_ball: Option<TeamBall>,
+    /// The team ball at its latest tick whatever its GBC, as the robot holds it (widened
+    /// at contact, see [`WorldModelConfig::contact_horizon_s`]).
+    pub team_ball_held: Option<TeamBall>,
     /// The kick it attempted at its latest tick, if any.
     pub kicked: Option<Kick>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
@@ -298,9 +380,13 @@ pub struct Robot {
     pub alive: bool,
     pass_to_posted: i64,
     kick_ready_at_s: f64,
+    push_reported_at_s: f64,
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
     heard: Vec<Option<(u64, u64)>>,
+    /// Per teammate (index = id − 1): the time and place of the message its velocity was
+    /// last measured to, and that velocity (field frame).
+    teammate_motion: Vec<Option<TeammateMotion>>,
     /// What it last told the team, for the sending policy.
     policy: super::policy::PolicyState,
     /// The acoustic fallback, when the team uses it (see [`super::acoustic`]).
@@ -362,6 +448,7 @@ impl Robot {
             rival_going: false,
             kicked: None,
             team_ball: None,
+            team_ball_held: None,
             ball_sighting: None,
             goal_seen_at_s: None,
             ball_seen_at_s: None,
@@ -377,8 +464,10 @@ impl Robot {
             alive: true,
             pass_to_posted: 0,
             kick_ready_at_s: 0.0,
+            push_reported_at_s: f64::NEG_INFINITY,
             decided_at_s: 0.0,
             heard: vec![None; team],
+            teammate_motion: vec![None; team],
             policy: Default::default(),
             sound: None,
         }
@@ -645,11 +734,22 @@ impl Robot {
                 }
             }
         }
+        if let Some(push) = self.push_report(field, cfg, now_s) {
+            // Its own ball, and with the next message its team's, turns with the push
+            // instead of several sightings later (as with a kick).
+            self.lwm.kick(&push);
+            self.kicked = Some(push);
+            self.push_reported_at_s = now_s;
+        }
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
-        self.team_ball = self
+        self.track_teammates(now_s);
+        self.team_ball_held = self
             .gwm
             .team_ball(now_s, own.as_ref())
+            .map(|b| self.widened_at_contact(field, cfg, b));
+        self.team_ball = self
+            .team_ball_held
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
         if self.compact {
             msg.to_compact_bytes()
@@ -658,6 +758,110 @@ impl Robot {
         } else {
             msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
         }
+    }
+
+    /// Each teammate's velocity from its messages' poses at least
+    /// [`TEAMMATE_VELOCITY_BASELINE_S`] apart (over one message interval a pose's noise
+    /// would swamp it; what the GWM keeps is the latest pose only).
+    fn track_teammates(&mut self, now_s: f64) {
+        for t in self.gwm.teammates(now_s) {
+            let Some(slot) = usize::from(t.id)
+                .checked_sub(1)
+                .and_then(|k| self.teammate_motion.get_mut(k))
+            else {
+                continue;
+            };
+            let (t_s, at) = (t.lwm.t_s, Vector2::new(t.pose.mean.x, t.pose.mean.y));
+            *slot = Some(match *slot {
+                Some(m) if t_s >= m.anchor.0 && t_s - m.anchor.0 < TEAMMATE_VELOCITY_BASELINE_S => {
+                    TeammateMotion { at, ..m }
+                }
+                Some(m)
+                    if t_s > m.anchor.0
+                        && t_s - m.anchor.0 < 4.0 * TEAMMATE_VELOCITY_BASELINE_S =>
+                {
+                    TeammateMotion {
+                        anchor: (t_s, at),
+                        velocity: (at - m.anchor.1) / (t_s - m.anchor.0),
+                        at,
+                    }
+                }
+                _ => TeammateMotion {
+                    anchor: (t_s, at),
+                    velocity: Vector2::zeros(),
+                    at,
+                },
+            });
+        }
+    }
+
+    /// Its own velocity over the latest control period, field frame: odometry turned by
+    /// the heading halfway through it.
+    fn own_velocity(&self, cfg: &BrainConfig) -> Vector2<f64> {
+        let o = &self.odometry;
+        let heading = self.pose_belief.theta_rad - 0.5 * o.turn_rad;
+        let moved = Vec2::new(o.forward_m, o.left_m).rotate(heading);
+        Vector2::new(moved.x, moved.y) / cfg.control_period_s
+    }
+
+    /// `ball` with its position variance widened while a body is at it and moving into
+    /// it: the robot itself (its odometry), a teammate where its latest message put it (its
+    /// velocity between its last two), an opponent its camera sees now (at its top speed).
+    /// A body there pushes the ball at moments nobody has told this robot of yet: by
+    /// `push_gain` × its closing speed (its velocity less the ball's, along the line
+    /// between them) × [`WorldModelConfig::contact_horizon_s`] per body.
+    /// Only the estimate the robot holds is widened, not the filter's state (a push, once
+    /// seen or reported, is in it).
+    fn widened_at_contact(
+        &self,
+        field: &FieldConfig,
+        cfg: &BrainConfig,
+        mut ball: TeamBall,
+    ) -> TeamBall {
+        let wm = &cfg.world_model;
+        if wm.contact_horizon_s <= 0.0 {
+            return ball;
+        }
+        let (at, v_ball) = (ball.estimate.position(), ball.estimate.velocity());
+        let reach = |radius: f64| radius + field.ball.radius_m + wm.contact_margin_m;
+        // σ of the unheard push of a body at `p` moving at `v`, if it is at the ball.
+        let sigma = |p: Vector2<f64>, v: Vector2<f64>, radius: f64| {
+            let rel = at - p;
+            let d = rel.norm();
+            if d > reach(radius) || d < 1e-9 {
+                return 0.0;
+            }
+            wm.push_gain * (v - v_ball).dot(&(rel / d)).max(0.0) * wm.contact_horizon_s
+        };
+        let own = self.lwm.pose();
+        let ours = field.kinematics.radius_m;
+        let mut var = sigma(
+            Vector2::new(own.mean.x, own.mean.y),
+            self.own_velocity(cfg),
+            ours,
+        )
+        .powi(2);
+        for (k, m) in self.teammate_motion.iter().enumerate() {
+            if crate::harness::robot_id(k) == self.id {
+                continue;
+            }
+            if let Some(m) = m {
+                var += sigma(m.at, m.velocity, ours).powi(2);
+            }
+        }
+        let top = field.opponent_kinematics.top_speed_mps;
+        for s in &self.frame.opponents {
+            let p = perception::to_fusion_point(self.pose_belief.to_field(s.local()));
+            // Its velocity is unknown: as if it came straight at the ball at top speed.
+            let towards = (at - p).try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * top;
+            var += sigma(p, towards, field.opponent_kinematics.radius_m).powi(2);
+        }
+        if var > 0.0 {
+            ball.estimate.cov[(0, 0)] += var;
+            ball.estimate.cov[(1, 1)] += var;
+            ball.gbc = fusion::position_confidence(&ball.estimate.position_cov());
+        }
+        ball
     }
 
     /// The team ball if there is a usable one, else the robot's own.
@@ -760,6 +964,66 @@ impl Robot {
         (0, Some(cmd), None)
     }
 
+    /// A push of the ball by the robot's own body over the latest control period, as the
+    /// robot knows it: its own velocity from odometry, its own ball estimate relative to
+    /// its own pose. When the ball is at its body (its odds of touching, from both
+    /// estimates' uncertainty, at least [`WorldModelConfig::push_min_contact_prob`]) and
+    /// the body closed in on it, the ball takes `push_gain` × the closing speed along the
+    /// contact normal: reported as a [`Kick`] with those odds as its contact probability,
+    /// so every filter takes it as the mixture "pushed or not". Opponents' pushes are not
+    /// known to anyone: the ball model's noise covers them.
+    fn push_report(&self, field: &FieldConfig, cfg: &BrainConfig, now_s: f64) -> Option<Kick> {
+        let wm = &cfg.world_model;
+        if wm.push_gain <= 0.0 || now_s - self.push_reported_at_s < wm.push_report_interval_s {
+            return None;
+        }
+        // Only a ball it has seen itself lately: a remembered one is not where it walks.
+        self.ball?;
+        let ball = self.lwm.ball_at(now_s)?;
+        let pose = self.lwm.pose();
+        let rel = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
+        let d = rel.norm();
+        if d < 1e-6 {
+            return None;
+        }
+        let n = rel / d;
+        let v_body = self.own_velocity(cfg);
+        let v_ball = ball.velocity();
+        let closing = (v_body - v_ball).dot(&n);
+        if closing <= 0.0 {
+            return None;
+        }
+        let touch = field.kinematics.radius_m + field.ball.radius_m;
+        let cov = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
+        let sigma_d = (n.transpose() * cov * n)[(0, 0)].max(1e-12).sqrt();
+        let contact_prob = fusion::consistency::normal_cdf((touch - d) / sigma_d).clamp(0.0, 1.0);
+        if contact_prob < wm.push_min_contact_prob || contact_prob <= 0.0 {
+            return None;
+        }
+        let gained = n * (wm.push_gain * closing);
+        if gained.norm() < wm.push_min_change_mps {
+            return None;
+        }
+        let v_after = v_ball + gained;
+        let across = Vector2::new(-n.y, n.x);
+        let sigma_across = (across.transpose() * cov * across)[(0, 0)].max(0.0).sqrt();
+        // The contact normal is as uncertain as the ball's place around the body; the
+        // speed as the ball's own velocity and the closing speed (odometry's 5%, the
+        // body's acceleration within the period).
+        let speed_sigma = (0.5 * (ball.cov[(2, 2)] + ball.cov[(3, 3)])
+            + (0.25 * gained.norm()).powi(2))
+        .sqrt()
+        .max(0.05);
+        Some(Kick {
+            t_s: now_s,
+            speed_mps: v_after.norm(),
+            direction_rad: v_after.y.atan2(v_after.x),
+            speed_sigma_mps: speed_sigma,
+            direction_sigma_rad: (sigma_across / touch).clamp(0.05, 1.0),
+            contact_prob,
+        })
+    }
+
     /// The robot's own probability that its foot would meet the ball now: its ball
     /// estimate relative to its pose estimate, both uncertainties included, against its
     /// foot's reach (range and opening angle; its own body's geometry). Range and the
@@ -845,6 +1109,112 @@ mod tests {
     }
 
     use comms::wire::{FrameWriter, ItemRef, TeamKey};
+
+    /// A robot at the origin facing +x that has watched the ball lie still at `range_m`
+    /// straight ahead for a second, and moved `forward_m` over its latest control period.
+    fn robot_at_a_still_ball(range_m: f64, forward_m: f64) -> (Robot, FieldConfig, BrainConfig) {
+        let (field, cfg) = (FieldConfig::default(), BrainConfig::default());
+        let mut r = Robot::new(
+            2,
+            Position::Field(0),
+            ArbitrationParams::default(),
+            Pose::default(),
+            &cfg.world_model,
+            5,
+        );
+        let seen = perception::ball_sighting(
+            &field.camera,
+            &crate::field::camera::Sighting {
+                range_m,
+                bearing_rad: 0.0,
+            },
+        );
+        for k in 0..25 {
+            r.lwm.ball_sighting(0.04 * k as f64, &seen);
+        }
+        r.ball = Some(BallBelief {
+            at: Vec2::new(range_m, 0.0),
+            seen_at_s: 0.96,
+        });
+        r.odometry = Odometry {
+            forward_m,
+            left_m: 0.0,
+            turn_rad: 0.0,
+        };
+        (r, field, cfg)
+    }
+
+    #[test]
+    fn a_robot_that_walks_into_the_ball_reports_the_push_like_a_kick() {
+        // Touching is 0.2 m (body) + 0.05 m (ball); the ball lies 0.24 m ahead and the robot
+        // closed in at 0.5 m/s: the ball leaves straight ahead at 1.2 × 0.5 m/s.
+        let (r, field, cfg) = robot_at_a_still_ball(0.24, 0.02);
+        let push = r
+            .push_report(&field, &cfg, 0.96)
+            .expect("a body at the ball moving into it pushes it");
+        assert!(push.is_valid(), "{push:?}");
+        assert!(
+            (push.speed_mps - 0.6).abs() < 0.05,
+            "1.2 × the closing speed: {push:?}"
+        );
+        assert!(
+            push.direction_rad.abs() < 0.05,
+            "along the contact normal: {push:?}"
+        );
+        assert!(
+            push.contact_prob > 0.5 && push.contact_prob <= 1.0,
+            "the ball is more likely than not at the body: {push:?}"
+        );
+        // The robot's own ball turns with it at once.
+        let mut lwm = r.lwm.clone();
+        lwm.kick(&push);
+        let v = lwm.ball_at(0.96).unwrap().velocity();
+        assert!(v.x > 0.3, "own ball rolls on after the push: {v}");
+
+        // Not at the ball, backing away from it, or standing still: nothing to report.
+        let (far, ..) = robot_at_a_still_ball(0.6, 0.02);
+        assert_eq!(
+            far.push_report(&field, &cfg, 0.96),
+            None,
+            "30 cm short of it"
+        );
+        let (back, ..) = robot_at_a_still_ball(0.24, -0.02);
+        assert_eq!(back.push_report(&field, &cfg, 0.96), None, "moving away");
+        let (still, ..) = robot_at_a_still_ball(0.24, 0.0);
+        assert_eq!(still.push_report(&field, &cfg, 0.96), None, "standing");
+        // Reports switched off.
+        let mut off = cfg;
+        off.world_model.push_gain = 0.0;
+        assert_eq!(r.push_report(&field, &off, 0.96), None);
+    }
+
+    #[test]
+    fn the_team_ball_is_widened_while_a_body_closes_in_on_it() {
+        // The same robot and ball: walking into it widens the held team ball by
+        // push_gain × closing speed × the horizon; standing next to it does not.
+        let (r, field, cfg) = robot_at_a_still_ball(0.24, 0.02);
+        let own = r.lwm.ball_at(0.96).unwrap();
+        let ball = TeamBall {
+            estimate: own,
+            gbc: fusion::position_confidence(&own.position_cov()),
+            source: fusion::TeamBallSource::OwnFallback,
+        };
+        let wide = r.widened_at_contact(&field, &cfg, ball);
+        let sigma = 1.2 * 0.5 * cfg.world_model.contact_horizon_s;
+        let added = wide.estimate.cov[(0, 0)] - own.cov[(0, 0)];
+        assert!(
+            (added - sigma * sigma).abs() < 0.2 * sigma * sigma,
+            "added {added} m², expected about {}",
+            sigma * sigma
+        );
+        assert!(wide.gbc < ball.gbc, "a wider ball is a less confident one");
+        let (standing, ..) = robot_at_a_still_ball(0.24, 0.0);
+        let same = standing.widened_at_contact(&field, &cfg, ball);
+        assert_eq!(
+            same.estimate.cov, own.cov,
+            "a body that stands still pushes nothing"
+        );
+    }
 
     #[test]
     fn a_robots_world_model_fits_the_spl_message_limit_even_with_a_kick() {

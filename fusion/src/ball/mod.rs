@@ -3,6 +3,8 @@
 //!
 //! One idea per file:
 //! - `motion`: how the ball moves between sightings ([`BallModel`]);
+//! - `field`: the ball on a real field, inside its boards, with speed-dependent noise
+//!   ([`FieldBall`], [`Boards`]);
 //! - `estimate`: a ball estimate at a time, predicted to any other ([`BallEstimate`]);
 //! - `kick`: a kick as the kicker commanded it, and the estimate it leaves ([`Kick`]);
 //! - `observation`: a sighting in robot coordinates as a field-frame measurement whose
@@ -12,6 +14,7 @@
 //!   [`NetworkLimitedBall`]).
 
 mod estimate;
+mod field;
 mod filter;
 mod kick;
 mod motion;
@@ -19,6 +22,7 @@ mod observation;
 mod reference;
 
 pub use estimate::BallEstimate;
+pub use field::{Boards, FieldBall};
 pub use filter::{initial_estimate, update, BallFilter, BallFilterConfig, BallUpdate};
 pub use kick::Kick;
 pub use motion::BallModel;

@@ -1,5 +1,6 @@
 //! How the ball moves between sightings: the motion models and their exact discretisation.
 
+use super::FieldBall;
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
 /// How the ball moves between sightings.
@@ -44,6 +45,9 @@ pub enum BallModel {
         /// q: acceleration noise spectral density per axis (m²/s³).
         accel_noise_m2_per_s3: f64,
     },
+    /// [`BallModel::Friction`] inside the field's boards, with process noise that grows
+    /// with the speed (see [`FieldBall`]).
+    Field(FieldBall),
     /// The seed's static model: the ball stays where it is, up to a random walk of the given
     /// spectral density (m²/s) per axis; the velocity is zero with zero variance.
     Static {
@@ -82,59 +86,30 @@ impl BallModel {
         dt_s: f64,
     ) -> (Vector4<f64>, Matrix4<f64>, Matrix4<f64>) {
         let dt = dt_s.max(0.0);
-        let BallModel::Friction {
-            drag_per_s: c,
-            rolling_decel_mps2: mu,
-            accel_noise_m2_per_s3: q,
-        } = *self
-        else {
-            let (F, Q) = self.transition(dt);
-            return (F * x, F, Q);
-        };
-        let (_, Q) = BallModel::Rolling {
-            friction_per_s: c,
-            accel_noise_m2_per_s3: q,
+        match *self {
+            BallModel::Friction {
+                drag_per_s,
+                rolling_decel_mps2,
+                accel_noise_m2_per_s3,
+            } => friction_propagate(
+                drag_per_s,
+                rolling_decel_mps2,
+                |_| accel_noise_m2_per_s3,
+                x,
+                velocity_var_m2ps2,
+                dt,
+            ),
+            BallModel::Field(field) => field.propagate(x, velocity_var_m2ps2, dt),
+            _ => {
+                let (F, Q) = self.transition(dt);
+                (F * x, F, Q)
+            }
         }
-        .transition(dt);
-        let v = Vector2::new(x.z, x.w);
-        let s = v.norm();
-        let s = if s.is_finite() { s } else { 0.0 };
-        // The mean rolls at its own speed; P is linearised at the speed the velocity
-        // uncertainty spans, √(s² + tr P_vv): at the mean itself a ball believed at rest
-        // would have F_vv = 0, and a fresh track (v = 0, wide P_vv) would lose its velocity
-        // variance in one step, which a ball that may have just been kicked does not.
-        let (d, s_next, _, _, _) = friction_roll(c, mu, s, dt);
-        let s_lin = (s * s + velocity_var_m2ps2.max(0.0)).sqrt();
-        let (d_lin, s_next_lin, g, a, _) = friction_roll(c, mu, s_lin, dt);
-        let mut F = Matrix4::identity();
-        let (across_p, across_v) = if s_lin > 0.0 {
-            (d_lin / s_lin, s_next_lin / s_lin)
-        } else {
-            (g, a)
-        };
-        let (along, across) = if s > 0.0 {
-            let u = v / s;
-            let along = u * u.transpose();
-            (along, Matrix2::identity() - along)
-        } else {
-            // No direction: every direction is as likely, so average the two.
-            (Matrix2::identity() * 0.5, Matrix2::identity() * 0.5)
-        };
-        let dp_dv = along * g + across * across_p;
-        let dv_dv = along * a + across * across_v;
-        F.fixed_view_mut::<2, 2>(0, 2).copy_from(&dp_dv);
-        F.fixed_view_mut::<2, 2>(2, 2).copy_from(&dv_dv);
-        let (p, vn) = if s > 0.0 {
-            let u = v / s;
-            (Vector2::new(x.x, x.y) + u * d, u * s_next)
-        } else {
-            (Vector2::new(x.x, x.y), Vector2::zeros())
-        };
-        (Vector4::new(p.x, p.y, vn.x, vn.y), F, Q)
     }
 
     /// F and Q over `dt_s` (negative `dt_s` is treated as 0). For [`BallModel::Friction`]
-    /// this is its drag-only linearisation; predict with [`Self::propagate`] instead.
+    /// and [`BallModel::Field`] this is the drag-only linearisation (the latter's at rest,
+    /// without boards); predict with [`Self::propagate`] instead.
     #[allow(non_snake_case)]
     pub fn transition(&self, dt_s: f64) -> (Matrix4<f64>, Matrix4<f64>) {
         let dt = dt_s.max(0.0);
@@ -146,6 +121,11 @@ impl BallModel {
             } => BallModel::Rolling {
                 friction_per_s: drag_per_s,
                 accel_noise_m2_per_s3,
+            }
+            .transition(dt),
+            BallModel::Field(f) => BallModel::Rolling {
+                friction_per_s: f.drag_per_s,
+                accel_noise_m2_per_s3: f.still_accel_noise_m2_per_s3,
             }
             .transition(dt),
             BallModel::Rolling {
@@ -201,17 +181,72 @@ impl BallModel {
     /// The velocity variance a fresh track starts with: none for the static model.
     pub(super) fn initial_velocity_var(&self, rolling_var: f64) -> f64 {
         match self {
-            BallModel::Rolling { .. } | BallModel::Friction { .. } => rolling_var,
+            BallModel::Rolling { .. } | BallModel::Friction { .. } | BallModel::Field(_) => {
+                rolling_var
+            }
             BallModel::Static { .. } => 0.0,
         }
     }
+}
+
+/// [`BallModel::Friction`]'s prediction over `dt` (see [`BallModel::propagate`]), with the
+/// acceleration noise `q_of(s)` a function of the mean's speed.
+#[allow(non_snake_case)]
+pub(super) fn friction_propagate(
+    c: f64,
+    mu: f64,
+    q_of: impl Fn(f64) -> f64,
+    x: &Vector4<f64>,
+    velocity_var_m2ps2: f64,
+    dt: f64,
+) -> (Vector4<f64>, Matrix4<f64>, Matrix4<f64>) {
+    let v = Vector2::new(x.z, x.w);
+    let s = v.norm();
+    let s = if s.is_finite() { s } else { 0.0 };
+    // The mean rolls at its own speed; P is linearised at the speed the velocity
+    // uncertainty spans, √(s² + tr P_vv): at the mean itself a ball believed at rest
+    // would have F_vv = 0, and a fresh track (v = 0, wide P_vv) would lose its velocity
+    // variance in one step, which a ball that may have just been kicked does not.
+    let (d, s_next, _, _, _) = friction_roll(c, mu, s, dt);
+    let s_lin = (s * s + velocity_var_m2ps2.max(0.0)).sqrt();
+    let (_, Q) = BallModel::Rolling {
+        friction_per_s: c,
+        accel_noise_m2_per_s3: q_of(s),
+    }
+    .transition(dt);
+    let (d_lin, s_next_lin, g, a, _) = friction_roll(c, mu, s_lin, dt);
+    let mut F = Matrix4::identity();
+    let (across_p, across_v) = if s_lin > 0.0 {
+        (d_lin / s_lin, s_next_lin / s_lin)
+    } else {
+        (g, a)
+    };
+    let (along, across) = if s > 0.0 {
+        let u = v / s;
+        let along = u * u.transpose();
+        (along, Matrix2::identity() - along)
+    } else {
+        // No direction: every direction is as likely, so average the two.
+        (Matrix2::identity() * 0.5, Matrix2::identity() * 0.5)
+    };
+    let dp_dv = along * g + across * across_p;
+    let dv_dv = along * a + across * across_v;
+    F.fixed_view_mut::<2, 2>(0, 2).copy_from(&dp_dv);
+    F.fixed_view_mut::<2, 2>(2, 2).copy_from(&dv_dv);
+    let (p, vn) = if s > 0.0 {
+        let u = v / s;
+        (Vector2::new(x.x, x.y) + u * d, u * s_next)
+    } else {
+        (Vector2::new(x.x, x.y), Vector2::zeros())
+    };
+    (Vector4::new(p.x, p.y, vn.x, vn.y), F, Q)
 }
 
 /// A ball at speed `s` rolling for `dt` under drag `c` and rolling deceleration `mu`:
 /// (distance, final speed, ∂distance/∂s, ∂(final speed)/∂s, stop time). The derivatives
 /// hold through the stop too: the speed is 0 there, so the stop time's own dependence on s
 /// adds nothing.
-fn friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64, f64, f64) {
+pub(super) fn friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64, f64, f64) {
     let t_stop = if mu <= 0.0 {
         f64::INFINITY
     } else if c * s / mu < 1e-9 {

@@ -294,3 +294,148 @@ fn a_kick_sets_the_velocity_and_keeps_the_position() {
         "a kick moves no ball at its instant"
     );
 }
+
+/// The field's ball as `huddle sim` rolls it (drag, rolling deceleration, boards with
+/// restitution), integrated in 1 ms steps: what the field model is checked against.
+fn roll_on_the_field(x: Vector4<f64>, boards: &Boards, seconds: f64) -> Vector4<f64> {
+    let (mut p, mut v) = (Vector2::new(x.x, x.y), Vector2::new(x.z, x.w));
+    let dt = 1e-3;
+    for _ in 0..(seconds / dt).round() as usize {
+        let s = v.norm();
+        let slowed = (s * (1.0 - 0.5 * dt) - 0.6 * dt).max(0.0);
+        v = if s > 0.0 { v * (slowed / s) } else { v };
+        p += v * dt;
+        for (a, half) in [(0, boards.half_x_m), (1, boards.half_y_m)] {
+            if p[a].abs() > half {
+                p[a] = half.copysign(p[a]);
+                v[a] = -v[a] * boards.restitution;
+            }
+        }
+    }
+    Vector4::new(p.x, p.y, v.x, v.y)
+}
+
+fn field_model(boards: Option<Boards>) -> BallModel {
+    BallModel::Field(FieldBall {
+        drag_per_s: 0.5,
+        rolling_decel_mps2: 0.6,
+        still_accel_noise_m2_per_s3: 0.05,
+        accel_noise_per_speed: 5.0,
+        still_below_mps: 0.0,
+        boards,
+    })
+}
+
+#[test]
+fn a_ball_rolling_into_the_boards_bounces_back_as_the_field_does() {
+    // The default field: 9 × 6 m, 0.5 m of carpet beyond the lines, a 5 cm ball, e = 0.5.
+    let boards = Boards::around(9.0, 6.0, 0.5, 0.05, 0.5, 0.1);
+    assert!((boards.half_x_m - 4.95).abs() < 1e-12 && (boards.half_y_m - 3.45).abs() < 1e-12);
+    let model = field_model(Some(boards));
+    // 3 m/s towards the +x board from 0.5 m before it, and one into a corner.
+    for x in [
+        Vector4::new(4.45, 0.3, 3.0, 0.4),
+        Vector4::new(4.6, 3.1, 2.0, 2.0),
+    ] {
+        for dt in [0.1, 0.3, 1.0, 4.0] {
+            let (m, _, _) = model.propagate(&x, 0.0, dt);
+            let field = roll_on_the_field(x, &boards, dt);
+            assert!(
+                (m - field).norm() < 0.02,
+                "from {x} over {dt} s: model {m} vs field {field}"
+            );
+            assert!(m.x.abs() <= boards.half_x_m + 1e-9 && m.y.abs() <= boards.half_y_m + 1e-9);
+        }
+    }
+    // Without boards the same prediction goes through the board.
+    let (m, _, _) = field_model(None).propagate(&Vector4::new(4.45, 0.3, 3.0, 0.4), 0.0, 1.0);
+    assert!(m.x > boards.half_x_m, "no boards, no bounce: {m}");
+}
+
+#[test]
+fn a_bounce_reflects_the_gaussian_and_its_jacobian_is_the_derivative() {
+    let boards = Boards::around(9.0, 6.0, 0.5, 0.05, 0.5, 0.0);
+    let model = field_model(Some(boards));
+    let x = Vector4::new(4.6, 0.2, 2.5, 0.5);
+    let dt = 0.4;
+    let (m, f, _) = model.propagate(&x, 0.0, dt);
+    assert!(m.z < 0.0, "it came back: {m}");
+    // F across the bounce is ∂f/∂x (the saltation matrix makes it so): a ball further
+    // along x hit the board earlier and is now e times as much short of the mean.
+    for j in 0..4 {
+        let h = 1e-6;
+        let (mut up, mut dn) = (x, x);
+        up[j] += h;
+        dn[j] -= h;
+        let col = (model.propagate(&up, 0.0, dt).0 - model.propagate(&dn, 0.0, dt).0) / (2.0 * h);
+        assert!(
+            (col - f.column(j)).abs().max() < 1e-3 * (1.0 + col.abs().max()),
+            "column {j}: {col} vs {}",
+            f.column(j)
+        );
+    }
+    assert!(
+        f[(0, 0)] < 0.0 && f[(2, 2)] < 0.0,
+        "x and vx turn over: {f}"
+    );
+    // The restitution's σ widens the normal velocity, not the tangential one.
+    let unsure = field_model(Some(Boards {
+        restitution_sigma: 0.1,
+        ..boards
+    }));
+    let est = BallEstimate {
+        t_s: 0.0,
+        mean: x,
+        cov: Matrix4::from_diagonal(&Vector4::new(1e-4, 1e-4, 1e-3, 1e-3)),
+    };
+    let (sure, loose) = (est.predict_to(&model, dt), est.predict_to(&unsure, dt));
+    let (normal, tangential) = (
+        loose.cov[(2, 2)] - sure.cov[(2, 2)],
+        loose.cov[(3, 3)] - sure.cov[(3, 3)],
+    );
+    assert!(normal > 0.01, "{}", loose.cov);
+    // (The friction law couples the two a little once the direction has turned.)
+    assert!(tangential.abs() < 0.1 * normal, "{normal} vs {tangential}");
+    assert!(loose.cov.cholesky().is_some(), "P stays positive definite");
+}
+
+#[test]
+fn a_mean_already_beyond_the_board_is_put_back_without_shrinking_p() {
+    // A sighting's noise put the estimate 2 cm beyond the board, moving out slowly: it
+    // bounced, but nothing says where it is better than before.
+    let boards = Boards::around(9.0, 6.0, 0.5, 0.05, 0.5, 0.1);
+    let model = field_model(Some(boards));
+    let est = BallEstimate {
+        t_s: 0.0,
+        mean: Vector4::new(4.97, 0.0, 0.2, 0.0),
+        cov: Matrix4::from_diagonal(&Vector4::new(4e-4, 4e-4, 0.01, 0.01)),
+    };
+    let next = est.predict_to(&model, 0.04);
+    assert!(
+        next.mean.x <= boards.half_x_m && next.mean.z < 0.0,
+        "{}",
+        next.mean
+    );
+    assert!(next.cov[(0, 0)] >= est.cov[(0, 0)], "{}", next.cov);
+}
+
+#[test]
+fn a_still_ball_is_predicted_tighter_than_a_fast_one() {
+    let model = field_model(None);
+    let at = |v: f64| BallEstimate {
+        t_s: 0.0,
+        mean: Vector4::new(0.0, 0.0, v, 0.0),
+        cov: Matrix4::from_diagonal(&Vector4::new(1e-4, 1e-4, 1e-4, 1e-4)),
+    };
+    let (still, fast) = (
+        at(0.0).predict_to(&model, 0.1),
+        at(3.0).predict_to(&model, 0.1),
+    );
+    // q = 0.05 at rest, 15.05 at 3 m/s.
+    assert!(
+        fast.cov[(1, 1)] > 50.0 * (still.cov[(1, 1)] - 1e-4),
+        "still {} vs fast {}",
+        still.cov,
+        fast.cov
+    );
+}
