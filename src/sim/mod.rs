@@ -175,7 +175,8 @@ pub struct SimConfig {
     pub arbitration: ArbitrationParams,
     /// How frames travel.
     pub transport: Transport,
-    /// A league's message budget for the team (shared equally by the robots), or none.
+    /// A league's message budget for the team, pooled by its robots (every robot runs
+    /// huddle: `comms::BudgetSpec::share`), or none.
     #[serde(serialize_with = "budget_name")]
     pub budget: Option<comms::BudgetSpec>,
     /// Set the arbitration's latency compensation to the network's expected delay (as a
