@@ -46,6 +46,8 @@ pub const VOI_BALL_TOLERANCE_M: f64 = 0.5;
 pub const VOI_GATE_CHI2: f64 = 13.82;
 /// The VOI policy sends at least this often, seconds.
 pub const VOI_HEARTBEAT_S: f64 = 10.0;
+/// … with no budget: metres, radians.
+pub const VOI_UNBUDGETED_POSE_TOLERANCE: (f64, f64) = (0.5, 0.35);
 /// Pose change teammates tolerate under the VOI policy: metres, radians.
 pub const VOI_POSE_TOLERANCE: (f64, f64) = (2.0, std::f64::consts::PI);
 
@@ -199,6 +201,43 @@ impl PolicyState {
         }
     }
 
+    /// VOI with no budget: messages cost bandwidth only, so it tells teammates whenever
+    /// its own last ball, rolled forward with the model's growing σ, is more than
+    /// [`VOI_SIGMAS`] σ off what it knows or has grown vaguer than it by far, and when it
+    /// moved or turned more than half a metre or 20°.
+    fn voi_unbudgeted(&self, now: &Now<'_>) -> Option<bool> {
+        let Some(last) = self.last else {
+            return Some(false);
+        };
+        if self.urgent(now) {
+            return Some(true);
+        }
+        if now.t_s - last.t_s >= VOI_HEARTBEAT_S {
+            return Some(false);
+        }
+        let (tol_m, tol_rad) = VOI_UNBUDGETED_POSE_TOLERANCE;
+        if last.pose.at.distance(now.pose.at) > tol_m
+            || fusion::wrap_angle(last.pose.theta_rad - now.pose.theta_rad).abs() > tol_rad
+        {
+            return Some(false);
+        }
+        match (last.ball, now.ball) {
+            (None, None) => None,
+            // Teammates believe I see a ball I lost, or do not know one I see.
+            (Some(_), None) | (None, Some(_)) => Some(false),
+            (Some(sent), Some(mine)) => {
+                let predicted = sent.predict_to(now.model, now.t_s);
+                let e = mine.position() - predicted.position();
+                let s = predicted.position_cov() + mine.position_cov();
+                let d2 = s.cholesky().map_or(f64::INFINITY, |c| e.dot(&c.solve(&e)));
+                // Vaguer by far: teammates' σ more than three times mine and over 0.5 m.
+                let vague = predicted.position_cov().trace()
+                    > (9.0 * mine.position_cov().trace()).max(0.25);
+                (d2 > VOI_SIGMAS * VOI_SIGMAS || vague).then_some(false)
+            }
+        }
+    }
+
     /// A goer whose claim is about to be dropped by teammates says it again, with
     /// priority (a robot that does not go loses nothing much when its cost is dropped).
     fn keepalive(&self, now: &Now<'_>) -> Option<bool> {
@@ -237,6 +276,9 @@ impl PolicyState {
     }
 
     fn voi(&self, now: &Now<'_>) -> Option<bool> {
+        if now.headroom.is_none() {
+            return self.voi_unbudgeted(now);
+        }
         let Some(last) = self.last else {
             return Some(false);
         };
@@ -270,6 +312,8 @@ impl PolicyState {
         };
         let spare = now.headroom.is_none_or(|h| h >= needed);
         let tolerance = match now.headroom {
+            // Plenty in hand (a Humanoid budget): spend it on smaller errors.
+            Some(h) if h >= 4 * VOI_SPARE => VOI_BALL_TOLERANCE_M / 2.0,
             Some(h) if h < 1 => VOI_BALL_TOLERANCE_M * 3.0,
             Some(h) if h < VOI_SPARE => VOI_BALL_TOLERANCE_M * 2.0,
             _ => VOI_BALL_TOLERANCE_M,
