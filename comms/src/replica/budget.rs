@@ -268,7 +268,7 @@ impl BudgetState {
         match self.budget.team {
             None => self.budget.messages.saturating_sub(self.sent),
             Some(team) => {
-                let cap = team.messages - team.margin() / 2;
+                let cap = team.messages.saturating_sub(team.margin() / 2);
                 cap.saturating_sub(self.team_sent())
             }
         }
@@ -715,6 +715,21 @@ mod replica_tests {
         assert!(
             left >= 100 - 15 - 6,
             "one frame heard counts for at most 6, whatever its counter says: {left} left"
+        );
+    }
+
+    #[test]
+    fn a_pooled_budget_smaller_than_its_margin_sends_nothing_and_does_not_panic() {
+        // 5 messages for 5 robots: the margin (15) is larger than the budget.
+        let spec = crate::BudgetSpec {
+            team_messages: 5,
+            game: Duration::from_secs(10),
+            payload_limit: Some(128),
+        };
+        let sent = team(spec.share(5), 10_000, |_, _| true);
+        assert!(
+            sent.iter().sum::<u64>() <= 5,
+            "never beyond the team's budget: {sent:?}"
         );
     }
 }
