@@ -20,6 +20,7 @@ pub mod references;
 mod report;
 pub mod robot;
 pub mod svg;
+pub mod world_model;
 
 use std::time::Duration;
 

@@ -148,7 +148,7 @@ pub struct Report {
     /// … fast.
     pub team_ball_nees_fast: NeesBand,
     /// The team-ball NEES per cause: the latest event that changed the true ball's motion
-    /// within a second before the sample ([`metrics::BallEvent`], `quiet`: none).
+    /// within a second before the sample ([`super::metrics::BallEvent`], `quiet`: none).
     pub team_ball_nees_by_cause: Vec<NeesCause>,
     /// Average position NEES of the centralized filter.
     pub centralized_nees: f64,
