@@ -268,18 +268,7 @@ impl Decoder {
                 .copied()
                 .unwrap_or(0.0);
             let threshold = gamma_upper_quantile(half.count as f64, P_HALF_TONE).max(above_most);
-            [
-                frame.sender.index() as usize,
-                SENDER_COUNT + usize::from(frame.data),
-            ]
-            .into_iter()
-            .all(|basic| {
-                basic_tones(basic)
-                    .iter()
-                    .filter(|&&k| present[k] && half.sums[k] >= threshold)
-                    .count()
-                    >= 2
-            })
+            each_vote_holds(frame, present, |k| half.sums[k] >= threshold)
         })
     }
 
@@ -315,18 +304,7 @@ impl Decoder {
             let local = (median(around) / n - LOCAL_Z * spread).max(1.0);
             sums[k] >= threshold * local
         };
-        [
-            frame.sender.index() as usize,
-            SENDER_COUNT + usize::from(frame.data),
-        ]
-        .into_iter()
-        .all(|basic| {
-            basic_tones(basic)
-                .iter()
-                .filter(|&&k| present[k] && stands_out(k))
-                .count()
-                >= 2
-        })
+        each_vote_holds(frame, present, stands_out)
     }
 
     /// Whether each of the frame's basics has two `present` tones that sound steadily
@@ -390,18 +368,7 @@ impl Decoder {
             let median_shows = raised <= 1.0 || median(r.clone()) >= MEDIAN_PRESENT;
             tail >= P_DROPOUTS && median_shows
         };
-        [
-            frame.sender.index() as usize,
-            SENDER_COUNT + usize::from(frame.data),
-        ]
-        .into_iter()
-        .all(|basic| {
-            basic_tones(basic)
-                .iter()
-                .filter(|&&k| present[k] && steady(k))
-                .count()
-                >= 2
-        })
+        each_vote_holds(frame, present, steady)
     }
 
     /// Whether a tone outside the frame sounds about as loud as the frame's own tones
@@ -430,8 +397,8 @@ impl Decoder {
             l.sort_by(|a, b| b.total_cmp(a));
             l[1]
         };
-        let weakest_vote =
-            vote(frame.sender.index() as usize).min(vote(SENDER_COUNT + usize::from(frame.data)));
+        let [sender, data] = vote_basics(frame);
+        let weakest_vote = vote(sender).min(vote(data));
         (0..TONE_COUNT).any(|k| {
             present[k]
                 && !own.contains(&k)
@@ -443,6 +410,29 @@ impl Decoder {
 
 /// `P(r < 1)` for the normalised power `r` of a steady tone of excess `lambda` in noise of
 /// mean 1 (Simpson's rule on the non-central χ² density, 32 intervals).
+/// The two basics a frame's 2-of-3 votes are taken on: its sender's and its data's.
+fn vote_basics(frame: Frame) -> [usize; 2] {
+    [
+        frame.sender.index() as usize,
+        SENDER_COUNT + usize::from(frame.data),
+    ]
+}
+
+/// Whether both of the frame's votes rest on two `present` tones that pass `holds`.
+fn each_vote_holds(
+    frame: Frame,
+    present: &[bool; TONE_COUNT],
+    holds: impl Fn(usize) -> bool,
+) -> bool {
+    vote_basics(frame).into_iter().all(|basic| {
+        basic_tones(basic)
+            .iter()
+            .filter(|&&k| present[k] && holds(k))
+            .count()
+            >= 2
+    })
+}
+
 pub(super) fn probability_below_noise_mean(lambda: f64) -> f64 {
     let steps = 32;
     let h = 1.0 / steps as f64;
