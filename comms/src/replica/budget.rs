@@ -163,6 +163,17 @@ impl TeamPool {
     fn margin(&self) -> u64 {
         3 * self.robots
     }
+
+    /// Frames the team's line reaches by the end of the game.
+    fn usable(&self) -> u64 {
+        self.messages.saturating_sub(self.margin())
+    }
+
+    /// One robot's equal part of the line (not of its own share less its reserve: the
+    /// parts must add up to the line, or the last robot to decide starves).
+    fn own_usable(&self) -> u64 {
+        self.usable() / self.robots.max(1)
+    }
 }
 
 impl Budget {
@@ -303,10 +314,7 @@ impl BudgetState {
     /// Pooled: the team's line over the game, `line(p) = ⌊usable · p⌋ + 1` frames by the
     /// time a share `p` of it is played, and this robot's equal share of it likewise.
     fn next_pooled(&self, now: Instant, team: TeamPool) -> Option<Instant> {
-        let usable = team.messages.saturating_sub(team.margin());
-        // This robot's equal part of the team's line (not of its own share less its
-        // reserve: the parts must add up to the line, or the last robot to decide starves).
-        let own_usable = usable / team.robots.max(1);
+        let (usable, own_usable) = (team.usable(), team.own_usable());
         if usable == 0 || self.left() == 0 {
             return None;
         }
@@ -349,10 +357,7 @@ impl BudgetState {
         let played = self.played(now);
         let line = |usable: u64| (usable as f64 * played).floor() as i64 + 1;
         match self.budget.team {
-            Some(team) => {
-                let usable = team.messages.saturating_sub(team.margin());
-                line(usable) - self.team_sent() as i64
-            }
+            Some(team) => line(team.usable()) - self.team_sent() as i64,
             None => {
                 let usable = self.budget.messages.saturating_sub(self.budget.reserve);
                 line(usable) - self.sent_ordinary as i64
@@ -386,8 +391,7 @@ impl BudgetState {
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
         if let Some(team) = self.budget.team {
             // Every frame draws on the credit while there is some; borrowing owes nothing.
-            let own_usable = team.messages.saturating_sub(team.margin()) / team.robots.max(1);
-            let credit = self.credit_at(now, own_usable);
+            let credit = self.credit_at(now, team.own_usable());
             self.credit = ((credit - 1.0).max(0.0), self.played(now));
         }
         self.sent += 1;
