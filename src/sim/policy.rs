@@ -45,9 +45,6 @@ pub const VOI_SPARE: i64 = 3;
 pub const VOI_BALL_TOLERANCE_M: f64 = 1.0;
 /// … with plenty of budget in hand (a Humanoid budget), metres.
 pub const VOI_ABUNDANT_BALL_TOLERANCE_M: f64 = 0.25;
-/// The GWM's gate (χ²₂ at 99.9%, `WorldModelConfig`): a message this far off what
-/// teammates believe restarts their team ball rather than nudging it.
-pub const VOI_GATE_CHI2: f64 = 13.82;
 /// The VOI policy sends at least this often, seconds.
 pub const VOI_HEARTBEAT_S: f64 = 10.0;
 /// … with no budget: metres, radians.
@@ -139,6 +136,9 @@ pub struct Now<'a> {
     pub rival_going: bool,
     /// The lowest such cost among teammates, as heard (`None`: no teammate counts).
     pub rival_cost: Option<f64>,
+    /// The gate teammates' GWMs hold a sighting to (χ², 2 dof): a message further off
+    /// what they believe restarts their team ball rather than nudging it.
+    pub gate_chi2: f64,
     /// Under a budget: frames its pacing would let go now (`comms::Replica::
     /// budget_headroom`); `None` without one.
     pub headroom: Option<i64>,
@@ -359,7 +359,7 @@ impl PolicyState {
                 let theirs = along(predicted.position_cov());
                 let total = (theirs + mine_var).max(1e-12);
                 // Beyond their gate teammates restart on it: the belief moves all the way.
-                let shift = if e.norm_squared() / total > VOI_GATE_CHI2 {
+                let shift = if e.norm_squared() / total > now.gate_chi2 {
                     e.norm()
                 } else {
                     e.norm() * theirs / total

@@ -421,6 +421,7 @@ impl Robot {
                 .filter_map(|m| m.lwm.ball)
                 .max_by(|a, b| a.t_s.total_cmp(&b.t_s)),
             headroom: input.budget_headroom,
+            gate_chi2: self.gwm.config().gate_chi2,
             cost: self.arbiter.params().effective_cost(&posted),
             h: posted.h,
             rival_cost: self.rival_cost,
