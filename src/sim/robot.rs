@@ -414,12 +414,16 @@ impl Robot {
             kicked: kick.is_some(),
             model: &cfg.world_model.local.ball.model,
             // What teammates last told the team about the ball: the freshest track heard.
-            told: self
-                .gwm
-                .teammates(t)
-                .iter()
-                .filter_map(|m| m.lwm.ball)
-                .max_by(|a, b| a.t_s.total_cmp(&b.t_s)),
+            // (Only VOI weighs it: no copy of every teammate's model per tick for the rest.)
+            told: (cfg.send_policy == super::policy::SendPolicy::Voi)
+                .then(|| {
+                    self.gwm
+                        .teammates(t)
+                        .iter()
+                        .filter_map(|m| m.lwm.ball)
+                        .max_by(|a, b| a.t_s.total_cmp(&b.t_s))
+                })
+                .flatten(),
             headroom: input.budget_headroom,
             gate_chi2: self.gwm.config().gate_chi2,
             cost: self.arbiter.params().effective_cost(&posted),
