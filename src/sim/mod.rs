@@ -508,6 +508,7 @@ impl Simulation {
                 percepts,
                 board: replica.blackboard(),
                 world_model_waiting: replica.is_pending(&robot::world_local_key()),
+                claim_waiting: replica.is_pending(&comms::arbitration::heuristic_key()),
                 budget_headroom: replica.budget_headroom(),
                 homes: &self.homes,
                 holders: &self.holders,

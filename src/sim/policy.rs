@@ -134,7 +134,8 @@ pub struct Now<'a> {
     pub keepalive_s: Option<f64>,
     /// A teammate also claims to be going, as heard.
     pub rival_going: bool,
-    /// The lowest such cost among teammates, as heard (`None`: no teammate counts).
+    /// The lowest such cost among teammates, as heard (the no-ball cost when no
+    /// teammate counts; `None`: not known).
     pub rival_cost: Option<f64>,
     /// The gate teammates' GWMs hold a sighting to (χ², 2 dof): a message further off
     /// what they believe restarts their team ball rather than nudging it.
@@ -147,12 +148,27 @@ pub struct Now<'a> {
 impl PolicyState {
     /// What to do this tick. `waiting`: the world model written last has not gone out
     /// yet (a budget's pacing holds it).
-    pub fn decide(&mut self, policy: SendPolicy, now: &Now<'_>, waiting: bool) -> Action {
+    /// `claim_waiting`: the claim written with it has not gone out either (a frame
+    /// may carry the small claim while the world model still waits for room).
+    pub fn decide(
+        &mut self,
+        policy: SendPolicy,
+        now: &Now<'_>,
+        waiting: bool,
+        claim_waiting: bool,
+    ) -> Action {
         self.kick_pending |= now.kicked;
         if !waiting {
             // It went out since the previous tick: that is what teammates now hold.
             if let Some(sent) = self.pending.take() {
                 self.last = Some(sent);
+            }
+        } else if !claim_waiting {
+            // Only the claim went: teammates hold its cost and its going.
+            if let (Some(last), Some(sent)) = (&mut self.last, &self.pending) {
+                last.going = sent.going;
+                last.h = sent.h;
+                last.cost = sent.cost;
             }
         }
         let decision = match policy {
@@ -367,5 +383,61 @@ impl PolicyState {
                 (significant && shift > tolerance).then_some(false)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn now(model: &BallModel, t_s: f64, going: bool, h: f64) -> Now<'_> {
+        Now {
+            t_s,
+            pose: Pose::default(),
+            ball: None,
+            going,
+            team_ball_stale: false,
+            kicked: false,
+            model,
+            told: None,
+            cost: h,
+            h,
+            keepalive_s: Some(5.0),
+            rival_going: false,
+            rival_cost: Some(1.0),
+            gate_chi2: 13.82,
+            headroom: Some(10),
+        }
+    }
+
+    /// Under a budget a frame may carry the small claim while the world model written
+    /// with it waits for room: teammates then hold the new cost, and so must the robot
+    /// (it decides on what they hold), or the two sides weigh different numbers.
+    #[test]
+    fn a_claim_that_went_alone_is_what_teammates_hold() {
+        let model = BallModel::default();
+        let mut p = PolicyState::default();
+        // The first message goes out: teammates hold cost 2.0, not going.
+        assert_eq!(
+            p.decide(SendPolicy::Voi, &now(&model, 0.0, false, 2.0), false, false),
+            Action::Send { priority: false }
+        );
+        p.decide(SendPolicy::Voi, &now(&model, 0.04, false, 2.0), false, false);
+        assert_eq!(p.told_cost(), Some(2.0));
+        // It starts going with cost 0.5: a goer change, with priority.
+        assert_eq!(
+            p.decide(SendPolicy::Voi, &now(&model, 1.0, true, 0.5), false, false),
+            Action::Send { priority: true }
+        );
+        // Nothing went out yet: teammates still hold 2.0.
+        p.decide(SendPolicy::Voi, &now(&model, 1.04, true, 0.5), true, true);
+        assert_eq!(p.told_cost(), Some(2.0), "nothing went out yet");
+        // The claim went in a frame, the world model still waits.
+        p.decide(SendPolicy::Voi, &now(&model, 1.08, true, 0.5), true, false);
+        assert_eq!(
+            p.told_cost(),
+            Some(0.5),
+            "the claim went alone: teammates hold cost 0.5"
+        );
     }
 }

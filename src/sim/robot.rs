@@ -209,6 +209,10 @@ pub struct Robot {
     compact: bool,
     /// The lowest effective cost among teammates at the latest decision.
     rival_cost: Option<f64>,
+    /// A claim change written between ticks that has not gone out yet (a budget's pacing
+    /// holds it): a goer that stopped keeps going until its team can know (see
+    /// [`Robot::going`]).
+    untold_claim: Option<Posted>,
     /// … and whether one of them claimed to be going.
     rival_going: bool,
     /// The team ball at its latest tick (when its GBC is high enough to use).
@@ -266,6 +270,8 @@ pub struct TickInput<'a> {
     /// it): the robot writes its newest again, so the frame carries what it knows when it
     /// goes rather than when it decided to send.
     pub world_model_waiting: bool,
+    /// Its claim (`HEURISTIC_KEY`) written earlier still waits for a frame.
+    pub claim_waiting: bool,
     /// Its replica's budget headroom (`comms::Replica::budget_headroom`), if it has a
     /// budget.
     pub budget_headroom: Option<i64>,
@@ -306,6 +312,7 @@ impl Robot {
             gwm: GlobalModel::new(id, world_model.global),
             compact: world_model.global.track_after_s.is_some(),
             rival_cost: None,
+            untold_claim: None,
             rival_going: false,
             kicked: None,
             team_ball: None,
@@ -345,8 +352,14 @@ impl Robot {
     }
 
     /// Whether it is going to the ball now.
+    ///
+    /// A goer that decided to stop while its "not going" waits for a frame goes on: its
+    /// teammates still hold its claim and none of them goes, so stopping unannounced
+    /// would leave the ball to nobody.
     pub fn going(&self) -> bool {
-        self.alive && self.arbiter.going()
+        self.alive
+            && (self.arbiter.going()
+                || (!self.rival_going && self.untold_claim.is_some_and(|c| !c.going)))
     }
 
     /// One control tick: sense, decide, act. `field` is what the robot knows of the field
@@ -359,6 +372,9 @@ impl Robot {
     ) -> TickOutput {
         let t = seconds(input.local_now);
         self.kicked = None;
+        if !input.claim_waiting {
+            self.untold_claim = None;
+        }
         let percepts = std::mem::take(&mut input.percepts);
         self.frame = percepts.frame;
         self.odometry = percepts.odometry;
@@ -391,7 +407,7 @@ impl Robot {
         let goalkeeper = self.position == Position::Goalkeeper;
         self.mode = if goalkeeper {
             Mode::Goaltend
-        } else if self.arbiter.going() {
+        } else if self.going() {
             Mode::Active
         } else {
             match mode(self.id, goalkeeper, &decision, pass_to) {
@@ -434,15 +450,30 @@ impl Robot {
                 .compact
                 .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
         };
-        let action = self
-            .policy
-            .decide(cfg.send_policy, &now, input.world_model_waiting);
+        let action = self.policy.decide(
+            cfg.send_policy,
+            &now,
+            input.world_model_waiting,
+            input.claim_waiting,
+        );
         if self.compact {
             // Sparse messages: decide on the cost teammates hold (see `set_told_cost`).
             self.arbiter.set_told_cost(self.policy.told_cost());
         }
-        if !matches!(action, Action::Send { .. }) {
-            writes.clear();
+        let mut priority = action == (Action::Send { priority: true });
+        match action {
+            // The claim written with the world model is the newest.
+            Action::Send { .. } => self.untold_claim = None,
+            Action::Quiet => writes.clear(),
+            // Taking back the world model takes back the claim in its frame: a claim
+            // change still untold goes again, on its own.
+            Action::Withdraw => {
+                writes.clear();
+                if let Some(claim) = self.untold_claim {
+                    writes.push((arbitration::heuristic_key(), Value::from(claim)));
+                    priority = true;
+                }
+            }
         }
         if receiver != self.pass_to_posted {
             self.pass_to_posted = receiver;
@@ -450,7 +481,7 @@ impl Robot {
         }
         TickOutput {
             writes,
-            priority: action == (Action::Send { priority: true }),
+            priority,
             withdraw: action == Action::Withdraw,
             command,
             believed: self.pose_belief,
@@ -472,9 +503,12 @@ impl Robot {
                 .iter()
                 .filter(|c| c.robot != self.id && params.counts(c))
         };
+        // With no teammate in the running, the bar to beat is the no-ball cost: a robot
+        // that told "no ball" and now sees one has news.
         self.rival_cost = rivals()
             .map(|c| params.effective_cost(&c.posted))
-            .min_by(f64::total_cmp);
+            .min_by(f64::total_cmp)
+            .or(Some(params.no_ball_cost));
         self.rival_going = rivals().any(|c| c.posted.going);
         self.claim_ages.clear();
         self.claim_ages.extend(
@@ -506,6 +540,7 @@ impl Robot {
             let cost = self.arbiter.params().effective_cost(&posted);
             self.policy.sent_going(posted.going, posted.h, cost);
             if self.compact {
+                self.untold_claim = Some(posted);
                 self.arbiter.set_told_cost(self.policy.told_cost());
             }
         }
