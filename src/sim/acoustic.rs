@@ -4,8 +4,27 @@
 //! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
 //! robot sounds only in its own slot of a repeating cycle on the team's (radio-synchronised)
 //! clock: the slot a message started in says who sent it, and the sender basic is free to
-//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]) that covers the
-//! longest flight across the field (about 35 ms) and the decoder's start-time error.
+//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
+//! set for a hall, not for a dry room: a 100 ms tone in a reverberant hall (critical
+//! distance 8 m, T60 anywhere from 0.6 to 2 s) is almost never decoded, even alone with a
+//! second of silence around it; the decoder needs about 300 ms there, and the previous
+//! slot's tail and the end test (half a tone past the end) want the guard at about 300 ms.
+//! The default 400 + 300 ms slot makes a 2.8 s cycle for four robots.
+//!
+//! **Decision.** While the radio is silent (no teammate's radio claim fresher than the
+//! arbitration's staleness limit) the fallback decides, on the claims this robot holds:
+//! each field player's newest, by radio (the last one heard before the outage) or by
+//! sound, its own as the team heard it (what it posted, then what it sounded, quantised).
+//! Every claim counts as fresh until `stale_cycles` cycles old: a missed message leaves
+//! the teammate's previous claim standing rather than making room for a second goer, so
+//! the goer the team agreed by radio keeps the ball until a claim sounded in the room
+//! says otherwise. A claim heard by sound counts from the end of its slot, on everyone's
+//! clock, its sender's too: robots that heard the same messages change their minds at the
+//! same instant. The rule is the arbitration's (`comms::arbitration::decide`: lowest cost,
+//! the goer's lowered by the hysteresis margin, ties to the lower id).
+//! What is left is robots that missed different messages: they disagree until the next
+//! cycle, and as the goer's "going" claim stands until it is heard to let go, this shows
+//! as time with no goer far more than as two goers.
 //!
 //! **Claim.** A short message carries 3 × 21 = 63 values ([`encode_claim`]): 0 = "no ball,
 //! no claim", 1–31 = "not going" with the cost h in one of 31 bins of
