@@ -118,6 +118,10 @@ pub struct SimArgs {
     /// arbitration's).
     #[arg(long, value_name = "M")]
     pub acoustic_hysteresis: Option<f64>,
+    /// Hold a teammate's claim to be going at full weight even when its last slot went
+    /// by unheard (default: such a claim loses the goer's margin).
+    #[arg(long)]
+    pub acoustic_no_doubt: bool,
     /// The crowd's noise as the in-band SNR of one robot's sound heard 1 m away, dB.
     #[arg(long, value_name = "DB", allow_hyphen_values = true)]
     pub crowd_snr: Option<f64>,
@@ -169,6 +173,7 @@ impl Default for SimArgs {
             tone: None,
             guard: None,
             acoustic_hysteresis: None,
+            acoustic_no_doubt: false,
             crowd_snr: None,
             t60: None,
             critical_distance: None,
@@ -290,6 +295,7 @@ fn config(args: &SimArgs) -> SimConfig {
             if let Some(g) = args.guard {
                 a.guard_s = g.as_secs_f64();
             }
+            a.doubt_going = !args.acoustic_no_doubt;
             if args.acoustic_hysteresis.is_some() {
                 a.hysteresis_m = args.acoustic_hysteresis;
             }

@@ -83,6 +83,9 @@ pub struct AcousticConfig {
     pub stale_cycles: f64,
     /// Hysteresis margin of the fallback's decision, m (`None`: the arbitration's).
     pub hysteresis_m: Option<f64>,
+    /// Whether a claim to be going whose sender's last slot went by unheard loses the
+    /// goer's hysteresis margin.
+    pub doubt_going: bool,
 }
 
 impl Default for AcousticConfig {
@@ -107,6 +110,7 @@ impl Default for AcousticConfig {
             // drop a goer's claim, which would make a second goer.
             stale_cycles: 3.0,
             hysteresis_m: None,
+            doubt_going: true,
         }
     }
 }
@@ -189,6 +193,10 @@ impl SlotPlan {
     }
 }
 
+/// A claim newer than one cycle and this is not in doubt (the decoder reports a claim
+/// within its slot's guard; this allows for late reports), s.
+const DOUBT_MARGIN_S: f64 = 0.2;
+
 /// A claim as this robot holds it: what a teammate (or itself) last told the team, by
 /// radio or by sound, and from when it counts (this robot's clock, s).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -207,6 +215,8 @@ pub struct SoundFallback {
     expire_s: f64,
     /// The rule the team decides by while the fallback is in control.
     params: ArbitrationParams,
+    /// Whether a going claim whose last slot went by unheard loses the goer's margin.
+    doubt_going: bool,
     /// Per robot (index = id − 1): its latest claim heard by sound (its own: sounded),
     /// in force from the end of its slot.
     sounded: Vec<Option<Told>>,
@@ -237,6 +247,7 @@ impl SoundFallback {
                 hysteresis_m: cfg.hysteresis_m.unwrap_or(params.hysteresis_m),
                 ..params
             },
+            doubt_going: cfg.doubt_going,
             sounded: vec![None; team],
             pending: vec![None; team],
             own_radio: None,
@@ -349,9 +360,19 @@ impl SoundFallback {
                 (r, s) => r.or(s),
             };
             if let Some(t) = newest.filter(|t| now_s - t.at_s <= self.expire_s) {
+                let mut posted = t.posted;
+                if id != me
+                    && self.doubt_going
+                    && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S
+                {
+                    // Its last slot went by unheard: a claim to be going is in doubt (it
+                    // may have let go in the message this robot missed), so it keeps its
+                    // cost but not the goer's margin.
+                    posted.going = false;
+                }
                 out.push(Candidate {
                     robot: id,
-                    posted: t.posted,
+                    posted,
                     age: Duration::ZERO,
                 });
             }
@@ -1019,5 +1040,121 @@ mod tests {
             );
         }
         assert!(!plan.starts_in(1, 0.0, 0.01), "the goalkeeper has no slot");
+    }
+
+    fn radio_claim(robot: u8, h: f64, going: bool, age_s: f64) -> Candidate {
+        Candidate {
+            robot,
+            posted: Posted { h, going },
+            age: Duration::from_secs_f64(age_s),
+        }
+    }
+
+    #[test]
+    fn the_radio_goer_keeps_the_ball_until_a_claim_heard_in_the_room_beats_it() {
+        let cfg = AcousticConfig::default();
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: cfg.slot_s(),
+        };
+        let stale = ArbitrationParams::default().stale_after;
+        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        // Robot 3 at 11.55 s: the radio still speaks; 2 goes, 4 is a little closer (within
+        // the hysteresis margin).
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 11.5),
+                radio_claim(4, 0.8, false, t - 11.5),
+                radio_claim(5, 3.0, false, t - 11.5),
+            ]
+        };
+        assert!(
+            !fb.radio(3, &at(11.55), stale),
+            "fresh radio: the arbiter decides"
+        );
+        fb.posted(
+            11.55,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        // At 12 s the radio is silent: the fallback keeps the agreed goer.
+        assert!(
+            fb.radio(3, &at(12.0), stale),
+            "silent radio: the fallback decides"
+        );
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(
+            goer(&mut fb, 12.0),
+            Some(2),
+            "the goer agreed by radio keeps the ball"
+        );
+        // Robot 4 sounds 0.2 m in its slot; heard 20 ms into it, it counts from its end.
+        let start = (12.0 / plan.cycle_s()).floor() * plan.cycle_s() + 2.0 * plan.slot_s;
+        assert_eq!(plan.sender_at(start + 0.02), Some(4));
+        fb.hear(3, &claim_message(0.2, false), start + 0.02);
+        let end = plan.slot_end(start + 0.02);
+        assert!((end - (start + plan.slot_s)).abs() < 1e-9);
+        assert_eq!(
+            goer(&mut fb, end - 0.05),
+            Some(2),
+            "not before its slot ends"
+        );
+        assert_eq!(
+            goer(&mut fb, end + 0.01),
+            Some(4),
+            "0.25 m beats 1.0 − 0.5 m"
+        );
+    }
+
+    #[test]
+    fn a_going_claim_whose_slot_went_by_unheard_loses_the_margin() {
+        let cfg = AcousticConfig::default();
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: cfg.slot_s(),
+        };
+        let stale = ArbitrationParams::default().stale_after;
+        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 10.0),
+                radio_claim(4, 0.7, false, t - 10.0),
+                radio_claim(5, 3.0, false, t - 10.0),
+            ]
+        };
+        fb.posted(
+            10.0,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        assert!(fb.radio(3, &at(10.5), stale));
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(goer(&mut fb, 10.5), Some(2));
+        // A cycle and more without a word from robot 2: its claim is in doubt.
+        let later = 10.0 + plan.cycle_s() + DOUBT_MARGIN_S + 0.1;
+        assert_eq!(
+            goer(&mut fb, later),
+            Some(4),
+            "1.0 m without the margin loses to 0.7 m"
+        );
+        // Older than `stale_cycles` cycles: gone (robot 3's own claim is too).
+        let expired = 10.0 + cfg.stale_cycles * plan.cycle_s() + 0.1;
+        assert_eq!(fb.candidates(3, expired, &at(expired)), vec![]);
+    }
+
+    fn claim_message(h: f64, going: bool) -> Message {
+        encode_claim(Posted { h, going }, 1000.0)
     }
 }
