@@ -111,6 +111,17 @@ pub struct SimArgs {
     /// Tone length of the acoustic messages (`150ms`; 60 ms to 5 s).
     #[arg(long, value_parser = duration::parse)]
     pub tone: Option<Duration>,
+    /// Silence after each acoustic message before the next robot's slot (`300ms`).
+    #[arg(long, value_parser = duration::parse)]
+    pub guard: Option<Duration>,
+    /// Hysteresis margin of the acoustic fallback's decision, m (default: the
+    /// arbitration's).
+    #[arg(long, value_name = "M")]
+    pub acoustic_hysteresis: Option<f64>,
+    /// Hold a teammate's claim to be going at full weight even when its last slot went
+    /// by unheard (default: such a claim loses the goer's margin).
+    #[arg(long)]
+    pub acoustic_no_doubt: bool,
     /// The crowd's noise as the in-band SNR of one robot's sound heard 1 m away, dB.
     #[arg(long, value_name = "DB", allow_hyphen_values = true)]
     pub crowd_snr: Option<f64>,
@@ -160,6 +171,9 @@ impl Default for SimArgs {
             outage: None,
             acoustic: false,
             tone: None,
+            guard: None,
+            acoustic_hysteresis: None,
+            acoustic_no_doubt: false,
             crowd_snr: None,
             t60: None,
             critical_distance: None,
@@ -277,6 +291,13 @@ fn config(args: &SimArgs) -> SimConfig {
             };
             if let Some(t) = args.tone {
                 a.tone_s = t.as_secs_f64();
+            }
+            if let Some(g) = args.guard {
+                a.guard_s = g.as_secs_f64();
+            }
+            a.doubt_going = !args.acoustic_no_doubt;
+            if args.acoustic_hysteresis.is_some() {
+                a.hysteresis_m = args.acoustic_hysteresis;
             }
             if let Some(snr) = args.crowd_snr {
                 a.crowd_snr_db_at_1m = snr;

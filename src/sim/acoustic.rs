@@ -4,8 +4,27 @@
 //! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
 //! robot sounds only in its own slot of a repeating cycle on the team's (radio-synchronised)
 //! clock: the slot a message started in says who sent it, and the sender basic is free to
-//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]) that covers the
-//! longest flight across the field (about 35 ms) and the decoder's start-time error.
+//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
+//! set for a hall, not for a dry room: a 100 ms tone in a reverberant hall (critical
+//! distance 8 m, T60 anywhere from 0.6 to 2 s) is almost never decoded, even alone with a
+//! second of silence around it; the decoder needs about 300 ms there, and the previous
+//! slot's tail and the end test (half a tone past the end) want the guard at about 300 ms.
+//! The default 400 + 300 ms slot makes a 2.8 s cycle for four robots.
+//!
+//! **Decision.** While the radio is silent (no teammate's radio claim fresher than the
+//! arbitration's staleness limit) the fallback decides, on the claims this robot holds:
+//! each field player's newest, by radio (the last one heard before the outage) or by
+//! sound, its own as the team heard it (what it posted, then what it sounded, quantised).
+//! Every claim counts as fresh until `stale_cycles` cycles old: a missed message leaves
+//! the teammate's previous claim standing rather than making room for a second goer, so
+//! the goer the team agreed by radio keeps the ball until a claim sounded in the room
+//! says otherwise. A claim heard by sound counts from the end of its slot, on everyone's
+//! clock, its sender's too: robots that heard the same messages change their minds at the
+//! same instant. The rule is the arbitration's (`comms::arbitration::decide`: lowest cost,
+//! the goer's lowered by the hysteresis margin, ties to the lower id).
+//! What is left is robots that missed different messages: they disagree until the next
+//! cycle, and as the goer's "going" claim stands until it is heard to let go, this shows
+//! as time with no goer far more than as two goers.
 //!
 //! **Claim.** A short message carries 3 × 21 = 63 values ([`encode_claim`]): 0 = "no ball,
 //! no claim", 1–31 = "not going" with the cost h in one of 31 bins of
@@ -27,7 +46,7 @@ use audio::channel::{Babble, Source};
 use audio::{Decoder, DecoderConfig, Detection, Encoder, EncoderConfig, Message, Sender};
 use std::time::Duration;
 
-use comms::arbitration::{Candidate, Posted};
+use comms::arbitration::{self, ArbitrationParams, Candidate, Decision, Posted};
 use serde::Serialize;
 
 /// Speed of sound, m/s.
@@ -60,25 +79,38 @@ pub struct AcousticConfig {
     /// Distance at which the direct sound equals the reverberant field, m (default 8 m:
     /// r_c ≈ 0.057·√(Q·V/T60) for a 10,000 m³ hall, Q = 2, T60 = 1 s).
     pub critical_distance_m: f64,
-    /// Teammates' acoustic claims older than this many cycles are dropped.
+    /// Claims older than this many cycles no longer count while the fallback decides.
     pub stale_cycles: f64,
+    /// Hysteresis margin of the fallback's decision, m (`None`: the arbitration's).
+    pub hysteresis_m: Option<f64>,
+    /// Whether a claim to be going whose sender's last slot went by unheard loses the
+    /// goer's hysteresis margin.
+    pub doubt_going: bool,
 }
 
 impl Default for AcousticConfig {
     fn default() -> Self {
         Self {
             enabled: false,
-            // 100 ms: the decoder decodes 100 ms tones at 0 dB, and the far side of the
-            // field is still ~5 dB over the crowd; shorter claims mean fresher claims
-            // (measured on seeds 101–103: 150 and 250 ms did worse).
-            tone_s: 0.1,
-            // The decoder's end test listens half a tone past the end: the next slot must
-            // start later than that, plus the longest flight across the field (~35 ms).
-            guard_s: 0.08,
+            // 400 ms: in a reverberant room (T60 0.6–2 s, critical distance 8 m) the
+            // decoder decodes almost no 100 ms claims, even from a robot sounding alone
+            // with a second of silence around it (0–3%), 20–30% of 150 ms ones and
+            // ~95% of 300 ms ones; four robots taking turns: 300 ms 73–84%, 400 ms
+            // 93–97% with this guard (`tests/acoustic_fallback.rs` shows the
+            // difference).
+            tone_s: 0.4,
+            // The decoder's end test listens half a tone past the end, and in a hall the
+            // previous slot's tail still sounds: with 400 ms tones at T60 1 s, guards of
+            // 80/150/300/500 ms decoded 50/77/97/96% of the receptions.
+            guard_s: 0.3,
             crowd_snr_db_at_1m: 25.0,
             t60_s: 1.0,
             critical_distance_m: 8.0,
-            stale_cycles: 2.0,
+            // A claim counts for three cycles (8.4 s): missing one message must not
+            // drop a goer's claim, which would make a second goer.
+            stale_cycles: 3.0,
+            hysteresis_m: None,
+            doubt_going: true,
         }
     }
 }
@@ -141,6 +173,12 @@ impl SlotPlan {
         start >= t_s - 1e-9
     }
 
+    /// The end of the slot a message heard to start at `start_s` was sounded in.
+    pub fn slot_end(&self, start_s: f64) -> f64 {
+        let k = ((start_s - 0.02) / self.slot_s).round().max(0.0);
+        (k + 1.0) * self.slot_s
+    }
+
     /// Who sent a message heard to start at `start_s` (the flight and the decoder's
     /// error make it a little late; the nearest slot start at or before it wins).
     pub fn sender_at(&self, start_s: f64) -> Option<u8> {
@@ -155,29 +193,66 @@ impl SlotPlan {
     }
 }
 
-/// A robot's side of the fallback: the slot plan it shares with its team, and the claims
-/// its own microphone's decoder gave it. Robot code holds this; it never sees the room.
+/// A claim newer than one cycle and this is not in doubt (the decoder reports a claim
+/// within its slot's guard; this allows for late reports), s.
+const DOUBT_MARGIN_S: f64 = 0.2;
+
+/// A claim as this robot holds it: what a teammate (or itself) last told the team, by
+/// radio or by sound, and from when it counts (this robot's clock, s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Told {
+    posted: Posted,
+    at_s: f64,
+}
+
+/// A robot's side of the fallback: the slot plan it shares with its team, the claims its
+/// own microphone's decoder gave it, and the decision it makes on them while the radio is
+/// silent. Robot code holds this; it never sees the room.
 #[derive(Debug, Clone)]
 pub struct SoundFallback {
     plan: SlotPlan,
-    stale_s: f64,
-    no_ball_cost: f64,
-    /// Per teammate (index = id − 1): its latest claim heard by sound and when the
-    /// message ended, on this robot's clock (s).
-    claims: Vec<Option<(Posted, f64)>>,
+    /// Claims older than this no longer count, s.
+    expire_s: f64,
+    /// The rule the team decides by while the fallback is in control.
+    params: ArbitrationParams,
+    /// Whether a going claim whose last slot went by unheard loses the goer's margin.
+    doubt_going: bool,
+    /// Per robot (index = id − 1): its latest claim heard by sound (its own: sounded),
+    /// in force from the end of its slot.
+    sounded: Vec<Option<Told>>,
+    /// Per robot: a claim heard before the end of its slot, waiting to come into force.
+    pending: Vec<Option<Told>>,
+    /// What this robot last posted on the radio before the fallback took control.
+    own_radio: Option<Told>,
     /// Whether some teammate with a slot had no fresh radio claim at the last decision.
     radio_stale: bool,
+    /// Whether no teammate with a slot had a fresh radio claim at the last decision: the
+    /// radio is silent and the fallback decides.
+    in_control: bool,
 }
 
 impl SoundFallback {
-    /// The fallback for a team of `team` robots sounding on `plan`.
-    pub fn new(plan: SlotPlan, cfg: &AcousticConfig, team: usize, no_ball_cost: f64) -> Self {
+    /// The fallback for a team of `team` robots sounding on `plan`, deciding with the
+    /// arbitration's `params` (hysteresis, tie band, no-ball cost).
+    pub fn new(
+        plan: SlotPlan,
+        cfg: &AcousticConfig,
+        team: usize,
+        params: ArbitrationParams,
+    ) -> Self {
         Self {
             plan,
-            stale_s: cfg.stale_cycles * plan.cycle_s(),
-            no_ball_cost,
-            claims: vec![None; team],
+            expire_s: cfg.stale_cycles * plan.cycle_s(),
+            params: ArbitrationParams {
+                hysteresis_m: cfg.hysteresis_m.unwrap_or(params.hysteresis_m),
+                ..params
+            },
+            doubt_going: cfg.doubt_going,
+            sounded: vec![None; team],
+            pending: vec![None; team],
+            own_radio: None,
             radio_stale: false,
+            in_control: false,
         }
     }
 
@@ -186,57 +261,130 @@ impl SoundFallback {
         &self.plan
     }
 
-    /// A message robot `me`'s decoder produced, started at `start_s` and ended at `end_s`
-    /// on `me`'s clock. Its own slot and long messages are ignored.
-    pub fn hear(&mut self, me: u8, message: &Message, start_s: f64, end_s: f64) {
+    /// Whether the fallback decided last time (the radio was silent).
+    pub fn in_control(&self) -> bool {
+        self.in_control
+    }
+
+    /// A message robot `me`'s decoder produced, started at `start_s` on `me`'s clock. The
+    /// slot it started in names the sender; the claim counts from the end of that slot,
+    /// when every teammate that decodes it has (so the team changes its mind at once).
+    /// Its own slot and long messages are ignored.
+    pub fn hear(&mut self, me: u8, message: &Message, start_s: f64) {
         let Some(from) = self.plan.sender_at(start_s) else {
+            return;
+        };
+        let Some(posted) = decode_claim(message, self.params.no_ball_cost) else {
             return;
         };
         if from == me {
             return;
         }
-        let (Some(posted), Some(slot)) = (
-            decode_claim(message, self.no_ball_cost),
-            self.claims.get_mut(usize::from(from) - 1),
-        ) else {
-            return;
-        };
-        *slot = Some((posted, end_s));
-    }
-
-    /// Put the fresh acoustic claims of teammates whose radio claims are stale (or
-    /// missing) into `heard`, the candidates robot `me` decides on at `now_s`. An acoustic
-    /// claim's age is scaled so that `stale_after` stands for the acoustic limit
-    /// (`stale_cycles` cycles), which is what the arbitration's cut-off means for it.
-    pub fn merge(&mut self, me: u8, heard: &mut Vec<Candidate>, now_s: f64, stale_after: Duration) {
-        let fresh = |c: &Candidate| c.age <= stale_after;
-        self.radio_stale = (0..self.plan.slots)
-            .map(|k| self.plan.first_id + k)
-            .filter(|&id| id != me)
-            .any(|id| !heard.iter().any(|c| c.robot == id && fresh(c)));
-        for (i, claim) in self.claims.iter().enumerate() {
-            let Some((posted, end_s)) = *claim else {
-                continue;
-            };
-            let id = (i + 1) as u8;
-            let age_s = (now_s - end_s).max(0.0);
-            if id == me || age_s > self.stale_s || heard.iter().any(|c| c.robot == id && fresh(c)) {
-                continue;
-            }
-            heard.retain(|c| c.robot != id);
-            heard.push(Candidate {
-                robot: id,
-                posted,
-                age: stale_after.mul_f64(age_s / self.stale_s),
-            });
+        let at_s = self.plan.slot_end(start_s);
+        if let Some(slot) = self.pending.get_mut(usize::from(from) - 1) {
+            *slot = Some(Told { posted, at_s });
         }
     }
 
-    /// What robot `me` sounds in its slot: its claim, while some teammate's radio claim
-    /// is stale; nothing otherwise (or when it has no slot).
-    pub fn claim(&self, me: u8, posted: Posted) -> Option<Message> {
-        (self.radio_stale && self.plan.slot_of(me).is_some())
-            .then(|| encode_claim(posted, self.no_ball_cost))
+    /// What robot `me` sounds in its slot starting at `start_s` (its clock): `posted`,
+    /// while some teammate's radio claim is stale; nothing otherwise (or when it has no
+    /// slot). What it sounds counts for itself, as its teammates will hear it (quantised),
+    /// from the end of the slot.
+    pub fn claim(&mut self, me: u8, posted: Posted, start_s: f64) -> Option<Message> {
+        if !(self.radio_stale && self.plan.slot_of(me).is_some()) {
+            return None;
+        }
+        let message = encode_claim(posted, self.params.no_ball_cost);
+        if let (Some(heard), Some(slot)) = (
+            decode_claim(&message, self.params.no_ball_cost),
+            self.pending.get_mut(usize::from(me) - 1),
+        ) {
+            *slot = Some(Told {
+                posted: heard,
+                at_s: self.plan.slot_end(start_s),
+            });
+        }
+        Some(message)
+    }
+
+    /// Robot `me` with the radio claims `radio` it holds: whether the radio is silent (no
+    /// teammate with a slot has a claim fresher than `stale_after`), so that the fallback
+    /// decides.
+    pub fn radio(&mut self, me: u8, radio: &[Candidate], stale_after: Duration) -> bool {
+        let fresh = |id: u8| radio.iter().any(|c| c.robot == id && c.age <= stale_after);
+        let mates: Vec<u8> = (0..self.plan.slots)
+            .map(|k| self.plan.first_id + k)
+            .filter(|&id| id != me)
+            .collect();
+        self.radio_stale = mates.iter().any(|&id| !fresh(id));
+        self.in_control = !mates.is_empty() && mates.iter().all(|&id| !fresh(id));
+        self.in_control
+    }
+
+    /// What this robot posted on the radio at `now_s` while the radio decided: the claim
+    /// its teammates hold from it when the radio falls silent.
+    pub fn posted(&mut self, now_s: f64, posted: Posted) {
+        self.own_radio = Some(Told {
+            posted,
+            at_s: now_s,
+        });
+    }
+
+    /// The claims robot `me` decides on at `now_s` while the radio is silent: each
+    /// field player's newest claim, by radio (`radio`, aged on this robot's clock) or by
+    /// sound, unless older than `stale_cycles` cycles; every one counts as fresh (age
+    /// zero), so a missed message leaves the teammate's previous claim standing instead
+    /// of making room for a second goer.
+    pub fn candidates(&mut self, me: u8, now_s: f64, radio: &[Candidate]) -> Vec<Candidate> {
+        for (pending, sounded) in self.pending.iter_mut().zip(&mut self.sounded) {
+            if let Some(p) = pending.filter(|p| p.at_s <= now_s) {
+                if sounded.is_none_or(|s| s.at_s <= p.at_s) {
+                    *sounded = Some(p);
+                }
+                *pending = None;
+            }
+        }
+        let mut out = Vec::new();
+        for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
+            let by_radio = if id == me {
+                self.own_radio
+            } else {
+                radio.iter().find(|c| c.robot == id).map(|c| Told {
+                    posted: c.posted,
+                    at_s: now_s - c.age.as_secs_f64(),
+                })
+            };
+            let by_sound = self.sounded.get(usize::from(id) - 1).copied().flatten();
+            let newest = match (by_radio, by_sound) {
+                (Some(r), Some(s)) => Some(if s.at_s >= r.at_s { s } else { r }),
+                (r, s) => r.or(s),
+            };
+            if let Some(t) = newest.filter(|t| now_s - t.at_s <= self.expire_s) {
+                let mut posted = t.posted;
+                if id != me
+                    && self.doubt_going
+                    && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S
+                {
+                    // Its last slot went by unheard: a claim to be going is in doubt (it
+                    // may have let go in the message this robot missed), so it keeps its
+                    // cost but not the goer's margin.
+                    posted.going = false;
+                }
+                out.push(Candidate {
+                    robot: id,
+                    posted,
+                    age: Duration::ZERO,
+                });
+            }
+        }
+        out
+    }
+
+    /// The team's decision on `candidates` (see [`SoundFallback::candidates`]): the
+    /// arbitration's rule (lowest cost, the goer's by the hysteresis margin, ties to the
+    /// lower id), so robots that heard the same claims agree.
+    pub fn decide(&self, candidates: &[Candidate]) -> Decision {
+        arbitration::decide(&self.params, candidates)
     }
 }
 
@@ -601,8 +749,8 @@ impl super::Simulation {
         };
         let team = self.robots.len();
         for r in &mut self.robots {
-            let no_ball = r.arbiter.params().no_ball_cost;
-            r.sound = Some(SoundFallback::new(plan, &cfg, team, no_ball));
+            let params = *r.arbiter.params();
+            r.sound = Some(SoundFallback::new(plan, &cfg, team, params));
         }
         self.acoustic = Some(
             AcousticChannel::new(&cfg, team, self.cfg.seed)
@@ -622,8 +770,8 @@ impl super::Simulation {
             let local = |s: f64| {
                 super::robot::seconds(self.harness.local_at(i, netsim::Time::from_secs_f64(s)))
             };
-            let (start, end) = (local(h.detection.start_s), local(h.detection.end_s));
-            self.robots[i].hear_sound(&h.detection.message, start, end);
+            let start = local(h.detection.start_s);
+            self.robots[i].hear_sound(&h.detection.message, start);
         }
         let dt = self.cfg.physics_dt_s;
         let positions: Vec<(f64, f64)> = self
@@ -633,33 +781,64 @@ impl super::Simulation {
             .map(|b| (b.pose.at.x, b.pose.at.y))
             .collect();
         for i in 0..self.robots.len() {
-            let r = &self.robots[i];
+            let r = &mut self.robots[i];
             let due = r
                 .sound
                 .as_ref()
                 .is_some_and(|s| s.plan().starts_in(r.id, t_s, dt));
-            if let Some(message) = due.then(|| r.sound_claim()).flatten() {
+            if !due {
+                continue;
+            }
+            let local =
+                super::robot::seconds(self.harness.local_at(i, netsim::Time::from_secs_f64(t_s)));
+            if let Some(message) = r.sound_claim(local) {
                 channel.sound(i, &message, &positions);
             }
         }
     }
 
-    /// One metrics sample of the outage window.
+    /// One metrics sample of the outage window, and of as long a window just before it
+    /// (the radio deciding, for comparison).
     pub(super) fn sample_outage(&mut self, t_s: f64, visible: bool, goers: &[u8]) {
-        if self
-            .cfg
-            .outage
-            .is_some_and(|o| o.contains(t_s - self.cfg.physics_dt_s))
-        {
-            self.outage_metrics
-                .sample(t_s, self.cfg.physics_dt_s, visible, goers);
+        let Some(o) = self.cfg.outage else {
+            return;
+        };
+        let dt = self.cfg.physics_dt_s;
+        let before = OutageConfig {
+            start_s: o.start_s - o.duration_s,
+            ..o
+        };
+        let window = if o.contains(t_s - dt) {
+            &mut self.outage_metrics.during
+        } else if before.contains(t_s - dt) {
+            &mut self.outage_metrics.before
+        } else {
+            return;
+        };
+        window.arbitration.sample(t_s, dt, visible, goers);
+        if let ([g], true) = (goers, visible) {
+            // The truth, for the figures only: how far the lone goer is from the ball
+            // beyond the field player nearest to it.
+            let ball = self.world.ball.at;
+            let distance = |i: usize| self.world.robots[i].pose.at.distance(ball);
+            let nearest = (0..self.robots.len())
+                .filter(|&i| self.robots[i].is_field_player() && self.robots[i].alive)
+                .map(distance)
+                .fold(f64::INFINITY, f64::min);
+            let goer = self.robots.iter().position(|r| r.id == *g).map(distance);
+            window.lone_s += dt;
+            if goer.is_some_and(|d| d <= nearest + NEAR_GOER_M) {
+                window.near_s += dt;
+            }
         }
     }
 
     /// The outage's figures for the report, when there was one.
     pub(super) fn outage_report(&self) -> Option<OutageReport> {
         let o = self.cfg.outage?;
-        let m = &self.outage_metrics;
+        let w = &self.outage_metrics.during;
+        let m = &w.arbitration;
+        let b = &self.outage_metrics.before;
         let s = self.acoustic.as_ref().map(|c| c.stats).unwrap_or_default();
         Some(OutageReport {
             outage_start_s: o.start_s,
@@ -669,7 +848,13 @@ impl super::Simulation {
             outage_exactly_one_goer_pct: round3(m.exactly_one_pct()),
             outage_conflict_pct: round3(m.conflict_pct()),
             outage_no_goer_pct: round3(m.no_goer_pct()),
+            outage_handovers: m.handovers,
+            outage_near_goer_pct: round3(w.near_pct()),
+            before_outage_exactly_one_goer_pct: round3(b.arbitration.exactly_one_pct()),
+            before_outage_handovers: b.arbitration.handovers,
+            before_outage_near_goer_pct: round3(b.near_pct()),
             acoustic_tone_ms: round3(self.cfg.acoustic.tone_s * 1e3),
+            acoustic_guard_ms: round3(self.cfg.acoustic.guard_s * 1e3),
             acoustic_sounded: s.sounded,
             acoustic_receptions: s.receptions,
             acoustic_decoded: s.decoded,
@@ -677,6 +862,41 @@ impl super::Simulation {
             acoustic_collided: s.collided,
         })
     }
+}
+
+/// A lone goer at most this much farther from the ball than the nearest field player is
+/// "near" (the arbitration's hysteresis is 0.5 m, and costs lag the play).
+pub const NEAR_GOER_M: f64 = 1.0;
+
+/// The arbitration's figures in one window.
+#[derive(Debug, Clone, Default)]
+pub struct WindowFigures {
+    /// Who went, as everywhere else.
+    pub arbitration: super::metrics::Metrics,
+    /// Ball-visible time with exactly one goer, s.
+    pub lone_s: f64,
+    /// Of that, time the goer was near (see [`NEAR_GOER_M`]), s.
+    pub near_s: f64,
+}
+
+impl WindowFigures {
+    /// Share of the lone-goer time the goer was near, percent.
+    pub fn near_pct(&self) -> f64 {
+        if self.lone_s > 0.0 {
+            100.0 * self.near_s / self.lone_s
+        } else {
+            100.0
+        }
+    }
+}
+
+/// The outage window's figures, and those of as long a window just before it.
+#[derive(Debug, Clone, Default)]
+pub struct OutageFigures {
+    /// Inside the outage.
+    pub during: WindowFigures,
+    /// Just before it, the radio deciding.
+    pub before: WindowFigures,
 }
 
 fn round3(x: f64) -> f64 {
@@ -701,8 +921,22 @@ pub struct OutageReport {
     pub outage_conflict_pct: f64,
     /// Share with no goer, percent.
     pub outage_no_goer_pct: f64,
+    /// Handovers of the lone goer inside the outage.
+    pub outage_handovers: u64,
+    /// Share of the lone-goer time the goer was within [`NEAR_GOER_M`] of the field
+    /// player nearest to the ball (the truth), percent: a fallback that never handed the
+    /// ball over would keep one goer and lose this.
+    pub outage_near_goer_pct: f64,
+    /// Exactly one goer in as long a window just before the outage (radio), percent.
+    pub before_outage_exactly_one_goer_pct: f64,
+    /// Handovers in that window.
+    pub before_outage_handovers: u64,
+    /// Near-goer share in that window, percent.
+    pub before_outage_near_goer_pct: f64,
     /// Tone length of the fallback's messages, ms.
     pub acoustic_tone_ms: f64,
+    /// Silence after each tone, ms.
+    pub acoustic_guard_ms: f64,
     /// Messages sounded (whole match).
     pub acoustic_sounded: u64,
     /// Receptions (messages × teammates listening).
@@ -732,11 +966,21 @@ impl std::fmt::Display for OutageReport {
             self.outage_conflict_pct,
             self.outage_no_goer_pct
         )?;
+        writeln!(
+            f,
+            "  lone goer near ball {:>9.2} %  of lone-goer time, {} handovers (before the outage, radio: {:.2} % one goer, {:.2} % near, {} handovers)",
+            self.outage_near_goer_pct,
+            self.outage_handovers,
+            self.before_outage_exactly_one_goer_pct,
+            self.before_outage_near_goer_pct,
+            self.before_outage_handovers
+        )?;
         write!(
             f,
-            "  acoustic            {:>9} sounded ({:.0} ms tones), {} of {} receptions decoded, {} wrong, {} collided",
+            "  acoustic            {:>9} sounded ({:.0} ms tones, {:.0} ms guard), {} of {} receptions decoded, {} wrong, {} collided",
             self.acoustic_sounded,
             self.acoustic_tone_ms,
+            self.acoustic_guard_ms,
             self.acoustic_decoded,
             self.acoustic_receptions,
             self.acoustic_wrong,
@@ -796,5 +1040,121 @@ mod tests {
             );
         }
         assert!(!plan.starts_in(1, 0.0, 0.01), "the goalkeeper has no slot");
+    }
+
+    fn radio_claim(robot: u8, h: f64, going: bool, age_s: f64) -> Candidate {
+        Candidate {
+            robot,
+            posted: Posted { h, going },
+            age: Duration::from_secs_f64(age_s),
+        }
+    }
+
+    #[test]
+    fn the_radio_goer_keeps_the_ball_until_a_claim_heard_in_the_room_beats_it() {
+        let cfg = AcousticConfig::default();
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: cfg.slot_s(),
+        };
+        let stale = ArbitrationParams::default().stale_after;
+        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        // Robot 3 at 11.55 s: the radio still speaks; 2 goes, 4 is a little closer (within
+        // the hysteresis margin).
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 11.5),
+                radio_claim(4, 0.8, false, t - 11.5),
+                radio_claim(5, 3.0, false, t - 11.5),
+            ]
+        };
+        assert!(
+            !fb.radio(3, &at(11.55), stale),
+            "fresh radio: the arbiter decides"
+        );
+        fb.posted(
+            11.55,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        // At 12 s the radio is silent: the fallback keeps the agreed goer.
+        assert!(
+            fb.radio(3, &at(12.0), stale),
+            "silent radio: the fallback decides"
+        );
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(
+            goer(&mut fb, 12.0),
+            Some(2),
+            "the goer agreed by radio keeps the ball"
+        );
+        // Robot 4 sounds 0.2 m in its slot; heard 20 ms into it, it counts from its end.
+        let start = (12.0 / plan.cycle_s()).floor() * plan.cycle_s() + 2.0 * plan.slot_s;
+        assert_eq!(plan.sender_at(start + 0.02), Some(4));
+        fb.hear(3, &claim_message(0.2, false), start + 0.02);
+        let end = plan.slot_end(start + 0.02);
+        assert!((end - (start + plan.slot_s)).abs() < 1e-9);
+        assert_eq!(
+            goer(&mut fb, end - 0.05),
+            Some(2),
+            "not before its slot ends"
+        );
+        assert_eq!(
+            goer(&mut fb, end + 0.01),
+            Some(4),
+            "0.25 m beats 1.0 − 0.5 m"
+        );
+    }
+
+    #[test]
+    fn a_going_claim_whose_slot_went_by_unheard_loses_the_margin() {
+        let cfg = AcousticConfig::default();
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: cfg.slot_s(),
+        };
+        let stale = ArbitrationParams::default().stale_after;
+        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 10.0),
+                radio_claim(4, 0.7, false, t - 10.0),
+                radio_claim(5, 3.0, false, t - 10.0),
+            ]
+        };
+        fb.posted(
+            10.0,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        assert!(fb.radio(3, &at(10.5), stale));
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(goer(&mut fb, 10.5), Some(2));
+        // A cycle and more without a word from robot 2: its claim is in doubt.
+        let later = 10.0 + plan.cycle_s() + DOUBT_MARGIN_S + 0.1;
+        assert_eq!(
+            goer(&mut fb, later),
+            Some(4),
+            "1.0 m without the margin loses to 0.7 m"
+        );
+        // Older than `stale_cycles` cycles: gone (robot 3's own claim is too).
+        let expired = 10.0 + cfg.stale_cycles * plan.cycle_s() + 0.1;
+        assert_eq!(fb.candidates(3, expired, &at(expired)), vec![]);
+    }
+
+    fn claim_message(h: f64, going: bool) -> Message {
+        encode_claim(Posted { h, going }, 1000.0)
     }
 }

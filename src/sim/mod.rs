@@ -316,8 +316,8 @@ pub struct Simulation {
     // --- WLAN outage and the acoustic fallback (see `acoustic`) ---
     /// The room, when the fallback is on.
     acoustic: Option<acoustic::AcousticChannel>,
-    /// Arbitration figures inside the outage window.
-    outage_metrics: Metrics,
+    /// Arbitration figures inside the outage window (and just before it).
+    outage_metrics: acoustic::OutageFigures,
 }
 
 impl Simulation {
@@ -446,7 +446,7 @@ impl Simulation {
             ball_event_by: None,
             kick_met: None,
             acoustic: None,
-            outage_metrics: Metrics::default(),
+            outage_metrics: acoustic::OutageFigures::default(),
         };
         sim.setup_fallback()?;
         Ok(sim)

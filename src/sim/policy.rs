@@ -422,7 +422,12 @@ mod tests {
             p.decide(SendPolicy::Voi, &now(&model, 0.0, false, 2.0), false, false),
             Action::Send { priority: false }
         );
-        p.decide(SendPolicy::Voi, &now(&model, 0.04, false, 2.0), false, false);
+        p.decide(
+            SendPolicy::Voi,
+            &now(&model, 0.04, false, 2.0),
+            false,
+            false,
+        );
         assert_eq!(p.told_cost(), Some(2.0));
         // It starts going with cost 0.5: a goer change, with priority.
         assert_eq!(

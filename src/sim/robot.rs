@@ -256,6 +256,9 @@ pub struct Robot {
     policy: super::policy::PolicyState,
     /// The acoustic fallback, when the team uses it (see [`super::acoustic`]).
     pub sound: Option<super::acoustic::SoundFallback>,
+    /// Whether it goes by the fallback's decision while the radio is silent (`None`: the
+    /// arbiter decides).
+    sound_going: Option<bool>,
 }
 
 /// Everything a tick needs from outside the robot.
@@ -338,6 +341,7 @@ impl Robot {
             teammate_motion: vec![None; team],
             policy: Default::default(),
             sound: None,
+            sound_going: None,
         }
     }
 
@@ -357,9 +361,19 @@ impl Robot {
     /// teammates still hold its claim and none of them goes, so stopping unannounced
     /// would leave the ball to nobody.
     pub fn going(&self) -> bool {
-        self.alive
-            && (self.arbiter.going()
-                || (!self.rival_going && self.untold_claim.is_some_and(|c| !c.going)))
+        self.alive && self.acts_as_goer()
+    }
+
+    /// Whether it decided to go: by the fallback while the radio is silent, else by the
+    /// arbiter.
+    fn claims_ball(&self) -> bool {
+        self.sound_going.unwrap_or_else(|| self.arbiter.going())
+    }
+
+    /// Whether it plays the ball: it claims it, or it stopped claiming while no teammate
+    /// claims and its teammates have not heard the stop yet.
+    fn acts_as_goer(&self) -> bool {
+        self.claims_ball() || (!self.rival_going && self.untold_claim.is_some_and(|c| !c.going))
     }
 
     /// One control tick: sense, decide, act. `field` is what the robot knows of the field
@@ -407,7 +421,7 @@ impl Robot {
         let goalkeeper = self.position == Position::Goalkeeper;
         self.mode = if goalkeeper {
             Mode::Goaltend
-        } else if self.going() {
+        } else if self.acts_as_goer() {
             Mode::Active
         } else {
             match mode(self.id, goalkeeper, &decision, pass_to) {
@@ -425,7 +439,7 @@ impl Robot {
             t_s: t,
             pose: self.pose_belief,
             ball: self.ball.and(self.lwm.ball_at(t)),
-            going: self.arbiter.going(),
+            going: self.claims_ball(),
             team_ball_stale: self.team_ball.is_none(),
             kicked: kick.is_some(),
             model: &cfg.world_model.local.ball.model,
@@ -489,13 +503,40 @@ impl Robot {
         }
     }
 
-    /// Run the arbitration on the current cost and what the replica has heard.
+    /// Run the arbitration on the current cost and what the replica has heard (by the
+    /// acoustic fallback's claims while the radio is silent).
     fn decide(&mut self, t_s: f64, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
-        let mut heard = arbitration::heard(board, local_now);
-        self.merge_sound(t_s, &mut heard);
+        let heard = arbitration::heard(board, local_now);
         let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
         self.decided_at_s = t_s;
-        let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
+        let stale_after = self.arbiter.params().stale_after;
+        let fallback = self.sound.as_mut().and_then(|sound| {
+            sound
+                .radio(self.id, &heard, stale_after)
+                .then(|| sound.candidates(self.id, t_s, &heard))
+        });
+        let (decision, posted) = match fallback {
+            None => {
+                self.sound_going = None;
+                let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
+                if let Some(sound) = &mut self.sound {
+                    sound.posted(t_s, posted);
+                }
+                (decision, posted)
+            }
+            Some(claims) => {
+                let decision = self
+                    .sound
+                    .as_ref()
+                    .map_or(self.decision, |s| s.decide(&claims));
+                // The arbiter follows on the same claims, so that it carries on from
+                // about the same place when the radio comes back.
+                let (_, mut posted) = self.arbiter.tick(dt, self.h, &claims);
+                posted.going = self.is_field_player() && decision.should_go(self.id);
+                self.sound_going = Some(posted.going);
+                (decision, posted)
+            }
+        };
         self.decision = decision;
         let params = *self.arbiter.params();
         let rivals = || {
@@ -533,7 +574,7 @@ impl Robot {
         if !self.alive {
             return None;
         }
-        let was = self.arbiter.going();
+        let was = self.claims_ball();
         let (_, posted) = self.decide(t_s, board, local_now);
         let changed = posted.going != was;
         if changed {
@@ -547,30 +588,24 @@ impl Robot {
         changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))
     }
 
-    /// The acoustic fallback's part of a decision: teammates whose radio claims are stale
-    /// count with what this robot's own decoder heard from them.
-    fn merge_sound(&mut self, t_s: f64, heard: &mut Vec<arbitration::Candidate>) {
-        let stale_after = self.arbiter.params().stale_after;
-        if let Some(sound) = &mut self.sound {
-            sound.merge(self.id, heard, t_s, stale_after);
+    /// What this robot sounds if its slot begins now (`t_s`, its clock): its claim while
+    /// the radio is stale.
+    pub fn sound_claim(&mut self, t_s: f64) -> Option<audio::Message> {
+        if !self.alive {
+            return None;
         }
-    }
-
-    /// What this robot sounds if its slot begins now: its claim while the radio is stale.
-    pub fn sound_claim(&self) -> Option<audio::Message> {
-        let sound = self.sound.as_ref().filter(|_| self.alive)?;
         let posted = Posted {
             h: self.h,
-            going: self.arbiter.going(),
+            going: self.claims_ball(),
         };
-        sound.claim(self.id, posted)
+        self.sound.as_mut()?.claim(self.id, posted, t_s)
     }
 
-    /// A message this robot's microphone decoder produced, its start and end on this
-    /// robot's clock, s.
-    pub fn hear_sound(&mut self, message: &audio::Message, start_s: f64, end_s: f64) {
+    /// A message this robot's microphone decoder produced, its start on this robot's
+    /// clock, s.
+    pub fn hear_sound(&mut self, message: &audio::Message, start_s: f64) {
         if let (Some(sound), true) = (&mut self.sound, self.alive) {
-            sound.hear(self.id, message, start_s, end_s);
+            sound.hear(self.id, message, start_s);
         }
     }
 
