@@ -63,8 +63,11 @@ fn gwm(config: GlobalConfig) -> GlobalModel {
     )
 }
 
-/// Every message of both robots up to `until_s`: (robot, publish time, bytes).
-fn kick_messages(until_s: f64) -> Vec<(u8, f64, Vec<u8>)> {
+/// A message as sent: (robot, publish time, bytes).
+type Sent = (u8, f64, Vec<u8>);
+
+/// Every message of both robots up to `until_s`.
+fn kick_messages(until_s: f64) -> Vec<Sent> {
     let mut kicker = local_model(0.2);
     let mut watcher = local_model(1.0);
     let mut out = Vec::new();
@@ -98,7 +101,7 @@ fn a_sighting_from_before_a_kick_that_arrives_after_its_report_still_counts() {
     let until_s = 1.6;
     let messages = kick_messages(until_s);
     // In time order of arrival: the kicker's at once, the watcher's at the next beacon.
-    let mut held: Vec<(f64, &(u8, f64, Vec<u8>))> = messages
+    let mut held: Vec<(f64, &Sent)> = messages
         .iter()
         .map(|m| {
             let arrives = if m.0 == 2 {
