@@ -56,6 +56,12 @@ pub struct GlobalConfig {
     /// is fused (see `track_measurement`), so nothing is counted twice. `None`: batches
     /// only (the default; messages every control tick).
     pub track_after_s: Option<f64>,
+    /// After [`GlobalModel::forget_ball`] at `t`, a teammate's ball information stamped
+    /// before `t` + this is void too (s). Its stamp carries the shared clock's placement
+    /// error (a few ms), so a message sent just before the ball was put back can land just
+    /// after the forget and start the new team ball on the old one, far from the centre
+    /// spot, until the cameras outvote it. The own robot's stamps are exact.
+    pub forget_margin_s: f64,
 }
 
 impl Default for GlobalConfig {
@@ -74,6 +80,7 @@ impl Default for GlobalConfig {
             teammate_restart_after: 3,
             kick_reach_m: 0.5,
             track_after_s: None,
+            forget_margin_s: 0.03,
         }
     }
 }
@@ -206,14 +213,19 @@ struct Rewind {
 }
 
 /// One piece of ball information for the team track: a position batch (what a camera
-/// saw), or the new information in a teammate's track (sparse messages), whose position
-/// part gates, challenges and orders it like a batch.
+/// saw), the new information in a teammate's track (sparse messages), whose position
+/// part gates, challenges and orders it like a batch, or a kick, which sits among them at
+/// its own time (so a sighting made before it that arrives after its report still slots
+/// in before it, and the kick is applied again on top).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Measured {
+    /// The observation; for a kick, only its time counts.
     obs: FieldObservation,
     /// The whole state (x, y, vx, vy) measured, with its covariance, when it came from a
     /// track; `obs` is then its position part.
     state: Option<(Vector4<f64>, Matrix4<f64>)>,
+    /// A kick applied at `obs.t_s` (not gated: it was taken when its report came).
+    kick: Option<Kick>,
 }
 
 impl Deref for Measured {
@@ -225,13 +237,33 @@ impl Deref for Measured {
 
 impl From<FieldObservation> for Measured {
     fn from(obs: FieldObservation) -> Self {
-        Measured { obs, state: None }
+        Measured {
+            obs,
+            state: None,
+            kick: None,
+        }
     }
 }
 
 impl Measured {
+    /// A kick, to sit among the observations at its time.
+    fn kick(kick: &Kick) -> Self {
+        Measured {
+            obs: FieldObservation {
+                t_s: kick.t_s,
+                position: Vector2::zeros(),
+                cov: Matrix2::zeros(),
+            },
+            state: None,
+            kick: Some(*kick),
+        }
+    }
+
     /// `est` updated by this measurement at its time (`None`: it could not be applied).
     fn apply(&self, model: &BallModel, est: &BallEstimate) -> Option<BallEstimate> {
+        if let Some(kick) = &self.kick {
+            return Some(est.kicked(model, kick));
+        }
         let Some((z, r)) = self.state else {
             return update(model, est, &self.obs, None).ok().map(|(e, _)| e);
         };
@@ -361,7 +393,7 @@ impl GlobalModel {
         };
         let rec = self.robots.get_mut(&robot).expect("record inserted above");
         if let Some(kick) = rec.heard.kick(lwm) {
-            self.kicked(&kick, &lwm.pose, now_s);
+            self.kicked(robot, &kick, &lwm.pose, now_s);
         }
         self.commit(now_s - self.config.commit_lag_s);
         self.restart_on_consensus(now_s);
@@ -377,7 +409,7 @@ impl GlobalModel {
     ) -> Ingest {
         let model = self.config.ball;
         let obs = &measured.obs;
-        if obs.t_s < self.forgotten_before_t_s {
+        if obs.t_s < self.forgotten_before(robot) {
             self.stats.late += 1;
             return Ingest::Late;
         }
@@ -545,11 +577,16 @@ impl GlobalModel {
         self.restart_from(&first, now_s);
     }
 
-    /// A teammate (or this robot) kicked the ball: the team ball as it was at the kick,
-    /// with the kick's velocity, replaces the track from then on, and every observation made
-    /// since (pending or rejected) is gated against it and fused at its own time. Sightings
-    /// after a kick no longer have to outvote the old track first: the team ball turns the
-    /// moment the kick's report arrives. Dissent is cleared (it was about the kick).
+    /// A teammate (or this robot) kicked the ball: the kick joins the pending observations
+    /// at its own time, so the team ball as it was at the kick, with the kick's velocity,
+    /// continues the track from then on, and every observation made since (pending or
+    /// rejected) is gated against it and fused at its own time. Sightings after a kick no
+    /// longer have to outvote the old track first: the team ball turns the moment the
+    /// kick's report arrives. What was seen before the kick is kept, and a sighting made
+    /// before it whose message comes after the report (a beacon hold delays teammates'
+    /// messages by up to two beacons while the kicker's own report is at once) slots in
+    /// before it: the kick is applied again on the better state. Dissent is cleared (it
+    /// was about the kick).
     ///
     /// A kick is taken only from a kicker that was within reach of the team ball at the
     /// kick ([`GlobalConfig::kick_reach_m`] plus three σ of both positions): a robot that
@@ -557,8 +594,8 @@ impl GlobalModel {
     /// cameras restarted the ball after the kick but before its report came, the track is
     /// rewound to the kick first; when the kick is older than the committed ball and there
     /// is nothing to rewind, its velocity is fused instead (see `kick_velocity`).
-    fn kicked(&mut self, kick: &Kick, kicker: &PoseEstimate, now_s: f64) {
-        if !kick.is_valid() || kick.t_s < self.forgotten_before_t_s {
+    fn kicked(&mut self, robot: u8, kick: &Kick, kicker: &PoseEstimate, now_s: f64) {
+        if !kick.is_valid() || kick.t_s < self.forgotten_before(robot) {
             return;
         }
         let Some(committed) = self.committed else {
@@ -600,35 +637,52 @@ impl GlobalModel {
             self.kick_velocity(kick, &committed);
             return;
         };
-        let mut late: Vec<Measured> = Vec::new();
-        if let Some(mut rw) = rewind {
-            // Back to the track as it was up to the kick; everything seen since the kick
-            // (by either track, fused or not) is gated again against the kicked one.
-            let keep = rw.pending.partition_point(|o| o.t_s <= kick.t_s);
-            late = self
-                .pending
-                .iter()
-                .chain(&self.rejected)
-                .chain(&rw.pending[keep..])
-                .chain(&rw.rejected)
-                .filter(|o| o.t_s > kick.t_s)
-                .copied()
-                .collect();
-            rw.pending.truncate(keep);
-            rw.after.truncate(keep);
-            self.committed = Some(rw.committed);
-            self.pending = rw.pending;
-            self.after = rw.after;
-            self.rejected.clear();
-        }
+        // What was seen after the kick, by either track (the one set aside by a restart,
+        // if there is one), fused or not: gated again against the kicked one. What was
+        // seen before it stays, and a sighting from before it that arrives later still
+        // slots in before it.
+        let later: Vec<Measured> = match rewind {
+            Some(mut rw) => {
+                let keep = rw.pending.partition_point(|o| o.t_s <= kick.t_s);
+                let later = self
+                    .pending
+                    .iter()
+                    .chain(&self.rejected)
+                    .chain(&rw.pending[keep..])
+                    .chain(&rw.rejected)
+                    .filter(|o| o.t_s > kick.t_s)
+                    .copied()
+                    .collect();
+                rw.pending.truncate(keep);
+                rw.after.truncate(keep);
+                self.committed = Some(rw.committed);
+                self.pending = rw.pending;
+                self.after = rw.after;
+                later
+            }
+            None => {
+                let keep = self.pending.partition_point(|o| o.t_s <= kick.t_s);
+                self.after.truncate(keep);
+                self.pending
+                    .drain(keep..)
+                    .chain(self.rejected.iter().filter(|o| o.t_s > kick.t_s).copied())
+                    .collect()
+            }
+        };
+        self.rejected.clear();
         self.stats.kicks += 1;
-        let fresh = before.kicked(&model, kick);
         for rec in self.robots.values_mut() {
             rec.last_rejected_t_s = None;
             rec.rejected_run.clear();
         }
-        self.rejected.extend(late);
-        self.restart_with(fresh, now_s);
+        let kicked = Measured::kick(kick);
+        let turned = kicked.apply(&model, &before).unwrap_or(before);
+        self.pending.push(kicked);
+        self.after.push(turned);
+        self.head = Some(turned);
+        self.last_support_t_s = now_s;
+        self.last_accepted_obs_t_s = kick.t_s;
+        self.regate(later);
     }
 
     /// Whether a kicker at `kicker` could have reached `ball` (which may have rolled up to
@@ -709,14 +763,26 @@ impl GlobalModel {
     /// The team ball restarts as `fresh`; every observation made after it (pending or
     /// rejected) is gated against the new track and fused at its own time.
     fn restart_with(&mut self, fresh: BallEstimate, now_s: f64) {
-        let model = self.config.ball;
-        let mut since: Vec<Measured> = self
+        let since: Vec<Measured> = self
             .pending
             .iter()
             .chain(self.rejected.iter())
             .filter(|o| o.t_s > fresh.t_s)
             .copied()
             .collect();
+        self.committed = Some(fresh);
+        self.head = Some(fresh);
+        self.clear_pending();
+        self.rejected.clear();
+        self.last_support_t_s = now_s;
+        self.last_accepted_obs_t_s = fresh.t_s;
+        self.regate(since);
+    }
+
+    /// Fuses `since` (everything after the head, in any order) at their own times: each
+    /// observation gated against the track at its time, each kick applied.
+    fn regate(&mut self, mut since: Vec<Measured>) {
+        let model = self.config.ball;
         // One observation may sit in both lists (or twice, after a rewind): fuse it once.
         // Sorting by time, then place, puts copies next to each other.
         since.sort_by(|a, b| {
@@ -726,16 +792,14 @@ impl GlobalModel {
                 .then(a.position.y.total_cmp(&b.position.y))
         });
         since.dedup();
-        self.committed = Some(fresh);
-        self.head = Some(fresh);
-        self.clear_pending();
-        self.rejected.clear();
-        self.last_support_t_s = now_s;
-        self.last_accepted_obs_t_s = fresh.t_s;
         for o in &since {
             let Some(prior) = self.state_at(o.t_s) else {
                 continue;
             };
+            if o.kick.is_some() {
+                self.insert_pending(o, &prior);
+                continue;
+            }
             match prior.position_mahalanobis_sq(&model, o) {
                 Some(d2) if d2 <= self.config.gate_chi2 => {
                     self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(o.t_s);
@@ -824,6 +888,16 @@ impl GlobalModel {
             rec.lwm.ball = None;
             rec.last_rejected_t_s = None;
             rec.rejected_run.clear();
+        }
+    }
+
+    /// Ball information from `robot` stamped before this is void (see
+    /// [`GlobalConfig::forget_margin_s`]).
+    fn forgotten_before(&self, robot: u8) -> f64 {
+        if robot == self.own_id {
+            self.forgotten_before_t_s
+        } else {
+            self.forgotten_before_t_s + self.config.forget_margin_s
         }
     }
 
@@ -955,6 +1029,7 @@ fn track_measurement(
             cov: cov.fixed_view::<2, 2>(0, 0).into_owned(),
         },
         state: Some((mean, cov)),
+        kick: None,
     })
 }
 

@@ -115,16 +115,21 @@
 //! # Kick-offs
 //! When the ball is put back by hand the robots are told (the game controller):
 //! [`LocalModel::forget_ball`], [`GlobalModel::forget_ball`] drop every ball belief and
-//! every observation from before that moment still on its way.
+//! every observation from before that moment still on its way; a teammate's for
+//! [`GlobalConfig::forget_margin_s`] after it too, since the shared clock can place a
+//! message sent just before the reset a few ms after it.
 //!
 //! # Kicks
 //! A robot knows its own kicks before anyone sees them. [`LocalModel::kick`] turns its own
 //! ball at once and puts the kick (time, speed, direction and their σ, as a [`Kick`]) in
 //! its messages for [`KICK_REPORTED_FOR_S`]; a receiver takes each kick once, by its
-//! number ([`KickReport`]). The GWM then restarts the team ball from its own state at the
-//! kick time with the kick's velocity and re-gates every observation made since, so the
-//! team ball turns the moment the report arrives instead of after several sightings have
-//! outvoted the old track. When the cameras already restarted the ball before the report
+//! number ([`KickReport`]). The GWM then puts the kick among its pending observations at
+//! the kick time: the team ball continues from its own state there with the kick's
+//! velocity and every observation made since is re-gated, so the team ball turns the
+//! moment the report arrives instead of after several sightings have outvoted the old
+//! track. What was seen before the kick stays, and a teammate's sighting from before it
+//! whose message comes after the report (a beacon hold delays it; the kicker's own report
+//! reaches its own GWM at once) slots in before the kick, which is applied again on top. When the cameras already restarted the ball before the report
 //! came, the GWM rewinds to the track as it was before that restart; failing that, it fuses
 //! the kick's velocity, rolled forward by the model, into the current track (gated).
 //!

@@ -352,6 +352,8 @@ fn tune_team_ball(wm: &mut huddle::sim::WorldModelConfig, spec: &str) {
             ("push_min", _) => wm.push_min_change_mps = v,
             ("contact_horizon", _) => wm.contact_horizon_s = v,
             ("contact_margin", _) => wm.contact_margin_m = v,
+            ("kick_hazard", _) => wm.kick_hazard_per_s = v,
+            ("kick_hazard_window", _) => wm.kick_hazard_window_s = v,
             _ => tracing::warn!("--team-ball: {item:?} not applied"),
         }
     }

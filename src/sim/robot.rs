@@ -683,7 +683,7 @@ impl Robot {
         self.team_ball_held = self
             .gwm
             .team_ball(now_s, own.as_ref())
-            .map(|b| self.widened_at_contact(field, cfg, b));
+            .map(|b| self.widened_at_contact(field, cfg, now_s, b));
         self.team_ball = self
             .team_ball_held
             .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
@@ -752,10 +752,11 @@ impl Robot {
         &self,
         field: &FieldConfig,
         cfg: &BrainConfig,
+        now_s: f64,
         mut ball: TeamBall,
     ) -> TeamBall {
         let wm = &cfg.world_model;
-        if wm.contact_horizon_s <= 0.0 {
+        if wm.contact_horizon_s <= 0.0 && wm.kick_hazard_per_s <= 0.0 {
             return ball;
         }
         let (at, v_ball) = (ball.estimate.position(), ball.estimate.velocity());
@@ -792,12 +793,49 @@ impl Robot {
             let towards = (at - p).try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * top;
             var += sigma(p, towards, field.opponent_kinematics.radius_m).powi(2);
         }
+        var += self.unheard_kicks_var(field, wm, now_s, at);
         if var > 0.0 {
             ball.estimate.cov[(0, 0)] += var;
             ball.estimate.cov[(1, 1)] += var;
             ball.gbc = fusion::position_confidence(&ball.estimate.position_cov());
         }
         ball
+    }
+
+    /// Per-axis variance of the kicks teammates at the ball (their latest messages put
+    /// them within a foot's reach of the ball they saw, or of `at`) may have made since those messages'
+    /// snapshots, that no report has brought yet: a kick at a uniform instant in the
+    /// unheard window w, with probability λw (λ = [`WorldModelConfig::kick_hazard_per_s`]),
+    /// would have carried the ball v(w − τ) in a direction nobody here knows yet, so
+    /// E|Δ|² = λ v² w³ / 3, half per axis. A beacon hold makes w two beacons long, and
+    /// that is when a teammate's kick is most surprising.
+    fn unheard_kicks_var(
+        &self,
+        field: &FieldConfig,
+        wm: &WorldModelConfig,
+        now_s: f64,
+        at: Vector2<f64>,
+    ) -> f64 {
+        if wm.kick_hazard_per_s <= 0.0 {
+            return 0.0;
+        }
+        let reach = field.kinematics.radius_m
+            + field.ball.radius_m
+            + KICK_REACH_MARGIN_M
+            + wm.contact_margin_m;
+        let v = field.kick_speed_mps;
+        self.gwm
+            .teammates(now_s)
+            .iter()
+            .filter(|t| {
+                // At the ball as it saw it (the geometry its foot goes by), else as the
+                // team ball has it.
+                let ball = t.lwm.ball.map_or(at, |b| b.position());
+                let p = Vector2::new(t.pose.mean.x, t.pose.mean.y);
+                t.silent_for_s <= wm.kick_hazard_window_s && (p - ball).norm() <= reach
+            })
+            .map(|t| wm.kick_hazard_per_s * v * v * t.silent_for_s.powi(3) / 6.0)
+            .sum()
     }
 
     /// The team ball if there is a usable one, else the robot's own.
@@ -1135,7 +1173,7 @@ mod tests {
             gbc: fusion::position_confidence(&own.position_cov()),
             source: fusion::TeamBallSource::OwnFallback,
         };
-        let wide = r.widened_at_contact(&field, &cfg, ball);
+        let wide = r.widened_at_contact(&field, &cfg, 0.96, ball);
         let sigma = 1.2 * 0.5 * cfg.world_model.contact_horizon_s;
         let added = wide.estimate.cov[(0, 0)] - own.cov[(0, 0)];
         assert!(
@@ -1145,10 +1183,50 @@ mod tests {
         );
         assert!(wide.gbc < ball.gbc, "a wider ball is a less confident one");
         let (standing, ..) = robot_at_a_still_ball(0.24, 0.0);
-        let same = standing.widened_at_contact(&field, &cfg, ball);
+        let same = standing.widened_at_contact(&field, &cfg, 0.96, ball);
         assert_eq!(
             same.estimate.cov, own.cov,
             "a body that stands still pushes nothing"
+        );
+    }
+
+    #[test]
+    fn a_teammate_at_the_ball_widens_the_held_ball_by_the_kicks_not_heard_of_yet() {
+        // Robot 2 stands still 0.24 m from the ball. Teammate 1 was at the ball (0.25 m
+        // from it) when it last published, 0.2 s ago: it may have kicked since, at λ per
+        // second, at the field's kick speed v: λ v² w³ / 6 per axis. Teammate 3, 2 m
+        // away, could not have.
+        let (mut r, field, cfg) = robot_at_a_still_ball(0.24, 0.0);
+        let own = r.lwm.ball_at(0.96).unwrap();
+        let ball = TeamBall {
+            estimate: own,
+            gbc: fusion::position_confidence(&own.position_cov()),
+            source: fusion::TeamBallSource::OwnFallback,
+        };
+        let teammate = |x: f64, y: f64| {
+            let pose = fusion::PoseEstimate::new(x, y, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
+            LocalModel::new(fusion::LocalConfig::default(), pose).publish(0.9)
+        };
+        r.gwm.ingest(3, &teammate(0.24, 2.0), 0.9);
+        let far = r.widened_at_contact(&field, &cfg, 1.1, ball);
+        assert_eq!(
+            far.estimate.cov, own.cov,
+            "a teammate 2 m away kicks nothing"
+        );
+        r.gwm.ingest(1, &teammate(0.24, -0.25), 0.9);
+        let wide = r.widened_at_contact(&field, &cfg, 1.1, ball);
+        let wm = &cfg.world_model;
+        let expected = wm.kick_hazard_per_s * field.kick_speed_mps.powi(2) * 0.2f64.powi(3) / 6.0;
+        let added = wide.estimate.cov[(1, 1)] - own.cov[(1, 1)];
+        assert!(
+            expected > 0.0 && (added - expected).abs() < 1e-9,
+            "added {added} m², expected {expected}"
+        );
+        // Heard long enough ago, where it is now is anyone's guess.
+        let stale = r.widened_at_contact(&field, &cfg, 0.9 + wm.kick_hazard_window_s + 0.1, ball);
+        assert_eq!(
+            stale.estimate.cov, own.cov,
+            "a silent teammate is not at the ball"
         );
     }
 
