@@ -546,6 +546,59 @@ impl Decoder {
         }
     }
 
+    /// After a second slot that failed its decision: whether the sender had plainly
+    /// stopped at the first slot's end `end`, judged on the analysis windows wholly in the
+    /// second half of that second slot (from [`SPRT_HORIZON`] slots after `end` on).
+    ///
+    /// The end test decides within half a slot, and in a hall a short message's own tail
+    /// sometimes passes there for a continuation (a tone in a notch of the room's
+    /// response reverberates louder than it sounded, and talkers put power on the data
+    /// tones); the second slot then fails, and the message would be lost. Half a slot
+    /// later any tail of T60 up to 2.5 s has fallen 12 dB more, while a second frame's
+    /// sender sounds through its whole slot: the sender's tones alone, against every
+    /// stop hypothesis at each continuation level, must say "stopped" at
+    /// [`SPRT_BOUND`]. A long message whose second slot failed keeps its sender sounding
+    /// there and is not taken for a short.
+    pub(super) fn sender_stopped_late(&self, t: &Tracking, end: f64) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        if slot_len < 4.0 * window_len {
+            // Half a slot of a window or so: nothing to go by but windows that reach past
+            // the second slot, where a long message has ended too.
+            return false;
+        }
+        let (from, to) = (end + SPRT_HORIZON * slot_len, end + slot_len);
+        let mut llr = [[0.0f64; TAILS]; CONTINUATIONS];
+        let mut windows = 0;
+        for w in &self.history {
+            let start = w.start as f64;
+            if start < from || start + window_len > to {
+                continue;
+            }
+            windows += 1;
+            let after = hann_share_inside(start, window_len, end, end + slot_len);
+            let tails = tail_shares(
+                after,
+                (start + 0.5 * window_len - end) / self.rate(),
+                self.config.tone_duration_s,
+            );
+            for k in basic_tones(t.sender.index() as usize) {
+                if !t.present[k] || t.level[k] <= 0.0 {
+                    continue;
+                }
+                let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                for (acc, share) in llr.iter_mut().zip(CONTINUATION_SHARES) {
+                    let continued = ln_tone_likelihood(r, t.level[k] * share * after * after);
+                    for (x, tail) in acc.iter_mut().zip(tails) {
+                        *x += (continued - ln_tone_likelihood(r, t.level[k] * tail))
+                            .clamp(-LLR_CLIP, LLR_CLIP);
+                    }
+                }
+            }
+        }
+        windows > 0 && (0..TAILS).any(|m| llr.iter().all(|acc| acc[m] <= -SPRT_BOUND))
+    }
+
     /// The same test on the analysis windows (almost) wholly after the slot end, run
     /// alongside the short windows: it decides at ±[`SPRT_BOUND`] only when the short
     /// windows' samples were no longer held, and by its lean when the short windows ran

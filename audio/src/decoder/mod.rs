@@ -266,6 +266,9 @@ pub struct Decoder {
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,
+    /// While the search replays windows already heard (see [`Decoder::replay_search`]):
+    /// the index of the window it stands at, which it treats as the newest.
+    replaying: Option<u64>,
     output: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     /// The end test's short window.
@@ -323,6 +326,7 @@ impl Decoder {
             blocked: None,
             recent: None,
             failed_slot: None,
+            replaying: None,
             output: VecDeque::new(),
             eof: false,
         })

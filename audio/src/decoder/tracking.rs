@@ -1,7 +1,7 @@
 //! Following a found frame to a report: decide its first slot, run the end test, decide a
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
-use super::end_test::{EndTest, EndVerdict};
+use super::end_test::{EndTest, EndVerdict, SPRT_HORIZON};
 use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
@@ -28,6 +28,8 @@ pub(super) struct Tracking {
     pub(super) onset: f64,
     /// The onset was re-estimated once the whole first slot had been heard.
     onset_refined: bool,
+    /// The onset estimated when the frame was found.
+    found_onset: f64,
     pub(super) stage: Stage,
     /// Per-window excess power of each tone measured in the last decided slot.
     pub(super) level: [f64; TONE_COUNT],
@@ -68,6 +70,7 @@ impl Decoder {
             scale,
             onset,
             onset_refined: false,
+            found_onset: onset,
             stage: Stage::Slot1,
             level: [0.0; TONE_COUNT],
             present: [false; TONE_COUNT],
@@ -104,8 +107,36 @@ impl Decoder {
             self.refine_onset(t);
             return Step::Again;
         }
-        let Some(slot) = self.confirm_slot(t, a, b) else {
-            self.failed_slot = Some((t.sender, b));
+        let decision = self
+            .confirm_slot(t, a, b)
+            .filter(|_| first || self.second_frame_holds_its_level(t, a, b));
+        let Some(slot) = decision else {
+            // A first slot of the sender just decided, starting within half a tone of that
+            // transmission's end, is its reverberant tail (plus babble), not a long
+            // message's first frame: by the protocol the sender's next message comes
+            // later, and must not be taken for a second frame of this one.
+            // A failed second slot ends its transmission (a long message has two frames):
+            // a frame after it is not the second half of anything.
+            let tail_of_recent = self
+                .recent
+                .is_some_and(|r| r.frame.sender == t.sender && a - r.end < SPRT_HORIZON * slot_len);
+            if first && !tail_of_recent {
+                self.failed_slot = Some((t.sender, b));
+            }
+            if !first && self.sender_stopped_late(t, a) {
+                // The end test took the first frame's tail for a second frame: it was a
+                // short message after all, and the search goes on from its end (a message
+                // that began during the second slot is still found at its onset).
+                let message = Message::Short {
+                    sender: t.sender,
+                    data: t.data[0],
+                };
+                let decided_at = self.latest_window_end();
+                self.report(t, message, a, decided_at);
+                self.end_transmission(a, false);
+                self.replay_search(a.max(0.0).floor() as u64);
+                return Step::Wait;
+            }
             if first {
                 // A first slot that fails was someone else's sound (babble, a tail, a
                 // burst) or a frame found at the wrong onset: the search resumes just
@@ -125,8 +156,11 @@ impl Decoder {
                     until: Some(b.max(0.0) as u64),
                     fresh_start: false,
                 });
-                let resume = a + self.geometry.window_len as f64;
-                self.reset_sliding(resume.max(0.0).floor() as u64);
+                let window_len = self.geometry.window_len as f64;
+                let from = t.found_onset.min(a) - window_len;
+                let resume =
+                    (from.max(0.0).floor() as u64).max(self.floor + self.geometry.hop as u64);
+                self.replay_search(resume);
             } else {
                 self.end_transmission(b, false);
             }
@@ -260,6 +294,7 @@ impl Decoder {
                     self.recent = Some(Recent {
                         frame,
                         level,
+                        end,
                         until: (end + RECENT_SLOTS * self.geometry.slot_samples).max(0.0) as u64,
                     });
                     // A tail is quiet 25 dB down or within noise (2.5 σ of six tones'

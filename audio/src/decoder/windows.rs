@@ -97,7 +97,7 @@ impl Decoder {
         self.position(index).map(|p| &self.history[p])
     }
 
-    fn add_to_sliding(&mut self, index: u64) {
+    pub(super) fn add_to_sliding(&mut self, index: u64) {
         let Some(pos) = self.position(index) else {
             return;
         };
