@@ -140,6 +140,18 @@ impl Evidence {
         self.total_over(1)
     }
 
+    /// The sender's tones' evidence alone, for the continuation level that explains them
+    /// best, against the stop hypothesis that explains them best.
+    fn sender(&self) -> f64 {
+        (0..TAILS)
+            .map(|m| {
+                (0..CONTINUATIONS)
+                    .map(|c| self.llr[c][m])
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// [`Evidence::total`] with the second frame's data basic at any of the first
     /// `levels` of [`DATA_LEVELS`].
     fn total_over(&self, levels: usize) -> f64 {
@@ -528,15 +540,21 @@ impl Decoder {
             let at = end as f64;
             // "Continues" rests on the best of 21 data basics: a union over them costs
             // ln 21 (the stop side needs no such allowance: the true one is among them).
-            // The lean at the horizon also weighs a second frame whose data tones sound far
-            // below the first frame's (see `DATA_LEVELS`): that is where a long message in
-            // a hall was cut short. Here "stopped" keeps the typical-level test, which
-            // reports a stop within a few windows (weak data hypotheses, each near
-            // neither side, would only slow it).
+            // Where the sender's own tones lean to "continues", "stopped" must also beat a
+            // second frame whose data tones sound far below the first frame's (see
+            // `DATA_LEVELS`), as in the lean at the horizon: in a hall a long message's
+            // second data basic may reach the microphone 10 dB down while its sender
+            // plainly goes on, and tested at the typical level alone the frame was cut to
+            // a wrong short within a few windows. Where the sender leans to "stopped" the
+            // typical-level test decides within a few windows (the weak data hypotheses,
+            // each near neither side, would only slow it).
             if evidence >= END_CONTINUE_NATS + (DATA_VALUES as f64).ln() {
                 return Some((EndVerdict::Continues, at));
             }
-            if evidence <= -END_BOUND_NATS {
+            let sender_went_on = st.evidence.sender() > 0.0;
+            if evidence <= -END_BOUND_NATS
+                && (!sender_went_on || effective(st, st.evidence.against_stop()) <= -END_BOUND_NATS)
+            {
                 return Some((EndVerdict::Stopped, at));
             }
             if at >= slot_end + SPRT_HORIZON * slot_len {

@@ -50,6 +50,10 @@ pub(super) enum Stage {
     EndTest(EndTest),
     /// Waiting for the windows of the second slot.
     Slot2,
+    /// The end test after the first slot (ending at this sample) could not tell: waiting
+    /// for the second half of a would-be second slot (see
+    /// [`Decoder::sender_stopped_late`]).
+    LateCheck(f64),
 }
 
 /// Whether tracking can go on with what has been heard, or must wait for more.
@@ -85,6 +89,7 @@ impl Decoder {
             let step = match t.stage {
                 Stage::Slot1 | Stage::Slot2 => self.decide_slot(&t),
                 Stage::EndTest(test) => self.end_test(&t, test),
+                Stage::LateCheck(end) => self.late_check(&t, end),
             };
             if let Step::Wait = step {
                 return;
@@ -125,16 +130,8 @@ impl Decoder {
             }
             if !first && self.sender_stopped_late(t, a) {
                 // The end test took the first frame's tail for a second frame: it was a
-                // short message after all, and the search goes on from its end (a message
-                // that began during the second slot is still found at its onset).
-                let message = Message::Short {
-                    sender: t.sender,
-                    data: t.data[0],
-                };
-                let decided_at = self.latest_window_end();
-                self.report(t, message, a, decided_at);
-                self.end_transmission(a, false);
-                self.replay_search(a.max(0.0).floor() as u64);
+                // short message after all.
+                self.report_late_short(t, a);
                 return Step::Wait;
             }
             if first {
@@ -184,6 +181,39 @@ impl Decoder {
         Step::Again
     }
 
+    /// After an unclear end test on the first slot (ending at `end`): once the second half
+    /// of a would-be second slot is heard, a sender plainly silent there makes the slot a
+    /// short message; otherwise nothing is reported (a long message whose second data
+    /// basic cannot be told is lost, not cut short).
+    fn late_check(&mut self, t: &Tracking, end: f64) -> Step {
+        let slot_len = self.geometry.slot_samples;
+        let quarter = 0.25 * self.geometry.window_len as f64;
+        if self.latest_window_end() < end + slot_len + quarter && !self.eof {
+            return Step::Wait;
+        }
+        if self.sender_stopped_late(t, end) {
+            self.report_late_short(t, end);
+        } else {
+            self.end_transmission(end, false);
+            self.replay_search(end.max(0.0).floor() as u64);
+        }
+        Step::Wait
+    }
+
+    /// Reports the first slot of `t`, ending at `end`, as a short message decided late,
+    /// and searches again from its end (a message that began meanwhile is still found at
+    /// its onset).
+    fn report_late_short(&mut self, t: &Tracking, end: f64) {
+        let message = Message::Short {
+            sender: t.sender,
+            data: t.data[0],
+        };
+        let decided_at = self.latest_window_end();
+        self.report(t, message, end, decided_at);
+        self.end_transmission(end, false);
+        self.replay_search(end.max(0.0).floor() as u64);
+    }
+
     /// Re-estimates the onset once the whole first slot has been heard. Tracking can start
     /// two windows into a loud frame, when the edge refinement has a plateau of two noisy
     /// windows to go by; a first slot that starts late catches the second frame's data as
@@ -211,6 +241,11 @@ impl Decoder {
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
         match (test.slot, continues) {
+            (1, EndVerdict::Unclear) => {
+                if let Some(tr) = self.tracking.as_mut() {
+                    tr.stage = Stage::LateCheck(slot_end);
+                }
+            }
             (_, EndVerdict::Unclear) => {
                 // Stopped or not cannot be told: a short would possibly be a long message
                 // cut short, and a second slot is not worth deciding on such evidence.
