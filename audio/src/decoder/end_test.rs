@@ -140,16 +140,26 @@ impl Evidence {
         self.total_over(1)
     }
 
-    /// The sender's tones' evidence alone, for the continuation level that explains them
-    /// best, against the stop hypothesis that explains them best.
-    fn sender(&self) -> f64 {
-        (0..TAILS)
-            .map(|m| {
+    /// Whether one "stopped" hypothesis beats every continuation (`beats` says whether an
+    /// evidence sum is far enough below zero): with the second frame's data basic at the
+    /// typical level and, where the sender's own tones lean to "continues" under that
+    /// hypothesis, at every level of [`DATA_LEVELS`].
+    fn stopped(&self, beats: impl Fn(f64) -> bool) -> bool {
+        (0..TAILS).any(|m| {
+            let best = |levels: usize, with_data: bool| {
                 (0..CONTINUATIONS)
-                    .map(|c| self.llr[c][m])
+                    .map(|c| {
+                        let data = self.data_llr[c][m][..levels]
+                            .iter()
+                            .flatten()
+                            .copied()
+                            .fold(f64::NEG_INFINITY, f64::max);
+                        self.llr[c][m] + if with_data { data } else { 0.0 }
+                    })
                     .fold(f64::NEG_INFINITY, f64::max)
-            })
-            .fold(f64::INFINITY, f64::min)
+            };
+            beats(best(1, true)) && (best(1, false) <= 0.0 || beats(best(DATA_LEVEL_COUNT, true)))
+        })
     }
 
     /// [`Evidence::total`] with the second frame's data basic at any of the first
@@ -551,10 +561,7 @@ impl Decoder {
             if evidence >= END_CONTINUE_NATS + (DATA_VALUES as f64).ln() {
                 return Some((EndVerdict::Continues, at));
             }
-            let sender_went_on = st.evidence.sender() > 0.0;
-            if evidence <= -END_BOUND_NATS
-                && (!sender_went_on || effective(st, st.evidence.against_stop()) <= -END_BOUND_NATS)
-            {
+            if st.evidence.stopped(|x| effective(st, x) <= -END_BOUND_NATS) {
                 return Some((EndVerdict::Stopped, at));
             }
             if at >= slot_end + SPRT_HORIZON * slot_len {

@@ -269,6 +269,9 @@ pub struct Decoder {
     /// While the search replays windows already heard (see [`Decoder::replay_search`]):
     /// the index of the window it stands at, which it treats as the newest.
     replaying: Option<u64>,
+    /// A replay asked for (from this floor) by a decision taken during a search or a
+    /// replay; run once that has returned (see [`Decoder::run_pending_replays`]).
+    pending_replay: Option<u64>,
     output: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     /// The end test's short window.
@@ -327,6 +330,7 @@ impl Decoder {
             recent: None,
             failed_slot: None,
             replaying: None,
+            pending_replay: None,
             output: VecDeque::new(),
             eof: false,
         })
@@ -373,6 +377,7 @@ impl Decoder {
             }) if end.short.running()
         ) {
             self.advance_tracking();
+            self.run_pending_replays();
         }
     }
 
@@ -387,6 +392,7 @@ impl Decoder {
     pub fn finish(&mut self) {
         self.eof = true;
         self.advance_tracking();
+        self.run_pending_replays();
         if self.tracking.is_some() {
             // Slots not complete: not a message.
             self.tracking = None;

@@ -168,11 +168,22 @@ impl Decoder {
             self.replaying = Some(index);
             self.detect();
             self.replaying = None;
-            if self.tracking.is_some() {
+            if self.tracking.is_some() || self.pending_replay.is_some() {
                 // The tracking takes the windows from here (its slot may already be
-                // complete: `start_tracking` moved it on as far as the audio allows).
+                // complete: `start_tracking` moved it on as far as the audio allows), or
+                // what it tracked was decided and asked for a replay of its own.
                 return;
             }
+        }
+    }
+
+    /// Runs the replays decisions asked for, one after the other (a replay may find a frame
+    /// whose decision asks for the next): never one inside another, whose sliding sums
+    /// would be the other's. Each starts at least a hop after the last failed slot's
+    /// floor, so they end.
+    pub(super) fn run_pending_replays(&mut self) {
+        while let Some(floor) = self.pending_replay.take() {
+            self.replay_search(floor);
         }
     }
 

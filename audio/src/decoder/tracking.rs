@@ -157,7 +157,7 @@ impl Decoder {
                 let from = t.found_onset.min(a) - window_len;
                 let resume =
                     (from.max(0.0).floor() as u64).max(self.floor + self.geometry.hop as u64);
-                self.replay_search(resume);
+                self.pending_replay = Some(resume);
             } else {
                 self.end_transmission(b, false);
             }
@@ -195,7 +195,7 @@ impl Decoder {
             self.report_late_short(t, end);
         } else {
             self.end_transmission(end, false);
-            self.replay_search(end.max(0.0).floor() as u64);
+            self.pending_replay = Some(end.max(0.0).floor() as u64);
         }
         Step::Wait
     }
@@ -211,7 +211,7 @@ impl Decoder {
         let decided_at = self.latest_window_end();
         self.report(t, message, end, decided_at);
         self.end_transmission(end, false);
-        self.replay_search(end.max(0.0).floor() as u64);
+        self.pending_replay = Some(end.max(0.0).floor() as u64);
     }
 
     /// Re-estimates the onset once the whole first slot has been heard. Tracking can start

@@ -85,6 +85,7 @@ impl Decoder {
         } else {
             self.detect();
         }
+        self.run_pending_replays();
     }
 
     fn position(&self, index: u64) -> Option<usize> {
