@@ -133,6 +133,50 @@ fn a_long_message_is_not_cut_short_by_its_own_tail() {
     }
 }
 
+/// Long messages in halls full of talkers: a second frame's data tones may reach the
+/// microphone 10 dB below the first frame's while its sender plainly goes on, and babble
+/// puts power on any data basic; the end test once stopped on the first frame within a
+/// few windows, reporting a wrong short (seed 87 lost one that way at T60 1.2 s and one
+/// at 2.5 s). A long message may be lost, never cut short. Seeds 86 and 87 are not among
+/// those `huddle audio eval` reports.
+#[test]
+fn long_messages_in_babble_halls_are_lost_rather_than_cut_short() {
+    for seed in [86u64, 87] {
+        for t60 in [1.2, 2.5] {
+            let mut trial = RoomTrial::new(seed, t60, 0.0, RoomNoise::Babble, 30);
+            trial.long_share = 1.0;
+            let out = run_room_trial(&trial).unwrap();
+            assert_eq!(
+                out.wrong, 0,
+                "seed {seed}, T60 {t60} s: a long message reported as a short (or garbled)"
+            );
+            assert!(
+                out.correct >= 15,
+                "seed {seed}, T60 {t60} s: {} of 30 long messages decoded",
+                out.correct
+            );
+        }
+    }
+}
+
+/// The longest hall the issue names (T60 2.5 s) at babble 0 dB: a short message's tail
+/// with the same data once passed for a second frame (a wrong long), or for a
+/// continuation that lost the message; the second slot must now keep the sender's level,
+/// and a sender plainly silent half a slot later makes it a short.
+#[test]
+fn short_messages_decode_in_the_longest_hall() {
+    for seed in [88u64, 89] {
+        let out = run_room_trial(&RoomTrial::new(seed, 2.5, 0.0, RoomNoise::Babble, 40)).unwrap();
+        assert!(
+            out.correct >= 37,
+            "T60 2.5 s, babble 0 dB, seed {seed}: {} of 40 decoded",
+            out.correct
+        );
+        assert_eq!(out.wrong, 0, "T60 2.5 s, seed {seed}: wrong messages");
+        assert_eq!(out.spurious, 0, "T60 2.5 s, seed {seed}: extra messages");
+    }
+}
+
 #[test]
 fn minutes_of_reverberant_babble_say_nothing() {
     let out = run_room_false_alarm_trial(1.5, 0.05, 74);
@@ -167,11 +211,14 @@ fn twenty_minutes_of_babble_in_a_hall_and_dry_say_nothing() {
 /// and 2.0 s) and dry babble, no message may be reported. Takes about ten minutes in
 /// release: `cargo test --release -p audio --test rooms -- --ignored ten_hours`.
 ///
-/// Known failure at this commit: the T60 2.0 s hall (seed 84) reports 1 false message
-/// in 10 h (a frame of tones barely above the floor, 0 dB per window); the T60 1.2 s
-/// hall (seed 83) reports none. `huddle audio eval` shows the reported seeds' figures.
+/// Measured at this commit: 0 false in 10 h in each of the T60 1.2 s hall (seed 83), the
+/// T60 2.0 s hall (seed 84) and dry (seed 85); 390 s in release. (An intermediate
+/// version that let an end test "unclear" be decided half a slot later for any frame
+/// reported one frame of tones 2.4 dB above the floor in the T60 2.0 s hall: such late
+/// decisions now need the frame's tones 6 dB up.) `huddle audio eval` shows the reported
+/// seeds' figures.
 #[test]
-#[ignore = "ten hours of audio per row; known failure: 1 false in 10 h at T60 2.0 s"]
+#[ignore = "ten hours of audio per row (minutes in release); run with --ignored"]
 fn ten_hours_of_babble_in_halls_and_dry_say_nothing() {
     let mut heard = Vec::new();
     for (t60, seed) in [(1.2, 83u64), (2.0, 84)] {

@@ -73,6 +73,12 @@ const MEDIAN_PRESENT: f64 = 1.3;
 /// Least probability, under a steady tone, of as many dropouts as a vote tone shows.
 const P_DROPOUTS: f64 = 1e-3;
 
+/// Least share of the first slot's level the sender's tones keep in the second half of a
+/// second slot (−5 dB; see [`Decoder::second_frame_holds_its_level`]).
+const SECOND_FRAME_SHARE: f64 = 0.3;
+/// Noise allowance of that test, standard deviations of the summed excess.
+const SECOND_FRAME_NOISE_Z: f64 = 3.0;
+
 /// Shares of the frame's level a leftover tail before the onset may have (see
 /// [`Decoder::sender_sounded_before`]): 0, −20, −15 and −10 dB, all well below the
 /// [`CONTINUATION_SHARE`] a first frame that was missed would sound at.
@@ -118,6 +124,45 @@ impl Decoder {
             level,
             noise,
         })
+    }
+
+    /// Whether a second slot `[a, b)` is a second frame rather than the first frame's
+    /// reverberant tail: the sender's tones (the same tones, through the same room, so at
+    /// the same level as in the first slot) must keep [`SECOND_FRAME_SHARE`] of the first
+    /// slot's level through the second half of the slot, within the noise.
+    ///
+    /// In a hall of T60 2.5 s a tone's tail still holds a fifth of its energy over the
+    /// next second, front-loaded, and with the same data it passes for a second frame of
+    /// the same data: a short message would become a wrong long one. Half a slot after
+    /// the end such a tail has fallen by 10–25 dB; a second frame has not fallen at all.
+    pub(super) fn second_frame_holds_its_level(&self, t: &Tracking, a: f64, b: f64) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        if b - a < 4.0 * window_len {
+            // Half a slot of a window or so: too little to tell a tail by, and a window
+            // reaching past the slot would read a long message's end as a decay.
+            return true;
+        }
+        let mid = 0.5 * (a + b);
+        let tones: Vec<usize> = basic_tones(t.sender.index() as usize)
+            .into_iter()
+            .filter(|&k| t.present[k] && t.level[k] > 0.0)
+            .collect();
+        // On the first slot's noise level: where the background is the tones' own leakage
+        // (a clean recording), each frame's data tones set a different per-window level.
+        let (mut observed, mut noise, mut windows) = (0.0, 0.0, 0usize);
+        for w in &self.history {
+            let start = w.start as f64;
+            if start < mid || start + window_len > b {
+                continue;
+            }
+            let scale = w.level / t.noise;
+            observed += Self::excess(w, t.scale, &tones) * scale;
+            noise += scale;
+            windows += 1;
+        }
+        let expected: f64 = tones.iter().map(|&k| t.level[k]).sum::<f64>() * windows as f64;
+        let spread = (tones.len() as f64 / windows.max(1) as f64).sqrt() * noise;
+        windows == 0 || observed >= SECOND_FRAME_SHARE * expected - SECOND_FRAME_NOISE_Z * spread
     }
 
     /// Whether the first slot `t` (its level and tones measured, starting at `a`) is the

@@ -76,6 +76,12 @@ const CONTINUATIONS: usize = CONTINUATION_SHARES.len();
 /// only at the typical level, they read as "not there", and a long message whose sender
 /// plainly went on would be cut to a wrong short.
 const DATA_LEVELS: [f64; 3] = [1.0, 0.2, 0.04];
+/// Least typical tone level (per-window excess over the noise, 6 dB) of a first slot
+/// that [`Decoder::sender_stopped_late`] may still make a short message. Every room row
+/// `huddle audio eval` runs (down to −6 dB in-band) has its tones 12 dB or more above the
+/// noise in a window; the frames babble assembles sit near 0 dB, and in 10 h of
+/// reverberant babble one was let through this way.
+const LATE_MIN_LEVEL: f64 = 4.0;
 /// Number of data levels.
 const DATA_LEVEL_COUNT: usize = DATA_LEVELS.len();
 
@@ -138,6 +144,28 @@ impl Evidence {
     /// continuation at full level look alike at first; neither decides then).
     fn total(&self) -> f64 {
         self.total_over(1)
+    }
+
+    /// Whether one "stopped" hypothesis beats every continuation (`beats` says whether an
+    /// evidence sum is far enough below zero): with the second frame's data basic at the
+    /// typical level and, where the sender's own tones lean to "continues" under that
+    /// hypothesis, at every level of [`DATA_LEVELS`].
+    fn stopped(&self, beats: impl Fn(f64) -> bool) -> bool {
+        (0..TAILS).any(|m| {
+            let best = |levels: usize, with_data: bool| {
+                (0..CONTINUATIONS)
+                    .map(|c| {
+                        let data = self.data_llr[c][m][..levels]
+                            .iter()
+                            .flatten()
+                            .copied()
+                            .fold(f64::NEG_INFINITY, f64::max);
+                        self.llr[c][m] + if with_data { data } else { 0.0 }
+                    })
+                    .fold(f64::NEG_INFINITY, f64::max)
+            };
+            beats(best(1, true)) && (best(1, false) <= 0.0 || beats(best(DATA_LEVEL_COUNT, true)))
+        })
     }
 
     /// [`Evidence::total`] with the second frame's data basic at any of the first
@@ -528,15 +556,18 @@ impl Decoder {
             let at = end as f64;
             // "Continues" rests on the best of 21 data basics: a union over them costs
             // ln 21 (the stop side needs no such allowance: the true one is among them).
-            // The lean at the horizon also weighs a second frame whose data tones sound far
-            // below the first frame's (see `DATA_LEVELS`): that is where a long message in
-            // a hall was cut short. Here "stopped" keeps the typical-level test, which
-            // reports a stop within a few windows (weak data hypotheses, each near
-            // neither side, would only slow it).
+            // Where the sender's own tones lean to "continues", "stopped" must also beat a
+            // second frame whose data tones sound far below the first frame's (see
+            // `DATA_LEVELS`), as in the lean at the horizon: in a hall a long message's
+            // second data basic may reach the microphone 10 dB down while its sender
+            // plainly goes on, and tested at the typical level alone the frame was cut to
+            // a wrong short within a few windows. Where the sender leans to "stopped" the
+            // typical-level test decides within a few windows (the weak data hypotheses,
+            // each near neither side, would only slow it).
             if evidence >= END_CONTINUE_NATS + (DATA_VALUES as f64).ln() {
                 return Some((EndVerdict::Continues, at));
             }
-            if evidence <= -END_BOUND_NATS {
+            if st.evidence.stopped(|x| effective(st, x) <= -END_BOUND_NATS) {
                 return Some((EndVerdict::Stopped, at));
             }
             if at >= slot_end + SPRT_HORIZON * slot_len {
@@ -544,6 +575,70 @@ impl Decoder {
                 return None;
             }
         }
+    }
+
+    /// After a second slot that failed its decision: whether the sender had plainly
+    /// stopped at the first slot's end `end`, judged on the analysis windows wholly in the
+    /// second half of that second slot (from [`SPRT_HORIZON`] slots after `end` on).
+    ///
+    /// The end test decides within half a slot, and in a hall a short message's own tail
+    /// sometimes passes there for a continuation (a tone in a notch of the room's
+    /// response reverberates louder than it sounded, and talkers put power on the data
+    /// tones); the second slot then fails, and the message would be lost. Half a slot
+    /// later any tail of T60 up to 2.5 s has fallen 12 dB more, while a second frame's
+    /// sender sounds through its whole slot: the sender's tones alone, against every
+    /// stop hypothesis at each continuation level, must say "stopped" at
+    /// [`SPRT_BOUND`]. A long message whose second slot failed keeps its sender sounding
+    /// there and is not taken for a short.
+    pub(super) fn sender_stopped_late(&self, t: &Tracking, end: f64) -> bool {
+        let window_len = self.geometry.window_len as f64;
+        let slot_len = self.geometry.slot_samples;
+        if slot_len < 4.0 * window_len {
+            // Half a slot of a window or so: nothing to go by but windows that reach past
+            // the second slot, where a long message has ended too.
+            return false;
+        }
+        let typical = median(
+            (0..TONE_COUNT)
+                .filter(|&k| t.present[k])
+                .map(|k| t.level[k])
+                .collect(),
+        );
+        if typical < LATE_MIN_LEVEL {
+            // A frame barely above the floor: the end test could not tell because there
+            // was little to tell by, and babble assembles such frames now and then.
+            return false;
+        }
+        let (from, to) = (end + SPRT_HORIZON * slot_len, end + slot_len);
+        let mut llr = [[0.0f64; TAILS]; CONTINUATIONS];
+        let mut windows = 0;
+        for w in &self.history {
+            let start = w.start as f64;
+            if start < from || start + window_len > to {
+                continue;
+            }
+            windows += 1;
+            let after = hann_share_inside(start, window_len, end, end + slot_len);
+            let tails = tail_shares(
+                after,
+                (start + 0.5 * window_len - end) / self.rate(),
+                self.config.tone_duration_s,
+            );
+            for k in basic_tones(t.sender.index() as usize) {
+                if !t.present[k] || t.level[k] <= 0.0 {
+                    continue;
+                }
+                let r = f64::from(w.r[t.scale * TONE_COUNT + k]) * w.level / t.noise;
+                for (acc, share) in llr.iter_mut().zip(CONTINUATION_SHARES) {
+                    let continued = ln_tone_likelihood(r, t.level[k] * share * after * after);
+                    for (x, tail) in acc.iter_mut().zip(tails) {
+                        *x += (continued - ln_tone_likelihood(r, t.level[k] * tail))
+                            .clamp(-LLR_CLIP, LLR_CLIP);
+                    }
+                }
+            }
+        }
+        windows > 0 && (0..TAILS).any(|m| llr.iter().all(|acc| acc[m] <= -SPRT_BOUND))
     }
 
     /// The same test on the analysis windows (almost) wholly after the slot end, run

@@ -26,7 +26,11 @@
 //!    shape (with the frame's tones in, the median would read high exactly while a
 //!    message sounds); the shape (pink noise, a microphone's response) is a slow,
 //!    outlier-gated average per tone, frozen on the tones of a message being tracked.
-//!    Powers are divided by level × shape, so under noise each is ≈ Exp(1).
+//!    Powers are divided by level × shape, so under noise each is ≈ Exp(1). The level is
+//!    smoothed lightly, except that one 10 dB or more off is taken at once: a new
+//!    background (a sound after digital silence, a tail dying away), not the estimate's
+//!    spread; smoothed across such a step, the first windows of a message after silence
+//!    read tens of times louder than its last.
 //! 3. **Integration**: the normalised powers of the last `n` windows that fit in one tone
 //!    duration are summed per tone and scale (the energy detector matched to the tone
 //!    length). Under noise each sum is ≈ Gamma(n, 1).
@@ -68,9 +72,19 @@
 //!    costs nothing). Undecided at the horizon, the same test on the analysis windows
 //!    gives the lean (a weak lean is a stop). "Stopped" must also beat a second frame
 //!    whose data tones sound up to 14 dB below the first frame's (in a hall each tone
-//!    has its own level); when the sender plainly went on but no data basic did at the
-//!    first frame's level, the verdict is unclear and nothing is reported: a long message
-//!    is lost rather than cut to a wrong short.
+//!    has its own level), in the lean and, under any stop hypothesis the sender's own
+//!    tones do not bear out, in the short windows too; when the sender plainly went on
+//!    but no data basic did at the first frame's level, the verdict is unclear: a long
+//!    message is lost rather than cut to a wrong short. An unclear end, and a second
+//!    slot that fails after "continues", are looked at once more half a slot later,
+//!    when any tail up to T60 2.5 s has fallen 12 dB more while a second frame's sender
+//!    still sounds at full level: a sender plainly silent there (its tones alone, at
+//!    ±14) makes the first slot a short message (in a hall a short message's own tail,
+//!    a tone in a notch of the room reverberating louder than it sounded, passes for a
+//!    continuation now and then). A second slot must also keep the sender's level through
+//!    its second half (≥ −5 dB of the first slot's, within the noise): a T60 2.5 s tail
+//!    of a frame, front-loaded, holds a fifth of its energy over the next second and,
+//!    with the same data, passed for a second frame.
 //!    The test looks half a slot past the end, so two messages from one robot need more
 //!    than half a tone of silence between them (closer frames *are* a long message).
 //!    Each slot must also sound through: both of its halves carry a fair share of the
@@ -94,6 +108,13 @@
 //!    second half of a long message whose first half was missed, and is dropped.
 //! 8. **Once per transmission**: after a decision the integration restarts after the
 //!    transmission's end.
+//! 9. **Replay**: while a frame is tracked the search is idle. When a first slot fails
+//!    (babble assembled a frame for a moment over a hall's tail), the search runs again
+//!    over the windows heard since just before that frame's onset, as a second search
+//!    running alongside would have, so a message that began meanwhile is found at its
+//!    onset rather than half over. Replays run one after another, each starting after the
+//!    last one's floor. A first slot failing right after the same sender's decided
+//!    transmission is that transmission's tail, not a long message's lost first frame.
 //!
 //! # False alarms
 //!
@@ -266,6 +287,12 @@ pub struct Decoder {
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,
+    /// While the search replays windows already heard (see [`Decoder::replay_search`]):
+    /// the index of the window it stands at, which it treats as the newest.
+    replaying: Option<u64>,
+    /// A replay asked for (from this floor) by a decision taken during a search or a
+    /// replay; run once that has returned (see [`Decoder::run_pending_replays`]).
+    pending_replay: Option<u64>,
     output: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     /// The end test's short window.
@@ -323,6 +350,8 @@ impl Decoder {
             blocked: None,
             recent: None,
             failed_slot: None,
+            replaying: None,
+            pending_replay: None,
             output: VecDeque::new(),
             eof: false,
         })
@@ -369,6 +398,7 @@ impl Decoder {
             }) if end.short.running()
         ) {
             self.advance_tracking();
+            self.run_pending_replays();
         }
     }
 
@@ -383,6 +413,7 @@ impl Decoder {
     pub fn finish(&mut self) {
         self.eof = true;
         self.advance_tracking();
+        self.run_pending_replays();
         if self.tracking.is_some() {
             // Slots not complete: not a message.
             self.tracking = None;

@@ -10,6 +10,13 @@ const SHAPE_GATE: f64 = 4.0;
 const KEEP: f64 = 0.85;
 /// Slowest shape adaptation rate per window (time constant 256 windows, 16–33 s).
 const SHAPE_RATE: f64 = 1.0 / 256.0;
+/// A level this many times above or below the smoothed one (10 dB) is taken at once: far
+/// beyond the estimate's own spread (about ±17% per window), it is a new background (a
+/// sound starting after digital silence, a hall's tail dying away), not noise in the
+/// estimate. Smoothing across such a step would normalise the first windows of a message
+/// that follows silence by a level orders of magnitude too low, and its first half would
+/// look like a burst.
+const LEVEL_JUMP: f64 = 10.0;
 /// The quietest noise assumed: quantisation noise of a 20-bit recording. Without it a
 /// synthetic, noise-free signal would be normalised by FFT round-off, which jumps by
 /// orders of magnitude from window to window.
@@ -78,7 +85,8 @@ impl NoiseFloor {
         }
         let measured = sum / expected;
         let instant = measured.max(self.minimum);
-        self.level = if self.level <= 0.0 {
+        let jump = (instant / self.level).ln().abs() > LEVEL_JUMP.ln();
+        self.level = if self.level <= 0.0 || jump {
             instant
         } else {
             // Light smoothing in the log domain: the median of 72 exponentials is ±17%.

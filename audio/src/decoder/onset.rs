@@ -12,10 +12,14 @@ impl Decoder {
         let tones = frame.tones();
         let window_len = self.geometry.window_len as f64;
         let lookback = 3 * self.geometry.slot_windows + 4;
+        // During a replay the search stands at an earlier window: what follows it is not
+        // part of the frame's onset.
+        let newest = self.replaying.unwrap_or(u64::MAX);
         let recent: Vec<&WindowRecord> = self
             .history
             .iter()
             .rev()
+            .filter(|w| w.index <= newest)
             .take(lookback)
             .filter(|w| w.start >= self.floor)
             .collect::<Vec<_>>()

@@ -34,6 +34,8 @@ pub(super) struct Recent {
     pub(super) frame: Frame,
     /// Its six tones' per-window excess when it was decided.
     pub(super) level: f64,
+    /// Where its transmission ended (sample).
+    pub(super) end: f64,
     /// Window start (sample) from which it is forgotten (a tail is gone by then).
     pub(super) until: u64,
 }
@@ -108,7 +110,7 @@ impl Decoder {
     /// steady there; a reverberant tail (of a message already decided, or of one whose
     /// start was missed) decays. The search just waits: a real frame passes a window later.
     fn decaying(&self, frame: Frame, scale: usize, count: usize) -> bool {
-        let Some(newest) = self.history.back() else {
+        let Some(newest) = self.search_newest() else {
             return false;
         };
         let tones = frame.tones();
@@ -130,6 +132,59 @@ impl Decoder {
         let long_tone = self.geometry.slot_windows >= DECAYING_MIN_WINDOWS;
         tail_of_recent
             || (long_tone && latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt())
+    }
+
+    /// The window the search stands at: the newest heard, or the one a replay is at.
+    pub(super) fn search_newest(&self) -> Option<&super::windows::WindowRecord> {
+        match self.replaying {
+            Some(index) => self.record(index),
+            None => self.history.back(),
+        }
+    }
+
+    /// Runs the search again over the windows heard since `floor`, as if nothing had been
+    /// tracked meanwhile, until it starts tracking a frame; then goes on live.
+    ///
+    /// While a frame is tracked the search is idle. In a hall full of talkers the search
+    /// now and then picks up a frame that babble (over a reverberant tail) assembled for a
+    /// moment, and a message that begins while that frame's slot is heard out would be
+    /// lost: by the time the slot fails, the message's onset lies behind the newest
+    /// window, and a search resumed there sees only its decaying part. Replaying the
+    /// windows finds the message at its onset, as a second search running alongside
+    /// would have.
+    pub(super) fn replay_search(&mut self, floor: u64) {
+        self.floor = floor;
+        self.sliding.iter_mut().for_each(|s| *s = 0.0);
+        self.sliding_count = 0;
+        self.run = None;
+        let indices: Vec<u64> = self
+            .history
+            .iter()
+            .filter(|w| w.start >= floor)
+            .map(|w| w.index)
+            .collect();
+        for index in indices {
+            self.add_to_sliding(index);
+            self.replaying = Some(index);
+            self.detect();
+            self.replaying = None;
+            if self.tracking.is_some() || self.pending_replay.is_some() {
+                // The tracking takes the windows from here (its slot may already be
+                // complete: `start_tracking` moved it on as far as the audio allows), or
+                // what it tracked was decided and asked for a replay of its own.
+                return;
+            }
+        }
+    }
+
+    /// Runs the replays decisions asked for, one after the other (a replay may find a frame
+    /// whose decision asks for the next): never one inside another, whose sliding sums
+    /// would be the other's. Each starts at least a hop after the last failed slot's
+    /// floor, so they end.
+    pub(super) fn run_pending_replays(&mut self) {
+        while let Some(floor) = self.pending_replay.take() {
+            self.replay_search(floor);
+        }
     }
 
     /// Unblocks a blocked frame once its tones have fallen below its quiet level in two

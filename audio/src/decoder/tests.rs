@@ -329,3 +329,50 @@ fn dropout_statistics_match_their_distributions() {
     let t = binomial_upper_tail(12, 3, 0.01);
     assert!((t / 2.0562e-4 - 1.0).abs() < 0.01, "{t}");
 }
+
+/// Digital silence, then a message: the noise floor sat at its quantisation minimum, and
+/// the level smoothed up from there over many windows, so the first windows of the
+/// message read tens of times louder than the last and a short tone failed the slot's
+/// both-halves check (a 250 ms tone after 0.3 s of silence decoded nothing). Every tone
+/// duration after any lead-in of silence, and a second message after silence that
+/// follows the first, must decode with its start.
+#[test]
+fn a_message_after_digital_silence_decodes_at_any_tone_duration() {
+    for tone_s in [0.1f64, 0.25, 0.5, 1.0] {
+        let enc = Encoder::new(EncoderConfig {
+            tone_duration_s: tone_s,
+            fade_s: (tone_s / 20.0).min(0.01),
+            ..EncoderConfig::default()
+        })
+        .unwrap();
+        let config = DecoderConfig {
+            tone_duration_s: tone_s,
+            ..DecoderConfig::default()
+        };
+        let first = Message::short(Sender::Goalkeeper, 4).unwrap();
+        let second = Message::short(Sender::RightAttacker, 11).unwrap();
+        for lead_s in [0.1f64, 0.3, 0.6, 2.0] {
+            let mut x = vec![0.0f32; (lead_s * 16_000.0) as usize];
+            x.extend(enc.encode_f32(&first));
+            let gap = x.len();
+            x.extend(vec![0.0f32; 24_000]);
+            let second_at = x.len() as f64 / 16_000.0;
+            x.extend(enc.encode_f32(&second));
+            x.extend(vec![0.0f32; 16_000]);
+            let got = decode_all(config.clone(), &x, 512);
+            let heard: Vec<Message> = got.iter().map(|d| d.message).collect();
+            assert_eq!(
+                heard,
+                vec![first, second],
+                "{tone_s} s tones after {lead_s} s of silence (and 1.5 s of it after {gap} samples)"
+            );
+            for (d, at) in got.iter().zip([lead_s, second_at]) {
+                assert!(
+                    (d.start_s - at).abs() < 0.03,
+                    "{tone_s} s tones after {lead_s} s of silence: start {} for {at}",
+                    d.start_s
+                );
+            }
+        }
+    }
+}

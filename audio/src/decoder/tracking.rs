@@ -1,7 +1,7 @@
 //! Following a found frame to a report: decide its first slot, run the end test, decide a
 //! second slot if the sender continued, and report a short or a long message (or nothing).
 
-use super::end_test::{EndTest, EndVerdict};
+use super::end_test::{EndTest, EndVerdict, SPRT_HORIZON};
 use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::tones::{Frame, Message, Sender, TONE_COUNT};
@@ -28,6 +28,8 @@ pub(super) struct Tracking {
     pub(super) onset: f64,
     /// The onset was re-estimated once the whole first slot had been heard.
     onset_refined: bool,
+    /// The onset estimated when the frame was found.
+    found_onset: f64,
     pub(super) stage: Stage,
     /// Per-window excess power of each tone measured in the last decided slot.
     pub(super) level: [f64; TONE_COUNT],
@@ -48,6 +50,10 @@ pub(super) enum Stage {
     EndTest(EndTest),
     /// Waiting for the windows of the second slot.
     Slot2,
+    /// The end test after the first slot (ending at this sample) could not tell: waiting
+    /// for the second half of a would-be second slot (see
+    /// [`Decoder::sender_stopped_late`]).
+    LateCheck(f64),
 }
 
 /// Whether tracking can go on with what has been heard, or must wait for more.
@@ -68,6 +74,7 @@ impl Decoder {
             scale,
             onset,
             onset_refined: false,
+            found_onset: onset,
             stage: Stage::Slot1,
             level: [0.0; TONE_COUNT],
             present: [false; TONE_COUNT],
@@ -82,6 +89,7 @@ impl Decoder {
             let step = match t.stage {
                 Stage::Slot1 | Stage::Slot2 => self.decide_slot(&t),
                 Stage::EndTest(test) => self.end_test(&t, test),
+                Stage::LateCheck(end) => self.late_check(&t, end),
             };
             if let Step::Wait = step {
                 return;
@@ -104,8 +112,28 @@ impl Decoder {
             self.refine_onset(t);
             return Step::Again;
         }
-        let Some(slot) = self.confirm_slot(t, a, b) else {
-            self.failed_slot = Some((t.sender, b));
+        let decision = self
+            .confirm_slot(t, a, b)
+            .filter(|_| first || self.second_frame_holds_its_level(t, a, b));
+        let Some(slot) = decision else {
+            // A first slot of the sender just decided, starting within half a tone of that
+            // transmission's end, is its reverberant tail (plus babble), not a long
+            // message's first frame: by the protocol the sender's next message comes
+            // later, and must not be taken for a second frame of this one.
+            // A failed second slot ends its transmission (a long message has two frames):
+            // a frame after it is not the second half of anything.
+            let tail_of_recent = self
+                .recent
+                .is_some_and(|r| r.frame.sender == t.sender && a - r.end < SPRT_HORIZON * slot_len);
+            if first && !tail_of_recent {
+                self.failed_slot = Some((t.sender, b));
+            }
+            if !first && self.sender_stopped_late(t, a) {
+                // The end test took the first frame's tail for a second frame: it was a
+                // short message after all.
+                self.report_late_short(t, a);
+                return Step::Wait;
+            }
             if first {
                 // A first slot that fails was someone else's sound (babble, a tail, a
                 // burst) or a frame found at the wrong onset: the search resumes just
@@ -125,8 +153,11 @@ impl Decoder {
                     until: Some(b.max(0.0) as u64),
                     fresh_start: false,
                 });
-                let resume = a + self.geometry.window_len as f64;
-                self.reset_sliding(resume.max(0.0).floor() as u64);
+                let window_len = self.geometry.window_len as f64;
+                let from = t.found_onset.min(a) - window_len;
+                let resume =
+                    (from.max(0.0).floor() as u64).max(self.floor + self.geometry.hop as u64);
+                self.pending_replay = Some(resume);
             } else {
                 self.end_transmission(b, false);
             }
@@ -148,6 +179,39 @@ impl Decoder {
         next.stage = Stage::EndTest(EndTest::new(if first { 1 } else { 2 }, b, next_index));
         self.tracking = Some(next);
         Step::Again
+    }
+
+    /// After an unclear end test on the first slot (ending at `end`): once the second half
+    /// of a would-be second slot is heard, a sender plainly silent there makes the slot a
+    /// short message; otherwise nothing is reported (a long message whose second data
+    /// basic cannot be told is lost, not cut short).
+    fn late_check(&mut self, t: &Tracking, end: f64) -> Step {
+        let slot_len = self.geometry.slot_samples;
+        let quarter = 0.25 * self.geometry.window_len as f64;
+        if self.latest_window_end() < end + slot_len + quarter && !self.eof {
+            return Step::Wait;
+        }
+        if self.sender_stopped_late(t, end) {
+            self.report_late_short(t, end);
+        } else {
+            self.end_transmission(end, false);
+            self.pending_replay = Some(end.max(0.0).floor() as u64);
+        }
+        Step::Wait
+    }
+
+    /// Reports the first slot of `t`, ending at `end`, as a short message decided late,
+    /// and searches again from its end (a message that began meanwhile is still found at
+    /// its onset).
+    fn report_late_short(&mut self, t: &Tracking, end: f64) {
+        let message = Message::Short {
+            sender: t.sender,
+            data: t.data[0],
+        };
+        let decided_at = self.latest_window_end();
+        self.report(t, message, end, decided_at);
+        self.end_transmission(end, false);
+        self.pending_replay = Some(end.max(0.0).floor() as u64);
     }
 
     /// Re-estimates the onset once the whole first slot has been heard. Tracking can start
@@ -177,6 +241,11 @@ impl Decoder {
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
         match (test.slot, continues) {
+            (1, EndVerdict::Unclear) => {
+                if let Some(tr) = self.tracking.as_mut() {
+                    tr.stage = Stage::LateCheck(slot_end);
+                }
+            }
             (_, EndVerdict::Unclear) => {
                 // Stopped or not cannot be told: a short would possibly be a long message
                 // cut short, and a second slot is not worth deciding on such evidence.
@@ -260,6 +329,7 @@ impl Decoder {
                     self.recent = Some(Recent {
                         frame,
                         level,
+                        end,
                         until: (end + RECENT_SLOTS * self.geometry.slot_samples).max(0.0) as u64,
                     });
                     // A tail is quiet 25 dB down or within noise (2.5 σ of six tones'

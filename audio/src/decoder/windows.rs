@@ -85,6 +85,7 @@ impl Decoder {
         } else {
             self.detect();
         }
+        self.run_pending_replays();
     }
 
     fn position(&self, index: u64) -> Option<usize> {
@@ -97,7 +98,7 @@ impl Decoder {
         self.position(index).map(|p| &self.history[p])
     }
 
-    fn add_to_sliding(&mut self, index: u64) {
+    pub(super) fn add_to_sliding(&mut self, index: u64) {
         let Some(pos) = self.position(index) else {
             return;
         };

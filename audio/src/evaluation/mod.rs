@@ -70,6 +70,9 @@ pub struct SnrOutcome {
     pub start_errors_s: Vec<f64>,
     /// Samples decoded.
     pub samples: u64,
+    /// Each message not decoded right, with its start and end (s, as heard), for
+    /// diagnosis.
+    pub missed: Vec<(Message, f64, f64)>,
 }
 
 impl SnrOutcome {
@@ -163,6 +166,11 @@ fn finish_and_score(
     for d in &detections {
         score(sent, d, out);
     }
+    out.missed = sent
+        .iter()
+        .filter(|s| !s.matched)
+        .map(|s| (s.message, s.start_s, s.end_s))
+        .collect();
 }
 
 /// Sends `trial.messages` random messages separated by random gaps through white noise.
