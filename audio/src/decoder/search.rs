@@ -168,7 +168,10 @@ impl Decoder {
             self.replaying = Some(index);
             self.detect();
             self.replaying = None;
-            if self.tracking.is_some() || self.pending_replay.is_some() {
+            // Something else took over the sums (a block lifted and integration restarted
+            // at the newest window): the replay has nothing left to look at.
+            let took_over = self.sliding_first + self.sliding_count as u64 != index + 1;
+            if self.tracking.is_some() || self.pending_replay.is_some() || took_over {
                 // The tracking takes the windows from here (its slot may already be
                 // complete: `start_tracking` moved it on as far as the audio allows), or
                 // what it tracked was decided and asked for a replay of its own.

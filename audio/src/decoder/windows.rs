@@ -102,6 +102,17 @@ impl Decoder {
         let Some(pos) = self.position(index) else {
             return;
         };
+        // The sums hold consecutive windows, each once: a window already summed is not
+        // added again, and one past a gap starts the sums afresh (the oldest window,
+        // taken off as the sums slide, must be the one that was added first).
+        let next = self.sliding_first + self.sliding_count as u64;
+        if self.sliding_count > 0 && index < next {
+            return;
+        }
+        if self.sliding_count > 0 && index > next {
+            self.sliding.iter_mut().for_each(|s| *s = 0.0);
+            self.sliding_count = 0;
+        }
         if self.sliding_count == 0 {
             self.sliding_first = index;
         }
