@@ -1050,8 +1050,8 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_radio_goer_keeps_the_ball_until_a_claim_heard_in_the_room_beats_it() {
+    /// Four field players (ids 2–5) in the default slots, and the radio's staleness.
+    fn four_slot_fallback() -> (SlotPlan, Duration, SoundFallback) {
         let cfg = AcousticConfig::default();
         let plan = SlotPlan {
             first_id: 2,
@@ -1059,7 +1059,13 @@ mod tests {
             slot_s: cfg.slot_s(),
         };
         let stale = ArbitrationParams::default().stale_after;
-        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        let fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        (plan, stale, fb)
+    }
+
+    #[test]
+    fn the_radio_goer_keeps_the_ball_until_a_claim_heard_in_the_room_beats_it() {
+        let (plan, stale, mut fb) = four_slot_fallback();
         // Robot 3 at 11.55 s: the radio still speaks; 2 goes, 4 is a little closer (within
         // the hysteresis margin).
         let at = |t: f64| {
@@ -1114,14 +1120,7 @@ mod tests {
 
     #[test]
     fn a_going_claim_whose_slot_went_by_unheard_loses_the_margin() {
-        let cfg = AcousticConfig::default();
-        let plan = SlotPlan {
-            first_id: 2,
-            slots: 4,
-            slot_s: cfg.slot_s(),
-        };
-        let stale = ArbitrationParams::default().stale_after;
-        let mut fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        let (plan, stale, mut fb) = four_slot_fallback();
         let at = |t: f64| {
             vec![
                 radio_claim(2, 1.0, true, t - 10.0),
@@ -1150,7 +1149,7 @@ mod tests {
             "1.0 m without the margin loses to 0.7 m"
         );
         // Older than `stale_cycles` cycles: gone (robot 3's own claim is too).
-        let expired = 10.0 + cfg.stale_cycles * plan.cycle_s() + 0.1;
+        let expired = 10.0 + AcousticConfig::default().stale_cycles * plan.cycle_s() + 0.1;
         assert_eq!(fb.candidates(3, expired, &at(expired)), vec![]);
     }
 

@@ -157,13 +157,7 @@ impl Decoder {
         self.sliding.iter_mut().for_each(|s| *s = 0.0);
         self.sliding_count = 0;
         self.run = None;
-        let indices: Vec<u64> = self
-            .history
-            .iter()
-            .filter(|w| w.start >= floor)
-            .map(|w| w.index)
-            .collect();
-        for index in indices {
+        for index in self.indices_from(floor) {
             self.add_to_sliding(index);
             self.replaying = Some(index);
             self.detect();

@@ -131,17 +131,21 @@ impl Decoder {
         }
     }
 
+    /// Indices of the windows in the history that start at or after `floor`.
+    pub(super) fn indices_from(&self, floor: u64) -> Vec<u64> {
+        self.history
+            .iter()
+            .filter(|w| w.start >= floor)
+            .map(|w| w.index)
+            .collect()
+    }
+
     /// Restarts integration from the windows starting at or after `floor`.
     pub(super) fn reset_sliding(&mut self, floor: u64) {
         self.floor = floor;
         self.sliding.iter_mut().for_each(|s| *s = 0.0);
         self.sliding_count = 0;
-        let indices: Vec<u64> = self
-            .history
-            .iter()
-            .filter(|w| w.start >= floor)
-            .map(|w| w.index)
-            .collect();
+        let indices = self.indices_from(floor);
         let keep = indices.len().saturating_sub(self.geometry.slot_windows);
         for &i in &indices[keep..] {
             self.add_to_sliding(i);
