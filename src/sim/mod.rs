@@ -13,6 +13,7 @@
 //! its [`Odometry`](crate::field::body::Odometry) and its replica's blackboard.
 
 pub mod acoustic;
+mod acoustic_channel;
 pub mod metrics;
 pub mod perception;
 pub mod policy;
