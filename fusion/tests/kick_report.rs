@@ -7,50 +7,18 @@
 //! (age 0). The ball rests at the origin until robot 1 kicks it along +x at 4 m/s at
 //! t = 1 s. No friction, so the truth is x = 4 (t − 1).
 
+mod kick_scenario;
+
 use fusion::nalgebra::{Matrix2, Vector2, Vector3};
 use fusion::{
-    BallFilterConfig, BallModel, BallSighting, GlobalConfig, GlobalModel, Kick, LocalConfig,
-    LocalModel, LocalWorldModel, PoseEstimate,
+    BallSighting, GlobalConfig, GlobalModel, LocalConfig, LocalModel, LocalWorldModel, PoseEstimate,
 };
-
-const PERIOD_S: f64 = 0.04;
-const KICK_T_S: f64 = 1.0;
-const SPEED_MPS: f64 = 4.0;
-
-fn model() -> BallModel {
-    BallModel::Rolling {
-        friction_per_s: 0.0,
-        accel_noise_m2_per_s3: 0.05,
-    }
-}
-
-fn truth_x(t_s: f64) -> f64 {
-    SPEED_MPS * (t_s - KICK_T_S).max(0.0)
-}
-
-fn kick() -> Kick {
-    Kick {
-        t_s: KICK_T_S,
-        speed_mps: SPEED_MPS,
-        direction_rad: 0.0,
-        speed_sigma_mps: 0.2,
-        direction_sigma_rad: 0.08,
-        contact_prob: 1.0,
-    }
-}
+use kick_scenario::{kick, local_model, model, sighting, truth_x, KICK_T_S, PERIOD_S};
 
 /// Robot 1's messages up to and including `until_s`, as robot 2 receives them; the kick
 /// is left out of the messages sent before `kick_reported_from_s`.
 fn messages(until_s: f64, kick_reported_from_s: f64) -> Vec<(f64, Vec<u8>)> {
-    let start = PoseEstimate::new(0.0, -0.2, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
-    let config = LocalConfig {
-        ball: BallFilterConfig {
-            model: model(),
-            ..BallFilterConfig::default()
-        },
-        ..LocalConfig::default()
-    };
-    let mut sender = LocalModel::new(config, start);
+    let mut sender = local_model(0.2);
     let mut out = Vec::new();
     let mut k = 0;
     loop {
@@ -59,11 +27,7 @@ fn messages(until_s: f64, kick_reported_from_s: f64) -> Vec<(f64, Vec<u8>)> {
             return out;
         }
         // Robot frame: +x right (field +x), +y forward (field +y); the ball is 0.2 m ahead.
-        let seen = BallSighting {
-            local: Vector2::new(truth_x(t_s), 0.2),
-            cov: Matrix2::identity() * 4e-4,
-        };
-        sender.ball_sighting(t_s, &seen);
+        sender.ball_sighting(t_s, &sighting(truth_x(t_s), 0.2));
         let mut msg: LocalWorldModel = sender.publish(t_s);
         if t_s < kick_reported_from_s - 1e-9 {
             msg.kick = None;

@@ -8,50 +8,16 @@
 //! robot 2 (1 m behind it). Both publish at 25 Hz with a sighting per message. No
 //! friction, so a ball kicked along +x at 4 m/s at t = 1 s is at x = 4 (t − 1).
 
-use fusion::nalgebra::{Matrix2, Vector2, Vector3};
-use fusion::{
-    BallFilterConfig, BallModel, BallSighting, GlobalConfig, GlobalModel, Kick, LocalConfig,
-    LocalModel, PoseEstimate,
-};
+mod kick_scenario;
 
-const PERIOD_S: f64 = 0.04;
-const KICK_T_S: f64 = 1.0;
-const SPEED_MPS: f64 = 4.0;
+use fusion::nalgebra::Vector2;
+use fusion::{GlobalConfig, GlobalModel};
+use kick_scenario::{kick, local_model, model, sighting, truth_x, KICK_T_S, PERIOD_S};
+
 /// Robot 2's messages wait for the next of these beacons (a DTIM period of 2 × 102.4 ms).
 const BEACON_S: f64 = 0.2048;
 /// … the first after the kick at 1.0 + 0.279 s, long after the kick's report (1.04 s).
 const BEACON_PHASE_S: f64 = 0.05;
-
-fn model() -> BallModel {
-    BallModel::Rolling {
-        friction_per_s: 0.0,
-        accel_noise_m2_per_s3: 0.05,
-    }
-}
-
-fn truth_x(t_s: f64) -> f64 {
-    SPEED_MPS * (t_s - KICK_T_S).max(0.0)
-}
-
-fn local_model(behind_m: f64) -> LocalModel {
-    let start = PoseEstimate::new(0.0, -behind_m, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
-    let config = LocalConfig {
-        ball: BallFilterConfig {
-            model: model(),
-            ..BallFilterConfig::default()
-        },
-        ..LocalConfig::default()
-    };
-    LocalModel::new(config, start)
-}
-
-/// A robot `behind_m` behind the ball at (x, 0), facing +y: it sees it at (x, behind).
-fn sighting(x: f64, behind_m: f64) -> BallSighting {
-    BallSighting {
-        local: Vector2::new(x, behind_m),
-        cov: Matrix2::identity() * 4e-4,
-    }
-}
 
 fn gwm(config: GlobalConfig) -> GlobalModel {
     GlobalModel::new(
@@ -83,14 +49,7 @@ fn kick_messages(until_s: f64) -> Vec<Sent> {
             out.push((id, t_s, bytes));
         }
         if (t_s - KICK_T_S).abs() < 1e-9 {
-            kicker.kick(&Kick {
-                t_s: KICK_T_S,
-                speed_mps: SPEED_MPS,
-                direction_rad: 0.0,
-                speed_sigma_mps: 0.2,
-                direction_sigma_rad: 0.08,
-                contact_prob: 1.0,
-            });
+            kicker.kick(&kick());
         }
     }
     out
