@@ -165,10 +165,8 @@ impl PolicyState {
             }
         } else if !claim_waiting {
             // Only the claim went: teammates hold its cost and its going.
-            if let (Some(last), Some(sent)) = (&mut self.last, &self.pending) {
-                last.going = sent.going;
-                last.h = sent.h;
-                last.cost = sent.cost;
+            if let Some(sent) = self.pending {
+                self.sent_going(sent.going, sent.h, sent.cost);
             }
         }
         let decision = match policy {
