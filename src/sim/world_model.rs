@@ -176,19 +176,7 @@ impl WorldModelConfig {
             },
             start_sigma_m: 0.05,
             start_sigma_rad: 0.05,
-            // The pose EKF's floor for shoves odometry cannot see. 5 mm per reading left the
-            // pose 1.3× wider than its error (NEES 2.4 of 3), which made the landmark
-            // updates' gains too high. Seeds 101–110, 300 s, per preset lan / wlan /
-            // competition / competition-ps: pose NEES, pose RMSE (m), team RMSE (m):
-            //
-            //   5 mm (before)  2.40/2.37/2.36/2.39  0.036/0.038/0.036/0.036  0.0375/0.0382/0.0466/0.0872
-            //   3.5 mm         2.46/2.48/2.52/2.51  0.031/0.032/0.032/0.033  0.0367/0.0377/0.0464/0.0845
-            //   2.5 mm         2.65/2.71/2.72/2.71  0.029/0.029/0.029/0.029  0.0366/0.0372/0.0450/0.0877
-            //   1.5 mm         3.07/3.18/3.08/3.13  0.026/0.027/0.026/0.026  0.0364/0.0368/0.0450/0.0866
-            //
-            // Delivery ratio (median/worst) at 1.5 mm 0.994/1.025, 0.985/1.003, 1.010/1.048,
-            // 1.037/1.075; the team ball's band NEES move by less than 0.1.
-            push_sigma_m: 0.0015,
+            push_sigma_m: 0.005,
             // The field's kicks leave at `kick_speed_mps` give or take the field's speed
             // noise (5%), as a real foot does: the kicker reports the same σ.
             kick_speed_sigma_mps: 0.2,
