@@ -251,7 +251,7 @@ impl NeesSeries {
     /// covariance describes (mostly small, now and then a jump nobody has told of yet).
     pub fn above_999_pct_at_mean_2(&self) -> f64 {
         let mean = self.mean();
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return f64::NAN;
         }
         let threshold = fusion::consistency::CHI2_2DOF_999 * mean / 2.0;
