@@ -354,6 +354,10 @@ fn tune_team_ball(wm: &mut huddle::sim::WorldModelConfig, spec: &str) {
             ("contact_margin", _) => wm.contact_margin_m = v,
             ("kick_hazard", _) => wm.kick_hazard_per_s = v,
             ("kick_hazard_window", _) => wm.kick_hazard_window_s = v,
+            ("own_restart", _) => wm.global.own_restart_after = v as u32,
+            ("mate_restart", _) => wm.global.teammate_restart_after = v as u32,
+            ("gate", _) => wm.global.gate_chi2 = v,
+            ("push_sigma", _) => wm.push_sigma_m = v,
             _ => tracing::warn!("--team-ball: {item:?} not applied"),
         }
     }

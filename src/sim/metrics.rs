@@ -45,7 +45,11 @@
 //!   worth by the method of batch means ([`NEES_BATCHES`] batches of consecutive samples,
 //!   `fusion::consistency::batch_means_effective_samples`): bounds χ²₂ₙ(0.025, 0.975) / n.
 //!   **Above 99.9%**: the share of samples whose NEES exceeds χ²₂'s 99.9% point (13.8),
-//!   0.1% for an honest filter.
+//!   0.1% for an honest filter. **Median**: 1.386 for an honest filter (0.693 of the
+//!   mean). **Above 99.9% at mean 2**: the same share had the group's covariances all
+//!   been scaled by the one factor that puts its mean at 2; 0.1% for errors of a
+//!   Gaussian's shape at any scale, so a figure above the tail target says that no
+//!   single scale (of q, R or a widening) meets both targets.
 //! - **NEES by cause**: each team-ball sample is put down to the latest event that changed
 //!   the true ball's motion other than friction within [`CAUSE_WINDOW_S`] before it
 //!   ([`BallEvent`]: a kick that met the ball, a bounce off the boards, a push by one of our
@@ -226,6 +230,33 @@ impl NeesSeries {
     /// Share of samples above χ²₂'s 99.9% point, percent.
     pub fn above_999_pct(&self) -> f64 {
         100.0 * self.above_999 as f64 / self.series.len().max(1) as f64
+    }
+
+    /// Median NEES: 2 ln 2 ≈ 1.386 (0.693 of the mean) for an honest filter.
+    pub fn median(&self) -> f64 {
+        let mut sorted = self.series.clone();
+        sorted.sort_by(f64::total_cmp);
+        match sorted.len() {
+            0 => f64::NAN,
+            n if n % 2 == 1 => sorted[n / 2],
+            n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+        }
+    }
+
+    /// The share above χ²₂'s 99.9% point, percent, had every covariance of the series been
+    /// scaled by the one factor that puts its mean NEES at 2 (NEES scales inversely with
+    /// the covariance): 0.1 for errors of an honest filter's shape, whatever its scale.
+    /// Above the tail target, no single rescaling (of q, R or a widening) can meet both
+    /// the mean and the tail target: the errors are heavier-tailed than the Gaussian the
+    /// covariance describes (mostly small, now and then a jump nobody has told of yet).
+    pub fn above_999_pct_at_mean_2(&self) -> f64 {
+        let mean = self.mean();
+        if mean.is_nan() || mean <= 0.0 {
+            return f64::NAN;
+        }
+        let threshold = fusion::consistency::CHI2_2DOF_999 * mean / 2.0;
+        let above = self.series.iter().filter(|&&x| x > threshold).count();
+        100.0 * above as f64 / self.series.len() as f64
     }
 
     /// Independent samples the series is worth (batch means over [`NEES_BATCHES`]
@@ -594,6 +625,62 @@ mod tests {
             f.nees.above_999_pct() < 1.0,
             "χ²₂ values rarely pass the 99.9% point: {}%",
             f.nees.above_999_pct()
+        );
+    }
+
+    #[test]
+    fn a_scale_mixture_cannot_be_rescaled_into_the_mean_and_the_tail_targets() {
+        // χ²₂ values, drawn as −2 ln u.
+        let mut state = 11u64;
+        let mut chi2 = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            -2.0 * (((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64).ln()
+        };
+        // An honest filter's errors under a covariance twice too wide: mean 1, nothing
+        // in the tail, and scaled back to mean 2, the honest 0.1% above the 99.9% point.
+        let mut wide = NeesSeries::default();
+        for _ in 0..100_000 {
+            wide.add(0.5 * chi2());
+        }
+        assert!((wide.mean() - 1.0).abs() < 0.02, "mean {}", wide.mean());
+        assert!(
+            (wide.median() / wide.mean() - std::f64::consts::LN_2).abs() < 0.02,
+            "median {} of mean {}: a χ² shape",
+            wide.median(),
+            wide.mean()
+        );
+        let rescaled = wide.above_999_pct_at_mean_2();
+        assert!(
+            (0.06..=0.14).contains(&rescaled),
+            "{rescaled}% above at mean 2"
+        );
+        // A team ball widened for a jump that mostly did not come: 95% of samples three
+        // times too wide, 5% (a jump came) a little overconfident. Underconfident on
+        // average, hardly any tail, yet scaled to mean 2 about 1% of samples pass the
+        // 99.9% point: the shape, not the scale, is wrong.
+        let mut mixture = NeesSeries::default();
+        for k in 0..100_000 {
+            let scale = if k % 20 == 0 { 1.5 } else { 0.3 };
+            mixture.add(scale * chi2());
+        }
+        assert!(
+            mixture.mean() < 0.8 && mixture.above_999_pct() < 0.3,
+            "mean {}, {}% above",
+            mixture.mean(),
+            mixture.above_999_pct()
+        );
+        assert!(
+            mixture.median() / mixture.mean() < 0.65,
+            "median {} of mean {}: heavier-tailed than χ²",
+            mixture.median(),
+            mixture.mean()
+        );
+        let rescaled = mixture.above_999_pct_at_mean_2();
+        assert!(
+            rescaled > 0.5,
+            "{rescaled}% above at mean 2: no single scale meets both targets"
         );
     }
 

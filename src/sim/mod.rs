@@ -862,6 +862,8 @@ impl Simulation {
                 samples: f.nees_bands[k].samples() as u64,
                 independent_samples: n,
                 above_999_pct: round3(f.nees_bands[k].above_999_pct()),
+                median: round3(f.nees_bands[k].median()),
+                above_999_pct_at_mean_2: round3(f.nees_bands[k].above_999_pct_at_mean_2()),
             }
         };
         let all_samples = f.nees.samples().max(1) as f64;
@@ -952,6 +954,7 @@ impl Simulation {
             team_ball_nees_bounds: [round3(nees_lo), round3(nees_hi)],
             team_ball_nees_samples: f.nees_independent_samples(),
             team_ball_nees_above_999_pct: round3(f.nees.above_999_pct()),
+            team_ball_nees_above_999_pct_at_mean_2: round3(f.nees.above_999_pct_at_mean_2()),
             team_ball_nees_still: band(0),
             team_ball_nees_rolling: band(1),
             team_ball_nees_fast: band(2),

@@ -141,6 +141,9 @@ pub struct Report {
     pub team_ball_nees_samples: u64,
     /// Share of samples above χ²₂'s 99.9% point, percent (0.1 for an honest filter).
     pub team_ball_nees_above_999_pct: f64,
+    /// The same had every covariance been scaled by the one factor that puts the mean
+    /// NEES at 2, percent (0.1 for a Gaussian's shape at any scale; see [`NeesBand`]).
+    pub team_ball_nees_above_999_pct_at_mean_2: f64,
     /// The team-ball NEES while the true ball is still.
     pub team_ball_nees_still: NeesBand,
     /// … rolling.
@@ -181,6 +184,12 @@ pub struct NeesBand {
     pub independent_samples: u64,
     /// Share above χ²₂'s 99.9% point, percent.
     pub above_999_pct: f64,
+    /// Median NEES (1.386 for an honest filter, 0.693 of its mean).
+    pub median: f64,
+    /// The share above the 99.9% point had the band's covariances been scaled by the one
+    /// factor that puts its mean at 2, percent: 0.1 for a Gaussian's shape at any scale;
+    /// above the tail target no single scale meets both targets.
+    pub above_999_pct_at_mean_2: f64,
 }
 
 /// The team-ball NEES of the samples put down to one cause (see
@@ -330,14 +339,14 @@ impl std::fmt::Display for Report {
         ] {
             writeln!(
                 f,
-                "  {name:<8}            {:>9.3}    (bounds [{:.3}, {:.3}] for {} of {} samples; {:.2}% above the 99.9% point)",
-                b.nees, b.bounds[0], b.bounds[1], b.independent_samples, b.samples, b.above_999_pct
+                "  {name:<8}            {:>9.3}    (bounds [{:.3}, {:.3}] for {} of {} samples; {:.2}% above the 99.9% point; median {:.3}; {:.2}% above if scaled to mean 2)",
+                b.nees, b.bounds[0], b.bounds[1], b.independent_samples, b.samples, b.above_999_pct, b.median, b.above_999_pct_at_mean_2
             )?;
         }
         writeln!(
             f,
-            "  above 99.9% point   {:>9.3} %  (0.1% for an honest filter)",
-            self.team_ball_nees_above_999_pct
+            "  above 99.9% point   {:>9.3} %  (0.1% for an honest filter; {:.3}% if scaled to mean 2)",
+            self.team_ball_nees_above_999_pct, self.team_ball_nees_above_999_pct_at_mean_2
         )?;
         writeln!(
             f,
