@@ -630,14 +630,10 @@ mod tests {
 
     #[test]
     fn a_scale_mixture_cannot_be_rescaled_into_the_mean_and_the_tail_targets() {
-        // χ²₂ values, drawn as −2 ln u.
-        let mut state = 11u64;
-        let mut chi2 = move || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1);
-            -2.0 * (((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64).ln()
-        };
+        use rand::{RngExt, SeedableRng};
+        // χ²₂ values, drawn as −2 ln u (u in (0, 1]).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut chi2 = move || -2.0 * (1.0 - rng.random::<f64>()).ln();
         // An honest filter's errors under a covariance twice too wide: mean 1, nothing
         // in the tail, and scaled back to mean 2, the honest 0.1% above the 99.9% point.
         let mut wide = NeesSeries::default();
