@@ -49,7 +49,13 @@
 //!    the stricter [`P_FRAME_CONFIRM`](confirm::P_FRAME_CONFIRM), and a rival basic (a
 //!    second sender or data basic) must pass the stricter
 //!    [`P_TONE_RIVAL`](confirm::P_TONE_RIVAL) to reject the frame. A stray tone outside
-//!    the frame's basics is judged by its own test (step 7).
+//!    the frame's basics is judged by its own test (step 7). In a hall a real frame's
+//!    tones each reach the microphone at their own level (a tone in a notch of the room
+//!    sits 10–20 dB below the others), and babble puts two tones of some other basic, or
+//!    a single tone, at that level now and then: for a frame that stands clear of the
+//!    floor (typical tone ≥ 15 dB per window, as the messages of the 0 dB babble rows
+//!    mostly are; babble's frames sit near 0 dB), a rival basic counts only if its votes sound like a
+//!    transmitter's (the tone checks of step 7), and a stray only if it sounds steadily.
 //! 6. **Timing and re-decision**: once accepted, the onset is located on the per-window
 //!    energy of the frame's six tones (a step-change estimate refined by a least-squares
 //!    fit of the Hann-window share of the windows around the step), once more when the
@@ -94,9 +100,12 @@
 //!    So is a slot whose tones do not share one frequency scale: a sender's clock error
 //!    moves all six tones by one factor, while another codec's tones that pass near ours
 //!    are each off by their own amount (a present tone must keep most of its best-scale
-//!    power at the frame's scale, within the noise; at the comb's edge the power must not
-//!    still be rising outward; loud tones' interpolated peaks must agree with one scale
-//!    within a fraction of a hertz, and none may peak on the bin just beyond the comb).
+//!    power at one common scale, within the noise (for a frame clear of the floor, the
+//!    slot's own best scale: the one found by the search may sit a bin off in a hall); at
+//!    the comb's edge the power must not still be rising outward; tones 20 dB above their
+//!    neighbourhood must have interpolated peaks that agree with one scale within a
+//!    fraction of a hertz (babble around a tone pulls its peak, and a hall's low tones sit
+//!    in the talkers' band), and none may peak on the bin just beyond the comb).
 //!    A tone outside the frame much louder than one its 2-of-3 votes rest on is a stray
 //!    too.
 //!    And each vote must be a tone's, not babble's: the two tones of each basic its vote
@@ -105,7 +114,11 @@
 //!    speech lifts all its tones), and not fall to the floor between bursts more often
 //!    than a steady tone at their level would (a held harmonic does).
 //!    Symmetrically, a first frame whose sender was already sounding just before it is the
-//!    second half of a long message whose first half was missed, and is dropped.
+//!    second half of a long message whose first half was missed, and is dropped; so is
+//!    one right after a failed slot of the same sender, unless (for a frame clear of the
+//!    floor) the sender's tones did not hold their level through that slot: the two
+//!    frames of a long message sound the same tones through the same room, while a slot
+//!    babble assembled, or the sender's next message found early, holds them only in part.
 //! 8. **Once per transmission**: after a decision the integration restarts after the
 //!    transmission's end.
 //! 9. **Replay**: while a frame is tracked the search is idle. When a first slot fails

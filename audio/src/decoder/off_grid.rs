@@ -13,8 +13,8 @@ use crate::tones::{tone_frequency_hz, Frame, TONE_COUNT};
 const OFF_GRID_SHARE: f64 = 0.7;
 /// Noise allowance of the off-grid test, in standard deviations of the tone's sum.
 const OFF_GRID_Z: f64 = 4.0;
-/// Per-window excess (20 dB) from which a tone's peak frequency is trusted (see
-/// [`Decoder::peaks_disagree`]).
+/// Per-window excess (20 dB) over its neighbourhood's level from which a tone's peak
+/// frequency is trusted (see [`Decoder::peaks_disagree`]).
 const PEAK_LOUD: f64 = 100.0;
 /// Largest distance of a loud tone's peak from the frame's common scale, Hz. A real
 /// frame's loud tones agree with one scale to a small fraction of this; another codec's
@@ -39,6 +39,7 @@ impl Decoder {
         scale: usize,
         a: f64,
         b: f64,
+        clear: bool,
     ) -> bool {
         let window_len = self.geometry.window_len as f64;
         let scales = self.geometry.scale_count();
@@ -81,15 +82,40 @@ impl Decoder {
                 return true;
             }
         }
-        let off = tones.iter().enumerate().any(|(i, _)| {
-            let best = sums
+        // One scale must explain every tone: the one the frame was found at came from the
+        // search's sums, which in a hall also hold the tail of what sounded before, and
+        // may sit a bin off the slot's own common scale.
+        let best: Vec<f64> = (0..tones.len())
+            .map(|i| {
+                sums.iter()
+                    .map(|row| row[i])
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .collect();
+        let fits = |j: usize| {
+            (0..tones.len()).all(|i| {
+                sums[j][i] - n >= OFF_GRID_SHARE * (best[i] - n) - OFF_GRID_Z * best[i].sqrt()
+            })
+        };
+        let on_grid = fits(scale) || (clear && (0..scales).any(fits));
+        // Each tone's local background over the same windows: the median non-frame tone
+        // within ±NEIGHBOURHOOD, over the noise mean (at least 1).
+        let own = frame.tones();
+        let locals: Vec<f64> = match self.integrate_slot(scale, a, b) {
+            Some(slot) => tones
                 .iter()
-                .map(|row| row[i])
-                .fold(f64::NEG_INFINITY, f64::max);
-            let here = sums[scale][i];
-            here - n < OFF_GRID_SHARE * (best - n) - OFF_GRID_Z * best.sqrt()
-        });
-        off || self.peaks_disagree(&tones, &sums, &margins, n)
+                .map(|&k| {
+                    let around: Vec<f64> = (k.saturating_sub(super::confirm::NEIGHBOURHOOD)
+                        ..=k + super::confirm::NEIGHBOURHOOD)
+                        .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
+                        .map(|j| slot.sums[j])
+                        .collect();
+                    (super::median(around) / slot.count.max(1) as f64).max(1.0)
+                })
+                .collect(),
+            _ => vec![1.0; tones.len()],
+        };
+        !on_grid || self.peaks_disagree(&tones, &sums, &margins, n, &locals)
     }
 
     /// Whether the loud tones among `tones` (slot sums `sums[j][i]` at every scale `j` over
@@ -97,15 +123,20 @@ impl Decoder {
     /// located between FFT bins (a parabola through the log excess of the loudest bin
     /// the comb reads for it and its two neighbours), the common scale fitted (weighted by
     /// frequency², as the Hz error is alike for every tone), and a tone more than
-    /// [`PEAK_TOLERANCE_HZ`] from it fails. Only tones ≥ 20 dB per window count: their peak
-    /// is known to a small fraction of a bin, and a foreign burst loud enough to pass for
-    /// our frame is that loud.
+    /// [`PEAK_TOLERANCE_HZ`] from it fails. Only tones ≥ 20 dB per window above their
+    /// neighbourhood (`locals[i]`, the median of the non-frame tones within ±3 over the
+    /// noise mean, at least 1) count: their peak is known to a small fraction of a bin,
+    /// and a foreign burst loud enough to pass for our frame is that loud. Where babble
+    /// lifts the band around a tone (speech's formants, smeared by a hall), the floor is
+    /// not what it competes with: a loud tone there still had its peak pulled by half a
+    /// hertz to a hertz by the talkers' harmonics, and the frame was refused.
     fn peaks_disagree(
         &self,
         tones: &[usize],
         sums: &[[f64; 6]],
         margins: &[[f64; 2]; 6],
         n: f64,
+        locals: &[f64],
     ) -> bool {
         let bin_hz = self.rate() / self.geometry.fft_len as f64;
         let mut peaks = Vec::new();
@@ -138,7 +169,7 @@ impl Decoder {
             else {
                 continue;
             };
-            if by_bin[p].1 < PEAK_LOUD * n {
+            if by_bin[p].1 < PEAK_LOUD * n * locals[i] {
                 continue;
             }
             if p == 0 || p + 1 >= by_bin.len() {

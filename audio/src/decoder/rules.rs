@@ -27,11 +27,17 @@ impl Decoder {
     /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
     /// at `p_tone`; when several sender (or data) basics have 2 of 3 tones present, the
     /// strongest stands and each other one counts only if it also has 2 of 3 at `p_rival`.
+    ///
+    /// `is_transmitter(frame, present)` is asked of each rival that passes those: a
+    /// rival counts only if the frame it would make with the other group's strongest
+    /// basic (a second data basic with the sender, a second sender with the data) sounds
+    /// like a transmitter's tones, not babble's (the search passes `|_, _| true`).
     pub(super) fn apply_rules(
         sums: &[f64],
         count: usize,
         p_tone: f64,
         p_rival: f64,
+        is_transmitter: impl Fn(Frame, &[bool; TONE_COUNT]) -> bool,
     ) -> (Option<Frame>, [bool; TONE_COUNT]) {
         let n = count.max(1) as f64;
         let threshold = gamma_upper_quantile(n, p_tone);
@@ -90,20 +96,38 @@ impl Decoder {
             e.sort_unstable_by(|x, y| y.total_cmp(x));
             e[1]
         };
-        for group in [&mut senders, &mut data] {
+        let top = |group: &[usize]| {
+            group
+                .iter()
+                .copied()
+                .max_by(|&a, &b| basic_sum(a).total_cmp(&basic_sum(b)))
+        };
+        let (top_sender, top_data) = (top(&senders), top(&data));
+        // The frame a rival basic would make with the other group's strongest basic.
+        let with_rival = |b: usize| -> Option<Frame> {
+            let (s, d) = if b < SENDER_COUNT {
+                (b, top_data?)
+            } else {
+                (top_sender?, b)
+            };
+            Some(Frame {
+                sender: Sender::from_index(s as u8)?,
+                data: (d - SENDER_COUNT) as u8,
+            })
+        };
+        for (group, top) in [(&mut senders, top_sender), (&mut data, top_data)] {
             if group.len() > 1 {
-                let top = group
-                    .iter()
-                    .copied()
-                    .max_by(|&a, &b| basic_sum(a).total_cmp(&basic_sum(b)))
-                    .unwrap_or(0);
+                let top = top.unwrap_or(0);
                 // A rival also needs its 2-of-3 vote within RIVAL_RANGE of the top
                 // basic's: under babble, harmonics give some basic two strong tones now
                 // and then, far below a real second transmitter (which sounds at full
                 // level, or is lost under the first anyway).
                 let top_vote = vote(top);
                 group.retain(|&b| {
-                    b == top || (strong_votes(b) >= 2 && vote(b) >= RIVAL_RANGE * top_vote)
+                    b == top
+                        || (strong_votes(b) >= 2
+                            && vote(b) >= RIVAL_RANGE * top_vote
+                            && with_rival(b).is_none_or(|f| is_transmitter(f, &present)))
                 });
             }
         }

@@ -82,6 +82,7 @@ impl Decoder {
             count,
             P_TONE,
             P_TONE,
+            |_, _| true,
         );
         let Some(frame) = frame else {
             self.run = None;
