@@ -3,24 +3,43 @@
 //! SNR [MESSAGES [LONG_SHARE]]`. The eval's row seed is `seed + 1000 + 100·i + 10·j + k`
 //! (T60 index i, noise j, SNR index k).
 use audio::evaluation::{run_room_trial, RoomNoise, RoomTrial};
+const USAGE: &str = "usage: hall_diag ROW_SEED T60 white|babble SNR [MESSAGES [LONG_SHARE]]";
+
+/// The argument at `i` as a `T`, or the usage and exit status 2.
+fn arg<T: std::str::FromStr>(a: &[String], i: usize, default: Option<T>) -> T {
+    match (a.get(i).map(|s| s.parse::<T>()), default) {
+        (Some(Ok(v)), _) => v,
+        (None, Some(d)) => d,
+        _ => {
+            eprintln!("{USAGE}");
+            std::process::exit(2);
+        }
+    }
+}
+
 fn main() {
     let a: Vec<String> = std::env::args().collect();
-    if a.len() < 5 {
-        eprintln!("usage: hall_diag ROW_SEED T60 white|babble SNR [MESSAGES [LONG_SHARE]]");
-        std::process::exit(2);
-    }
-    let seed: u64 = a[1].parse().unwrap();
-    let t60: f64 = a[2].parse().unwrap();
-    let noise = if a[3] == "white" {
-        RoomNoise::White
-    } else {
-        RoomNoise::Babble
+    let seed: u64 = arg(&a, 1, None);
+    let t60: f64 = arg(&a, 2, None);
+    let noise = match a.get(3).map(String::as_str) {
+        Some("white") => RoomNoise::White,
+        Some("babble") => RoomNoise::Babble,
+        _ => {
+            eprintln!("{USAGE}");
+            std::process::exit(2);
+        }
     };
-    let snr: f64 = a[4].parse().unwrap();
-    let n: usize = a.get(5).map(|x| x.parse().unwrap()).unwrap_or(1000);
+    let snr: f64 = arg(&a, 4, None);
+    let n: usize = arg(&a, 5, Some(1000));
     let mut trial = RoomTrial::new(seed, t60, snr, noise, n);
-    trial.long_share = a.get(6).map(|x| x.parse().unwrap()).unwrap_or(0.0);
-    let out = run_room_trial(&trial).unwrap();
+    trial.long_share = arg(&a, 6, Some(0.0));
+    let out = match run_room_trial(&trial) {
+        Ok(out) => out,
+        Err(e) => {
+            eprintln!("hall_diag: {e}");
+            std::process::exit(1);
+        }
+    };
     let mut e = out.start_errors_s.clone();
     e.sort_by(|a, b| a.total_cmp(b));
     println!(
