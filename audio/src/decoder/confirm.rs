@@ -147,9 +147,7 @@ impl Decoder {
         })?;
         let clear = stands_clear(frame, &present, &level);
         let ours = self.sounds_through_slot(frame, &present, t.scale, a, b)
-            && self.votes_hold_in_each_half(frame, &present, t.scale, a, b)
-            && Self::votes_stand_above_their_neighbours(frame, &present, &sums, count)
-            && self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b)
+            && self.sounds_like_tones(frame, &present, &sums, count, t.scale, a, b)
             && !self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear)
             && !self.has_off_grid_tone(frame, &present, t.scale, a, b, clear);
         ours.then_some(SlotDecision {
