@@ -18,12 +18,26 @@ pub fn scratch_group() -> SocketAddrV4 {
 }
 
 /// A TCP port on 127.0.0.1 that nothing listens on right now (the kernel's pick), for a
-/// daemon's relay.
+/// daemon's relay, and never the same twice in one test binary: the tests of a binary run
+/// at once, and a port dropped by one probe could otherwise be handed to a second test
+/// before the first test's daemon binds it (the second daemon then fails to bind, and its
+/// test talks to the first test's daemon until that one stops).
 pub fn free_tcp_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free TCP port on loopback")
-        .port()
+    static HANDED_OUT: std::sync::Mutex<std::collections::BTreeSet<u16>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    loop {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free TCP port on loopback")
+            .port();
+        if HANDED_OUT
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(port)
+        {
+            return port;
+        }
+    }
 }
 
 /// A running daemon, killed when dropped.
@@ -75,8 +89,15 @@ impl Daemon {
             if let Ok(Some(status)) = d.child.try_wait() {
                 panic!("daemon {id} exited at start: {status}");
             }
-            if TcpStream::connect(relay).is_ok() {
-                return d;
+            // Up once the relay greets as this robot (another robot's greeting: the
+            // port is some other daemon's, and this one will fail to bind and exit).
+            if let Ok(stream) = TcpStream::connect(relay) {
+                let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
+                let mut greeting = String::new();
+                let _ = BufReader::new(stream).read_line(&mut greeting);
+                if greeting.trim_end().ends_with(&format!("robot {id}")) {
+                    return d;
+                }
             }
             assert!(
                 Instant::now() < deadline,
