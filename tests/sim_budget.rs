@@ -5,23 +5,21 @@
 //! Claims:
 //! - neither policy spends more than the game's budget allows by then (1,200 per 1,200 s:
 //!   600 by 600 s), and both spend most of it; no frame is over 128 bytes;
-//! - huddle's VOI policy gives the robots that do not see the ball a team ball no worse
-//!   than B-Human's limiter at the same budget (over the three seeds), and its robots
-//!   agree on one goer about as often: over the three seeds, no more than 3 points less.
+//! - huddle's VOI policy gives the robots that do not see the ball a better team ball
+//!   than B-Human's limiter at the same budget: over the three seeds, at most 0.85× its
+//!   RMSE; and its robots agree on one goer about as often: no more than 3 points less.
 //!
-//! Why "about": over seeds 1–27 VOI's one goer is 1.4 points above the baseline's on
-//! average, but it is above on only 14 of the 27 seeds, with a per-seed spread of 4
-//! points, so a three-seed mean moves by ±2.3 points with any change that reshuffles the
-//! matches (a pose-noise floor of 1.5 mm instead of 5 mm, with no change to either policy,
+//! The target is 0.8× the baseline's blind RMSE per seed. Seeds 1–3 give 0.69 /
+//! 0.72 / 0.90 (0.77 over the three). Over seeds 1–51 the per-seed ratio averages 0.69
+//! (spread 0.09) and is at most 0.8 on 46 of the 51; the 17 groups of three consecutive
+//! seeds give 0.57–0.77 over each group, hence the 0.85 here.
+//!
+//! Why "about" for one goer: over seeds 1–51 VOI is 0.7 points above the baseline on
+//! average but above it on only 27 of the 51 seeds, with a per-seed spread of 4 points,
+//! so a three-seed mean moves by ±2.4 points with any change that reshuffles the matches
+//! (a pose-noise floor of 1.5 mm instead of 5 mm, with no change to either policy, once
 //! turned seeds 1–3 from +3.2 to −0.6). A loss of more than 3 points is a regression.
-//!
-//! The target is 0.8× the baseline's blind RMSE per seed, and this test does not
-//! hold it because these three seeds do not meet it: 0.89 / 0.98 / 1.03 (0.97 over the
-//! three) at the commit that relaxed this bound from 0.9×. Over seeds 1–27 the per-seed
-//! ratio averages 0.76 (spread 0.13) and is at most 0.8 on 15 of the 27; the nine groups
-//! of three consecutive seeds run from 0.61 to 0.97, seeds 1–3 the worst of them. One
-//! half of one seed is noisy: the baseline alone moves by ±0.3 m when the ball model
-//! changes. `huddle sim --budget spl --policy voi|baseline` reports the figures.
+//! `huddle sim --budget spl --policy voi|baseline` reports the figures.
 use huddle::sim::policy::SendPolicy;
 use huddle::sim::{Report, SimConfig, Simulation};
 
@@ -82,8 +80,8 @@ fn under_the_spl_budget_voi_tells_blind_robots_no_less_than_b_humans_limiter() {
         }
     }
     assert!(
-        blind[1] <= blind[0],
-        "VOI's blind robots must know the ball no worse: {:.3} m vs the baseline's {:.3} m",
+        blind[1] <= 0.85 * blind[0],
+        "VOI's blind robots must know the ball better: {:.3} m vs the baseline's {:.3} m",
         blind[1],
         blind[0]
     );
