@@ -9,15 +9,15 @@
 //!   than B-Human's limiter at the same budget: over the three seeds, at most 0.85× its
 //!   RMSE; and its robots agree on one goer about as often: no more than 3 points less.
 //!
-//! The target is 0.8× the baseline's blind RMSE per seed. Seeds 1–3 give 0.69 /
-//! 0.72 / 0.90 (0.77 over the three). Over seeds 1–51 the per-seed ratio averages 0.69
-//! (spread 0.09) and is at most 0.8 on 46 of the 51; the 17 groups of three consecutive
-//! seeds give 0.57–0.77 over each group, hence the 0.85 here.
+//! The target is 0.8× the baseline's blind RMSE per seed. Seeds 1–3 give 0.80 /
+//! 0.60 / 0.63 (0.67 over the three). Over seeds 1–51 the per-seed ratio averages 0.69
+//! (spread 0.13) and is at most 0.8 on 46 of the 51; the 17 groups of three consecutive
+//! seeds give 0.56–0.79 over each group, hence the 0.85 here.
 //!
-//! Why "about" for one goer: over seeds 1–51 VOI is 0.7 points above the baseline on
-//! average but above it on only 27 of the 51 seeds, with a per-seed spread of 4 points,
-//! so a three-seed mean moves by ±2.4 points with any change that reshuffles the matches
-//! (a pose-noise floor of 1.5 mm instead of 5 mm, with no change to either policy, once
+//! Why "about" for one goer: over seeds 1–51 VOI is 0.4 points below the baseline on
+//! average and above it on 20 of the 51 seeds, with a per-seed spread of 4.6 points, so a
+//! three-seed mean moves by ±2.6 points with any change that reshuffles the matches (a
+//! pose-noise floor of 1.5 mm instead of 5 mm, with no change to either policy, once
 //! turned seeds 1–3 from +3.2 to −0.6). A loss of more than 3 points is a regression.
 //! `huddle sim --budget spl --policy voi|baseline` reports the figures.
 use huddle::sim::policy::SendPolicy;

@@ -55,7 +55,7 @@ pub struct DaemonArgs {
     /// The team's message budget: `spl` (1200 per 20-minute game, frames of at most 128
     /// bytes), `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`). This robot
     /// spends its equal share (see --team-size), paced over the game from the daemon's
-    /// start, a tenth kept for priority items; frames never exceed the league's payload
+    /// start, a fifth kept for priority items; frames never exceed the league's payload
     /// and a value that cannot fit one is refused at SETV. Default: no budget.
     #[arg(long, value_name = "SPEC")]
     pub budget: Option<comms::BudgetSpec>,

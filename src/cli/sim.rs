@@ -35,7 +35,7 @@ pub struct SimArgs {
     pub dtim: Option<u32>,
     /// The team's message budget: `spl` (1200 per 20-minute game, 128-byte frames),
     /// `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`); shared equally by the
-    /// robots, a tenth of each share kept for priority items. Default: none.
+    /// robots, a fifth of each share kept for priority items. Default: none.
     #[arg(long)]
     pub budget: Option<comms::BudgetSpec>,
     /// When robots send: every (each control tick), baseline (B-Human-style thresholds),
