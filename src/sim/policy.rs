@@ -266,8 +266,7 @@ impl PolicyState {
     /// A goer whose claim is about to be dropped by teammates says it again, with
     /// priority (a robot that does not go loses nothing much when its cost is dropped).
     fn keepalive(&self, now: &Now<'_>) -> Option<bool> {
-        let (last, keepalive) = (self.last?, now.keepalive_s?);
-        (now.going && now.t_s - last.t_s >= keepalive).then_some(true)
+        (now.going && claim_due(&self.last?, now)).then_some(true)
     }
 
     /// A goer change or a kick report waiting: priority.
@@ -346,7 +345,7 @@ impl PolicyState {
         // A robot at the ball keeps its claim alive at teammates (they drop it at twice
         // `keepalive_s`) whatever the headroom: the heartbeat below waits for spare
         // frames, and a dropped claim leaves teammates deciding without its cost.
-        if now.ball.is_some() && now.keepalive_s.is_some_and(|k| now.t_s - last.t_s >= k) {
+        if now.ball.is_some() && claim_due(&last, now) {
             return Some(false);
         }
         if spare && now.t_s - last.t_s >= VOI_HEARTBEAT_S {
@@ -395,6 +394,13 @@ impl PolicyState {
             }
         }
     }
+}
+
+/// Under a budget teammates drop what a robot said once it is twice `keepalive_s` old:
+/// whether its claim is due to go again.
+fn claim_due(last: &Sent, now: &Now<'_>) -> bool {
+    now.keepalive_s
+        .is_some_and(|keepalive| now.t_s - last.t_s >= keepalive)
 }
 
 #[cfg(test)]
