@@ -55,7 +55,7 @@ const P_HALF_TONE: f64 = 0.2;
 
 /// Tones on each side whose slot sums give a tone's local background (see
 /// [`Decoder::votes_stand_above_their_neighbours`]): ±150 Hz, about a formant's width.
-pub(super) const NEIGHBOURHOOD: usize = 3;
+const NEIGHBOURHOOD: usize = 3;
 
 /// Standard deviations of its noise-only spread a neighbourhood's level must exceed the
 /// floor by before it raises a tone's threshold.
@@ -417,10 +417,7 @@ impl Decoder {
         let n = count.max(1) as f64;
         let threshold = gamma_upper_quantile(n, P_TONE_CONFIRM);
         let stands_out = |k: usize| {
-            let around: Vec<f64> = (k.saturating_sub(NEIGHBOURHOOD)..=k + NEIGHBOURHOOD)
-                .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
-                .map(|j| sums[j])
-                .collect();
+            let around = neighbourhood(&own, k, sums);
             // The median of m Gamma(n) sums over n spreads by about 1.25 / √(m n) under
             // noise alone: only a level beyond that spread is the neighbourhood's own.
             let spread = 1.25 / ((around.len().max(1) as f64) * n).sqrt();
@@ -489,10 +486,7 @@ impl Decoder {
             return None;
         }
         Some(move |k: usize| {
-            let around: Vec<f64> = (k.saturating_sub(NEIGHBOURHOOD)..=k + NEIGHBOURHOOD)
-                .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
-                .map(|j| sums[j])
-                .collect();
+            let around = neighbourhood(&own, k, sums);
             let spread = 1.25 / ((around.len().max(1) as f64) * n).sqrt();
             let raised = median(around.clone()) / n - LOCAL_Z * spread;
             let local = (median(around) / n).max(1.0);
@@ -549,15 +543,26 @@ impl Decoder {
         // through the slot: a foreign signal steady enough to hold our six tones for a
         // slot holds its own too, while in a babble hall a talker's harmonic smeared
         // over the slot reaches the level of a frame tone in a notch now and then.
-        let steady = self.steadiness(frame, sums, count, scale, a, b);
+        let steady = clear
+            .then(|| self.steadiness(frame, sums, count, scale, a, b))
+            .flatten();
         (0..TONE_COUNT).any(|k| {
             present[k]
                 && !own.contains(&k)
                 && sums[k] >= strict
                 && (level[k] >= STRAY_SHARE * median || level[k] >= STRAY_OVER_VOTE * weakest_vote)
-                && (!clear || steady.as_ref().is_none_or(|steady| steady(k)))
+                && steady.as_ref().is_none_or(|steady| steady(k))
         })
     }
+}
+
+/// The sums of the tones within [`NEIGHBOURHOOD`] of tone `k`, leaving out `k` and the
+/// frame's own tones `own`: the local background a tone is judged against.
+pub(super) fn neighbourhood(own: &[usize; 6], k: usize, sums: &[f64]) -> Vec<f64> {
+    (k.saturating_sub(NEIGHBOURHOOD)..=k + NEIGHBOURHOOD)
+        .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
+        .map(|j| sums[j])
+        .collect()
 }
 
 /// Whether `frame` stands clear of the floor: its typical tone (the median of its

@@ -105,11 +105,7 @@ impl Decoder {
             Some(slot) => tones
                 .iter()
                 .map(|&k| {
-                    let around: Vec<f64> = (k.saturating_sub(super::confirm::NEIGHBOURHOOD)
-                        ..=k + super::confirm::NEIGHBOURHOOD)
-                        .filter(|&j| j < TONE_COUNT && j != k && !own.contains(&j))
-                        .map(|j| slot.sums[j])
-                        .collect();
+                    let around = super::confirm::neighbourhood(&own, k, &slot.sums);
                     (super::median(around) / slot.count.max(1) as f64).max(1.0)
                 })
                 .collect(),
