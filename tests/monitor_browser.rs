@@ -7,8 +7,10 @@
 
 #![allow(clippy::disallowed_methods)] // a real browser and server, real time
 
+mod daemon_support;
+
 use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -24,13 +26,6 @@ fn chromium() -> Option<PathBuf> {
     .iter()
     .flat_map(|name| std::env::split_paths(&path).map(move |dir| dir.join(name)))
     .find(|p| p.is_file())
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .unwrap()
-        .port()
 }
 
 /// A plain HTTP/1.1 GET; the body.
@@ -104,7 +99,9 @@ fn the_monitor_page_draws_every_robot_and_the_team_ball_where_state_says() {
         );
         return;
     };
-    let addr: SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
+    let addr: SocketAddr = format!("127.0.0.1:{}", daemon_support::free_tcp_port())
+        .parse()
+        .unwrap();
     // A short match, fast, robot 3 switched off at 1 s; the monitor keeps serving the
     // final picture after the match, so the page and /state can be compared exactly.
     let _sim = Killed(
