@@ -7,18 +7,21 @@
 //!   600 by 600 s), and both spend most of it; no frame is over 128 bytes;
 //! - huddle's VOI policy gives the robots that do not see the ball a better team ball
 //!   than B-Human's limiter at the same budget: over the three seeds, at most 0.85× its
-//!   RMSE; and its robots agree on one goer about as often: no more than 3 points less.
+//!   RMSE; and its robots agree on one goer at least as often (the target).
 //!
-//! The target is 0.8× the baseline's blind RMSE per seed. Seeds 1–3 give 0.80 /
-//! 0.60 / 0.63 (0.67 over the three). Over seeds 1–51 the per-seed ratio averages 0.69
-//! (spread 0.13) and is at most 0.8 on 46 of the 51; the 17 groups of three consecutive
-//! seeds give 0.56–0.79 over each group, hence the 0.85 here.
+//! The target is 0.8× the baseline's blind RMSE per seed. Seeds 1–3 give 0.59 /
+//! 0.71 / 0.78 (0.69 over the three). Over seeds 1–51 the per-seed ratio averages 0.72
+//! (spread 0.09) and is at most 0.8 on 43 of the 51; the 17 groups of three consecutive
+//! seeds give 0.65–0.81 over each group, hence the 0.85 here.
 //!
-//! Why "about" for one goer: over seeds 1–51 VOI is 0.4 points below the baseline on
-//! average and above it on 20 of the 51 seeds, with a per-seed spread of 4.6 points, so a
-//! three-seed mean moves by ±2.6 points with any change that reshuffles the matches (a
-//! pose-noise floor of 1.5 mm instead of 5 mm, with no change to either policy, once
-//! turned seeds 1–3 from +3.2 to −0.6). A loss of more than 3 points is a regression.
+//! One goer, seeds 1–3: VOI 95.0 / 95.0 / 89.5% against the baseline's 94.6 / 92.6 /
+//! 86.5%. Over seeds 1–51 VOI is 0.6 points above the baseline on average and at or above
+//! it on 31 of the 51, with a per-seed spread of 3.4 points: the two are close, and a
+//! three-seed mean moves by about ±2 points with any change that reshuffles the matches.
+//! Both policies decide on the claims teammates hold (`Arbiter::set_told`); before that,
+//! a robot weighed its own claim to be going with the hysteresis margin while it still
+//! waited for a frame, and VOI, which spends its frames where the ball is, lost 0.4
+//! points to the baseline over the 51 seeds.
 //! `huddle sim --budget spl --policy voi|baseline` reports the figures.
 use huddle::sim::policy::SendPolicy;
 use huddle::sim::{Report, SimConfig, Simulation};
@@ -86,7 +89,7 @@ fn under_the_spl_budget_voi_tells_blind_robots_no_less_than_b_humans_limiter() {
         blind[0]
     );
     assert!(
-        one_goer[1] >= one_goer[0] - 3.0,
+        one_goer[1] >= one_goer[0],
         "VOI must not cost the team its agreement on one goer: {:.2}% vs {:.2}%",
         one_goer[1],
         one_goer[0]

@@ -108,6 +108,9 @@ pub struct PolicyState {
     pending: Option<Sent>,
     /// A kick whose report has not been sent yet.
     kick_pending: bool,
+    /// A claim written between ticks (going, cost as posted, cost as weighed) that has
+    /// not gone out yet: what teammates will hold once it has.
+    claim_pending: Option<(bool, f64, f64)>,
 }
 
 /// What the robot knows now, for the decision.
@@ -170,9 +173,13 @@ impl PolicyState {
             if let Some(sent) = self.pending.take() {
                 self.last = Some(sent);
             }
-        } else if !claim_waiting {
-            // Only the claim went: teammates hold its cost and its going.
-            if let Some(sent) = self.pending {
+        }
+        if !claim_waiting {
+            // The claim went (alone, or with the world model): teammates hold its cost
+            // and its going. One written between ticks is newer than the tick's.
+            if let Some((going, h, cost)) = self.claim_pending.take() {
+                self.sent_going(going, h, cost);
+            } else if let Some(sent) = self.pending.filter(|_| waiting) {
                 self.sent_going(sent.going, sent.h, sent.cost);
             }
         }
@@ -192,6 +199,8 @@ impl PolicyState {
         match decision {
             Some(priority) => {
                 self.pending = Some(state);
+                // The claim in this frame is the newest.
+                self.claim_pending = None;
                 // A kick made at this very tick is in the next LWM: it stays pending.
                 self.kick_pending = now.kicked;
                 Action::Send { priority }
@@ -217,7 +226,23 @@ impl PolicyState {
         self.last.map(|l| l.h)
     }
 
-    /// The robot sent a goer change between ticks (with priority).
+    /// The claim teammates last heard from this robot, cost and going (`None` before its
+    /// first message).
+    pub fn told(&self) -> Option<comms::arbitration::Posted> {
+        self.last.map(|l| comms::arbitration::Posted {
+            h: l.h,
+            going: l.going,
+        })
+    }
+
+    /// The robot wrote a claim change between ticks; it counts as told once it went out
+    /// (a budget's pacing may hold it).
+    pub fn wrote_claim(&mut self, going: bool, h: f64, cost: f64) {
+        self.claim_pending = Some((going, h, cost));
+    }
+
+    /// A claim went out on its own (its world model still waits, or it was written
+    /// between ticks): teammates hold this going and cost.
     pub fn sent_going(&mut self, going: bool, h: f64, cost: f64) {
         if let Some(last) = &mut self.last {
             last.going = going;
@@ -460,6 +485,42 @@ mod tests {
             p.told_cost(),
             Some(0.5),
             "the claim went alone: teammates hold cost 0.5"
+        );
+    }
+
+    /// A claim change written between ticks waits for a frame like any other: until it
+    /// went, teammates hold the claim before it, and so must the robot (its arbiter
+    /// decides on what they hold).
+    #[test]
+    fn a_claim_written_between_ticks_is_told_once_it_went() {
+        let model = BallModel::default();
+        let mut p = PolicyState::default();
+        p.decide(SendPolicy::Voi, &now(&model, 0.0, false, 2.0), false, false);
+        p.decide(
+            SendPolicy::Voi,
+            &now(&model, 0.04, false, 2.0),
+            false,
+            false,
+        );
+        let not_going = comms::arbitration::Posted {
+            h: 2.0,
+            going: false,
+        };
+        assert_eq!(p.told(), Some(not_going));
+        // Between ticks it decides to go, at cost 2.0 (1.5 as weighed with the margin).
+        p.wrote_claim(true, 2.0, 1.5);
+        // The budget holds the claim: teammates still hold "not going".
+        p.decide(SendPolicy::Voi, &now(&model, 0.08, true, 2.0), false, true);
+        assert_eq!(p.told(), Some(not_going), "the claim still waits");
+        // It went.
+        p.decide(SendPolicy::Voi, &now(&model, 0.12, true, 2.0), false, false);
+        assert_eq!(
+            p.told(),
+            Some(comms::arbitration::Posted {
+                h: 2.0,
+                going: true
+            }),
+            "the claim went: teammates hold it"
         );
     }
 

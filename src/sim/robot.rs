@@ -471,8 +471,8 @@ impl Robot {
             input.claim_waiting,
         );
         if self.compact {
-            // Sparse messages: decide on the cost teammates hold (see `set_told_cost`).
-            self.arbiter.set_told_cost(self.policy.told_cost());
+            // Sparse messages: decide on the claim teammates hold (see `set_told`).
+            self.arbiter.set_told(self.policy.told());
         }
         let mut priority = action == (Action::Send { priority: true });
         match action {
@@ -579,10 +579,12 @@ impl Robot {
         let changed = posted.going != was;
         if changed {
             let cost = self.arbiter.params().effective_cost(&posted);
-            self.policy.sent_going(posted.going, posted.h, cost);
             if self.compact {
+                // Told once it went out (see `Arbiter::set_told`).
+                self.policy.wrote_claim(posted.going, posted.h, cost);
                 self.untold_claim = Some(posted);
-                self.arbiter.set_told_cost(self.policy.told_cost());
+            } else {
+                self.policy.sent_going(posted.going, posted.h, cost);
             }
         }
         changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))

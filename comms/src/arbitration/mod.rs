@@ -294,6 +294,8 @@ pub struct Arbiter {
     /// The cost its teammates last heard from it, when messages are sparse (see
     /// [`Arbiter::set_told_cost`]).
     told: Option<f64>,
+    /// … and whether that message said it was going (see [`Arbiter::set_told`]).
+    told_going: Option<bool>,
 }
 
 impl Arbiter {
@@ -304,6 +306,18 @@ impl Arbiter {
     /// own current cost (messages every control period).
     pub fn set_told_cost(&mut self, told: Option<f64>) {
         self.told = told.filter(|h| h.is_finite());
+        self.told_going = None;
+    }
+
+    /// Sparse messages: the claim teammates last heard from this robot, cost and going.
+    /// It then decides entirely on what they hold: its own claim to be going counts (with
+    /// the hysteresis margin) only once it went out, as it does for them. Why: a robot
+    /// that weighed its own untold claim with the margin while teammates weighed it
+    /// without would see itself ahead where they see a teammate, and both would go for
+    /// as long as the claim waits for a frame (seconds, under a league's budget).
+    pub fn set_told(&mut self, told: Option<Posted>) {
+        self.set_told_cost(told.map(|t| t.h));
+        self.told_going = told.filter(|t| t.h.is_finite()).map(|t| t.going);
     }
 
     /// A robot `me` that starts now. A goalkeeper never competes.
@@ -320,6 +334,7 @@ impl Arbiter {
             claiming_since: BTreeMap::new(),
             deferring_to: None,
             told: None,
+            told_going: None,
         }
     }
 
@@ -377,7 +392,10 @@ impl Arbiter {
                 Some(told) if !self.goalkeeper => told,
                 _ => seen,
             },
-            going: self.going,
+            going: match self.told_going {
+                Some(going) if !self.goalkeeper => going,
+                _ => self.going,
+            },
         };
         let mut all: Vec<Candidate> = heard
             .iter()

@@ -440,3 +440,50 @@ fn a_goer_that_gives_up_frees_the_ball_at_once_and_a_silent_one_does_not() {
         "robot 2 takes over one latency after the give-up, at {first_go_2:?}"
     );
 }
+
+/// Under a league's budget a claim waits seconds for a frame. Robot 3 took the ball while
+/// alone; its claim to be going has not gone out, so teammates hold its last message:
+/// cost 1.0, not going. Robot 2 then tells cost 0.8. Teammates weigh 0.8 against 1.0 and
+/// see robot 2 as the goer. Robot 3 must weigh the same: were its untold claim to count
+/// with the hysteresis margin (1.0 − 0.5 beats 0.8), it would go on beside robot 2.
+#[test]
+fn a_claim_teammates_have_not_heard_earns_no_margin() {
+    let p = ArbitrationParams {
+        stale_after: Duration::from_secs(15),
+        ..ArbitrationParams::default()
+    };
+    let tick = Duration::from_millis(40);
+    let told_not_going = Posted {
+        h: 1.0,
+        going: false,
+    };
+    for (told, goes_on) in [
+        // Deciding on its told cost only, with its own going (the old rule): both go.
+        (None, true),
+        // Deciding on the whole claim teammates hold: robot 2 alone goes.
+        (Some(told_not_going), false),
+    ] {
+        let mut a = Arbiter::new(3, false, p);
+        // Alone, past its listening time: it goes.
+        for _ in 0..5 {
+            a.tick(tick, 1.0, &[]);
+        }
+        assert!(a.going(), "alone, robot 3 goes");
+        match told {
+            None => a.set_told_cost(Some(1.0)),
+            Some(t) => a.set_told(Some(t)),
+        }
+        let (decision, posted) = a.tick(tick, 1.0, &[fresh(2, 0.8, false)]);
+        assert_eq!(
+            posted.going,
+            goes_on,
+            "told {told:?}: robot 3 {} going",
+            if goes_on { "keeps" } else { "stops" }
+        );
+        let teammates = decide(&p, &[fresh(2, 0.8, false), fresh(3, 1.0, false)]);
+        assert_eq!(teammates.goer, Some(2), "teammates see robot 2 as the goer");
+        if told.is_some() {
+            assert_eq!(decision.goer, teammates.goer, "robot 3 agrees with them");
+        }
+    }
+}
