@@ -64,7 +64,8 @@ pub struct DaemonArgs {
     pub team_size: u8,
     /// Pool the --budget with the team: a robot with nothing to say leaves its share to
     /// teammates that have, each knowing the team's spending from teammates' frame
-    /// counters. Only when every robot of the team runs huddle with the same --budget:
+    /// counters, and priority items share the team's room of one frame per robot beyond
+    /// the pacing (instead of a fifth of each share). Only when every robot of the team runs huddle with the same --budget:
     /// the frames of a teammate that does not count (other software) use up the pool.
     #[arg(long, requires = "budget")]
     pub budget_pool: bool,
@@ -211,11 +212,15 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
         if !args.budget_pool {
             replica.budget = replica.budget.map(comms::Budget::split);
         }
+        let priority = if args.budget_pool {
+            format!("priority items share {} frames ahead", args.team_size)
+        } else {
+            format!("{} reserved for priority items", share.reserve)
+        };
         tracing::info!(
-            "budget: {spec}: this robot's share {} messages per {:?} ({} reserved), frames ≤ {} B",
+            "budget: {spec}: this robot's share {} messages per {:?} ({priority}), frames ≤ {} B",
             share.messages,
             share.game,
-            share.reserve,
             replica.mtu
         );
     }

@@ -34,8 +34,9 @@ pub struct SimArgs {
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=255))]
     pub dtim: Option<u32>,
     /// The team's message budget: `spl` (1200 per 20-minute game, 128-byte frames),
-    /// `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`); shared equally by the
-    /// robots, a fifth of each share kept for priority items. Default: none.
+    /// `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`); pooled by the robots,
+    /// whose priority items (goer changes, kicks) share a room of one frame per robot
+    /// beyond the pacing. Default: none.
     #[arg(long)]
     pub budget: Option<comms::BudgetSpec>,
     /// When robots send: every (each control tick), baseline (B-Human-style thresholds),
