@@ -15,16 +15,16 @@
 //! to say leaves its share to teammates that have. Every frame carries its sender's frame
 //! counter, so each replica knows how many frames each teammate has sent up to the last
 //! one it heard; the team's frames are paced along one line over the game (its messages
-//! less a margin and the room for priority frames, see [`TeamPool`]). A robot under its equal share of the
-//! line may send whenever the team is under it; one over its share (borrowing what others
-//! left) only while the team is at least one frame per robot under it, so that robots
-//! under their share go first and several borrowers deciding at once cannot overrun it.
-//! Priority items ([`crate::Replica::set_priority`]: a goer change, a kick, a referee
-//! event) may go at once while the team is less than one frame per robot beyond its
-//! line, whoever sends them; a robot spending its share alone keeps a fifth of it for
-//! its own. The game clock is an input: by default
-//! the game starts when the replica does; [`crate::Replica::set_game_clock`] sets the
-//! remaining time (the GameController's `secsRemaining`, when there is one).
+//! less a margin and the room for priority frames, see [`TeamPool`]). A robot under its
+//! equal share of the line may send whenever the team is under it; one over its share
+//! (borrowing what others left) only while the team is at least one frame per robot
+//! under it, so that robots under their share go first and several borrowers deciding at
+//! once cannot overrun it. Priority items ([`crate::Replica::set_priority`]: a goer
+//! change, a kick, a referee event) may go at once while the team is less than one frame
+//! per robot beyond its line, whoever sends them; a robot spending its share alone keeps
+//! a fifth of it for its own. The game clock is an input: by default the game starts when
+//! the replica does; [`crate::Replica::set_game_clock`] sets the remaining time (the
+//! GameController's `secsRemaining`, when there is one).
 
 use std::fmt;
 use std::str::FromStr;
@@ -657,6 +657,21 @@ mod replica_tests {
     /// replica at once) for `until_ms`; robot `i` has news every 10 ms when
     /// `chatty(i, ms)`. Returns the frames each sent.
     fn team(budget: Budget, until_ms: u64, chatty: impl Fn(usize, u64) -> bool) -> Vec<u64> {
+        let mut sent = vec![0u64; 5];
+        for (i, _) in team_frames(budget, until_ms, chatty, |_, _| false) {
+            sent[i] += 1;
+        }
+        sent
+    }
+
+    /// [`team`], where robot `i` also has a priority item at `ms` when `priority(i, ms)`.
+    /// Returns every frame as (robot, ms), in the order sent.
+    fn team_frames(
+        budget: Budget,
+        until_ms: u64,
+        chatty: impl Fn(usize, u64) -> bool,
+        priority: impl Fn(usize, u64) -> bool,
+    ) -> Vec<(usize, u64)> {
         let mut team: Vec<Replica> = (0..5)
             .map(|i| {
                 let cfg = ReplicaConfig {
@@ -668,7 +683,8 @@ mod replica_tests {
             })
             .collect();
         let x = Key::parse("*.var.x").unwrap();
-        let mut sent = vec![0u64; 5];
+        let goer = Key::parse("*.var.goer").unwrap();
+        let mut frames = Vec::new();
         let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
         for ms in (0..until_ms).step_by(10) {
             for i in 0..5 {
@@ -676,8 +692,13 @@ mod replica_tests {
                 if chatty(i, ms) {
                     team[i].set_key(at(ms), &x, Value::Int(ms as i64)).unwrap();
                 }
+                if priority(i, ms) {
+                    team[i]
+                        .set_priority(at(ms), &goer, Value::Int(ms as i64))
+                        .unwrap();
+                }
                 while let Some(t) = team[i].poll_transmit() {
-                    sent[i] += 1;
+                    frames.push((i, ms));
                     for (j, other) in team.iter_mut().enumerate() {
                         if j != i {
                             other.handle_datagram(at(ms), from, &t.payload);
@@ -686,7 +707,7 @@ mod replica_tests {
                 }
             }
         }
-        sent
+        frames
     }
 
     #[test]
@@ -742,50 +763,25 @@ mod replica_tests {
             game: Duration::from_secs(100),
             payload_limit: Some(128),
         };
-        let mut team: Vec<Replica> = (0..5)
-            .map(|i| {
-                let cfg = ReplicaConfig {
-                    budget: Some(spec.share(5)),
-                    mtu: 128,
-                    ..ReplicaConfig::new(i as u8 + 1, 1)
-                };
-                Replica::new(cfg, 100 + i as u64, at(0)).unwrap()
-            })
-            .collect();
-        let (x, goer) = (
-            Key::parse("*.var.x").unwrap(),
-            Key::parse("*.var.goer").unwrap(),
-        );
         let changes: Vec<u64> = (50_000..60_000).step_by(1000).collect();
-        let mut told = Vec::new();
-        let mut total = 0u64;
-        let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
-        for ms in (0..61_000).step_by(10) {
-            for i in 0..5 {
-                team[i].handle_timeout(at(ms));
-                team[i].set_key(at(ms), &x, Value::Int(ms as i64)).unwrap();
-                if i == 1 && changes.contains(&ms) {
-                    team[i]
-                        .set_priority(at(ms), &goer, Value::Int(ms as i64))
-                        .unwrap();
-                }
-                while let Some(t) = team[i].poll_transmit() {
-                    total += 1;
-                    if i == 1 && changes.contains(&ms) {
-                        told.push(ms);
-                    }
-                    for (j, other) in team.iter_mut().enumerate() {
-                        if j != i {
-                            other.handle_datagram(at(ms), from, &t.payload);
-                        }
-                    }
-                }
-            }
+        let frames = team_frames(
+            spec.share(5),
+            61_000,
+            |_, _| true,
+            |i, ms| i == 1 && changes.contains(&ms),
+        );
+        for (n, (_, ms)) in frames.iter().enumerate() {
             assert!(
-                total <= 2 * ms / 1000 + 1,
-                "{total} frames by {ms} ms: beyond the budget pro rata (2 per second)"
+                n as u64 <= 2 * ms / 1000,
+                "{} frames by {ms} ms: beyond the budget pro rata (2 per second)",
+                n + 1
             );
         }
+        let told: Vec<u64> = frames
+            .iter()
+            .filter(|&&(i, ms)| i == 1 && changes.contains(&ms))
+            .map(|&(_, ms)| ms)
+            .collect();
         assert_eq!(
             told, changes,
             "each goer change went at once although the line was full"
