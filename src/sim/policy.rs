@@ -238,11 +238,6 @@ impl PolicyState {
         }
     }
 
-    /// The cost teammates last heard from this robot (`None` before its first message).
-    pub fn told_cost(&self) -> Option<f64> {
-        self.last.map(|l| l.h)
-    }
-
     /// The claim teammates last heard from this robot, cost and going (`None` before its
     /// first message).
     pub fn told(&self) -> Option<comms::arbitration::Posted> {
@@ -496,7 +491,7 @@ mod tests {
             false,
             false,
         );
-        assert_eq!(p.told_cost(), Some(2.0));
+        assert_eq!(p.told().map(|t| t.h), Some(2.0));
         // It starts going with cost 0.5: a goer change, with priority.
         assert_eq!(
             p.decide(SendPolicy::Voi, &now(&model, 1.0, true, 0.5), false, false),
@@ -504,11 +499,11 @@ mod tests {
         );
         // Nothing went out yet: teammates still hold 2.0.
         p.decide(SendPolicy::Voi, &now(&model, 1.04, true, 0.5), true, true);
-        assert_eq!(p.told_cost(), Some(2.0), "nothing went out yet");
+        assert_eq!(p.told().map(|t| t.h), Some(2.0), "nothing went out yet");
         // The claim went in a frame, the world model still waits.
         p.decide(SendPolicy::Voi, &now(&model, 1.08, true, 0.5), true, false);
         assert_eq!(
-            p.told_cost(),
+            p.told().map(|t| t.h),
             Some(0.5),
             "the claim went alone: teammates hold cost 0.5"
         );
