@@ -304,24 +304,9 @@ fn logs_are_plain_off_a_terminal_and_q_quietens_them() {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        // Up once the relay greets (the relay serves only after the daemon logged that
-        // it runs; a bound port alone accepts connections a moment earlier).
-        let deadline = Instant::now() + Duration::from_secs(10);
-        loop {
-            if let Ok(stream) = std::net::TcpStream::connect(format!("127.0.0.1:{relay}")) {
-                let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
-                let mut greeting = String::new();
-                let _ = std::io::BufRead::read_line(
-                    &mut std::io::BufReader::new(stream),
-                    &mut greeting,
-                );
-                if greeting.trim_end().ends_with("robot 9") {
-                    break;
-                }
-            }
-            assert!(Instant::now() < deadline, "daemon never came up");
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        // Up once the relay greets: the daemon logged that it runs before it serves.
+        let addr = format!("127.0.0.1:{relay}").parse().unwrap();
+        daemon_support::await_relay(&mut child, addr, 9);
         let _ = child.kill();
         text(&child.wait_with_output().unwrap().stderr)
     };

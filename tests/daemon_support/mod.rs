@@ -11,6 +11,33 @@ use std::time::{Duration, Instant};
 
 pub mod netns;
 
+/// Waits until the daemon `child` (robot `id`) serves its relay at `relay`: its greeting
+/// names the robot. A bound port alone is not enough (it accepts connections into its
+/// backlog a moment before the daemon serves, and logs that it runs); another robot's
+/// greeting means the port is some other daemon's, and this one will fail to bind and
+/// exit. Panics if the daemon exits or is not up within 10 s.
+pub fn await_relay(child: &mut Child, relay: SocketAddr, id: u8) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("daemon {id} exited at start: {status}");
+        }
+        if let Ok(stream) = TcpStream::connect(relay) {
+            let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
+            let mut greeting = String::new();
+            let _ = BufReader::new(stream).read_line(&mut greeting);
+            if greeting.trim_end().ends_with(&format!("robot {id}")) {
+                return;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "daemon {id}'s relay never came up"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// A multicast group and port of this test's own, so that two runs of the suite on one
 /// host never hear each other (see `driver::scratch_group`).
 pub fn scratch_group() -> SocketAddrV4 {
@@ -84,27 +111,8 @@ impl Daemon {
             .spawn()
             .expect("spawn huddle daemon");
         let mut d = Daemon { child, relay };
-        let deadline = Instant::now() + Duration::from_secs(10);
-        loop {
-            if let Ok(Some(status)) = d.child.try_wait() {
-                panic!("daemon {id} exited at start: {status}");
-            }
-            // Up once the relay greets as this robot (another robot's greeting: the
-            // port is some other daemon's, and this one will fail to bind and exit).
-            if let Ok(stream) = TcpStream::connect(relay) {
-                let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
-                let mut greeting = String::new();
-                let _ = BufReader::new(stream).read_line(&mut greeting);
-                if greeting.trim_end().ends_with(&format!("robot {id}")) {
-                    return d;
-                }
-            }
-            assert!(
-                Instant::now() < deadline,
-                "daemon {id}'s relay never came up"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        await_relay(&mut d.child, relay, id);
+        d
     }
 
     pub fn client(&self) -> Client {
