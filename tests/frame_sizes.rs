@@ -175,3 +175,94 @@ fn in_a_team_the_world_model_frame_carries_an_echo() {
          {SPL_MESSAGE_LIMIT}"
     );
 }
+
+/// What a robot sends under `--budget spl` when it starts going to the ball and passes:
+/// its claim, its pass receiver and its compact world model, five minutes into a half
+/// (versions past 250: 3-byte varints), echoing a teammate (`keyed`: with a team key).
+fn league_frame(keyed: bool) -> Vec<u8> {
+    let robots = 5;
+    let mut cfg = ReplicaConfig::new(3, 7).with_budget(&comms::BudgetSpec::SPL, robots);
+    if keyed {
+        cfg = cfg.with_team_key(TEAM_KEY);
+    }
+    let mut r3 = Replica::new(cfg, 0x5eed_5eed_5eed_5eed, Instant::ZERO).expect("valid");
+    let mut cfg = ReplicaConfig::new(1, 7);
+    if keyed {
+        cfg = cfg.with_team_key(TEAM_KEY);
+    }
+    let mut r1 = Replica::new(cfg, 1, Instant::ZERO).expect("valid");
+    r1.handle_timeout(Instant::ZERO);
+    r3.handle_timeout(Instant::ZERO);
+    let from = std::net::SocketAddr::from(([127, 0, 0, 1], 2000));
+    let mut lwm = LocalModel::new(
+        LocalConfig::default(),
+        PoseEstimate::new(-3.2, 1.7, 2.0, Vector3::new(1e-3, 1e-3, 1e-4)),
+    );
+    let seen = BallSighting {
+        local: Vector2::new(0.1, 1.5),
+        cov: Matrix2::identity() * 1e-3,
+    };
+    let claim = comms::arbitration::heuristic_key();
+    let pass_to = huddle::sim::robot::pass_to_key();
+    let world = Key::parse(WORLD_LOCAL_KEY).expect("a valid key");
+    let mut last = Vec::new();
+    // 300 world models, claims and receivers, a second apart; robot 1 is heard 20 ms
+    // before each (so every frame echoes it).
+    for k in 1..=300u64 {
+        let now = Instant::from_micros(k * 1_000_000);
+        let heard = Instant::from_micros(k * 1_000_000 - 20_000);
+        while let Some(t) = r1.poll_transmit() {
+            r3.handle_datagram(heard, from, &t.payload);
+        }
+        r1.set(now, "*.var.x", Value::Int(k as i64))
+            .expect("own key");
+        let t_s = k as f64;
+        lwm.ball_sighting(t_s, &seen);
+        let model = lwm.publish(t_s).to_compact_bytes().expect("encodes");
+        let posted = comms::arbitration::Posted {
+            h: 1.0 / k as f64,
+            going: k % 2 == 0,
+        };
+        r3.set_priority(now, &claim, Value::from(posted))
+            .expect("own key");
+        r3.set_priority(now, &pass_to, Value::Int((k % 5) as i64))
+            .expect("own key");
+        r3.set_priority(now, &world, Value::Bytes(model.to_vec()))
+            .expect("own key");
+        r3.handle_timeout(now);
+        if let Some(t) = r3.poll_transmit() {
+            last = t.payload;
+        }
+    }
+    let key = keyed.then(|| TeamKey::new(&TEAM_KEY));
+    let frame = decode_frame(&last, 7, key.as_ref()).expect("a valid frame");
+    assert!(frame.clock.echo.is_some(), "robot 1 is echoed");
+    let paths: Vec<&str> = frame
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            comms::wire::Item::Update { path, .. } => Some(path.as_str()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        paths,
+        ["machine.heuristic", "machine.pass_to", "world.local"],
+        "claim, pass receiver and world model in one frame, each once (keyed: {keyed})"
+    );
+    last
+}
+
+/// With the paths of huddle's own keys as one byte (wire item 4, used under a budget),
+/// a claim, a pass receiver and a world model share one frame within SPL's limit, with a
+/// team key too. As text they took 43 bytes more: the world model then waited for the
+/// robot's next frame, seconds later under the budget.
+#[test]
+fn under_an_spl_budget_claim_pass_receiver_and_world_model_share_one_frame() {
+    let (plain, keyed) = (league_frame(false).len(), league_frame(true).len());
+    assert_eq!(plain, 102, "102 bytes without a key");
+    assert_eq!(
+        keyed, 118,
+        "118 bytes with the 16-byte tag: within SPL's {SPL_MESSAGE_LIMIT}"
+    );
+}

@@ -634,6 +634,75 @@ mod replica_tests {
         assert_eq!(r.budget_status(), Some((120, 120)));
     }
 
+    /// Under a budget the refresh rides along in the room a frame has left; a value that
+    /// is in the frame as news already is not sent a second time by it (it was: 26 of a
+    /// league's 128 bytes on a claim repeated).
+    #[test]
+    fn a_frame_carries_a_value_once_even_when_its_refresh_is_due() {
+        let budget = crate::BudgetSpec::SPL.share(5);
+        let cfg = ReplicaConfig::new(3, 1).with_budget(&crate::BudgetSpec::SPL, 5);
+        assert_eq!(cfg.budget, Some(budget));
+        let mut r = Replica::new(cfg, 1, at(0)).unwrap();
+        let claim = crate::arbitration::heuristic_key();
+        let other = Key::parse("*.var.other").unwrap();
+        r.set_key(at(0), &other, Value::Int(1)).unwrap();
+        let mut frames = Vec::new();
+        for s in 1..=30u64 {
+            let now = at(s * 1000);
+            r.handle_timeout(now);
+            let posted = crate::arbitration::Posted {
+                h: s as f64,
+                going: s % 2 == 0,
+            };
+            r.set_priority(now, &claim, Value::from(posted)).unwrap();
+            while let Some(t) = r.poll_transmit() {
+                frames.push(crate::wire::decode_frame(&t.payload, 1, None).unwrap());
+            }
+        }
+        assert!(frames.len() >= 5, "{} frames", frames.len());
+        let mut refreshed = 0;
+        for f in &frames {
+            let paths: Vec<&str> = f
+                .items
+                .iter()
+                .filter_map(|i| match i {
+                    crate::wire::Item::Update { path, .. } => Some(path.as_str()),
+                    _ => None,
+                })
+                .collect();
+            let claims = paths.iter().filter(|&&p| p == "machine.heuristic").count();
+            assert_eq!(claims, 1, "frame {}: {paths:?}", f.seq);
+            refreshed += paths.contains(&"other") as usize;
+        }
+        assert!(refreshed > 0, "the refresh still rides along");
+    }
+
+    /// Known paths go as one byte under a budget only: without one a frame is what every
+    /// format-3 reader takes.
+    #[test]
+    fn known_paths_are_short_under_a_budget_only() {
+        let claim = crate::arbitration::heuristic_key();
+        let frame_len = |cfg: ReplicaConfig| {
+            let mut r = Replica::new(cfg, 1, at(0)).unwrap();
+            r.handle_timeout(at(0));
+            while r.poll_transmit().is_some() {}
+            let posted = crate::arbitration::Posted {
+                h: 1.0,
+                going: true,
+            };
+            r.set_priority(at(10), &claim, Value::from(posted)).unwrap();
+            r.handle_timeout(at(10));
+            r.poll_transmit().expect("the claim goes").payload.len()
+        };
+        let free = frame_len(ReplicaConfig::new(3, 1));
+        let league = frame_len(ReplicaConfig::new(3, 1).with_budget(&crate::BudgetSpec::SPL, 5));
+        assert_eq!(
+            free - league,
+            "machine.heuristic".len(),
+            "{free} vs {league} bytes"
+        );
+    }
+
     #[test]
     fn a_value_that_cannot_fit_the_leagues_payload_is_refused_when_set() {
         let cfg = ReplicaConfig {

@@ -206,12 +206,15 @@ impl Replica {
         let global = scope != Scope::Local;
         if global {
             let (version, age_us) = self.widest_version_and_age();
-            let bytes = wire::item_len(ItemRef::Update {
-                path: key.path(),
-                value: &value,
-                version,
-                age_us,
-            });
+            let bytes = wire::item_len_coded(
+                ItemRef::Update {
+                    path: key.path(),
+                    value: &value,
+                    version,
+                    age_us,
+                },
+                self.known_paths(),
+            );
             if bytes + self.frame_overhead() > self.cfg.mtu {
                 return Err(SetError::TooLarge {
                     key: key.to_string(),

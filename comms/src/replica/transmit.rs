@@ -26,6 +26,13 @@ impl Replica {
         }
     }
 
+    /// Whether frames send huddle's own paths as one byte (`wire::KNOWN_PATHS`): under a
+    /// budget, where every byte of a league's payload limit counts. Without one, frames
+    /// stay in the layout every format-3 reader takes.
+    pub(crate) fn known_paths(&self) -> bool {
+        self.budget.is_some()
+    }
+
     /// The widest version and age an update item may carry: under a budget, ages are
     /// clamped to 2³² µs (71 minutes: "old") and versions assumed below 2³² (a robot
     /// setting one key at 100 Hz gets there in 16 months), 5-byte varints instead of 9.
@@ -107,7 +114,8 @@ impl Replica {
             self.seq + 1,
             self.cfg.mtu,
             self.key.as_ref(),
-        );
+        )
+        .with_known_paths(self.known_paths());
         let age_cap = self.widest_version_and_age().1;
         w.set_clock(FrameClock {
             stamp_us: stamp_of(now),
@@ -147,6 +155,8 @@ impl Replica {
         }
         // Priority items first, then the longest waiting. One that does not fit keeps its
         // place at the head of the line while a few smaller ones behind it may still go.
+        // Values in this frame as news: the refresh below does not repeat them.
+        let mut sent: Vec<String> = Vec::new();
         let urgent: Vec<String> = self.urgent.iter().cloned().collect();
         for path in urgent {
             match self.board.get_stored(me, &path) {
@@ -154,6 +164,7 @@ impl Replica {
                 _ => {
                     self.dirty.remove(&path);
                     self.urgent.remove(&path);
+                    sent.push(path);
                 }
             }
         }
@@ -170,6 +181,7 @@ impl Replica {
                     i += 1;
                     continue;
                 }
+                sent.push(path.to_owned());
             }
             self.dirty.remove_at(i);
         }
@@ -178,7 +190,8 @@ impl Replica {
                 break;
             };
             if let Some(e) = self.board.get_stored(me, path) {
-                if !self.dirty.contains(path) && !w.push(update_ref(path, e, now, age_cap)) {
+                let fresh = self.dirty.contains(path) || sent.iter().any(|s| s == path);
+                if !fresh && !w.push(update_ref(path, e, now, age_cap)) {
                     full = true;
                     break;
                 }

@@ -6,17 +6,58 @@ use bincode::de::{Decode, Decoder};
 use bincode::enc::{Encode, Encoder};
 use bincode::error::{AllowedEnumVariants, DecodeError as BincodeDecodeError, EncodeError};
 
-use super::{DecodeError, Item, ItemRef, MAX_FRAME_LEN};
+use super::{known_path_index, DecodeError, Item, ItemRef, KNOWN_PATHS, MAX_FRAME_LEN};
 use crate::value::Value;
 
 fn config() -> impl bincode::config::Config {
     bincode::config::standard().with_limit::<MAX_FRAME_LEN>()
 }
 
-/// Appends the encoding of `item` to `out`; false if it could not be encoded (writing
-/// into a `Vec` does not fail).
-pub(super) fn encode_item(item: ItemRef<'_>, out: &mut Vec<u8>) -> bool {
+/// Appends the encoding of `item` to `out`, an update of a known path as item 4 when
+/// `known_paths`; false if it could not be encoded (writing into a `Vec` does not fail).
+pub(super) fn encode_item(item: ItemRef<'_>, known_paths: bool, out: &mut Vec<u8>) -> bool {
+    if let ItemRef::Update {
+        path,
+        value,
+        version,
+        age_us,
+    } = item
+    {
+        if let Some(index) = known_path_index(path).filter(|_| known_paths) {
+            let known = KnownUpdate {
+                index,
+                value,
+                version,
+                age_us,
+            };
+            return bincode::encode_into_std_write(known, out, config()).is_ok();
+        }
+    }
     bincode::encode_into_std_write(item, out, config()).is_ok()
+}
+
+/// The indices item 4 may carry.
+const KNOWN_PATH_INDICES: AllowedEnumVariants = AllowedEnumVariants::Range {
+    min: 0,
+    max: KNOWN_PATHS.len() as u32 - 1,
+};
+
+/// Item 4: an update whose path is [`KNOWN_PATHS`]`[index]`.
+struct KnownUpdate<'a> {
+    index: u8,
+    value: &'a Value,
+    version: u64,
+    age_us: u64,
+}
+
+impl Encode for KnownUpdate<'_> {
+    fn encode<E: Encoder>(&self, e: &mut E) -> Result<(), EncodeError> {
+        4u32.encode(e)?;
+        u32::from(self.index).encode(e)?;
+        self.value.encode(e)?;
+        self.version.encode(e)?;
+        self.age_us.encode(e)
+    }
 }
 
 /// Appends `v` as a varint to `out`.
@@ -152,10 +193,27 @@ impl<Ctx> Decode<Ctx> for Item {
                 first: u64::decode(d)?,
                 last: u64::decode(d)?,
             },
+            4 => {
+                let index = u32::decode(d)?;
+                let Some(path) = usize::try_from(index).ok().and_then(|i| KNOWN_PATHS.get(i))
+                else {
+                    return Err(BincodeDecodeError::UnexpectedVariant {
+                        type_name: "known path",
+                        allowed: &KNOWN_PATH_INDICES,
+                        found: index,
+                    });
+                };
+                Item::Update {
+                    path: (*path).to_owned(),
+                    value: Value::decode(d)?,
+                    version: u64::decode(d)?,
+                    age_us: u64::decode(d)?,
+                }
+            }
             found => {
                 return Err(BincodeDecodeError::UnexpectedVariant {
                     type_name: "Item",
-                    allowed: &AllowedEnumVariants::Range { min: 0, max: 3 },
+                    allowed: &AllowedEnumVariants::Range { min: 0, max: 4 },
                     found,
                 })
             }

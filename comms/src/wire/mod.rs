@@ -34,6 +34,15 @@
 //! | 1   | `Talk`     | queue (str), seq (varint), value                  |
 //! | 2   | `TalkHead` | queue (str), first retained seq, last posted seq  |
 //! | 3   | `Nack`     | target robot (u8), queue (str), first, last (missing seqs) |
+//! | 4   | `Update` of a known path | index into [`KNOWN_PATHS`] (varint), value, version (varint), age_us (varint) |
+//!
+//! Item 4 is item 0 with the path as one byte: huddle's own keys (the arbitration claim,
+//! the world model, the pass receiver) cost 11 to 18 bytes of a frame as text, and a
+//! league's 128 bytes hold a claim, a pass receiver and a world model only without them.
+//! Writers use it only when asked ([`FrameWriter::with_known_paths`]; a replica does
+//! under a message budget), so frames without a budget stay byte for byte what earlier
+//! builds of format 3 read; readers take both. A reader from before item 4 drops a
+//! frame carrying one as malformed.
 //!
 //! Values: varint tag 0..=5 (`Int` zigzag varint, `Float` 8 bytes LE, `Bool` 1 byte,
 //! `String` varint length + UTF-8, `Floats` varint count + 8 bytes LE each (f64), `Bytes`
@@ -45,10 +54,11 @@
 //!
 //! Overhead per frame: the 18-byte header, the 5-byte echo when present, the seq and item-count varints (1 to 9 bytes
 //! each) and, with a team key, the 16-byte tag. Per update item: 1 byte of item index,
-//! the path (length varint and bytes), the value (1 tag byte, then its encoding; `Bytes`
+//! the path (length varint and bytes, or one byte for a known path under item 4), the value (1 tag byte, then its encoding; `Bytes`
 //! adds a length varint), and the version and age varints (1 to 9 bytes each). So the
 //! same payload costs more as a match goes on and its counters grow; [`FrameWriter::len`]
-//! and [`item_len`] compute it exactly without encoding.
+//! and [`item_len`] ([`item_len_coded`] for a writer with known paths) compute it
+//! exactly without encoding.
 //!
 //! # Reading frames
 //!
@@ -81,7 +91,24 @@ mod writer;
 
 pub use auth::TeamKey;
 pub use decode::{decode_frame, peek_origin, DecodeError};
-pub use writer::{encode_frame, item_len, value_len, varint_len, FrameWriter};
+pub use writer::{encode_frame, item_len, item_len_coded, value_len, varint_len, FrameWriter};
+
+/// Paths sent as one byte (item 4) by writers that use known paths: huddle's own keys,
+/// by index. Append only: an index, once given, is part of the format.
+pub const KNOWN_PATHS: [&str; 4] = [
+    "machine.heuristic",
+    "world.local",
+    "machine.pass_to",
+    "audio.heard",
+];
+
+/// The index of `path` in [`KNOWN_PATHS`].
+pub fn known_path_index(path: &str) -> Option<u8> {
+    KNOWN_PATHS
+        .iter()
+        .position(|&k| k == path)
+        .and_then(|i| u8::try_from(i).ok())
+}
 
 /// The first two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"HD";

@@ -270,6 +270,99 @@ fn golden_bytes_freeze_every_varint_width() {
     assert_eq!(decode_frame(&bytes, 7, None), Ok(frame));
 }
 
+/// A league's frame: the claim, the pass receiver and the world model under item 4
+/// (known paths as one byte), frozen like [`GOLDEN`].
+#[test]
+fn golden_bytes_freeze_known_paths() {
+    let update = |path: &str, value: Value| Item::Update {
+        path: path.into(),
+        value,
+        version: 300,
+        age_us: 7,
+    };
+    let frame = Frame {
+        clock: FrameClock::default(),
+        items: vec![
+            update("machine.heuristic", Value::Floats(vec![1.0, 0.0])),
+            update("machine.pass_to", Value::Int(2)),
+            update("world.local", Value::Bytes(vec![0xab, 0xcd])),
+            update("machine.heuristic.x", Value::Bool(true)),
+        ],
+        ..sample()
+    };
+    let mut w =
+        FrameWriter::new(7, 3, frame.incarnation, frame.seq, 1200, None).with_known_paths(true);
+    for item in &frame.items {
+        assert!(w.push(item.as_ref()));
+    }
+    let bytes = w.finish();
+    let body = concat!(
+        "fb2c01",
+        "04", // seq 300, 4 items
+        "04",
+        "00",
+        "04",
+        "02",
+        "000000000000f03f",
+        "0000000000000000",
+        "fb2c01",
+        "07",
+        "04",
+        "02",
+        "00",
+        "04",
+        "fb2c01",
+        "07", // Int 2, zigzag 4
+        "04",
+        "01",
+        "05",
+        "02",
+        "abcd",
+        "fb2c01",
+        "07",
+        // Not a known path (only whole paths are): as item 0.
+        "00",
+        "13",
+        "6d616368696e652e6865757269737469632e78",
+        "02",
+        "01",
+        "fb2c01",
+        "07",
+    );
+    assert_eq!(hex(&bytes[HEADER_LEN..]), body);
+    assert_eq!(decode_frame(&bytes, 7, None), Ok(frame.clone()));
+    // The same items without known paths: item 0 throughout, each path's length and
+    // text (18, 16 and 12 bytes) instead of one byte.
+    let plain = encode_frame(&frame, None);
+    assert_eq!(plain.len(), bytes.len() + 17 + 15 + 11);
+    assert_eq!(decode_frame(&plain, 7, None), Ok(frame));
+}
+
+#[test]
+fn an_unknown_known_path_index_is_malformed() {
+    let mut w = FrameWriter::new(7, 3, 1, 1, 1200, None).with_known_paths(true);
+    assert!(w.push(ItemRef::Update {
+        path: "world.local",
+        value: &Value::Int(1),
+        version: 1,
+        age_us: 0,
+    }));
+    let mut bytes = w.finish();
+    // seq, count, item 4, then the index: point it past the table.
+    let at = HEADER_LEN + 3;
+    assert_eq!(bytes[at], 1, "world.local is index 1");
+    for index in [KNOWN_PATHS.len() as u8, 250] {
+        bytes[at] = index;
+        assert!(
+            matches!(
+                decode_frame(&bytes, 7, None),
+                Err(DecodeError::Malformed(_))
+            ),
+            "index {index} names no path"
+        );
+    }
+}
+
 #[test]
 fn bad_frames_are_told_apart() {
     let key = TeamKey::new(b"k");
@@ -405,7 +498,10 @@ fn any_value() -> impl Strategy<Value = Value> {
 }
 
 fn any_path() -> impl Strategy<Value = String> {
-    "[a-z0-9_-]{1,8}(\\.[a-z0-9_-]{1,8}){0,2}"
+    prop_oneof![
+        3 => "[a-z0-9_-]{1,8}(\\.[a-z0-9_-]{1,8}){0,2}".boxed(),
+        1 => proptest::sample::select(&KNOWN_PATHS[..]).prop_map(str::to_owned).boxed(),
+    ]
 }
 
 pub(crate) fn any_item() -> impl Strategy<Value = Item> {
@@ -473,18 +569,32 @@ fn any_clock() -> impl Strategy<Value = FrameClock> {
 
 proptest! {
     #[test]
-    fn decode_inverts_encode_for_any_frame(frame in any_frame(), keyed in any::<bool>()) {
+    fn decode_inverts_encode_for_any_frame(frame in any_frame(), keyed in any::<bool>(), known in any::<bool>()) {
         let key = TeamKey::new(b"secret");
         let key = keyed.then_some(&key);
-        let bytes = encode_frame(&frame, key);
+        let mut w = FrameWriter::new(frame.team, frame.sender, frame.incarnation, frame.seq, usize::MAX, key)
+            .with_known_paths(known);
+        w.set_clock(frame.clock);
+        for item in &frame.items {
+            prop_assert!(w.push(item.as_ref()));
+        }
+        let len = w.len();
+        let bytes = w.finish();
+        prop_assert_eq!(bytes.len(), len);
+        if !known {
+            prop_assert_eq!(&bytes, &encode_frame(&frame, key));
+        }
         prop_assert_eq!(decode_frame(&bytes, frame.team, key), Ok(frame));
     }
 
     #[test]
-    fn computed_item_sizes_match_the_encoder(item in any_item()) {
+    fn computed_item_sizes_match_the_encoder(item in any_item(), known in any::<bool>()) {
         let mut sink = Vec::new();
-        prop_assert!(super::codec::encode_item(item.as_ref(), &mut sink));
-        prop_assert_eq!(item_len(item.as_ref()), sink.len());
+        prop_assert!(super::codec::encode_item(item.as_ref(), known, &mut sink));
+        prop_assert_eq!(item_len_coded(item.as_ref(), known), sink.len());
+        if !known {
+            prop_assert_eq!(item_len(item.as_ref()), sink.len());
+        }
     }
 
     #[test]

@@ -28,6 +28,7 @@ pub struct FrameWriter<'k> {
     count: usize,
     budget: usize,
     key: Option<&'k TeamKey>,
+    known_paths: bool,
 }
 
 impl<'k> FrameWriter<'k> {
@@ -56,7 +57,15 @@ impl<'k> FrameWriter<'k> {
             count: 0,
             budget,
             key,
+            known_paths: false,
         }
+    }
+
+    /// The writer sends the paths of [`super::KNOWN_PATHS`] as one byte (item 4; see
+    /// the module docs). Off by default.
+    pub fn with_known_paths(mut self, on: bool) -> Self {
+        self.known_paths = on;
+        self
     }
 
     /// Sets the frame's send stamp and echo (call before pushing items: an echo takes
@@ -96,7 +105,7 @@ impl<'k> FrameWriter<'k> {
     /// Appends `item` if the frame stays within budget; returns whether it did.
     pub fn push(&mut self, item: ItemRef<'_>) -> bool {
         let before = self.items.len();
-        if !codec::encode_item(item, &mut self.items)
+        if !codec::encode_item(item, self.known_paths, &mut self.items)
             || self.total_len(self.items.len(), self.count + 1) > self.budget
         {
             self.items.truncate(before);
@@ -124,9 +133,20 @@ impl<'k> FrameWriter<'k> {
     }
 }
 
-/// Encoded size of one item (what it adds to a frame's body), computed without encoding.
+/// Encoded size of one item (what it adds to a frame's body), computed without encoding,
+/// as a writer without known paths writes it.
 pub fn item_len(item: ItemRef<'_>) -> usize {
+    item_len_coded(item, false)
+}
+
+/// [`item_len`] for a writer that sends known paths as one byte (`known_paths`, see
+/// [`FrameWriter::with_known_paths`]) or not.
+pub fn item_len_coded(item: ItemRef<'_>, known_paths: bool) -> usize {
     let str_len = |s: &str| varint_len(s.len() as u64) + s.len();
+    let path_len = |s: &str| match super::known_path_index(s).filter(|_| known_paths) {
+        Some(i) => varint_len(u64::from(i)),
+        None => str_len(s),
+    };
     // Every variant index is below 251: one byte.
     1 + match item {
         ItemRef::Update {
@@ -134,7 +154,7 @@ pub fn item_len(item: ItemRef<'_>) -> usize {
             value,
             version,
             age_us,
-        } => str_len(path) + value_len(value) + varint_len(version) + varint_len(age_us),
+        } => path_len(path) + value_len(value) + varint_len(version) + varint_len(age_us),
         ItemRef::Talk { queue, seq, value } => str_len(queue) + varint_len(seq) + value_len(value),
         ItemRef::TalkHead { queue, first, last } => {
             str_len(queue) + varint_len(first) + varint_len(last)
