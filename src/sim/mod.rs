@@ -481,13 +481,26 @@ impl Simulation {
                     continue;
                 };
                 let now = self.harness.local_now(i);
-                if let Some((key, value)) =
-                    self.robots[i].redecide(robot::seconds(now), replica.blackboard(), now)
-                {
-                    // A goer change: priority under a budget.
-                    self.harness
-                        .set_priority(i, &key, value)
-                        .expect("robots only write their own valid keys");
+                let waiting = replica.is_pending(&robot::world_local_key());
+                let writes = self.robots[i].redecide(
+                    robot::seconds(now),
+                    replica.blackboard(),
+                    now,
+                    waiting,
+                );
+                for (key, value) in writes {
+                    if key == robot::world_local_key() {
+                        // Its latest tick's world model, riding along.
+                        self.harness.set(i, &key, value)
+                    } else {
+                        // A goer change: priority under a budget.
+                        self.harness.set_priority(i, &key, value)
+                    }
+                    .expect("robots only write their own valid keys");
+                    if key == robot::world_local_key() {
+                        let tick_s = self.next_tick_s[i] - self.cfg.brain.control_period_s;
+                        self.record_publication(i, tick_s);
+                    }
                 }
                 continue;
             }

@@ -124,6 +124,8 @@ pub struct PolicyState {
     /// When its latest "not going" went out, while no teammate has been heard taking
     /// the ball since (VOI under a budget, see [`VOI_RELEASE_REPEAT_S`]).
     released_at: Option<f64>,
+    /// What the robot knew at its latest tick.
+    latest: Option<Sent>,
 }
 
 /// What the robot knows now, for the decision.
@@ -166,6 +168,10 @@ pub struct Now<'a> {
     /// Under a budget: frames its pacing would let go now (`comms::Replica::
     /// budget_headroom`); `None` without one.
     pub headroom: Option<i64>,
+    /// A frame goes anyway for another write (the pass receiver changed; a claim waiting
+    /// for one counts too, see [`PolicyState::decide`]): under a budget the world model
+    /// rides in it, whatever the policy would have asked.
+    pub frame_anyway: bool,
 }
 
 impl PolicyState {
@@ -205,6 +211,10 @@ impl PolicyState {
             SendPolicy::Baseline => self.baseline(now),
             SendPolicy::Voi => self.voi(now),
         };
+        // Under a budget a frame is the scarce thing, not its bytes: one that goes anyway
+        // carries the newest world model.
+        let anyway = now.frame_anyway || claim_waiting;
+        let decision = decision.or((anyway && now.headroom.is_some()).then_some(false));
         let state = Sent {
             t_s: now.t_s,
             pose: now.pose,
@@ -213,6 +223,7 @@ impl PolicyState {
             cost: now.cost,
             h: now.h,
         };
+        self.latest = Some(state);
         match decision {
             Some(priority) => {
                 self.pending = Some(state);
@@ -235,6 +246,14 @@ impl PolicyState {
                 }
             },
             None => Action::Quiet,
+        }
+    }
+
+    /// The world model of the latest tick rides in a frame that goes anyway (with a claim
+    /// written between ticks): teammates hold it once that frame went.
+    pub fn world_model_rides(&mut self) {
+        if let Some(latest) = self.latest {
+            self.pending = Some(latest);
         }
     }
 
@@ -470,6 +489,7 @@ mod tests {
             rival_cost: Some(1.0),
             gate_chi2: 13.82,
             headroom: Some(10),
+            frame_anyway: false,
         }
     }
 
@@ -578,6 +598,87 @@ mod tests {
                 "a second later, teammate taking the ball: {taken}"
             );
         }
+    }
+
+    /// Under a budget a frame that goes anyway (a claim waiting, a new pass receiver)
+    /// carries the newest world model, though nothing in it is news enough to ask for a
+    /// frame of its own; without a budget frames are not counted and nothing changes.
+    #[test]
+    fn a_frame_that_goes_anyway_carries_the_world_model() {
+        let model = BallModel::default();
+        for (headroom, expected) in [
+            (Some(10), Action::Send { priority: false }),
+            (None, Action::Quiet),
+        ] {
+            let at = |t_s: f64, frame_anyway: bool| Now {
+                headroom,
+                frame_anyway,
+                ..now(&model, t_s, false, 2.0)
+            };
+            let mut p = PolicyState::default();
+            p.decide(SendPolicy::Voi, &at(0.0, false), false, false);
+            assert_eq!(
+                p.decide(SendPolicy::Voi, &at(0.04, false), false, false),
+                Action::Quiet,
+                "nothing new (headroom {headroom:?})"
+            );
+            assert_eq!(
+                p.decide(SendPolicy::Voi, &at(0.08, true), false, false),
+                expected,
+                "a frame goes anyway (headroom {headroom:?})"
+            );
+            // Baseline's limiter too: under a second since its last message.
+            let mut p = PolicyState::default();
+            p.decide(SendPolicy::Baseline, &at(0.0, false), false, false);
+            p.decide(SendPolicy::Baseline, &at(0.04, false), false, false);
+            assert_eq!(
+                p.decide(SendPolicy::Baseline, &at(0.08, true), false, false),
+                expected,
+                "baseline: a frame goes anyway (headroom {headroom:?})"
+            );
+        }
+    }
+
+    /// A claim written between ticks takes the latest tick's world model along: once
+    /// that frame went, teammates hold that tick's ball, and so does the robot's
+    /// predictor of what they believe.
+    #[test]
+    fn a_world_model_riding_with_a_claim_is_told_once_it_went() {
+        let model = BallModel::default();
+        let ball = |t_s: f64, x: f64| BallEstimate {
+            t_s,
+            mean: fusion::nalgebra::Vector4::new(x, 0.0, 0.0, 0.0),
+            cov: fusion::nalgebra::Matrix4::identity() * 1e-3,
+        };
+        let at = |t_s: f64, x: f64| Now {
+            ball: Some(ball(t_s, x)),
+            ..now(&model, t_s, false, 2.0)
+        };
+        let mut p = PolicyState::default();
+        p.decide(SendPolicy::Voi, &at(0.0, 0.0), false, false);
+        p.decide(SendPolicy::Voi, &at(0.04, 0.0), false, false);
+        // The ball moved 30 cm: not worth a frame of its own (tolerance 1 m).
+        assert_eq!(
+            p.decide(SendPolicy::Voi, &at(0.08, 0.3), false, false),
+            Action::Quiet
+        );
+        // Between ticks it decides to go: the claim is written, the 0.08 s tick's world
+        // model rides along.
+        p.wrote_claim(true, 0.5, 0.0);
+        p.world_model_rides();
+        assert_eq!(p.told().map(|t| t.h), Some(2.0), "nothing went yet");
+        // By the next tick the frame went: teammates hold that ball and the new claim.
+        let going = Now {
+            going: true,
+            h: 0.5,
+            cost: 0.0,
+            ..at(0.12, 0.3)
+        };
+        p.decide(SendPolicy::Voi, &going, false, false);
+        let told = p.told().expect("told");
+        assert_eq!((told.h, told.going), (0.5, true), "the claim went");
+        let sent = p.last.and_then(|l| l.ball).expect("a ball was told");
+        assert_eq!(sent.mean.x, 0.3, "the latest tick's ball rode along");
     }
 
     /// A robot at a still ball, with a budget running dry: nothing it knows has changed,

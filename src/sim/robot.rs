@@ -244,6 +244,8 @@ pub struct Robot {
     /// Whether it is switched on (a dead robot neither senses, decides nor sends).
     pub alive: bool,
     pass_to_posted: i64,
+    /// The world model of the latest tick, as published (written or not).
+    latest_lwm: Option<Value>,
     kick_ready_at_s: f64,
     push_reported_at_s: f64,
     decided_at_s: f64,
@@ -334,6 +336,7 @@ impl Robot {
             counts: PlayCounts::default(),
             alive: true,
             pass_to_posted: 0,
+            latest_lwm: None,
             kick_ready_at_s: 0.0,
             push_reported_at_s: f64::NEG_INFINITY,
             decided_at_s: 0.0,
@@ -431,6 +434,7 @@ impl Robot {
         };
 
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        self.latest_lwm.clone_from(&lwm_bytes);
         if let Some(bytes) = lwm_bytes {
             writes.push((world_local_key(), bytes));
         }
@@ -463,6 +467,7 @@ impl Robot {
             keepalive_s: self
                 .compact
                 .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
+            frame_anyway: receiver != self.pass_to_posted,
         };
         let action = self.policy.decide(
             cfg.send_policy,
@@ -563,31 +568,39 @@ impl Robot {
 
     /// Between control ticks: decide again on the latest cost with whatever the replica
     /// heard since (a robot reacts to a teammate's claim when it arrives, not at its next
-    /// camera frame); `t_s` is the robot's clock in seconds. Returns the write to make if
-    /// its claim changed.
+    /// camera frame); `t_s` is the robot's clock in seconds. Returns the writes to make if
+    /// its claim changed: the claim, with priority, and under a budget its latest tick's
+    /// world model when none waits already (`world_model_waiting`): the claim's frame is
+    /// spent anyway.
     pub fn redecide(
         &mut self,
         t_s: f64,
         board: &Blackboard,
         local_now: Instant,
-    ) -> Option<(Key, Value)> {
+        world_model_waiting: bool,
+    ) -> Vec<(Key, Value)> {
         if !self.alive {
-            return None;
+            return Vec::new();
         }
         let was = self.claims_ball();
         let (_, posted) = self.decide(t_s, board, local_now);
-        let changed = posted.going != was;
-        if changed {
-            let cost = self.arbiter.params().effective_cost(&posted);
-            if self.compact {
-                // Told once it went out (see `Arbiter::set_told`).
-                self.policy.wrote_claim(posted.going, posted.h, cost);
-                self.untold_claim = Some(posted);
-            } else {
-                self.policy.sent_going(posted.going, posted.h, cost);
-            }
+        if posted.going == was {
+            return Vec::new();
         }
-        changed.then(|| (arbitration::heuristic_key(), Value::from(posted)))
+        let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        let cost = self.arbiter.params().effective_cost(&posted);
+        if self.compact {
+            // Told once it went out (see `Arbiter::set_told`).
+            self.policy.wrote_claim(posted.going, posted.h, cost);
+            self.untold_claim = Some(posted);
+            if let Some(lwm) = self.latest_lwm.clone().filter(|_| !world_model_waiting) {
+                self.policy.world_model_rides();
+                writes.push((world_local_key(), lwm));
+            }
+        } else {
+            self.policy.sent_going(posted.going, posted.h, cost);
+        }
+        writes
     }
 
     /// What this robot sounds if its slot begins now (`t_s`, its clock): its claim while
