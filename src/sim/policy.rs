@@ -25,6 +25,8 @@
 //!   teammate told the team meanwhile. Under a budget running short it keeps
 //!   [`VOI_SPARE`] frames in hand (the tolerance grows, pose and heartbeat wait), so a
 //!   ball that moves unforeseen goes out at once.
+//!   A ball more than [`VOI_URGENT_BALL_M`] off what teammates believe goes with
+//!   priority.
 //! - Under both: a kick and a goer change go with priority (the replica may spend its
 //!   reserve on them at once), and under a budget a goer's claim goes again before
 //!   teammates would drop it (`keepalive_s`).
@@ -60,6 +62,18 @@ pub const VOI_SPARE: i64 = 5;
 /// RMSE, baseline 1.764 m): 0.5 m 1.393, 0.8 m 1.326, 1.0 m 1.307, 1.5 m 1.310, 2.0 m
 /// 1.244 (within the seeds' noise from 1.0 m on; one goer 86.8–87.9% throughout).
 pub const VOI_BALL_TOLERANCE_M: f64 = 1.0;
+/// A ball further off what teammates believe than this, metres, is news that cannot wait:
+/// the VOI policy sends it with priority (the team's room beyond its pacing line), where
+/// a dry budget would otherwise hold it for seconds. Why: a kick whose report turned out
+/// wrong (a weak contact, a push after it) or a bounce sends every blind teammate's
+/// belief off at metres per second until someone who sees the ball speaks (seed 1: after
+/// robot 4's kick report at 44.5 s robot 2's team ball was 2 m off within 0.5 s and 4.5 m
+/// off at 46 s, with no spare frame in the team). Tuned on seeds 4–27 (`huddle sim
+/// --budget spl`, 600 s; blind team-ball RMSE, one goer): none 1.074 m 98.26%, 1.0 m
+/// 0.931 m 97.31%, 1.25 m 0.903 m 98.31%, 1.5 m 0.960 m 98.28%, 2.0 m 1.005 m 98.46%,
+/// 2.5 m 1.027 m 97.94%, 3.0 m 1.022 m 97.90% (the baseline: 1.452 m 96.88%). Below
+/// 1.25 m the priority frames crowd out claims; above it the tail waits.
+pub const VOI_URGENT_BALL_M: f64 = 1.25;
 /// … with plenty of budget in hand (a Humanoid budget), metres.
 pub const VOI_ABUNDANT_BALL_TOLERANCE_M: f64 = 0.25;
 /// The VOI policy sends at least this often, seconds.
@@ -455,6 +469,9 @@ impl PolicyState {
                 } else {
                     e.norm() * theirs / total
                 };
+                if significant && shift > VOI_URGENT_BALL_M {
+                    return Some(true);
+                }
                 (significant && shift > tolerance).then_some(false)
             }
         }
@@ -596,6 +613,38 @@ mod tests {
                 p.decide(SendPolicy::Voi, &later(3.04), false, false),
                 expected,
                 "a second later, teammate taking the ball: {taken}"
+            );
+        }
+    }
+
+    /// A ball far off what teammates believe goes at once, with priority, however dry
+    /// the budget; a smaller error waits for spare frames.
+    #[test]
+    fn a_ball_far_off_what_teammates_believe_goes_with_priority() {
+        let model = BallModel::default();
+        let ball = |t_s: f64, x: f64| BallEstimate {
+            t_s,
+            mean: fusion::nalgebra::Vector4::new(x, 0.0, 0.0, 0.0),
+            cov: fusion::nalgebra::Matrix4::identity() * 1e-3,
+        };
+        for (off_m, expected) in [
+            (1.1, Action::Quiet),
+            (VOI_URGENT_BALL_M + 0.2, Action::Send { priority: true }),
+        ] {
+            // Told at x = 0 (still); the robot sees it at `off_m`, with no frame in hand.
+            let at = |t_s: f64, x: f64| Now {
+                ball: Some(ball(t_s, x)),
+                told: Some(ball(0.0, 0.0)),
+                headroom: Some(0),
+                ..now(&model, t_s, false, 2.0)
+            };
+            let mut p = PolicyState::default();
+            p.decide(SendPolicy::Voi, &at(0.0, 0.0), false, false);
+            p.decide(SendPolicy::Voi, &at(0.04, 0.0), false, false);
+            assert_eq!(
+                p.decide(SendPolicy::Voi, &at(1.0, off_m), false, false),
+                expected,
+                "the ball {off_m} m off what teammates believe, on a dry budget"
             );
         }
     }
