@@ -489,6 +489,15 @@ fn claim_due(last: &Sent, now: &Now<'_>) -> bool {
 mod tests {
     use super::*;
 
+    /// A still ball at (x, 0), known to a millimetre, as estimated at `t_s`.
+    fn still_ball(t_s: f64, x: f64) -> BallEstimate {
+        BallEstimate {
+            t_s,
+            mean: fusion::nalgebra::Vector4::new(x, 0.0, 0.0, 0.0),
+            cov: fusion::nalgebra::Matrix4::identity() * 1e-3,
+        }
+    }
+
     fn now(model: &BallModel, t_s: f64, going: bool, h: f64) -> Now<'_> {
         Now {
             t_s,
@@ -622,19 +631,14 @@ mod tests {
     #[test]
     fn a_ball_far_off_what_teammates_believe_goes_with_priority() {
         let model = BallModel::default();
-        let ball = |t_s: f64, x: f64| BallEstimate {
-            t_s,
-            mean: fusion::nalgebra::Vector4::new(x, 0.0, 0.0, 0.0),
-            cov: fusion::nalgebra::Matrix4::identity() * 1e-3,
-        };
         for (off_m, expected) in [
             (1.1, Action::Quiet),
             (VOI_URGENT_BALL_M + 0.2, Action::Send { priority: true }),
         ] {
             // Told at x = 0 (still); the robot sees it at `off_m`, with no frame in hand.
             let at = |t_s: f64, x: f64| Now {
-                ball: Some(ball(t_s, x)),
-                told: Some(ball(0.0, 0.0)),
+                ball: Some(still_ball(t_s, x)),
+                told: Some(still_ball(0.0, 0.0)),
                 headroom: Some(0),
                 ..now(&model, t_s, false, 2.0)
             };
@@ -694,13 +698,8 @@ mod tests {
     #[test]
     fn a_world_model_riding_with_a_claim_is_told_once_it_went() {
         let model = BallModel::default();
-        let ball = |t_s: f64, x: f64| BallEstimate {
-            t_s,
-            mean: fusion::nalgebra::Vector4::new(x, 0.0, 0.0, 0.0),
-            cov: fusion::nalgebra::Matrix4::identity() * 1e-3,
-        };
         let at = |t_s: f64, x: f64| Now {
-            ball: Some(ball(t_s, x)),
+            ball: Some(still_ball(t_s, x)),
             ..now(&model, t_s, false, 2.0)
         };
         let mut p = PolicyState::default();
