@@ -489,7 +489,8 @@ impl Simulation {
                     waiting,
                 );
                 for (key, value) in writes {
-                    if key == robot::world_local_key() {
+                    let lwm = key == robot::world_local_key();
+                    if lwm {
                         // Its latest tick's world model, riding along.
                         self.harness.set(i, &key, value)
                     } else {
@@ -497,7 +498,7 @@ impl Simulation {
                         self.harness.set_priority(i, &key, value)
                     }
                     .expect("robots only write their own valid keys");
-                    if key == robot::world_local_key() {
+                    if lwm {
                         let tick_s = self.next_tick_s[i] - self.cfg.brain.control_period_s;
                         self.record_publication(i, tick_s);
                     }
