@@ -174,16 +174,20 @@ impl Replica {
             let Some(path) = self.dirty.get(i) else {
                 break;
             };
-            if let Some(e) = self.board.get_stored(me, path) {
-                if !w.push(update_ref(path, e, now, age_cap)) {
+            let pushed = match self.board.get_stored(me, path) {
+                Some(e) if !w.push(update_ref(path, e, now, age_cap)) => {
                     full = true;
                     skipped += 1;
                     i += 1;
                     continue;
                 }
-                sent.push(path.to_owned());
+                Some(_) => true,
+                None => false,
+            };
+            let path = self.dirty.remove_at(i);
+            if pushed {
+                sent.extend(path);
             }
-            self.dirty.remove_at(i);
         }
         while !full {
             let Some(path) = self.refresh_queue.front() else {
