@@ -209,12 +209,6 @@ impl Harness {
         }
     }
 
-    /// Robot `i` takes back its changed `key` still waiting for a frame
-    /// ([`Replica::withdraw`]).
-    pub fn withdraw(&mut self, i: usize, key: &Key) -> bool {
-        self.replicas[i].as_mut().is_some_and(|r| r.withdraw(key))
-    }
-
     /// Robot `i` writes `key = value` now with priority ([`Replica::set_priority`]: under
     /// a budget it may draw on the reserve at once).
     pub fn set_priority(&mut self, i: usize, key: &Key, value: Value) -> Result<(), SetError> {

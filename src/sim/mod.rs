@@ -305,6 +305,8 @@ pub struct Simulation {
     homes: Vec<Vec2>,
     holders: Vec<u8>,
     next_tick_s: Vec<f64>,
+    /// When each robot last ticked (global s): its latest world model's publication time.
+    ticked_at_s: Vec<f64>,
     step: u64,
     next_snapshot_s: f64,
     /// The latest event that changed the true ball's motion (global s), for the NEES
@@ -441,6 +443,7 @@ impl Simulation {
             homes,
             holders,
             next_tick_s,
+            ticked_at_s: vec![0.0; n],
             step: 0,
             next_snapshot_s: 0.0,
             ball_event: (f64::NEG_INFINITY, BallEvent::Quiet),
@@ -499,8 +502,7 @@ impl Simulation {
                     }
                     .expect("robots only write their own valid keys");
                     if lwm {
-                        let tick_s = self.next_tick_s[i] - self.cfg.brain.control_period_s;
-                        self.record_publication(i, tick_s);
+                        self.record_publication(i, self.ticked_at_s[i]);
                     }
                 }
                 continue;
@@ -509,6 +511,7 @@ impl Simulation {
             if !self.robots[i].alive {
                 continue;
             }
+            self.ticked_at_s[i] = t;
             let Some(replica) = self.harness.replica(i) else {
                 continue;
             };
@@ -531,11 +534,6 @@ impl Simulation {
             let out = self.robots[i].tick(self.world.config(), &self.cfg.brain, input);
             if let Some(cmd) = out.command {
                 self.world.command_believed(i, cmd, &out.believed);
-            }
-            if out.withdraw {
-                self.harness.withdraw(i, &robot::world_local_key());
-                self.harness
-                    .withdraw(i, &comms::arbitration::heuristic_key());
             }
             for (key, value) in out.writes {
                 let lwm = key == robot::world_local_key();

@@ -170,9 +170,6 @@ pub struct TickOutput {
     pub writes: Vec<(Key, Value)>,
     /// They carry a goer change or a kick: under a budget they may use its reserve.
     pub priority: bool,
-    /// Take back the world model (and cost) still waiting for a frame: no longer worth
-    /// one.
-    pub withdraw: bool,
     /// The motion command, worked out in the field frame as the robot believes it is
     /// posed (`None`: carry on with the previous one).
     pub command: Option<MotionCommand>,
@@ -479,20 +476,11 @@ impl Robot {
             // Sparse messages: decide on the claim teammates hold (see `set_told`).
             self.arbiter.set_told(self.policy.told());
         }
-        let mut priority = action == (Action::Send { priority: true });
+        let priority = action == (Action::Send { priority: true });
         match action {
             // The claim written with the world model is the newest.
             Action::Send { .. } => self.untold_claim = None,
             Action::Quiet => writes.clear(),
-            // Taking back the world model takes back the claim in its frame: a claim
-            // change still untold goes again, on its own.
-            Action::Withdraw => {
-                writes.clear();
-                if let Some(claim) = self.untold_claim {
-                    writes.push((arbitration::heuristic_key(), Value::from(claim)));
-                    priority = true;
-                }
-            }
         }
         if receiver != self.pass_to_posted {
             self.pass_to_posted = receiver;
@@ -501,7 +489,6 @@ impl Robot {
         TickOutput {
             writes,
             priority,
-            withdraw: action == Action::Withdraw,
             command,
             believed: self.pose_belief,
             kick,
@@ -570,8 +557,8 @@ impl Robot {
     /// heard since (a robot reacts to a teammate's claim when it arrives, not at its next
     /// camera frame); `t_s` is the robot's clock in seconds. Returns the writes to make if
     /// its claim changed: the claim, with priority, and under a budget its latest tick's
-    /// world model when none waits already (`world_model_waiting`): the claim's frame is
-    /// spent anyway.
+    /// world model when none waits already (`world_model_waiting`) and that tick's did
+    /// not go: the claim's frame is spent anyway.
     pub fn redecide(
         &mut self,
         t_s: f64,
@@ -593,9 +580,10 @@ impl Robot {
             // Told once it went out (see `Arbiter::set_told`).
             self.policy.wrote_claim(posted.going, posted.h, cost);
             self.untold_claim = Some(posted);
-            if let Some(lwm) = self.latest_lwm.clone().filter(|_| !world_model_waiting) {
-                self.policy.world_model_rides();
-                writes.push((world_local_key(), lwm));
+            if let Some(lwm) = self.latest_lwm.clone() {
+                if !world_model_waiting && self.policy.world_model_rides() {
+                    writes.push((world_local_key(), lwm));
+                }
             }
         } else {
             self.policy.sent_going(posted.going, posted.h, cost);

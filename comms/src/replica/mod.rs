@@ -262,15 +262,6 @@ impl Replica {
         self.budget.as_ref().map(|b| b.headroom(self.now))
     }
 
-    /// Takes back this robot's changed value at `key` while it waits for a frame: it
-    /// stays on the blackboard (and in the refresh) but no longer asks for a frame of its
-    /// own. For a sending policy that re-weighs a held message (a teammate told the team
-    /// meanwhile). Whether it was waiting.
-    pub fn withdraw(&mut self, key: &Key) -> bool {
-        self.urgent.remove(key.path());
-        self.dirty.remove(key.path())
-    }
-
     /// Tells a pooled budget how many frames teammates have sent.
     fn note_team_frames(&mut self) {
         if let Some(b) = &mut self.budget {

@@ -37,7 +37,7 @@
 //! | 4   | `Update` of a known path | index into [`KNOWN_PATHS`] (varint), value, version (varint), age_us (varint) |
 //!
 //! Item 4 is item 0 with the path as one byte: huddle's own keys (the arbitration claim,
-//! the world model, the pass receiver) cost 11 to 18 bytes of a frame as text, and a
+//! the world model, the pass receiver) cost 12 to 18 bytes of a frame as text, and a
 //! league's 128 bytes hold a claim, a pass receiver and a world model only without them.
 //! Writers use it only when asked ([`FrameWriter::with_known_paths`]; a replica does
 //! under a message budget), so frames without a budget stay byte for byte what earlier
