@@ -156,6 +156,8 @@ impl Replica {
         // Priority items first, then the longest waiting. One that does not fit keeps its
         // place at the head of the line while a few smaller ones behind it may still go.
         // Values in this frame as news: the refresh below does not repeat them.
+        // Kept only when a refresh is due (no list on the busy path of a frame of news).
+        let refreshing = !self.refresh_queue.is_empty();
         let mut sent: Vec<String> = Vec::new();
         let urgent: Vec<String> = self.urgent.iter().cloned().collect();
         for path in urgent {
@@ -164,7 +166,9 @@ impl Replica {
                 _ => {
                     self.dirty.remove(&path);
                     self.urgent.remove(&path);
-                    sent.push(path);
+                    if refreshing {
+                        sent.push(path);
+                    }
                 }
             }
         }
@@ -185,7 +189,7 @@ impl Replica {
                 None => false,
             };
             let path = self.dirty.remove_at(i);
-            if pushed {
+            if pushed && refreshing {
                 sent.extend(path);
             }
         }
