@@ -677,6 +677,76 @@ mod replica_tests {
         assert!(refreshed > 0, "the refresh still rides along");
     }
 
+    /// Under a budget a frame leaves out its echo (5 bytes of clock estimate, which any
+    /// later frame can carry) rather than a changed value that fits without it: with a
+    /// team key a league frame is 16 bytes tighter.
+    #[test]
+    fn an_echo_gives_way_to_news_that_fits_without_it() {
+        let key = [7u8; 32];
+        let claim = crate::arbitration::heuristic_key();
+        let blob = Key::parse("*.var.blob").unwrap();
+        let from = std::net::SocketAddr::from(([127, 0, 0, 1], 2000));
+        let posted = crate::arbitration::Posted {
+            h: 1.0,
+            going: true,
+        };
+        let mut crowded = 0;
+        for len in 20..=90 {
+            let cfg = ReplicaConfig::new(3, 1)
+                .with_budget(&crate::BudgetSpec::SPL, 5)
+                .with_team_key(key);
+            let mut r3 = Replica::new(cfg, 3, at(0)).unwrap();
+            let mut r1 =
+                Replica::new(ReplicaConfig::new(1, 1).with_team_key(key), 1, at(0)).unwrap();
+            r1.handle_timeout(at(0));
+            r3.handle_timeout(at(0));
+            while let Some(t) = r1.poll_transmit() {
+                r3.handle_datagram(at(5), from, &t.payload);
+            }
+            let value = Value::Bytes(vec![0xab; len]);
+            if r3.set_key(at(10), &blob, value.clone()).is_err() {
+                // Too large for a league frame on its own: refused, nothing to weigh.
+                continue;
+            }
+            r3.set_priority(at(10), &claim, Value::from(posted))
+                .unwrap();
+            r3.handle_timeout(at(10));
+            let frame = r3.poll_transmit().expect("the claim goes").payload;
+            assert!(frame.len() <= 128, "len {len}: {} bytes", frame.len());
+            let decoded =
+                crate::wire::decode_frame(&frame, 1, Some(&crate::wire::TeamKey::new(&key)))
+                    .unwrap();
+            // Both values, written as the replica does, in a frame without an echo.
+            let tk = crate::wire::TeamKey::new(&key);
+            let mut w =
+                crate::wire::FrameWriter::new(1, 3, 3, 1, 128, Some(&tk)).with_known_paths(true);
+            let both = [(&claim, Value::from(posted)), (&blob, value)]
+                .iter()
+                .all(|(k, v)| {
+                    w.push(crate::wire::ItemRef::Update {
+                        path: k.path(),
+                        value: v,
+                        version: 1,
+                        age_us: 0,
+                    })
+                });
+            if both {
+                assert_eq!(
+                    decoded.items.len(),
+                    2,
+                    "len {len}: both fit without an echo"
+                );
+            }
+            if decoded.clock.echo.is_none() {
+                assert!(both, "len {len}: the echo went for nothing");
+                crowded += 1;
+            } else {
+                assert!(frame.len() <= 128);
+            }
+        }
+        assert!(crowded > 0, "some length fits only without the echo");
+    }
+
     /// Known paths go as one byte under a budget only: without one a frame is what every
     /// format-3 reader takes.
     #[test]

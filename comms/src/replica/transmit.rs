@@ -5,8 +5,8 @@ use crate::blackboard::Entry;
 use crate::key::Scope;
 use crate::time::{duration_to_micros, Instant};
 use crate::wire::{
-    Echo, FrameClock, FrameWriter, ItemRef, ECHO_HOLD_UNIT_US, ECHO_LEN, HEADER_LEN,
-    MAX_ECHO_HOLD_US, TAG_LEN,
+    self, varint_len, Echo, FrameClock, FrameWriter, ItemRef, ECHO_HOLD_UNIT_US, ECHO_LEN,
+    HEADER_LEN, MAX_ECHO_HOLD_US, TAG_LEN,
 };
 
 use super::budget::Class;
@@ -42,6 +42,30 @@ impl Replica {
         } else {
             (u64::MAX, u64::MAX)
         }
+    }
+
+    /// Under a budget: whether the changed values waiting fit one frame without an echo
+    /// but not with one. The echo then waits for the next frame (it only feeds the clock
+    /// estimate, which any later frame can); the values would wait for a frame of their
+    /// own, seconds later under a league's budget. Only for frames of changed values
+    /// alone (NACKs and talk messages keep the echo).
+    fn echo_crowds_out_news(&self, now: Instant, age_cap: u64) -> bool {
+        if !(self.nacks_out.is_empty() && self.talk_out.is_empty()) {
+            return false;
+        }
+        let me = Scope::Robot(self.cfg.robot_id);
+        let known = self.known_paths();
+        let (mut items, mut len) = (0u64, 0usize);
+        // Priority items are changed values too: the dirty queue holds them all.
+        for path in self.dirty.iter() {
+            if let Some(e) = self.board.get_stored(me, path) {
+                items += 1;
+                len += wire::item_len_coded(update_ref(path, e, now, age_cap), known);
+            }
+        }
+        let tag = if self.key.is_some() { TAG_LEN } else { 0 };
+        let frame = HEADER_LEN + varint_len(self.seq + 1) + varint_len(items) + len + tag;
+        frame <= self.cfg.mtu && frame + ECHO_LEN > self.cfg.mtu
     }
 
     /// The echo for the next frame: of the present teammates heard recently enough for
@@ -106,7 +130,12 @@ impl Replica {
         };
         let me = Scope::Robot(self.cfg.robot_id);
         let now = self.now;
-        let echo = self.next_echo(now);
+        let age_cap = self.widest_version_and_age().1;
+        let echo = if class.is_some() && self.echo_crowds_out_news(now, age_cap) {
+            None
+        } else {
+            self.next_echo(now)
+        };
         let mut w = FrameWriter::new(
             self.cfg.team_id,
             self.cfg.robot_id,
@@ -116,7 +145,6 @@ impl Replica {
             self.key.as_ref(),
         )
         .with_known_paths(self.known_paths());
-        let age_cap = self.widest_version_and_age().1;
         w.set_clock(FrameClock {
             stamp_us: stamp_of(now),
             echo,
