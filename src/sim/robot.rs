@@ -431,11 +431,15 @@ impl Robot {
         };
 
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
-        self.latest_lwm.clone_from(&lwm_bytes);
+        if self.compact {
+            // Only a budget's ride-along reads it (see `redecide`).
+            self.latest_lwm.clone_from(&lwm_bytes);
+        }
         if let Some(bytes) = lwm_bytes {
             writes.push((world_local_key(), bytes));
         }
         let (receiver, command, kick) = self.act(field, cfg, &input);
+        let receiver_changed = receiver != self.pass_to_posted;
         let now = super::policy::Now {
             t_s: t,
             pose: self.pose_belief,
@@ -464,7 +468,7 @@ impl Robot {
             keepalive_s: self
                 .compact
                 .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
-            frame_anyway: receiver != self.pass_to_posted,
+            frame_anyway: receiver_changed,
         };
         let action = self.policy.decide(
             cfg.send_policy,
@@ -482,7 +486,7 @@ impl Robot {
             Action::Send { .. } => self.untold_claim = None,
             Action::Quiet => writes.clear(),
         }
-        if receiver != self.pass_to_posted {
+        if receiver_changed {
             self.pass_to_posted = receiver;
             writes.push((pass_to_key(), Value::Int(receiver)));
         }
