@@ -35,7 +35,7 @@ fn play(policy: SendPolicy, seed: u64) -> Report {
         ..SimConfig::default()
     };
     cfg.network.preset = netsim::Preset::Competition;
-    cfg.brain.send_policy = policy;
+    cfg.brain.team.send_policy = policy;
     let mut sim = Simulation::new(cfg).expect("a valid configuration");
     sim.run(|_| {});
     sim.report(0.0)

@@ -26,7 +26,7 @@ impl PoseEstimate {
 
 /// Odometry since the previous event, in the robot frame at the start of the motion
 /// (the seed's Δf, Δl, Δθ).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Odometry {
     /// Δf, along the robot's +y.
     pub forward_m: f64,

@@ -40,9 +40,9 @@ pub struct SimArgs {
     #[arg(long)]
     pub budget: Option<comms::BudgetSpec>,
     /// When robots send: every (each control tick), baseline (B-Human-style thresholds),
-    /// voi (value of information).
-    #[arg(long, value_enum, default_value = "every")]
-    pub policy: huddle::sim::policy::SendPolicy,
+    /// voi (value of information). Default: voi under a budget, every without one.
+    #[arg(long, value_enum)]
+    pub policy: Option<huddle::sim::policy::SendPolicy>,
     /// How frames travel: multicast, broadcast (SPL), unicast (one copy per teammate).
     #[arg(long, value_enum, default_value = "multicast")]
     pub transport: huddle::sim::Transport,
@@ -155,7 +155,7 @@ impl Default for SimArgs {
             jitter: None,
             dtim: None,
             budget: None,
-            policy: huddle::sim::policy::SendPolicy::Every,
+            policy: None,
             transport: huddle::sim::Transport::Multicast,
             sweep: None,
             reference_q: None,
@@ -246,12 +246,13 @@ pub fn run(args: SimArgs) -> Result<()> {
 
 /// The match `args` describe.
 fn config(args: &SimArgs) -> SimConfig {
-    let mut brain = huddle::sim::BrainConfig {
-        send_policy: args.policy,
-        ..huddle::sim::BrainConfig::default()
-    };
+    let mut brain = huddle::sim::BrainConfig::default();
+    brain.team.send_policy = team::policy::SendPolicy::default_for(args.budget.is_some());
+    if let Some(p) = args.policy {
+        brain.team.send_policy = p;
+    }
     if let Some(q) = args.team_q {
-        let wm = &mut brain.world_model;
+        let wm = &mut brain.team.world_model;
         wm.local.ball.model = fusion::BallModel::Rolling {
             friction_per_s: 1.0,
             accel_noise_m2_per_s3: q,
@@ -262,7 +263,7 @@ fn config(args: &SimArgs) -> SimConfig {
         wm.global.ball = wm.local.ball.model;
     }
     if let Some(spec) = &args.team_ball {
-        tune_team_ball(&mut brain.world_model, spec);
+        tune_team_ball(&mut brain.team.world_model, spec);
     }
     SimConfig {
         brain,

@@ -80,6 +80,46 @@ impl Default for FieldConfig {
 }
 
 impl FieldConfig {
+    /// The calibration a team would measure on this field if it measured perfectly: the
+    /// world's own constants. The simulator hands it to robots only when asked to
+    /// (`SimConfig::calibration` unset); robots never see the world itself.
+    pub fn exact_calibration(&self) -> team::Calibration {
+        team::Calibration {
+            field: team::calibration::FieldGeometry {
+                length_m: self.length_m,
+                width_m: self.width_m,
+                goal_width_m: self.goal_width_m,
+                border_m: self.border_m,
+            },
+            ball: team::calibration::BallCalibration {
+                radius_m: self.ball.radius_m,
+                rolling_decel_mps2: self.ball.rolling_decel_mps2,
+                drag_per_s: self.ball.drag_per_s,
+                restitution: self.ball.restitution,
+            },
+            body: team::calibration::BodyCalibration {
+                radius_m: self.kinematics.radius_m,
+                top_speed_mps: self.kinematics.top_speed_mps,
+            },
+            opponent: team::calibration::BodyCalibration {
+                radius_m: self.opponent_kinematics.radius_m,
+                top_speed_mps: self.opponent_kinematics.top_speed_mps,
+            },
+            kick: team::calibration::KickCalibration {
+                speed_mps: self.kick_speed_mps,
+                direction_sigma_rad: self.kick_noise_rad,
+                reach_margin_m: KICK_REACH_MARGIN_M,
+                max_angle_rad: KICK_MAX_ANGLE_RAD,
+            },
+            sensors: team::calibration::SensorCalibration {
+                odometry_noise_frac: self.odometry_noise_frac,
+                range_noise_m: self.camera.range_noise_m,
+                range_noise_frac: self.camera.range_noise_frac,
+                bearing_noise_rad: self.camera.bearing_noise_rad,
+            },
+        }
+    }
+
     /// Centre of the opponent goal mouth.
     pub fn opponent_goal(&self) -> Vec2 {
         Vec2::new(self.length_m / 2.0, 0.0)

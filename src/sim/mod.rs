@@ -16,12 +16,12 @@ pub mod acoustic;
 mod acoustic_channel;
 pub mod metrics;
 pub mod perception;
-pub mod policy;
+/// The sending policies: the team layer's ([`team::policy`]).
+pub use team::policy;
 pub mod references;
 mod report;
 pub mod robot;
 pub mod svg;
-pub mod world_model;
 
 use std::time::Duration;
 
@@ -196,6 +196,10 @@ pub struct SimConfig {
     pub outage: Option<acoustic::OutageConfig>,
     /// The acoustic fallback and its room.
     pub acoustic: acoustic::AcousticConfig,
+    /// What the robots' brains know of their bodies, ball and field (`None`: the field's
+    /// own constants, [`FieldConfig::exact_calibration`]).
+    #[serde(skip)]
+    pub calibration: Option<team::Calibration>,
 }
 
 impl Default for SimConfig {
@@ -218,6 +222,7 @@ impl Default for SimConfig {
             snapshot_every_s: 0.25,
             outage: None,
             acoustic: acoustic::AcousticConfig::default(),
+            calibration: None,
         }
     }
 }
@@ -228,7 +233,7 @@ impl SimConfig {
     /// included) and the one-way delay (`delay`, the measured 99th percentile): see
     /// [`Report::conflict_bound_ms`] for why.
     pub fn conflict_bound(&self, claim_gap: Duration, delay: Duration) -> Duration {
-        claim_gap + delay + Duration::from_secs_f64(self.brain.control_period_s)
+        claim_gap + delay + Duration::from_secs_f64(self.brain.team.control_period_s)
     }
 
     /// The mean one-way delay frames take with this transport: unicast is not held to
@@ -338,7 +343,7 @@ impl Simulation {
                 cfg.duration_s
             )));
         }
-        if !(cfg.physics_dt_s > 0.0 && cfg.brain.control_period_s >= cfg.physics_dt_s) {
+        if !(cfg.physics_dt_s > 0.0 && cfg.brain.team.control_period_s >= cfg.physics_dt_s) {
             return Err(SimError::Config(
                 "the control period must be at least one physics step".into(),
             ));
@@ -373,7 +378,10 @@ impl Simulation {
             .collect();
         let world = World::new(cfg.field, &starts, cfg.opponents, cfg.seed);
         let mut params = cfg.arbitration;
-        let mut world_model = cfg.brain.world_model;
+        let mut world_model = cfg.brain.team.world_model;
+        let calibration = cfg
+            .calibration
+            .unwrap_or_else(|| cfg.field.exact_calibration());
         let budget = cfg.budget.map(|b| b.share(n));
         if let Some(b) = budget {
             // A robot's messages come `interval` apart at best: what it said last holds
@@ -400,6 +408,7 @@ impl Simulation {
                     p,
                     params,
                     pose,
+                    &calibration,
                     &world_model,
                     n,
                 )
@@ -421,7 +430,7 @@ impl Simulation {
         let mut harness = Harness::new(n, net, replica, cfg.seed)?;
         harness.set_unicast(cfg.transport == Transport::Unicast);
         harness.keep_events(false);
-        let period = cfg.brain.control_period_s;
+        let period = cfg.brain.team.control_period_s;
         let next_tick_s = (0..n).map(|i| period * i as f64 / n as f64).collect();
         let mut sim = Self {
             timeline: Timeline::new(n),
@@ -485,12 +494,7 @@ impl Simulation {
                 };
                 let now = self.harness.local_now(i);
                 let waiting = replica.is_pending(&robot::world_local_key());
-                let writes = self.robots[i].redecide(
-                    robot::seconds(now),
-                    replica.blackboard(),
-                    now,
-                    waiting,
-                );
+                let writes = self.robots[i].redecide(replica.blackboard(), now, waiting);
                 for (key, value) in writes {
                     let lwm = key == robot::world_local_key();
                     if lwm {
@@ -507,7 +511,7 @@ impl Simulation {
                 }
                 continue;
             }
-            self.next_tick_s[i] += self.cfg.brain.control_period_s;
+            self.next_tick_s[i] += self.cfg.brain.team.control_period_s;
             if !self.robots[i].alive {
                 continue;
             }
@@ -590,13 +594,13 @@ impl Simulation {
         self.metrics.sample(t_end, dt, visible, &goers);
         self.sample_outage(t_end, visible, &goers);
         self.timeline
-            .sample(t_end, visible, self.robots.iter().map(Robot::going));
+            .sample(t_end, visible, self.robots.iter().map(|r| r.going()));
         if self.cfg.snapshot_every_s > 0.0 && t_end >= self.next_snapshot_s {
             self.next_snapshot_s += self.cfg.snapshot_every_s;
             self.snapshots.push(Snapshot {
                 t_s: t_end,
                 robots: self.world.robots.iter().map(|b| b.pose).collect(),
-                going: self.robots.iter().map(Robot::going).collect(),
+                going: self.robots.iter().map(|r| r.going()).collect(),
                 opponents: self.world.opponents.iter().map(|b| b.pose.at).collect(),
                 ball: self.world.ball.at,
             });
@@ -784,7 +788,7 @@ impl Simulation {
             let mut team = team;
             team.estimate = team
                 .estimate
-                .predict_to(&self.cfg.brain.world_model.global.ball, now_s);
+                .predict_to(&self.cfg.brain.team.world_model.global.ball, now_s);
             let te = (team.estimate.position() - truth).norm_squared();
             let ce = (c.position() - truth).norm_squared();
             self.fusion.ball(&BallSample {
@@ -904,7 +908,7 @@ impl Simulation {
             .map(|spec| spec.team_messages.saturating_sub(team_sent));
         Report {
             budget: self.cfg.budget.map(|b| b.to_string()),
-            policy: self.cfg.brain.send_policy,
+            policy: self.cfg.brain.team.send_policy,
             transport: self.cfg.transport,
             team_messages_sent: per_robot.iter().sum(),
             messages_per_robot: per_robot,

@@ -1,36 +1,21 @@
-//! What a simulated robot's senses mean to the `fusion` crate: the two frame conventions,
-//! and the noise each measurement carries (from the same numbers the field simulator draws
-//! its noise with, so the filters are told the truth about their inputs).
+//! What a simulated robot's senses mean to its team layer: camera sightings as `fusion`
+//! measurements, with the noise the robot's own calibration ([`SensorCalibration`]) says
+//! they carry. The frame conventions are the team layer's ([`team::frames`]).
 //!
 //! Frames. The field simulator's robot frame has +x forward and +y left, and a heading
 //! θ_sim measured from field +x; `fusion` (the seed's Fig. 6) has +y forward and +x right,
 //! with θ = 0 facing field +y. So θ_fusion = θ_sim − π/2 and a point (f, l) seen by the
 //! camera is (−l, f) to `fusion`. Odometry means the same in both (forward, left, turn).
 
-use std::f64::consts::FRAC_PI_2;
-
-use fusion::nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
-use fusion::{wrap_angle, BallSighting, PoseEstimate, RangeBearingSighting};
+use fusion::nalgebra::{Matrix2, Vector2};
+use fusion::{BallSighting, RangeBearingSighting};
 
 use crate::field::body::Odometry;
-use crate::field::camera::{CameraConfig, Sighting};
-use crate::field::geometry::{Pose, Vec2};
+use crate::field::camera::Sighting;
+use crate::field::geometry::Vec2;
+use team::calibration::SensorCalibration;
 
-/// A true (or believed) pose as a `fusion` pose estimate with covariance `cov`.
-pub fn to_fusion_pose(pose: &Pose, cov: Matrix3<f64>) -> PoseEstimate {
-    PoseEstimate {
-        mean: Vector3::new(pose.at.x, pose.at.y, wrap_angle(pose.theta_rad - FRAC_PI_2)),
-        cov,
-    }
-}
-
-/// A `fusion` pose estimate's mean in the simulator's convention.
-pub fn from_fusion_pose(est: &PoseEstimate) -> Pose {
-    Pose {
-        at: Vec2::new(est.mean.x, est.mean.y),
-        theta_rad: wrap_angle(est.mean.z + FRAC_PI_2),
-    }
-}
+pub use team::frames::{from_fusion_point, from_fusion_pose, to_fusion_point, to_fusion_pose};
 
 /// Odometry as `fusion` takes it.
 pub fn to_fusion_odometry(odo: &Odometry) -> fusion::Odometry {
@@ -41,30 +26,14 @@ pub fn to_fusion_odometry(odo: &Odometry) -> fusion::Odometry {
     }
 }
 
-/// Q of one odometry reading, `diag(q_right, q_forward, q_θ)`: the simulator draws each
-/// component's noise with σ = k·d (translation, d the distance travelled) and
-/// k·(|Δθ| + 0.2·d) (turn), k = `noise_frac`. The measured motion stands in for the true
-/// one. `pushed_m` adds a floor for what odometry never sees (robots shoving each other).
-pub fn odometry_q(odo: &Odometry, noise_frac: f64, pushed_m: f64) -> Matrix3<f64> {
-    let d = odo.forward_m.hypot(odo.left_m);
-    let s_xy = noise_frac * d;
-    let s_th = noise_frac * (odo.turn_rad.abs() + 0.2 * d);
-    let floor = pushed_m * pushed_m;
-    Matrix3::from_diagonal(&Vector3::new(
-        s_xy * s_xy + floor,
-        s_xy * s_xy + floor,
-        s_th * s_th + 1e-8,
-    ))
-}
-
 /// σ of a range measured at `range_m`.
-fn range_sigma(cam: &CameraConfig, range_m: f64) -> f64 {
+fn range_sigma(cam: &SensorCalibration, range_m: f64) -> f64 {
     cam.range_noise_m + cam.range_noise_frac * range_m
 }
 
 /// A landmark at `field` seen as range and bearing, and R of that sighting.
 pub fn landmark_sighting(
-    cam: &CameraConfig,
+    cam: &SensorCalibration,
     field: Vec2,
     s: &Sighting,
 ) -> (RangeBearingSighting, Matrix2<f64>) {
@@ -81,7 +50,7 @@ pub fn landmark_sighting(
 
 /// A ball sighting in `fusion`'s robot coordinates, its range/bearing noise carried into
 /// x/y through the Jacobian of the polar → Cartesian map.
-pub fn ball_sighting(cam: &CameraConfig, s: &Sighting) -> BallSighting {
+pub fn ball_sighting(cam: &SensorCalibration, s: &Sighting) -> BallSighting {
     let (r, b) = (s.range_m, s.bearing_rad);
     let (sin, cos) = b.sin_cos();
     // Simulator frame: p = r (cos b, sin b); fusion frame: (−p_y, p_x).
@@ -97,19 +66,11 @@ pub fn ball_sighting(cam: &CameraConfig, s: &Sighting) -> BallSighting {
     }
 }
 
-/// A field point as `fusion` takes it (both crates' field frames are the same).
-pub fn to_fusion_point(p: Vec2) -> Vector2<f64> {
-    Vector2::new(p.x, p.y)
-}
-
-/// A `fusion` field point as the simulator's.
-pub fn from_fusion_point(v: &Vector2<f64>) -> Vec2 {
-    Vec2::new(v.x, v.y)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::geometry::Pose;
+    use fusion::nalgebra::Matrix3;
 
     #[test]
     fn both_conventions_put_a_seen_ball_at_the_same_field_point() {
@@ -125,7 +86,7 @@ mod tests {
         let est = to_fusion_pose(&pose, Matrix3::identity());
         let f = fusion::robot_to_field(
             &est.mean,
-            &ball_sighting(&CameraConfig::default(), &s).local,
+            &ball_sighting(&team::Calibration::default().sensors, &s).local,
         );
         assert!((f.x - sim.x).abs() < 1e-12 && (f.y - sim.y).abs() < 1e-12);
         let back = from_fusion_pose(&est);
@@ -155,7 +116,7 @@ mod tests {
 
     #[test]
     fn a_ball_straight_ahead_is_uncertain_along_the_line_of_sight_by_the_range_noise() {
-        let cam = CameraConfig::default();
+        let cam = team::Calibration::default().sensors;
         let b = ball_sighting(
             &cam,
             &Sighting {

@@ -36,7 +36,7 @@
 use fusion::{BallEstimate, BallModel};
 use serde::Serialize;
 
-use crate::field::geometry::Pose;
+use crate::geometry::Pose;
 
 /// The VOI policy's threshold, in σ of the robot's own ball estimate.
 pub const VOI_SIGMAS: f64 = 3.0;
@@ -86,7 +86,8 @@ pub const VOI_UNBUDGETED_POSE_TOLERANCE: (f64, f64) = (0.5, 0.35);
 pub const VOI_POSE_TOLERANCE: (f64, f64) = (2.0, std::f64::consts::PI);
 
 /// Which sending policy robots use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum SendPolicy {
     /// Every control tick.
@@ -96,6 +97,19 @@ pub enum SendPolicy {
     Baseline,
     /// Value of information (huddle's).
     Voi,
+}
+
+impl SendPolicy {
+    /// The policy a robot uses unless told otherwise: [`SendPolicy::Voi`] under a
+    /// league's budget (it beats the baseline on blind robots' team ball, see the crate
+    /// docs' table), [`SendPolicy::Every`] without one.
+    pub fn default_for(budgeted: bool) -> Self {
+        if budgeted {
+            SendPolicy::Voi
+        } else {
+            SendPolicy::Every
+        }
+    }
 }
 
 /// What this robot last told its team.

@@ -1,11 +1,156 @@
-//! How the robots' world models are set up: the LWM's and the GWM's filters, the ball
-//! model the team runs (and the table it was tuned with), and how a robot reports its
-//! kicks and pushes. Kept beside `robot` (which re-exports it) so that the robot's
-//! brain and its filters' settings are each one room.
+//! What a robot knows of its body, its ball and its field before the match (its
+//! [`Calibration`]: what a team measures on its own carpet, never the simulator's truth),
+//! and how its world models are set up from that ([`WorldModelConfig`]: the LWM's and the
+//! GWM's filters, the ball model the team runs and the table it was tuned with, and how a
+//! robot reports its kicks and pushes).
 
 use fusion::{BallFilterConfig, GlobalConfig, LocalConfig, PoseNoise};
+use serde::{Deserialize, Serialize};
 
-use crate::field::FieldConfig;
+/// The field's lines as the rules give them, metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FieldGeometry {
+    /// Length between the goal lines.
+    pub length_m: f64,
+    /// Width between the touch lines.
+    pub width_m: f64,
+    /// Goal mouth width.
+    pub goal_width_m: f64,
+    /// Carpet beyond the lines up to the boards.
+    pub border_m: f64,
+}
+
+impl FieldGeometry {
+    /// Fixed landmarks a camera can recognise: the four goal posts, the four corners and
+    /// the two ends of the halfway line.
+    pub fn landmarks(&self) -> [crate::geometry::Vec2; 10] {
+        use crate::geometry::Vec2;
+        let (hx, hy, gy) = (
+            self.length_m / 2.0,
+            self.width_m / 2.0,
+            self.goal_width_m / 2.0,
+        );
+        [
+            Vec2::new(hx, gy),
+            Vec2::new(hx, -gy),
+            Vec2::new(-hx, gy),
+            Vec2::new(-hx, -gy),
+            Vec2::new(hx, hy),
+            Vec2::new(hx, -hy),
+            Vec2::new(-hx, hy),
+            Vec2::new(-hx, -hy),
+            Vec2::new(0.0, hy),
+            Vec2::new(0.0, -hy),
+        ]
+    }
+}
+
+/// The ball as the team calibrated it on its carpet.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BallCalibration {
+    /// Radius, m.
+    pub radius_m: f64,
+    /// Constant rolling deceleration, m/s².
+    pub rolling_decel_mps2: f64,
+    /// Speed-proportional drag, 1/s.
+    pub drag_per_s: f64,
+    /// Share of the normal speed a board gives back.
+    pub restitution: f64,
+}
+
+/// A body (ours or an opponent's) as the team knows it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BodyCalibration {
+    /// Radius for contacts, m.
+    pub radius_m: f64,
+    /// Top speed over ground, m/s.
+    pub top_speed_mps: f64,
+}
+
+/// The robot's kick as the team measured it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct KickCalibration {
+    /// Speed the ball leaves at, m/s.
+    pub speed_mps: f64,
+    /// σ of the direction it leaves in, rad.
+    pub direction_sigma_rad: f64,
+    /// How far beyond touching (body radius + ball radius) the foot reaches, m.
+    pub reach_margin_m: f64,
+    /// How far off the heading the ball may lie for the foot to meet it, rad.
+    pub max_angle_rad: f64,
+}
+
+/// The robot's sensors' noise as the team measured it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SensorCalibration {
+    /// Odometry: σ as a fraction of the motion.
+    pub odometry_noise_frac: f64,
+    /// Camera range σ, m, plus …
+    pub range_noise_m: f64,
+    /// … this fraction of the range.
+    pub range_noise_frac: f64,
+    /// Camera bearing σ, rad.
+    pub bearing_noise_rad: f64,
+}
+
+/// What a robot's brain knows before the match: the nominal figures its team measured.
+/// The simulator's world draws its own physics; the brain never sees them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Calibration {
+    /// The field's lines.
+    pub field: FieldGeometry,
+    /// The ball.
+    pub ball: BallCalibration,
+    /// Its own body.
+    pub body: BodyCalibration,
+    /// Opponents' bodies.
+    pub opponent: BodyCalibration,
+    /// Its kick.
+    pub kick: KickCalibration,
+    /// Its sensors.
+    pub sensors: SensorCalibration,
+}
+
+impl Default for Calibration {
+    /// A small-size wheeled robot on a 9 × 6 m carpet: the figures huddle's simulator
+    /// uses as its nominal world.
+    fn default() -> Self {
+        Self {
+            field: FieldGeometry {
+                length_m: 9.0,
+                width_m: 6.0,
+                goal_width_m: 1.5,
+                border_m: 0.5,
+            },
+            ball: BallCalibration {
+                radius_m: 0.05,
+                rolling_decel_mps2: 0.6,
+                drag_per_s: 0.5,
+                restitution: 0.5,
+            },
+            body: BodyCalibration {
+                radius_m: 0.2,
+                top_speed_mps: 1.5,
+            },
+            opponent: BodyCalibration {
+                radius_m: 0.2,
+                top_speed_mps: 0.6,
+            },
+            kick: KickCalibration {
+                speed_mps: 4.0,
+                direction_sigma_rad: 0.08,
+                reach_margin_m: 0.08,
+                max_angle_rad: 40.0 * std::f64::consts::PI / 180.0,
+            },
+            sensors: SensorCalibration {
+                odometry_noise_frac: 0.05,
+                range_noise_m: 0.02,
+                range_noise_frac: 0.05,
+                bearing_noise_rad: 0.02,
+            },
+        }
+    }
+}
 
 /// How the robots' world models are set up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,14 +203,15 @@ pub struct WorldModelConfig {
 
 impl Default for WorldModelConfig {
     fn default() -> Self {
-        Self::for_field(&FieldConfig::default())
+        Self::calibrated(&Calibration::default())
     }
 }
 
 impl WorldModelConfig {
-    /// The world models of a team that plays on `field`: its ball model knows the field's
-    /// boards and the friction law the team calibrated on its carpet.
-    pub fn for_field(field: &FieldConfig) -> Self {
+    /// The world models of a team calibrated as `cal`: its ball model knows the field's
+    /// boards and the friction law the team measured on its carpet.
+    pub fn calibrated(cal: &Calibration) -> Self {
+        let field = &cal.field;
         // The ball as a team would calibrate it on its carpet: 0.5/s drag plus 0.6 m/s²
         // rolling deceleration, bouncing off the boards with e = 0.5 (σ 0.1: boards and
         // balls vary), and acceleration noise for what nobody reports (opponents' shoves,
@@ -143,8 +289,8 @@ impl WorldModelConfig {
         let ball = BallFilterConfig {
             pose_error_sharing: 1.5,
             model: fusion::BallModel::Field(fusion::FieldBall {
-                drag_per_s: field.ball.drag_per_s,
-                rolling_decel_mps2: field.ball.rolling_decel_mps2,
+                drag_per_s: cal.ball.drag_per_s,
+                rolling_decel_mps2: cal.ball.rolling_decel_mps2,
                 still_accel_noise_m2_per_s3: 0.05,
                 accel_noise_per_speed: 3.0,
                 still_below_mps: 0.0,
@@ -152,8 +298,8 @@ impl WorldModelConfig {
                     field.length_m,
                     field.width_m,
                     field.border_m,
-                    field.ball.radius_m,
-                    field.ball.restitution,
+                    cal.ball.radius_m,
+                    cal.ball.restitution,
                     0.1,
                 )),
             }),

@@ -1,0 +1,591 @@
+//! The fallback over sound: when the WLAN fails, robots sound their should-I-go claims as
+//! Cerberus tones and each hears what its own microphone's decoder makes of the room.
+//!
+//! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
+//! robot sounds only in its own slot of a repeating cycle on the team's (radio-synchronised)
+//! clock: the slot a message started in says who sent it, and the sender basic is free to
+//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
+//! set for a hall, not for a dry room: a 100 ms tone in a reverberant hall (critical
+//! distance 8 m, T60 anywhere from 0.6 to 2 s) is almost never decoded, even alone with a
+//! second of silence around it; the decoder needs about 300 ms there, and the previous
+//! slot's tail and the end test (half a tone past the end) want the guard at about 300 ms.
+//! The default 400 + 300 ms slot makes a 2.8 s cycle for four robots.
+//!
+//! **Decision.** While the radio is silent (no teammate's radio claim fresher than the
+//! arbitration's staleness limit) the fallback decides, on the claims this robot holds:
+//! each field player's newest, by radio (the last one heard before the outage) or by
+//! sound, its own as the team heard it (what it posted, then what it sounded, quantised).
+//! Every claim counts as fresh until `stale_cycles` cycles old: a missed message leaves
+//! the teammate's previous claim standing rather than making room for a second goer, so
+//! the goer the team agreed by radio keeps the ball until a claim sounded in the room
+//! says otherwise. A claim heard by sound counts from the end of its slot, on everyone's
+//! clock, its sender's too: robots that heard the same messages change their minds at the
+//! same instant. The rule is the arbitration's (`comms::arbitration::decide`: lowest cost,
+//! the goer's lowered by the hysteresis margin, ties to the lower id).
+//! What is left is robots that missed different messages: they disagree until the next
+//! cycle, and as the goer's "going" claim stands until it is heard to let go, this shows
+//! as time with no goer far more than as two goers.
+//!
+//! **Claim.** A short message carries 3 × 21 = 63 values ([`encode_claim`]): 0 = "no ball,
+//! no claim", 1–31 = "not going" with the cost h in one of 31 bins of
+//! [`COST_BIN_M`] from −0.5 m, 32–62 = "going" with its bin. The robot's (h, going) is what
+//! the radio posts, so the arbitration decides on the same kind of data either way.
+//!
+//! **Channel** ([`AcousticChannel`], the simulator's side; robots never see it). Each robot
+//! has a loudspeaker and a microphone at its true position. For every listener, every
+//! sounding robot's PCM arrives delayed by distance / 343 m/s and attenuated as 1/r (from
+//! 1 m); the room adds a diffuse reverberant field (a Schroeder reverberator, T60
+//! configurable, its level equal to the direct sound's at the critical distance, so it does
+//! not fall with distance) and the crowd adds speech babble (`audio::channel::Babble`) at
+//! a level given as the in-band SNR of one robot's sound heard at 1 m. The mix goes into
+//! the listener's own streaming `audio::Decoder`; two robots sounding together collide as
+//! the decoder makes of the sum. A robot's own sound is mixed in too, and ignored by its
+//! slot.
+
+use audio::{Message, Sender};
+use std::time::Duration;
+
+use comms::arbitration::{self, ArbitrationParams, Candidate, Decision, Posted};
+use serde::Serialize;
+
+/// Speed of sound, m/s.
+pub const SPEED_OF_SOUND_MPS: f64 = 343.0;
+/// Sample rate of the acoustic channel, Hz.
+pub const SAMPLE_RATE_HZ: u32 = 16_000;
+/// Width of one cost bin, m.
+pub const COST_BIN_M: f64 = 0.3;
+/// Cost at the bottom of bin 0, m (h can be as low as k1 = −0.5 m at the ball).
+pub const COST_FLOOR_M: f64 = -0.5;
+/// Cost bins per going state.
+pub const COST_BINS: u16 = 31;
+/// Values a short message carries when the slot names the sender (3 sender basics × 21).
+pub const CLAIM_VALUES: u16 = 63;
+
+/// How the fallback is set up.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AcousticConfig {
+    /// Whether robots use the fallback (sound their claims when the radio is stale and
+    /// decide on what they hear).
+    pub enabled: bool,
+    /// Tone (frame) duration, s.
+    pub tone_s: f64,
+    /// Silence after each tone before the next slot, s.
+    pub guard_s: f64,
+    /// In-band SNR of one robot's sound heard 1 m away, against the crowd's babble, dB.
+    pub crowd_snr_db_at_1m: f64,
+    /// The room's reverberation time, s.
+    pub t60_s: f64,
+    /// Distance at which the direct sound equals the reverberant field, m (default 8 m:
+    /// r_c ≈ 0.057·√(Q·V/T60) for a 10,000 m³ hall, Q = 2, T60 = 1 s).
+    pub critical_distance_m: f64,
+    /// Claims older than this many cycles no longer count while the fallback decides.
+    pub stale_cycles: f64,
+    /// Hysteresis margin of the fallback's decision, m (`None`: the arbitration's).
+    pub hysteresis_m: Option<f64>,
+    /// Whether a claim to be going whose sender's last slot went by unheard loses the
+    /// goer's hysteresis margin.
+    pub doubt_going: bool,
+}
+
+impl Default for AcousticConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            // 400 ms: in a reverberant room (T60 0.6–2 s, critical distance 8 m) the
+            // decoder decodes almost no 100 ms claims, even from a robot sounding alone
+            // with a second of silence around it (0–3%), 20–30% of 150 ms ones and
+            // ~95% of 300 ms ones; four robots taking turns: 300 ms 73–84%, 400 ms
+            // 93–97% with this guard (`tests/acoustic_fallback.rs` shows the
+            // difference).
+            tone_s: 0.4,
+            // The decoder's end test listens half a tone past the end, and in a hall the
+            // previous slot's tail still sounds: with 400 ms tones at T60 1 s, guards of
+            // 80/150/300/500 ms decoded 50/77/97/96% of the receptions.
+            guard_s: 0.3,
+            crowd_snr_db_at_1m: 25.0,
+            t60_s: 1.0,
+            critical_distance_m: 8.0,
+            // A claim counts for three cycles (8.4 s): missing one message must not
+            // drop a goer's claim, which would make a second goer.
+            stale_cycles: 3.0,
+            hysteresis_m: None,
+            doubt_going: true,
+        }
+    }
+}
+
+impl AcousticConfig {
+    /// One slot, s.
+    pub fn slot_s(&self) -> f64 {
+        self.tone_s + self.guard_s
+    }
+}
+
+/// A WLAN outage: every link down from `start_s` for `duration_s`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OutageConfig {
+    /// When it starts, s of simulated time.
+    pub start_s: f64,
+    /// How long it lasts, s.
+    pub duration_s: f64,
+}
+
+impl OutageConfig {
+    /// Whether `t_s` falls inside it.
+    pub fn contains(&self, t_s: f64) -> bool {
+        t_s >= self.start_s && t_s < self.start_s + self.duration_s
+    }
+}
+
+/// Who sounds when: a cycle of one slot per field player, on the team clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlotPlan {
+    /// The first field player's id (slot 0).
+    pub first_id: u8,
+    /// Slots in a cycle (field players).
+    pub slots: u8,
+    /// One slot, s.
+    pub slot_s: f64,
+}
+
+impl SlotPlan {
+    /// One cycle, s.
+    pub fn cycle_s(&self) -> f64 {
+        self.slot_s * f64::from(self.slots)
+    }
+
+    /// The slot robot `id` sounds in, if it has one.
+    pub fn slot_of(&self, id: u8) -> Option<u8> {
+        let k = id.checked_sub(self.first_id)?;
+        (k < self.slots).then_some(k)
+    }
+
+    /// Whether robot `id`'s slot begins in `[t_s, t_s + dt_s)`.
+    pub fn starts_in(&self, id: u8, t_s: f64, dt_s: f64) -> bool {
+        let Some(k) = self.slot_of(id) else {
+            return false;
+        };
+        let offset = f64::from(k) * self.slot_s;
+        // The latest slot start before the end of the step, then whether the step holds it.
+        let n = ((t_s + dt_s - 1e-9 - offset) / self.cycle_s()).floor();
+        let start = offset + n * self.cycle_s();
+        start >= t_s - 1e-9
+    }
+
+    /// The end of the slot a message heard to start at `start_s` was sounded in.
+    pub fn slot_end(&self, start_s: f64) -> f64 {
+        let k = ((start_s - 0.02) / self.slot_s).round().max(0.0);
+        (k + 1.0) * self.slot_s
+    }
+
+    /// Who sent a message heard to start at `start_s` (the flight and the decoder's
+    /// error make it a little late; the nearest slot start at or before it wins).
+    pub fn sender_at(&self, start_s: f64) -> Option<u8> {
+        // Up to 40 ms of flight and error are expected; anything within half a slot of a
+        // slot start is attributed to it.
+        let k = ((start_s - 0.02) / self.slot_s).round();
+        if !k.is_finite() || k < 0.0 {
+            return None;
+        }
+        let slot = (k as u64 % u64::from(self.slots)) as u8;
+        Some(self.first_id + slot)
+    }
+}
+
+/// A claim newer than one cycle and this is not in doubt (the decoder reports a claim
+/// within its slot's guard; this allows for late reports), s.
+const DOUBT_MARGIN_S: f64 = 0.2;
+
+/// A claim as this robot holds it: what a teammate (or itself) last told the team, by
+/// radio or by sound, and from when it counts (this robot's clock, s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Told {
+    posted: Posted,
+    at_s: f64,
+}
+
+/// A robot's side of the fallback: the slot plan it shares with its team, the claims its
+/// own microphone's decoder gave it, and the decision it makes on them while the radio is
+/// silent. Robot code holds this; it never sees the room.
+#[derive(Debug, Clone)]
+pub struct SoundFallback {
+    plan: SlotPlan,
+    /// Claims older than this no longer count, s.
+    expire_s: f64,
+    /// The rule the team decides by while the fallback is in control.
+    params: ArbitrationParams,
+    /// Whether a going claim whose last slot went by unheard loses the goer's margin.
+    doubt_going: bool,
+    /// Per robot (index = id − 1): its latest claim heard by sound (its own: sounded),
+    /// in force from the end of its slot.
+    sounded: Vec<Option<Told>>,
+    /// Per robot: a claim heard before the end of its slot, waiting to come into force.
+    pending: Vec<Option<Told>>,
+    /// What this robot last posted on the radio before the fallback took control.
+    own_radio: Option<Told>,
+    /// Whether some teammate with a slot had no fresh radio claim at the last decision.
+    radio_stale: bool,
+    /// Whether no teammate with a slot had a fresh radio claim at the last decision: the
+    /// radio is silent and the fallback decides.
+    in_control: bool,
+}
+
+impl SoundFallback {
+    /// The fallback for a team of `team` robots sounding on `plan`, deciding with the
+    /// arbitration's `params` (hysteresis, tie band, no-ball cost).
+    pub fn new(
+        plan: SlotPlan,
+        cfg: &AcousticConfig,
+        team: usize,
+        params: ArbitrationParams,
+    ) -> Self {
+        Self {
+            plan,
+            expire_s: cfg.stale_cycles * plan.cycle_s(),
+            params: ArbitrationParams {
+                hysteresis_m: cfg.hysteresis_m.unwrap_or(params.hysteresis_m),
+                ..params
+            },
+            doubt_going: cfg.doubt_going,
+            sounded: vec![None; team],
+            pending: vec![None; team],
+            own_radio: None,
+            radio_stale: false,
+            in_control: false,
+        }
+    }
+
+    /// The team's slot plan.
+    pub fn plan(&self) -> &SlotPlan {
+        &self.plan
+    }
+
+    /// Whether the fallback decided last time (the radio was silent).
+    pub fn in_control(&self) -> bool {
+        self.in_control
+    }
+
+    /// A message robot `me`'s decoder produced, started at `start_s` on `me`'s clock. The
+    /// slot it started in names the sender; the claim counts from the end of that slot,
+    /// when every teammate that decodes it has (so the team changes its mind at once).
+    /// Its own slot and long messages are ignored.
+    pub fn hear(&mut self, me: u8, message: &Message, start_s: f64) {
+        let Some(from) = self.plan.sender_at(start_s) else {
+            return;
+        };
+        let Some(posted) = decode_claim(message, self.params.no_ball_cost) else {
+            return;
+        };
+        if from == me {
+            return;
+        }
+        let at_s = self.plan.slot_end(start_s);
+        if let Some(slot) = self.pending.get_mut(usize::from(from) - 1) {
+            *slot = Some(Told { posted, at_s });
+        }
+    }
+
+    /// What robot `me` sounds in its slot starting at `start_s` (its clock): `posted`,
+    /// while some teammate's radio claim is stale; nothing otherwise (or when it has no
+    /// slot). What it sounds counts for itself, as its teammates will hear it (quantised),
+    /// from the end of the slot.
+    pub fn claim(&mut self, me: u8, posted: Posted, start_s: f64) -> Option<Message> {
+        if !(self.radio_stale && self.plan.slot_of(me).is_some()) {
+            return None;
+        }
+        let message = encode_claim(posted, self.params.no_ball_cost);
+        if let (Some(heard), Some(slot)) = (
+            decode_claim(&message, self.params.no_ball_cost),
+            self.pending.get_mut(usize::from(me) - 1),
+        ) {
+            *slot = Some(Told {
+                posted: heard,
+                at_s: self.plan.slot_end(start_s),
+            });
+        }
+        Some(message)
+    }
+
+    /// Robot `me` with the radio claims `radio` it holds: whether the radio is silent (no
+    /// teammate with a slot has a claim fresher than `stale_after`), so that the fallback
+    /// decides.
+    pub fn radio(&mut self, me: u8, radio: &[Candidate], stale_after: Duration) -> bool {
+        let fresh = |id: u8| radio.iter().any(|c| c.robot == id && c.age <= stale_after);
+        let mates: Vec<u8> = (0..self.plan.slots)
+            .map(|k| self.plan.first_id + k)
+            .filter(|&id| id != me)
+            .collect();
+        self.radio_stale = mates.iter().any(|&id| !fresh(id));
+        self.in_control = !mates.is_empty() && mates.iter().all(|&id| !fresh(id));
+        self.in_control
+    }
+
+    /// What this robot posted on the radio at `now_s` while the radio decided: the claim
+    /// its teammates hold from it when the radio falls silent.
+    pub fn posted(&mut self, now_s: f64, posted: Posted) {
+        self.own_radio = Some(Told {
+            posted,
+            at_s: now_s,
+        });
+    }
+
+    /// The claims robot `me` decides on at `now_s` while the radio is silent: each
+    /// field player's newest claim, by radio (`radio`, aged on this robot's clock) or by
+    /// sound, unless older than `stale_cycles` cycles; every one counts as fresh (age
+    /// zero), so a missed message leaves the teammate's previous claim standing instead
+    /// of making room for a second goer.
+    pub fn candidates(&mut self, me: u8, now_s: f64, radio: &[Candidate]) -> Vec<Candidate> {
+        for (pending, sounded) in self.pending.iter_mut().zip(&mut self.sounded) {
+            if let Some(p) = pending.filter(|p| p.at_s <= now_s) {
+                if sounded.is_none_or(|s| s.at_s <= p.at_s) {
+                    *sounded = Some(p);
+                }
+                *pending = None;
+            }
+        }
+        let mut out = Vec::new();
+        for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
+            let by_radio = if id == me {
+                self.own_radio
+            } else {
+                radio.iter().find(|c| c.robot == id).map(|c| Told {
+                    posted: c.posted,
+                    at_s: now_s - c.age.as_secs_f64(),
+                })
+            };
+            let by_sound = self.sounded.get(usize::from(id) - 1).copied().flatten();
+            let newest = match (by_radio, by_sound) {
+                (Some(r), Some(s)) => Some(if s.at_s >= r.at_s { s } else { r }),
+                (r, s) => r.or(s),
+            };
+            if let Some(t) = newest.filter(|t| now_s - t.at_s <= self.expire_s) {
+                let mut posted = t.posted;
+                if id != me
+                    && self.doubt_going
+                    && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S
+                {
+                    // Its last slot went by unheard: a claim to be going is in doubt (it
+                    // may have let go in the message this robot missed), so it keeps its
+                    // cost but not the goer's margin.
+                    posted.going = false;
+                }
+                out.push(Candidate {
+                    robot: id,
+                    posted,
+                    age: Duration::ZERO,
+                });
+            }
+        }
+        out
+    }
+
+    /// The team's decision on `candidates` (see [`SoundFallback::candidates`]): the
+    /// arbitration's rule (lowest cost, the goer's by the hysteresis margin, ties to the
+    /// lower id), so robots that heard the same claims agree.
+    pub fn decide(&self, candidates: &[Candidate]) -> Decision {
+        arbitration::decide(&self.params, candidates)
+    }
+}
+
+/// The message that carries a claim (see the module docs for the values).
+pub fn encode_claim(posted: Posted, no_ball_cost: f64) -> Message {
+    let value = if !(posted.h.is_finite() && posted.h < no_ball_cost) {
+        0
+    } else {
+        let bin = ((posted.h - COST_FLOOR_M) / COST_BIN_M)
+            .floor()
+            .clamp(0.0, f64::from(COST_BINS - 1)) as u16;
+        1 + bin + if posted.going { COST_BINS } else { 0 }
+    };
+    let sender = Sender::from_index((value / 21) as u8).expect("value < 63");
+    Message::short(sender, (value % 21) as u8).expect("data < 21")
+}
+
+/// The claim a message carries (bin centres), or `None` for a long message.
+pub fn decode_claim(message: &Message, no_ball_cost: f64) -> Option<Posted> {
+    let Message::Short { sender, data } = *message else {
+        return None;
+    };
+    let value = u16::from(sender.index()) * 21 + u16::from(data);
+    if value == 0 || value >= CLAIM_VALUES {
+        return Some(Posted {
+            h: no_ball_cost,
+            going: false,
+        });
+    }
+    let going = value > COST_BINS;
+    let bin = (value - 1) % COST_BINS;
+    Some(Posted {
+        h: COST_FLOOR_M + (f64::from(bin) + 0.5) * COST_BIN_M,
+        going,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_claim_survives_its_message_within_a_bin() {
+        for going in [false, true] {
+            for k in 0..40 {
+                let h = -0.5 + 0.25 * f64::from(k);
+                let p = Posted { h, going };
+                let back = decode_claim(&encode_claim(p, 1000.0), 1000.0).unwrap();
+                assert_eq!(back.going, going, "h {h}");
+                if h < 8.5 {
+                    assert!(
+                        (back.h - h).abs() <= COST_BIN_M / 2.0 + 1e-9,
+                        "h {h} → {}",
+                        back.h
+                    );
+                }
+            }
+        }
+        let none = decode_claim(
+            &encode_claim(
+                Posted {
+                    h: 1000.0,
+                    going: false,
+                },
+                1000.0,
+            ),
+            1000.0,
+        )
+        .unwrap();
+        assert_eq!(none.h, 1000.0, "no ball stays no ball");
+    }
+
+    #[test]
+    fn the_slot_names_the_sender() {
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: 0.21,
+        };
+        for id in 2..=5u8 {
+            let k = f64::from(id - 2);
+            assert!(plan.starts_in(id, 3.0 * plan.cycle_s() + k * 0.21, 0.01));
+            assert_eq!(
+                plan.sender_at(7.0 * plan.cycle_s() + k * 0.21 + 0.03),
+                Some(id)
+            );
+        }
+        assert!(!plan.starts_in(1, 0.0, 0.01), "the goalkeeper has no slot");
+    }
+
+    fn radio_claim(robot: u8, h: f64, going: bool, age_s: f64) -> Candidate {
+        Candidate {
+            robot,
+            posted: Posted { h, going },
+            age: Duration::from_secs_f64(age_s),
+        }
+    }
+
+    /// Four field players (ids 2–5) in the default slots, and the radio's staleness.
+    fn four_slot_fallback() -> (SlotPlan, Duration, SoundFallback) {
+        let cfg = AcousticConfig::default();
+        let plan = SlotPlan {
+            first_id: 2,
+            slots: 4,
+            slot_s: cfg.slot_s(),
+        };
+        let stale = ArbitrationParams::default().stale_after;
+        let fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        (plan, stale, fb)
+    }
+
+    #[test]
+    fn the_radio_goer_keeps_the_ball_until_a_claim_heard_in_the_room_beats_it() {
+        let (plan, stale, mut fb) = four_slot_fallback();
+        // Robot 3 at 11.55 s: the radio still speaks; 2 goes, 4 is a little closer (within
+        // the hysteresis margin).
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 11.5),
+                radio_claim(4, 0.8, false, t - 11.5),
+                radio_claim(5, 3.0, false, t - 11.5),
+            ]
+        };
+        assert!(
+            !fb.radio(3, &at(11.55), stale),
+            "fresh radio: the arbiter decides"
+        );
+        fb.posted(
+            11.55,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        // At 12 s the radio is silent: the fallback keeps the agreed goer.
+        assert!(
+            fb.radio(3, &at(12.0), stale),
+            "silent radio: the fallback decides"
+        );
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(
+            goer(&mut fb, 12.0),
+            Some(2),
+            "the goer agreed by radio keeps the ball"
+        );
+        // Robot 4 sounds 0.2 m in its slot; heard 20 ms into it, it counts from its end.
+        let start = (12.0 / plan.cycle_s()).floor() * plan.cycle_s() + 2.0 * plan.slot_s;
+        assert_eq!(plan.sender_at(start + 0.02), Some(4));
+        fb.hear(3, &claim_message(0.2, false), start + 0.02);
+        let end = plan.slot_end(start + 0.02);
+        assert!((end - (start + plan.slot_s)).abs() < 1e-9);
+        assert_eq!(
+            goer(&mut fb, end - 0.05),
+            Some(2),
+            "not before its slot ends"
+        );
+        assert_eq!(
+            goer(&mut fb, end + 0.01),
+            Some(4),
+            "0.25 m beats 1.0 − 0.5 m"
+        );
+    }
+
+    #[test]
+    fn a_going_claim_whose_slot_went_by_unheard_loses_the_margin() {
+        let (plan, stale, mut fb) = four_slot_fallback();
+        let at = |t: f64| {
+            vec![
+                radio_claim(2, 1.0, true, t - 10.0),
+                radio_claim(4, 0.7, false, t - 10.0),
+                radio_claim(5, 3.0, false, t - 10.0),
+            ]
+        };
+        fb.posted(
+            10.0,
+            Posted {
+                h: 2.0,
+                going: false,
+            },
+        );
+        assert!(fb.radio(3, &at(10.5), stale));
+        let goer = |fb: &mut SoundFallback, t: f64| {
+            let c = fb.candidates(3, t, &at(t));
+            fb.decide(&c).goer
+        };
+        assert_eq!(goer(&mut fb, 10.5), Some(2));
+        // A cycle and more without a word from robot 2: its claim is in doubt.
+        let later = 10.0 + plan.cycle_s() + DOUBT_MARGIN_S + 0.1;
+        assert_eq!(
+            goer(&mut fb, later),
+            Some(4),
+            "1.0 m without the margin loses to 0.7 m"
+        );
+        // Older than `stale_cycles` cycles: gone (robot 3's own claim is too).
+        let expired = 10.0 + AcousticConfig::default().stale_cycles * plan.cycle_s() + 0.1;
+        assert_eq!(fb.candidates(3, expired, &at(expired)), vec![]);
+    }
+
+    fn claim_message(h: f64, going: bool) -> Message {
+        encode_claim(Posted { h, going }, 1000.0)
+    }
+}

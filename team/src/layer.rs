@@ -1,0 +1,930 @@
+//! [`TeamLayer`]: one robot's team behaviour, from what it sensed to what it tells its
+//! team. The daemon, the C node and the simulator's robots all run it.
+//!
+//! A control tick has three steps, in this order (the simulator's robot puts its
+//! behaviour between the second and the third; the daemon has none):
+//! 1. [`TeamLayer::sense`]: odometry and landmarks (or a pose estimate the robot made
+//!    itself) into the pose EKF, a ball sighting into the ball EKF, teammates' new LWMs
+//!    from the replica's blackboard into the GWM, its own push of the ball reported, the
+//!    team ball; returns the LWM to publish.
+//! 2. [`TeamLayer::decide`]: the cost (eq. 19 from its own ball, or the robot's own), the
+//!    should-I-go arbitration on the claims the blackboard holds (or on what the acoustic
+//!    fallback heard while the radio is silent).
+//! 3. [`TeamLayer::finish`]: the sending policy decides what goes to the team; returns
+//!    the blackboard writes and whether they may draw on the budget's reserve.
+//!
+//! Between ticks [`TeamLayer::redecide`] reacts to a teammate's claim as it arrives.
+
+use std::time::Duration;
+
+use comms::arbitration::{self, heuristic, Arbiter, ArbitrationParams, BallView, Decision, Posted};
+use comms::{Blackboard, Instant, Key, Scope, Value};
+use fusion::nalgebra::{Matrix2, Vector2};
+use fusion::{
+    BallEstimate, BallSighting, GlobalModel, Kick, LocalModel, PoseEstimate, RangeBearingSighting,
+    TeamBall,
+};
+use serde::Serialize;
+
+use crate::acoustic::SoundFallback;
+use crate::calibration::{Calibration, WorldModelConfig};
+use crate::frames;
+use crate::geometry::{Pose, Vec2};
+use crate::policy::{self, Action, PolicyState, SendPolicy};
+
+/// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
+pub const WORLD_LOCAL_KEY: &str = "*.var.world.local";
+
+/// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
+pub const PASS_TO_KEY: &str = "*.var.machine.pass_to";
+
+/// The key every robot publishes its LWM to ([`WORLD_LOCAL_KEY`]).
+pub fn world_local_key() -> Key {
+    Key::parse(WORLD_LOCAL_KEY).expect("a valid key")
+}
+
+/// The key robot `id`'s LWM is held under on a teammate's blackboard.
+pub fn world_local_of(id: u8) -> Key {
+    Key::new(Scope::Robot(id), comms::Kind::Var, "world.local").expect("a valid key")
+}
+
+/// The key the pass receiver is announced on ([`PASS_TO_KEY`]).
+pub fn pass_to_key() -> Key {
+    Key::parse(PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
+}
+
+/// A robot clock reading in seconds.
+pub fn seconds(t: Instant) -> f64 {
+    t.as_micros() as f64 * 1e-6
+}
+
+/// A teammate's velocity is measured between its messages' poses at least this far apart,
+/// s.
+const TEAMMATE_VELOCITY_BASELINE_S: f64 = 0.2;
+
+/// How the team layer runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TeamConfig {
+    /// Control period, seconds (one camera frame per tick).
+    pub control_period_s: f64,
+    /// A ball not seen for longer than this is forgotten (`f_ball` = 0), seconds.
+    pub ball_memory_s: f64,
+    /// The opponent goal counts as in view if seen within this long, seconds (one missed
+    /// detection must not add |k1| to the cost).
+    pub goal_memory_s: f64,
+    /// The team ball is used when its global ball confidence (GBC) is at least this
+    /// (0.25: a 1-σ radius of about 0.5 m); below, the robot goes by its own ball.
+    pub team_ball_min_gbc: f64,
+    /// The world models.
+    #[serde(skip)]
+    pub world_model: WorldModelConfig,
+    /// When the robot tells the team what it knows.
+    pub send_policy: SendPolicy,
+}
+
+impl Default for TeamConfig {
+    fn default() -> Self {
+        Self {
+            control_period_s: 0.04,
+            ball_memory_s: 0.5,
+            goal_memory_s: 0.15,
+            team_ball_min_gbc: 0.25,
+            world_model: WorldModelConfig::default(),
+            send_policy: SendPolicy::Every,
+        }
+    }
+}
+
+/// A robot's idea of where the ball is, from its own sightings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct BallBelief {
+    /// Its own ball EKF's position now, field frame, metres.
+    pub at: Vec2,
+    /// When it was last seen, seconds on the robot's clock.
+    pub seen_at_s: f64,
+}
+
+/// Where a teammate is and how it moves, from its messages.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TeammateMotion {
+    /// The time and place its velocity was last measured to (field frame).
+    anchor: (f64, Vector2<f64>),
+    /// That velocity, m/s.
+    velocity: Vector2<f64>,
+    /// Its latest pose's place.
+    at: Vector2<f64>,
+}
+
+/// What the robot sensed over the latest control period: all the layer knows of the
+/// world outside the robot. Its pose comes from odometry and landmarks (the layer's pose
+/// EKF) or from `pose`, the robot's own estimate.
+#[derive(Debug, Clone, Default)]
+pub struct Senses<'a> {
+    /// Odometry over the latest control period (REP-103: forward, left, turn).
+    pub odometry: Option<fusion::Odometry>,
+    /// Landmarks at known field places, as range and bearing with their R.
+    pub landmarks: &'a [(RangeBearingSighting, Matrix2<f64>)],
+    /// The robot's own pose estimate (REP-103 mean, covariance of x, y, θ), replacing
+    /// the pose EKF's.
+    pub pose: Option<(Pose, fusion::nalgebra::Matrix3<f64>)>,
+    /// A ball sighting in `fusion`'s robot frame (see [`frames::ball_sighting_from_rep103`])
+    /// and how old it was at this tick, s.
+    pub ball: Option<(BallSighting, f64)>,
+    /// The opponent goal is in view (eq. 19's `f_other`).
+    pub goal_in_view: bool,
+    /// Opponents seen now, robot frame (REP-103, m): a body at the ball may push it.
+    pub opponents: &'a [Vector2<f64>],
+    /// A cost the robot computed itself, replacing eq. (19) from its own ball.
+    pub cost: Option<f64>,
+}
+
+/// One robot's team behaviour. See the module docs for the tick's steps.
+#[derive(Debug, Clone)]
+pub struct TeamLayer {
+    /// Robot id, 1–254.
+    pub id: u8,
+    /// Its side of the arbitration.
+    pub arbiter: Arbiter,
+    /// What it knows of its body, ball and field.
+    pub cal: Calibration,
+    /// Where it believes it is (its LWM's pose).
+    pub pose_belief: Pose,
+    /// Odometry over the latest control period.
+    pub odometry: fusion::Odometry,
+    /// Where it believes the ball is from its own sightings, if it has seen it recently.
+    pub ball: Option<BallBelief>,
+    /// Its local world model.
+    pub lwm: LocalModel,
+    /// Its global world model.
+    pub gwm: GlobalModel,
+    /// Messages are sparse (a league's budget): publish the compact LWM, which leaves room
+    /// for the arbitration's cost in a 128-byte frame (teammates take the track, not the
+    /// batches).
+    compact: bool,
+    /// The lowest effective cost among teammates at the latest decision.
+    rival_cost: Option<f64>,
+    /// A claim change written between ticks that has not gone out yet (a budget's pacing
+    /// holds it): a goer that stopped keeps going until its team can know (see
+    /// [`TeamLayer::acts_as_goer`]).
+    untold_claim: Option<Posted>,
+    /// … and whether one of them claimed to be going.
+    rival_going: bool,
+    /// The team ball at its latest tick (when its GBC is high enough to use).
+    pub team_ball: Option<TeamBall>,
+    /// The team ball at its latest tick whatever its GBC, as the robot holds it (widened
+    /// at contact, see [`WorldModelConfig::contact_horizon_s`]).
+    pub team_ball_held: Option<TeamBall>,
+    /// The kick or push it reported at its latest tick, if any.
+    pub kicked: Option<Kick>,
+    /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
+    pub ball_sighting: Option<BallSighting>,
+    /// When it last saw the opponent goal, seconds.
+    pub goal_seen_at_s: Option<f64>,
+    /// When it last saw the ball, seconds.
+    pub ball_seen_at_s: Option<f64>,
+    /// Its latest cost, eq. (19).
+    pub h: f64,
+    /// The team decision as it sees it.
+    pub decision: Decision,
+    /// The teammates' claims it decided on last, those with a ball (cost below the
+    /// no-ball cost): (robot, receiver-side age).
+    pub claim_ages: Vec<(u8, Duration)>,
+    /// Whether it is switched on (a dead robot neither senses, decides nor sends).
+    pub alive: bool,
+    goalkeeper: bool,
+    pass_to_posted: i64,
+    /// The world model of the latest tick, as published (written or not).
+    latest_lwm: Option<Value>,
+    push_reported_at_s: f64,
+    decided_at_s: f64,
+    /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
+    heard: Vec<Option<(u64, u64)>>,
+    /// Per teammate (index = id − 1): the time and place of the message its velocity was
+    /// last measured to, and that velocity (field frame).
+    teammate_motion: Vec<Option<TeammateMotion>>,
+    /// What it last told the team, for the sending policy.
+    policy: PolicyState,
+    /// The acoustic fallback, when the team uses it (see [`crate::acoustic`]).
+    pub sound: Option<SoundFallback>,
+    /// Whether it goes by the fallback's decision while the radio is silent (`None`: the
+    /// arbiter decides).
+    sound_going: Option<bool>,
+}
+
+/// The robot id at index `k` of a team's per-robot vectors.
+fn robot_id(k: usize) -> u8 {
+    u8::try_from(k + 1).unwrap_or(u8::MAX)
+}
+
+impl TeamLayer {
+    /// Robot `id`'s team layer, deciding with `params`, calibrated as `cal`, started at
+    /// `pose` (which it is told, give or take the configured start σ), in a team of
+    /// `team` robots (ids 1..=team).
+    pub fn new(
+        id: u8,
+        goalkeeper: bool,
+        params: ArbitrationParams,
+        pose: Pose,
+        cal: &Calibration,
+        world_model: &WorldModelConfig,
+        team: usize,
+    ) -> Self {
+        let start = frames::to_fusion_pose(
+            &pose,
+            fusion::nalgebra::Matrix3::from_diagonal(&fusion::nalgebra::Vector3::new(
+                world_model.start_sigma_m.powi(2),
+                world_model.start_sigma_m.powi(2),
+                world_model.start_sigma_rad.powi(2),
+            )),
+        );
+        Self {
+            id,
+            arbiter: Arbiter::new(id, goalkeeper, params),
+            cal: *cal,
+            pose_belief: pose,
+            odometry: fusion::Odometry::default(),
+            ball: None,
+            lwm: LocalModel::new(world_model.local, start),
+            gwm: GlobalModel::new(id, world_model.global),
+            compact: world_model.global.track_after_s.is_some(),
+            rival_cost: None,
+            untold_claim: None,
+            rival_going: false,
+            team_ball: None,
+            team_ball_held: None,
+            kicked: None,
+            ball_sighting: None,
+            goal_seen_at_s: None,
+            ball_seen_at_s: None,
+            h: params.no_ball_cost,
+            decision: Decision {
+                goer: None,
+                goer_cost: f64::INFINITY,
+            },
+            claim_ages: Vec::new(),
+            alive: true,
+            goalkeeper,
+            pass_to_posted: 0,
+            latest_lwm: None,
+            push_reported_at_s: f64::NEG_INFINITY,
+            decided_at_s: 0.0,
+            heard: vec![None; team],
+            teammate_motion: vec![None; team],
+            policy: PolicyState::default(),
+            sound: None,
+            sound_going: None,
+        }
+    }
+
+    /// Whether it competes for the ball.
+    pub fn is_field_player(&self) -> bool {
+        !self.goalkeeper
+    }
+
+    /// Whether it is the goalkeeper.
+    pub fn is_goalkeeper(&self) -> bool {
+        self.goalkeeper
+    }
+
+    /// Make it the goalkeeper (it never competes for the ball) or a field player.
+    pub fn set_goalkeeper(&mut self, goalkeeper: bool) {
+        if goalkeeper != self.goalkeeper {
+            self.goalkeeper = goalkeeper;
+            let params = *self.arbiter.params();
+            self.arbiter = Arbiter::new(self.id, goalkeeper, params);
+        }
+    }
+
+    /// Whether it is going to the ball now.
+    ///
+    /// A goer that decided to stop while its "not going" waits for a frame goes on: its
+    /// teammates still hold its claim and none of them goes, so stopping unannounced
+    /// would leave the ball to nobody.
+    pub fn going(&self) -> bool {
+        self.alive && self.acts_as_goer()
+    }
+
+    /// Whether it decided to go: by the fallback while the radio is silent, else by the
+    /// arbiter.
+    pub fn claims_ball(&self) -> bool {
+        self.sound_going.unwrap_or_else(|| self.arbiter.going())
+    }
+
+    /// Whether it plays the ball: it claims it, or it stopped claiming while no teammate
+    /// claims and its teammates have not heard the stop yet.
+    pub fn acts_as_goer(&self) -> bool {
+        self.claims_ball() || (!self.rival_going && self.untold_claim.is_some_and(|c| !c.going))
+    }
+
+    /// Step 1 of a tick at `local_now` (the robot's clock): what it sensed into its world
+    /// models, teammates' new LWMs from `board` into its GWM. `claim_waiting`: its claim
+    /// written earlier still waits for a frame. Returns the LWM to write to
+    /// [`WORLD_LOCAL_KEY`].
+    pub fn sense(
+        &mut self,
+        cfg: &TeamConfig,
+        local_now: Instant,
+        senses: &Senses<'_>,
+        board: &Blackboard,
+        claim_waiting: bool,
+    ) -> Option<Value> {
+        let wm = &cfg.world_model;
+        let now_s = seconds(local_now);
+        self.kicked = None;
+        if !claim_waiting {
+            self.untold_claim = None;
+        }
+        self.odometry = senses.odometry.unwrap_or_default();
+        if let Some((pose, cov)) = senses.pose {
+            self.lwm.set_pose(frames::to_fusion_pose(&pose, cov));
+        } else {
+            let pf = self.lwm.pose_filter_mut();
+            pf.noise.q = frames::odometry_q(&self.odometry, &self.cal.sensors, wm.push_sigma_m);
+            pf.odometry(&self.odometry);
+            for (sighting, r) in senses.landmarks {
+                pf.noise.r_range_bearing = *r;
+                // A degenerate sighting (the robot on the landmark) is skipped.
+                let _ = pf.range_bearing(sighting);
+            }
+        }
+        self.pose_belief = frames::from_fusion_pose(self.lwm.pose());
+
+        self.ball_sighting = senses.ball.map(|(s, _)| s);
+        if let Some((s, age_s)) = &senses.ball {
+            let seen_s = now_s - age_s;
+            self.lwm.ball_sighting(seen_s, s);
+            self.ball_seen_at_s = Some(self.ball_seen_at_s.map_or(seen_s, |t| t.max(seen_s)));
+        }
+        if senses.goal_in_view {
+            self.goal_seen_at_s = Some(now_s);
+        }
+        let recent = self
+            .ball_seen_at_s
+            .filter(|&seen| now_s - seen <= cfg.ball_memory_s);
+        let own = self.lwm.ball_at(now_s);
+        self.ball = recent.and_then(|seen_at_s| {
+            own.map(|b| BallBelief {
+                at: frames::from_fusion_point(&b.position()),
+                seen_at_s,
+            })
+        });
+
+        for j in 0..self.heard.len() {
+            let id = robot_id(j);
+            if id == self.id {
+                continue;
+            }
+            let Some(e) = board.get(&world_local_of(id)) else {
+                continue;
+            };
+            if self.heard[j] == Some((e.incarnation, e.version)) {
+                continue;
+            }
+            self.heard[j] = Some((e.incarnation, e.version));
+            if let Value::Bytes(bytes) = &e.value {
+                let age_s = e.age(local_now).as_secs_f64();
+                // A malformed message is the sender's bug; the GWM just does not take it.
+                if let Ok(lwm) = self.gwm.decode(bytes, now_s, age_s) {
+                    self.gwm.ingest(id, &lwm, now_s);
+                }
+            }
+        }
+        if let Some(push) = self.push_report(cfg, now_s) {
+            // Its own ball, and with the next message its team's, turns with the push
+            // instead of several sightings later (as with a kick).
+            self.lwm.kick(&push);
+            self.kicked = Some(push);
+            self.push_reported_at_s = now_s;
+        }
+        let msg = self.lwm.publish(now_s);
+        self.gwm.ingest(self.id, &msg, now_s);
+        self.track_teammates(now_s);
+        self.team_ball_held = self
+            .gwm
+            .team_ball(now_s, own.as_ref())
+            .map(|b| self.widened_at_contact(cfg, now_s, senses.opponents, b));
+        self.team_ball = self
+            .team_ball_held
+            .filter(|b| b.gbc >= cfg.team_ball_min_gbc);
+        let bytes = if self.compact {
+            msg.to_compact_bytes()
+                .ok()
+                .map(|b| Value::Bytes(b.to_vec()))
+        } else {
+            msg.to_bytes().ok().map(|b| Value::Bytes(b.to_vec()))
+        };
+        self.h = match senses.cost {
+            Some(h) => h,
+            None => {
+                let facing = self
+                    .goal_seen_at_s
+                    .is_some_and(|s| now_s - s <= cfg.goal_memory_s);
+                let view = self.ball.map(|b| BallView {
+                    distance_m: b.at.distance(self.pose_belief.at),
+                    facing_opponent_goal: facing,
+                });
+                heuristic(self.arbiter.params(), view)
+            }
+        };
+        if self.compact {
+            // Only a budget's ride-along reads it (see `redecide`).
+            self.latest_lwm.clone_from(&bytes);
+        }
+        bytes
+    }
+
+    /// Step 2: run the arbitration on the current cost and what the replica has heard (by
+    /// the acoustic fallback's claims while the radio is silent).
+    pub fn decide(&mut self, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
+        let t_s = seconds(local_now);
+        let heard = arbitration::heard(board, local_now);
+        let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
+        self.decided_at_s = t_s;
+        let stale_after = self.arbiter.params().stale_after;
+        let fallback = self.sound.as_mut().and_then(|sound| {
+            sound
+                .radio(self.id, &heard, stale_after)
+                .then(|| sound.candidates(self.id, t_s, &heard))
+        });
+        let (decision, posted) = match fallback {
+            None => {
+                self.sound_going = None;
+                let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
+                if let Some(sound) = &mut self.sound {
+                    sound.posted(t_s, posted);
+                }
+                (decision, posted)
+            }
+            Some(claims) => {
+                let decision = self
+                    .sound
+                    .as_ref()
+                    .map_or(self.decision, |s| s.decide(&claims));
+                // The arbiter follows on the same claims, so that it carries on from
+                // about the same place when the radio comes back.
+                let (_, mut posted) = self.arbiter.tick(dt, self.h, &claims);
+                posted.going = self.is_field_player() && decision.should_go(self.id);
+                self.sound_going = Some(posted.going);
+                (decision, posted)
+            }
+        };
+        self.decision = decision;
+        let params = *self.arbiter.params();
+        let rivals = || {
+            heard
+                .iter()
+                .filter(|c| c.robot != self.id && params.counts(c))
+        };
+        // With no teammate in the running, the bar to beat is the no-ball cost: a robot
+        // that told "no ball" and now sees one has news.
+        self.rival_cost = rivals()
+            .map(|c| params.effective_cost(&c.posted))
+            .min_by(f64::total_cmp)
+            .or(Some(params.no_ball_cost));
+        self.rival_going = rivals().any(|c| c.posted.going);
+        self.claim_ages.clear();
+        self.claim_ages.extend(
+            heard
+                .iter()
+                .filter(|c| c.robot != self.id && c.posted.h < params.no_ball_cost)
+                .map(|c| (c.robot, c.age)),
+        );
+        (decision, posted)
+    }
+
+    /// The pass receiver the goer `decision` names announces, as `board` holds it.
+    pub fn goer_pass_to(&self, board: &Blackboard, local_now: Instant) -> Option<u8> {
+        let params = self.arbiter.params();
+        self.decision.goer.filter(|&g| g != self.id).and_then(|g| {
+            let key = Key::new(Scope::Robot(g), comms::Kind::Var, pass_to_key().path()).ok()?;
+            match board
+                .get_fresher_than(local_now, &key, params.stale_after)?
+                .value
+            {
+                Value::Int(r) => u8::try_from(r).ok(),
+                _ => None,
+            }
+        })
+    }
+
+    /// A kick the robot just swung at `now_s` in field direction `direction_rad`, with
+    /// its own odds `contact_prob` that the foot met the ball: its ball, and with its next
+    /// message its team's, turns with the kick instead of waiting to see it. Returns the
+    /// report.
+    pub fn report_kick(
+        &mut self,
+        cfg: &TeamConfig,
+        now_s: f64,
+        direction_rad: f64,
+        speed_mps: f64,
+        contact_prob: f64,
+    ) -> Kick {
+        let kick = Kick {
+            t_s: now_s,
+            speed_mps,
+            direction_rad,
+            speed_sigma_mps: cfg.world_model.kick_speed_sigma_mps,
+            direction_sigma_rad: self.cal.kick.direction_sigma_rad,
+            contact_prob,
+        };
+        self.lwm.kick(&kick);
+        self.kicked = Some(kick);
+        kick
+    }
+
+    /// Step 3: the sending policy on what the tick found. `lwm`: what
+    /// [`TeamLayer::sense`] returned; `posted`: what [`TeamLayer::decide`] returned;
+    /// `receiver`: the pass receiver it announces (0: none); `kicked`: it kicked at this
+    /// tick; `world_model_waiting` / `claim_waiting`: its last world model / claim still
+    /// wait for a frame; `headroom`: its replica's budget headroom, if it has a budget.
+    /// Returns the writes to make through the replica, and whether they may draw on the
+    /// budget's reserve (a goer change or a kick).
+    #[allow(clippy::too_many_arguments)]
+    pub fn finish(
+        &mut self,
+        cfg: &TeamConfig,
+        local_now: Instant,
+        lwm: Option<Value>,
+        posted: Posted,
+        receiver: i64,
+        kicked: bool,
+        world_model_waiting: bool,
+        claim_waiting: bool,
+        headroom: Option<i64>,
+    ) -> (Vec<(Key, Value)>, bool) {
+        let t = seconds(local_now);
+        let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        if let Some(bytes) = lwm {
+            writes.push((world_local_key(), bytes));
+        }
+        let receiver_changed = receiver != self.pass_to_posted;
+        let now = policy::Now {
+            t_s: t,
+            pose: self.pose_belief,
+            ball: self.ball.and(self.lwm.ball_at(t)),
+            going: self.claims_ball(),
+            team_ball_stale: self.team_ball.is_none(),
+            kicked,
+            model: &cfg.world_model.local.ball.model,
+            // What teammates last told the team about the ball: the freshest track heard.
+            // (Only VOI weighs it: no copy of every teammate's model per tick for the rest.)
+            told: (cfg.send_policy == SendPolicy::Voi)
+                .then(|| {
+                    self.gwm
+                        .teammates(t)
+                        .iter()
+                        .filter_map(|m| m.lwm.ball)
+                        .max_by(|a, b| a.t_s.total_cmp(&b.t_s))
+                })
+                .flatten(),
+            headroom,
+            gate_chi2: self.gwm.config().gate_chi2,
+            cost: self.arbiter.params().effective_cost(&posted),
+            h: posted.h,
+            rival_cost: self.rival_cost,
+            rival_going: self.rival_going,
+            keepalive_s: self
+                .compact
+                .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
+            frame_anyway: receiver_changed,
+        };
+        let action = self
+            .policy
+            .decide(cfg.send_policy, &now, world_model_waiting, claim_waiting);
+        if self.compact {
+            // Sparse messages: decide on the claim teammates hold (see `set_told`).
+            self.arbiter.set_told(self.policy.told());
+        }
+        let priority = action == (Action::Send { priority: true });
+        match action {
+            // The claim written with the world model is the newest.
+            Action::Send { .. } => self.untold_claim = None,
+            Action::Quiet => writes.clear(),
+        }
+        if receiver_changed {
+            self.pass_to_posted = receiver;
+            writes.push((pass_to_key(), Value::Int(receiver)));
+        }
+        (writes, priority)
+    }
+
+    /// Between control ticks: decide again on the latest cost with whatever the replica
+    /// heard since (a robot reacts to a teammate's claim when it arrives, not at its next
+    /// camera frame). Returns the writes to make if its claim changed: the claim, with
+    /// priority, and under a budget its latest tick's world model when none waits already
+    /// (`world_model_waiting`) and that tick's did not go: the claim's frame is spent
+    /// anyway.
+    pub fn redecide(
+        &mut self,
+        board: &Blackboard,
+        local_now: Instant,
+        world_model_waiting: bool,
+    ) -> Vec<(Key, Value)> {
+        if !self.alive {
+            return Vec::new();
+        }
+        let was = self.claims_ball();
+        let (_, posted) = self.decide(board, local_now);
+        if posted.going == was {
+            return Vec::new();
+        }
+        let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        let cost = self.arbiter.params().effective_cost(&posted);
+        if self.compact {
+            // Told once it went out (see `Arbiter::set_told`).
+            self.policy.wrote_claim(posted.going, posted.h, cost);
+            self.untold_claim = Some(posted);
+            if let Some(lwm) = self.latest_lwm.clone() {
+                if !world_model_waiting && self.policy.world_model_rides() {
+                    writes.push((world_local_key(), lwm));
+                }
+            }
+        } else {
+            self.policy.sent_going(posted.going, posted.h, cost);
+        }
+        writes
+    }
+
+    /// What this robot sounds if its slot begins now (`t_s`, its clock): its claim while
+    /// the radio is stale.
+    pub fn sound_claim(&mut self, t_s: f64) -> Option<audio::Message> {
+        if !self.alive {
+            return None;
+        }
+        let posted = Posted {
+            h: self.h,
+            going: self.claims_ball(),
+        };
+        self.sound.as_mut()?.claim(self.id, posted, t_s)
+    }
+
+    /// A message this robot's microphone decoder produced, its start on this robot's
+    /// clock, s.
+    pub fn hear_sound(&mut self, message: &audio::Message, start_s: f64) {
+        if let (Some(sound), true) = (&mut self.sound, self.alive) {
+            sound.hear(self.id, message, start_s);
+        }
+    }
+
+    /// Each teammate's velocity from its messages' poses at least
+    /// [`TEAMMATE_VELOCITY_BASELINE_S`] apart (over one message interval a pose's noise
+    /// would swamp it; what the GWM keeps is the latest pose only).
+    fn track_teammates(&mut self, now_s: f64) {
+        for t in self.gwm.teammates(now_s) {
+            let Some(slot) = usize::from(t.id)
+                .checked_sub(1)
+                .and_then(|k| self.teammate_motion.get_mut(k))
+            else {
+                continue;
+            };
+            let (t_s, at) = (t.lwm.t_s, Vector2::new(t.pose.mean.x, t.pose.mean.y));
+            *slot = Some(match *slot {
+                Some(m) if t_s >= m.anchor.0 && t_s - m.anchor.0 < TEAMMATE_VELOCITY_BASELINE_S => {
+                    TeammateMotion { at, ..m }
+                }
+                Some(m)
+                    if t_s > m.anchor.0
+                        && t_s - m.anchor.0 < 4.0 * TEAMMATE_VELOCITY_BASELINE_S =>
+                {
+                    TeammateMotion {
+                        anchor: (t_s, at),
+                        velocity: (at - m.anchor.1) / (t_s - m.anchor.0),
+                        at,
+                    }
+                }
+                _ => TeammateMotion {
+                    anchor: (t_s, at),
+                    velocity: Vector2::zeros(),
+                    at,
+                },
+            });
+        }
+    }
+
+    /// Its own velocity over the latest control period, field frame: odometry turned by
+    /// the heading halfway through it.
+    pub fn own_velocity(&self, cfg: &TeamConfig) -> Vector2<f64> {
+        let o = &self.odometry;
+        let heading = self.pose_belief.theta_rad - 0.5 * o.turn_rad;
+        let moved = Vec2::new(o.forward_m, o.left_m).rotate(heading);
+        Vector2::new(moved.x, moved.y) / cfg.control_period_s
+    }
+
+    /// `ball` with its position variance widened while a body is at it and moving into
+    /// it: the robot itself (its odometry), a teammate where its latest message put it (its
+    /// velocity between its last two), an opponent its camera sees now (at its top speed).
+    /// A body there pushes the ball at moments nobody has told this robot of yet: by
+    /// `push_gain` × its closing speed (its velocity less the ball's, along the line
+    /// between them) × [`WorldModelConfig::contact_horizon_s`] per body.
+    /// Only the estimate the robot holds is widened, not the filter's state (a push, once
+    /// seen or reported, is in it).
+    fn widened_at_contact(
+        &self,
+        cfg: &TeamConfig,
+        now_s: f64,
+        opponents: &[Vector2<f64>],
+        mut ball: TeamBall,
+    ) -> TeamBall {
+        let wm = &cfg.world_model;
+        if wm.contact_horizon_s <= 0.0 && wm.kick_hazard_per_s <= 0.0 {
+            return ball;
+        }
+        let cal = &self.cal;
+        let (at, v_ball) = (ball.estimate.position(), ball.estimate.velocity());
+        let reach = |radius: f64| radius + cal.ball.radius_m + wm.contact_margin_m;
+        // σ of the unheard push of a body at `p` moving at `v`, if it is at the ball.
+        let sigma = |p: Vector2<f64>, v: Vector2<f64>, radius: f64| {
+            let rel = at - p;
+            let d = rel.norm();
+            if d > reach(radius) || d < 1e-9 {
+                return 0.0;
+            }
+            wm.push_gain * (v - v_ball).dot(&(rel / d)).max(0.0) * wm.contact_horizon_s
+        };
+        let own = self.lwm.pose();
+        let ours = cal.body.radius_m;
+        let mut var = sigma(
+            Vector2::new(own.mean.x, own.mean.y),
+            self.own_velocity(cfg),
+            ours,
+        )
+        .powi(2);
+        for (k, m) in self.teammate_motion.iter().enumerate() {
+            if robot_id(k) == self.id {
+                continue;
+            }
+            if let Some(m) = m {
+                var += sigma(m.at, m.velocity, ours).powi(2);
+            }
+        }
+        let top = cal.opponent.top_speed_mps;
+        for o in opponents {
+            let p = frames::to_fusion_point(self.pose_belief.to_field(Vec2::new(o.x, o.y)));
+            // Its velocity is unknown: as if it came straight at the ball at top speed.
+            let towards = (at - p).try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * top;
+            var += sigma(p, towards, cal.opponent.radius_m).powi(2);
+        }
+        var += self.unheard_kicks_var(wm, now_s, at);
+        if var > 0.0 {
+            ball.estimate.cov[(0, 0)] += var;
+            ball.estimate.cov[(1, 1)] += var;
+            ball.gbc = fusion::position_confidence(&ball.estimate.position_cov());
+        }
+        ball
+    }
+
+    /// Per-axis variance of the kicks teammates at the ball (their latest messages put
+    /// them within a foot's reach of the ball they saw, or of `at`) may have made since
+    /// those messages' snapshots, that no report has brought yet: a kick at a uniform
+    /// instant in the unheard window w, with probability λw (λ =
+    /// [`WorldModelConfig::kick_hazard_per_s`]), would have carried the ball v(w − τ) in a
+    /// direction nobody here knows yet, so E|Δ|² = λ v² w³ / 3, half per axis. A beacon
+    /// hold makes w two beacons long, and that is when a teammate's kick is most
+    /// surprising.
+    fn unheard_kicks_var(&self, wm: &WorldModelConfig, now_s: f64, at: Vector2<f64>) -> f64 {
+        if wm.kick_hazard_per_s <= 0.0 {
+            return 0.0;
+        }
+        let cal = &self.cal;
+        let reach =
+            cal.body.radius_m + cal.ball.radius_m + cal.kick.reach_margin_m + wm.contact_margin_m;
+        let v = cal.kick.speed_mps;
+        self.gwm
+            .teammates(now_s)
+            .iter()
+            .filter(|t| {
+                // At the ball as it saw it (the geometry its foot goes by), else as the
+                // team ball has it.
+                let ball = t.lwm.ball.map_or(at, |b| b.position());
+                let p = Vector2::new(t.pose.mean.x, t.pose.mean.y);
+                t.silent_for_s <= wm.kick_hazard_window_s && (p - ball).norm() <= reach
+            })
+            .map(|t| wm.kick_hazard_per_s * v * v * t.silent_for_s.powi(3) / 6.0)
+            .sum()
+    }
+
+    /// The team ball if there is a usable one, else the robot's own.
+    pub fn best_ball(&self) -> Option<Vec2> {
+        self.team_ball
+            .map(|b| frames::from_fusion_point(&b.estimate.position()))
+            .or(self.ball.map(|b| b.at))
+    }
+
+    /// A push of the ball by the robot's own body over the latest control period, as the
+    /// robot knows it: its own velocity from odometry, its own ball estimate relative to
+    /// its own pose. When the ball is at its body (its odds of touching, from both
+    /// estimates' uncertainty, at least [`WorldModelConfig::push_min_contact_prob`]) and
+    /// the body closed in on it, the ball takes `push_gain` × the closing speed along the
+    /// contact normal: reported as a [`Kick`] with those odds as its contact probability,
+    /// so every filter takes it as the mixture "pushed or not". Opponents' pushes are not
+    /// known to anyone: the ball model's noise covers them.
+    pub fn push_report(&self, cfg: &TeamConfig, now_s: f64) -> Option<Kick> {
+        let wm = &cfg.world_model;
+        if wm.push_gain <= 0.0 || now_s - self.push_reported_at_s < wm.push_report_interval_s {
+            return None;
+        }
+        // Only a ball it has seen itself lately: a remembered one is not where it walks.
+        self.ball?;
+        let ball = self.lwm.ball_at(now_s)?;
+        let pose = self.lwm.pose();
+        let rel = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
+        let d = rel.norm();
+        if d < 1e-6 {
+            return None;
+        }
+        let n = rel / d;
+        let v_body = self.own_velocity(cfg);
+        let v_ball = ball.velocity();
+        let closing = (v_body - v_ball).dot(&n);
+        if closing <= 0.0 {
+            return None;
+        }
+        let touch = self.cal.body.radius_m + self.cal.ball.radius_m;
+        let cov = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
+        let sigma_d = (n.transpose() * cov * n)[(0, 0)].max(1e-12).sqrt();
+        let contact_prob = fusion::consistency::normal_cdf((touch - d) / sigma_d).clamp(0.0, 1.0);
+        if contact_prob < wm.push_min_contact_prob || contact_prob <= 0.0 {
+            return None;
+        }
+        let gained = n * (wm.push_gain * closing);
+        if gained.norm() < wm.push_min_change_mps {
+            return None;
+        }
+        let v_after = v_ball + gained;
+        let across = Vector2::new(-n.y, n.x);
+        let sigma_across = (across.transpose() * cov * across)[(0, 0)].max(0.0).sqrt();
+        // The contact normal is as uncertain as the ball's place around the body; the
+        // speed as the ball's own velocity and the closing speed (odometry's 5%, the
+        // body's acceleration within the period).
+        let speed_sigma = (0.5 * (ball.cov[(2, 2)] + ball.cov[(3, 3)])
+            + (0.25 * gained.norm()).powi(2))
+        .sqrt()
+        .max(0.05);
+        Some(Kick {
+            t_s: now_s,
+            speed_mps: v_after.norm(),
+            direction_rad: v_after.y.atan2(v_after.x),
+            speed_sigma_mps: speed_sigma,
+            direction_sigma_rad: (sigma_across / touch).clamp(0.05, 1.0),
+            contact_prob,
+        })
+    }
+
+    /// The robot's own probability that its foot would meet the ball now: its ball
+    /// estimate relative to its pose estimate, both uncertainties included, against its
+    /// foot's reach (range and opening angle; its own body's geometry). Range and the
+    /// lateral margin are taken as independent normals.
+    pub fn contact_probability(&self, now_s: f64) -> f64 {
+        let Some(ball) = self.lwm.ball_at(now_s) else {
+            return 0.0;
+        };
+        let pose = self.lwm.pose();
+        // REP-103's heading (x forward), from fusion's (y forward).
+        let (sin, cos) = frames::from_fusion_pose(pose).theta_rad.sin_cos();
+        // Field → robot frame, x forward.
+        let rot = Matrix2::new(cos, sin, -sin, cos);
+        let d_field = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
+        let rel = rot * d_field;
+        let cov_field = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
+        let mut cov = rot * cov_field * rot.transpose();
+        // The heading's σ moves the ball sideways by its distance.
+        cov[(1, 1)] += rel.norm_squared() * pose.cov[(2, 2)];
+        let cal = &self.cal;
+        let reach = cal.body.radius_m + cal.ball.radius_m + cal.kick.reach_margin_m;
+        let d = rel.norm();
+        let along = if d > 1e-9 {
+            rel / d
+        } else {
+            Vector2::new(1.0, 0.0)
+        };
+        let sigma_d = (along.transpose() * cov * along)[(0, 0)].max(1e-12).sqrt();
+        let p_range = fusion::consistency::normal_cdf((reach - d) / sigma_d);
+        let lateral_room = rel.x.max(0.0) * cal.kick.max_angle_rad.tan() - rel.y.abs();
+        let p_angle = fusion::consistency::normal_cdf(lateral_room / cov[(1, 1)].max(1e-12).sqrt());
+        (p_range * p_angle).clamp(0.0, 1.0)
+    }
+
+    /// The game controller says the ball was put back for a kick-off (`now_s` on the
+    /// robot's clock): every ball belief goes.
+    pub fn forget_ball(&mut self, now_s: f64) {
+        self.lwm.forget_ball();
+        self.gwm.forget_ball(now_s);
+        self.ball = None;
+        self.ball_seen_at_s = None;
+        self.team_ball = None;
+    }
+
+    /// The pose estimate the layer holds (`fusion`'s convention).
+    pub fn pose_estimate(&self) -> &PoseEstimate {
+        self.lwm.pose()
+    }
+
+    /// Its own ball estimate now, if it saw the ball within its ball memory.
+    pub fn own_ball(&self, now_s: f64) -> Option<BallEstimate> {
+        self.ball.and(self.lwm.ball_at(now_s))
+    }
+}
+
+#[cfg(test)]
+#[path = "layer_tests.rs"]
+mod tests;

@@ -1,0 +1,195 @@
+//! Unit tests of the team layer: what it reports and how it widens the ball it holds.
+
+use super::*;
+use comms::wire::{FrameWriter, ItemRef, TeamKey};
+use fusion::nalgebra::Vector3;
+
+/// A robot at the origin facing +x that has watched the ball lie still at `range_m`
+/// straight ahead for a second, and moved `forward_m` over its latest control period.
+fn robot_at_a_still_ball(range_m: f64, forward_m: f64) -> (TeamLayer, Calibration, TeamConfig) {
+    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
+    let mut r = TeamLayer::new(
+        2,
+        false,
+        ArbitrationParams::default(),
+        Pose::default(),
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    // The camera's σ: range 0.02 m + 5% along the line of sight, bearing 0.02 rad across.
+    let along = cal.sensors.range_noise_m + cal.sensors.range_noise_frac * range_m;
+    let across = range_m * cal.sensors.bearing_noise_rad;
+    let seen = crate::frames::ball_sighting_from_rep103(
+        Vector2::new(range_m, 0.0),
+        Matrix2::new(along * along, 0.0, 0.0, across * across),
+    );
+    for k in 0..25 {
+        r.lwm.ball_sighting(0.04 * k as f64, &seen);
+    }
+    r.ball = Some(BallBelief {
+        at: Vec2::new(range_m, 0.0),
+        seen_at_s: 0.96,
+    });
+    r.odometry = fusion::Odometry {
+        forward_m,
+        left_m: 0.0,
+        turn_rad: 0.0,
+    };
+    (r, cal, cfg)
+}
+
+#[test]
+fn a_robot_that_walks_into_the_ball_reports_the_push_like_a_kick() {
+    // Touching is 0.2 m (body) + 0.05 m (ball); the ball lies 0.24 m ahead and the robot
+    // closed in at 0.5 m/s: the ball leaves straight ahead at 1.2 × 0.5 m/s.
+    let (r, _cal, cfg) = robot_at_a_still_ball(0.24, 0.02);
+    let push = r
+        .push_report(&cfg, 0.96)
+        .expect("a body at the ball moving into it pushes it");
+    assert!(push.is_valid(), "{push:?}");
+    assert!(
+        (push.speed_mps - 0.6).abs() < 0.05,
+        "1.2 × the closing speed: {push:?}"
+    );
+    assert!(
+        push.direction_rad.abs() < 0.05,
+        "along the contact normal: {push:?}"
+    );
+    assert!(
+        push.contact_prob > 0.5 && push.contact_prob <= 1.0,
+        "the ball is more likely than not at the body: {push:?}"
+    );
+    // The robot's own ball turns with it at once.
+    let mut lwm = r.lwm.clone();
+    lwm.kick(&push);
+    let v = lwm.ball_at(0.96).unwrap().velocity();
+    assert!(v.x > 0.3, "own ball rolls on after the push: {v}");
+
+    // Not at the ball, backing away from it, or standing still: nothing to report.
+    let (far, ..) = robot_at_a_still_ball(0.6, 0.02);
+    assert_eq!(far.push_report(&cfg, 0.96), None, "30 cm short of it");
+    let (back, ..) = robot_at_a_still_ball(0.24, -0.02);
+    assert_eq!(back.push_report(&cfg, 0.96), None, "moving away");
+    let (still, ..) = robot_at_a_still_ball(0.24, 0.0);
+    assert_eq!(still.push_report(&cfg, 0.96), None, "standing");
+    // Reports switched off.
+    let mut off = cfg;
+    off.world_model.push_gain = 0.0;
+    assert_eq!(r.push_report(&off, 0.96), None);
+}
+
+#[test]
+fn the_team_ball_is_widened_while_a_body_closes_in_on_it() {
+    // The same robot and ball: walking into it widens the held team ball by
+    // push_gain × closing speed × the horizon; standing next to it does not.
+    let (r, _cal, cfg) = robot_at_a_still_ball(0.24, 0.02);
+    let own = r.lwm.ball_at(0.96).unwrap();
+    let ball = TeamBall {
+        estimate: own,
+        gbc: fusion::position_confidence(&own.position_cov()),
+        source: fusion::TeamBallSource::OwnFallback,
+    };
+    let wide = r.widened_at_contact(&cfg, 0.96, &[], ball);
+    let sigma = 1.2 * 0.5 * cfg.world_model.contact_horizon_s;
+    let added = wide.estimate.cov[(0, 0)] - own.cov[(0, 0)];
+    assert!(
+        (added - sigma * sigma).abs() < 0.2 * sigma * sigma,
+        "added {added} m², expected about {}",
+        sigma * sigma
+    );
+    assert!(wide.gbc < ball.gbc, "a wider ball is a less confident one");
+    let (standing, ..) = robot_at_a_still_ball(0.24, 0.0);
+    let same = standing.widened_at_contact(&cfg, 0.96, &[], ball);
+    assert_eq!(
+        same.estimate.cov, own.cov,
+        "a body that stands still pushes nothing"
+    );
+}
+
+#[test]
+fn a_teammate_at_the_ball_widens_the_held_ball_by_the_kicks_not_heard_of_yet() {
+    // Robot 2 stands still 0.24 m from the ball. Teammate 1 was at the ball (0.25 m
+    // from it) when it last published, 0.2 s ago: it may have kicked since, at λ per
+    // second, at the field's kick speed v: λ v² w³ / 6 per axis. Teammate 3, 2 m
+    // away, could not have.
+    let (mut r, cal, cfg) = robot_at_a_still_ball(0.24, 0.0);
+    let own = r.lwm.ball_at(0.96).unwrap();
+    let ball = TeamBall {
+        estimate: own,
+        gbc: fusion::position_confidence(&own.position_cov()),
+        source: fusion::TeamBallSource::OwnFallback,
+    };
+    let teammate = |x: f64, y: f64| {
+        let pose = fusion::PoseEstimate::new(x, y, 0.0, Vector3::new(1e-4, 1e-4, 1e-5));
+        LocalModel::new(fusion::LocalConfig::default(), pose).publish(0.9)
+    };
+    r.gwm.ingest(3, &teammate(0.24, 2.0), 0.9);
+    let far = r.widened_at_contact(&cfg, 1.1, &[], ball);
+    assert_eq!(
+        far.estimate.cov, own.cov,
+        "a teammate 2 m away kicks nothing"
+    );
+    r.gwm.ingest(1, &teammate(0.24, -0.25), 0.9);
+    let wide = r.widened_at_contact(&cfg, 1.1, &[], ball);
+    let wm = &cfg.world_model;
+    let expected = wm.kick_hazard_per_s * cal.kick.speed_mps.powi(2) * 0.2f64.powi(3) / 6.0;
+    let added = wide.estimate.cov[(1, 1)] - own.cov[(1, 1)];
+    assert!(
+        expected > 0.0 && (added - expected).abs() < 1e-9,
+        "added {added} m², expected {expected}"
+    );
+    // Heard long enough ago, where it is now is anyone's guess.
+    let stale = r.widened_at_contact(&cfg, 0.9 + wm.kick_hazard_window_s + 0.1, &[], ball);
+    assert_eq!(
+        stale.estimate.cov, own.cov,
+        "a silent teammate is not at the ball"
+    );
+}
+
+#[test]
+fn a_robots_world_model_fits_the_spl_message_limit_even_with_a_kick() {
+    // The fullest LWM there is: ball, three batches and a kick, sent hours into a run
+    // (sequence number and version past 2³², the varints at their widest).
+    let start = fusion::PoseEstimate::new(-3.2, 1.7, 2.0, Vector3::new(1e-3, 1e-3, 1e-4));
+    let mut lwm = LocalModel::new(fusion::LocalConfig::default(), start);
+    let seen = BallSighting {
+        local: fusion::nalgebra::Vector2::new(0.1, 1.5),
+        cov: fusion::nalgebra::Matrix2::identity() * 1e-3,
+    };
+    for k in 0..3 {
+        let t_s = 0.04 * k as f64;
+        lwm.ball_sighting(t_s, &seen);
+        lwm.publish(t_s + 0.01);
+    }
+    lwm.ball_sighting(0.12, &seen);
+    lwm.kick(&Kick {
+        t_s: 0.12,
+        speed_mps: 4.0,
+        direction_rad: 0.3,
+        speed_sigma_mps: 0.2,
+        direction_sigma_rad: 0.08,
+        contact_prob: 1.0,
+    });
+    let msg = lwm.publish(0.13);
+    assert!(msg.kick.is_some() && msg.earlier.iter().all(Option::is_some));
+    let value = Value::Bytes(msg.to_bytes().expect("encodes").to_vec());
+    let frame = |key: Option<&TeamKey>| {
+        let mut w = FrameWriter::new(7, 3, u64::MAX, 1 << 33, 1200, key);
+        assert!(w.push(ItemRef::Update {
+            path: world_local_key().path(),
+            value: &value,
+            version: 1 << 33,
+            age_us: 70_000,
+        }));
+        w.finish().len()
+    };
+    let (plain, tagged) = (frame(None), frame(Some(&TeamKey::new(&[7u8; 32]))));
+    // Wire format 3 added a 4-byte send stamp (and a 5-byte echo in a team): the SPL
+    // packing issue has to win those back; until then the stamp is allowed for.
+    assert!(
+        plain <= 128 + 4,
+        "a world-model frame is {plain} bytes, over the SPL's 128 plus the send stamp"
+    );
+    assert_eq!(tagged, plain + 16, "the HMAC tag adds 16 bytes");
+}
