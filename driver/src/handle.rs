@@ -221,6 +221,22 @@ impl Handle {
         result
     }
 
+    /// Runs `f` on the replica itself at the driver's clock, then sends what it queued:
+    /// for code that needs the whole sans-IO core (a team layer reading the blackboard
+    /// and writing with priority, the budget's headroom, the game clock). `f` must be
+    /// short and must not use a [`Handle`].
+    pub fn with_replica<R>(&self, f: impl FnOnce(&mut comms::Replica, Instant) -> R) -> R {
+        let result = {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            let result = f(&mut inner.replica, now);
+            inner.pump();
+            result
+        };
+        run_reactions(&self.inner);
+        result
+    }
+
     /// Posts a message to this robot's `*.talk.<queue>`; returns its sequence number.
     pub fn post(&self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
         let seq = {

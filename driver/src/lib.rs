@@ -72,6 +72,7 @@ mod incarnation;
 mod rate_limit;
 mod relay;
 mod socket;
+pub mod team;
 
 pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,

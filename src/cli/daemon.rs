@@ -69,6 +69,17 @@ pub struct DaemonArgs {
     /// the frames of a teammate that does not count (other software) use up the pool.
     #[arg(long, requires = "budget")]
     pub budget_pool: bool,
+    /// Do not run the team layer (world model, team ball, should-I-go, sending policy:
+    /// docs/team-layer.md). It is on by default, and stays dormant, sending nothing of
+    /// its own, until a robot program writes `local.var.robot.pose` or
+    /// `local.var.robot.odometry`.
+    #[arg(long)]
+    pub no_team_layer: bool,
+    /// The team layer's sending policy: every (each control tick), baseline (B-Human-style
+    /// thresholds), voi (value of information). Default: voi under a --budget, every
+    /// without one.
+    #[arg(long, value_enum)]
+    pub policy: Option<team::SendPolicy>,
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
@@ -310,6 +321,19 @@ pub fn run(args: DaemonArgs) -> Result<()> {
             relay = %args.relay,
             "huddle daemon running"
         );
+        let _team = (!args.no_team_layer).then(|| {
+            let team_size = usize::from(args.team_size);
+            let interval = args.budget.map(|spec| spec.share(team_size).interval());
+            let mut cfg = driver::team::TeamLayerConfig::new(team_size, interval);
+            if let Some(p) = args.policy {
+                cfg.team.send_policy = p;
+            }
+            tracing::info!(
+                policy = ?cfg.team.send_policy,
+                "team layer: waiting for local.var.robot.pose or .odometry (docs/team-layer.md)"
+            );
+            driver::team::start(&handle, cfg)
+        });
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let mut relay_stop = stop_rx.clone();
         tokio::task::spawn_local(driver::serve(relay, handle, async move {

@@ -384,14 +384,8 @@ impl Simulation {
             .unwrap_or_else(|| cfg.field.exact_calibration());
         let budget = cfg.budget.map(|b| b.share(n));
         if let Some(b) = budget {
-            // A robot's messages come `interval` apart at best: what it said last holds
-            // until it says otherwise (a goer change goes at once, from the reserve).
-            let hold = b.interval() * 3;
-            params.stale_after = params.stale_after.max(hold);
-            world_model.global.stale_after_s =
-                world_model.global.stale_after_s.max(hold.as_secs_f64());
-            // Each message carries one tick's sightings; the sender's track holds them all.
-            world_model.global.track_after_s = Some(0.0);
+            // The daemon sets a budgeted team up the same way.
+            team::adapt_to_budget(&mut params, &mut world_model, b.interval());
         }
         if cfg.compensate_latency && params.latency_compensation.is_zero() {
             params.latency_compensation = cfg.expected_delay();

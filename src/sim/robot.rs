@@ -234,14 +234,18 @@ impl Robot {
                 Vector2::new(l.x, l.y)
             })
             .collect();
+        let odometry = [perception::to_fusion_odometry(&percepts.odometry)];
+        let ball: Vec<_> = self
+            .frame
+            .ball
+            .iter()
+            .map(|s| (perception::ball_sighting(&sensors, s), 0.0))
+            .collect();
         let senses = team::Senses {
-            odometry: Some(perception::to_fusion_odometry(&percepts.odometry)),
+            odometry: &odometry,
             landmarks: &landmarks,
             pose: None,
-            ball: self
-                .frame
-                .ball
-                .map(|s| (perception::ball_sighting(&sensors, &s), 0.0)),
+            ball: &ball,
             goal_in_view: self.frame.opponent_goal_in_view,
             opponents: &opponents,
             cost: None,

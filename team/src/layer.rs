@@ -53,6 +53,22 @@ pub fn pass_to_key() -> Key {
     Key::parse(PASS_TO_KEY).expect("PASS_TO_KEY is a valid key")
 }
 
+/// Under a league's budget a robot's messages come `interval` apart at best: what it said
+/// last holds until it says otherwise (a goer change goes at once, from the reserve), so
+/// teammates hold its claim and its world model three intervals, and each message carries
+/// one tick's sightings while the sender's track holds them all. The simulator and the
+/// daemon set a budgeted team up the same way.
+pub fn adapt_to_budget(
+    params: &mut ArbitrationParams,
+    world_model: &mut WorldModelConfig,
+    interval: Duration,
+) {
+    let hold = interval * 3;
+    params.stale_after = params.stale_after.max(hold);
+    world_model.global.stale_after_s = world_model.global.stale_after_s.max(hold.as_secs_f64());
+    world_model.global.track_after_s = Some(0.0);
+}
+
 /// A robot clock reading in seconds.
 pub fn seconds(t: Instant) -> f64 {
     t.as_micros() as f64 * 1e-6
@@ -120,16 +136,18 @@ struct TeammateMotion {
 /// EKF) or from `pose`, the robot's own estimate.
 #[derive(Debug, Clone, Default)]
 pub struct Senses<'a> {
-    /// Odometry over the latest control period (REP-103: forward, left, turn).
-    pub odometry: Option<fusion::Odometry>,
+    /// Odometry readings over the latest control period, oldest first (REP-103:
+    /// forward, left, turn).
+    pub odometry: &'a [fusion::Odometry],
     /// Landmarks at known field places, as range and bearing with their R.
     pub landmarks: &'a [(RangeBearingSighting, Matrix2<f64>)],
     /// The robot's own pose estimate (REP-103 mean, covariance of x, y, θ), replacing
     /// the pose EKF's.
     pub pose: Option<(Pose, fusion::nalgebra::Matrix3<f64>)>,
-    /// A ball sighting in `fusion`'s robot frame (see [`frames::ball_sighting_from_rep103`])
-    /// and how old it was at this tick, s.
-    pub ball: Option<(BallSighting, f64)>,
+    /// Ball sightings in `fusion`'s robot frame (see
+    /// [`frames::ball_sighting_from_rep103`]), oldest first, each with how old it was at
+    /// this tick, s.
+    pub ball: &'a [(BallSighting, f64)],
     /// The opponent goal is in view (eq. 19's `f_other`).
     pub goal_in_view: bool,
     /// Opponents seen now, robot frame (REP-103, m): a body at the ball may push it.
@@ -334,13 +352,23 @@ impl TeamLayer {
         if !claim_waiting {
             self.untold_claim = None;
         }
-        self.odometry = senses.odometry.unwrap_or_default();
+        // The period's motion, for its own velocity: the readings added up.
+        self.odometry = senses
+            .odometry
+            .iter()
+            .fold(fusion::Odometry::default(), |a, o| fusion::Odometry {
+                forward_m: a.forward_m + o.forward_m,
+                left_m: a.left_m + o.left_m,
+                turn_rad: a.turn_rad + o.turn_rad,
+            });
         if let Some((pose, cov)) = senses.pose {
             self.lwm.set_pose(frames::to_fusion_pose(&pose, cov));
         } else {
             let pf = self.lwm.pose_filter_mut();
-            pf.noise.q = frames::odometry_q(&self.odometry, &self.cal.sensors, wm.push_sigma_m);
-            pf.odometry(&self.odometry);
+            for odo in senses.odometry {
+                pf.noise.q = frames::odometry_q(odo, &self.cal.sensors, wm.push_sigma_m);
+                pf.odometry(odo);
+            }
             for (sighting, r) in senses.landmarks {
                 pf.noise.r_range_bearing = *r;
                 // A degenerate sighting (the robot on the landmark) is skipped.
@@ -349,8 +377,8 @@ impl TeamLayer {
         }
         self.pose_belief = frames::from_fusion_pose(self.lwm.pose());
 
-        self.ball_sighting = senses.ball.map(|(s, _)| s);
-        if let Some((s, age_s)) = &senses.ball {
+        self.ball_sighting = senses.ball.last().map(|(s, _)| *s);
+        for (s, age_s) in senses.ball {
             let seen_s = now_s - age_s;
             self.lwm.ball_sighting(seen_s, s);
             self.ball_seen_at_s = Some(self.ball_seen_at_s.map_or(seen_s, |t| t.max(seen_s)));

@@ -37,6 +37,7 @@
 
 pub mod acoustic;
 pub mod calibration;
+pub mod contract;
 pub mod frames;
 pub mod geometry;
 mod layer;
@@ -45,7 +46,7 @@ pub mod policy;
 pub use calibration::{Calibration, WorldModelConfig};
 pub use geometry::{Pose, Vec2};
 pub use layer::{
-    pass_to_key, seconds, world_local_key, world_local_of, BallBelief, Senses, TeamConfig,
-    TeamLayer, PASS_TO_KEY, WORLD_LOCAL_KEY,
+    adapt_to_budget, pass_to_key, seconds, world_local_key, world_local_of, BallBelief, Senses,
+    TeamConfig, TeamLayer, PASS_TO_KEY, WORLD_LOCAL_KEY,
 };
 pub use policy::SendPolicy;

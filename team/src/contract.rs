@@ -1,0 +1,455 @@
+//! The keys a robot program feeds the team layer through, and the keys it reads back:
+//! `docs/team-layer.md` in code. Parsing is strict and total: every malformed input is a
+//! [`ContractError`] that says what is wrong (the daemon turns it into the relay's
+//! `ERR 412` line), and nothing is half-taken.
+
+use fusion::nalgebra::{Matrix2, Matrix3, Vector2};
+use fusion::{BallEstimate, PoseEstimate, RangeBearingSighting};
+use thiserror::Error;
+
+use crate::frames;
+use crate::geometry::{Pose, Vec2};
+
+/// The robot's own pose estimate (floats, see the contract).
+pub const POSE_KEY: &str = "local.var.robot.pose";
+/// Odometry since the previous write (floats `[forward, left, turn]`).
+pub const ODOMETRY_KEY: &str = "local.var.robot.odometry";
+/// Landmark sightings (floats, 6 per sighting).
+pub const LANDMARKS_KEY: &str = "local.var.robot.landmarks";
+/// One ball sighting, robot frame.
+pub const BALL_KEY: &str = "local.var.robot.ball";
+/// A kick the robot just made.
+pub const KICK_KEY: &str = "local.var.robot.kick";
+/// Eq. (19)'s `f_other` (bool).
+pub const GOAL_IN_VIEW_KEY: &str = "local.var.robot.goal_in_view";
+/// A cost replacing eq. (19) (float).
+pub const COST_KEY: &str = "local.var.robot.cost";
+/// The robot is the goalkeeper (bool).
+pub const GOALKEEPER_KEY: &str = "local.var.robot.goalkeeper";
+/// The robot is fallen (bool).
+pub const FALLEN_KEY: &str = "local.var.robot.fallen";
+
+/// The team ball (floats `[x, y, vx, vy, var_x, cov_xy, var_y, confidence, age_s]`).
+pub const TEAM_BALL_KEY: &str = "local.var.team.ball";
+/// The goer (int, 0: none).
+pub const GOER_KEY: &str = "local.var.team.goer";
+/// Whether this robot goes (bool).
+pub const GOING_KEY: &str = "local.var.team.going";
+/// This robot's cost as posted (float).
+pub const COST_OUT_KEY: &str = "local.var.team.cost";
+/// Teammates (floats, 5 per teammate: `[id, x, y, θ, silent_s]`).
+pub const MATES_KEY: &str = "local.var.team.mates";
+/// This robot's own ball (floats `[x, y, vx, vy, var_x, cov_xy, var_y, age_s]`).
+pub const OWN_BALL_KEY: &str = "local.var.team.own_ball";
+/// The pose the layer holds (floats, as [`POSE_KEY`] without the age).
+pub const POSE_OUT_KEY: &str = "local.var.team.pose";
+/// Messages this robot may still send now under its budget (int).
+pub const BUDGET_KEY: &str = "local.var.team.budget";
+
+/// Oldest observation the layer takes, s.
+pub const MAX_AGE_S: f64 = 10.0;
+
+/// Why an input is refused.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ContractError {
+    /// The value is not of the key's type.
+    #[error("{key} takes {expected}")]
+    Type {
+        /// The key.
+        key: &'static str,
+        /// What it takes.
+        expected: &'static str,
+    },
+    /// A float vector of the wrong length.
+    #[error("{key} takes {expected} numbers, got {got}")]
+    Length {
+        /// The key.
+        key: &'static str,
+        /// What it takes.
+        expected: &'static str,
+        /// How many it got.
+        got: usize,
+    },
+    /// NaN or infinity.
+    #[error("{key}: element {index} is not finite ({value})")]
+    NotFinite {
+        /// The key.
+        key: &'static str,
+        /// Which element.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// A covariance that is not symmetric positive definite.
+    #[error("{key}: the covariance is not positive definite")]
+    Covariance {
+        /// The key.
+        key: &'static str,
+    },
+    /// An age out of [0, MAX_AGE_S].
+    #[error("{key}: age_s {age_s} is not within [0, {MAX_AGE_S}] s")]
+    Age {
+        /// The key.
+        key: &'static str,
+        /// The age given.
+        age_s: f64,
+    },
+    /// A value out of its range.
+    #[error("{key}: {what}")]
+    Range {
+        /// The key.
+        key: &'static str,
+        /// What is wrong.
+        what: &'static str,
+    },
+}
+
+/// A pose the robot estimated itself.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseInput {
+    /// REP-103 mean.
+    pub pose: Pose,
+    /// Covariance of (x, y, θ).
+    pub cov: Matrix3<f64>,
+    /// How old it was when written, s.
+    pub age_s: f64,
+}
+
+/// A ball sighting in the robot frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallInput {
+    /// REP-103 robot-frame place, m.
+    pub local: Vector2<f64>,
+    /// Its covariance.
+    pub cov: Matrix2<f64>,
+    /// How old it was when written, s.
+    pub age_s: f64,
+}
+
+/// A kick the robot made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KickInput {
+    /// Field-frame direction, rad.
+    pub direction_rad: f64,
+    /// Ball speed, m/s.
+    pub speed_mps: f64,
+    /// The robot's own odds that the foot met the ball.
+    pub contact_prob: f64,
+}
+
+fn floats<'a>(
+    key: &'static str,
+    value: &'a comms::Value,
+    expected: &'static str,
+    lengths: &[usize],
+) -> Result<&'a [f64], ContractError> {
+    let comms::Value::Floats(v) = value else {
+        return Err(ContractError::Type {
+            key,
+            expected: "floats",
+        });
+    };
+    if !lengths.contains(&v.len()) {
+        return Err(ContractError::Length {
+            key,
+            expected,
+            got: v.len(),
+        });
+    }
+    if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        return Err(ContractError::NotFinite { key, index, value });
+    }
+    Ok(v)
+}
+
+fn age(key: &'static str, v: &[f64], at: usize) -> Result<f64, ContractError> {
+    let age_s = v.get(at).copied().unwrap_or(0.0);
+    if (0.0..=MAX_AGE_S).contains(&age_s) {
+        Ok(age_s)
+    } else {
+        Err(ContractError::Age { key, age_s })
+    }
+}
+
+/// Whether a symmetric matrix is positive definite (Cholesky succeeds, diagonal > 0).
+fn positive_definite<const N: usize>(m: &fusion::nalgebra::SMatrix<f64, N, N>) -> bool {
+    (0..N).all(|i| m[(i, i)] > 0.0) && m.cholesky().is_some()
+}
+
+/// Parses [`POSE_KEY`].
+pub fn parse_pose(value: &comms::Value) -> Result<PoseInput, ContractError> {
+    const KEY: &str = POSE_KEY;
+    let v = floats(
+        KEY,
+        value,
+        "9 or 10 (x, y, θ, 6 covariance terms, age_s)",
+        &[9, 10],
+    )?;
+    let cov = Matrix3::new(v[3], v[4], v[5], v[4], v[6], v[7], v[5], v[7], v[8]);
+    if !positive_definite(&cov) {
+        return Err(ContractError::Covariance { key: KEY });
+    }
+    Ok(PoseInput {
+        pose: Pose {
+            at: Vec2::new(v[0], v[1]),
+            theta_rad: fusion::wrap_angle(v[2]),
+        },
+        cov,
+        age_s: age(KEY, v, 9)?,
+    })
+}
+
+/// Parses [`ODOMETRY_KEY`].
+pub fn parse_odometry(value: &comms::Value) -> Result<fusion::Odometry, ContractError> {
+    let v = floats(ODOMETRY_KEY, value, "3 (forward, left, turn)", &[3])?;
+    if v[0].hypot(v[1]) > 5.0 || v[2].abs() > 2.0 * std::f64::consts::PI {
+        return Err(ContractError::Range {
+            key: ODOMETRY_KEY,
+            what: "more than 5 m or a full turn since the previous write",
+        });
+    }
+    Ok(fusion::Odometry {
+        forward_m: v[0],
+        left_m: v[1],
+        turn_rad: v[2],
+    })
+}
+
+/// Parses [`LANDMARKS_KEY`]: each sighting with its R, in `fusion`'s terms.
+pub fn parse_landmarks(
+    value: &comms::Value,
+) -> Result<Vec<(RangeBearingSighting, Matrix2<f64>)>, ContractError> {
+    const KEY: &str = LANDMARKS_KEY;
+    let comms::Value::Floats(all) = value else {
+        return Err(ContractError::Type {
+            key: KEY,
+            expected: "floats",
+        });
+    };
+    if all.len() % 6 != 0 || all.len() > 6 * 64 {
+        return Err(ContractError::Length {
+            key: KEY,
+            expected: "6 per sighting (field_x, field_y, range, bearing, σ_range, σ_bearing), at most 64 sightings",
+            got: all.len(),
+        });
+    }
+    let v = floats(KEY, value, "", &[all.len()])?;
+    v.chunks_exact(6)
+        .map(|s| {
+            if s[2] < 0.0 || s[4] <= 0.0 || s[5] <= 0.0 {
+                return Err(ContractError::Range {
+                    key: KEY,
+                    what: "a range below 0 or a σ not above 0",
+                });
+            }
+            Ok((
+                RangeBearingSighting {
+                    field: Vector2::new(s[0], s[1]),
+                    range_m: s[2],
+                    bearing_rad: s[3],
+                },
+                Matrix2::new(s[4] * s[4], 0.0, 0.0, s[5] * s[5]),
+            ))
+        })
+        .collect()
+}
+
+/// Parses [`BALL_KEY`].
+pub fn parse_ball(value: &comms::Value) -> Result<BallInput, ContractError> {
+    const KEY: &str = BALL_KEY;
+    let v = floats(
+        KEY,
+        value,
+        "5 or 6 (x, y, var_x, cov_xy, var_y, age_s)",
+        &[5, 6],
+    )?;
+    let cov = Matrix2::new(v[2], v[3], v[3], v[4]);
+    if !positive_definite(&cov) {
+        return Err(ContractError::Covariance { key: KEY });
+    }
+    if v[0].hypot(v[1]) > 50.0 {
+        return Err(ContractError::Range {
+            key: KEY,
+            what: "a ball more than 50 m away",
+        });
+    }
+    Ok(BallInput {
+        local: Vector2::new(v[0], v[1]),
+        cov,
+        age_s: age(KEY, v, 5)?,
+    })
+}
+
+/// Parses [`KICK_KEY`].
+pub fn parse_kick(value: &comms::Value) -> Result<KickInput, ContractError> {
+    const KEY: &str = KICK_KEY;
+    let v = floats(
+        KEY,
+        value,
+        "2 or 3 (direction, speed, contact_prob)",
+        &[2, 3],
+    )?;
+    let contact_prob = v.get(2).copied().unwrap_or(1.0);
+    if !(0.0..=20.0).contains(&v[1]) || !(0.0..=1.0).contains(&contact_prob) {
+        return Err(ContractError::Range {
+            key: KEY,
+            what: "speed outside 0–20 m/s or contact_prob outside 0–1",
+        });
+    }
+    Ok(KickInput {
+        direction_rad: fusion::wrap_angle(v[0]),
+        speed_mps: v[1],
+        contact_prob,
+    })
+}
+
+/// Parses a bool key ([`GOAL_IN_VIEW_KEY`], [`GOALKEEPER_KEY`], [`FALLEN_KEY`]).
+pub fn parse_bool(key: &'static str, value: &comms::Value) -> Result<bool, ContractError> {
+    match value {
+        comms::Value::Bool(b) => Ok(*b),
+        _ => Err(ContractError::Type {
+            key,
+            expected: "a bool",
+        }),
+    }
+}
+
+/// Parses [`COST_KEY`].
+pub fn parse_cost(value: &comms::Value) -> Result<f64, ContractError> {
+    let h = match value {
+        comms::Value::Float(h) => *h,
+        comms::Value::Int(h) => *h as f64,
+        _ => {
+            return Err(ContractError::Type {
+                key: COST_KEY,
+                expected: "a float",
+            })
+        }
+    };
+    if h.is_finite() {
+        Ok(h)
+    } else {
+        Err(ContractError::NotFinite {
+            key: COST_KEY,
+            index: 0,
+            value: h,
+        })
+    }
+}
+
+/// Checks the value written to an input `key`; `None` for a key that is not an input.
+pub fn check(key: &str, value: &comms::Value) -> Option<Result<(), ContractError>> {
+    Some(match key {
+        POSE_KEY => parse_pose(value).map(drop),
+        ODOMETRY_KEY => parse_odometry(value).map(drop),
+        LANDMARKS_KEY => parse_landmarks(value).map(drop),
+        BALL_KEY => parse_ball(value).map(drop),
+        KICK_KEY => parse_kick(value).map(drop),
+        GOAL_IN_VIEW_KEY => parse_bool(GOAL_IN_VIEW_KEY, value).map(drop),
+        GOALKEEPER_KEY => parse_bool(GOALKEEPER_KEY, value).map(drop),
+        FALLEN_KEY => parse_bool(FALLEN_KEY, value).map(drop),
+        COST_KEY => parse_cost(value).map(drop),
+        _ => return None,
+    })
+}
+
+/// The input keys, for guards and watches.
+pub const INPUT_KEYS: [&str; 9] = [
+    POSE_KEY,
+    ODOMETRY_KEY,
+    LANDMARKS_KEY,
+    BALL_KEY,
+    KICK_KEY,
+    GOAL_IN_VIEW_KEY,
+    COST_KEY,
+    GOALKEEPER_KEY,
+    FALLEN_KEY,
+];
+
+/// A pose estimate as [`POSE_OUT_KEY`] gives it (REP-103).
+pub fn pose_value(est: &PoseEstimate) -> comms::Value {
+    let p = frames::from_fusion_pose(est);
+    let c = &est.cov;
+    comms::Value::Floats(vec![
+        p.at.x,
+        p.at.y,
+        p.theta_rad,
+        c[(0, 0)],
+        c[(0, 1)],
+        c[(0, 2)],
+        c[(1, 1)],
+        c[(1, 2)],
+        c[(2, 2)],
+    ])
+}
+
+/// A ball estimate at `now_s` as [`TEAM_BALL_KEY`] / [`OWN_BALL_KEY`] give it;
+/// `confidence` is put before the age when given.
+pub fn ball_value(b: &BallEstimate, confidence: Option<f64>, age_s: f64) -> comms::Value {
+    let (p, v, c) = (b.position(), b.velocity(), b.position_cov());
+    let mut out = vec![p.x, p.y, v.x, v.y, c[(0, 0)], c[(0, 1)], c[(1, 1)]];
+    out.extend(confidence);
+    out.push(age_s.max(0.0));
+    comms::Value::Floats(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use comms::Value;
+
+    #[test]
+    fn a_pose_with_its_covariance_and_age_is_taken() {
+        let p = parse_pose(&Value::Floats(vec![
+            1.0, -2.0, 0.5, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001, 0.02,
+        ]))
+        .expect("a good pose");
+        assert_eq!(p.pose.at, Vec2::new(1.0, -2.0));
+        assert!((p.age_s - 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn every_kind_of_bad_input_is_refused_with_a_reason() {
+        let cases: [(&str, Value, &str); 9] = [
+            (POSE_KEY, Value::Float(1.0), "takes floats"),
+            (POSE_KEY, Value::Floats(vec![0.0; 4]), "takes 9 or 10"),
+            (
+                POSE_KEY,
+                Value::Floats(vec![0.0, 0.0, f64::NAN, 0.1, 0.0, 0.0, 0.1, 0.0, 0.1]),
+                "not finite",
+            ),
+            (
+                POSE_KEY,
+                Value::Floats(vec![0.0, 0.0, 0.0, 0.1, 0.5, 0.0, 0.1, 0.0, 0.1]),
+                "positive definite",
+            ),
+            (
+                BALL_KEY,
+                Value::Floats(vec![1.0, 0.0, 0.01, 0.0, 0.01, -1.0]),
+                "age_s -1",
+            ),
+            (
+                BALL_KEY,
+                Value::Floats(vec![1.0, 0.0, 0.01, 0.0, 0.01, 3600.0]),
+                "age_s 3600",
+            ),
+            (
+                BALL_KEY,
+                Value::Floats(vec![1.0, f64::INFINITY, 0.01, 0.0, 0.01]),
+                "not finite",
+            ),
+            (KICK_KEY, Value::Floats(vec![0.0, 4.0, 1.5]), "contact_prob"),
+            (COST_KEY, Value::Float(f64::NAN), "not finite"),
+        ];
+        for (key, value, why) in cases {
+            let err = check(key, &value)
+                .expect("an input key")
+                .expect_err(&format!("{key} {value:?} must be refused"));
+            assert!(
+                err.to_string().contains(why),
+                "{key} {value:?}: '{err}' should say '{why}'"
+            );
+        }
+        assert!(check("local.var.other", &Value::Int(1)).is_none());
+    }
+}
