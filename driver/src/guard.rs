@@ -61,6 +61,19 @@ impl Board for GuardedBoard<'_> {
         Board::post(&mut *self.replica, now, key, value)
     }
 
+    fn set_priority(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        for slot in self.guards.iter().filter_map(Weak::upgrade) {
+            if slot.key == *key {
+                (slot.check.borrow_mut())(&value)?;
+            }
+        }
+        Board::set_priority(&mut *self.replica, now, key, value)
+    }
+
+    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
+        Board::set_game_clock(&mut *self.replica, now, remaining);
+    }
+
     fn departed(&self, owner: u8) -> bool {
         Board::departed(&*self.replica, owner)
     }

@@ -36,8 +36,12 @@ fn team() -> Team {
     let cal = Calibration::default();
     let replicas = (1..=ROBOTS as u8)
         .map(|id| {
-            Replica::new(ReplicaConfig::new(id, 7), u64::from(id), Instant::from_micros(0))
-                .expect("a valid config")
+            Replica::new(
+                ReplicaConfig::new(id, 7),
+                u64::from(id),
+                Instant::from_micros(0),
+            )
+            .expect("a valid config")
         })
         .collect();
     let layers = (1..=ROBOTS as u8)
@@ -46,27 +50,57 @@ fn team() -> Team {
                 at: Vec2::new(-3.0 + f64::from(id), 0.5 * f64::from(id) - 1.5),
                 theta_rad: 0.0,
             };
-            TeamLayer::new(id, false, ArbitrationParams::default(), start, &cal, &cfg.world_model, ROBOTS)
+            TeamLayer::new(
+                id,
+                false,
+                ArbitrationParams::default(),
+                start,
+                &cal,
+                &cfg.world_model,
+                ROBOTS,
+            )
         })
         .collect();
-    Team { replicas, layers, cfg }
+    Team {
+        replicas,
+        layers,
+        cfg,
+    }
 }
 
 /// What robot `k` senses at tick `n`: a little forward motion, the ball ahead, landmarks.
-fn senses_of(k: usize, n: u64) -> (fusion::Odometry, Vec<(RangeBearingSighting, Matrix2<f64>)>, (fusion::BallSighting, f64)) {
-    let odo = fusion::Odometry { forward_m: 0.01, left_m: 0.0, turn_rad: 0.001 };
+fn senses_of(
+    k: usize,
+    n: u64,
+) -> (
+    fusion::Odometry,
+    Vec<(RangeBearingSighting, Matrix2<f64>)>,
+    (fusion::BallSighting, f64),
+) {
+    let odo = fusion::Odometry {
+        forward_m: 0.01,
+        left_m: 0.0,
+        turn_rad: 0.001,
+    };
     let marks = Calibration::default().field.landmarks();
     let landmarks = (0..3)
         .map(|j| {
             let m = marks[(n as usize + j + k) % marks.len()];
             (
-                RangeBearingSighting { field: Vector2::new(m.x, m.y), range_m: 4.0, bearing_rad: 0.1 * j as f64 },
+                RangeBearingSighting {
+                    field: Vector2::new(m.x, m.y),
+                    range_m: 4.0,
+                    bearing_rad: 0.1 * j as f64,
+                },
                 Matrix2::new(0.04, 0.0, 0.0, 0.0004),
             )
         })
         .collect();
     let wobble = 0.01 * ((n % 7) as f64 - 3.0);
-    let ball = frames::ball_sighting_from_rep103(Vector2::new(2.0 + wobble, 0.3), Matrix2::identity() * 0.01);
+    let ball = frames::ball_sighting_from_rep103(
+        Vector2::new(2.0 + wobble, 0.3),
+        Matrix2::identity() * 0.01,
+    );
     (odo, landmarks, (ball, 0.0))
 }
 
@@ -78,7 +112,12 @@ fn tick(t: &mut Team, n: u64) -> Duration {
         let (odo, landmarks, ball) = senses_of(k, n);
         let odometry = [odo];
         let balls = [ball];
-        let senses = Senses { odometry: &odometry, landmarks: &landmarks, ball: &balls, ..Senses::default() };
+        let senses = Senses {
+            odometry: &odometry,
+            landmarks: &landmarks,
+            ball: &balls,
+            ..Senses::default()
+        };
         let replica = &mut t.replicas[k];
         let layer = &mut t.layers[k];
         let start = Wall::now();
@@ -156,7 +195,16 @@ fn main() {
     base_us.sort_by(f64::total_cmp);
     let (layer, base) = (layer_us[2], base_us[2]);
     println!("team layer tick (robot 2 of 5, VOI, ball + 3 landmarks, 4 teammates' LWMs):");
-    println!("  median of 5 rounds of {TICKS} ticks: {layer:.1} µs per tick (rounds {:.1}–{:.1})", layer_us[0], layer_us[4]);
-    println!("  at 30 Hz: {:.3}% of one core (a NAO's budget: 1%, i.e. 333 µs a tick)", layer * 30.0 / 1e4);
-    println!("  the filters alone, same inputs, same run: {base:.1} µs; team layer / filters = {:.2}", layer / base);
+    println!(
+        "  median of 5 rounds of {TICKS} ticks: {layer:.1} µs per tick (rounds {:.1}–{:.1})",
+        layer_us[0], layer_us[4]
+    );
+    println!(
+        "  at 30 Hz: {:.3}% of one core (a NAO's budget: 1%, i.e. 333 µs a tick)",
+        layer * 30.0 / 1e4
+    );
+    println!(
+        "  the filters alone, same inputs, same run: {base:.1} µs; team layer / filters = {:.2}",
+        layer / base
+    );
 }

@@ -25,6 +25,16 @@ pub trait Board {
     fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
     /// Posts a message to an own `talk` queue.
     fn post(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected>;
+    /// [`Board::set`] of an item that may draw on a league budget's priority reserve.
+    /// Without a budget (or on a bare blackboard) it is a plain set.
+    fn set_priority(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        self.set(now, key, value)
+    }
+    /// The game clock a league budget paces itself over: `remaining` of play left. A
+    /// board without a budget has nothing to pace.
+    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
+        let _ = (now, remaining);
+    }
     /// Whether robot `owner` is departed (its values are old news): replies about its
     /// bindings carry the `departed` flag. A bare blackboard knows of no departures.
     fn departed(&self, owner: u8) -> bool {
@@ -120,6 +130,14 @@ impl Board for Replica {
         Replica::post(self, now, &key.to_string(), value)
             .map(|_| ())
             .map_err(Rejected::from)
+    }
+
+    fn set_priority(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), Rejected> {
+        Replica::set_priority(self, now, key, value).map_err(Rejected::from)
+    }
+
+    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
+        Replica::set_game_clock(self, now, remaining);
     }
 
     fn departed(&self, owner: u8) -> bool {

@@ -19,6 +19,12 @@ pub enum Command {
     Get(Key, Option<u64>),
     /// `SETV key value` (on a `talk` key: post a message).
     Set(Key, Value),
+    /// `SETP key value`: a `SETV` of a global value that may draw on a league budget's
+    /// reserve for priority items at once (a goer change, a kick report).
+    SetPriority(Key, Value),
+    /// `CLOK secs`: the game clock (seconds of play left in the game, as the referee's
+    /// clock says) that a league budget paces itself over.
+    GameClock(f64),
     /// `ADDW pattern`
     AddWatch(Pattern),
     /// `DELW pattern`
@@ -134,12 +140,32 @@ impl Command {
                 };
                 Ok(Command::Get(Key::parse(key)?, max_age))
             }
-            "SETV" => {
+            "SETV" | "SETP" => {
                 let (key, value) = word(rest);
                 if key.is_empty() || value.trim().is_empty() {
-                    return Err(Rejected::new(ErrCode::Usage, "usage: SETV key value"));
+                    return Err(Rejected::new(
+                        ErrCode::Usage,
+                        format!("usage: {verb} key value"),
+                    ));
                 }
-                Ok(Command::Set(Key::parse(key)?, parse_literal(value)?))
+                let (key, value) = (Key::parse(key)?, parse_literal(value)?);
+                Ok(if verb == "SETP" {
+                    Command::SetPriority(key, value)
+                } else {
+                    Command::Set(key, value)
+                })
+            }
+            "CLOK" => {
+                let secs = single("CLOK", rest, "secs")?;
+                match secs.parse::<f64>() {
+                    Ok(s) if s.is_finite() && (0.0..=86_400.0).contains(&s) => {
+                        Ok(Command::GameClock(s))
+                    }
+                    _ => Err(Rejected::new(
+                        ErrCode::BadValue,
+                        format!("bad game clock {secs:?}: expected seconds 0..=86400"),
+                    )),
+                }
             }
             "ADDW" => Ok(Command::AddWatch(Pattern::parse(single(
                 "ADDW", rest, "pattern",
@@ -166,7 +192,7 @@ impl Command {
             _ => Err(Rejected::new(
                 ErrCode::UnknownCommand,
                 format!(
-                    "unknown command {:?} (GETV SETV ADDW DELW CLRW LSTW REFR QUIT)",
+                    "unknown command {:?} (GETV SETV SETP CLOK ADDW DELW CLRW LSTW REFR QUIT)",
                     verb.chars().take(16).collect::<String>()
                 ),
             )),

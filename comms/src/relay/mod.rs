@@ -10,6 +10,9 @@
 //! GETV key [max_age_ms]
 //!                  -> VAL key type value age_ms [departed] | ERR code text
 //! SETV key value   -> OK                                   | ERR code text
+//! SETP key value   -> OK | ERR   SETV of an item that may spend a league budget's
+//!                                priority reserve at once (a goer change, a kick)
+//! CLOK secs        -> OK | ERR   the game clock (play left, s) the budget paces over
 //! ADDW pattern     -> OK      DELW pattern -> OK     CLRW -> OK
 //! LSTW             -> WATCH pattern (one per line), then END
 //! REFR ms          -> OK   then every ms: UPD key type value age_ms [departed] for each

@@ -273,6 +273,20 @@ impl Session {
                     Err(rejected) => self.push_err(&rejected),
                 }
             }
+            Command::SetPriority(key, value) => {
+                let result = match key.kind() {
+                    Kind::Var => board.set_priority(now, &key, value),
+                    Kind::Talk => board.post(now, &key, value),
+                };
+                match result {
+                    Ok(()) => self.push(format_args!("OK")),
+                    Err(rejected) => self.push_err(&rejected),
+                }
+            }
+            Command::GameClock(secs) => {
+                board.set_game_clock(now, std::time::Duration::from_secs_f64(secs));
+                self.push(format_args!("OK"));
+            }
             Command::AddWatch(pattern) => {
                 if self.watches.contains(&pattern) {
                     return self.push(format_args!("OK"));
@@ -555,6 +569,51 @@ mod tests {
         );
         assert_eq!(s.state(), SessionState::Closing);
         assert!(s.is_finished(), "all output sent after BYE: close");
+    }
+
+    #[test]
+    fn setp_spends_the_budget_reserve_at_once_where_setv_waits_for_the_pacing() {
+        // Robot 2 of a five-robot SPL team has spent what its pacing allows: the next
+        // frame is seconds away. A SETV waits for it; a SETP (a goer change) goes now.
+        use crate::{BudgetSpec, Replica, ReplicaConfig};
+        let spec: BudgetSpec = "spl".parse().expect("a league");
+        let cfg = ReplicaConfig::new(2, 7).with_budget(&spec, 5);
+        let mut r = Replica::new(cfg, 1, t(0)).expect("a valid config");
+        while r.poll_transmit().is_some() {}
+        let mut s = Session::new(2, SessionLimits::default());
+        s.consume_output(s.pending_output().len());
+        let mut say = |line: &str, r: &mut Replica| {
+            s.handle_input(t(10), line.as_bytes(), r);
+            let out = String::from_utf8(s.pending_output().to_vec()).unwrap();
+            s.consume_output(out.len());
+            out
+        };
+        // Spend what the pacing allows now: then it holds a plain value.
+        let mut held = false;
+        for i in 0..200 {
+            assert_eq!(say(&format!("SETV *.var.mode {i}\n"), &mut r), "OK\n");
+            if r.poll_transmit().is_none() {
+                held = true;
+                break;
+            }
+            while r.poll_transmit().is_some() {}
+        }
+        assert!(
+            held,
+            "an SPL share's pacing holds a frame within 200 writes"
+        );
+        assert_eq!(
+            say("SETP *.var.machine.heuristic [1.5, 1]\n", &mut r),
+            "OK\n"
+        );
+        assert!(
+            r.poll_transmit().is_some(),
+            "a priority item goes at once, from the reserve"
+        );
+        assert_eq!(say("CLOK 600\n", &mut r), "OK\n");
+        assert!(say("CLOK -1\n", &mut r).starts_with("ERR 412 "));
+        assert!(say("CLOK soon\n", &mut r).starts_with("ERR 412 "));
+        assert!(say("SETP *.var.x\n", &mut r).starts_with("ERR 401 usage: SETP"));
     }
 
     #[test]
