@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+import time
+import urllib.request
 
-from conftest import PACKAGE_DIR, scratch_group, start_daemon
+from conftest import PACKAGE_DIR, free_tcp_port, huddle_bin, scratch_group, start_daemon
 from huddle_client import Relay, RelayError
+
+
+def monitor_state(port: int) -> dict:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=5) as r:
+        return json.loads(r.read())
 
 
 def test_three_daemons_fed_by_the_readme_example_agree_on_the_team_ball(tmp_path):
@@ -14,6 +22,12 @@ def test_three_daemons_fed_by_the_readme_example_agree_on_the_team_ball(tmp_path
     # it: their team ball can only come from robot 1's world model over the network.
     group = scratch_group()
     daemons = [start_daemon(r, group, tmp_path) for r in (1, 2, 3)]
+    http = free_tcp_port()
+    monitor = subprocess.Popen(
+        [huddle_bin(), "monitor", "--group", group, "--iface", "127.0.0.1",
+         "--http", f"127.0.0.1:{http}", "-q"],
+        stdout=subprocess.DEVNULL,
+    )
     try:
         example = PACKAGE_DIR / "examples" / "team_ball.py"
         assert len(example.read_text().splitlines()) <= 40, "the example stays short"
@@ -26,6 +40,21 @@ def test_three_daemons_fed_by_the_readme_example_agree_on_the_team_ball(tmp_path
         assert out.stdout.count("team ball at") == 3, out.stdout
         # While robot 1 sees the ball every robot agrees that it goes.
         assert out.stdout.count("goer 1") == 3, out.stdout
+        # The monitor (listen-only, on the same group) draws the team the layers publish:
+        # three robots where their programs put them, and the team ball.
+        deadline = time.monotonic() + 10
+        while True:
+            state = monitor_state(http)
+            robots = {r["id"]: r for r in state.get("robots", [])}
+            if len(robots) == 3 and state.get("team_ball") is not None or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        assert sorted(robots) == [1, 2, 3], f"the monitor draws {sorted(robots)}: {state}"
+        assert state["team_ball"] is not None, f"no team ball on the monitor: {state}"
+        for r, (x, y) in zip((1, 2, 3), ((-1.0, 0.0), (-3.0, 1.5), (-3.0, -1.5))):
+            p = robots[r]["pose"]
+            assert abs(p["x"] - x) < 0.05 and abs(p["y"] - y) < 0.05, f"robot {r} drawn at {p}"
+        assert robots[1]["ball"] is not None, f"robot 1's own ball is drawn: {robots[1]}"
         for d in daemons:
             with Relay("127.0.0.1", d.port) as relay:
                 ball = relay.get("local.var.team.ball")
@@ -36,6 +65,8 @@ def test_three_daemons_fed_by_the_readme_example_agree_on_the_team_ball(tmp_path
                 ids = sorted(int(i) for i in mates.value[0::5])
                 assert ids == sorted({1, 2, 3} - {d.robot}), f"robot {d.robot} knows {ids}"
     finally:
+        monitor.terminate()
+        monitor.wait(5)
         for d in daemons:
             d.stop()
 
