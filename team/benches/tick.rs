@@ -5,8 +5,9 @@
 //! memory at 25 Hz; every robot sees the ball and three landmarks each tick, so robot 2's
 //! tick ingests four teammates' new LWMs, runs both EKFs, the GWM, the arbitration and
 //! the VOI policy. Only robot 2's `sense` + `decide` + `finish` is timed; the baseline
-//! is the same robot's pose and ball EKF updates plus its GWM ingest of the same LWMs,
-//! without the team layer around them.
+//! is the same robot's pose and ball EKF updates, its LWM publish, and a second GWM's
+//! decoding and ingest of the very LWMs robot 2's replica holds, and its team ball:
+//! the filters without the team layer around them.
 //!
 //! `cargo bench -p team --bench tick`
 
@@ -164,9 +165,16 @@ fn filters_only(t: &Team, n: u64, layer: &mut TeamLayer) -> Duration {
     layer.lwm.ball_sighting(now_s, &ball);
     let msg = layer.lwm.publish(now_s);
     layer.gwm.ingest(2, &msg, now_s);
-    for other in t.layers.iter().filter(|l| l.id != 2) {
-        let m = other.lwm.snapshot(now_s);
-        layer.gwm.ingest(other.id, &m, now_s);
+    // The same teammates' LWMs robot 2's replica holds (new ones every tick).
+    let board = t.replicas[1].blackboard();
+    for id in (1..=ROBOTS as u8).filter(|&id| id != 2) {
+        if let Some(comms::Value::Bytes(bytes)) =
+            board.get(&team::world_local_of(id)).map(|e| &e.value)
+        {
+            if let Ok(m) = layer.gwm.decode(bytes, now_s, 0.0) {
+                layer.gwm.ingest(id, &m, now_s);
+            }
+        }
     }
     black_box(layer.gwm.team_ball(now_s, None));
     start.elapsed()
