@@ -4,6 +4,7 @@
 use fusion::wrap_angle;
 
 use super::geometry::{Pose, Vec2};
+pub use player::senses::{MotionCommand, Odometry};
 use serde::Serialize;
 
 /// Limits of a robot's base.
@@ -27,39 +28,6 @@ impl Default for Kinematics {
             accel_mps2: 3.0,
             turn_rate_rps: 4.0,
             radius_m: 0.2,
-        }
-    }
-}
-
-/// What a robot asks of its base: a velocity in the field frame and a heading.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct MotionCommand {
-    /// Wanted velocity, field frame, m/s (capped at the top speed).
-    pub velocity: Vec2,
-    /// Wanted heading, radians.
-    pub heading_rad: f64,
-}
-
-/// Motion measured by the wheels, in the robot's own frame at the start of the motion
-/// (the Δf, Δl, Δθ of tsinghua-2005 §4).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct Odometry {
-    /// Forward travel, metres.
-    pub forward_m: f64,
-    /// Leftward travel, metres.
-    pub left_m: f64,
-    /// Turn, radians (counter-clockwise positive).
-    pub turn_rad: f64,
-}
-
-impl Odometry {
-    /// This motion followed by `next` (composed in the frame of the first).
-    pub fn then(self, next: Odometry) -> Odometry {
-        let d = Vec2::new(next.forward_m, next.left_m).rotate(self.turn_rad);
-        Odometry {
-            forward_m: self.forward_m + d.x,
-            left_m: self.left_m + d.y,
-            turn_rad: wrap_angle(self.turn_rad + next.turn_rad),
         }
     }
 }

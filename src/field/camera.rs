@@ -4,6 +4,7 @@
 use fusion::wrap_angle;
 
 use super::geometry::{Pose, Vec2};
+pub use player::senses::{Frame, Sighting};
 use rand::RngExt;
 use serde::Serialize;
 
@@ -38,35 +39,6 @@ impl Default for CameraConfig {
             bearing_noise_rad: 0.02,
         }
     }
-}
-
-/// One detection in the robot's frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Sighting {
-    /// Distance, metres.
-    pub range_m: f64,
-    /// Bearing, radians, 0 = straight ahead, positive to the left.
-    pub bearing_rad: f64,
-}
-
-impl Sighting {
-    /// The sighting as a point in the robot's frame.
-    pub fn local(&self) -> Vec2 {
-        Vec2::from_angle(self.bearing_rad) * self.range_m
-    }
-}
-
-/// Everything one camera frame saw.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
-pub struct Frame {
-    /// The ball, if detected.
-    pub ball: Option<Sighting>,
-    /// Whether the opponent goal's centre is in view (the seed's `front_found_other_goal()`).
-    pub opponent_goal_in_view: bool,
-    /// Fixed landmarks detected, by index into [`super::FieldConfig::landmarks`].
-    pub landmarks: Vec<(usize, Sighting)>,
-    /// Opponent robots detected.
-    pub opponents: Vec<Sighting>,
 }
 
 /// Whether `target` is within the view cone of `pose` up to `range_m`.

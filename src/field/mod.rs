@@ -11,7 +11,8 @@ pub mod behaviour;
 pub mod body;
 pub mod camera;
 pub mod geometry;
-pub mod tactics;
+/// CMUnited's modes and plays: the simulated player's ([`player::tactics`]).
+pub use player::tactics;
 
 use ball::{Ball, BallConfig};
 use body::{Body, Kinematics, MotionCommand, Odometry};

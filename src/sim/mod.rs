@@ -15,12 +15,14 @@
 pub mod acoustic;
 mod acoustic_channel;
 pub mod metrics;
-pub mod perception;
+/// What a simulated robot's senses mean to its team layer ([`player::perception`]).
+pub use player::perception;
 /// The sending policies: the team layer's ([`team::policy`]).
 pub use team::policy;
 pub mod references;
 mod report;
-pub mod robot;
+/// One of our robots: the simulated player ([`player::robot`]).
+pub use player::robot;
 pub mod svg;
 
 use std::time::Duration;
@@ -351,7 +353,11 @@ impl Simulation {
         let n = cfg.robots;
         let with_keeper = n >= 3;
         let field_players = n - usize::from(with_keeper);
-        let homes = formation_homes(&cfg.field, field_players);
+        let calibration = cfg
+            .calibration
+            .unwrap_or_else(|| cfg.field.exact_calibration());
+        // The formation is the team's: drawn on the field's lines as the robots know them.
+        let homes = formation_homes(&calibration.field, field_players);
         let mut positions = Vec::with_capacity(n);
         if with_keeper {
             positions.push(Position::Goalkeeper);
@@ -379,9 +385,6 @@ impl Simulation {
         let world = World::new(cfg.field, &starts, cfg.opponents, cfg.seed);
         let mut params = cfg.arbitration;
         let mut world_model = cfg.brain.team.world_model;
-        let calibration = cfg
-            .calibration
-            .unwrap_or_else(|| cfg.field.exact_calibration());
         let budget = cfg.budget.map(|b| b.share(n));
         if let Some(b) = budget {
             // The daemon sets a budgeted team up the same way.
@@ -529,7 +532,7 @@ impl Simulation {
                 homes: &self.homes,
                 holders: &self.holders,
             };
-            let out = self.robots[i].tick(self.world.config(), &self.cfg.brain, input);
+            let out = self.robots[i].tick(&self.cfg.brain, input);
             if let Some(cmd) = out.command {
                 self.world.command_believed(i, cmd, &out.believed);
             }

@@ -21,6 +21,16 @@ pub struct FieldGeometry {
 }
 
 impl FieldGeometry {
+    /// Centre of the opponent goal mouth.
+    pub fn opponent_goal(&self) -> crate::geometry::Vec2 {
+        crate::geometry::Vec2::new(self.length_m / 2.0, 0.0)
+    }
+
+    /// Centre of our own goal mouth.
+    pub fn own_goal(&self) -> crate::geometry::Vec2 {
+        crate::geometry::Vec2::new(-self.length_m / 2.0, 0.0)
+    }
+
     /// Fixed landmarks a camera can recognise: the four goal posts, the four corners and
     /// the two ends of the halfway line.
     pub fn landmarks(&self) -> [crate::geometry::Vec2; 10] {

@@ -19,7 +19,7 @@
 //! - everything else that needs the ball (formation, goalkeeper, the pass receiver, a goer
 //!   that lost sight of it) uses the **team ball**, which is better than any one robot's;
 //! - motion commands are meant in the robot's own frame: the world turns them into field
-//!   motion with the robot's true heading ([`World::command_believed`](crate::field::World::command_believed)).
+//!   motion with the robot's true heading (the simulator's `World::command_believed`).
 
 use comms::arbitration::ArbitrationParams;
 use comms::{Blackboard, Instant, Key, Value};
@@ -28,18 +28,17 @@ use fusion::Kick;
 use serde::Serialize;
 use std::ops::{Deref, DerefMut};
 
-use super::perception;
+use crate::perception;
 pub use team::{
     pass_to_key, seconds, world_local_key, world_local_of, BallBelief, Calibration, TeamConfig,
     TeamLayer, WorldModelConfig, WORLD_LOCAL_KEY,
 };
 
-use crate::field::behaviour::{self, Position};
-use crate::field::body::{MotionCommand, Odometry};
-use crate::field::camera::Frame;
-use crate::field::geometry::{Pose, Vec2};
-use crate::field::tactics::{choose_play, mode, Mode, PassParams, Play};
-use crate::field::FieldConfig;
+use crate::behaviour::{self, Position};
+use crate::senses::{Frame, MotionCommand, Odometry};
+use crate::tactics::{choose_play, mode, Mode, PassParams, Play};
+use team::calibration::FieldGeometry;
+use team::{Pose, Vec2};
 
 /// How a robot turns sightings into a belief and a belief into play.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -206,15 +205,9 @@ impl Robot {
         self.alive && self.frame.ball.is_some()
     }
 
-    /// One control tick: sense, decide, act. `field` is the field's lines as the rules
-    /// give them (its behaviour's geometry; what the robot knows of physics is its team
-    /// layer's calibration).
-    pub fn tick(
-        &mut self,
-        field: &FieldConfig,
-        cfg: &BrainConfig,
-        mut input: TickInput<'_>,
-    ) -> TickOutput {
+    /// One control tick: sense, decide, act. Everything the robot knows of its field and
+    /// body is its team layer's calibration ([`TeamLayer::cal`]).
+    pub fn tick(&mut self, cfg: &BrainConfig, mut input: TickInput<'_>) -> TickOutput {
         let percepts = std::mem::take(&mut input.percepts);
         self.frame = percepts.frame;
         let sensors = self.brain.cal.sensors;
@@ -270,7 +263,8 @@ impl Robot {
                 m => m,
             }
         };
-        let (receiver, command, kick) = self.act(field, cfg, &input);
+        let field = self.brain.cal.field;
+        let (receiver, command, kick) = self.act(&field, cfg, &input);
         let (writes, priority) = self.brain.finish(
             &cfg.team,
             input.local_now,
@@ -306,7 +300,7 @@ impl Robot {
     /// announce (0: none), the motion command and a kick attempt.
     fn act(
         &mut self,
-        field: &FieldConfig,
+        field: &FieldGeometry,
         cfg: &BrainConfig,
         input: &TickInput<'_>,
     ) -> (i64, Option<MotionCommand>, Option<KickAttempt>) {
@@ -347,7 +341,8 @@ impl Robot {
                     }
                     Play::Shoot { .. } => (goal, 0),
                 };
-                let action = behaviour::approach_and_push(field, &pose, b, aim, top);
+                let contact = self.brain.cal.body.radius_m + self.brain.cal.ball.radius_m;
+                let action = behaviour::approach_and_push(contact, &pose, b, aim, top);
                 let in_range = receiver != 0 || b.distance(goal) <= cfg.shoot_range_m;
                 let direction_rad = (aim - b).angle();
                 let mut attempt = None;

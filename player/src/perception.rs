@@ -10,10 +10,9 @@
 use fusion::nalgebra::{Matrix2, Vector2};
 use fusion::{BallSighting, RangeBearingSighting};
 
-use crate::field::body::Odometry;
-use crate::field::camera::Sighting;
-use crate::field::geometry::Vec2;
+use crate::senses::{Odometry, Sighting};
 use team::calibration::SensorCalibration;
+use team::Vec2;
 
 pub use team::frames::{from_fusion_point, from_fusion_pose, to_fusion_point, to_fusion_pose};
 
@@ -69,8 +68,8 @@ pub fn ball_sighting(cam: &SensorCalibration, s: &Sighting) -> BallSighting {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::geometry::Pose;
     use fusion::nalgebra::Matrix3;
+    use team::Pose;
 
     #[test]
     fn both_conventions_put_a_seen_ball_at_the_same_field_point() {

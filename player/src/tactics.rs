@@ -5,7 +5,7 @@
 
 use comms::arbitration::Decision;
 
-use super::geometry::Vec2;
+use team::Vec2;
 
 /// CMUnited-97's team modes (§3.2): the goer is active, the robot it intends to pass
 /// to is auxiliary, the rest hold their formation positions.
