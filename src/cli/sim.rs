@@ -43,6 +43,11 @@ pub struct SimArgs {
     /// voi (value of information). Default: voi under a budget, every without one.
     #[arg(long, value_enum)]
     pub policy: Option<huddle::sim::policy::SendPolicy>,
+    /// The world: ideal (its physics are exactly the robots' calibration; ideal clocks)
+    /// or drawn (physics drawn per match around the nominal field, which the robots'
+    /// calibration keeps; start poses off by their σ; clocks with offsets and drifts).
+    #[arg(long, value_enum, default_value = "ideal")]
+    pub world: WorldKind,
     /// How frames travel: multicast, broadcast (SPL), unicast (one copy per teammate).
     #[arg(long, value_enum, default_value = "multicast")]
     pub transport: huddle::sim::Transport,
@@ -156,6 +161,7 @@ impl Default for SimArgs {
             dtim: None,
             budget: None,
             policy: None,
+            world: WorldKind::Ideal,
             transport: huddle::sim::Transport::Multicast,
             sweep: None,
             reference_q: None,
@@ -244,6 +250,15 @@ pub fn run(args: SimArgs) -> Result<()> {
     Ok(())
 }
 
+/// Which world a match is played in (`--world`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WorldKind {
+    /// Physics exactly the robots' calibration, ideal clocks.
+    Ideal,
+    /// Physics drawn per match around the nominal field, start errors, real clocks.
+    Drawn,
+}
+
 /// The match `args` describe.
 fn config(args: &SimArgs) -> SimConfig {
     let mut brain = huddle::sim::BrainConfig::default();
@@ -267,6 +282,7 @@ fn config(args: &SimArgs) -> SimConfig {
     }
     SimConfig {
         brain,
+        drawn_world: args.world == WorldKind::Drawn,
         robots: args.robots,
         opponents: args.opponents,
         duration_s: args.duration.as_secs_f64(),

@@ -16,7 +16,7 @@ pub use player::tactics;
 
 use ball::{Ball, BallConfig};
 use body::{Body, Kinematics, MotionCommand, Odometry};
-use camera::{sight, standard_normal, CameraConfig, Frame};
+use camera::{sight, standard_normal, CameraConfig, Frame, Sighting};
 use fusion::wrap_angle;
 use geometry::{Pose, Vec2};
 use rand::{RngExt, SeedableRng};
@@ -51,6 +51,17 @@ pub struct FieldConfig {
     pub kick_speed_noise_frac: f64,
     /// Standard deviation of a kick's direction, radians.
     pub kick_noise_rad: f64,
+    /// A ball a body walks into leaves at this multiple of the closing speed along the
+    /// contact normal.
+    pub push_gain: f64,
+    /// Odometry's systematic scale error: it reports this multiple of the motion (wheel
+    /// radius miscalibrated, carpet).
+    pub odometry_scale: f64,
+    /// The share of a shove by another body that odometry sees (1: wheels roll with the
+    /// body; 0: a shove slips the wheels and odometry never knows).
+    pub shove_seen_frac: f64,
+    /// Probability that a camera frame reports a ball that is not there (a white blob).
+    pub false_ball_per_frame: f64,
 }
 
 /// How far beyond touching (robot radius + ball radius) a robot's foot reaches, metres.
@@ -76,8 +87,51 @@ impl Default for FieldConfig {
             kick_speed_mps: 4.0,
             kick_speed_noise_frac: 0.05,
             kick_noise_rad: 0.08,
+            push_gain: 1.2,
+            odometry_scale: 1.0,
+            shove_seen_frac: 1.0,
+            false_ball_per_frame: 0.0,
         }
     }
+}
+
+/// How a match's physics are drawn around the nominal field (`huddle sim --world drawn`).
+/// Each figure is the nominal one (what a team measures and its robots' calibration
+/// holds) times a factor drawn once per match from the seed:
+///
+/// | figure | draw |
+/// |---|---|
+/// | ball drag, rolling deceleration | × (1 + 0.15·N), at least × 0.5 |
+/// | board restitution | + 0.1·N, within [0.2, 0.8] |
+/// | push gain | × (1 + 0.15·N), at least × 0.5 |
+/// | kick speed | × (1 + 0.05·N) |
+/// | kick direction σ, camera range and bearing σ, odometry σ | × e^(0.2·N) |
+/// | odometry scale | 1 + 0.03·N |
+/// | share of a shove odometry sees | U(0, 0.5) |
+/// | false balls | 1 frame in 500 (one every 20 s at 25 Hz) |
+///
+/// N is a standard normal. The simulation adds per robot: a start pose off by its
+/// start σ, and a clock with an offset U(0, 20) s and a drift N(0, 30) ppm.
+pub fn drawn_field(nominal: &FieldConfig, seed: u64) -> FieldConfig {
+    // Its own stream: the match's other noise is unchanged by the draw.
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_f1e1_d000_0000);
+    let mut n = || standard_normal(&mut rng);
+    let mut f = *nominal;
+    f.ball.drag_per_s *= (1.0 + 0.15 * n()).max(0.5);
+    f.ball.rolling_decel_mps2 *= (1.0 + 0.15 * n()).max(0.5);
+    f.ball.restitution = (f.ball.restitution + 0.1 * n()).clamp(0.2, 0.8);
+    f.push_gain *= (1.0 + 0.15 * n()).max(0.5);
+    f.kick_speed_mps *= (1.0 + 0.05 * n()).max(0.5);
+    f.kick_noise_rad *= (0.2 * n()).exp();
+    f.camera.range_noise_m *= (0.2 * n()).exp();
+    f.camera.range_noise_frac *= (0.2 * n()).exp();
+    f.camera.bearing_noise_rad *= (0.2 * n()).exp();
+    f.odometry_noise_frac *= (0.2 * n()).exp();
+    f.odometry_scale = 1.0 + 0.03 * n();
+    let u = (0.5 * n()).abs().min(1.0) * 0.5; // within [0, 0.5]
+    f.shove_seen_frac = u;
+    f.false_ball_per_frame = 0.002;
+    f
 }
 
 impl FieldConfig {
@@ -276,7 +330,16 @@ impl World {
         let cam = self.cfg.camera;
         let pose = self.robots[i].pose;
         let rng = &mut self.robot_rngs[i];
-        let ball = sight(&cam, &pose, self.ball.at, cam.ball_range_m, rng);
+        let mut ball = sight(&cam, &pose, self.ball.at, cam.ball_range_m, rng);
+        if self.cfg.false_ball_per_frame > 0.0
+            && rng.random::<f64>() < self.cfg.false_ball_per_frame
+        {
+            // A white blob taken for the ball, anywhere in view.
+            ball = Some(Sighting {
+                range_m: 0.5 + (cam.ball_range_m - 0.5) * rng.random::<f64>(),
+                bearing_rad: cam.fov_rad * (rng.random::<f64>() - 0.5),
+            });
+        }
         let goal = self.cfg.opponent_goal();
         let opponent_goal_in_view = camera::in_view(&cam, &pose, goal, cam.landmark_range_m)
             && rng.random::<f64>() < cam.detect_prob;
@@ -303,6 +366,12 @@ impl World {
     /// Robot `i`'s noisy odometry since the previous call.
     pub fn read_odometry(&mut self, i: usize) -> Odometry {
         let o = std::mem::take(&mut self.odometry[i]);
+        let scale = self.cfg.odometry_scale;
+        let o = Odometry {
+            forward_m: o.forward_m * scale,
+            left_m: o.left_m * scale,
+            turn_rad: o.turn_rad * scale,
+        };
         let k = self.cfg.odometry_noise_frac;
         let rng = &mut self.robot_rngs[i];
         let d = o.forward_m.hypot(o.left_m);
@@ -336,16 +405,19 @@ impl World {
         let half_y = self.cfg.width_m / 2.0 + self.cfg.border_m;
         let before = self.ball.at;
         self.ball.step(&self.cfg.ball, dt_s, half_x, half_y);
+        let driven: Vec<Vec2> = self.robots.iter().map(|b| b.pose.at).collect();
         self.resolve_contacts();
         for b in self.robots.iter_mut().chain(self.opponents.iter_mut()) {
             b.pose.at.x = b.pose.at.x.clamp(-half_x, half_x);
             b.pose.at.y = b.pose.at.y.clamp(-half_y, half_y);
         }
-        // Odometry measures how the body actually moved, pushes and the boards included:
-        // the wheels roll with the body (no slip is modelled), so a pose filter fed it is
-        // told about every motion, with the configured noise on top.
+        // Odometry measures how the body moved under its own wheels: a shove by another
+        // body slips the wheels, and odometry sees only `shove_seen_frac` of it (1: every
+        // motion, the boards included), with the configured noise on top.
+        let unseen = 1.0 - self.cfg.shove_seen_frac;
         for (i, (start, body)) in starts.iter().zip(&self.robots).enumerate() {
-            let local = start.to_local(body.pose.at);
+            let shove = body.pose.at - driven[i];
+            let local = start.to_local(body.pose.at - shove * unseen);
             let o = Odometry {
                 forward_m: local.x,
                 left_m: local.y,
@@ -406,7 +478,8 @@ impl World {
                 let closing = (body.velocity - self.ball.velocity).dot(normal);
                 if closing > 0.0 {
                     // A little faster than the body: the ball rolls off ahead of it.
-                    self.ball.velocity = self.ball.velocity + normal * (closing * 1.2);
+                    self.ball.velocity =
+                        self.ball.velocity + normal * (closing * self.cfg.push_gain);
                 }
             }
         }

@@ -202,6 +202,10 @@ pub struct SimConfig {
     /// own constants, [`FieldConfig::exact_calibration`]).
     #[serde(skip)]
     pub calibration: Option<team::Calibration>,
+    /// Draw the match's physics around `field` ([`crate::field::drawn_field`]), start
+    /// each robot believing a pose off by its start σ, and give each robot a clock with
+    /// an offset and a drift; the robots' calibration stays `field`'s nominal figures.
+    pub drawn_world: bool,
 }
 
 impl Default for SimConfig {
@@ -225,6 +229,7 @@ impl Default for SimConfig {
             outage: None,
             acoustic: acoustic::AcousticConfig::default(),
             calibration: None,
+            drawn_world: false,
         }
     }
 }
@@ -382,7 +387,16 @@ impl Simulation {
                 }
             })
             .collect();
-        let world = World::new(cfg.field, &starts, cfg.opponents, cfg.seed);
+        // A drawn world's own stream, apart from the match's noise.
+        let mut draw = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(
+            cfg.seed ^ 0x000d_0a11_c10c_0000,
+        );
+        let world_field = if cfg.drawn_world {
+            crate::field::drawn_field(&cfg.field, cfg.seed)
+        } else {
+            cfg.field
+        };
+        let world = World::new(world_field, &starts, cfg.opponents, cfg.seed);
         let mut params = cfg.arbitration;
         let mut world_model = cfg.brain.team.world_model;
         let budget = cfg.budget.map(|b| b.share(n));
@@ -399,7 +413,18 @@ impl Simulation {
             .iter()
             .zip(&starts)
             .enumerate()
-            .map(|(i, (&p, &pose))| {
+            .map(|(i, (&p, &truth))| {
+                // Put on its spot by hand: it believes the spot, off by its start σ.
+                let pose = if cfg.drawn_world {
+                    let wm = &world_model;
+                    let mut n = || crate::field::camera::standard_normal(&mut draw);
+                    Pose {
+                        at: truth.at + Vec2::new(wm.start_sigma_m * n(), wm.start_sigma_m * n()),
+                        theta_rad: fusion::wrap_angle(truth.theta_rad + wm.start_sigma_rad * n()),
+                    }
+                } else {
+                    truth
+                };
                 Robot::new(
                     crate::harness::robot_id(i),
                     p,
@@ -426,6 +451,13 @@ impl Simulation {
         }
         let mut harness = Harness::new(n, net, replica, cfg.seed)?;
         harness.set_unicast(cfg.transport == Transport::Unicast);
+        if cfg.drawn_world {
+            for i in 0..n {
+                let offset = Duration::from_secs_f64(20.0 * rand::RngExt::random::<f64>(&mut draw));
+                let drift_ppm = 30.0 * crate::field::camera::standard_normal(&mut draw);
+                harness.set_clock(i, offset, drift_ppm)?;
+            }
+        }
         harness.keep_events(false);
         let period = cfg.brain.team.control_period_s;
         let next_tick_s = (0..n).map(|i| period * i as f64 / n as f64).collect();
@@ -906,6 +938,11 @@ impl Simulation {
         Report {
             budget: self.cfg.budget.map(|b| b.to_string()),
             policy: self.cfg.brain.team.send_policy,
+            world: if self.cfg.drawn_world {
+                "drawn"
+            } else {
+                "ideal"
+            },
             transport: self.cfg.transport,
             team_messages_sent: per_robot.iter().sum(),
             messages_per_robot: per_robot,

@@ -14,6 +14,9 @@ pub struct Report {
     pub budget: Option<String>,
     /// The robots' sending policy.
     pub policy: policy::SendPolicy,
+    /// The world: `ideal` (its physics are the robots' calibration, clocks ideal) or
+    /// `drawn` (physics drawn per match around it, start errors, real clocks).
+    pub world: &'static str,
     /// How frames travelled.
     pub transport: Transport,
     /// Frames (messages) the whole team sent.
