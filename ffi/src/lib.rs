@@ -64,19 +64,25 @@
 #![warn(missing_docs)]
 
 mod binding;
+mod control;
 mod engine;
 mod error;
 mod event;
 mod handles;
 mod node;
 mod replica;
+mod team;
 mod text;
+mod typed;
 
 pub use binding::huddle_binding;
+pub use control::*;
 pub use error::*;
 pub use event::*;
 pub use node::*;
 pub use replica::*;
+pub use team::*;
+pub use typed::*;
 
 /// The library's version, e.g. `"0.1.0"` (a static string: do not free it).
 ///
