@@ -278,8 +278,7 @@ pub unsafe extern "C" fn huddle_node_unwatch(
 }
 
 fn parse_pattern(text: &str) -> Result<Pattern, Failure> {
-    Pattern::parse(text)
-        .map_err(|e| Failure::new(HUDDLE_E_KEY, format!("pattern {text:?}: {e}")))
+    Pattern::parse(text).map_err(|e| Failure::new(HUDDLE_E_KEY, format!("pattern {text:?}: {e}")))
 }
 
 /// Lists the stored keys matching `pattern` (`#`: all; `+.var.#`: every robot's

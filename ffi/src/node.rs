@@ -149,7 +149,9 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
         other => {
             return Err(Failure::new(
                 HUDDLE_E_CONFIG,
-                format!("transport {other} is not HUDDLE_TRANSPORT_MULTICAST, _BROADCAST or _UNICAST"),
+                format!(
+                    "transport {other} is not HUDDLE_TRANSPORT_MULTICAST, _BROADCAST or _UNICAST"
+                ),
             ))
         }
     };
@@ -377,6 +379,8 @@ pub unsafe extern "C" fn huddle_node_start(
         let cfg = unsafe { cfg.as_ref() }.ok_or_else(|| Failure::null("cfg"))?;
         let node = Engine::start(driver_config(cfg)?)?;
         if cfg.id_check_ms > 0 {
+            // The I/O shell waits on the caller's thread, as it asked (not the sans-IO core).
+            #[allow(clippy::disallowed_methods)]
             std::thread::sleep(Duration::from_millis(cfg.id_check_ms.into()));
             let (robot, conflicts) = node.with_state(|state, _| {
                 (state.replica.robot_id(), state.replica.stats().id_conflicts)

@@ -86,7 +86,10 @@ fn age(what: &str, age_s: f64) -> Result<(), Failure> {
     if (0.0..=MAX_AGE_S).contains(&age_s) {
         Ok(())
     } else {
-        Err(bad(what, format!("age_s {age_s} is outside 0..={MAX_AGE_S}")))
+        Err(bad(
+            what,
+            format!("age_s {age_s} is outside 0..={MAX_AGE_S}"),
+        ))
     }
 }
 
@@ -120,10 +123,7 @@ fn covariance(what: &str, upper: &[f64]) -> Result<(), Failure> {
 /// # Safety
 ///
 /// `err` is NULL or writable.
-unsafe fn team_set(
-    err: *mut huddle_error,
-    body: impl FnOnce() -> Result<(), Failure>,
-) -> c_int {
+unsafe fn team_set(err: *mut huddle_error, body: impl FnOnce() -> Result<(), Failure>) -> c_int {
     // SAFETY: forwarded from the caller.
     unsafe { guard(err, -1, || body().map(|()| 0)) }
 }
@@ -288,7 +288,10 @@ pub unsafe extern "C" fn huddle_node_set_robot_landmarks(
             let v = read_array(sightings, n, "sightings")?;
             finite(what, v)?;
             if let Some(i) = v.chunks(6).position(|s| s[4] <= 0.0 || s[5] <= 0.0) {
-                return Err(bad(what, format!("sighting {i} has a sigma that is not > 0")));
+                return Err(bad(
+                    what,
+                    format!("sighting {i} has a sigma that is not > 0"),
+                ));
             }
             set_value(node, what, Value::Floats(v.to_vec()), false)
         })
@@ -296,7 +299,11 @@ pub unsafe extern "C" fn huddle_node_set_robot_landmarks(
 }
 
 /// The floats at `key`, checked to have `len` elements (any of `lens`).
-fn team_floats(node: *mut huddle_node, key: &str, lens: &[usize]) -> Result<Option<Vec<f64>>, Failure> {
+fn team_floats(
+    node: *mut huddle_node,
+    key: &str,
+    lens: &[usize],
+) -> Result<Option<Vec<f64>>, Failure> {
     match get_value(node, key)? {
         None => Ok(None),
         Some(Value::Floats(v)) if lens.contains(&v.len()) => Ok(Some(v)),

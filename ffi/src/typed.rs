@@ -89,6 +89,17 @@ unsafe fn out<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failure> {
     unsafe { ptr.as_mut() }.ok_or_else(|| Failure::null(what))
 }
 
+/// Writes `value` to the caller's `ptr`.
+///
+/// # Safety
+///
+/// `ptr` is NULL or valid for writes.
+unsafe fn put<T>(ptr: *mut T, value: T) -> Result<(), Failure> {
+    // SAFETY: forwarded from the caller.
+    *unsafe { out(ptr, "out") }? = value;
+    Ok(())
+}
+
 /// Copies `items` into the caller's `buf` of `cap` items, `len` set to how many there
 /// are; `extra`: room needed beyond them (a string's NUL). `buf` NULL with `cap` 0 is a
 /// length query.
@@ -292,7 +303,7 @@ pub unsafe extern "C" fn huddle_node_get_int(
     // SAFETY: forwarded from the caller.
     unsafe {
         get_typed(node, key, err, |key, value| match value {
-            Value::Int(v) => Ok(*self::out(out, "out")? = v),
+            Value::Int(v) => put(out, v),
             other => Err(wrong_type(key, &other, "int")),
         })
     }
@@ -316,8 +327,8 @@ pub unsafe extern "C" fn huddle_node_get_float(
     // SAFETY: forwarded from the caller.
     unsafe {
         get_typed(node, key, err, |key, value| match value {
-            Value::Float(v) => Ok(*self::out(out, "out")? = v),
-            Value::Int(v) => Ok(*self::out(out, "out")? = v as f64),
+            Value::Float(v) => put(out, v),
+            Value::Int(v) => put(out, v as f64),
             other => Err(wrong_type(key, &other, "float")),
         })
     }
@@ -341,7 +352,7 @@ pub unsafe extern "C" fn huddle_node_get_bool(
     // SAFETY: forwarded from the caller.
     unsafe {
         get_typed(node, key, err, |key, value| match value {
-            Value::Bool(v) => Ok(*self::out(out, "out")? = c_int::from(v)),
+            Value::Bool(v) => put(out, c_int::from(v)),
             other => Err(wrong_type(key, &other, "bool")),
         })
     }
