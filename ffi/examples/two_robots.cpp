@@ -53,10 +53,10 @@ int main(int argc, char **argv) {
         robot1.set_bool("*.var.ready", true);
         robot1.set_string("*.var.note", std::string(900, 'n'));
         robot1.set_bytes("*.var.raw", {1, 2, 255});
-        std::optional<std::string> note;
-        while (!note && ms_since(t0) < 3000.0) note = robot2.get_string("1.var.note");
+        std::optional<std::vector<std::uint8_t>> raw;  // set last: the others came before it
+        while (!raw && ms_since(t0) < 3000.0) raw = robot2.get_bytes("1.var.raw");
+        auto note = robot2.get_string("1.var.note");
         auto pose = robot2.get_floats("1.var.pose");
-        auto raw = robot2.get_bytes("1.var.raw");
         if (!note || note->size() != 900 || !pose || pose->size() != 3 || !raw || raw->size() != 3 ||
             robot2.get_int("1.var.mode").value_or(0) != 3 || !robot2.get_bool("1.var.ready").value_or(false) ||
             robot2.get_float("1.var.mode").value_or(0) != 3.0 || robot2.get_literal("1.var.note")->size() != 902) {

@@ -6,6 +6,7 @@
  *      -lpthread -ldl -lm -o typed_node && ./typed_node 239.255.7.7 47000
  *
  * Sends only on loopback (interface 127.0.0.1). */
+#define _POSIX_C_SOURCE 199309L /* nanosleep */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

@@ -161,6 +161,32 @@ public:
     Node(const Node &) = delete;
     Node &operator=(const Node &) = delete;
 
+private:
+    // Helpers of the typed calls (defined before them: their return types are deduced).
+    template <typename F, typename... A>
+    int call(F f, const std::string &key, A... args) {
+        huddle_error err = detail::fresh_error();
+        return detail::check(f(node_, key.c_str(), args..., &err), err);
+    }
+    template <typename T, typename F>
+    std::optional<T> get_one(F f, const std::string &key) {
+        T v{};
+        if (call(f, key, &v) == 0) return std::nullopt;
+        return v;
+    }
+    template <typename F>
+    auto bound(F f, const std::string &key) {
+        return [this, f, &key](auto *buf, std::size_t cap, std::size_t *len, huddle_error *err) {
+            return f(node_, key.c_str(), buf, cap, len, err);
+        };
+    }
+    static std::optional<std::string> as_string(const std::optional<std::vector<char>> &v) {
+        if (!v) return std::nullopt;
+        return std::string(v->begin(), v->end());
+    }
+
+public:
+
     /// Sets key to the value the literal spells ("1.5", "\"text\"", "[1, 2]").
     void set(const std::string &key, const std::string &literal) {
         huddle_error err = detail::fresh_error();
@@ -273,27 +299,6 @@ public:
     huddle_node *c_node() const noexcept { return node_; }
 
 private:
-    template <typename F, typename... A>
-    int call(F f, const std::string &key, A... args) {
-        huddle_error err = detail::fresh_error();
-        return detail::check(f(node_, key.c_str(), args..., &err), err);
-    }
-    template <typename T, typename F>
-    std::optional<T> get_one(F f, const std::string &key) {
-        T v{};
-        if (call(f, key, &v) == 0) return std::nullopt;
-        return v;
-    }
-    template <typename F>
-    auto bound(F f, const std::string &key) {
-        return [this, f, &key](auto *buf, std::size_t cap, std::size_t *len, huddle_error *err) {
-            return f(node_, key.c_str(), buf, cap, len, err);
-        };
-    }
-    static std::optional<std::string> as_string(const std::optional<std::vector<char>> &v) {
-        if (!v) return std::nullopt;
-        return std::string(v->begin(), v->end());
-    }
     huddle_node *node_ = nullptr;
 };
 
