@@ -6,7 +6,8 @@
  *
  * Two levels:
  *   - the node (huddle_node_*): huddle's driver on a thread of its own, as
- *     `huddle daemon` runs it without the relay: set, get, post, events, in-process;
+ *     `huddle daemon` runs it without the relay (multicast, SPL broadcast or unicast;
+ *     a league budget): typed set and get, post, events, keys, stats, in-process;
  *   - the replica (huddle_replica_*): the sans-IO protocol state machine, for programs
  *     that own their socket and clock (after every input, drain poll_transmit and
  *     poll_event until both return 0, then wait until poll_timeout or a datagram).
