@@ -20,7 +20,7 @@ static huddle_node *start(uint8_t robot, const char *group, uint16_t port) {
     cfg.robot_id = robot;
     cfg.group_address = group;
     cfg.group_port = port;
-    cfg.refresh_ms = 20;
+    cfg.refresh_ms = 100; /* departed after 300 ms of silence: slow machines too */
     huddle_node *node = huddle_node_start(&cfg, &err);
     if (node == NULL) {
         fprintf(stderr, "start robot %d: %s\n", robot, err.message);

@@ -298,7 +298,8 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
     let peers = [bad_peer.as_ptr()];
     let bcast = CString::new("10.0.255.255").unwrap();
     let budget = CString::new("1200 per game").unwrap();
-    let cases: Vec<(&str, Box<dyn Fn(&mut huddle_node_config)>, i32)> = vec![
+    type Edit = Box<dyn Fn(&mut huddle_node_config)>;
+    let cases: Vec<(&str, Edit, i32)> = vec![
         (
             "transport 7",
             Box::new(|c| c.transport = 7),

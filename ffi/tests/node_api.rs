@@ -36,7 +36,8 @@ impl Drop for Node {
 fn start(robot: u8, edit: impl FnOnce(&mut huddle_node_config)) -> Result<Node, (i32, String)> {
     let mut cfg: huddle_node_config = zeroed();
     cfg.robot_id = robot;
-    cfg.refresh_ms = 20;
+    // Departed after 300 ms of silence: long enough for a loaded machine.
+    cfg.refresh_ms = 100;
     edit(&mut cfg);
     let mut err: huddle_error = zeroed();
     // SAFETY: a valid config whose strings outlive the call; a writable error.
@@ -531,7 +532,7 @@ fn a_second_node_with_a_running_robots_id_is_refused() {
     let twin = start(5, |cfg| {
         cfg.group_address = ip.as_ptr();
         cfg.group_port = group.port();
-        cfg.id_check_ms = 200; // ten refresh periods of the running node
+        cfg.id_check_ms = 500; // five refresh periods of the running node
     });
     let (code, message) = twin.err().expect("the twin must not start");
     assert_eq!(code, HUDDLE_E_ID_CONFLICT);
@@ -540,7 +541,7 @@ fn a_second_node_with_a_running_robots_id_is_refused() {
     let other = start(6, |cfg| {
         cfg.group_address = ip.as_ptr();
         cfg.group_port = group.port();
-        cfg.id_check_ms = 100;
+        cfg.id_check_ms = 300;
     });
     assert!(other.is_ok(), "{:?}", other.err());
 }
