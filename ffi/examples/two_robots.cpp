@@ -106,9 +106,17 @@ int main(int argc, char **argv) {
         c2.robot_id = 2;
         huddle::Replica r1(c1, 0x1111, 0), r2(c2, 0x2222, 0);
         r1.set(0, "*.var.machine.heuristic", "2.5");
+        r1.set_floats(0, "*.var.pose", {1.0, 2.0, 0.5});
+        r1.set_int(0, "*.var.mode", 2);
         while (auto frame = r1.poll_transmit()) r2.handle_datagram(3000, *frame);
         auto h = r2.get(3000, "1.var.machine.heuristic");
         if (!h || h->value != "2.5") return fail("the replica did not replicate");
+        auto rp = r2.get_floats("1.var.pose");
+        if (!rp || rp->size() != 3 || (*rp)[2] != 0.5 || r2.get_int("1.var.mode").value_or(0) != 2 ||
+            r2.get_float("1.var.machine.heuristic").value_or(0) != 2.5 ||
+            r2.get_literal("1.var.pose").value_or("") != "[1.0, 2.0, 0.5]") {
+            return fail("the replica's typed values did not replicate");
+        }
         std::cout << "replica 2 read " << h->key << " = " << h->value << " age " << h->age_ms
                   << " ms; next deadline at " << r1.poll_timeout().value_or(0) << " us\n";
     } catch (const huddle::Error &e) {

@@ -683,6 +683,190 @@ int huddle_replica_poll_timeout(huddle_replica *replica, uint64_t *at_us, huddle
 // `out` is NULL or writable; `err` is NULL or writable.
 int huddle_replica_poll_event(huddle_replica *replica, huddle_event *out, huddle_error *err);
 
+// Sets `key` to the integer `value` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_int(huddle_replica *replica,
+                           uint64_t now_us,
+                           const char *key,
+                           int64_t value,
+                           huddle_error *err);
+
+// Sets `key` to the float `value` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_float(huddle_replica *replica,
+                             uint64_t now_us,
+                             const char *key,
+                             double value,
+                             huddle_error *err);
+
+// Sets `key` to the bool `value` (non-zero: true) at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_bool(huddle_replica *replica,
+                            uint64_t now_us,
+                            const char *key,
+                            int value,
+                            huddle_error *err);
+
+// Sets `key` to the NUL-terminated UTF-8 string `value` (no quotes or escapes) at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `value` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_string(huddle_replica *replica,
+                              uint64_t now_us,
+                              const char *key,
+                              const char *value,
+                              huddle_error *err);
+
+// Sets `key` to the `n` doubles at `values` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `values` is readable for `n` doubles (NULL when `n` is 0); `err` is NULL or writable.
+int huddle_replica_set_floats(huddle_replica *replica,
+                              uint64_t now_us,
+                              const char *key,
+                              const double *values,
+                              size_t n,
+                              huddle_error *err);
+
+// Sets `key` to the `n` bytes at `bytes` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `bytes` is readable for `n` bytes (NULL when `n` is 0); `err` is NULL or writable.
+int huddle_replica_set_bytes(huddle_replica *replica,
+                             uint64_t now_us,
+                             const char *key,
+                             const uint8_t *bytes,
+                             size_t n,
+                             huddle_error *err);
+
+// Reads an int at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_int(huddle_replica *replica,
+                           const char *key,
+                           int64_t *out,
+                           huddle_error *err);
+
+// Reads a float (an int is converted) at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_float(huddle_replica *replica,
+                             const char *key,
+                             double *out,
+                             huddle_error *err);
+
+// Reads a bool (1 or 0) at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_bool(huddle_replica *replica, const char *key, int *out, huddle_error *err);
+
+// Reads the string (NUL-terminated; `len` without the NUL) at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_string(huddle_replica *replica,
+                              const char *key,
+                              char *buf,
+                              size_t cap,
+                              size_t *len,
+                              huddle_error *err);
+
+// Reads the `floats` value (`len` elements) at `key` into `buf` (`cap` doubles); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` doubles; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_floats(huddle_replica *replica,
+                              const char *key,
+                              double *buf,
+                              size_t cap,
+                              size_t *len,
+                              huddle_error *err);
+
+// Reads the `bytes` value at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_bytes(huddle_replica *replica,
+                             const char *key,
+                             uint8_t *buf,
+                             size_t cap,
+                             size_t *len,
+                             huddle_error *err);
+
+// Reads the value of any type as its literal, however long (NUL-terminated; `len` without the NUL) at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_literal(huddle_replica *replica,
+                               const char *key,
+                               char *buf,
+                               size_t cap,
+                               size_t *len,
+                               huddle_error *err);
+
 // Writes the robot's own pose estimate to `local.var.robot.pose`: field frame (m, m,
 // rad), `cov` the 6-element upper triangle of its (x, y, θ) covariance, `age_s` how old
 // the estimate already is (0..=10 s). Returns 0, or -1 (`HUDDLE_E_VALUE`: not finite,

@@ -341,6 +341,53 @@ public:
         }
         return to_binding(b);
     }
+    // Typed set and get (as Node's; a get gives nothing for an unknown key and throws
+    // Error HUDDLE_E_TYPE for another type).
+    void set_int(std::uint64_t now_us, const std::string &key, std::int64_t v) {
+        huddle_error err = detail::fresh_error();
+        detail::check(huddle_replica_set_int(replica_, now_us, key.c_str(), v, &err), err);
+    }
+    void set_float(std::uint64_t now_us, const std::string &key, double v) {
+        huddle_error err = detail::fresh_error();
+        detail::check(huddle_replica_set_float(replica_, now_us, key.c_str(), v, &err), err);
+    }
+    void set_floats(std::uint64_t now_us, const std::string &key, const std::vector<double> &v) {
+        huddle_error err = detail::fresh_error();
+        detail::check(huddle_replica_set_floats(replica_, now_us, key.c_str(), v.data(), v.size(), &err), err);
+    }
+    void set_string(std::uint64_t now_us, const std::string &key, const std::string &v) {
+        huddle_error err = detail::fresh_error();
+        detail::check(huddle_replica_set_string(replica_, now_us, key.c_str(), v.c_str(), &err), err);
+    }
+    std::optional<double> get_float(const std::string &key) {
+        huddle_error err = detail::fresh_error();
+        double v = 0;
+        if (detail::check(huddle_replica_get_float(replica_, key.c_str(), &v, &err), err) == 0) return std::nullopt;
+        return v;
+    }
+    std::optional<std::int64_t> get_int(const std::string &key) {
+        huddle_error err = detail::fresh_error();
+        std::int64_t v = 0;
+        if (detail::check(huddle_replica_get_int(replica_, key.c_str(), &v, &err), err) == 0) return std::nullopt;
+        return v;
+    }
+    std::optional<std::vector<double>> get_floats(const std::string &key) {
+        return detail::read_sized<double>(
+            [this, &key](double *buf, std::size_t cap, std::size_t *len, huddle_error *err) {
+                return huddle_replica_get_floats(replica_, key.c_str(), buf, cap, len, err);
+            },
+            0);
+    }
+    /// The value of any type as its literal, however long.
+    std::optional<std::string> get_literal(const std::string &key) {
+        auto v = detail::read_sized<char>(
+            [this, &key](char *buf, std::size_t cap, std::size_t *len, huddle_error *err) {
+                return huddle_replica_get_literal(replica_, key.c_str(), buf, cap, len, err);
+            },
+            1);
+        if (!v) return std::nullopt;
+        return std::string(v->begin(), v->end());
+    }
     void handle_datagram(std::uint64_t now_us, const std::string &bytes) {
         huddle_error err = detail::fresh_error();
         detail::check(huddle_replica_handle_datagram(

@@ -82,6 +82,7 @@ mod event;
 mod handles;
 mod node;
 mod replica;
+mod replica_typed;
 mod team;
 mod text;
 mod typed;
@@ -92,6 +93,7 @@ pub use error::*;
 pub use event::*;
 pub use node::*;
 pub use replica::*;
+pub use replica_typed::*;
 pub use team::*;
 pub use typed::*;
 

@@ -15,15 +15,41 @@ use comms::Value;
 
 use crate::error::*;
 use crate::node::{get_value, huddle_node, set_value};
+use crate::replica::huddle_replica;
 use crate::text::read_str;
+
+/// What a typed call works on: the node, or the replica at the caller's time (µs).
+#[derive(Clone, Copy)]
+pub(crate) enum Target {
+    Node(*mut huddle_node),
+    Replica(*mut huddle_replica, u64),
+}
+
+impl Target {
+    fn set(self, key: &str, value: Value) -> Result<(), Failure> {
+        match self {
+            Target::Node(node) => set_value(node, key, value, false),
+            Target::Replica(replica, now_us) => {
+                crate::replica::set_value(replica, now_us, key, value)
+            }
+        }
+    }
+
+    fn get(self, key: &str) -> Result<Option<Value>, Failure> {
+        match self {
+            Target::Node(node) => get_value(node, key),
+            Target::Replica(replica, _) => crate::replica::get_value(replica, key),
+        }
+    }
+}
 
 /// Sets `key` to a value of one type; shared by the typed setters.
 ///
 /// # Safety
 ///
 /// `key` is NULL or NUL-terminated; `err` is NULL or writable.
-unsafe fn set_typed(
-    node: *mut huddle_node,
+pub(crate) unsafe fn set_typed(
+    target: impl Into<Target>,
     key: *const c_char,
     err: *mut huddle_error,
     value: impl FnOnce() -> Result<Value, Failure>,
@@ -31,11 +57,17 @@ unsafe fn set_typed(
     let body = || {
         // SAFETY: the caller promises a NULL or NUL-terminated string.
         let key = unsafe { read_str(key, "key") }?;
-        set_value(node, key, value()?, false)?;
+        target.into().set(key, value()?)?;
         Ok(0)
     };
     // SAFETY: the caller promises `err` is NULL or writable.
     unsafe { guard(err, -1, body) }
+}
+
+impl From<*mut huddle_node> for Target {
+    fn from(node: *mut huddle_node) -> Target {
+        Target::Node(node)
+    }
 }
 
 /// Reads `key` and hands its value to `take` (which checks the type and copies out).
@@ -43,8 +75,8 @@ unsafe fn set_typed(
 /// # Safety
 ///
 /// `key` is NULL or NUL-terminated; `err` is NULL or writable.
-unsafe fn get_typed(
-    node: *mut huddle_node,
+pub(crate) unsafe fn get_typed(
+    target: impl Into<Target>,
     key: *const c_char,
     err: *mut huddle_error,
     take: impl FnOnce(&str, Value) -> Result<(), Failure>,
@@ -52,7 +84,7 @@ unsafe fn get_typed(
     let body = || {
         // SAFETY: the caller promises a NULL or NUL-terminated string.
         let key = unsafe { read_str(key, "key") }?;
-        match get_value(node, key)? {
+        match target.into().get(key)? {
             Some(value) => {
                 take(key, value)?;
                 Ok(1)
@@ -94,7 +126,7 @@ unsafe fn out<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failure> {
 /// # Safety
 ///
 /// `ptr` is NULL or valid for writes.
-unsafe fn put<T>(ptr: *mut T, value: T) -> Result<(), Failure> {
+pub(crate) unsafe fn put<T>(ptr: *mut T, value: T) -> Result<(), Failure> {
     // SAFETY: forwarded from the caller.
     *unsafe { out(ptr, "out") }? = value;
     Ok(())
@@ -107,7 +139,7 @@ unsafe fn put<T>(ptr: *mut T, value: T) -> Result<(), Failure> {
 /// # Safety
 ///
 /// `buf` is NULL or writable for `cap` items; `len` is NULL or writable.
-unsafe fn copy_out<T: Copy + Default>(
+pub(crate) unsafe fn copy_out<T: Copy + Default>(
     items: &[T],
     extra: usize,
     buf: *mut T,

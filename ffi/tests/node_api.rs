@@ -657,3 +657,164 @@ fn team_layer_inputs_are_checked_and_outputs_read_typed() {
         assert_eq!((out[1].robot, out[1].silent_s), (3, 4.0));
     }
 }
+
+#[test]
+fn the_replica_has_the_same_typed_calls_in_virtual_time() {
+    let mut err: huddle_error = zeroed();
+    let replica = |robot| {
+        let mut cfg: huddle_replica_config = zeroed();
+        cfg.robot_id = robot;
+        // SAFETY: a valid config, a writable error.
+        let r = unsafe { huddle_replica_new(&cfg, u64::from(robot), 0, std::ptr::null_mut()) };
+        assert!(!r.is_null());
+        r
+    };
+    let (one, two) = (replica(1), replica(2));
+    let pose = [0.5, -1.0, 0.25];
+    let note = "x".repeat(700);
+    // SAFETY (all calls below): live replicas, NUL-terminated strings, buffers of the
+    // capacities given, writable outputs.
+    unsafe {
+        assert_eq!(
+            huddle_replica_set_floats(
+                one,
+                1000,
+                c("*.var.pose").as_ptr(),
+                pose.as_ptr(),
+                3,
+                &mut err
+            ),
+            0
+        );
+        assert_eq!(
+            huddle_replica_set_int(one, 1000, c("*.var.mode").as_ptr(), 4, &mut err),
+            0
+        );
+        assert_eq!(
+            huddle_replica_set_bool(one, 1000, c("*.var.ready").as_ptr(), 1, &mut err),
+            0
+        );
+        assert_eq!(
+            huddle_replica_set_float(one, 1000, c("*.var.cost").as_ptr(), 2.5, &mut err),
+            0
+        );
+        assert_eq!(
+            huddle_replica_set_string(
+                one,
+                1000,
+                c("*.var.note").as_ptr(),
+                c(&note).as_ptr(),
+                &mut err
+            ),
+            0
+        );
+        assert_eq!(
+            huddle_replica_set_bytes(
+                one,
+                1000,
+                c("*.var.raw").as_ptr(),
+                [9u8, 8].as_ptr(),
+                2,
+                &mut err
+            ),
+            0
+        );
+        let mut buf = [0u8; 2048];
+        let mut len = 0;
+        while huddle_replica_poll_transmit(one, buf.as_mut_ptr(), buf.len(), &mut len, &mut err)
+            == 1
+        {
+            assert_eq!(
+                huddle_replica_handle_datagram(two, 3000, buf.as_ptr(), len, &mut err),
+                0
+            );
+        }
+        let mut floats = [0.0; 3];
+        assert_eq!(
+            huddle_replica_get_floats(
+                two,
+                c("1.var.pose").as_ptr(),
+                floats.as_mut_ptr(),
+                3,
+                &mut len,
+                &mut err
+            ),
+            1
+        );
+        assert_eq!(floats, pose);
+        let (mut i, mut f, mut b) = (0i64, 0.0, 0);
+        assert_eq!(
+            huddle_replica_get_int(two, c("1.var.mode").as_ptr(), &mut i, &mut err),
+            1
+        );
+        assert_eq!(
+            huddle_replica_get_float(two, c("1.var.cost").as_ptr(), &mut f, &mut err),
+            1
+        );
+        assert_eq!(
+            huddle_replica_get_bool(two, c("1.var.ready").as_ptr(), &mut b, &mut err),
+            1
+        );
+        assert_eq!((i, f, b), (4, 2.5, 1));
+        let mut raw = [0u8; 2];
+        assert_eq!(
+            huddle_replica_get_bytes(
+                two,
+                c("1.var.raw").as_ptr(),
+                raw.as_mut_ptr(),
+                2,
+                &mut len,
+                &mut err
+            ),
+            1
+        );
+        assert_eq!(raw, [9, 8]);
+        assert_eq!(
+            huddle_replica_get_string(
+                two,
+                c("1.var.note").as_ptr(),
+                std::ptr::null_mut(),
+                0,
+                &mut len,
+                &mut err
+            ),
+            1
+        );
+        assert_eq!(len, 700);
+        let mut whole = vec![0 as c_char; len + 1];
+        assert_eq!(
+            huddle_replica_get_string(
+                two,
+                c("1.var.note").as_ptr(),
+                whole.as_mut_ptr(),
+                len + 1,
+                &mut len,
+                &mut err
+            ),
+            1
+        );
+        assert_eq!(text(&whole), note);
+        assert_eq!(
+            huddle_replica_get_literal(
+                two,
+                c("1.var.note").as_ptr(),
+                std::ptr::null_mut(),
+                0,
+                &mut len,
+                &mut err
+            ),
+            1
+        );
+        assert_eq!(
+            len, 702,
+            "the quoted literal, beyond huddle_binding's 1023 only when longer"
+        );
+        assert_eq!(
+            huddle_replica_get_int(two, c("1.var.note").as_ptr(), &mut i, &mut err),
+            -1
+        );
+        assert_eq!(err.code, HUDDLE_E_TYPE);
+    }
+    huddle_replica_free(one);
+    huddle_replica_free(two);
+}
