@@ -6,7 +6,8 @@
  *
  * Two levels:
  *   - the node (huddle_node_*): huddle's driver on a thread of its own, as
- *     `huddle daemon` runs it without the relay: set, get, post, events, in-process;
+ *     `huddle daemon` runs it without the relay (multicast, SPL broadcast or unicast;
+ *     a league budget): typed set and get, post, events, keys, stats, in-process;
  *   - the replica (huddle_replica_*): the sans-IO protocol state machine, for programs
  *     that own their socket and clock (after every input, drain poll_transmit and
  *     poll_event until both return 0, then wait until poll_timeout or a datagram).
@@ -71,6 +72,17 @@
 // A bug inside huddle (a panic, caught at the boundary). Please report it.
 #define HUDDLE_E_INTERNAL 11
 
+// Another robot sends with this node's robot id (`huddle_node_config.id_check_ms`).
+#define HUDDLE_E_ID_CONFLICT 12
+
+// A typed read of a value of another type (`huddle_node_get_int` of a string), or a
+// team-layer output of the wrong shape.
+#define HUDDLE_E_TYPE 13
+
+// A value a typed call refuses: NaN or infinity, a covariance that is not positive
+// definite, an age outside 0..=10 s.
+#define HUDDLE_E_VALUE 14
+
 // A teammate's talk message, in order, exactly once: `robot` sent message `seq` of
 // queue `name` (`plan` for `n.talk.plan`), `type` and `value` hold it.
 #define HUDDLE_EVENT_TALK_DELIVERED 1
@@ -90,15 +102,32 @@
 // The node's event queue was full: `count` older events were dropped.
 #define HUDDLE_EVENT_LAGGED 6
 
-// Replica only: the binding `name` (`n.var.x`, `local.var.x`) was inserted or changed.
+// The binding `name` (`n.var.x`, `local.var.x`) was inserted or changed. The node
+// queues it only for keys matching a pattern given to `huddle_node_watch`, with `robot`
+// the owner and `type`/`value` the new value; the replica reports every change, with
+// the name only.
 #define HUDDLE_EVENT_VALUE_CHANGED 7
 
 // Replica only: a datagram was dropped; `name` says why (e.g. `bad_tag`).
 #define HUDDLE_EVENT_FRAME_DROPPED 8
 
-// An event this version has no kind for; `name` describes it. The node reports this way
-// that another robot sends with its robot id (`IncarnationConflict`, `robot` set).
+// An event this version has no kind for; `name` describes it.
 #define HUDDLE_EVENT_OTHER 9
+
+// Another robot sends with this robot's id `robot` (a second node or daemon started
+// with the same id): its frames are dropped; `incarnation` is the other one's. Reported
+// at most once a second while it lasts (counted in `huddle_stats.id_conflicts`).
+#define HUDDLE_EVENT_ID_CONFLICT 10
+
+// `huddle_node_config.transport`: every frame to the multicast group (the default).
+#define HUDDLE_TRANSPORT_MULTICAST 0
+
+// `huddle_node_config.transport`: every frame to the interface's broadcast address on
+// the team port (RoboCup SPL: 10000 + team).
+#define HUDDLE_TRANSPORT_BROADCAST 1
+
+// `huddle_node_config.transport`: every frame to each listed peer only.
+#define HUDDLE_TRANSPORT_UNICAST 2
 
 // A running node. Opaque: create it with `huddle_node_start`, release it with
 // `huddle_node_stop`.
@@ -107,28 +136,6 @@ typedef struct huddle_node huddle_node;
 // A sans-IO replica. Opaque: create it with `huddle_replica_new`, release it with
 // `huddle_replica_free`.
 typedef struct huddle_replica huddle_replica;
-
-// How to start a node. Zero every field first (`huddle_node_config cfg = {0};`): a zero
-// or NULL field means its default.
-typedef struct {
-  // This robot's id, 1..=254; 0: the `ROBOT_ID` environment variable.
-  uint8_t robot_id;
-  // The team's id; frames of other teams are dropped.
-  uint8_t team_id;
-  // The team's IPv4 multicast group; NULL: `"224.0.0.1"`.
-  const char *group_address;
-  // The group's UDP port; 0: 2000.
-  uint16_t group_port;
-  // The interface, by IPv4 address or name (`"wlan0"`); NULL: `"127.0.0.1"`, so
-  // nothing leaves the machine unless an interface is named.
-  const char *interface_address;
-  // Every global value is re-sent this often (ms); 0: 100.
-  uint32_t refresh_ms;
-  // A file holding the team key (trailing whitespace ignored); NULL: no team key.
-  const char *key_file;
-  // A directory with `config.dat` and `config-<id>.dat`; NULL: no config files.
-  const char *config_dir;
-} huddle_node_config;
 
 // What went wrong in a call: a `HUDDLE_E_*` code (0 when the call succeeded) and a
 // NUL-terminated UTF-8 message, cut to fit. Every function taking a `huddle_error *`
@@ -139,6 +146,105 @@ typedef struct {
   // Why, in English; empty on success.
   char message[256];
 } huddle_error;
+
+// A node's budget now (`huddle_node_budget`).
+typedef struct {
+  // Ordinary frames the pacing would let go now before it holds one back (negative
+  // while it holds frames back; priority items may still go from the reserve).
+  int64_t headroom;
+  // Messages this robot sent so far.
+  uint64_t sent;
+  // Messages left: this robot's own, or with a pooled budget the team's as far as this
+  // robot has heard.
+  uint64_t left;
+} huddle_budget;
+
+// A node's counters (`huddle_node_stats`).
+typedef struct {
+  // Frames accepted from teammates.
+  uint64_t frames_in;
+  // Frames this robot sent (each one message of a budget).
+  uint64_t frames_out;
+  // Bytes of those frames.
+  uint64_t bytes_in;
+  // Bytes of frames sent.
+  uint64_t bytes_out;
+  // Datagrams dropped for any reason (bad tag, other team, malformed, ...).
+  uint64_t frames_dropped;
+  // Teammates' value updates applied.
+  uint64_t updates_applied;
+  // Talk messages delivered to this robot.
+  uint64_t talk_delivered;
+  // Talk messages given up.
+  uint64_t talk_given_up;
+  // Times another robot was heard sending with this robot's id.
+  uint64_t id_conflicts;
+  // Datagrams the sockets sent (a frame to the group and two peers is three).
+  uint64_t datagrams_sent;
+  // Datagrams the sockets received.
+  uint64_t datagrams_received;
+  // Sends the OS refused.
+  uint64_t send_errors;
+  // Unicast datagrams from an address that is not a listed peer, dropped.
+  uint64_t unicast_refused;
+  // Teammates heard and not departed.
+  uint32_t peers_present;
+  // Teammates heard that are now departed.
+  uint32_t peers_departed;
+} huddle_stats;
+
+// How to start a node. Zero every field first (`huddle_node_config cfg = {0};`): a zero
+// or NULL field means its default.
+typedef struct {
+  // This robot's id, 1..=254; 0: the `ROBOT_ID` environment variable.
+  uint8_t robot_id;
+  // The team's id; frames of other teams are dropped.
+  uint8_t team_id;
+  // The team's IPv4 multicast group (multicast only); NULL: `"224.0.0.1"`.
+  const char *group_address;
+  // The team's UDP port; 0: 2000 for multicast, 10000 + `team_id` (the RoboCup SPL
+  // team port) for broadcast and unicast.
+  uint16_t group_port;
+  // The interface, by IPv4 address or name (`"wlan0"`); NULL: `"127.0.0.1"`, so
+  // nothing leaves the machine unless an interface is named.
+  const char *interface_address;
+  // Every global value is re-sent this often (ms); 0: 100.
+  uint32_t refresh_ms;
+  // A file holding the team key (trailing whitespace ignored); NULL: no team key.
+  const char *key_file;
+  // A directory with `config.dat` and `config-<id>.dat`; NULL: no config files.
+  const char *config_dir;
+  // How frames reach the team, as `huddle daemon --transport`:
+  // `HUDDLE_TRANSPORT_MULTICAST` (0, to `group_address`), `HUDDLE_TRANSPORT_BROADCAST`
+  // (to the interface's broadcast address, RoboCup SPL; `127.255.255.255` on
+  // loopback) or `HUDDLE_TRANSPORT_UNICAST` (to each of `peers` only).
+  int32_t transport;
+  // Broadcast address of the broadcast transport (`"10.0.255.255"`); NULL: the
+  // interface's.
+  const char *broadcast_address;
+  // Teammates (`"10.0.0.12:10005"`) that also get every frame by unicast (with the
+  // unicast transport: only they). Unicast is received on `<interface>:<port>` from
+  // these addresses only. NULL when `peer_count` is 0.
+  const char *const *peers;
+  // How many strings `peers` points to.
+  size_t peer_count;
+  // The team's message budget, as `huddle daemon --budget`: `"spl"` (1200 messages per
+  // 20-minute game, frames of at most 128 bytes), `"humanoid"` (12,000, 512 bytes) or
+  // `"N/DURATION"` (`"600/10min"`). This robot spends its share (`team_size`), paced
+  // over the game clock (`huddle_node_set_game_clock`; from the start by default), a
+  // fifth kept for priority items (`huddle_node_set_priority`). NULL: no budget.
+  const char *budget;
+  // Robots sharing the budget; 0: 5.
+  uint8_t team_size;
+  // Non-zero: pool the budget with the team (`huddle daemon --budget-pool`): only when
+  // every robot of the team runs huddle with the same budget.
+  uint8_t budget_pool;
+  // Non-zero: listen this long (ms) at the start for another robot sending with this
+  // `robot_id`, and refuse to start (`HUDDLE_E_ID_CONFLICT`) if one is heard; a few
+  // refresh periods suffice (teammates send at least once per refresh). 0: start at
+  // once; a conflict is still reported later as `HUDDLE_EVENT_ID_CONFLICT`.
+  uint32_t id_check_ms;
+} huddle_node_config;
 
 // One binding as read by `huddle_node_get` or `huddle_replica_get`.
 typedef struct {
@@ -201,6 +307,51 @@ typedef struct {
   size_t team_key_len;
 } huddle_replica_config;
 
+// The team ball (`local.var.team.ball`), field frame.
+typedef struct {
+  // Position, m.
+  double x;
+  // Position, m.
+  double y;
+  // Velocity, m/s.
+  double vx;
+  // Velocity, m/s.
+  double vy;
+  // Position covariance, m²: var_x, cov_xy, var_y.
+  double cov[3];
+  // The global ball confidence, 0..=1.
+  double confidence;
+  // Age of the newest sighting in it, s.
+  double age_s;
+} huddle_team_ball;
+
+// A pose with covariance (`local.var.team.pose`), field frame.
+typedef struct {
+  // Position, m.
+  double x;
+  // Position, m.
+  double y;
+  // Heading, rad, counter-clockwise from +x.
+  double theta;
+  // Covariance of (x, y, θ), upper triangle: var_x, cov_xy, cov_xθ, var_y, cov_yθ,
+  // var_θ.
+  double cov[6];
+} huddle_pose;
+
+// A teammate as the team layer knows it (`local.var.team.mates`).
+typedef struct {
+  // Its robot id.
+  uint8_t robot;
+  // Its pose from its messages, field frame (m, m, rad).
+  double x;
+  // See `x`.
+  double y;
+  // See `x`.
+  double theta;
+  // How long it has been silent, s.
+  double silent_s;
+} huddle_teammate;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -210,11 +361,124 @@ extern "C" {
 // Thread safety: may be called from any thread.
 const char *huddle_version(void);
 
+// Sets `key` to the value `literal` spells on the **priority path**: under a budget the
+// next frame may draw on the reserve at once instead of waiting for the pacing (a goer
+// change, a kick, a referee event). Without a budget it is `huddle_node_set`. Returns 0,
+// or -1 with `err` set.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` and `literal` are NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_set_priority(huddle_node *node,
+                             const char *key,
+                             const char *literal,
+                             huddle_error *err);
+
+// `huddle_node_set_floats` on the priority path (see `huddle_node_set_priority`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `values` is readable for `n` doubles (NULL when `n`
+// is 0); `err` is NULL or writable.
+int huddle_node_set_priority_floats(huddle_node *node,
+                                    const char *key,
+                                    const double *values,
+                                    size_t n,
+                                    huddle_error *err);
+
+// Tells the budget that `remaining_ms` of play are left now (the GameController's
+// `secsRemaining`): it paces the rest of its messages over that. Without a budget it
+// does nothing. Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `err` is NULL or writable.
+int huddle_node_set_game_clock(huddle_node *node, uint64_t remaining_ms, huddle_error *err);
+
+// Fills `out` with the budget now (headroom, messages sent and left). Returns 1, 0 when
+// the node has no budget (`out` untouched), -1 on error.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_budget(huddle_node *node, huddle_budget *out, huddle_error *err);
+
+// Whether this robot's value at `key` changed and still waits for a frame (a budget's
+// pacing holds it). Returns 1 pending, 0 not, -1 on error.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_is_pending(huddle_node *node, const char *key, huddle_error *err);
+
+// Asks for `HUDDLE_EVENT_VALUE_CHANGED` events (from `huddle_node_next_event`) for every
+// binding matching `pattern` (`+.var.ball.#`, `2.var.#`, `local.var.team.#`): each
+// insert or change, this robot's and teammates', with the owner and the new value. A
+// pattern given twice counts once. Returns 0, or -1 (`HUDDLE_E_KEY`: not a pattern).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `pattern` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_watch(huddle_node *node, const char *pattern, huddle_error *err);
+
+// Stops the events `huddle_node_watch(pattern)` asked for (events already queued stay).
+// Returns 1 when the pattern was watched, 0 when not, -1 on error.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `pattern` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_unwatch(huddle_node *node, const char *pattern, huddle_error *err);
+
+// Lists the stored keys matching `pattern` (`#`: all; `+.var.#`: every robot's
+// variables; `local.#`), in key order, one per line (each ending in `\n`), into `buf`
+// (`cap` bytes, NUL-terminated); `len` gets the list's length without the NUL. `buf`
+// NULL and `cap` 0: only the length. Returns how many keys there are (0 or more), or
+// -1 on error (`HUDDLE_E_BUFFER` when `cap < len + 1`, nothing copied; call again with
+// `len + 1`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `pattern` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len`
+// is NULL or writable; `err` is NULL or writable.
+int huddle_node_keys(huddle_node *node,
+                     const char *pattern,
+                     char *buf,
+                     size_t cap,
+                     size_t *len,
+                     huddle_error *err);
+
+// Fills `out` with the node's counters. Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_stats(huddle_node *node, huddle_stats *out, huddle_error *err);
+
 // Starts a node: opens the team's multicast socket on the interface, applies the
 // config files, sends the first frame, and receives (and runs the replica's timers) on a
 // thread of its own until `huddle_node_stop`.
-// Returns NULL on failure, with the reason in `err` (bad robot id, group, interface,
-// key file, config directory or config line; the port or group could not be joined).
+// With `id_check_ms`, it first listens that long for another robot with its id.
+// Returns NULL on failure, with the reason in `err` (bad robot id, transport, group,
+// interface, peer, budget, key file, config directory or config line; the port or
+// group could not be joined; `HUDDLE_E_ID_CONFLICT`: another robot sends with this id).
 //
 // Thread safety: may be called from any thread.
 //
@@ -418,6 +682,477 @@ int huddle_replica_poll_timeout(huddle_replica *replica, uint64_t *at_us, huddle
 //
 // `out` is NULL or writable; `err` is NULL or writable.
 int huddle_replica_poll_event(huddle_replica *replica, huddle_event *out, huddle_error *err);
+
+// Sets `key` to the integer `value` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_int(huddle_replica *replica,
+                           uint64_t now_us,
+                           const char *key,
+                           int64_t value,
+                           huddle_error *err);
+
+// Sets `key` to the float `value` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_float(huddle_replica *replica,
+                             uint64_t now_us,
+                             const char *key,
+                             double value,
+                             huddle_error *err);
+
+// Sets `key` to the bool `value` (non-zero: true) at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_bool(huddle_replica *replica,
+                            uint64_t now_us,
+                            const char *key,
+                            int value,
+                            huddle_error *err);
+
+// Sets `key` to the NUL-terminated UTF-8 string `value` (no quotes or escapes) at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `value` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_replica_set_string(huddle_replica *replica,
+                              uint64_t now_us,
+                              const char *key,
+                              const char *value,
+                              huddle_error *err);
+
+// Sets `key` to the `n` doubles at `values` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `values` is readable for `n` doubles (NULL when `n` is 0); `err` is NULL or writable.
+int huddle_replica_set_floats(huddle_replica *replica,
+                              uint64_t now_us,
+                              const char *key,
+                              const double *values,
+                              size_t n,
+                              huddle_error *err);
+
+// Sets `key` to the `n` bytes at `bytes` at `now_us`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `bytes` is readable for `n` bytes (NULL when `n` is 0); `err` is NULL or writable.
+int huddle_replica_set_bytes(huddle_replica *replica,
+                             uint64_t now_us,
+                             const char *key,
+                             const uint8_t *bytes,
+                             size_t n,
+                             huddle_error *err);
+
+// Reads an int at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_int(huddle_replica *replica,
+                           const char *key,
+                           int64_t *out,
+                           huddle_error *err);
+
+// Reads a float (an int is converted) at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_float(huddle_replica *replica,
+                             const char *key,
+                             double *out,
+                             huddle_error *err);
+
+// Reads a bool (1 or 0) at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`: another type).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_bool(huddle_replica *replica, const char *key, int *out, huddle_error *err);
+
+// Reads the string (NUL-terminated; `len` without the NUL) at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_string(huddle_replica *replica,
+                              const char *key,
+                              char *buf,
+                              size_t cap,
+                              size_t *len,
+                              huddle_error *err);
+
+// Reads the `floats` value (`len` elements) at `key` into `buf` (`cap` doubles); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` doubles; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_floats(huddle_replica *replica,
+                              const char *key,
+                              double *buf,
+                              size_t cap,
+                              size_t *len,
+                              huddle_error *err);
+
+// Reads the `bytes` value at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_bytes(huddle_replica *replica,
+                             const char *key,
+                             uint8_t *buf,
+                             size_t cap,
+                             size_t *len,
+                             huddle_error *err);
+
+// Reads the value of any type as its literal, however long (NUL-terminated; `len` without the NUL) at `key` into `buf` (`cap` bytes); `len` gets its length. `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when it does not fit, nothing copied).
+//
+// Thread safety: may be called from any thread (it locks the replica).
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_replica_get_literal(huddle_replica *replica,
+                               const char *key,
+                               char *buf,
+                               size_t cap,
+                               size_t *len,
+                               huddle_error *err);
+
+// Writes the robot's own pose estimate to `local.var.robot.pose`: field frame (m, m,
+// rad), `cov` the 6-element upper triangle of its (x, y, θ) covariance, `age_s` how old
+// the estimate already is (0..=10 s). Returns 0, or -1 (`HUDDLE_E_VALUE`: not finite,
+// covariance not positive definite, age out of range).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `cov` is NULL or readable for 6 doubles; `err` is NULL or writable.
+int huddle_node_set_robot_pose(huddle_node *node,
+                               double x,
+                               double y,
+                               double theta,
+                               const double *cov,
+                               double age_s,
+                               huddle_error *err);
+
+// Writes one ball sighting to `local.var.robot.ball`: robot frame (m), `cov` the
+// 3-element upper triangle of its covariance (m²), `age_s` how old it is (0..=10 s).
+// Write it when the camera sees the ball, not again otherwise. Returns 0, or -1
+// (`HUDDLE_E_VALUE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `cov` is NULL or readable for 3 doubles; `err` is NULL or writable.
+int huddle_node_set_robot_ball(huddle_node *node,
+                               double x,
+                               double y,
+                               const double *cov,
+                               double age_s,
+                               huddle_error *err);
+
+// Writes the motion since the previous odometry write to `local.var.robot.odometry`:
+// robot frame, `forward` and `left` in m, `turn` in rad. Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `err` is NULL or writable.
+int huddle_node_set_robot_odometry(huddle_node *node,
+                                   double forward,
+                                   double left,
+                                   double turn,
+                                   huddle_error *err);
+
+// Writes a kick the robot just made to `local.var.robot.kick`: field-frame `direction`
+// (rad), ball `speed` (m/s, ≥ 0), `contact_prob` its own odds the foot met the ball
+// (0..=1). A kick matters to the team at once: it goes on the priority path. Returns 0,
+// or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `err` is NULL or writable.
+int huddle_node_set_robot_kick(huddle_node *node,
+                               double direction,
+                               double speed,
+                               double contact_prob,
+                               huddle_error *err);
+
+// Writes landmark sightings to `local.var.robot.landmarks`: `count` sightings of 6
+// doubles each at `sightings`: `field_x, field_y, range, bearing, sigma_range,
+// sigma_bearing` (m, rad; sigmas > 0). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `sightings` is readable for `6 * count` doubles (NULL when `count` is 0); `err` is
+// NULL or writable.
+int huddle_node_set_robot_landmarks(huddle_node *node,
+                                    const double *sightings,
+                                    size_t count,
+                                    huddle_error *err);
+
+// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while no robot
+// has seen the ball (or no team layer runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
+// something else than the contract's 9 floats).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_team_ball(huddle_node *node, huddle_team_ball *out, huddle_error *err);
+
+// Reads the pose the team layer holds for this robot (`local.var.team.pose`) into
+// `out`. Returns 1, 0 when there is none, -1 on error (`HUDDLE_E_TYPE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_team_pose(huddle_node *node, huddle_pose *out, huddle_error *err);
+
+// Reads the teammates (`local.var.team.mates`) into `out` (room for `cap`); `count`
+// gets how many there are. `out` NULL and `cap` 0: only the count. Returns 1, 0 when
+// the key is absent, -1 on error (`HUDDLE_E_BUFFER` when `cap < count`, nothing copied;
+// `HUDDLE_E_TYPE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `out` is NULL or writable for `cap` teammates; `count` is NULL or writable; `err` is
+// NULL or writable.
+int huddle_node_get_team_mates(huddle_node *node,
+                               huddle_teammate *out,
+                               size_t cap,
+                               size_t *count,
+                               huddle_error *err);
+
+// Sets `key` to the integer `value`. Returns 0, or -1 with `err` set.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_set_int(huddle_node *node, const char *key, int64_t value, huddle_error *err);
+
+// Sets `key` to the float `value` (NaN and infinities are values too). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_set_float(huddle_node *node, const char *key, double value, huddle_error *err);
+
+// Sets `key` to the bool `value` (non-zero: true). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_set_bool(huddle_node *node, const char *key, int value, huddle_error *err);
+
+// Sets `key` to the string `value` (NUL-terminated UTF-8, taken as it is: no quotes or
+// escapes). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` and `value` are NULL or NUL-terminated; `err` is NULL or writable.
+int huddle_node_set_string(huddle_node *node,
+                           const char *key,
+                           const char *value,
+                           huddle_error *err);
+
+// Sets `key` to the `n` doubles at `values` (a `floats` value). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `values` is readable for `n` doubles (NULL when `n`
+// is 0); `err` is NULL or writable.
+int huddle_node_set_floats(huddle_node *node,
+                           const char *key,
+                           const double *values,
+                           size_t n,
+                           huddle_error *err);
+
+// Sets `key` to the `n` bytes at `bytes` (a `bytes` value). Returns 0, or -1.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `bytes` is readable for `n` bytes (NULL when `n` is
+// 0); `err` is NULL or writable.
+int huddle_node_set_bytes(huddle_node *node,
+                          const char *key,
+                          const uint8_t *bytes,
+                          size_t n,
+                          huddle_error *err);
+
+// Reads the integer at `key` into `out`. Returns 1, 0 when the key is unknown, -1 on
+// error (`HUDDLE_E_TYPE`: not an int).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_int(huddle_node *node, const char *key, int64_t *out, huddle_error *err);
+
+// Reads the float at `key` into `out` (an int is converted). Returns 1, 0 when the key
+// is unknown, -1 on error (`HUDDLE_E_TYPE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_float(huddle_node *node, const char *key, double *out, huddle_error *err);
+
+// Reads the bool at `key` into `out` (1 or 0). Returns 1, 0 when the key is unknown, -1
+// on error (`HUDDLE_E_TYPE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_bool(huddle_node *node, const char *key, int *out, huddle_error *err);
+
+// Reads the string at `key` into `buf` (`cap` bytes, NUL-terminated); `len` gets its
+// length in bytes without the NUL. `buf` NULL and `cap` 0: only the length. Returns 1,
+// 0 when the key is unknown, -1 on error (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when
+// `cap < len + 1`, nothing copied).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_node_get_string(huddle_node *node,
+                           const char *key,
+                           char *buf,
+                           size_t cap,
+                           size_t *len,
+                           huddle_error *err);
+
+// Reads the `floats` value at `key` into `buf` (`cap` doubles); `len` gets how many it
+// holds. `buf` NULL and `cap` 0: only the length. Returns 1, 0 when the key is unknown,
+// -1 on error (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when `cap < len`, nothing copied).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` doubles; `len`
+// is NULL or writable; `err` is NULL or writable.
+int huddle_node_get_floats(huddle_node *node,
+                           const char *key,
+                           double *buf,
+                           size_t cap,
+                           size_t *len,
+                           huddle_error *err);
+
+// Reads the `bytes` value at `key` into `buf` (`cap` bytes); `len` gets its length.
+// `buf` NULL and `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on
+// error (`HUDDLE_E_TYPE`; `HUDDLE_E_BUFFER` when `cap < len`, nothing copied).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_node_get_bytes(huddle_node *node,
+                          const char *key,
+                          uint8_t *buf,
+                          size_t cap,
+                          size_t *len,
+                          huddle_error *err);
+
+// Reads the value at `key`, of any type, as its literal (what `huddle_node_set` reads)
+// into `buf` (`cap` bytes, NUL-terminated), however long: `len` gets the literal's length
+// without the NUL (`huddle_binding.value` holds 1023 bytes at most). `buf` NULL and
+// `cap` 0: only the length. Returns 1, 0 when the key is unknown, -1 on error
+// (`HUDDLE_E_BUFFER` when `cap < len + 1`, nothing copied).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `key` is NULL or NUL-terminated; `buf` is NULL or writable for `cap` bytes; `len` is
+// NULL or writable; `err` is NULL or writable.
+int huddle_node_get_literal(huddle_node *node,
+                            const char *key,
+                            char *buf,
+                            size_t cap,
+                            size_t *len,
+                            huddle_error *err);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -11,9 +11,11 @@
 //! next deadline (`poll_timeout`) comes, and feeds either to the replica under the same
 //! lock. Stopping sets a flag the thread sees within [`STOP_CHECK`].
 //!
-//! Like `driver::Driver` without peers, relay or impairment: the socket is
-//! `driver::open_multicast`'s, every frame goes to the group, the clock is microseconds
-//! since the node started.
+//! Like `driver::Driver` without relay or impairment: the sockets are the driver's
+//! (`driver::open` for the transport, multicast, broadcast or unicast, and
+//! `driver::open_unicast` for listed peers), every frame goes to the group or broadcast
+//! address and to each peer, as the driver sends it; datagrams on a unicast socket are
+//! taken from listed peers only. The clock is microseconds since the node started.
 
 use std::collections::VecDeque;
 use std::io;
@@ -23,8 +25,8 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use comms::{Event, Instant, Replica};
-use driver::{new_incarnation, Clock, DriverConfig};
+use comms::{Event, Instant, Pattern, Replica};
+use driver::{new_incarnation, Clock, DriverConfig, Transport};
 
 use crate::error::*;
 use crate::event::NodeEvent;
@@ -85,22 +87,68 @@ impl EventQueue {
 pub(crate) struct State {
     pub(crate) replica: Replica,
     /// `None` once the node is stopped: calls still in flight then fail.
-    socket: Option<UdpSocket>,
-    group: SocketAddr,
+    sockets: Option<Sockets>,
+    /// The group or broadcast address every frame goes to; `None` with unicast.
+    destination: Option<SocketAddr>,
+    /// Teammates that get every frame by unicast too (or only, with unicast).
+    peers: Vec<SocketAddr>,
     events: Arc<EventQueue>,
+    /// Patterns whose value changes are queued as events (`huddle_node_watch`).
+    pub(crate) watches: Vec<Pattern>,
+    /// Datagram counters for `huddle_node_stats`.
+    pub(crate) io: Io,
+}
+
+/// The node's sockets: the transport's, and the `--peer` one when peers are listed and
+/// the transport is not unicast (with unicast, `team` is that socket).
+struct Sockets {
+    team: UdpSocket,
+    unicast: Option<UdpSocket>,
+}
+
+/// What the node's sockets did.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Io {
+    pub(crate) datagrams_sent: u64,
+    pub(crate) datagrams_received: u64,
+    pub(crate) send_errors: u64,
+    /// Datagrams on a unicast socket from an address that is not a listed peer.
+    pub(crate) unicast_refused: u64,
 }
 
 impl State {
     /// Drains the replica: frames to the group, events to the queue.
     pub(crate) fn pump(&mut self) {
         while let Some(transmit) = self.replica.poll_transmit() {
-            // Every frame goes to the group (`Destination::Group`, the only one so far).
-            if let Some(socket) = &self.socket {
+            let Some(sockets) = &self.sockets else {
+                continue;
+            };
+            // As the driver sends: to each peer (from the peer socket when there is one),
+            // then to the group or broadcast address.
+            let peer_socket = sockets.unicast.as_ref().unwrap_or(&sockets.team);
+            let targets = self.peers.iter().map(|p| (peer_socket, *p));
+            let group = self.destination.map(|d| (&sockets.team, d));
+            for (socket, to) in targets.chain(group) {
                 // A failed send is a lost datagram, which the protocol repairs.
-                let _ = socket.send_to(&transmit.payload, self.group);
+                match socket.send_to(&transmit.payload, to) {
+                    Ok(_) => self.io.datagrams_sent += 1,
+                    Err(_) => self.io.send_errors += 1,
+                }
             }
         }
         while let Some(event) = self.replica.poll_event() {
+            if let Event::ValueChanged { key } = &event {
+                if self.watches.iter().any(|p| p.matches(key)) {
+                    if let Ok(Some(entry)) = self.replica.get(&key.to_string()) {
+                        self.events.push(NodeEvent::Changed {
+                            key: key.to_string(),
+                            owner: entry.owner,
+                            value: entry.value.clone(),
+                        });
+                    }
+                }
+                continue;
+            }
             if let Some(event) = node_event(event) {
                 self.events.push(event);
             }
@@ -109,13 +157,14 @@ impl State {
 
     /// Whether the node still runs (a call racing `huddle_node_stop` may find it not).
     pub(crate) fn running(&self) -> bool {
-        self.socket.is_some()
+        self.sockets.is_some()
     }
 }
 
-/// What the node reports of a replica event: talk, peers, and anything unexpected (two
-/// robots with one id; a variant a later comms adds). Value changes and dropped frames
-/// are the replica API's business (they would flood the queue).
+/// What the node reports of a replica event: talk, peers, another robot with this id, and
+/// anything unexpected (a variant a later comms adds). Value changes are queued only for
+/// watched patterns (`State::pump`); dropped frames are counted in the stats (they would
+/// flood the queue).
 fn node_event(event: Event) -> Option<NodeEvent> {
     Some(match event {
         Event::TalkDelivered {
@@ -150,21 +199,17 @@ fn node_event(event: Event) -> Option<NodeEvent> {
             incarnation: new_incarnation,
         },
         Event::PeerDeparted { robot } => NodeEvent::Departed { robot },
+        Event::IncarnationConflict { robot, other, .. } => NodeEvent::IdConflict {
+            robot,
+            incarnation: other,
+        },
         Event::ValueChanged { .. } | Event::FrameDropped { .. } => return None,
         #[allow(unreachable_patterns)] // variants a later comms adds
         other => NodeEvent::Other {
-            robot: other_robot(&other),
+            robot: 0,
             description: format!("{other:?}"),
         },
     })
-}
-
-/// The robot an unexpected event is about, when it names one.
-fn other_robot(event: &Event) -> u8 {
-    match event {
-        Event::IncarnationConflict { robot, .. } => *robot,
-        _ => 0,
-    }
 }
 
 /// Shared by the C-facing side and the receive thread.
@@ -187,28 +232,41 @@ impl Shared {
 /// A running node's engine: the shared state and the receive thread.
 pub(crate) struct Engine {
     pub(crate) shared: Arc<Shared>,
-    thread: Mutex<Option<JoinHandle<()>>>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
 }
 
 impl Engine {
     /// Opens the socket, starts the replica with the start values, sends its first frame
     /// and starts the receive thread.
     pub(crate) fn start(config: DriverConfig) -> Result<Engine, Failure> {
-        let opened = driver::open_multicast(&config.socket)
-            .map_err(|e| Failure::new(HUDDLE_E_NETWORK, e.to_string()))?;
-        let network = |e: io::Error| {
-            Failure::new(
-                HUDDLE_E_NETWORK,
-                format!("cannot set up the socket for {}: {e}", config.socket.group),
-            )
+        let transport = config.socket.transport;
+        let peers_only = transport == Transport::Unicast;
+        if peers_only && config.peers.is_empty() {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                "the unicast transport sends to each peer only, and none is given",
+            ));
+        }
+        let network = |e: driver::SocketError| Failure::new(HUDDLE_E_NETWORK, e.to_string());
+        let opened = driver::open(&config.socket).map_err(network)?;
+        let destination = opened.destination.map(SocketAddr::V4);
+        let team = blocking(opened.socket, &config)?;
+        let unicast = if config.peers.is_empty() || peers_only {
+            None
+        } else {
+            let socket = driver::open_unicast(&config.socket).map_err(network)?;
+            Some(blocking(socket, &config)?)
         };
-        let socket = opened.socket;
-        socket.set_nonblocking(false).map_err(network)?;
-        socket
-            .set_write_timeout(Some(SEND_TIMEOUT))
-            .map_err(network)?;
-        socket.set_read_timeout(Some(STOP_CHECK)).map_err(network)?;
-        let receiver = socket.try_clone().map_err(network)?;
+        let clone = |s: &UdpSocket| {
+            s.try_clone().map_err(|e| {
+                Failure::new(HUDDLE_E_NETWORK, format!("cannot share the socket: {e}"))
+            })
+        };
+        // Each socket gets a receive thread; the peers-only filter where unicast arrives.
+        let mut receivers = vec![(clone(&team)?, peers_only)];
+        if let Some(unicast) = &unicast {
+            receivers.push((clone(unicast)?, true));
+        }
 
         let clock = Clock::new();
         let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
@@ -226,9 +284,12 @@ impl Engine {
         let shared = Arc::new(Shared {
             state: Mutex::new(State {
                 replica,
-                socket: Some(socket),
-                group: config.socket.group.into(),
+                sockets: Some(Sockets { team, unicast }),
+                destination,
+                peers: config.peers.clone(),
                 events: events.clone(),
+                watches: Vec::new(),
+                io: Io::default(),
             }),
             clock,
             events,
@@ -237,15 +298,32 @@ impl Engine {
         // The first frame (heartbeat, start values) goes out at once.
         shared.lock().pump();
         let robot = shared.lock().replica.robot_id();
-        let for_thread = shared.clone();
-        let thread = std::thread::Builder::new()
-            .name(format!("huddle-node-{robot}"))
-            .spawn(move || receive_loop(&for_thread, receiver))
-            .map_err(|e| Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}")))?;
-        Ok(Engine {
+        let engine = Engine {
             shared,
-            thread: Mutex::new(Some(thread)),
-        })
+            threads: Mutex::new(Vec::new()),
+        };
+        for (socket, peers_only) in receivers {
+            let for_thread = engine.shared.clone();
+            let accept = peers_only.then(|| config.peers.clone());
+            let thread = std::thread::Builder::new()
+                .name(format!("huddle-node-{robot}"))
+                .spawn(move || receive_loop(&for_thread, socket, accept))
+                .map_err(|e| {
+                    Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}"))
+                });
+            match thread {
+                Ok(thread) => engine.threads().push(thread),
+                Err(e) => {
+                    engine.stop();
+                    return Err(e);
+                }
+            }
+        }
+        Ok(engine)
+    }
+
+    fn threads(&self) -> MutexGuard<'_, Vec<JoinHandle<()>>> {
+        self.threads.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Runs `f` on the replica under the node's lock, on the caller's thread; then sends
@@ -267,20 +345,41 @@ impl Engine {
     /// Ends the receive thread, waits for it and closes the socket; a second call does
     /// nothing. Calls in flight on other threads finish before it or fail after it.
     pub(crate) fn stop(&self) {
-        let running = self.thread.lock().unwrap_or_else(|e| e.into_inner()).take();
-        if let Some(thread) = running {
-            self.shared.stopping.store(true, Ordering::Relaxed);
-            self.shared.lock().socket = None;
+        let running = std::mem::take(&mut *self.threads());
+        self.shared.stopping.store(true, Ordering::Relaxed);
+        self.shared.lock().sockets = None;
+        for thread in running {
             // A panic on the receive thread was already reported there; nothing to add.
             let _ = thread.join();
         }
     }
 }
 
+/// `socket` made blocking with the node's timeouts.
+fn blocking(socket: UdpSocket, config: &DriverConfig) -> Result<UdpSocket, Failure> {
+    let network = |e: io::Error| {
+        Failure::new(
+            HUDDLE_E_NETWORK,
+            format!(
+                "cannot set up the {} socket on port {}: {e}",
+                config.socket.transport,
+                config.socket.group.port()
+            ),
+        )
+    };
+    socket.set_nonblocking(false).map_err(network)?;
+    socket
+        .set_write_timeout(Some(SEND_TIMEOUT))
+        .map_err(network)?;
+    socket.set_read_timeout(Some(STOP_CHECK)).map_err(network)?;
+    Ok(socket)
+}
+
 /// The receive thread: datagrams and deadlines into the replica until the node stops.
 /// One lock per wake-up: the datagram, a deadline that came, the frames and events they
 /// caused, and the time to the next deadline.
-fn receive_loop(shared: &Shared, socket: UdpSocket) {
+/// `accept`: the only senders taken (a unicast socket's listed peers); `None`: any.
+fn receive_loop(shared: &Shared, socket: UdpSocket, accept: Option<Vec<SocketAddr>>) {
     let mut buf = vec![0u8; 65_536];
     let mut received = None;
     let mut timeout = STOP_CHECK;
@@ -289,7 +388,12 @@ fn receive_loop(shared: &Shared, socket: UdpSocket) {
             let mut state = shared.lock();
             let now = shared.clock.now();
             if let Some((n, from)) = received.take() {
-                state.replica.handle_datagram(now, from, &buf[..n]);
+                if accept.as_ref().is_none_or(|peers| peers.contains(&from)) {
+                    state.io.datagrams_received += 1;
+                    state.replica.handle_datagram(now, from, &buf[..n]);
+                } else {
+                    state.io.unicast_refused += 1;
+                }
             }
             if state.replica.poll_timeout().is_some_and(|t| t <= now) {
                 state.replica.handle_timeout(now);

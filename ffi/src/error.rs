@@ -30,6 +30,14 @@ pub const HUDDLE_E_POST: i32 = 9;
 pub const HUDDLE_E_IO: i32 = 10;
 /// A bug inside huddle (a panic, caught at the boundary). Please report it.
 pub const HUDDLE_E_INTERNAL: i32 = 11;
+/// Another robot sends with this node's robot id (`huddle_node_config.id_check_ms`).
+pub const HUDDLE_E_ID_CONFLICT: i32 = 12;
+/// A typed read of a value of another type (`huddle_node_get_int` of a string), or a
+/// team-layer output of the wrong shape.
+pub const HUDDLE_E_TYPE: i32 = 13;
+/// A value a typed call refuses: NaN or infinity, a covariance that is not positive
+/// definite, an age outside 0..=10 s.
+pub const HUDDLE_E_VALUE: i32 = 14;
 
 /// What went wrong in a call: a `HUDDLE_E_*` code (0 when the call succeeded) and a
 /// NUL-terminated UTF-8 message, cut to fit. Every function taking a `huddle_error *`

@@ -20,14 +20,20 @@ pub const HUDDLE_EVENT_PEER_DEPARTED: i32 = 4;
 pub const HUDDLE_EVENT_PEER_RESTARTED: i32 = 5;
 /// The node's event queue was full: `count` older events were dropped.
 pub const HUDDLE_EVENT_LAGGED: i32 = 6;
-/// Replica only: the binding `name` (`n.var.x`, `local.var.x`) was inserted or changed.
+/// The binding `name` (`n.var.x`, `local.var.x`) was inserted or changed. The node
+/// queues it only for keys matching a pattern given to `huddle_node_watch`, with `robot`
+/// the owner and `type`/`value` the new value; the replica reports every change, with
+/// the name only.
 pub const HUDDLE_EVENT_VALUE_CHANGED: i32 = 7;
 /// Replica only: a datagram was dropped; `name` says why (e.g. `bad_tag`).
 pub const HUDDLE_EVENT_FRAME_DROPPED: i32 = 8;
 
-/// An event this version has no kind for; `name` describes it. The node reports this way
-/// that another robot sends with its robot id (`IncarnationConflict`, `robot` set).
+/// An event this version has no kind for; `name` describes it.
 pub const HUDDLE_EVENT_OTHER: i32 = 9;
+/// Another robot sends with this robot's id `robot` (a second node or daemon started
+/// with the same id): its frames are dropped; `incarnation` is the other one's. Reported
+/// at most once a second while it lasts (counted in `huddle_stats.id_conflicts`).
+pub const HUDDLE_EVENT_ID_CONFLICT: i32 = 10;
 
 /// One event. Fields an event kind does not use are zero (strings empty).
 #[repr(C)]
@@ -82,6 +88,17 @@ pub(crate) enum NodeEvent {
         incarnation: u64,
     },
     Lagged(u64),
+    /// A watched value changed.
+    Changed {
+        key: String,
+        owner: u8,
+        value: Value,
+    },
+    /// Another robot sends with this robot's id.
+    IdConflict {
+        robot: u8,
+        incarnation: u64,
+    },
     /// An event with no kind of its own (`HUDDLE_EVENT_OTHER`).
     Other {
         robot: u8,
@@ -154,6 +171,17 @@ pub(crate) fn fill_node_event(out: &mut huddle_event, event: &NodeEvent) {
             clear(out, HUDDLE_EVENT_LAGGED);
             out.count = *n;
         }
+        NodeEvent::Changed { key, owner, value } => {
+            clear(out, HUDDLE_EVENT_VALUE_CHANGED);
+            out.robot = *owner;
+            write_text(&mut out.name, key);
+            put_value(out, value);
+        }
+        NodeEvent::IdConflict { robot, incarnation } => {
+            clear(out, HUDDLE_EVENT_ID_CONFLICT);
+            out.robot = *robot;
+            out.incarnation = *incarnation;
+        }
         NodeEvent::Other { robot, description } => {
             clear(out, HUDDLE_EVENT_OTHER);
             out.robot = *robot;
@@ -218,6 +246,13 @@ pub(crate) fn fill_replica_event(out: &mut huddle_event, event: &Event) {
         Event::PeerDeparted { robot } => {
             fill_node_event(out, &NodeEvent::Departed { robot: *robot })
         }
+        Event::IncarnationConflict { robot, other, .. } => fill_node_event(
+            out,
+            &NodeEvent::IdConflict {
+                robot: *robot,
+                incarnation: *other,
+            },
+        ),
         // Dropped frames, and any event a later comms adds: described, never lost.
         other => {
             if let Event::FrameDropped { reason, .. } = other {

@@ -4,12 +4,18 @@
 //!
 //! **What it is.** Two levels behind one C API:
 //!
-//! - **the node** (`huddle_node_*`): `comms::Replica` on the `driver` crate's multicast
-//!   socket, as `huddle daemon` runs it without the relay. The program sets, reads and
-//!   posts in-process, on its own thread (a set is on the wire when it returns), with no
-//!   daemon and no socket round trip per update; a thread of the node's own receives
-//!   and runs the timers; talk messages and peer changes arrive as events
-//!   (`huddle_node_next_event`);
+//! - **the node** (`huddle_node_*`): `comms::Replica` on the `driver` crate's sockets,
+//!   as `huddle daemon` runs it without the relay: multicast, SPL broadcast (10000 +
+//!   team) or unicast to listed peers, under a league budget if asked (`spl`,
+//!   `humanoid`, `N/DURATION`) with the priority path, the game clock and the headroom.
+//!   The program sets, reads and posts in-process, on its own thread (a set is on the
+//!   wire when it returns), typed (`huddle_node_set_float`, `huddle_node_get_floats`, ...,
+//!   long values read whole through a length query) or as literals, with no daemon and
+//!   no socket round trip per update; a thread of the node's own receives and runs the
+//!   timers; talk messages, peer changes, id conflicts and watched value changes arrive
+//!   as events (`huddle_node_next_event`); `huddle_node_keys` and `huddle_node_stats`
+//!   list what it holds. Typed calls for the team layer's keys (`docs/team-layer.md`)
+//!   write its inputs and read its outputs;
 //! - **the replica** (`huddle_replica_*`): `comms::Replica`, the sans-IO state machine,
 //!   for programs that own their socket and their clock.
 //!
@@ -18,8 +24,13 @@
 //! system `cc`/`c++` and runs on loopback.
 //!
 //! **What it is not.** No protocol logic: every frame is decided by `comms`, every socket
-//! is opened by the `driver` (`open_multicast`); the node only moves datagrams between
-//! them.
+//! is opened by the `driver` (`driver::open`, `driver::open_unicast`); the node only moves
+//! datagrams between them. Not (yet) the team layer itself: the in-process node stores
+//! its keys, `huddle daemon` runs it.
+//!
+//! **Linking.** `cargo build --profile ffi -p huddle-ffi` makes `target/ffi/libhuddle.a`
+//! without huddle's debug info; `ffi/install.sh PREFIX` installs it stripped with the headers,
+//! pkg-config files (`huddle`, `huddle-static`) and a CMake package (`huddle::huddle`).
 //!
 //! # Rules at the boundary
 //!
@@ -64,19 +75,27 @@
 #![warn(missing_docs)]
 
 mod binding;
+mod control;
 mod engine;
 mod error;
 mod event;
 mod handles;
 mod node;
 mod replica;
+mod replica_typed;
+mod team;
 mod text;
+mod typed;
 
 pub use binding::huddle_binding;
+pub use control::*;
 pub use error::*;
 pub use event::*;
 pub use node::*;
 pub use replica::*;
+pub use replica_typed::*;
+pub use team::*;
+pub use typed::*;
 
 /// The library's version, e.g. `"0.1.0"` (a static string: do not free it).
 ///

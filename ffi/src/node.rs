@@ -12,8 +12,8 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-use comms::{Entry, Key, PostError, ReplicaConfig, SetError, Value};
-use driver::{resolve_iface, DriverConfig};
+use comms::{BudgetSpec, Entry, Key, PostError, ReplicaConfig, SetError, Value};
+use driver::{resolve_iface, DriverConfig, SocketConfig, Transport};
 
 use crate::binding::{fill_binding, huddle_binding};
 use crate::engine::Engine;
@@ -38,9 +38,10 @@ pub struct huddle_node_config {
     pub robot_id: u8,
     /// The team's id; frames of other teams are dropped.
     pub team_id: u8,
-    /// The team's IPv4 multicast group; NULL: `"224.0.0.1"`.
+    /// The team's IPv4 multicast group (multicast only); NULL: `"224.0.0.1"`.
     pub group_address: *const c_char,
-    /// The group's UDP port; 0: 2000.
+    /// The team's UDP port; 0: 2000 for multicast, 10000 + `team_id` (the RoboCup SPL
+    /// team port) for broadcast and unicast.
     pub group_port: u16,
     /// The interface, by IPv4 address or name (`"wlan0"`); NULL: `"127.0.0.1"`, so
     /// nothing leaves the machine unless an interface is named.
@@ -51,7 +52,45 @@ pub struct huddle_node_config {
     pub key_file: *const c_char,
     /// A directory with `config.dat` and `config-<id>.dat`; NULL: no config files.
     pub config_dir: *const c_char,
+    /// How frames reach the team, as `huddle daemon --transport`:
+    /// `HUDDLE_TRANSPORT_MULTICAST` (0, to `group_address`), `HUDDLE_TRANSPORT_BROADCAST`
+    /// (to the interface's broadcast address, RoboCup SPL; `127.255.255.255` on
+    /// loopback) or `HUDDLE_TRANSPORT_UNICAST` (to each of `peers` only).
+    pub transport: i32,
+    /// Broadcast address of the broadcast transport (`"10.0.255.255"`); NULL: the
+    /// interface's.
+    pub broadcast_address: *const c_char,
+    /// Teammates (`"10.0.0.12:10005"`) that also get every frame by unicast (with the
+    /// unicast transport: only they). Unicast is received on `<interface>:<port>` from
+    /// these addresses only. NULL when `peer_count` is 0.
+    pub peers: *const *const c_char,
+    /// How many strings `peers` points to.
+    pub peer_count: usize,
+    /// The team's message budget, as `huddle daemon --budget`: `"spl"` (1200 messages per
+    /// 20-minute game, frames of at most 128 bytes), `"humanoid"` (12,000, 512 bytes) or
+    /// `"N/DURATION"` (`"600/10min"`). This robot spends its share (`team_size`), paced
+    /// over the game clock (`huddle_node_set_game_clock`; from the start by default), a
+    /// fifth kept for priority items (`huddle_node_set_priority`). NULL: no budget.
+    pub budget: *const c_char,
+    /// Robots sharing the budget; 0: 5.
+    pub team_size: u8,
+    /// Non-zero: pool the budget with the team (`huddle daemon --budget-pool`): only when
+    /// every robot of the team runs huddle with the same budget.
+    pub budget_pool: u8,
+    /// Non-zero: listen this long (ms) at the start for another robot sending with this
+    /// `robot_id`, and refuse to start (`HUDDLE_E_ID_CONFLICT`) if one is heard; a few
+    /// refresh periods suffice (teammates send at least once per refresh). 0: start at
+    /// once; a conflict is still reported later as `HUDDLE_EVENT_ID_CONFLICT`.
+    pub id_check_ms: u32,
 }
+
+/// `huddle_node_config.transport`: every frame to the multicast group (the default).
+pub const HUDDLE_TRANSPORT_MULTICAST: i32 = 0;
+/// `huddle_node_config.transport`: every frame to the interface's broadcast address on
+/// the team port (RoboCup SPL: 10000 + team).
+pub const HUDDLE_TRANSPORT_BROADCAST: i32 = 1;
+/// `huddle_node_config.transport`: every frame to each listed peer only.
+pub const HUDDLE_TRANSPORT_UNICAST: i32 = 2;
 
 /// The C-facing side of a node: `Send + Sync`, shared by every calling thread.
 type Node = Engine;
@@ -91,34 +130,103 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
     };
     let mut replica = ReplicaConfig::new(robot_id, cfg.team_id)
         .with_refresh_period(Duration::from_millis(refresh_ms.into()));
-    // SAFETY (all three reads): the caller promises the config's strings are NULL or
+    // SAFETY (all reads of the config's strings): the caller promises they are NULL or
     // NUL-terminated and alive for the call.
-    let group = unsafe { read_opt_str(cfg.group_address, "group_address") }?.unwrap_or("224.0.0.1");
+    let group = unsafe { read_opt_str(cfg.group_address, "group_address") }?;
     let iface =
         unsafe { read_opt_str(cfg.interface_address, "interface_address") }?.unwrap_or("127.0.0.1");
     let key_file = unsafe { read_opt_str(cfg.key_file, "key_file") }?;
-    // SAFETY: as above.
     let config_dir = unsafe { read_opt_str(cfg.config_dir, "config_dir") }?;
+    let broadcast = unsafe { read_opt_str(cfg.broadcast_address, "broadcast_address") }?;
+    let budget = unsafe { read_opt_str(cfg.budget, "budget") }?;
+    // SAFETY: as above, for `peer_count` strings.
+    let peers = unsafe { read_peers(cfg.peers, cfg.peer_count) }?;
 
-    let group: Ipv4Addr = group.parse().map_err(|_| {
-        Failure::new(
-            HUDDLE_E_NETWORK,
-            format!("group_address {group:?} is not an IPv4 address"),
-        )
-    })?;
-    if !group.is_multicast() {
+    let transport = match cfg.transport {
+        HUDDLE_TRANSPORT_MULTICAST => Transport::Multicast,
+        HUDDLE_TRANSPORT_BROADCAST => Transport::Broadcast,
+        HUDDLE_TRANSPORT_UNICAST => Transport::Unicast,
+        other => {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!(
+                    "transport {other} is not HUDDLE_TRANSPORT_MULTICAST, _BROADCAST or _UNICAST"
+                ),
+            ))
+        }
+    };
+    let group = match (transport, group) {
+        (Transport::Multicast, group) => {
+            let group = group.unwrap_or("224.0.0.1");
+            let group: Ipv4Addr = group.parse().map_err(|_| {
+                Failure::new(
+                    HUDDLE_E_NETWORK,
+                    format!("group_address {group:?} is not an IPv4 address"),
+                )
+            })?;
+            if !group.is_multicast() {
+                return Err(Failure::new(
+                    HUDDLE_E_NETWORK,
+                    format!("group_address {group} is not a multicast address (224.0.0.0/4)"),
+                ));
+            }
+            let port = if cfg.group_port == 0 { 2000 } else { cfg.group_port };
+            SocketAddrV4::new(group, port)
+        }
+        (_, Some(group)) => {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!("group_address {group:?} is a multicast group, and the {transport} transport has none: leave it NULL"),
+            ))
+        }
+        (_, None) => {
+            let port = if cfg.group_port == 0 {
+                10_000 + u16::from(cfg.team_id)
+            } else {
+                cfg.group_port
+            };
+            SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, port)
+        }
+    };
+    let broadcast = match (transport, broadcast) {
+        (_, None) => None,
+        (Transport::Broadcast, Some(b)) => Some(b.parse::<Ipv4Addr>().map_err(|_| {
+            Failure::new(
+                HUDDLE_E_NETWORK,
+                format!("broadcast_address {b:?} is not an IPv4 address"),
+            )
+        })?),
+        (_, Some(_)) => {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                "broadcast_address is for the broadcast transport",
+            ))
+        }
+    };
+    if transport == Transport::Unicast && peers.is_empty() {
         return Err(Failure::new(
-            HUDDLE_E_NETWORK,
-            format!("group_address {group} is not a multicast address (224.0.0.0/4)"),
+            HUDDLE_E_CONFIG,
+            "the unicast transport sends to each peer only: give at least one in peers",
         ));
     }
-    let port = if cfg.group_port == 0 {
-        2000
-    } else {
-        cfg.group_port
-    };
     let iface = resolve_iface(iface)
         .map_err(|e| Failure::new(HUDDLE_E_NETWORK, format!("interface_address: {e}")))?;
+    if let Some(spec) = budget {
+        let spec: BudgetSpec = spec
+            .parse()
+            .map_err(|e: comms::BudgetParseError| Failure::new(HUDDLE_E_CONFIG, e.to_string()))?;
+        let team_size = if cfg.team_size == 0 { 5 } else { cfg.team_size };
+        if spec.share(usize::from(team_size)).messages == 0 {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!("budget {spec}: a share of 0 messages for each of {team_size} robots"),
+            ));
+        }
+        replica = replica.with_budget(&spec, usize::from(team_size));
+        if cfg.budget_pool == 0 {
+            replica.budget = replica.budget.map(comms::Budget::split);
+        }
+    }
     if let Some(file) = key_file {
         let bytes = std::fs::read(file)
             .map_err(|e| Failure::new(HUDDLE_E_IO, format!("cannot read key file {file}: {e}")))?;
@@ -143,9 +251,48 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
             .map_err(|e| Failure::new(HUDDLE_E_CONFIG, e.to_string()))?;
         config.start_values = entries.into_iter().map(|e| (e.key, e.value)).collect();
     }
-    config.socket.group = SocketAddrV4::new(group, port);
-    config.socket.iface = iface;
+    config.socket = SocketConfig {
+        transport,
+        group,
+        broadcast,
+        iface,
+        ..SocketConfig::default()
+    };
+    config.peers = peers;
     Ok(config)
+}
+
+/// The caller's `peers`, each `ADDR:PORT`.
+///
+/// # Safety
+///
+/// `peers` is NULL (then `count` is 0) or points to `count` NULL or NUL-terminated
+/// strings.
+unsafe fn read_peers(
+    peers: *const *const c_char,
+    count: usize,
+) -> Result<Vec<std::net::SocketAddr>, Failure> {
+    if count == 0 {
+        return Ok(Vec::new());
+    }
+    if peers.is_null() {
+        return Err(Failure::null("peers"));
+    }
+    // SAFETY: non-NULL, and the caller promises `count` pointers.
+    let list = unsafe { std::slice::from_raw_parts(peers, count) };
+    list.iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            // SAFETY: the caller promises NULL or NUL-terminated strings.
+            let text = unsafe { read_str(p, &format!("peers[{i}]")) }?;
+            text.parse().map_err(|_| {
+                Failure::new(
+                    HUDDLE_E_NETWORK,
+                    format!("peers[{i}] {text:?} is not ADDR:PORT"),
+                )
+            })
+        })
+        .collect()
 }
 
 /// The key a read found: `*.var.x` reads the owner's copy `n.var.x`.
@@ -157,11 +304,38 @@ fn stored_key(asked: &Key, entry: &Entry) -> Key {
 }
 
 /// The live node behind `node`.
-fn lookup(node: *const huddle_node) -> Result<Arc<Node>, Failure> {
+pub(crate) fn lookup(node: *const huddle_node) -> Result<Arc<Node>, Failure> {
     if node.is_null() {
         return Err(Failure::null("node"));
     }
     NODES.get(node).ok_or_else(|| Failure::stopped("node"))
+}
+
+/// Sets `key` to `value` on the caller's thread (see `huddle_node_set`); `priority`: the
+/// priority path (`Replica::set_priority`).
+pub(crate) fn set_value(
+    node: *mut huddle_node,
+    key: &str,
+    value: Value,
+    priority: bool,
+) -> Result<(), Failure> {
+    let node = lookup(node)?;
+    let key = Key::parse(key).map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))?;
+    node.with_state(|state, now| {
+        if priority {
+            state.replica.set_priority(now, &key, value)
+        } else {
+            state.replica.set_key(now, &key, value)
+        }
+    })?
+    .map_err(set_failure)
+}
+
+/// The value at `key` (as `huddle_node_get` reads it), if there is one.
+pub(crate) fn get_value(node: *mut huddle_node, key: &str) -> Result<Option<Value>, Failure> {
+    let node = lookup(node)?;
+    node.with_state(|state, _| state.replica.get(key).map(|e| e.map(|e| e.value.clone())))?
+        .map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))
 }
 
 fn parse_value(literal: &str) -> Result<Value, Failure> {
@@ -184,8 +358,10 @@ pub(crate) fn post_failure(e: PostError) -> Failure {
 /// Starts a node: opens the team's multicast socket on the interface, applies the
 /// config files, sends the first frame, and receives (and runs the replica's timers) on a
 /// thread of its own until `huddle_node_stop`.
-/// Returns NULL on failure, with the reason in `err` (bad robot id, group, interface,
-/// key file, config directory or config line; the port or group could not be joined).
+/// With `id_check_ms`, it first listens that long for another robot with its id.
+/// Returns NULL on failure, with the reason in `err` (bad robot id, transport, group,
+/// interface, peer, budget, key file, config directory or config line; the port or
+/// group could not be joined; `HUDDLE_E_ID_CONFLICT`: another robot sends with this id).
 ///
 /// Thread safety: may be called from any thread.
 ///
@@ -202,6 +378,24 @@ pub unsafe extern "C" fn huddle_node_start(
         // SAFETY: the caller promises `cfg` is NULL or valid for reads.
         let cfg = unsafe { cfg.as_ref() }.ok_or_else(|| Failure::null("cfg"))?;
         let node = Engine::start(driver_config(cfg)?)?;
+        if cfg.id_check_ms > 0 {
+            // The I/O shell waits on the caller's thread, as it asked (not the sans-IO core).
+            #[allow(clippy::disallowed_methods)]
+            std::thread::sleep(Duration::from_millis(cfg.id_check_ms.into()));
+            let (robot, conflicts) = node.with_state(|state, _| {
+                (state.replica.robot_id(), state.replica.stats().id_conflicts)
+            })?;
+            if conflicts > 0 {
+                node.stop();
+                return Err(Failure::new(
+                    HUDDLE_E_ID_CONFLICT,
+                    format!(
+                        "another robot is sending with robot id {robot}: not started \
+                         (two programs with one id would overwrite each other's values)"
+                    ),
+                ));
+            }
+        }
         Ok(NODES.insert(Arc::new(node)))
     };
     // SAFETY: the caller promises `err` is NULL or writable.

@@ -70,6 +70,33 @@ fn with<T>(
     f(&mut state)
 }
 
+/// Sets `key` to `value` at `now_us` (the typed calls).
+pub(crate) fn set_value(
+    replica: *mut huddle_replica,
+    now_us: u64,
+    key: &str,
+    value: comms::Value,
+) -> Result<(), Failure> {
+    with(replica, |s| {
+        s.replica
+            .set(Instant::from_micros(now_us), key, value)
+            .map_err(set_failure)
+    })
+}
+
+/// The value at `key`, if there is one (the typed calls).
+pub(crate) fn get_value(
+    replica: *mut huddle_replica,
+    key: &str,
+) -> Result<Option<comms::Value>, Failure> {
+    with(replica, |s| {
+        s.replica
+            .get(key)
+            .map(|e| e.map(|e| e.value.clone()))
+            .map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))
+    })
+}
+
 /// The value `ptr` spells.
 ///
 /// # Safety

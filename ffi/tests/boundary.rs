@@ -282,3 +282,221 @@ fn bad_arguments_and_garbage_datagrams_to_the_replica_are_errors() {
     assert_eq!(err.code, HUDDLE_E_STOPPED);
     huddle_replica_free(b);
 }
+
+#[test]
+fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
+    let group = driver::scratch_group().expect("scratch group");
+    let ip = CString::new(group.ip().to_string()).unwrap();
+    let mut err: huddle_error = zeroed();
+    let mut cfg: huddle_node_config = zeroed();
+    cfg.robot_id = 1;
+    cfg.group_address = ip.as_ptr();
+    cfg.group_port = group.port();
+
+    // Configurations that must fail cleanly, each with its code.
+    let bad_peer = CString::new("not an address").unwrap();
+    let peers = [bad_peer.as_ptr()];
+    let bcast = CString::new("10.0.255.255").unwrap();
+    let budget = CString::new("1200 per game").unwrap();
+    type Edit = Box<dyn Fn(&mut huddle_node_config)>;
+    let cases: Vec<(&str, Edit, i32)> = vec![
+        (
+            "transport 7",
+            Box::new(|c| c.transport = 7),
+            HUDDLE_E_CONFIG,
+        ),
+        (
+            "peers NULL with a count",
+            Box::new(|c| c.peer_count = 2),
+            HUDDLE_E_NULL,
+        ),
+        (
+            "a peer that is no address",
+            Box::new(move |c| {
+                c.peers = peers.as_ptr();
+                c.peer_count = 1;
+            }),
+            HUDDLE_E_NETWORK,
+        ),
+        (
+            "a broadcast address for multicast",
+            Box::new(move |c| c.broadcast_address = bcast.as_ptr()),
+            HUDDLE_E_CONFIG,
+        ),
+        (
+            "a budget that does not parse",
+            Box::new(move |c| c.budget = budget.as_ptr()),
+            HUDDLE_E_CONFIG,
+        ),
+    ];
+    for (what, edit, code) in &cases {
+        let mut bad: huddle_node_config = zeroed();
+        bad.robot_id = cfg.robot_id;
+        bad.group_address = cfg.group_address;
+        bad.group_port = cfg.group_port;
+        edit(&mut bad);
+        // SAFETY: a config whose pointers are NULL or valid; a writable error.
+        assert!(
+            unsafe { huddle_node_start(&bad, &mut err) }.is_null(),
+            "{what}"
+        );
+        assert_eq!(err.code, *code, "{what}: {}", message(&err));
+    }
+
+    // SAFETY (every call below): pointers are NULL or valid, strings NUL-terminated,
+    // buffers as long as the capacities given.
+    let node = unsafe { huddle_node_start(&cfg, null_mut()) };
+    assert!(!node.is_null());
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    let (mut i, mut f, mut b) = (0i64, 0f64, 0i32);
+    let mut text = [0 as c_char; 8];
+    let mut floats = [0f64; 4];
+    let mut bytes = [0u8; 4];
+    let mut len = 0usize;
+    let mut stats: huddle_stats = zeroed();
+    let mut budget: huddle_budget = zeroed();
+    let mut ball: huddle_team_ball = zeroed();
+    let cov = [0.01, 0.0, 0.01, 0.01, 0.0, 0.01];
+    for step in 0..3000 {
+        let key = if rng.next().is_multiple_of(10) {
+            null()
+        } else {
+            cstr(rng.pick(KEYS))
+        };
+        let err_ptr = if rng.next().is_multiple_of(4) {
+            null_mut()
+        } else {
+            &mut err as *mut _
+        };
+        let null_out = rng.next().is_multiple_of(6);
+        let cap = (rng.next() % 5) as usize;
+        let rc = unsafe {
+            match rng.next() % 16 {
+                0 => huddle_node_set_int(node, key, 7, err_ptr),
+                1 => huddle_node_set_string(node, key, cstr(rng.pick(LITERALS)), err_ptr),
+                2 => huddle_node_set_floats(
+                    node,
+                    key,
+                    if null_out { null() } else { floats.as_ptr() },
+                    cap,
+                    err_ptr,
+                ),
+                3 => huddle_node_set_bytes(
+                    node,
+                    key,
+                    if null_out { null() } else { bytes.as_ptr() },
+                    cap,
+                    err_ptr,
+                ),
+                4 => huddle_node_get_int(
+                    node,
+                    key,
+                    if null_out { null_mut() } else { &mut i },
+                    err_ptr,
+                ),
+                5 => huddle_node_get_float(
+                    node,
+                    key,
+                    if null_out { null_mut() } else { &mut f },
+                    err_ptr,
+                ),
+                6 => huddle_node_get_bool(
+                    node,
+                    key,
+                    if null_out { null_mut() } else { &mut b },
+                    err_ptr,
+                ),
+                7 => huddle_node_get_string(
+                    node,
+                    key,
+                    if null_out {
+                        null_mut()
+                    } else {
+                        text.as_mut_ptr()
+                    },
+                    cap,
+                    &mut len,
+                    err_ptr,
+                ),
+                8 => huddle_node_get_floats(
+                    node,
+                    key,
+                    if null_out {
+                        null_mut()
+                    } else {
+                        floats.as_mut_ptr()
+                    },
+                    cap,
+                    &mut len,
+                    err_ptr,
+                ),
+                9 => huddle_node_get_bytes(
+                    node,
+                    key,
+                    bytes.as_mut_ptr(),
+                    cap,
+                    if null_out { null_mut() } else { &mut len },
+                    err_ptr,
+                ),
+                10 => huddle_node_get_literal(node, key, text.as_mut_ptr(), cap, &mut len, err_ptr),
+                11 => huddle_node_set_priority(node, key, cstr(rng.pick(LITERALS)), err_ptr),
+                12 => huddle_node_is_pending(node, key, err_ptr),
+                13 => huddle_node_watch(node, key, err_ptr),
+                14 => huddle_node_set_robot_pose(
+                    node,
+                    1.0,
+                    f64::NAN,
+                    0.0,
+                    if null_out { null() } else { cov.as_ptr() },
+                    0.0,
+                    err_ptr,
+                ),
+                _ => match rng.next() % 4 {
+                    0 => huddle_node_stats(
+                        node,
+                        if null_out { null_mut() } else { &mut stats },
+                        err_ptr,
+                    ),
+                    1 => huddle_node_budget(
+                        node,
+                        if null_out { null_mut() } else { &mut budget },
+                        err_ptr,
+                    ),
+                    2 => huddle_node_get_team_ball(
+                        node,
+                        if null_out { null_mut() } else { &mut ball },
+                        err_ptr,
+                    ),
+                    _ => huddle_node_keys(node, key, text.as_mut_ptr(), cap, &mut len, err_ptr)
+                        .min(1),
+                },
+            }
+        };
+        assert!((-1..=1).contains(&rc), "step {step}: rc {rc}");
+        if rc == -1 && !err_ptr.is_null() {
+            assert!(
+                (HUDDLE_E_NULL..=HUDDLE_E_VALUE).contains(&err.code)
+                    && err.code != HUDDLE_E_INTERNAL,
+                "step {step}: code {} {}",
+                err.code,
+                message(&err)
+            );
+            assert!(!message(&err).is_empty(), "step {step}: an error says why");
+        }
+    }
+    huddle_node_stop(node);
+    let key = CString::new("*.var.x").unwrap();
+    for rc in unsafe {
+        [
+            huddle_node_set_float(node, key.as_ptr(), 1.0, &mut err),
+            huddle_node_get_float(node, key.as_ptr(), &mut f, &mut err),
+            huddle_node_stats(node, &mut stats, &mut err),
+            huddle_node_budget(node, &mut budget, &mut err),
+            huddle_node_set_game_clock(node, 1000, &mut err),
+            huddle_node_watch(node, key.as_ptr(), &mut err),
+        ]
+    } {
+        assert_eq!(rc, -1);
+        assert_eq!(err.code, HUDDLE_E_STOPPED, "{}", message(&err));
+    }
+}

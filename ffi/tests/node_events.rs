@@ -119,8 +119,7 @@ fn another_robot_with_this_id_is_reported() {
     let group = driver::scratch_group().unwrap();
     let one = Node::start(7, group);
     let _twin = Node::start(7, group);
-    let conflict = one.wait_for("an id conflict", |e| e.kind == HUDDLE_EVENT_OTHER);
+    let conflict = one.wait_for("an id conflict", |e| e.kind == HUDDLE_EVENT_ID_CONFLICT);
     assert_eq!(conflict.robot, 7);
-    let name = text(&conflict.name);
-    assert!(name.contains("IncarnationConflict"), "{name}");
+    assert_ne!(conflict.incarnation, 0, "the twin's incarnation");
 }

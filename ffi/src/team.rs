@@ -1,0 +1,474 @@
+//! Typed calls for the team layer's keys (docs/team-layer.md): the robot program's
+//! inputs (`local.var.robot.*`) and the layer's outputs (`local.var.team.*`), as thin
+//! wrappers over the typed float-vector set and get, in the contract's order and units
+//! (field frame, metres, radians, seconds; covariances as their upper triangle).
+//!
+//! The in-process node does not run the team layer itself (a later step; `huddle daemon`
+//! does): these calls write and read the keys the contract names, so a program written
+//! for them works against either. Inputs are checked as the daemon checks them (finite
+//! numbers, a positive definite covariance, `age_s` in 0..=10): a bad one is refused
+//! with `HUDDLE_E_VALUE` and nothing is written.
+
+use std::ffi::c_int;
+
+use comms::Value;
+
+use crate::error::*;
+use crate::node::{get_value, huddle_node, set_value};
+use crate::typed::{read_array, wrong_type};
+
+/// The oldest a measurement may be when written (the contract's `age_s` limit).
+const MAX_AGE_S: f64 = 10.0;
+
+/// The team ball (`local.var.team.ball`), field frame.
+#[repr(C)]
+#[allow(non_camel_case_types)]
+pub struct huddle_team_ball {
+    /// Position, m.
+    pub x: f64,
+    /// Position, m.
+    pub y: f64,
+    /// Velocity, m/s.
+    pub vx: f64,
+    /// Velocity, m/s.
+    pub vy: f64,
+    /// Position covariance, m²: var_x, cov_xy, var_y.
+    pub cov: [f64; 3],
+    /// The global ball confidence, 0..=1.
+    pub confidence: f64,
+    /// Age of the newest sighting in it, s.
+    pub age_s: f64,
+}
+
+/// A pose with covariance (`local.var.team.pose`), field frame.
+#[repr(C)]
+#[allow(non_camel_case_types)]
+pub struct huddle_pose {
+    /// Position, m.
+    pub x: f64,
+    /// Position, m.
+    pub y: f64,
+    /// Heading, rad, counter-clockwise from +x.
+    pub theta: f64,
+    /// Covariance of (x, y, θ), upper triangle: var_x, cov_xy, cov_xθ, var_y, cov_yθ,
+    /// var_θ.
+    pub cov: [f64; 6],
+}
+
+/// A teammate as the team layer knows it (`local.var.team.mates`).
+#[repr(C)]
+#[allow(non_camel_case_types)]
+pub struct huddle_teammate {
+    /// Its robot id.
+    pub robot: u8,
+    /// Its pose from its messages, field frame (m, m, rad).
+    pub x: f64,
+    /// See `x`.
+    pub y: f64,
+    /// See `x`.
+    pub theta: f64,
+    /// How long it has been silent, s.
+    pub silent_s: f64,
+}
+
+fn bad(what: &str, why: impl std::fmt::Display) -> Failure {
+    Failure::new(HUDDLE_E_VALUE, format!("{what}: {why}; nothing written"))
+}
+
+fn finite(what: &str, values: &[f64]) -> Result<(), Failure> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(bad(what, format!("element {i} is {}", values[i]))),
+        None => Ok(()),
+    }
+}
+
+fn age(what: &str, age_s: f64) -> Result<(), Failure> {
+    if (0.0..=MAX_AGE_S).contains(&age_s) {
+        Ok(())
+    } else {
+        Err(bad(
+            what,
+            format!("age_s {age_s} is outside 0..={MAX_AGE_S}"),
+        ))
+    }
+}
+
+/// Whether the symmetric matrix of upper triangle `upper` (2×2 or 3×3, row by row) is
+/// positive definite: every leading minor > 0 (Sylvester).
+fn positive_definite(upper: &[f64]) -> bool {
+    match *upper {
+        [a, b, c] => a > 0.0 && a * c - b * b > 0.0,
+        [a, b, c, d, e, f] => {
+            let m2 = a * d - b * b;
+            let det = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c);
+            a > 0.0 && m2 > 0.0 && det > 0.0
+        }
+        _ => false,
+    }
+}
+
+fn covariance(what: &str, upper: &[f64]) -> Result<(), Failure> {
+    if positive_definite(upper) {
+        Ok(())
+    } else {
+        Err(bad(
+            what,
+            format!("the covariance {upper:?} is not positive definite"),
+        ))
+    }
+}
+
+/// Runs `body` for a team call: the checks, then the set.
+///
+/// # Safety
+///
+/// `err` is NULL or writable.
+unsafe fn team_set(err: *mut huddle_error, body: impl FnOnce() -> Result<(), Failure>) -> c_int {
+    // SAFETY: forwarded from the caller.
+    unsafe { guard(err, -1, || body().map(|()| 0)) }
+}
+
+/// Writes the robot's own pose estimate to `local.var.robot.pose`: field frame (m, m,
+/// rad), `cov` the 6-element upper triangle of its (x, y, θ) covariance, `age_s` how old
+/// the estimate already is (0..=10 s). Returns 0, or -1 (`HUDDLE_E_VALUE`: not finite,
+/// covariance not positive definite, age out of range).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `cov` is NULL or readable for 6 doubles; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set_robot_pose(
+    node: *mut huddle_node,
+    x: f64,
+    y: f64,
+    theta: f64,
+    cov: *const f64,
+    age_s: f64,
+    err: *mut huddle_error,
+) -> c_int {
+    let what = "local.var.robot.pose";
+    // SAFETY: `err` forwarded; `cov` readable for 6 doubles as the caller promises.
+    unsafe {
+        team_set(err, || {
+            let cov = read_array(cov, 6, "cov")?;
+            let mut v = vec![x, y, theta];
+            v.extend_from_slice(cov);
+            v.push(age_s);
+            finite(what, &v)?;
+            covariance(what, cov)?;
+            age(what, age_s)?;
+            set_value(node, what, Value::Floats(v), false)
+        })
+    }
+}
+
+/// Writes one ball sighting to `local.var.robot.ball`: robot frame (m), `cov` the
+/// 3-element upper triangle of its covariance (m²), `age_s` how old it is (0..=10 s).
+/// Write it when the camera sees the ball, not again otherwise. Returns 0, or -1
+/// (`HUDDLE_E_VALUE`).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `cov` is NULL or readable for 3 doubles; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set_robot_ball(
+    node: *mut huddle_node,
+    x: f64,
+    y: f64,
+    cov: *const f64,
+    age_s: f64,
+    err: *mut huddle_error,
+) -> c_int {
+    let what = "local.var.robot.ball";
+    // SAFETY: `err` forwarded; `cov` readable for 3 doubles as the caller promises.
+    unsafe {
+        team_set(err, || {
+            let cov = read_array(cov, 3, "cov")?;
+            let mut v = vec![x, y];
+            v.extend_from_slice(cov);
+            v.push(age_s);
+            finite(what, &v)?;
+            covariance(what, cov)?;
+            age(what, age_s)?;
+            set_value(node, what, Value::Floats(v), false)
+        })
+    }
+}
+
+/// Writes the motion since the previous odometry write to `local.var.robot.odometry`:
+/// robot frame, `forward` and `left` in m, `turn` in rad. Returns 0, or -1.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set_robot_odometry(
+    node: *mut huddle_node,
+    forward: f64,
+    left: f64,
+    turn: f64,
+    err: *mut huddle_error,
+) -> c_int {
+    let what = "local.var.robot.odometry";
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        team_set(err, || {
+            let v = vec![forward, left, turn];
+            finite(what, &v)?;
+            set_value(node, what, Value::Floats(v), false)
+        })
+    }
+}
+
+/// Writes a kick the robot just made to `local.var.robot.kick`: field-frame `direction`
+/// (rad), ball `speed` (m/s, ≥ 0), `contact_prob` its own odds the foot met the ball
+/// (0..=1). A kick matters to the team at once: it goes on the priority path. Returns 0,
+/// or -1.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set_robot_kick(
+    node: *mut huddle_node,
+    direction: f64,
+    speed: f64,
+    contact_prob: f64,
+    err: *mut huddle_error,
+) -> c_int {
+    let what = "local.var.robot.kick";
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        team_set(err, || {
+            let v = vec![direction, speed, contact_prob];
+            finite(what, &v)?;
+            if speed < 0.0 || !(0.0..=1.0).contains(&contact_prob) {
+                return Err(bad(
+                    what,
+                    format!("speed {speed} < 0 or contact_prob {contact_prob} outside 0..=1"),
+                ));
+            }
+            set_value(node, what, Value::Floats(v), true)
+        })
+    }
+}
+
+/// Writes landmark sightings to `local.var.robot.landmarks`: `count` sightings of 6
+/// doubles each at `sightings`: `field_x, field_y, range, bearing, sigma_range,
+/// sigma_bearing` (m, rad; sigmas > 0). Returns 0, or -1.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `sightings` is readable for `6 * count` doubles (NULL when `count` is 0); `err` is
+/// NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_set_robot_landmarks(
+    node: *mut huddle_node,
+    sightings: *const f64,
+    count: usize,
+    err: *mut huddle_error,
+) -> c_int {
+    let what = "local.var.robot.landmarks";
+    // SAFETY: forwarded from the caller: `6 * count` readable doubles.
+    unsafe {
+        team_set(err, || {
+            let n = count
+                .checked_mul(6)
+                .ok_or_else(|| bad(what, "count overflows"))?;
+            let v = read_array(sightings, n, "sightings")?;
+            finite(what, v)?;
+            if let Some(i) = v.chunks(6).position(|s| s[4] <= 0.0 || s[5] <= 0.0) {
+                return Err(bad(
+                    what,
+                    format!("sighting {i} has a sigma that is not > 0"),
+                ));
+            }
+            set_value(node, what, Value::Floats(v.to_vec()), false)
+        })
+    }
+}
+
+/// The floats at `key`, checked to have `len` elements (any of `lens`).
+fn team_floats(
+    node: *mut huddle_node,
+    key: &str,
+    lens: &[usize],
+) -> Result<Option<Vec<f64>>, Failure> {
+    match get_value(node, key)? {
+        None => Ok(None),
+        Some(Value::Floats(v)) if lens.contains(&v.len()) => Ok(Some(v)),
+        Some(Value::Floats(v)) => Err(Failure::new(
+            HUDDLE_E_TYPE,
+            format!("{key} holds {} floats, the contract says {lens:?}", v.len()),
+        )),
+        Some(other) => Err(wrong_type(key, &other, "floats")),
+    }
+}
+
+/// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while no robot
+/// has seen the ball (or no team layer runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
+/// something else than the contract's 9 floats).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `out` is NULL or writable; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_get_team_ball(
+    node: *mut huddle_node,
+    out: *mut huddle_team_ball,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        // SAFETY: the caller promises `out` is NULL or valid for writes.
+        let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
+        Ok(match team_floats(node, "local.var.team.ball", &[9])? {
+            Some(v) => {
+                *out = huddle_team_ball {
+                    x: v[0],
+                    y: v[1],
+                    vx: v[2],
+                    vy: v[3],
+                    cov: [v[4], v[5], v[6]],
+                    confidence: v[7],
+                    age_s: v[8],
+                };
+                1
+            }
+            None => 0,
+        })
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Reads the pose the team layer holds for this robot (`local.var.team.pose`) into
+/// `out`. Returns 1, 0 when there is none, -1 on error (`HUDDLE_E_TYPE`).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `out` is NULL or writable; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_get_team_pose(
+    node: *mut huddle_node,
+    out: *mut huddle_pose,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        // SAFETY: the caller promises `out` is NULL or valid for writes.
+        let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
+        Ok(match team_floats(node, "local.var.team.pose", &[9])? {
+            Some(v) => {
+                *out = huddle_pose {
+                    x: v[0],
+                    y: v[1],
+                    theta: v[2],
+                    cov: [v[3], v[4], v[5], v[6], v[7], v[8]],
+                };
+                1
+            }
+            None => 0,
+        })
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// Reads the teammates (`local.var.team.mates`) into `out` (room for `cap`); `count`
+/// gets how many there are. `out` NULL and `cap` 0: only the count. Returns 1, 0 when
+/// the key is absent, -1 on error (`HUDDLE_E_BUFFER` when `cap < count`, nothing copied;
+/// `HUDDLE_E_TYPE`).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `out` is NULL or writable for `cap` teammates; `count` is NULL or writable; `err` is
+/// NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_get_team_mates(
+    node: *mut huddle_node,
+    out: *mut huddle_teammate,
+    cap: usize,
+    count: *mut usize,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        // SAFETY: the caller promises `count` is NULL or valid for writes.
+        let count = unsafe { count.as_mut() }.ok_or_else(|| Failure::null("count"))?;
+        let key = "local.var.team.mates";
+        let Some(v) = get_value(node, key)? else {
+            *count = 0;
+            return Ok(0);
+        };
+        let v = match v {
+            Value::Floats(v) if v.len() % 5 == 0 => v,
+            Value::Floats(v) => {
+                return Err(Failure::new(
+                    HUDDLE_E_TYPE,
+                    format!("{key} holds {} floats, not 5 per teammate", v.len()),
+                ))
+            }
+            other => return Err(wrong_type(key, &other, "floats")),
+        };
+        let mates: Vec<huddle_teammate> = v
+            .chunks(5)
+            .map(|m| huddle_teammate {
+                robot: m[0] as u8,
+                x: m[1],
+                y: m[2],
+                theta: m[3],
+                silent_s: m[4],
+            })
+            .collect();
+        *count = mates.len();
+        if out.is_null() && cap == 0 {
+            return Ok(1);
+        }
+        if out.is_null() {
+            return Err(Failure::null("out"));
+        }
+        if mates.len() > cap {
+            return Err(Failure::new(
+                HUDDLE_E_BUFFER,
+                format!("{} teammates, room for {cap}", mates.len()),
+            ));
+        }
+        for (i, mate) in mates.into_iter().enumerate() {
+            // SAFETY: non-NULL, and the caller promises `cap > i` writable teammates.
+            unsafe { out.add(i).write(mate) };
+        }
+        Ok(1)
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covariances_must_be_positive_definite_by_their_leading_minors() {
+        assert!(positive_definite(&[0.04, 0.0, 0.04]));
+        assert!(positive_definite(&[0.1, 0.01, 0.0, 0.1, 0.0, 0.01]));
+        assert!(!positive_definite(&[0.04, 0.05, 0.04]), "det < 0");
+        assert!(!positive_definite(&[-1.0, 0.0, 1.0]), "negative variance");
+        // Leading minors 1, 1 but det = -3: indefinite in θ.
+        assert!(!positive_definite(&[1.0, 0.0, 2.0, 1.0, 0.0, 1.0]));
+        assert!(!positive_definite(&[1.0, 0.0]), "wrong length");
+    }
+}
