@@ -278,7 +278,7 @@ mod tests {
         let mut t = 0;
         for i in 0..40 {
             t += if i % 2 == 0 { 30 } else { 50 };
-            r.record(&upd("2.var.pose", 2), ms(t));
+            r.record(&upd("2.var.pose", 0), ms(t));
         }
         let report = r.report(ms(2010));
         let ball = &report[0];
