@@ -175,3 +175,49 @@ fn man_writes_one_page_per_subcommand() {
     let set = std::fs::read_to_string(dir.path().join("huddle-set.1")).unwrap();
     assert!(set.contains("every"), "the page documents set's flags");
 }
+
+#[test]
+fn watch_on_a_terminal_redraws_in_place_shows_six_digits_and_q_quits() {
+    if Command::new("script").arg("--version").output().is_err() {
+        eprintln!("SKIPPED: no `script` (util-linux) to give watch a terminal");
+        return;
+    }
+    let (d, dir) = one_daemon(3);
+    let relay = d.relay.to_string();
+    run(&["set", "*.var.pi", "3.141592653589793", "--relay", &relay]);
+    let typescript = dir.path().join("watch.typescript");
+    let inner = format!(
+        "COLUMNS=100 LINES=20 {} watch '3.var.#' --relay {relay}",
+        env!("CARGO_BIN_EXE_huddle")
+    );
+    let mut child = Command::new("script")
+        .args(["-qfec", &inner])
+        .arg(&typescript)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn script");
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut keys = child.stdin.take().unwrap();
+    std::io::Write::write_all(&mut keys, b"q").unwrap();
+    let deadline = Instant::now() + Duration::from_secs(8);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("q did not end huddle watch");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    drop(keys);
+    assert!(status.success(), "{status}");
+    let screen = std::fs::read(&typescript).unwrap();
+    let has = |needle: &[u8]| screen.windows(needle.len()).any(|w| w == needle);
+    assert!(!has(b"\x1b[2J"), "no whole-screen clear: it flickers");
+    assert!(has(b"\x1b[H"), "redrawn from the top, in place");
+    assert!(has(b"3.14159\x1b[K"), "6 significant digits");
+    assert!(!has(b"3.141592653589793"), "not 17");
+    assert!(has(b"\x1b[?1049l"), "the terminal is given back");
+}
