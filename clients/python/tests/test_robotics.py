@@ -31,7 +31,6 @@ from huddle_client import (
 )
 from huddle_client._team import ball_value, mates_of, pose_value, team_ball_of
 
-np = pytest.importorskip("numpy") if False else None
 try:
     import numpy as np  # type: ignore[no-redef]
 except ImportError:  # pragma: no cover - CI installs it
@@ -254,8 +253,7 @@ def test_a_robot_that_comes_back_joins_again(pair, connect, tmp_path):
     a.stop()
     assert next(w) == Left(4)
     next(w)  # the departed value
-    group = None
-    # Robot 4 again, on the same group (its port file names it).
+    # Robot 4 again, on the same group.
     proc_args = a.proc.args
     group = proc_args[proc_args.index("--group") + 1]
     a2 = start_daemon(4, group, tmp_path)
