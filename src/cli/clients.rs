@@ -53,7 +53,8 @@ pub struct SetArgs {
     #[arg(required = true, num_args = 1.., allow_negative_numbers = true)]
     pub value: Vec<String>,
     /// Send it again every period (`100ms`), like `ros2 topic pub --rate`, until
-    /// interrupted or `--count` sends.
+    /// interrupted or `--count` sends. Each send restamps the value (its age starts
+    /// again); `echo` and `hz` see changes only, so an unchanged value shows once there.
     #[arg(long, value_parser = duration::parse_positive, value_name = "PERIOD")]
     pub every: Option<Duration>,
     /// With `--every`: stop after this many sends.

@@ -1,7 +1,8 @@
 //! `huddle hz PATTERN...`: how often each matching key changes, like `ros2 topic hz`:
 //! per key, the rate over a sliding window, the shortest and longest interval between
 //! updates, the jitter (standard deviation of the intervals) and the value's age now (on
-//! the owner's clock, as the relay reports it, plus the time since it arrived).
+//! the owner's clock, as the relay reports it, plus the time since it arrived). It counts
+//! changes, as the relay pushes them: a value set again unchanged is not one.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::Write;
