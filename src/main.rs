@@ -44,6 +44,8 @@ enum Command {
     Echo(cli::clients::EchoArgs),
     /// Live table of the keys matching patterns (the seed's Monitor).
     Watch(cli::watch::WatchArgs),
+    /// How often keys change: rate, jitter and age per key (like `ros2 topic hz`).
+    Hz(cli::hz::HzArgs),
     /// A daemon's counters: frames, drops by reason, peers.
     Stats(cli::clients::StatsArgs),
     /// The team monitor in the browser, live; listen-only (never sends a frame).
@@ -56,7 +58,7 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Print a shell completion script: `huddle completions bash > /etc/bash_completion.d/huddle`.
     Completions(cli::generate::CompletionsArgs),
-    /// Print the man page (roff): `huddle man > huddle.1`.
+    /// Print the man page (roff): `huddle man > huddle.1`; `--dir DIR`: one per subcommand.
     Man(cli::generate::ManArgs),
 }
 
@@ -71,6 +73,7 @@ fn run(command: Option<Command>) -> Result<()> {
         Some(Command::Keys(args)) => cli::clients::keys(args),
         Some(Command::Echo(args)) => cli::clients::echo(args),
         Some(Command::Watch(args)) => cli::watch::watch(args),
+        Some(Command::Hz(args)) => cli::hz::run(args),
         Some(Command::Stats(args)) => cli::clients::stats(args),
         Some(Command::Monitor(args)) => cli::monitor::run(args),
         Some(Command::Record(args)) => cli::record::record(args),

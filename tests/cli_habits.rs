@@ -165,7 +165,7 @@ fn the_clients_against_a_daemon() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["key"], "6.var.ball.dist");
-    assert_eq!(v["owner"], "6");
+    assert_eq!(v["owner"], 6, "an integer, as in /state and Python");
     assert_eq!(v["type"], "float");
     assert_eq!(v["value"], 1.5);
     assert!(v["age_ms"].as_u64().unwrap() < 5000);
@@ -173,7 +173,7 @@ fn the_clients_against_a_daemon() {
     // keys
     let out = run(&["keys", "6.var.#", "--relay", &port]);
     assert_eq!(text(&out.stdout), "6.var.ball.dist\n");
-    let out = run(&["keys", "--relay", &port]);
+    let out = run(&["keys", "--all", "--relay", &port]);
     assert!(text(&out.stdout).contains("local.var.huddle.stats.frames_out\n"));
 
     // stats --json

@@ -210,7 +210,7 @@ fn a_live_monitor_hears_a_broadcast_team() {
                 && has_robot(2)
                 && board
                     .iter()
-                    .any(|b| b["key"] == "1.var.ball.dist" && b["value"] == "2.25")
+                    .any(|b| b["key"] == "1.var.ball.dist" && b["value"] == 2.25)
             {
                 break;
             }

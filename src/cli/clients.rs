@@ -13,7 +13,9 @@ use serde_json::json;
 
 use super::duration;
 use super::feed::{Feed, FeedEvent};
-use super::relay::{binding_json, utc_now, RelayAddr, RelayClient, RelayTarget};
+use super::relay::{
+    binding_json, greeting_robot, owner_id, utc_now, RelayAddr, RelayClient, RelayTarget,
+};
 
 /// `huddle get KEY`
 #[derive(Args, Debug)]
@@ -43,12 +45,42 @@ pub struct GetArgs {
 pub struct SetArgs {
     /// Key: `*.var.x`, `local.var.x`; `*.talk.q` posts a message.
     pub key: String,
-    /// Value literal: `42`, `4.2`, `true`, `'"text"'`, `'[1, 2]'`, `0x0a0b` (several
-    /// words are joined by spaces).
+    /// Value: a literal (`42`, `4.2`, `true`, `'"text"'`, `'[1, 2]'`, `0x0a0b`), or bare
+    /// words, sent as a string (`attack`, `kick off`). The rule: what reads as a literal
+    /// is that literal; what does not, and does not start like one (a digit, sign, dot,
+    /// `"` or `[`), is a string. So `42` and `true` are a number and a bool: write
+    /// `'"42"'` for the text. Several words are joined by spaces.
     #[arg(required = true, num_args = 1.., allow_negative_numbers = true)]
     pub value: Vec<String>,
+    /// Send it again every period (`100ms`), like `ros2 topic pub --rate`, until
+    /// interrupted or `--count` sends. Each send restamps the value (its age starts
+    /// again); `echo` and `hz` see changes only, so an unchanged value shows once there.
+    #[arg(long, value_parser = duration::parse_positive, value_name = "PERIOD")]
+    pub every: Option<Duration>,
+    /// With `--every`: stop after this many sends.
+    #[arg(long, short = 'n', value_name = "N", requires = "every")]
+    pub count: Option<u64>,
     #[command(flatten)]
     pub relay: RelayAddr,
+}
+
+/// The literal `huddle set` sends for its VALUE words: a literal as typed, bare words as
+/// a string (see `SetArgs::value`). A malformed literal (`[1, 2`, `1.2.3`, `"open`) is
+/// an error saying what is wrong, not a string.
+pub fn value_literal(words: &[String]) -> Result<String> {
+    let text = words.join(" ");
+    match comms::parse_literal(&text) {
+        Ok(_) => Ok(text),
+        Err(e) => {
+            let starts_like_a_literal = text.trim_start().starts_with(|c: char| {
+                c.is_ascii_digit() || matches!(c, '-' | '+' | '.' | '"' | '[')
+            });
+            if starts_like_a_literal || text.trim().is_empty() {
+                bail!("{text:?} is not a value: {e} (bare words are sent as a string; quote a number to send it as text: '\"42\"')");
+            }
+            Ok(comms::Value::String(text).to_string())
+        }
+    }
 }
 
 /// `huddle keys [PATTERN]`
@@ -63,8 +95,28 @@ pub struct KeysArgs {
     /// One JSON object per line (as `get --json`).
     #[arg(long)]
     pub json: bool,
+    /// Also the daemon's own keys (`local.var.huddle.*`: its counters, see `huddle
+    /// stats`), hidden otherwise unless PATTERN names them.
+    #[arg(long, short = 'a')]
+    pub all: bool,
     #[command(flatten)]
     pub relay: RelayAddr,
+}
+
+/// Keys of the daemon's own (its counters) and of client probes: listed by `keys` only
+/// with `--all`, or when the pattern asks for them by name.
+fn is_internal(key: &str) -> bool {
+    key.starts_with("local.var.huddle.") || key.starts_with("local.var.huddle_client.")
+}
+
+/// What to say when a pattern matched nothing: most often a key was given where a
+/// pattern of its children was meant (`1.var.ball` for `1.var.ball.#`).
+pub fn no_match_hint(pattern: &str) -> String {
+    if pattern.ends_with('#') {
+        format!("no key matches {pattern}")
+    } else {
+        format!("no key matches {pattern} (patterns match whole keys: for the keys under it, try {pattern}.#)")
+    }
 }
 
 /// `huddle echo PATTERN...`
@@ -93,9 +145,9 @@ pub struct StatsArgs {
     pub relay: RelayAddr,
 }
 
-fn print_binding(out: &mut impl Write, b: &Binding, json: bool) -> Result<()> {
+fn print_binding(out: &mut impl Write, b: &Binding, json: bool, robot: Option<u8>) -> Result<()> {
     if json {
-        writeln!(out, "{}", binding_json(b))?;
+        writeln!(out, "{}", binding_json(b, robot))?;
     } else {
         let departed = if b.departed { ", owner departed" } else { "" };
         writeln!(
@@ -123,15 +175,30 @@ pub fn get(args: GetArgs) -> Result<()> {
             },
         }
     };
-    print_binding(&mut std::io::stdout().lock(), &b, args.json)?;
+    print_binding(&mut std::io::stdout().lock(), &b, args.json, c.robot())?;
     let _ = c.send("QUIT");
     Ok(())
 }
 
 /// `huddle set`
 pub fn set(args: SetArgs) -> Result<()> {
+    let line = format!("SETV {} {}", args.key, value_literal(&args.value)?);
     let mut c = RelayClient::connect(&args.relay.relay)?;
-    c.request(&format!("SETV {} {}", args.key, args.value.join(" ")))?;
+    c.request(&line)?;
+    if let Some(period) = args.every {
+        // Paced on a schedule, not by sleeping a period after each send, so the rate
+        // holds whatever a round trip takes.
+        let start = Instant::now();
+        let mut sent = 1u64;
+        while args.count.is_none_or(|n| sent < n) {
+            let next = start + period.mul_f64(sent as f64);
+            if let Some(wait) = next.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+            c.request(&line)?;
+            sent += 1;
+        }
+    }
     let _ = c.send("QUIT");
     Ok(())
 }
@@ -139,17 +206,31 @@ pub fn set(args: SetArgs) -> Result<()> {
 /// `huddle keys`
 pub fn keys(args: KeysArgs) -> Result<()> {
     let mut c = RelayClient::connect(&args.relay.relay)?;
-    let all = c.snapshot(&[args.pattern.as_str()])?;
+    let robot = c.robot();
+    let mut all = c.snapshot(&[args.pattern.as_str()])?;
+    let asked_for_internal = is_internal(&args.pattern);
+    let matched = all.len();
+    if !(args.all || asked_for_internal) {
+        all.retain(|b| !is_internal(&b.key));
+    }
+    if matched == 0 {
+        eprintln!("{}", no_match_hint(&args.pattern));
+    } else if all.is_empty() {
+        eprintln!(
+            "only the daemon's own keys match {} ({matched}; list them with --all)",
+            args.pattern
+        );
+    }
     let mut out = std::io::stdout().lock();
     for b in &all {
         if args.json {
-            writeln!(out, "{}", binding_json(b))?;
+            writeln!(out, "{}", binding_json(b, robot))?;
         } else if args.long {
             writeln!(
                 out,
                 "{}\t{}\t{}\t{}\t{}ms",
                 b.key,
-                b.owner(),
+                owner_id(b, robot).map_or_else(|| b.owner().to_owned(), |o| o.to_string()),
                 b.ty,
                 b.value,
                 b.age_ms
@@ -162,17 +243,17 @@ pub fn keys(args: KeysArgs) -> Result<()> {
 }
 
 /// One pushed line as `echo` prints it; `None` for lines that are not news.
-fn echo_line(line: &str, json: bool) -> Option<String> {
+fn echo_line(line: &str, json: bool, robot: Option<u8>) -> Option<String> {
     let time = utc_now();
     if let Some(b) = Binding::parse(line) {
         return Some(if json {
-            let mut v = binding_json(&b);
+            let mut v = binding_json(&b, robot);
             v["time"] = json!(time);
             v.to_string()
         } else {
             format!(
                 "{time}\t{}\t{}\t{}\t{}ms",
-                b.owner(),
+                owner_id(&b, robot).map_or_else(|| b.owner().to_owned(), |o| o.to_string()),
                 b.key,
                 b.value,
                 b.age_ms
@@ -194,12 +275,13 @@ pub fn echo(args: EchoArgs) -> Result<()> {
     let feed = Feed::start(args.relay.relay.clone(), args.patterns.clone(), 0)?;
     let mut out = std::io::stdout().lock();
     let mut printed = 0u64;
+    let mut robot = None;
     if args.count == Some(0) {
         return Ok(());
     }
     loop {
         match feed.next()? {
-            FeedEvent::Line(line) => match echo_line(&line, args.json) {
+            FeedEvent::Line(line) => match echo_line(&line, args.json, robot) {
                 Some(text) => {
                     writeln!(out, "{text}")?;
                     out.flush()?;
@@ -211,6 +293,7 @@ pub fn echo(args: EchoArgs) -> Result<()> {
                 None => tracing::warn!("relay: {line}"),
             },
             FeedEvent::Connected(greeting) => {
+                robot = greeting_robot(&greeting);
                 tracing::info!(%greeting, "reconnected to the relay")
             }
             FeedEvent::Down { reason, retry_in } => tracing::warn!(
@@ -337,17 +420,57 @@ mod tests {
 
     #[test]
     fn echo_prints_time_owner_key_value_age_and_never_drops_a_loss() {
-        let line = echo_line("UPD 3.var.ball.dist float 1.5 12", false).unwrap();
+        let line = echo_line("UPD 3.var.ball.dist float 1.5 12", false, Some(1)).unwrap();
         let fields: Vec<&str> = line.split('\t').collect();
         assert_eq!(&fields[1..], ["3", "3.var.ball.dist", "1.5", "12ms"]);
         let v: serde_json::Value =
-            serde_json::from_str(&echo_line("UPD 3.var.n int 7 0", true).unwrap()).unwrap();
+            serde_json::from_str(&echo_line("UPD 3.var.n int 7 0", true, Some(1)).unwrap())
+                .unwrap();
         assert_eq!(v["value"], json!(7));
-        assert_eq!(v["owner"], json!("3"));
+        assert_eq!(v["owner"], json!(3), "an integer, as in /state and Python");
         assert!(v["time"].is_string());
-        let lost = echo_line("LOST 3.talk.plan 4 6", false).unwrap();
+        let local: serde_json::Value =
+            serde_json::from_str(&echo_line("UPD local.var.n int 7 0", true, Some(4)).unwrap())
+                .unwrap();
+        assert_eq!(
+            local["owner"],
+            json!(4),
+            "a local key is the relay's robot's"
+        );
+        let lost = echo_line("LOST 3.talk.plan 4 6", false, None).unwrap();
         assert!(lost.ends_with("\tLOST\t3.talk.plan 4 6"), "{lost}");
-        assert_eq!(echo_line("OK", false), None);
+        assert_eq!(echo_line("OK", false, None), None);
+    }
+
+    #[test]
+    fn bare_words_are_strings_and_literals_stay_literals() {
+        let lit = |words: &[&str]| {
+            value_literal(&words.iter().map(|w| w.to_string()).collect::<Vec<_>>())
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(lit(&["attack"]).unwrap(), "\"attack\"");
+        assert_eq!(lit(&["kick", "off"]).unwrap(), "\"kick off\"");
+        assert_eq!(lit(&["42"]).unwrap(), "42");
+        assert_eq!(lit(&["-1.5"]).unwrap(), "-1.5");
+        assert_eq!(lit(&["true"]).unwrap(), "true");
+        assert_eq!(lit(&["\"42\""]).unwrap(), "\"42\"");
+        assert_eq!(lit(&["[1,", "2]"]).unwrap(), "[1, 2]");
+        assert_eq!(lit(&["0x0a0b"]).unwrap(), "0x0a0b");
+        assert_eq!(lit(&["say \"hi\""]).unwrap(), "\"say \\\"hi\\\"\"");
+        for typo in [&["[1,", "2"][..], &["1.2.3"], &["\"open"]] {
+            assert!(
+                lit(typo).is_err(),
+                "{typo:?} is a malformed literal, not a string"
+            );
+        }
+    }
+
+    #[test]
+    fn an_empty_match_suggests_the_children_pattern() {
+        assert!(no_match_hint("1.var.ball").contains("1.var.ball.#"));
+        assert!(!no_match_hint("1.var.#").contains("try"));
+        assert!(is_internal("local.var.huddle.stats.frames_in"));
+        assert!(!is_internal("local.var.huddlex"));
     }
 
     #[test]

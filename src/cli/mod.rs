@@ -22,6 +22,7 @@ pub mod duration;
 pub mod feed;
 pub mod fusion;
 pub mod generate;
+pub mod hz;
 pub mod monitor;
 pub mod monitor_sim;
 pub mod record;

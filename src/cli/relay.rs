@@ -154,6 +154,11 @@ impl RelayClient {
         Ok(client)
     }
 
+    /// The relay's robot id, from its greeting.
+    pub fn robot(&self) -> Option<u8> {
+        greeting_robot(&self.greeting)
+    }
+
     /// Sends one command line.
     pub fn send(&mut self, line: &str) -> Result<()> {
         self.writer.write_all(line.as_bytes())?;
@@ -246,11 +251,26 @@ pub fn value_json(literal: &str) -> serde_json::Value {
     }
 }
 
-/// A binding as one JSON object: key, owner, type, value, age_ms.
-pub fn binding_json(b: &Binding) -> serde_json::Value {
+/// The robot a binding belongs to, as a number: the key's first level (`3.var.x` -> 3),
+/// or for a `local.` key the relay's own robot (`robot`, from its greeting).
+pub fn owner_id(b: &Binding, robot: Option<u8>) -> Option<u8> {
+    b.owner().parse::<u8>().ok().or(robot)
+}
+
+/// The robot id in a relay greeting (`HUDDLE 2 robot 3` -> 3).
+pub fn greeting_robot(greeting: &str) -> Option<u8> {
+    match greeting.split_whitespace().collect::<Vec<_>>()[..] {
+        ["HUDDLE", _, "robot", id] => id.parse().ok(),
+        _ => None,
+    }
+}
+
+/// A binding as one JSON object: key, owner (an integer, as in `/state` and Python; for
+/// a `local.` key the relay's robot `robot`), type, value, age_ms, departed.
+pub fn binding_json(b: &Binding, robot: Option<u8>) -> serde_json::Value {
     json!({
         "key": b.key,
-        "owner": b.owner(),
+        "owner": owner_id(b, robot),
         "type": b.ty,
         "value": value_json(&b.value),
         "age_ms": b.age_ms,

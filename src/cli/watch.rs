@@ -3,6 +3,11 @@
 //! few seconds), the robots heard and the ones departed, and the talk queues' latest
 //! messages and losses; on a pipe, one line per update. Either way it reconnects with
 //! backoff when the daemon restarts.
+//!
+//! On a terminal it is calm: it draws on the alternate screen and overwrites the table in
+//! place (cursor home, each line cleared to its end; never a whole-screen clear, which
+//! flickers), numbers show 6 significant digits, and `q` (or Ctrl-C) quits and gives the
+//! terminal back as it was.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{IsTerminal, Write};
@@ -171,7 +176,13 @@ impl View {
                     Ok(r) if self.departed.contains(&r) => format!("{r} gone"),
                     _ => b.owner().to_owned(),
                 };
-                format!("{:<40} {:>10} {:>6} ms  {}", b.key, owner, age_ms, b.value)
+                format!(
+                    "{:<40} {:>10} {:>6} ms  {}",
+                    b.key,
+                    owner,
+                    age_ms,
+                    short_value(&b.value)
+                )
             })
             .collect();
         let fit = rows_fit(head.len() + tail.len()).max(1);
@@ -197,6 +208,118 @@ impl View {
         }
         lines.extend(tail);
         lines
+    }
+}
+
+/// A number with 6 significant digits, as `%g` writes it (`0.333333`, `1.23457e+06`).
+fn significant(x: f64) -> String {
+    if !x.is_finite() || x == 0.0 {
+        return comms::Value::Float(x).to_string();
+    }
+    let exp = x.abs().log10().floor() as i32;
+    if !(-4..6).contains(&exp) {
+        let text = format!("{x:.5e}");
+        let (mantissa, e) = text.split_once('e').unwrap_or((&text, "0"));
+        let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+        let e: i32 = e.parse().unwrap_or(0);
+        return format!("{mantissa}e{}{:02}", if e < 0 { '-' } else { '+' }, e.abs());
+    }
+    let decimals = (5 - exp).max(0) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
+    }
+}
+
+/// A value literal as the table shows it: floats (alone or in a list) to 6 significant
+/// digits; anything else as it is.
+fn short_value(literal: &str) -> String {
+    match comms::parse_literal(literal) {
+        Ok(comms::Value::Float(x)) => significant(x),
+        Ok(comms::Value::Floats(v)) => {
+            let items: Vec<String> = v.iter().map(|&x| significant(x)).collect();
+            format!("[{}]", items.join(", "))
+        }
+        _ => literal.to_owned(),
+    }
+}
+
+/// One redraw in place: cursor home, each line followed by clear-to-end-of-line, then
+/// clear below. Nothing is cleared before it is overwritten, so nothing flickers.
+fn frame(lines: &[String]) -> String {
+    let mut out = String::from("\x1b[H");
+    for line in lines {
+        out.push_str(line);
+        out.push_str("\x1b[K\r\n");
+    }
+    out.push_str("\x1b[J");
+    out
+}
+
+/// Whether a key typed at the table ends it: `q`, `Q`, Ctrl-C (read as a byte, the
+/// terminal's signals being off), Ctrl-D.
+fn quits(byte: u8) -> bool {
+    matches!(byte, b'q' | b'Q' | 0x03 | 0x04)
+}
+
+/// The terminal while the table is up: keys read one by one without echo (so `q` quits
+/// at once), the alternate screen, no cursor. Dropping it restores all three.
+struct Screen {
+    saved_stty: Option<String>,
+}
+
+impl Screen {
+    fn stty(args: &[&str]) -> Option<String> {
+        let tty = std::fs::File::open("/dev/tty").ok()?;
+        let out = std::process::Command::new("stty")
+            .args(args)
+            .stdin(tty)
+            .stderr(std::process::Stdio::null())
+            .output()
+            .ok()?;
+        out.status
+            .success()
+            .then(|| String::from_utf8_lossy(&out.stdout).trim().to_owned())
+    }
+
+    /// Takes the terminal over; `keys` then receives each byte typed.
+    fn open(out: &mut impl Write) -> Result<(Screen, std::sync::mpsc::Receiver<u8>)> {
+        let saved_stty = Screen::stty(&["-g"]);
+        if saved_stty.is_some() {
+            Screen::stty(&["-icanon", "-echo", "-isig", "min", "1"]);
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        if saved_stty.is_some() {
+            std::thread::spawn(move || {
+                use std::io::Read as _;
+                let Ok(mut tty) = std::fs::File::open("/dev/tty") else {
+                    return;
+                };
+                let mut byte = [0u8; 1];
+                while let Ok(1) = tty.read(&mut byte) {
+                    if tx.send(byte[0]).is_err() {
+                        return;
+                    }
+                }
+            });
+        }
+        // Alternate screen, cursor hidden.
+        write!(out, "\x1b[?1049h\x1b[?25l")?;
+        out.flush()?;
+        Ok((Screen { saved_stty }, rx))
+    }
+}
+
+impl Drop for Screen {
+    fn drop(&mut self) {
+        let mut out = std::io::stdout();
+        let _ = write!(out, "\x1b[?25h\x1b[?1049l");
+        let _ = out.flush();
+        if let Some(saved) = &self.saved_stty {
+            Screen::stty(&[saved.as_str()]);
+        }
     }
 }
 
@@ -268,7 +391,19 @@ pub fn watch(args: WatchArgs) -> Result<()> {
     let mut next_draw = Instant::now();
     let mut size = (terminal_size(), Instant::now());
     let mut out = std::io::stdout().lock();
+    let (screen, keys) = if tty {
+        let (screen, keys) = Screen::open(&mut out)?;
+        (Some(screen), Some(keys))
+    } else {
+        (None, None)
+    };
     loop {
+        if let Some(keys) = &keys {
+            if keys.try_iter().any(quits) {
+                drop(screen);
+                return Ok(());
+            }
+        }
         let wait = next_draw
             .saturating_duration_since(Instant::now())
             .min(Duration::from_millis(250));
@@ -326,11 +461,8 @@ pub fn watch(args: WatchArgs) -> Result<()> {
             );
             let page = started.elapsed().as_secs() / PAGE_TIME.as_secs();
             let lines = view.render(&title, |fixed| rows.saturating_sub(fixed + 1), page);
-            // Home, clear screen: redraw in place.
-            write!(out, "\x1b[H\x1b[2J")?;
-            for line in lines {
-                writeln!(out, "{}", fit_width(&line, cols))?;
-            }
+            let fitted: Vec<String> = lines.iter().map(|l| fit_width(l, cols)).collect();
+            write!(out, "{}", frame(&fitted))?;
             out.flush()?;
             next_draw = Instant::now() + redraw;
         }
@@ -357,6 +489,36 @@ mod tests {
             status: None,
             keep: 2,
         }
+    }
+
+    #[test]
+    fn numbers_show_six_significant_digits() {
+        assert_eq!(short_value("0.30000000000000004"), "0.3");
+        assert_eq!(short_value("3.141592653589793"), "3.14159");
+        assert_eq!(short_value("1234567.89"), "1.23457e+06");
+        assert_eq!(short_value("0.000012345678"), "1.23457e-05");
+        assert_eq!(short_value("-2.0"), "-2");
+        assert_eq!(short_value("[0.1, 2.718281828459045]"), "[0.1, 2.71828]");
+        assert_eq!(short_value("42"), "42", "ints as they are");
+        assert_eq!(short_value("\"text 0.123456789\""), "\"text 0.123456789\"");
+    }
+
+    #[test]
+    fn a_redraw_overwrites_in_place_and_q_quits() {
+        let f = frame(&["title".into(), "row".into()]);
+        assert!(f.starts_with("\x1b[H"), "cursor home first: {f:?}");
+        assert!(
+            !f.contains("\x1b[2J"),
+            "no whole-screen clear (it flickers): {f:?}"
+        );
+        assert_eq!(
+            f.matches("\x1b[K").count(),
+            2,
+            "each line cleared to its end"
+        );
+        assert!(f.ends_with("\x1b[J"), "what is below the table is cleared");
+        assert!(quits(b'q') && quits(b'Q') && quits(0x03));
+        assert!(!quits(b'x') && !quits(b'\n'));
     }
 
     #[test]

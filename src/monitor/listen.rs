@@ -80,6 +80,12 @@ pub struct Listener {
     start_ns: u64,
 }
 
+/// Where the listener's clock starts: a day in, not at zero. A value heard for the first
+/// time is stamped `arrival - the age its owner reported`; from a clock at zero that
+/// would saturate at the listener's start, and a value 4 minutes old would show as old
+/// as the monitor. Values up to a day old keep their true age.
+const ORIGIN_US: u64 = 24 * 3600 * 1_000_000;
+
 impl Listener {
     /// A listener for team `team` (with its key, if frames are tagged), whose clock
     /// starts at `start_ns` (nanoseconds on the clock the datagrams will be stamped with).
@@ -88,7 +94,7 @@ impl Listener {
         if let Some(key) = key {
             cfg = cfg.with_team_key(key);
         }
-        let replica = Replica::new(cfg, 1, Instant::from_micros(0))
+        let replica = Replica::new(cfg, 1, Instant::from_micros(ORIGIN_US))
             .context("setting up the listening replica")?;
         let mut l = Self { replica, start_ns };
         l.discard_transmits();
@@ -102,7 +108,7 @@ impl Listener {
 
     /// The listener's clock at `t_ns` (earlier times count as its start).
     pub fn instant(&self, t_ns: u64) -> Instant {
-        Instant::from_micros(t_ns.saturating_sub(self.start_ns) / 1000)
+        Instant::from_micros(ORIGIN_US + t_ns.saturating_sub(self.start_ns) / 1000)
     }
 
     /// Seconds since the start at `t_ns`.
@@ -138,7 +144,7 @@ impl Listener {
 
     fn drain_events(&mut self, now: Instant, out: &mut Vec<Heard>) {
         let t_s = now
-            .saturating_duration_since(Instant::from_micros(0))
+            .saturating_duration_since(Instant::from_micros(ORIGIN_US))
             .as_secs_f64();
         while let Some(event) = self.replica.poll_event() {
             match event {

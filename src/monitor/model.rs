@@ -358,14 +358,18 @@ impl Model {
             .flat_map(|p| replica.iter(p))
             .filter(|(k, _)| matches!(k.scope(), comms::Scope::Robot(_)))
             .map(|(k, e)| {
-                json!({
+                let mut b = json!({
                     "key": k.to_string(),
                     "owner": e.owner,
                     "type": e.value.value_type().name(),
-                    "value": e.value.to_string(),
+                    "value": crate::cli::relay::value_json(&e.value.to_string()),
                     "age_ms": e.age(now).as_secs_f64() * 1e3,
                     "departed": replica.is_departed(e.owner),
-                })
+                });
+                if let (true, Value::Bytes(bytes)) = (k.path() == "world.local", &e.value) {
+                    b["decoded"] = decode_world(bytes, now_s - e.age(now).as_secs_f64());
+                }
+                b
             })
             .collect();
         json!({
@@ -384,6 +388,28 @@ impl Model {
             "talk": self.talk.iter().collect::<Vec<_>>(),
         })
     }
+}
+
+/// A robot's world model (`n.var.world.local`, bytes on the wire) as the board shows
+/// it: pose, its standard deviations, the ball it sees and its confidences; `null` when
+/// it does not decode.
+fn decode_world(bytes: &[u8], t_s: f64) -> Json {
+    let Ok(l) = LocalWorldModel::from_bytes(bytes, t_s) else {
+        return Json::Null;
+    };
+    let m = &l.pose.mean;
+    let c = &l.pose.cov;
+    json!({
+        "pose": {"x": m.x, "y": m.y, "theta": m.z},
+        "pose_sd": {"x": c[(0, 0)].max(0.0).sqrt(), "y": c[(1, 1)].max(0.0).sqrt(),
+                    "theta": c[(2, 2)].max(0.0).sqrt()},
+        "ball": l.ball.as_ref().map(|b| {
+            let p = b.position();
+            json!({"x": p.x, "y": p.y})
+        }),
+        "slc": l.slc,
+        "lbc": l.lbc,
+    })
 }
 
 #[cfg(test)]
@@ -424,6 +450,51 @@ mod tests {
         m.advance(2_000_000_000);
         assert_eq!(m.state()["robots"][0]["departed"], true);
         assert_eq!(m.state()["goer"], serde_json::Value::Null);
+    }
+
+    #[test]
+    fn the_board_has_typed_values_and_ages_on_the_owners_clock() {
+        // Robot 2 set its values 4 minutes before the monitor started listening: the
+        // monitor hears them in a refresh frame and must show them 4 minutes old, not
+        // as old as the monitor.
+        let t0 = Instant::from_micros(0);
+        let mut r = Replica::new(ReplicaConfig::new(2, 0), 7, t0).unwrap();
+        r.set(t0, "*.var.machine.heuristic", Value::Floats(vec![1.5, 1.0]))
+            .unwrap();
+        r.set(t0, "*.var.machine.pass_to", Value::Int(3)).unwrap();
+        while r.poll_transmit().is_some() {}
+        let later = Instant::from_micros(240_000_000);
+        let mut frames = Vec::new();
+        while let Some(deadline) = r.poll_timeout() {
+            if deadline > later {
+                break;
+            }
+            r.handle_timeout(deadline);
+            frames = std::iter::from_fn(|| r.poll_transmit().map(|t| t.payload)).collect();
+        }
+        assert!(!frames.is_empty(), "robot 2 refreshes its values");
+        let mut m = Model::new(0, None, 254, 0, "test", None).unwrap();
+        let from: SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        for f in &frames {
+            m.datagram(1_000_000_000, from, f);
+        }
+        let s = m.state();
+        let board = s["board"].as_array().expect("a board");
+        let entry = |key: &str| {
+            board
+                .iter()
+                .find(|b| b["key"] == key)
+                .unwrap_or_else(|| panic!("{key} on the board: {board:?}"))
+        };
+        let h = entry("2.var.machine.heuristic");
+        assert_eq!(h["value"], json!([1.5, 1.0]), "numbers as numbers");
+        assert_eq!(h["owner"], json!(2));
+        assert_eq!(entry("2.var.machine.pass_to")["value"], json!(3));
+        let age_ms = h["age_ms"].as_f64().unwrap();
+        assert!(
+            age_ms > 200_000.0,
+            "set 240 s before it was heard, shown {age_ms} ms old"
+        );
     }
 
     #[test]

@@ -9,8 +9,9 @@ from __future__ import annotations
 import math
 import numbers
 import struct
-from dataclasses import dataclass
-from typing import List, Optional, Sequence, Union
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any, Dict, Iterator, List, Optional, Sequence, Union
 
 #: A value as Python holds it: ``int`` (64-bit), ``float``, ``bool``, ``str``, ``bytes``
 #: or a list of floats.
@@ -54,7 +55,17 @@ class RelayError(HuddleError):
 
 
 class RelayConnectionError(HuddleError, ConnectionError):
-    """The relay could not be reached, or closed the connection unexpectedly."""
+    """The relay could not be reached, or closed the connection unexpectedly (and, with
+    ``reconnect=True``, could not be reached again within the timeout)."""
+
+
+class RelayTimeout(HuddleError, TimeoutError):
+    """No answer (or no update, for a watch with a ``timeout``) within the time allowed.
+
+    Also a built-in ``TimeoutError``, so ``except TimeoutError`` keeps working. A request
+    that timed out closes its connection (a late answer would be taken for the next
+    one's); with ``reconnect=True`` the next request opens a new one.
+    """
 
 
 class TalkLost(HuddleError):
@@ -112,6 +123,21 @@ class Binding:
     age_ms: int
     owner: int
     departed: bool = False
+    #: ``time.monotonic()`` when this client read the line (for :attr:`age_now_ms`).
+    received: float = field(default_factory=time.monotonic, compare=False, repr=False)
+
+    @property
+    def age_now_ms(self) -> int:
+        """The age now: ``age_ms`` plus the time since this client read it. A binding
+        kept by a program keeps getting older; ``age_ms`` is the age when it was read."""
+        return self.age_ms + int((time.monotonic() - self.received) * 1000)
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> Any:
+        """``numpy.asarray(binding)`` is the value as an array (numpy is imported only
+        when numpy itself asks)."""
+        import numpy
+
+        return numpy.asarray(self.value, dtype=dtype)
 
     @property
     def is_talk(self) -> bool:
@@ -160,10 +186,10 @@ def _float_literal(x: float) -> str:
 
 def _exact_float(x: object, where: str) -> float:
     """A number as an f64, refusing anything that would change on the way."""
-    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+    if isinstance(x, bool) or _is_numpy_bool(x) or not isinstance(x, numbers.Real):
         raise TypeError(f"{where}: {type(x).__name__} is not a number")
     if isinstance(x, float):
-        return x
+        return float(x)  # numpy.float64 is a float whose repr is not a literal
     if isinstance(x, numbers.Integral):
         n = int(x)
         try:
@@ -180,15 +206,59 @@ def _exact_float(x: object, where: str) -> float:
     return f
 
 
+def _is_numpy_bool(x: object) -> bool:
+    # numpy.bool_ is neither a bool nor a number; known by its name, without numpy.
+    return type(x).__name__ in ("bool_", "bool") and type(x) is not bool and hasattr(x, "item")
+
+
+def plain_value(value: object) -> object:
+    """``value`` with array-likes made plain Python, by duck typing (numpy is never
+    imported): a 0-d array or numpy scalar (``.item()``) becomes its Python scalar,
+    a 1-D array (``.tolist()``) a list; ``numpy.float64`` (a ``float`` subclass) a
+    ``float``. A 2-D array raises ``ValueError``. Anything else is returned as it is."""
+    if type(value) in (bool, int, float, str, bytes, list, tuple):
+        return value
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        return value
+    if isinstance(value, bool):
+        return bool(value)
+    if _is_numpy_bool(value):
+        return bool(value.item())  # type: ignore[attr-defined]
+    ndim = getattr(value, "ndim", None)
+    if isinstance(ndim, int) and not isinstance(ndim, bool):
+        if ndim == 0 and hasattr(value, "item"):
+            return plain_value(value.item())  # type: ignore[attr-defined]
+        if ndim == 1 and hasattr(value, "tolist"):
+            return value.tolist()  # type: ignore[attr-defined]
+        if ndim > 1:
+            shape = getattr(value, "shape", "?")
+            raise ValueError(
+                f"a {ndim}-D array (shape {shape}): the relay takes 1-D float lists; "
+                "send .ravel() and the shape apart"
+            )
+    if isinstance(value, float):
+        return float(value)
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, str):
+        return str(value)
+    return value
+
+
 def encode_value(value: object) -> str:
     """The relay literal for a Python value.
 
     ``bool`` → ``bool``; ``int`` → ``int`` (must fit in 64 bits); ``float`` → ``float``;
     ``str`` → ``string``; ``bytes``/``bytearray``/``memoryview`` → ``bytes``; a list or
     tuple of numbers → ``floats`` (64-bit; an int must be exactly representable).
+    numpy values are taken by duck typing, without importing numpy: scalars
+    (``float64``, ``float32``, ``int64``, ``bool_``) as their Python value and 1-D arrays
+    as lists (see :func:`plain_value`); so are other array libraries' values with
+    ``.item()``/``.tolist()`` and ``ndim``.
     Anything else raises ``TypeError``; a value that would change on the way raises
     ``ValueError``: nothing is narrowed silently.
     """
+    value = plain_value(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -393,6 +463,7 @@ def _f32_exact(x: float) -> bool:
 
 def needs_wide_floats(value: object) -> bool:
     """Whether ``value`` is a float list that a 32-bit float list would change."""
+    value = plain_value(value)
     if not isinstance(value, (list, tuple)):
         return False
     return not all(
@@ -405,3 +476,203 @@ def narrow_error(value: object) -> ValueError:
         f"{value!r}: this relay keeps float lists as 32-bit floats, which would change "
         "these values; send them one by one as floats, or scale them"
     )
+
+
+@dataclass(frozen=True)
+class Joined:
+    """A watch event (``events=True``): robot ``robot``'s values started arriving: the
+    first one this watch saw, or the first after it departed or restarted."""
+
+    robot: int
+
+
+@dataclass(frozen=True)
+class Left:
+    """A watch event (``events=True``): robot ``robot`` departed (silent for longer
+    than the daemon's departure limit; its values come again flagged ``departed``) or
+    its values were released. ``released`` tells which."""
+
+    robot: int
+    released: bool = False
+
+
+@dataclass(frozen=True)
+class Reconnected:
+    """A watch event (``events=True``): the connection dropped (a daemon restart) and
+    the watch connected and subscribed again; the current values follow. ``robot`` is
+    the relay's robot id now."""
+
+    robot: int
+
+
+#: What a watch yields with ``events=True``, besides bindings.
+Event = Union[Joined, Left, Reconnected]
+
+#: How long a robot's values may stay unchanged on a push watch before the watch asks
+#: the relay whether the robot is still there (milliseconds). The daemon flags a robot
+#: departed after 300 ms of silence by default.
+DEFAULT_PROBE_MS = 250
+
+#: Reconnect backoff: first wait and longest wait between attempts, in seconds.
+BACKOFF_FIRST_S = 0.05
+BACKOFF_MAX_S = 1.0
+
+
+def backoff_delays(first: float = BACKOFF_FIRST_S, most: float = BACKOFF_MAX_S) -> "Iterator[float]":
+    """Waits between reconnect attempts: doubling from ``first`` up to ``most``."""
+    wait = first
+    while True:
+        yield wait
+        wait = min(wait * 2, most)
+
+
+def robot_of(key: str) -> Optional[int]:
+    """The robot a stored key belongs to (``3.var.x`` -> 3), ``None`` for ``local``."""
+    head = key.split(".", 1)[0]
+    return int(head) if head.isdigit() else None
+
+
+class WatchBook:
+    """What a watch knows about the values it delivered, without I/O: the newest
+    binding of each key, which robots are present, and which quiet robots to ask about.
+
+    A push watch (``interval_ms=0``) hears nothing when a robot dies: the relay pushes
+    changes only. So when a robot's values have not changed for ``probe_ms``, the watch
+    asks the relay (``GETV`` of that robot's newest key, on the watch's connection) and
+    learns its true age and whether it departed; a departure re-delivers the robot's
+    values flagged ``departed`` with their ages now, and a :class:`Left` event.
+    """
+
+    def __init__(self, probe_ms: Optional[int]) -> None:
+        self.probe_ms = probe_ms
+        self.latest: Dict[str, Binding] = {}
+        self.departed: Dict[int, bool] = {}
+        self.heard: Dict[int, float] = {}
+        #: Keys asked about (``GETV``), in the order the answers come.
+        self.probing: List[str] = []
+
+    def take(self, b: Binding) -> List[Any]:
+        """A pushed binding: the events it brings, then the binding."""
+        if b.is_talk:
+            return [b]
+        out: List[Any] = []
+        owner = robot_of(b.key)
+        if owner is not None:
+            was = self.departed.get(owner)
+            if b.departed:
+                if was is False:
+                    out.append(Left(owner))
+                self.departed[owner] = True
+            else:
+                if was is None or was:
+                    out.append(Joined(owner))
+                self.departed[owner] = False
+                self.heard[owner] = b.received
+        self.latest[b.key] = b
+        out.append(b)
+        return out
+
+    def due(self, now: float) -> List[str]:
+        """Keys to ask about now (one per quiet robot); none while answers are due."""
+        if self.probe_ms is None or self.probing:
+            return []
+        keys = []
+        for owner, departed in self.departed.items():
+            if departed or (now - self.heard[owner]) * 1000 < self.probe_ms:
+                continue
+            mine = [b for k, b in self.latest.items() if robot_of(k) == owner]
+            if mine:
+                keys.append(max(mine, key=lambda b: b.received).key)
+                self.heard[owner] = now
+        self.probing = keys
+        return keys
+
+    def next_due(self) -> Optional[float]:
+        """When :meth:`due` next has something (``time.monotonic()`` seconds)."""
+        if self.probe_ms is None or self.probing:
+            return None
+        times = [t for o, t in self.heard.items() if not self.departed.get(o, True)]
+        return min(times) + self.probe_ms / 1000 if times else None
+
+    def answered(self, b: Optional[Binding], now: float) -> List[Any]:
+        """The relay's answer to the oldest question (``None``: no value any more):
+        what to deliver."""
+        if not self.probing:
+            return []
+        key = self.probing.pop(0)
+        owner = robot_of(key)
+        if owner is None:
+            return []
+        was_present = self.departed.get(owner) is False
+        if b is None:
+            for k in [k for k in self.latest if robot_of(k) == owner]:
+                del self.latest[k]
+            self.departed[owner] = True
+            return [Left(owner, released=True)] if was_present else []
+        if not b.departed:
+            self.heard[owner] = now
+            self.latest[b.key] = b
+            return []
+        self.departed[owner] = True
+        out: List[Any] = [Left(owner)] if was_present else []
+        for k, old in sorted(self.latest.items()):
+            if robot_of(k) != owner:
+                continue
+            fresh = b if k == b.key else replace(old, departed=True, age_ms=old.age_now_ms, received=now)
+            self.latest[k] = fresh
+            out.append(fresh)
+        return out
+
+    def snapshot(self) -> Dict[str, Binding]:
+        """The newest binding of each key, its age brought up to now."""
+        now = time.monotonic()
+        return {k: replace(b, age_ms=b.age_now_ms, received=now) for k, b in sorted(self.latest.items())}
+
+
+#: Internal keys that ``keys()`` leaves out unless asked (the daemon's counters, this
+#: client's probe).
+INTERNAL_PREFIXES = ("local.var.huddle.", "local.var.huddle_client.")
+
+
+def is_internal(key: str) -> bool:
+    return key.startswith(INTERNAL_PREFIXES)
+
+
+#: Where the daemon keeps its counters.
+STATS_PREFIX = "local.var.huddle.stats."
+
+#: The lines a snapshot sends: watch, refresh (which pushes the current values once),
+#: list the watches (its ``END`` marks the snapshot's end), forget the watches.
+SNAPSHOT_PERIOD_MS = MAX_INTERVAL_MS
+
+
+def snapshot_lines(patterns: List[str]) -> List[str]:
+    return [f"ADDW {p}" for p in patterns] + [f"REFR {SNAPSHOT_PERIOD_MS}", "LSTW", "CLRW"]
+
+
+class SnapshotReader:
+    """Reads the answers to :func:`snapshot_lines`, line by line."""
+
+    def __init__(self, robot: int) -> None:
+        self.robot = robot
+        self.bindings: Dict[str, Binding] = {}
+        self.error: Optional[RelayError] = None
+        self.ended = False
+        self.done = False
+
+    def feed(self, line: str) -> None:
+        if self.ended:
+            # The answer to CLRW.
+            self.done = True
+            return
+        if line == "END":
+            self.ended = True
+            return
+        if line.startswith("UPD "):
+            b = parse_binding(line, self.robot)
+            if b is not None and not b.is_talk:
+                self.bindings[b.key] = b
+            return
+        err = parse_error(line)
+        if err is not None and self.error is None:
+            self.error = err

@@ -70,8 +70,9 @@ class Daemon:
                 self.proc.wait()
 
 
-def start_daemon(robot: int, group: str, config_dir: Path) -> Daemon:
-    port = free_tcp_port()
+def start_daemon(robot: int, group: str, config_dir: Path, port: Optional[int] = None) -> Daemon:
+    """A daemon for ``robot``; on ``port`` (a restart) or on a free one."""
+    port = free_tcp_port() if port is None else port
     proc = subprocess.Popen(
         [
             huddle_bin(),
@@ -146,6 +147,9 @@ class _AsyncWatchAdapter:
     def close(self) -> None:
         self._owner._run(self._watch.close())
 
+    def latest(self) -> Any:
+        return self._watch.latest()
+
     def __enter__(self) -> "_AsyncWatchAdapter":
         return self
 
@@ -179,6 +183,13 @@ class AsyncAdapter:
 
     def post(self, queue: str, value: object) -> None:
         self._run(self._relay.post(queue, value))
+
+    def __getattr__(self, name: str) -> Any:
+        # Every other coroutine method (keys, stats, the team layer's), run to the end.
+        attr = getattr(self._relay, name)
+        if asyncio.iscoroutinefunction(attr):
+            return lambda *args, **kwargs: self._run(attr(*args, **kwargs))
+        return attr
 
     def watch(self, *args: Any, **kwargs: Any) -> _AsyncWatchAdapter:
         w = self._relay.watch(*args, **kwargs)

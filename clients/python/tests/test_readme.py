@@ -8,6 +8,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from conftest import PACKAGE_DIR
 
 
@@ -36,8 +38,28 @@ def test_the_readme_example_drives_two_daemons(team):
     assert lines[3].startswith("refused: 420 "), lines
 
 
+def block_with(marker: str) -> str:
+    found = [b for b in readme_blocks() if marker in b]
+    assert len(found) == 1, f"one README example with {marker!r}"
+    return found[0]
+
+
 def test_the_readme_asyncio_example_runs(team):
-    example = readme_blocks()[1]
+    example = block_with("asyncio.run")
     out = run(example.replace("2001", str(team.a.port)))
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("Binding(key='1.var.ball.dist'"), out.stdout
+
+
+def test_the_readme_numpy_example_runs(team):
+    pytest.importorskip("numpy")
+    out = run(block_with("np.array([0.33").replace("2001", str(team.a.port)))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[ 0.66 -4.5 ]", out.stdout
+
+
+def test_the_readme_team_layer_example_runs(team):
+    pytest.importorskip("numpy")
+    out = run(block_with("set_pose").replace("2001", str(team.a.port)))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().endswith("pose written: [1.0, -0.5, 0.3]"), out.stdout
