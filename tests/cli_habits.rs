@@ -130,6 +130,18 @@ fn bench_with_zero_rounds_is_a_clear_error() {
 }
 
 #[test]
+fn a_robot_id_out_of_range_names_the_range_the_help_gives() {
+    for id in ["0", "255", "300"] {
+        let out = run(&["daemon", "--id", id]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--id {id}: {stderr}");
+        assert!(stderr.contains("1..=254"), "--id {id} should say 1..=254: {stderr}");
+    }
+    let help = text(&run(&["daemon", "--help"]).stdout);
+    assert!(help.contains("1..=254"), "the help gives the same range");
+}
+
+#[test]
 fn one_duration_syntax_and_bare_numbers_show_the_fix() {
     for (args, fix) in [
         (vec!["watch", "x.var.y", "--interval", "500"], "500ms"),

@@ -20,7 +20,7 @@ use huddle::impair::LinkImpairment;
 #[derive(Args, Debug, Clone)]
 pub struct DaemonArgs {
     /// This robot's id, 1..=254 (default: the ROBOT_ID environment variable).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=254))]
     pub id: Option<u8>,
     /// Team id: frames of other teams are dropped.
     #[arg(long, default_value_t = 0)]
