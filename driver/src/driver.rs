@@ -406,9 +406,10 @@ impl Inner {
                     last,
                 } => {
                     tracing::warn!(from, %queue, first, last, "talk messages given up");
+                    let now = *now.get_or_insert_with(|| clock.now());
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
-                        slot.session.handle_talk_lost(from, &queue, first, last);
+                        slot.session.handle_talk_lost(now, from, &queue, first, last);
                         self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
                     let notice = || Notice::TalkLost {
