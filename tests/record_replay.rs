@@ -211,7 +211,7 @@ fn a_simulated_match_is_recorded_in_the_same_format_and_replays() {
 /// writes one (section and interface headers, one enhanced packet block each).
 fn pcapng_of(packets: &[(u64, Vec<u8>)]) -> Vec<u8> {
     let mut b = Vec::new();
-    let mut block = |b: &mut Vec<u8>, kind: u32, body: &[u8]| {
+    let block = |b: &mut Vec<u8>, kind: u32, body: &[u8]| {
         let len = (12 + body.len()) as u32;
         b.extend_from_slice(&kind.to_le_bytes());
         b.extend_from_slice(&len.to_le_bytes());
