@@ -228,6 +228,8 @@ pub(crate) struct Inner {
     key_mismatch: RateLimit,
     /// Warnings about sends the OS refused, rate-limited.
     send_failures: RateLimit,
+    /// Warnings about given-up talk messages.
+    give_up_warnings: RateLimit,
 }
 
 impl Inner {
@@ -412,8 +414,12 @@ impl Inner {
                     first,
                     last,
                 } => {
-                    tracing::warn!(from, %queue, first, last, "talk messages given up");
                     let now = *now.get_or_insert_with(|| clock.now());
+                    // Unkeyed talk heads can cause give-ups as fast as they are sent: one
+                    // warning per period, with the count it stands for.
+                    if let Some(times) = self.give_up_warnings.record(now) {
+                        tracing::warn!(from, %queue, first, last, times, "talk messages given up");
+                    }
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
                         let suppressed = slot.session.lost_suppressed();
@@ -757,6 +763,7 @@ impl Driver {
             handed_up: 0,
             key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
             send_failures: RateLimit::new(SEND_WARNING_PERIOD),
+            give_up_warnings: RateLimit::new(SEND_WARNING_PERIOD),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
