@@ -124,7 +124,9 @@ fn forged_frame_counters_do_not_silence_a_pooled_team() {
         sent as f64 <= 2.0 * secs + 12.0,
         "beyond its share: {sent} frames in {secs:.1} s"
     );
-    c2.wait_for("1.var.x", Duration::from_secs(5), |a| a.contains(" int 100 "));
+    c2.wait_for("1.var.x", Duration::from_secs(5), |a| {
+        a.contains(" int 100 ")
+    });
 }
 
 /// 100 spoofed senders x 64 queues, a gap in each once a second, at an SPL robot: its
@@ -139,7 +141,9 @@ fn spoofed_gaps_under_a_budget_neither_grow_memory_nor_crowd_out_the_robots_news
     let two = start(2, group, dir.path(), &budget);
     let (mut c1, mut c2) = (one.client(), two.client());
     assert_eq!(c1.ask("SETV *.var.x 0"), "OK");
-    c2.wait_for("1.var.x", Duration::from_secs(10), |a| a.contains(" int 0 "));
+    c2.wait_for("1.var.x", Duration::from_secs(10), |a| {
+        a.contains(" int 0 ")
+    });
     let rss_before = rss_mib(&one);
     let mut attacker = Attacker::new(group);
     let queues: Vec<String> = (0..64).map(|q| format!("q{q}")).collect();
@@ -170,7 +174,9 @@ fn spoofed_gaps_under_a_budget_neither_grow_memory_nor_crowd_out_the_robots_news
     );
     assert!(rss_after <= 64, "robot 1 grew to {rss_after} MiB");
     // An SPL share is a frame every 5 s: the latest value is there within two.
-    c2.wait_for("1.var.x", Duration::from_secs(12), |a| a.contains(" int 15 "));
+    c2.wait_for("1.var.x", Duration::from_secs(12), |a| {
+        a.contains(" int 15 ")
+    });
 }
 
 /// Talk heads that make robot 2 give up messages, 1,000 a second for 3 s: a relay client

@@ -31,7 +31,13 @@ impl Drop for Killed {
 fn monitor(group: SocketAddrV4, http: SocketAddr, extra: &[&str]) -> Killed {
     Killed(
         Command::new(env!("CARGO_BIN_EXE_huddle"))
-            .args(["monitor", "--group", &group.to_string(), "--iface", "127.0.0.1"])
+            .args([
+                "monitor",
+                "--group",
+                &group.to_string(),
+                "--iface",
+                "127.0.0.1",
+            ])
             .args(["--http", &http.to_string(), "--team", "7"])
             .args(extra)
             .env("RUST_LOG", "warn")
@@ -180,7 +186,8 @@ fn the_monitor_keeps_answering_under_a_full_board_event_streams_and_silent_conne
 
     // The silent connections are closed (evicted at the cap, or at the header timeout).
     let mut last = silent.into_iter().last().expect("a silent connection");
-    last.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    last.set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
     let mut buf = [0u8; 16];
     let closed = match last.read(&mut buf) {
         Ok(0) => true,

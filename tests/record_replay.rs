@@ -328,7 +328,11 @@ fn a_replay_of_a_device_or_a_fifo_is_refused_at_once() {
         let (out, _) = replay_within(&input, Duration::from_secs(20));
         assert!(!out.status.success(), "{}", input.display());
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains("not a regular file"), "{}: {err}", input.display());
+        assert!(
+            err.contains("not a regular file"),
+            "{}: {err}",
+            input.display()
+        );
         assert!(!err.contains("panicked"), "{err}");
     }
 }

@@ -177,7 +177,8 @@ impl Outbox {
 
     /// Whether `seq` is retained and has never been on the wire (a post, not a re-send).
     pub(crate) fn unsent(&self, seq: u64) -> bool {
-        self.index(seq).is_some_and(|i| self.retained[i].3.is_none())
+        self.index(seq)
+            .is_some_and(|i| self.retained[i].3.is_none())
     }
 
     /// Records that `seq` went on the wire at `now`.

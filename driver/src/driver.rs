@@ -423,7 +423,8 @@ impl Inner {
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
                         let suppressed = slot.session.lost_suppressed();
-                        slot.session.handle_talk_lost(now, from, &queue, first, last);
+                        slot.session
+                            .handle_talk_lost(now, from, &queue, first, last);
                         self.io.relay_lost_suppressed +=
                             slot.session.lost_suppressed() - suppressed;
                         self.handed_up += u64::from(wake_if_changed(slot, before));

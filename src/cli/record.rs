@@ -226,8 +226,7 @@ pub const MAX_RECORDING_BYTES: u64 = 1 << 30;
 /// end); a file that grows while read is read only up to the limit.
 pub fn read_recording(path: &std::path::Path) -> Result<Vec<u8>> {
     use std::io::Read as _;
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
+    let meta = std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
     if !meta.file_type().is_file() {
         bail!(
             "{}: not a regular file (a pipe or a device may never end); save the recording \

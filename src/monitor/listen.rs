@@ -126,7 +126,11 @@ impl Listener {
                 break;
             }
             steps += 1;
-            let at = if steps > MAX_TIMER_STEPS { now } else { deadline };
+            let at = if steps > MAX_TIMER_STEPS {
+                now
+            } else {
+                deadline
+            };
             self.replica.handle_timeout(at);
             self.discard_transmits();
             self.drain_events(at, out);

@@ -20,7 +20,9 @@ use std::convert::Infallible;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use tokio::time::Instant;
 
 use anyhow::{Context, Result};
 use axum::http::{header, StatusCode};
@@ -191,10 +193,7 @@ async fn serve(listener: tokio::net::TcpListener, app: Router) {
                     _ = conn => {}
                     _ = close.notified() => {}
                 }
-                conns
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .remove(&id);
+                conns.lock().unwrap_or_else(|p| p.into_inner()).remove(&id);
             });
         }
     }

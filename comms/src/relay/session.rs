@@ -404,14 +404,7 @@ impl Session {
     ///
     /// At most [`LOST_LINES_PER_S`] a second (with a burst of as many); the rest are
     /// counted in [`Session::lost_suppressed`].
-    pub fn handle_talk_lost(
-        &mut self,
-        now: Instant,
-        from: u8,
-        queue: &str,
-        first: u64,
-        last: u64,
-    ) {
+    pub fn handle_talk_lost(&mut self, now: Instant, from: u8, queue: &str, first: u64, last: u64) {
         if !self.watches_talk(from, queue) {
             return;
         }
@@ -866,7 +859,10 @@ mod tests {
         for ms in 0..10_000u64 {
             s.handle_talk_lost(t(ms), 9, "q", ms + 1, ms + 1);
         }
-        let lines = take(&mut s).lines().filter(|l| l.starts_with("LOST ")).count();
+        let lines = take(&mut s)
+            .lines()
+            .filter(|l| l.starts_with("LOST "))
+            .count();
         let most = (LOST_LINES_PER_S * 11.0) as usize;
         assert!(lines <= most, "{lines} LOST lines in 10 s (at most {most})");
         assert!(lines >= 100, "the limit still lets {lines} through");

@@ -59,7 +59,9 @@ fn run(
             }
         }
         if ms % 100 == 0 {
-            victim.set(now, "*.var.ball", Value::Int(ms as i64)).unwrap();
+            victim
+                .set(now, "*.var.ball", Value::Int(ms as i64))
+                .unwrap();
         }
         victim.handle_timeout(now);
         while let Some(tx) = victim.poll_transmit() {
@@ -94,9 +96,11 @@ fn under_a_budget_gaps_from_100_spoofed_senders_neither_pile_up_nor_crowd_out_th
     let with_news = frames
         .iter()
         .filter(|f| {
-            decode_frame(f, 7, None).unwrap().items.iter().any(
-                |i| matches!(i, Item::Update { path, .. } if path == "ball"),
-            )
+            decode_frame(f, 7, None)
+                .unwrap()
+                .items
+                .iter()
+                .any(|i| matches!(i, Item::Update { path, .. } if path == "ball"))
         })
         .count();
     // An SPL share is a frame every 5 s.

@@ -98,9 +98,7 @@ impl Replica {
                     queue,
                     first,
                     last,
-                } if target == self.cfg.robot_id => {
-                    self.repair(now, sender, &queue, first, last)
-                }
+                } if target == self.cfg.robot_id => self.repair(now, sender, &queue, first, last),
                 Item::Nack { .. } => {}
             }
         }

@@ -218,12 +218,7 @@ impl Replica {
             // robot that asks. Once either allowance is spent the rest of the request is
             // refused at once: a flood of NACKs costs no more work.
             let cost = outbox.get(seq).map_or(0, |value| {
-                wire::HEADER_LEN
-                    + wire::item_len(ItemRef::Talk {
-                        queue,
-                        seq,
-                        value,
-                    })
+                wire::HEADER_LEN + wire::item_len(ItemRef::Talk { queue, seq, value })
             }) as f64;
             if credit < cost || !outbox.spend_repair(now, seq) {
                 self.stats.talk_repair_limited += (wanted.len() - i) as u64;

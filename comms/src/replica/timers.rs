@@ -4,11 +4,11 @@
 use std::collections::BTreeSet;
 
 use crate::key::{Key, Kind, Scope};
-use crate::talk::NACKS_WAITING_MAX;
-use crate::wire::{self, ItemRef, HEADER_LEN};
 use crate::stats::DropReason;
+use crate::talk::NACKS_WAITING_MAX;
 use crate::time::Instant;
 use crate::value::Value;
+use crate::wire::{self, ItemRef, HEADER_LEN};
 
 use super::{Event, Replica};
 
@@ -111,7 +111,8 @@ impl Replica {
             return;
         }
         self.stats.nacks_sent += paid.len() as u64;
-        let fresh: BTreeSet<(u8, &str)> = paid.iter().map(|(r, q, _, _)| (*r, q.as_str())).collect();
+        let fresh: BTreeSet<(u8, &str)> =
+            paid.iter().map(|(r, q, _, _)| (*r, q.as_str())).collect();
         let before = self.nacks_out.len();
         self.nacks_out
             .retain(|(r, q, _, _)| !fresh.contains(&(*r, q.as_str())));

@@ -177,7 +177,11 @@ impl Replica {
                 (now, age_cap),
             );
         }
-        let nack_room = if budgeted { self.cfg.mtu / 4 } else { usize::MAX };
+        let nack_room = if budgeted {
+            self.cfg.mtu / 4
+        } else {
+            usize::MAX
+        };
         let nacks_from = w.len();
         while let Some((target, queue, first, last)) = self.nacks_out.front() {
             let item = ItemRef::Nack {
@@ -278,7 +282,6 @@ impl Replica {
             payload,
         })
     }
-
 }
 
 /// Priority items, then changed values, into `w` (see `poll_transmit`); those pushed go
