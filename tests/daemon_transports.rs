@@ -236,6 +236,49 @@ fn wait_until_recorded(file: &Path) {
     }
 }
 
+/// A datagram from an address that is not a listed peer is refused, and the refusal
+/// shows in `huddle stats` (it was counted in the driver only). The check is on the source
+/// address, which anyone can forge: it is not authentication (a team key is).
+#[test]
+fn a_unicast_daemon_refuses_a_stranger_and_says_so_in_huddle_stats() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_udp_port();
+    let net = [
+        "--transport".to_string(),
+        "unicast".into(),
+        "--port".into(),
+        port.to_string(),
+        "--iface".into(),
+        "127.0.0.1".into(),
+        "--peer".into(),
+        format!("127.0.0.2:{port}"),
+    ];
+    let net: Vec<&str> = net.iter().map(String::as_str).collect();
+    let d = Daemon::start_on(1, &net, free_tcp_port(), &["--team", "7"], dir.path());
+    let stranger = std::net::UdpSocket::bind("127.0.0.3:0").expect("bind 127.0.0.3");
+    stranger
+        .send_to(b"not from a peer", format!("127.0.0.1:{port}"))
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let out = huddle()
+            .args(["stats", "--json", "--relay", &d.relay.to_string()])
+            .output()
+            .expect("run huddle stats");
+        let stats: serde_json::Value =
+            serde_json::from_slice(&out.stdout).unwrap_or(serde_json::Value::Null);
+        if stats["unicast_refused"].as_i64().is_some_and(|n| n >= 1) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "unicast_refused never showed: {}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 #[test]
 fn three_unicast_daemons_on_loopback_replicate_to_their_peers() {
     let dir = tempfile::tempdir().unwrap();

@@ -206,3 +206,133 @@ fn a_simulated_match_is_recorded_in_the_same_format_and_replays() {
     let text = String::from_utf8(text.stdout).unwrap();
     assert!(text.contains("robot 2 departed"), "{text}");
 }
+
+/// A pcapng file of `packets` (reception time in ns, frame), written as `huddle record`
+/// writes one (section and interface headers, one enhanced packet block each).
+fn pcapng_of(packets: &[(u64, Vec<u8>)]) -> Vec<u8> {
+    let mut b = Vec::new();
+    let block = |b: &mut Vec<u8>, kind: u32, body: &[u8]| {
+        let len = (12 + body.len()) as u32;
+        b.extend_from_slice(&kind.to_le_bytes());
+        b.extend_from_slice(&len.to_le_bytes());
+        b.extend_from_slice(body);
+        b.extend_from_slice(&len.to_le_bytes());
+    };
+    let mut shb = Vec::new();
+    shb.extend_from_slice(&0x1A2B_3C4Du32.to_le_bytes());
+    shb.extend_from_slice(&1u16.to_le_bytes());
+    shb.extend_from_slice(&0u16.to_le_bytes());
+    shb.extend_from_slice(&(-1i64).to_le_bytes());
+    block(&mut b, 0x0A0D_0D0A, &shb);
+    // IPv4 link, snap length 65535, if_tsresol 9 (nanoseconds).
+    let mut idb = Vec::new();
+    idb.extend_from_slice(&228u16.to_le_bytes());
+    idb.extend_from_slice(&0u16.to_le_bytes());
+    idb.extend_from_slice(&65_535u32.to_le_bytes());
+    idb.extend_from_slice(&[9, 0, 1, 0, 9, 0, 0, 0, 0, 0, 0, 0]);
+    block(&mut b, 1, &idb);
+    let from = "127.0.0.1:40000".parse().unwrap();
+    let to = "239.255.0.1:2000".parse().unwrap();
+    for (t_ns, payload) in packets {
+        let mut data = Vec::new();
+        netsim::pcap::push_ipv4_udp(&mut data, from, to, 1, 0, payload);
+        let mut epb = Vec::new();
+        epb.extend_from_slice(&0u32.to_le_bytes());
+        epb.extend_from_slice(&((t_ns >> 32) as u32).to_le_bytes());
+        epb.extend_from_slice(&(*t_ns as u32).to_le_bytes());
+        epb.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        epb.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        epb.extend_from_slice(&data);
+        epb.resize(20 + data.len().div_ceil(4) * 4, 0);
+        block(&mut b, 6, &epb);
+    }
+    b
+}
+
+/// A frame of robot `sender` (team 1, no key) numbered `seq`, setting `x`.
+fn frame(sender: u8, seq: u64) -> Vec<u8> {
+    let mut w = comms::wire::FrameWriter::new(1, sender, 5, seq, 1200, None);
+    w.push(comms::wire::ItemRef::Update {
+        path: "x",
+        value: &comms::Value::Int(seq as i64),
+        version: seq,
+        age_us: 0,
+    });
+    w.finish()
+}
+
+/// Runs `huddle replay` on `file`, killed after `limit`; returns its output and how long
+/// it took.
+fn replay_within(file: &std::path::Path, limit: Duration) -> (std::process::Output, Duration) {
+    let started = Instant::now();
+    let mut child = huddle()
+        .arg("replay")
+        .arg(file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run huddle replay");
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > limit {
+            child.kill().unwrap();
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "replay still running after {limit:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let took = started.elapsed();
+    (child.wait_with_output().unwrap(), took)
+}
+
+/// Two frames 2^63 ns apart (a 200-byte file) took about a week of CPU: the listener
+/// stepped through every 100 ms of the gap. Now any gap costs O(frames). The figure is
+/// printed; the test bounds only a generous 20 s (a debug build on a shared machine).
+#[test]
+fn a_recording_with_a_gap_of_centuries_replays_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, gap_ns) in [
+        ("forever.pcapng", 1u64 << 63),
+        ("month.pcapng", 30 * 24 * 3600 * 1_000_000_000),
+    ] {
+        let file = dir.path().join(name);
+        std::fs::write(&file, pcapng_of(&[(1, frame(1, 1)), (gap_ns, frame(1, 2))])).unwrap();
+        let (out, took) = replay_within(&file, Duration::from_secs(20));
+        println!("{name}: replayed in {took:?}");
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("1.var.x = 2"), "{name}: {text}");
+    }
+}
+
+/// `/dev/zero` was read into memory until it failed, a FIFO waited forever: both are
+/// refused at once with a clear error.
+#[test]
+fn a_replay_of_a_device_or_a_fifo_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo.pcapng");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    let mut inputs = vec![std::path::PathBuf::from("/dev/zero")];
+    if made.is_ok_and(|s| s.success()) {
+        inputs.push(fifo);
+    } else {
+        eprintln!("mkfifo not available: the FIFO case is skipped");
+    }
+    for input in inputs {
+        let (out, _) = replay_within(&input, Duration::from_secs(20));
+        assert!(!out.status.success(), "{}", input.display());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("not a regular file"),
+            "{}: {err}",
+            input.display()
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}

@@ -133,6 +133,12 @@ pub struct Stats {
     pub talk_resent: u64,
     /// NACK items sent.
     pub nacks_sent: u64,
+    /// NACK items not sent because the bytes heard from their sender did not pay for them
+    /// (`talk::AMPLIFICATION`).
+    pub nacks_limited: u64,
+    /// NACK items dropped while waiting for a frame: replaced by a newer NACK of the same
+    /// queue, or beyond `talk::NACKS_WAITING_MAX`.
+    pub nacks_superseded: u64,
     /// Talk items ignored because the sender has too many queues.
     pub talk_queue_overflow: u64,
     /// Talk items refused as implausible (a head spanning or jumping too far, a message

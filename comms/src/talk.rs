@@ -25,7 +25,10 @@
 //! queue, `window` messages and `window_bytes` bytes buffered per (sender, queue),
 //! `max_queues` queues per sender. Repairs cost the sender at most [`REPAIR_SHARE`] times
 //! the bytes it posted (a re-send serves every receiver that lost the message) plus
-//! [`REPAIR_TRICKLE_BYTES_PER_S`], however many NACKs arrive.
+//! [`REPAIR_TRICKLE_BYTES_PER_S`], however many NACKs arrive; and in bytes on the air
+//! NACKs about a sender, and re-sends a sender's NACKs cause, cost at most
+//! [`AMPLIFICATION`] times the bytes of that sender's frames heard (banked up to
+//! [`CREDIT_MAX_BYTES`]). At most [`NACKS_WAITING_MAX`] NACK items wait for a frame.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -48,6 +51,21 @@ pub const REPAIR_SHARE: f64 = 2.0;
 /// [`REPAIR_SHARE`] of the bytes posted): enough to answer a newcomer's NACK of a quiet
 /// queue.
 pub const REPAIR_TRICKLE_BYTES_PER_S: f64 = 2048.0;
+
+/// Bytes of NACKs a robot may send about a sender, and bytes of re-sends a sender's NACKs
+/// may cause, per byte of that sender's frames heard: NACKs from gaps and re-sends from
+/// NACKs each cost at most twice the bytes that caused them on the air (each NACK item
+/// and each re-send is charged as if it went in a frame of its own, header included).
+pub const AMPLIFICATION: f64 = 2.0;
+
+/// The most NACK or repair credit one sender's frames can bank, bytes: what a burst
+/// after a quiet spell may use.
+pub const CREDIT_MAX_BYTES: f64 = 16_384.0;
+
+/// NACK items waiting for a frame, at most (a new NACK of one queue replaces the one
+/// waiting; beyond this the oldest waiting are dropped: the inbox asks again on its next
+/// timer). With a budget frames are rare, and NACKs must not pile up between them.
+pub const NACKS_WAITING_MAX: usize = 256;
 
 /// Limits and timers of the talk queues.
 #[derive(Clone, Debug, PartialEq)]
@@ -155,6 +173,12 @@ impl Outbox {
     /// A retained message.
     pub(crate) fn get(&self, seq: u64) -> Option<&Value> {
         self.index(seq).map(|i| &self.retained[i].1)
+    }
+
+    /// Whether `seq` is retained and has never been on the wire (a post, not a re-send).
+    pub(crate) fn unsent(&self, seq: u64) -> bool {
+        self.index(seq)
+            .is_some_and(|i| self.retained[i].3.is_none())
     }
 
     /// Records that `seq` went on the wire at `now`.

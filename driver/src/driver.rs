@@ -166,8 +166,15 @@ pub struct IoStats {
     pub datagrams_sent: u64,
     /// Datagrams received (on the team's socket and, with peers, the unicast socket).
     pub datagrams_received: u64,
-    /// Unicast datagrams refused because they did not come from a configured peer.
+    /// Unicast datagrams refused because they did not come from a configured peer. The
+    /// check is on the source address, which anyone on the network can forge: it keeps
+    /// strays out, it is not authentication (a team key is). Mirrored to
+    /// `local.var.huddle.stats.unicast_refused` (`huddle stats`).
     pub unicast_refused: u64,
+    /// `LOST` lines not sent to relay clients over their rate limit
+    /// ([`comms::relay::LOST_LINES_PER_S`]); mirrored to
+    /// `local.var.huddle.stats.relay_lost_suppressed`.
+    pub relay_lost_suppressed: u64,
     /// Sends that failed with an error other than a full buffer (a peer or network
     /// unreachable, a broadcast refused): logged, at most one warning per 10 s.
     pub send_errors: u64,
@@ -221,6 +228,8 @@ pub(crate) struct Inner {
     key_mismatch: RateLimit,
     /// Warnings about sends the OS refused, rate-limited.
     send_failures: RateLimit,
+    /// Warnings about given-up talk messages.
+    give_up_warnings: RateLimit,
 }
 
 impl Inner {
@@ -405,10 +414,19 @@ impl Inner {
                     first,
                     last,
                 } => {
-                    tracing::warn!(from, %queue, first, last, "talk messages given up");
+                    let now = *now.get_or_insert_with(|| clock.now());
+                    // Unkeyed talk heads can cause give-ups as fast as they are sent: one
+                    // warning per period, with the count it stands for.
+                    if let Some(times) = self.give_up_warnings.record(now) {
+                        tracing::warn!(from, %queue, first, last, times, "talk messages given up");
+                    }
                     for slot in self.sessions.values_mut() {
                         let before = slot.session.pending_output().len();
-                        slot.session.handle_talk_lost(from, &queue, first, last);
+                        let suppressed = slot.session.lost_suppressed();
+                        slot.session
+                            .handle_talk_lost(now, from, &queue, first, last);
+                        self.io.relay_lost_suppressed +=
+                            slot.session.lost_suppressed() - suppressed;
                         self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
                     let notice = || Notice::TalkLost {
@@ -494,6 +512,7 @@ impl Inner {
         self.release_held();
         let now = self.clock.now();
         self.replica.handle_timeout(now);
+        self.mirror_io(now);
         for slot in self.sessions.values_mut() {
             if slot.session.poll_timeout().is_some_and(|t| t <= now) {
                 let before = slot.session.pending_output().len();
@@ -502,6 +521,29 @@ impl Inner {
             }
         }
         self.pump();
+    }
+
+    /// Mirrors the I/O counters `huddle stats` shows into `local.var.huddle.stats.*`
+    /// (written when they change).
+    fn mirror_io(&mut self, now: Instant) {
+        let counters = [
+            ("unicast_refused", self.io.unicast_refused),
+            ("relay_lost_suppressed", self.io.relay_lost_suppressed),
+        ];
+        for (name, count) in counters {
+            let key = format!("local.var.huddle.stats.{name}");
+            let value = Value::Int(i64::try_from(count).unwrap_or(i64::MAX));
+            let same = self
+                .replica
+                .get(&key)
+                .ok()
+                .flatten()
+                .is_some_and(|e| e.value == value);
+            if !same {
+                // A local key of valid shape: only the local-key limit could refuse it.
+                let _ = self.replica.set(now, &key, value);
+            }
+        }
     }
 
     /// A new relay session: its id and the notifier its connection waits on.
@@ -722,6 +764,7 @@ impl Driver {
             handed_up: 0,
             key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
             send_failures: RateLimit::new(SEND_WARNING_PERIOD),
+            give_up_warnings: RateLimit::new(SEND_WARNING_PERIOD),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),

@@ -387,6 +387,14 @@ pub fn stats(args: StatsArgs) -> Result<()> {
             format!(" ({})", drops.join(", "))
         }
     )?;
+    // Refusals of the I/O layer (the daemon mirrors them; older daemons do not).
+    let io: Vec<String> = ["unicast_refused", "relay_lost_suppressed", "nacks_limited"]
+        .iter()
+        .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
+        .collect();
+    if !io.is_empty() {
+        writeln!(out, "refused {}", io.join("  "))?;
+    }
     // Only a daemon that speaks or listens (`--audio-in`, `--audio-out`) has these.
     let audio: Vec<String> = all
         .iter()

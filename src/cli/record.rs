@@ -192,8 +192,7 @@ pub fn replay_file(
 /// The packets of a recording and a model for them (team from the first frame unless
 /// given, key file read).
 fn open_recording(args: &ReplayArgs) -> Result<(Vec<Packet>, Model)> {
-    let bytes =
-        std::fs::read(&args.file).with_context(|| format!("reading {}", args.file.display()))?;
+    let bytes = read_recording(&args.file)?;
     let packets = pcapng::read(&bytes).with_context(|| format!("{}", args.file.display()))?;
     let key = match &args.key_file {
         Some(f) => Some(driver::read_key_file(f)?),
@@ -216,6 +215,46 @@ fn open_recording(args: &ReplayArgs) -> Result<(Vec<Packet>, Model)> {
     });
     let model = Model::new(team, key, listen_id, start_ns, "replay", None)?;
     Ok((packets, model))
+}
+
+/// A recording larger than this is refused (a 20-minute match of five robots is about
+/// 15 MB): the file is read into memory whole.
+pub const MAX_RECORDING_BYTES: u64 = 1 << 30;
+
+/// The bytes of a recording: a regular file of at most [`MAX_RECORDING_BYTES`]. A FIFO,
+/// a device (`/dev/zero`) or a socket is refused before anything is read (it may never
+/// end); a file that grows while read is read only up to the limit.
+pub fn read_recording(path: &std::path::Path) -> Result<Vec<u8>> {
+    use std::io::Read as _;
+    let meta = std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
+    if !meta.file_type().is_file() {
+        bail!(
+            "{}: not a regular file (a pipe or a device may never end); save the recording \
+             to a file first",
+            path.display()
+        );
+    }
+    if meta.len() > MAX_RECORDING_BYTES {
+        bail!(
+            "{}: {} bytes, larger than the {} bytes a replay reads",
+            path.display(),
+            meta.len(),
+            MAX_RECORDING_BYTES
+        );
+    }
+    let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_RECORDING_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("reading {}", path.display()))?;
+    if bytes.len() as u64 > MAX_RECORDING_BYTES {
+        bail!(
+            "{}: grew beyond the {} bytes a replay reads",
+            path.display(),
+            MAX_RECORDING_BYTES
+        );
+    }
+    Ok(bytes)
 }
 
 /// The team id in a frame's plain header, if it looks like a huddle frame.

@@ -74,6 +74,11 @@ impl Heard {
     }
 }
 
+/// Timer deadlines [`Listener::advance`] runs one by one before it jumps to the end of a
+/// gap: 1,000 refresh periods (100 s at the default 100 ms), more than any departure or
+/// give-up takes, so a real recording's events keep their times.
+pub const MAX_TIMER_STEPS: usize = 1000;
+
 /// A replica that hears and never speaks.
 pub struct Listener {
     replica: Replica,
@@ -116,16 +121,28 @@ impl Listener {
         t_ns.saturating_sub(self.start_ns) as f64 / 1e9
     }
 
-    /// Runs the replica's timers up to `t_ns` (departures are noticed here).
+    /// Runs the replica's timers up to `t_ns` (departures are noticed here): each
+    /// deadline in turn, up to [`MAX_TIMER_STEPS`]; the rest of a longer gap at once (a
+    /// recording's clock may jump by years: a replay costs O(frames), not O(gap)).
     pub fn advance(&mut self, t_ns: u64, out: &mut Vec<Heard>) {
         let now = self.instant(t_ns);
+        let mut steps = 0;
         while let Some(deadline) = self.replica.poll_timeout() {
             if deadline > now {
                 break;
             }
-            self.replica.handle_timeout(deadline);
+            steps += 1;
+            let at = if steps > MAX_TIMER_STEPS {
+                now
+            } else {
+                deadline
+            };
+            self.replica.handle_timeout(at);
             self.discard_transmits();
-            self.drain_events(deadline, out);
+            self.drain_events(at, out);
+            if at == now {
+                break;
+            }
         }
     }
 

@@ -59,6 +59,14 @@ pub struct Truth {
 
 /// Window over which a robot's message rate is measured, seconds.
 const RATE_WINDOW_S: f64 = 2.0;
+/// Bindings of the board the picture shows at most, in key order (`board_total` in the
+/// picture says how many there are): a spoofer that fills the board to its limit does
+/// not make every picture megabytes long.
+pub const BOARD_SHOWN: usize = 500;
+/// Frames one step forward in a robot's frame numbers counts for at most: a spoofed
+/// frame numbered 10^9 (no key) shows as that many lost, not as 100% loss and a spent
+/// budget. A real outage longer than this shows as a departure.
+const MAX_SEQ_STEP: u64 = 64;
 /// Talk messages kept for the log.
 const TALK_KEPT: usize = 200;
 
@@ -68,8 +76,11 @@ struct RobotView {
     posted: Option<Posted>,
     pass_to: Option<i64>,
     incarnation: u64,
-    first_seq: Option<u64>,
-    last_seq: u64,
+    /// Highest frame number heard from the current life (`None`: none yet).
+    last_seq: Option<u64>,
+    /// Frames it sent, as far as the frame numbers say: each step forward counts, up to
+    /// [`MAX_SEQ_STEP`] (a frame numbered far ahead, forged or not, moves it that much).
+    sent: u64,
     received: u64,
     arrivals: VecDeque<f64>,
 }
@@ -154,28 +165,43 @@ impl Model {
     }
 
     /// One datagram received at `t_ns` from `from`; returns what it changed.
+    ///
+    /// Only frames the listening replica took count in the frame counters (rate, loss,
+    /// budget): with a team key a forged or replayed frame (another life's, or a copy)
+    /// changes none of them. Without a key any frame can be forged, counters included.
     pub fn datagram(&mut self, t_ns: u64, from: SocketAddr, bytes: &[u8]) -> Vec<Heard> {
         self.now_ns = self.now_ns.max(t_ns);
         let t_s = self.listener.seconds(t_ns);
-        if let Ok(frame) = comms::wire::decode_frame(bytes, self.team, self.key.as_ref()) {
+        let taken = |r: &comms::Replica| (r.stats().drops_total(), r.stats().own_frames);
+        let before = taken(self.listener.replica());
+        let mut heard = Vec::new();
+        self.listener.datagram(t_ns, from, bytes, &mut heard);
+        let admitted = taken(self.listener.replica()) == before;
+        let frame = admitted
+            .then(|| comms::wire::decode_frame(bytes, self.team, self.key.as_ref()).ok())
+            .flatten();
+        if let Some(frame) = frame {
             let v = self.robots.entry(frame.sender).or_default();
             if v.incarnation != frame.incarnation {
                 v.incarnation = frame.incarnation;
-                v.first_seq = None;
+                v.last_seq = None;
+                v.sent = 0;
                 v.received = 0;
             }
-            if v.first_seq.is_none_or(|s| frame.seq < s) {
-                v.first_seq = Some(frame.seq);
+            match v.last_seq {
+                None => v.sent = 1,
+                Some(last) if frame.seq > last => {
+                    v.sent += (frame.seq - last).min(MAX_SEQ_STEP);
+                }
+                Some(_) => {}
             }
-            v.last_seq = v.last_seq.max(frame.seq);
+            v.last_seq = v.last_seq.max(Some(frame.seq));
             v.received += 1;
             v.arrivals.push_back(t_s);
             while v.arrivals.front().is_some_and(|&a| a < t_s - RATE_WINDOW_S) {
                 v.arrivals.pop_front();
             }
         }
-        let mut heard = Vec::new();
-        self.listener.datagram(t_ns, from, bytes, &mut heard);
         self.take(&heard);
         heard
     }
@@ -309,7 +335,7 @@ impl Model {
                 } else {
                     "inactive".to_owned()
                 };
-                let sent = v.first_seq.map_or(0, |f| v.last_seq.saturating_sub(f) + 1);
+                let sent = v.sent;
                 let loss = if sent > 0 {
                     1.0 - (v.received.min(sent) as f64 / sent as f64)
                 } else {
@@ -353,10 +379,14 @@ impl Model {
             })
         });
         let all = Pattern::parse("#").ok();
-        let board: Vec<Json> = all
-            .iter()
-            .flat_map(|p| replica.iter(p))
-            .filter(|(k, _)| matches!(k.scope(), comms::Scope::Robot(_)))
+        let robot_keys = || {
+            all.iter()
+                .flat_map(|p| replica.iter(p))
+                .filter(|(k, _)| matches!(k.scope(), comms::Scope::Robot(_)))
+        };
+        let board_total = robot_keys().count();
+        let board: Vec<Json> = robot_keys()
+            .take(BOARD_SHOWN)
             .map(|(k, e)| {
                 let mut b = json!({
                     "key": k.to_string(),
@@ -385,6 +415,7 @@ impl Model {
             "team_ball": team_ball,
             "truth": truth,
             "board": board,
+            "board_total": board_total,
             "talk": self.talk.iter().collect::<Vec<_>>(),
         })
     }

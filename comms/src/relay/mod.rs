@@ -70,4 +70,6 @@ pub use board::Board;
 pub use command::{Command, Rejected, MAX_REFRESH_MS};
 pub use error::ErrCode;
 pub use reply::Binding;
-pub use session::{CloseReason, Session, SessionLimits, SessionState, PROTOCOL_VERSION};
+pub use session::{
+    CloseReason, Session, SessionLimits, SessionState, LOST_LINES_PER_S, PROTOCOL_VERSION,
+};

@@ -97,7 +97,18 @@ pub struct Session {
     watches: Vec<Pattern>,
     refresh: Refresh,
     state: SessionState,
+    /// `LOST` lines still allowed (a bucket refilled at [`LOST_LINES_PER_S`]), and when it
+    /// was last refilled.
+    lost_allowance: (f64, Option<Instant>),
+    /// `LOST` lines not sent because the allowance was spent.
+    lost_suppressed: u64,
 }
+
+/// `LOST` lines a session sends per second at most (a burst of as many): given-up talk
+/// is the sender's word, and unkeyed talk heads can make a relay give up messages as fast
+/// as an attacker sends them. Those beyond are counted ([`Session::lost_suppressed`]);
+/// the client still sees the gap in the sequence numbers of the `UPD` lines.
+pub const LOST_LINES_PER_S: f64 = 20.0;
 
 impl Session {
     /// A new session for robot `robot_id`; the greeting `HUDDLE <version> robot <id>` is
@@ -112,6 +123,8 @@ impl Session {
             watches: Vec::new(),
             refresh: Refresh::Off,
             state: SessionState::Open,
+            lost_allowance: (LOST_LINES_PER_S, None),
+            lost_suppressed: 0,
         };
         s.push(format_args!("HUDDLE {PROTOCOL_VERSION} robot {robot_id}"));
         s
@@ -402,10 +415,30 @@ impl Session {
     /// Messages `first..=last` of a teammate's talk queue were given up (they can no
     /// longer arrive): pushed at once, whatever `REFR` says, as
     /// `LOST <from>.talk.<queue> <first> <last>` if a watch matches.
-    pub fn handle_talk_lost(&mut self, from: u8, queue: &str, first: u64, last: u64) {
-        if self.watches_talk(from, queue) {
-            self.push(format_args!("LOST {from}.talk.{queue} {first} {last}"));
+    ///
+    /// At most [`LOST_LINES_PER_S`] a second (with a burst of as many); the rest are
+    /// counted in [`Session::lost_suppressed`].
+    pub fn handle_talk_lost(&mut self, now: Instant, from: u8, queue: &str, first: u64, last: u64) {
+        if !self.watches_talk(from, queue) {
+            return;
         }
+        let (mut allowance, at) = self.lost_allowance;
+        if let Some(at) = at {
+            let dt = now.saturating_duration_since(at).as_secs_f64();
+            allowance = (allowance + dt * LOST_LINES_PER_S).min(LOST_LINES_PER_S);
+        }
+        if allowance < 1.0 {
+            self.lost_allowance = (allowance, Some(now));
+            self.lost_suppressed += 1;
+            return;
+        }
+        self.lost_allowance = (allowance - 1.0, Some(now));
+        self.push(format_args!("LOST {from}.talk.{queue} {first} {last}"));
+    }
+
+    /// `LOST` lines not sent because this client's allowance was spent.
+    pub fn lost_suppressed(&self) -> u64 {
+        self.lost_suppressed
     }
 
     /// Whether the session is open and watches `from`'s talk queue `queue`.
@@ -860,17 +893,39 @@ mod tests {
     #[test]
     fn given_up_talk_messages_reach_watching_clients_as_lost_lines() {
         let (mut s, mut bb) = open();
-        s.handle_talk_lost(3, "plan", 4, 7);
+        s.handle_talk_lost(t(0), 3, "plan", 4, 7);
         assert_eq!(take(&mut s), "", "nobody watches the queue");
         say(&mut s, &mut bb, t(0), "ADDW +.talk.plan\n");
         s.handle_talk(3, "plan", &Value::Int(3));
-        s.handle_talk_lost(3, "plan", 4, 7);
-        s.handle_talk_lost(3, "other", 1, 1);
+        s.handle_talk_lost(t(0), 3, "plan", 4, 7);
+        s.handle_talk_lost(t(0), 3, "other", 1, 1);
         s.handle_talk(3, "plan", &Value::Int(8));
         assert_eq!(
             take(&mut s),
             "UPD 3.talk.plan int 3 0\nLOST 3.talk.plan 4 7\nUPD 3.talk.plan int 8 0\n"
         );
+    }
+
+    /// Unkeyed talk heads can make the relay give up messages as fast as an attacker
+    /// sends them: a watching client gets at most `LOST_LINES_PER_S` lines a second
+    /// (it got one per give-up, 2.5x the attacker's bytes), and the rest are counted.
+    #[test]
+    fn lost_lines_are_rate_limited_per_client_and_counted() {
+        let (mut s, mut bb) = open();
+        say(&mut s, &mut bb, t(0), "ADDW +.talk.#\n");
+        take(&mut s);
+        // 1,000 give-ups a second for 10 s.
+        for ms in 0..10_000u64 {
+            s.handle_talk_lost(t(ms), 9, "q", ms + 1, ms + 1);
+        }
+        let lines = take(&mut s)
+            .lines()
+            .filter(|l| l.starts_with("LOST "))
+            .count();
+        let most = (LOST_LINES_PER_S * 11.0) as usize;
+        assert!(lines <= most, "{lines} LOST lines in 10 s (at most {most})");
+        assert!(lines >= 100, "the limit still lets {lines} through");
+        assert_eq!(s.lost_suppressed() as usize, 10_000 - lines);
     }
 
     #[test]

@@ -22,7 +22,21 @@
 //! once cannot overrun it. Priority items ([`crate::Replica::set_priority`]: a goer
 //! change, a kick, a referee event) may go at once while the team is less than one frame
 //! per robot beyond its line, whoever sends them; a robot spending its share alone keeps
-//! a fifth of it for its own. The game clock is an input: by default the game starts when
+//! a fifth of it for its own.
+//!
+//! What the pool counts, and what holds when frames lie: a teammate's frames count by
+//! the frame counter of its current life, at most twice the frames of that life this
+//! robot heard plus four, and an earlier life only as far as it was counted while it was
+//! current here (a replayed frame of a life never current here counts nothing); only the
+//! `robots - 1` ids that count most are summed. That bounds what one forged header can
+//! claim, but not what a stream of them can: without a team key any frame can be forged,
+//! and with one a whole recorded life of a teammate absent today can be replayed to a
+//! robot that never heard it. So the pool has a **floor**: whatever it heard, a robot
+//! may send on its own equal part of the line (`⌊own · p⌋` frames by the share `p` of
+//! the game played, paced by its credit). A drained pool costs the team its lending,
+//! never its voice; and since the floor is the robot's own part, the team stays within
+//! its budget (the margin absorbs the few frames by which owners and borrowers deciding
+//! at once can overlap). The game clock is an input: by default the game starts when
 //! the replica does; [`crate::Replica::set_game_clock`] sets the remaining time (the
 //! GameController's `secsRemaining`, when there is one).
 
@@ -348,28 +362,37 @@ impl BudgetState {
     /// time a share `p` of it is played, and this robot's equal share of it likewise.
     fn next_pooled(&self, now: Instant, team: TeamPool) -> Option<Instant> {
         let (usable, own_usable) = (team.usable(), team.own_usable());
+        // The floor: this robot's own equal part of the line, paced by its credit, whatever
+        // it heard of the team. A pool drained by forged or replayed frame counters (or
+        // teammates that truly overspent) falls back to it, never to silence.
+        // It goes while the robot is under its own line, `⌊own_usable · p⌋` frames by `p`
+        // (so not before its first frame's worth of the game has passed: the pool
+        // starts the game), on its credit (so what it left earlier is not spent at once:
+        // borrowers have used it).
+        let credit = self.credit_at(now, own_usable);
+        let own = if self.sent >= self.budget.messages || own_usable == 0 {
+            None
+        } else {
+            let under_line = self.when_played(now, (self.sent + 1) as f64 / own_usable as f64);
+            let credited = if credit >= 1.0 {
+                Some(now)
+            } else {
+                self.when_played(now, self.played(now) + (1.0 - credit) / own_usable as f64)
+            };
+            match (under_line, credited) {
+                (Some(a), Some(b)) => Some(a.max(b)),
+                _ => None,
+            }
+        };
         if usable == 0 || self.left() == 0 {
-            return None;
+            return own;
         }
         // The line passes `k` frames once ⌊usable · p⌋ ≥ k, i.e. at p = k / usable.
         let team_at = |k: u64| self.when_played(now, k as f64 / usable as f64);
-        let credit = self.credit_at(now, own_usable);
-        let within_share = if credit >= 1.0 {
-            Some(now)
-        } else if own_usable == 0 {
-            None
-        } else {
-            self.when_played(now, self.played(now) + (1.0 - credit) / own_usable as f64)
-        };
-        // On its own credit: once the team line passes the team's frames and it has a
-        // frame's credit.
-        let as_owner = match (team_at(self.team_sent()), within_share) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            _ => None,
-        };
-        // Borrowing: once the team line is a frame per robot ahead.
+        // Borrowing (beyond its own credit): once the team line is a frame per robot ahead
+        // of the team's frames as heard, so that robots under their share go first.
         let as_borrower = team_at(self.team_sent() + team.robots);
-        match (as_owner, as_borrower) {
+        match (own, as_borrower) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
@@ -400,10 +423,11 @@ impl BudgetState {
 
     /// Whether a frame of `class` may go now.
     pub(crate) fn allows(&self, now: Instant, class: Class) -> bool {
-        if self.left() == 0 {
-            return false;
-        }
+        // Pooled, the floor (its own credit) holds whatever the team's count says.
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
+        if self.left() == 0 {
+            return ordinary && self.budget.team.is_some();
+        }
         match class {
             Class::Ordinary => ordinary,
             Class::Priority => match self.budget.team {

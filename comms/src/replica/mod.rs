@@ -82,6 +82,8 @@ pub struct Replica {
     budget: Option<budget::BudgetState>,
     /// Own global paths set with priority and not sent since.
     urgent: BTreeSet<String>,
+    /// Under a budget: frames that went with NACKs and re-sends only (at most half).
+    repair_frames: u64,
 }
 
 impl Replica {
@@ -123,6 +125,7 @@ impl Replica {
             deliveries: Vec::new(),
             budget: config_budget.map(|b| budget::BudgetState::new(b, now)),
             urgent: BTreeSet::new(),
+            repair_frames: 0,
         })
     }
 
@@ -262,11 +265,19 @@ impl Replica {
         self.budget.as_ref().map(|b| b.headroom(self.now))
     }
 
-    /// Tells a pooled budget how many frames teammates have sent.
+    /// Tells a pooled budget how many frames teammates have sent: of every id heard,
+    /// the `robots - 1` that count most (a team of `robots` has no more teammates, so
+    /// frames forged under 250 other ids count as at most that many).
     fn note_team_frames(&mut self) {
         if let Some(b) = &mut self.budget {
-            if b.budget.team.is_some() {
-                b.set_heard(self.peers.values().map(Peer::frames_sent).sum());
+            if let Some(team) = b.budget.team {
+                let mut counts: Vec<u64> = self.peers.values().map(Peer::frames_sent).collect();
+                let teammates = usize::try_from(team.robots.saturating_sub(1)).unwrap_or(0);
+                if counts.len() > teammates {
+                    counts.select_nth_unstable_by(teammates, |a, b| b.cmp(a));
+                    counts.truncate(teammates);
+                }
+                b.set_heard(counts.iter().fold(0u64, |a, &c| a.saturating_add(c)));
             }
         }
     }
@@ -317,5 +328,7 @@ impl Replica {
 mod bounds_tests;
 #[cfg(test)]
 mod clock_tests;
+#[cfg(test)]
+mod nack_tests;
 #[cfg(test)]
 mod tests;

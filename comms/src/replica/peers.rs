@@ -100,6 +100,9 @@ struct OlderLife {
     reported: Option<Instant>,
     /// It was this receiver's current life of the peer once (not only heard beside one).
     was_current: bool,
+    /// Frames of it a pooled budget counts: what was counted while it was current here
+    /// (0 for a life only heard beside the current one: a replay proves nothing).
+    counted: u64,
 }
 
 #[derive(Debug)]
@@ -111,6 +114,8 @@ pub(super) struct Peer {
     pub(super) last_heard: Instant,
     pub(super) present: bool,
     frames: u64,
+    /// Frames admitted from the current life.
+    life_frames: u64,
     replay: ReplayWindow,
     pub(super) inboxes: BTreeMap<String, Inbox>,
     /// Until then, queues first heard start at the sender's current position: this robot
@@ -120,17 +125,29 @@ pub(super) struct Peer {
     conflict_at: Option<Instant>,
     /// Echo bookkeeping and the estimate of its clock (of the current life).
     pub(super) clock: PeerClock,
+    /// Bytes of NACKs this robot may still send about its queues, and bytes of re-sends
+    /// its NACKs may still cause ([`crate::talk::AMPLIFICATION`] per byte heard from it).
+    pub(super) nack_credit: f64,
+    pub(super) repair_credit: f64,
 }
 
 impl Peer {
-    /// Frames this peer has sent, by the highest frame counters heard from each of its
-    /// lives (a pooled budget counts every one). A counter is the sender's word, so it
-    /// counts for at most twice the frames actually heard, plus four: a forged frame with
-    /// a huge counter cannot use up the team's budget, while losses of up to half a
-    /// teammate's frames are still counted in full.
+    /// Frames this peer has sent as a pooled budget counts them: its current life's
+    /// counter, and what was counted of each earlier life while it was current here. A
+    /// counter is the sender's word, so it counts for at most twice the frames of that
+    /// life actually heard, plus four (losses of up to half a teammate's frames are still
+    /// counted in full): a forged frame with a huge counter, or one replayed frame of an
+    /// earlier life (never current here: it proves nothing), cannot use up the team's
+    /// budget. What a spoofer can still claim (without a key, or by replaying a whole
+    /// recorded life) the budget survives by its floor: see [`super::Budget`].
     pub(super) fn frames_sent(&self) -> u64 {
-        let claimed = self.highest_seq + self.older.iter().map(|o| o.highest_seq).sum::<u64>();
-        claimed.min(self.frames.saturating_mul(2).saturating_add(4))
+        let older: u64 = self.older.iter().map(|o| o.counted).sum();
+        self.current_counted().saturating_add(older)
+    }
+
+    fn current_counted(&self) -> u64 {
+        self.highest_seq
+            .min(self.life_frames.saturating_mul(2).saturating_add(4))
     }
 
     fn new(now: Instant, incarnation: u64, seq: u64, catch_up_until: Option<Instant>) -> Peer {
@@ -141,11 +158,14 @@ impl Peer {
             last_heard: now,
             present: true,
             frames: 0,
+            life_frames: 0,
             replay: ReplayWindow::default(),
             inboxes: BTreeMap::new(),
             catch_up_until,
             conflict_at: None,
             clock: PeerClock::default(),
+            nack_credit: 0.0,
+            repair_credit: 0.0,
         }
     }
 
@@ -159,12 +179,20 @@ impl Peer {
             fresh: 0,
             reported: None,
             was_current: true,
+            counted: self.current_counted(),
         };
+        // A life coming back keeps what was counted of it.
+        let returning = self
+            .older
+            .iter()
+            .find(|l| l.incarnation == incarnation)
+            .map_or(0, |l| l.counted);
         self.older.retain(|l| l.incarnation != incarnation);
         self.older.push_front(life);
         self.older.truncate(OLDER_INCARNATIONS);
         self.incarnation = incarnation;
         self.highest_seq = seq;
+        self.life_frames = returning;
         self.replay = ReplayWindow::default();
         // A new life restarts its clock's origin (and its frame numbers).
         self.clock = PeerClock::default();
@@ -264,6 +292,7 @@ impl Replica {
         peer.highest_seq = peer.highest_seq.max(seq);
         peer.last_heard = now;
         peer.frames += 1;
+        peer.life_frames += 1;
         self.stats.last_heard.insert(sender, now);
         if joined {
             self.refresh_for_newcomer(now);
@@ -314,6 +343,7 @@ impl Replica {
                     fresh: 0,
                     reported: None,
                     was_current: false,
+                    counted: 0,
                 });
                 if peer.older.len() > OLDER_INCARNATIONS {
                     peer.older.pop_front();

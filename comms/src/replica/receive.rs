@@ -6,6 +6,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use crate::stats::DropReason;
+use crate::talk::{AMPLIFICATION, CREDIT_MAX_BYTES};
 use crate::time::Instant;
 use crate::wire::{self, FrameClock, Item};
 
@@ -65,6 +66,12 @@ impl Replica {
         if let Err(reason) = self.admit(now, sender, frame.incarnation, frame.seq) {
             return self.drop_frame(from, reason);
         }
+        if let Some(peer) = self.peers.get_mut(&sender) {
+            // What its frames cost on the air pays for the NACKs and re-sends they cause.
+            let earned = AMPLIFICATION * bytes.len() as f64;
+            peer.nack_credit = (peer.nack_credit + earned).min(CREDIT_MAX_BYTES);
+            peer.repair_credit = (peer.repair_credit + earned).min(CREDIT_MAX_BYTES);
+        }
         let transit = self.on_frame_clock(now, sender, frame.seq, &frame.clock);
         for item in frame.items {
             match item {
@@ -91,7 +98,7 @@ impl Replica {
                     queue,
                     first,
                     last,
-                } if target == self.cfg.robot_id => self.repair(now, &queue, first, last),
+                } if target == self.cfg.robot_id => self.repair(now, sender, &queue, first, last),
                 Item::Nack { .. } => {}
             }
         }

@@ -196,25 +196,41 @@ impl Replica {
         }
     }
 
-    /// A teammate asked for `first..=last` of our queue.
-    pub(super) fn repair(&mut self, now: Instant, queue: &str, first: u64, last: u64) {
+    /// Whether an own post waits for its first frame (news, unlike a re-send).
+    pub(super) fn talk_posts_waiting(&self) -> bool {
+        self.talk_out
+            .iter()
+            .any(|(q, seq)| self.outboxes.get(q).is_some_and(|o| o.unsent(*seq)))
+    }
+
+    /// Teammate `from` asked for `first..=last` of our queue.
+    pub(super) fn repair(&mut self, now: Instant, from: u8, queue: &str, first: u64, last: u64) {
         let Some(outbox) = self.outboxes.get_mut(queue) else {
             return;
         };
         // A resend within half a NACK interval already answers this request.
         let quiet = self.cfg.talk.nack_interval / 2;
         let wanted = outbox.to_resend(first, last, now, quiet);
+        let mut credit = self.peers.get(&from).map_or(0.0, |p| p.repair_credit);
         for (i, &seq) in wanted.iter().enumerate() {
             // However many NACKs arrive (spoofed ones too), repairs stay within twice
-            // what was posted plus a trickle. Once the allowance is spent the rest of
-            // the request is refused at once: a flood of NACKs costs no more work.
-            if !outbox.spend_repair(now, seq) {
+            // what was posted plus a trickle, and within twice the bytes heard from the
+            // robot that asks. Once either allowance is spent the rest of the request is
+            // refused at once: a flood of NACKs costs no more work.
+            let cost = outbox.get(seq).map_or(0, |value| {
+                wire::HEADER_LEN + wire::item_len(ItemRef::Talk { queue, seq, value })
+            }) as f64;
+            if credit < cost || !outbox.spend_repair(now, seq) {
                 self.stats.talk_repair_limited += (wanted.len() - i) as u64;
                 break;
             }
+            credit -= cost;
             outbox.mark_sent(seq, now);
             self.talk_out.push_back((queue.to_owned(), seq));
             self.stats.talk_resent += 1;
+        }
+        if let Some(peer) = self.peers.get_mut(&from) {
+            peer.repair_credit = credit;
         }
         if first < outbox.first() || last > outbox.last() {
             // Some of it is gone (or never existed): the head tells them to give up.

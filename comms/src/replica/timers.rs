@@ -1,10 +1,14 @@
 //! Timers: the periodic refresh and heartbeat (and the extra refresh for a newcomer),
 //! departures, talk NACKs and give-ups, and the stats mirror written at each refresh.
 
+use std::collections::BTreeSet;
+
 use crate::key::{Key, Kind, Scope};
 use crate::stats::DropReason;
+use crate::talk::NACKS_WAITING_MAX;
 use crate::time::Instant;
 use crate::value::Value;
+use crate::wire::{self, ItemRef, HEADER_LEN};
 
 use super::{Event, Replica};
 
@@ -76,9 +80,49 @@ impl Replica {
         for (robot, queue, mut d) in handed {
             Self::hand_up_into(&mut self.events, &mut self.stats, &mut d, robot, &queue);
         }
-        self.stats.nacks_sent += nacks.len() as u64;
-        self.nacks_out.extend(nacks);
+        self.queue_nacks(nacks);
         self.release_departed(now);
+    }
+
+    /// NACKs due: each paid from its sender's NACK credit (refused ones counted in
+    /// `nacks_limited`: the inbox asks again on its next timer), replacing any still
+    /// waiting for the same queue, at most [`NACKS_WAITING_MAX`] waiting.
+    fn queue_nacks(&mut self, nacks: Vec<(u8, String, u64, u64)>) {
+        let mut paid: Vec<(u8, String, u64, u64)> = Vec::with_capacity(nacks.len());
+        for (robot, queue, first, last) in nacks {
+            let Some(peer) = self.peers.get_mut(&robot) else {
+                continue;
+            };
+            let cost = (HEADER_LEN
+                + wire::item_len(ItemRef::Nack {
+                    target: robot,
+                    queue: &queue,
+                    first,
+                    last,
+                })) as f64;
+            if peer.nack_credit < cost {
+                self.stats.nacks_limited += 1;
+                continue;
+            }
+            peer.nack_credit -= cost;
+            paid.push((robot, queue, first, last));
+        }
+        if paid.is_empty() {
+            return;
+        }
+        self.stats.nacks_sent += paid.len() as u64;
+        let fresh: BTreeSet<(u8, &str)> =
+            paid.iter().map(|(r, q, _, _)| (*r, q.as_str())).collect();
+        let before = self.nacks_out.len();
+        self.nacks_out
+            .retain(|(r, q, _, _)| !fresh.contains(&(*r, q.as_str())));
+        let mut dropped = (before - self.nacks_out.len()) as u64;
+        self.nacks_out.extend(paid);
+        while self.nacks_out.len() > NACKS_WAITING_MAX {
+            self.nacks_out.pop_front();
+            dropped += 1;
+        }
+        self.stats.nacks_superseded += dropped;
     }
 
     /// When robot `robot`'s values are released if it stays departed: its
@@ -127,6 +171,8 @@ impl Replica {
             ("talk_repair_limited".into(), s.talk_repair_limited as i64),
             ("id_conflicts".into(), s.id_conflicts as i64),
             ("nacks_sent".into(), s.nacks_sent as i64),
+            ("nacks_limited".into(), s.nacks_limited as i64),
+            ("nacks_superseded".into(), s.nacks_superseded as i64),
             ("clock_samples".into(), s.clock_samples as i64),
             (
                 "clock_echoes_rejected".into(),

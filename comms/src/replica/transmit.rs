@@ -1,7 +1,9 @@
 //! Transmit packing: pending NACKs, talk messages, changed values, the refresh and talk
 //! heads, in that order, packed into frames of at most `mtu` bytes.
 
-use crate::blackboard::Entry;
+use std::collections::BTreeSet;
+
+use crate::blackboard::{Blackboard, Entry};
 use crate::key::Scope;
 use crate::time::{duration_to_micros, Instant};
 use crate::wire::{
@@ -11,6 +13,7 @@ use crate::wire::{
 
 use super::budget::Class;
 use super::clock::stamp_of;
+use super::dirty::DirtyQueue;
 use super::{Destination, Replica, Transmit};
 
 impl Replica {
@@ -114,9 +117,8 @@ impl Replica {
         let class = match &self.budget {
             None => None,
             Some(b) => {
-                let news = !(self.nacks_out.is_empty()
-                    && self.talk_out.is_empty()
-                    && self.dirty.is_empty());
+                let own_news = !self.dirty.is_empty() || self.talk_posts_waiting();
+                let news = own_news || !(self.nacks_out.is_empty() && self.talk_out.is_empty());
                 let class = if self.dirty.iter().any(|p| self.urgent.contains(p)) {
                     Class::Priority
                 } else {
@@ -124,6 +126,14 @@ impl Replica {
                 };
                 if !news || !b.allows(self.now, class) {
                     return None;
+                }
+                // NACKs and re-sends alone start at most half of the frames: the rest
+                // are the robot's own news'.
+                if !own_news {
+                    if self.repair_frames.saturating_mul(2) > b.sent() {
+                        return None;
+                    }
+                    self.repair_frames += 1;
                 }
                 Some(class)
             }
@@ -150,13 +160,40 @@ impl Replica {
             echo,
         });
         let mut full = false;
+        // Under a budget the robot's own values go first, and NACKs take at most a
+        // quarter of the frame: a flood of gaps must not crowd its news out.
+        let budgeted = class.is_some();
+        let refreshing = !self.refresh_queue.is_empty();
+        let mut sent: Vec<String> = Vec::new();
+        if budgeted {
+            full |= push_values(
+                &self.board,
+                &mut self.dirty,
+                &mut self.urgent,
+                me,
+                refreshing,
+                &mut w,
+                &mut sent,
+                (now, age_cap),
+            );
+        }
+        let nack_room = if budgeted {
+            self.cfg.mtu / 4
+        } else {
+            usize::MAX
+        };
+        let nacks_from = w.len();
         while let Some((target, queue, first, last)) = self.nacks_out.front() {
-            if !w.push(ItemRef::Nack {
+            let item = ItemRef::Nack {
                 target: *target,
                 queue,
                 first: *first,
                 last: *last,
-            }) {
+            };
+            if w.len() > nacks_from && w.len() - nacks_from + wire::item_len(item) > nack_room {
+                break;
+            }
+            if !w.push(item) {
                 full = true;
                 break;
             }
@@ -181,45 +218,17 @@ impl Replica {
             }
             self.talk_out.pop_front();
         }
-        // Priority items first, then the longest waiting. One that does not fit keeps its
-        // place at the head of the line while a few smaller ones behind it may still go.
-        // Values in this frame as news: the refresh below does not repeat them.
-        // Kept only when a refresh is due (no list on the busy path of a frame of news).
-        let refreshing = !self.refresh_queue.is_empty();
-        let mut sent: Vec<String> = Vec::new();
-        let urgent: Vec<String> = self.urgent.iter().cloned().collect();
-        for path in urgent {
-            match self.board.get_stored(me, &path) {
-                Some(e) if !w.push(update_ref(&path, e, now, age_cap)) => full = true,
-                _ => {
-                    self.dirty.remove(&path);
-                    self.urgent.remove(&path);
-                    if refreshing {
-                        sent.push(path);
-                    }
-                }
-            }
-        }
-        let mut i = 0;
-        let mut skipped = 0;
-        while skipped < MAX_SKIPPED {
-            let Some(path) = self.dirty.get(i) else {
-                break;
-            };
-            let pushed = match self.board.get_stored(me, path) {
-                Some(e) if !w.push(update_ref(path, e, now, age_cap)) => {
-                    full = true;
-                    skipped += 1;
-                    i += 1;
-                    continue;
-                }
-                Some(_) => true,
-                None => false,
-            };
-            let path = self.dirty.remove_at(i);
-            if pushed && refreshing {
-                sent.extend(path);
-            }
+        if !budgeted {
+            full |= push_values(
+                &self.board,
+                &mut self.dirty,
+                &mut self.urgent,
+                me,
+                refreshing,
+                &mut w,
+                &mut sent,
+                (now, age_cap),
+            );
         }
         while !full {
             let Some(path) = self.refresh_queue.front() else {
@@ -273,6 +282,61 @@ impl Replica {
             payload,
         })
     }
+}
+
+/// Priority items, then changed values, into `w` (see `poll_transmit`); those pushed go
+/// into `sent` when a refresh is due. Returns whether one did not fit.
+#[allow(clippy::too_many_arguments)]
+fn push_values(
+    board: &Blackboard,
+    dirty: &mut DirtyQueue,
+    urgent: &mut BTreeSet<String>,
+    me: Scope,
+    refreshing: bool,
+    w: &mut FrameWriter<'_>,
+    sent: &mut Vec<String>,
+    (now, age_cap): (Instant, u64),
+) -> bool {
+    // Priority items first, then the longest waiting. One that does not fit keeps its
+    // place at the head of the line while a few smaller ones behind it may still go.
+    // Values in this frame as news: the refresh does not repeat them. Kept only when a
+    // refresh is due (no list on the busy path of a frame of news).
+    let mut full = false;
+    let first: Vec<String> = urgent.iter().cloned().collect();
+    for path in first {
+        match board.get_stored(me, &path) {
+            Some(e) if !w.push(update_ref(&path, e, now, age_cap)) => full = true,
+            _ => {
+                dirty.remove(&path);
+                urgent.remove(&path);
+                if refreshing {
+                    sent.push(path);
+                }
+            }
+        }
+    }
+    let mut i = 0;
+    let mut skipped = 0;
+    while skipped < MAX_SKIPPED {
+        let Some(path) = dirty.get(i) else {
+            break;
+        };
+        let pushed = match board.get_stored(me, path) {
+            Some(e) if !w.push(update_ref(path, e, now, age_cap)) => {
+                full = true;
+                skipped += 1;
+                i += 1;
+                continue;
+            }
+            Some(_) => true,
+            None => false,
+        };
+        let path = dirty.remove_at(i);
+        if pushed && refreshing {
+            sent.extend(path);
+        }
+    }
+    full
 }
 
 /// Changed values that did not fit a frame, after which it is sent as it is.
