@@ -348,7 +348,10 @@ impl Decoder {
             analyzer: Analyzer::new(geometry.clone()),
             sliding: vec![0.0; geometry.scale_count() * TONE_COUNT],
             scratch_powers: vec![0.0; geometry.scale_count() * TONE_COUNT],
-            noise: NoiseFloor::new(geometry.window_len),
+            noise: NoiseFloor::new(
+                geometry.window_len,
+                geometry.slot_samples / geometry.hop as f64,
+            ),
             short_window: ShortWindow::new(geometry.window_len),
             geometry,
             config,
