@@ -137,6 +137,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--t60", default="0,0.5,1.2,2.0", help="nominal T60s, s (0: free field)")
+    ap.add_argument("--kinds", default="lab,hall", help="room kinds: lab, hall")
     ap.add_argument("--senders", type=int, default=4, help="robot positions per room")
     ap.add_argument("--talkers", type=int, default=8, help="talker positions per room")
     ap.add_argument("--babble-tracks", type=int, default=8)
@@ -148,7 +149,7 @@ def main():
     os.makedirs(os.path.join(args.out, "babble"), exist_ok=True)
     lines = [f"# huddle room set, seed {args.seed}"]
     for t60 in [float(t) for t in args.t60.split(",")]:
-        for kind in ("lab", "hall"):
+        for kind in args.kinds.split(","):
             if kind == "lab":
                 dim = [rng.uniform(10, 14), rng.uniform(7, 9), rng.uniform(2.8, 3.5)]
             else:

@@ -238,6 +238,8 @@ pub struct SceneOutcome {
     pub overlapped_correct: usize,
     /// The wrong reports and what was sent around them, for diagnosis.
     pub wrong_reports: Vec<(Detection, Vec<Message>)>,
+    /// Messages not decoded right, with their start (s, as heard), for diagnosis.
+    pub missed: Vec<(Message, f64)>,
     /// Seconds of audio.
     pub seconds: f64,
 }
@@ -488,6 +490,9 @@ pub fn run_scene_trial(
         }
     }
     for s in &sent {
+        if !s.matched {
+            out.missed.push((s.message, s.start_s));
+        }
         if matches!(s.message, Message::Long { .. }) {
             out.long_sent += 1;
             out.long_correct += usize::from(s.matched);
