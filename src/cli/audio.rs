@@ -16,6 +16,10 @@ use audio::evaluation::{
     run_snr_trial_team, run_whistle_over_messages, Interference, RoomNoise, RoomTrial, SnrOutcome,
     SnrTrial,
 };
+use audio::evaluation::{
+    load_room_set, run_scene_false_alarm_trial, run_scene_trial, ExternalRoom, RoomSet,
+    SceneOutcome, SceneTrial,
+};
 use audio::{
     i16_to_s16le, read_wav, write_wav_f32, write_wav_i16, Decoder, DecoderConfig, Detection,
     Encoder, EncoderConfig, Message, S16leDecoder, Sender, TeamMessage, TeamPlan,
@@ -95,6 +99,24 @@ enum AudioCommand {
         /// Team plan of the messages sent and decoded (`three` or `six`).
         #[arg(long, default_value_t = TeamPlan::Three)]
         team: TeamPlan,
+    },
+    /// Room tests on a room set built by another tool (`audio/rooms/make_rooms.py`:
+    /// pyroomacoustics image-source rooms, espeak-ng babble with its pauses): short
+    /// messages over babble, long messages in halls, two robots overlapping, false
+    /// messages in crowds. Wrong messages are counted on their own.
+    Rooms {
+        /// The room set's directory (holds `manifest.txt`).
+        dir: PathBuf,
+        /// Seed of messages, clocks, talkers (report seeds: 101 and up; see
+        /// audio/rooms/README.md).
+        #[arg(long, default_value_t = 101)]
+        seed: u64,
+        /// Messages per row.
+        #[arg(long, default_value_t = 1000)]
+        messages: usize,
+        /// Crowd with no message, per room, for the false-message count (`10min`, `1h`).
+        #[arg(long, default_value = "10min", value_parser = duration::parse_positive)]
+        noise_time: Duration,
     },
 }
 
@@ -234,6 +256,12 @@ pub fn run(args: AudioArgs) -> Result<()> {
             section,
             team,
         ),
+        AudioCommand::Rooms {
+            dir,
+            seed,
+            messages,
+            noise_time,
+        } => rooms(&dir, seed, messages, noise_time.as_secs_f64()),
     }
 }
 
@@ -644,6 +672,164 @@ fn eval_rooms(hours: f64, seed: u64, messages: usize, team: TeamPlan) -> Result<
         fa.false_messages,
         verdict(fa.false_messages == 0)
     );
+    Ok(())
+}
+
+/// One row of `huddle audio rooms`.
+fn rooms_row(
+    label: &str,
+    room: &ExternalRoom,
+    set: &RoomSet,
+    trial: &SceneTrial,
+) -> Result<SceneOutcome> {
+    let out = run_scene_trial(room, &set.babble, trial)?;
+    let snr = trial
+        .snr_db
+        .map_or_else(|| "quiet".to_string(), |s| format!("{s:.0} dB"));
+    let overlapped = if trial.two_senders {
+        format!("{:>5}/{:<5}", out.overlapped_correct, out.overlapped_sent)
+    } else {
+        "-".to_string()
+    };
+    outln!(
+        "{label:<8} {:<9} {:>5.2} {:>7} {:>3} {:>5} {:>8.2}% {:>11} {:>5} {:>5} {:>11}",
+        room.name,
+        room.t60_measured_s,
+        snr,
+        trial.talkers,
+        out.sent,
+        100.0 * out.correct_share(),
+        format!("{}/{}", out.long_correct, out.long_sent),
+        out.wrong,
+        out.spurious,
+        overlapped,
+    );
+    for (d, around) in &out.wrong_reports {
+        let around: Vec<String> = around.iter().map(|m| m.to_string()).collect();
+        outln!(
+            "    wrong: {} at {:.2} s over [{}]",
+            d.message,
+            d.start_s,
+            around.join(", ")
+        );
+    }
+    Ok(out)
+}
+
+/// `huddle audio rooms`: the room set's tables and the targets they check.
+fn rooms(dir: &std::path::Path, seed: u64, messages: usize, noise_s: f64) -> Result<()> {
+    let started = Instant::now();
+    let set = load_room_set(dir).with_context(|| format!("reading room set {}", dir.display()))?;
+    outln!(
+        "Room set {}: {} rooms, {} babble recordings; seed {seed}, {messages} messages per row",
+        dir.display(),
+        set.rooms.len(),
+        set.babble.len()
+    );
+    outln!(
+        "{:<8} {:<9} {:>5} {:>7} {:>3} {:>5} {:>9} {:>11} {:>5} {:>5} {:>11}",
+        "row",
+        "room",
+        "T60 s",
+        "SNR",
+        "tlk",
+        "sent",
+        "correct",
+        "long ok",
+        "wrong",
+        "extra",
+        "overlap ok"
+    );
+    let mut row = 0u64;
+    let mut trial = |snr_db: Option<f64>, talkers: usize, long_share: f64, two: bool| {
+        row += 1;
+        SceneTrial {
+            seed: seed.wrapping_mul(1000).wrapping_add(row),
+            snr_db,
+            talkers,
+            messages,
+            long_share,
+            two_senders: two,
+            max_clock_error: 0.005,
+        }
+    };
+    let (mut short_worst, mut wrong, mut long_12, mut long_20) = (1.0f64, 0usize, 1.0f64, 1.0f64);
+    for room in set.rooms.iter().filter(|r| r.t60_nominal_s <= 1.2) {
+        for (k, snr) in [20.0, 10.0, 0.0].into_iter().enumerate() {
+            let t = trial(Some(snr), 2 + k, 0.0, false);
+            let out = rooms_row("short", room, &set, &t)?;
+            short_worst = short_worst.min(out.correct_share());
+            wrong += out.wrong;
+        }
+    }
+    for room in set.rooms.iter().filter(|r| r.t60_nominal_s >= 1.2) {
+        for (k, snr) in [None, Some(20.0), Some(0.0)].into_iter().enumerate() {
+            let t = trial(snr, 2 + k, 1.0, false);
+            let out = rooms_row("long", room, &set, &t)?;
+            let share = out.long_correct as f64 / out.long_sent.max(1) as f64;
+            if room.t60_nominal_s < 1.5 {
+                long_12 = long_12.min(share);
+            } else {
+                long_20 = long_20.min(share);
+            }
+            wrong += out.wrong;
+        }
+    }
+    for room in set.rooms.iter().filter(|r| r.t60_nominal_s >= 0.5) {
+        let t = trial(Some(10.0), 3, 0.5, true);
+        let out = rooms_row("two", room, &set, &t)?;
+        wrong += out.wrong;
+    }
+    let mut false_messages = 0;
+    let mut false_s = 0.0;
+    for (i, room) in set.rooms.iter().enumerate() {
+        let heard = run_scene_false_alarm_trial(
+            room,
+            &set.babble,
+            8,
+            noise_s,
+            seed.wrapping_mul(1000).wrapping_add(900 + i as u64),
+        );
+        for d in &heard {
+            outln!(
+                "    false: {} at {:.1} s in {}",
+                d.message,
+                d.start_s,
+                room.name
+            );
+        }
+        false_messages += heard.len();
+        false_s += noise_s;
+    }
+    let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
+    outln!("Targets:");
+    outln!(
+        "  short over babble, 20…0 dB, T60 <= 1.2 s, worst row {:>7.2}%  target >= 99%  {}",
+        100.0 * short_worst,
+        verdict(short_worst >= 0.99)
+    );
+    outln!(
+        "  long, T60 1.2 s, worst row                        {:>7.2}%  target >= 98%  {}",
+        100.0 * long_12,
+        verdict(long_12 >= 0.98)
+    );
+    outln!(
+        "  long, T60 2.0 s, worst row                        {:>7.2}%  target >= 95%  {}",
+        100.0 * long_20,
+        verdict(long_20 >= 0.95)
+    );
+    outln!(
+        "  wrong messages, all rows                          {:>8}  target 0       {}",
+        wrong,
+        verdict(wrong == 0)
+    );
+    outln!(
+        "  false messages, crowd of 8, {:.2} h                {:>8}  target 0       {}",
+        false_s / 3600.0,
+        false_messages,
+        verdict(false_messages == 0)
+    );
+    outln!("(rooms took {:.1} s)", started.elapsed().as_secs_f64());
     Ok(())
 }
 

@@ -26,6 +26,10 @@
 //!    shape (with the frame's tones in, the median would read high exactly while a
 //!    message sounds); the shape (pink noise, a microphone's response) is a slow,
 //!    outlier-gated average per tone, frozen on the tones of a message being tracked.
+//!    The level never falls below −13 dB of the band's mean tone power held at its peak
+//!    and let down 20 dB per three tone durations: a background that stops and starts
+//!    (talkers pausing into digital silence) would otherwise swing a steady tone's
+//!    normalised power by orders of magnitude from window to window.
 //!    Powers are divided by level × shape, so under noise each is ≈ Exp(1). The level is
 //!    smoothed lightly, except that one 10 dB or more off is taken at once: a new
 //!    background (a sound after digital silence, a tail dying away), not the estimate's
@@ -348,7 +352,10 @@ impl Decoder {
             analyzer: Analyzer::new(geometry.clone()),
             sliding: vec![0.0; geometry.scale_count() * TONE_COUNT],
             scratch_powers: vec![0.0; geometry.scale_count() * TONE_COUNT],
-            noise: NoiseFloor::new(geometry.window_len),
+            noise: NoiseFloor::new(
+                geometry.window_len,
+                geometry.slot_samples / geometry.hop as f64,
+            ),
             short_window: ShortWindow::new(geometry.window_len),
             geometry,
             config,

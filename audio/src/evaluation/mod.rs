@@ -5,8 +5,13 @@
 //! times a trial if it wants a speed.
 
 mod room;
+mod scene;
 
 pub use room::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
+pub use scene::{
+    load_room_set, run_scene_false_alarm_trial, run_scene_trial, ExternalRoom, RoomSet,
+    RoomSetError, SceneOutcome, SceneTrial, ROOM_SET_RATE_HZ,
+};
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
