@@ -41,7 +41,7 @@ mod talk;
 mod timers;
 mod transmit;
 
-pub use budget::{Budget, BudgetParseError, BudgetSpec};
+pub use budget::{Budget, BudgetParseError, BudgetSpec, ExternalCap, FREE_GAP};
 pub use config::{ConfigInvalid, ReplicaConfig};
 pub use events::{Destination, Event, Transmit};
 pub use peers::ordered_incarnation;
@@ -246,6 +246,17 @@ impl Replica {
     pub fn set_game_clock(&mut self, now: Instant, remaining: Duration) {
         if let Some(b) = &mut self.budget {
             b.set_clock(now, remaining);
+        }
+    }
+
+    /// The league's referee system's figures for the team's budget, the authority over
+    /// this replica's own accounting (see [`ExternalCap`]); `None` goes back to the
+    /// replica's own. Without a budget it is ignored.
+    pub fn set_external_budget(&mut self, cap: Option<ExternalCap>) {
+        // The teammates' frames heard so far are in the figure's "before".
+        self.note_team_frames();
+        if let Some(b) = &mut self.budget {
+            b.set_external(cap);
         }
     }
 
