@@ -319,6 +319,11 @@ impl BudgetState {
         });
     }
 
+    /// Whether an external figure is in force.
+    pub(crate) fn has_external(&self) -> bool {
+        self.external.is_some()
+    }
+
     /// Frames the team may still send by the external figure, less this robot's frames
     /// and the teammates' heard since it came.
     fn external_left(&self, x: &External) -> u64 {
@@ -721,6 +726,51 @@ mod replica_tests {
 
     fn at(ms: u64) -> Instant {
         Instant::from_micros(ms * 1000)
+    }
+
+    /// Robot 1 (its own share) hears that the GameController leaves the team 5 frames;
+    /// teammate 2 then sends 3 frames it hears. Robot 1, which always has news, sends the 2
+    /// left and no more until the GC's next figure: the teammates' frames since the figure
+    /// use it up too.
+    #[test]
+    fn teammates_frames_heard_since_the_gcs_figure_count_against_it() {
+        let budget = crate::BudgetSpec::SPL.share(5).split();
+        let cfg = ReplicaConfig {
+            budget: Some(budget),
+            mtu: 128,
+            ..ReplicaConfig::new(1, 1)
+        };
+        let mut r1 = Replica::new(cfg, 1, at(0)).unwrap();
+        let mut r2 = Replica::new(ReplicaConfig::new(2, 1), 2, at(0)).unwrap();
+        let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        r1.set_game_clock(at(0), Duration::ZERO);
+        r1.set_external_budget(Some(crate::ExternalCap {
+            counted: true,
+            team_left: 5,
+            rate_per_s: 1.0,
+        }));
+        let x = Key::parse("*.var.x").unwrap();
+        let mut sent = 0;
+        for ms in (0..3000).step_by(10) {
+            if ms < 30 {
+                r2.set_key(at(ms), &x, Value::Int(ms as i64)).unwrap();
+                r2.handle_timeout(at(ms));
+                while let Some(t) = r2.poll_transmit() {
+                    r1.handle_datagram(at(ms), from, &t.payload);
+                }
+            }
+            r1.handle_timeout(at(ms));
+            r1.set_priority(at(ms), &x, Value::Int(ms as i64)).unwrap();
+            while r1.poll_transmit().is_some() {
+                sent += 1;
+            }
+        }
+        let heard = r1.peers().map(|p| p.frames).sum::<u64>();
+        assert!(heard >= 3, "robot 2's frames were heard: {heard}");
+        assert!(
+            sent <= 5u64.saturating_sub(heard),
+            "{sent} sent with {heard} of the team's 5 heard"
+        );
     }
 
     /// Drives a replica for `until_ms`, writing `*.var.x` every 10 ms and the priority key

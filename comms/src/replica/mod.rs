@@ -254,8 +254,9 @@ impl Replica {
     /// replica's own. Without a budget it is ignored.
     pub fn set_external_budget(&mut self, cap: Option<ExternalCap>) {
         // The teammates' frames heard so far are in the figure's "before".
-        self.note_team_frames();
+        let heard = self.peers.values().map(Peer::frames_sent).sum();
         if let Some(b) = &mut self.budget {
+            b.set_heard(heard);
             b.set_external(cap);
         }
     }
@@ -273,10 +274,11 @@ impl Replica {
         self.budget.as_ref().map(|b| b.headroom(self.now))
     }
 
-    /// Tells a pooled budget how many frames teammates have sent.
+    /// Tells a pooled budget, or one under an external cap (whose figure the teammates'
+    /// frames since use up), how many frames teammates have sent.
     fn note_team_frames(&mut self) {
         if let Some(b) = &mut self.budget {
-            if b.budget.team.is_some() {
+            if b.budget.team.is_some() || b.has_external() {
                 b.set_heard(self.peers.values().map(Peer::frames_sent).sum());
             }
         }
