@@ -335,15 +335,31 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         let _gc = match gamecontroller_config(&args, handle.robot_id()) {
             Some(config) => {
                 let listen = config.listen;
-                let gc = driver::GameController::start(&handle, config)
-                    .with_context(|| format!("listening for the GameController on {listen}"))?;
-                tracing::info!(
-                    %listen,
-                    team = args.team,
-                    "GameController: listening (local.var.gc.*), status packets to its port {}",
-                    args.gc_status_port
-                );
-                Some(gc)
+                match driver::GameController::start(&handle, config) {
+                    Ok(gc) => {
+                        tracing::info!(
+                            %listen,
+                            team = args.team,
+                            "GameController: listening (local.var.gc.*), status packets to its port {}",
+                            args.gc_status_port
+                        );
+                        Some(gc)
+                    }
+                    // Asked for: a robot that cannot hear the GC must not play unaware.
+                    Err(e) if args.gamecontroller => {
+                        bail!("cannot listen for the GameController on {listen}: {e}")
+                    }
+                    // On by default with --budget spl: run as before, loudly.
+                    Err(e) => {
+                        tracing::error!(
+                            %listen,
+                            error = %e,
+                            "CANNOT LISTEN FOR THE GAMECONTROLLER: the budget is paced from this \
+                             daemon's start and cannot see the team's count"
+                        );
+                        None
+                    }
+                }
             }
             None => {
                 if args.budget == Some(comms::BudgetSpec::SPL) {
@@ -404,5 +420,43 @@ async fn shutdown_signal() {
     tokio::select! {
         _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT: shutting down"),
         _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    }
+
+    fn gc(args: &[&str]) -> Option<driver::GameControllerConfig> {
+        let cli = Cli::try_parse_from(["huddle"].iter().chain(args)).expect("parses");
+        gamecontroller_config(&cli.daemon, 3)
+    }
+
+    #[test]
+    fn the_gamecontroller_is_on_by_default_under_an_spl_budget_only() {
+        let spl = gc(&["--budget", "spl", "--team", "12"]).expect("on with --budget spl");
+        assert_eq!((spl.team, spl.player), (12, 3));
+        assert_eq!(spl.listen, "0.0.0.0:3838".parse().unwrap());
+        let budget = spl.budget.expect("the budget follows the GC");
+        assert_eq!((budget.messages_per_game, budget.robots), (1200, 5));
+        assert!(gc(&[]).is_none(), "off without a budget");
+        assert!(
+            gc(&["--budget", "humanoid"]).is_none(),
+            "off for another league"
+        );
+        assert!(gc(&["--budget", "spl", "--no-gamecontroller"]).is_none());
+        let asked = gc(&["--gamecontroller"]).expect("on when asked");
+        assert!(asked.budget.is_none(), "no budget to feed");
+        assert!(
+            gc(&["--gamecontroller", "--no-gamecontroller"]).is_none(),
+            "the last flag wins"
+        );
     }
 }
