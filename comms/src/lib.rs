@@ -174,7 +174,7 @@ pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
 pub use replica::{
     ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ConfigInvalid, Destination, Event,
-    PostError, Replica, ReplicaConfig, Transmit,
+    ExternalCap, PostError, Replica, ReplicaConfig, Transmit, FREE_GAP,
 };
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;

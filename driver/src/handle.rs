@@ -334,6 +334,28 @@ impl Handle {
         Ok(Guard::new(slot))
     }
 
+    /// The league's referee system's figures for the replica's budget: the game clock
+    /// (`game_remaining`, when known) and the team's messages left
+    /// ([`comms::Replica::set_external_budget`]; `None`: the replica's own accounting).
+    pub fn set_external_budget(
+        &self,
+        game_remaining: Option<Duration>,
+        cap: Option<comms::ExternalCap>,
+    ) {
+        {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            if let Some(remaining) = game_remaining {
+                inner.replica.set_game_clock(now, remaining);
+            }
+            inner.replica.set_external_budget(cap);
+            inner.pump();
+            // The budget's deadline moved: the driver task may sleep until a later one.
+            inner.wake.notify_one();
+        }
+        run_reactions(&self.inner);
+    }
+
     /// The driver's clock, for threads that stamp what they observe on its timeline.
     pub fn clock(&self) -> Clock {
         self.inner.borrow().clock

@@ -56,7 +56,10 @@ pub struct DaemonArgs {
     /// bytes), `humanoid` (12,000, 512 bytes) or N/DURATION (`600/10min`). This robot
     /// spends its equal share (see --team-size), paced over the game from the daemon's
     /// start, a fifth kept for priority items; frames never exceed the league's payload
-    /// and a value that cannot fit one is refused at SETV. Default: no budget.
+    /// and a value that cannot fit one is refused at SETV. With a GameController
+    /// (--gamecontroller, on by default with `spl`), the pacing follows its game clock,
+    /// only the states it counts spend messages, and its count of the team's messages
+    /// left is the authority: nothing goes within a margin of its 0. Default: no budget.
     #[arg(long, value_name = "SPEC")]
     pub budget: Option<comms::BudgetSpec>,
     /// Robots sharing the --budget.
@@ -80,6 +83,22 @@ pub struct DaemonArgs {
     /// without one.
     #[arg(long, value_enum)]
     pub policy: Option<team::SendPolicy>,
+    /// Listen to the league's GameController (RoboCup SPL, UDP port 3838): the game's
+    /// state, penalties and score go to `local.var.gc.*`, this robot's status (RGrt) goes
+    /// back to it, and under --budget the pacing follows its clock and its count of the
+    /// team's messages. On by default with --budget spl.
+    #[arg(long, overrides_with = "no_gamecontroller")]
+    pub gamecontroller: bool,
+    /// Do not listen to a GameController, even with --budget spl.
+    #[arg(long, overrides_with = "gamecontroller")]
+    pub no_gamecontroller: bool,
+    /// Where the GameController's packets are received (its broadcasts reach a socket
+    /// bound to every interface only).
+    #[arg(long, value_name = "ADDR:PORT", default_value = "0.0.0.0:3838")]
+    pub gc_listen: SocketAddr,
+    /// The port this robot's status packets go to on the GameController's address.
+    #[arg(long, value_name = "PORT", default_value_t = 3939)]
+    pub gc_status_port: u16,
     /// Multicast TTL.
     #[arg(long, default_value_t = 1)]
     pub ttl: u32,
@@ -192,6 +211,28 @@ pub fn impairment(args: &DaemonArgs, robot_id: u8) -> Result<Option<LinkImpairme
     Ok(Some(model))
 }
 
+/// The GameController listener's settings, if it is on (`--gamecontroller`, or by
+/// default with `--budget spl`).
+pub fn gamecontroller_config(
+    args: &DaemonArgs,
+    robot_id: u8,
+) -> Option<driver::GameControllerConfig> {
+    let spl = args.budget == Some(comms::BudgetSpec::SPL);
+    if args.no_gamecontroller || !(args.gamecontroller || spl) {
+        return None;
+    }
+    let mut config = driver::GameControllerConfig::new(args.team, robot_id);
+    config.listen = args.gc_listen;
+    config.status_port = args.gc_status_port;
+    if let Some(spec) = args.budget {
+        let mut budget = gamecontroller::GcBudget::spl(args.team_size);
+        budget.messages_per_game = u32::try_from(spec.team_messages).unwrap_or(u32::MAX);
+        budget.half = spec.game / 2;
+        config.budget = Some(budget);
+    }
+    Some(config)
+}
+
 /// Builds the driver configuration from the arguments: robot id, config files, key.
 pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     let id = match args.id {
@@ -302,6 +343,45 @@ pub fn run(args: DaemonArgs) -> Result<()> {
             driver.set_impairment(Some(Box::new(model)));
         }
         let handle = driver.handle();
+        let _gc = match gamecontroller_config(&args, handle.robot_id()) {
+            Some(config) => {
+                let listen = config.listen;
+                match driver::GameController::start(&handle, config) {
+                    Ok(gc) => {
+                        tracing::info!(
+                            %listen,
+                            team = args.team,
+                            "GameController: listening (local.var.gc.*), status packets to its port {}",
+                            args.gc_status_port
+                        );
+                        Some(gc)
+                    }
+                    // Asked for: a robot that cannot hear the GC must not play unaware.
+                    Err(e) if args.gamecontroller => {
+                        bail!("cannot listen for the GameController on {listen}: {e}")
+                    }
+                    // On by default with --budget spl: run as before, loudly.
+                    Err(e) => {
+                        tracing::error!(
+                            %listen,
+                            error = %e,
+                            "CANNOT LISTEN FOR THE GAMECONTROLLER: the budget is paced from this \
+                             daemon's start and cannot see the team's count"
+                        );
+                        None
+                    }
+                }
+            }
+            None => {
+                if args.budget == Some(comms::BudgetSpec::SPL) {
+                    tracing::warn!(
+                        "--budget spl with --no-gamecontroller: the budget is paced from this \
+                         daemon's start and cannot see the team's count as the GameController keeps it"
+                    );
+                }
+                None
+            }
+        };
         let _audio = match args.audio.config() {
             Some(config) => {
                 let audio = driver::audio::Audio::start(&handle, config.clone())
@@ -364,5 +444,43 @@ async fn shutdown_signal() {
     tokio::select! {
         _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT: shutting down"),
         _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    }
+
+    fn gc(args: &[&str]) -> Option<driver::GameControllerConfig> {
+        let cli = Cli::try_parse_from(["huddle"].iter().chain(args)).expect("parses");
+        gamecontroller_config(&cli.daemon, 3)
+    }
+
+    #[test]
+    fn the_gamecontroller_is_on_by_default_under_an_spl_budget_only() {
+        let spl = gc(&["--budget", "spl", "--team", "12"]).expect("on with --budget spl");
+        assert_eq!((spl.team, spl.player), (12, 3));
+        assert_eq!(spl.listen, "0.0.0.0:3838".parse().unwrap());
+        let budget = spl.budget.expect("the budget follows the GC");
+        assert_eq!((budget.messages_per_game, budget.robots), (1200, 5));
+        assert!(gc(&[]).is_none(), "off without a budget");
+        assert!(
+            gc(&["--budget", "humanoid"]).is_none(),
+            "off for another league"
+        );
+        assert!(gc(&["--budget", "spl", "--no-gamecontroller"]).is_none());
+        let asked = gc(&["--gamecontroller"]).expect("on when asked");
+        assert!(asked.budget.is_none(), "no budget to feed");
+        assert!(
+            gc(&["--gamecontroller", "--no-gamecontroller"]).is_none(),
+            "the last flag wins"
+        );
     }
 }

@@ -39,6 +39,15 @@
 //! at once can overlap). The game clock is an input: by default the game starts when
 //! the replica does; [`crate::Replica::set_game_clock`] sets the remaining time (the
 //! GameController's `secsRemaining`, when there is one).
+//!
+//! The league's referee system is the authority on what a team has left: with an
+//! [`ExternalCap`] ([`crate::Replica::set_external_budget`], the daemon feeds the
+//! GameController's figures twice a second) no frame goes beyond the team's messages left
+//! by its figure (less what this robot and the teammates it heard sent since), ordinary
+//! frames also keep to its line (`ceil(rate · time left)` kept for the rest of the game),
+//! a pooled team counts its frames by it (so a robot restarted mid-game resumes from the
+//! GC's figures, not a fresh share), and in states it does not count a frame is free
+//! (one per [`FREE_GAP`] at most) and spends nothing.
 
 use std::fmt;
 use std::str::FromStr;
@@ -235,6 +244,33 @@ impl Budget {
     }
 }
 
+/// The league's referee system's figures for the team's budget (the GameController's
+/// `messageBudget` less a safety margin): the authority over this robot's own accounting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExternalCap {
+    /// Whether a frame sent now is counted against the budget.
+    pub counted: bool,
+    /// Frames the whole team may still send, as of this figure.
+    pub team_left: u64,
+    /// The league's messages per second of game time: ordinary frames leave
+    /// `ceil(rate_per_s · time left)` for the rest of the game.
+    pub rate_per_s: f64,
+}
+
+/// The shortest gap between two frames in a state the referee system does not count: its
+/// state can lag by one of its periods (500 ms), in which frames thought free are counted.
+pub const FREE_GAP: Duration = Duration::from_millis(250);
+
+/// An external figure and the counts of frames when it came.
+#[derive(Debug, Clone, Copy)]
+struct External {
+    cap: ExternalCap,
+    /// This robot's frames (counted and free) when the figure came.
+    sent_at: u64,
+    /// Teammates' frames heard when the figure came.
+    heard_at: u64,
+}
+
 /// Which allowance a frame draws on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Class {
@@ -260,6 +296,10 @@ pub(crate) struct BudgetState {
     /// Pooled: this robot's credit on its equal part, in frames, as of the share of the
     /// game `.1` (it accrues with play, up to [`OWNER_CREDIT_MAX`]).
     credit: (f64, f64),
+    /// The referee system's figures, when there are some.
+    external: Option<External>,
+    /// Frames sent in states the referee system does not count, and the last one's time.
+    free: (u64, Option<Instant>),
 }
 
 /// Frames of its equal part a pooled robot may save up: what it leaves beyond this goes to
@@ -278,7 +318,47 @@ impl BudgetState {
             last_ordinary: None,
             heard: 0,
             credit: (1.0, 0.0),
+            external: None,
+            free: (0, None),
         }
+    }
+
+    /// The referee system's newest figures (`None`: there is none; the budget is this
+    /// replica's own accounting alone).
+    pub(crate) fn set_external(&mut self, cap: Option<ExternalCap>) {
+        self.external = cap.map(|cap| External {
+            cap,
+            sent_at: self.sent + self.free.0,
+            heard_at: self.heard,
+        });
+    }
+
+    /// Whether an external figure is in force.
+    pub(crate) fn has_external(&self) -> bool {
+        self.external.is_some()
+    }
+
+    /// Frames the team may still send by the external figure, less this robot's frames
+    /// and the teammates' heard since it came.
+    fn external_left(&self, x: &External) -> u64 {
+        let since = (self.sent + self.free.0).saturating_sub(x.sent_at)
+            + self.heard.saturating_sub(x.heard_at);
+        x.cap.team_left.saturating_sub(since)
+    }
+
+    /// When the external line lets an ordinary frame go: once `ceil(rate · time left)` is
+    /// below the figure's frames left.
+    fn external_line_open(&self, now: Instant, x: &External) -> Option<Instant> {
+        let left = self.external_left(x);
+        if left == 0 {
+            return None;
+        }
+        if x.cap.rate_per_s <= 0.0 {
+            return Some(now);
+        }
+        let until = (left - 1) as f64 / x.cap.rate_per_s;
+        let wait = self.remaining(now).as_secs_f64() - until;
+        Some(now + Duration::from_secs_f64(wait.clamp(0.0, 1e9)))
     }
 
     /// Teammates have sent `frames` in all, as far as this robot has heard.
@@ -286,9 +366,13 @@ impl BudgetState {
         self.heard = frames;
     }
 
-    /// The team's frames so far, as far as this robot knows.
+    /// The team's frames so far, as far as this robot knows (by the external figure when
+    /// there is one).
     pub(crate) fn team_sent(&self) -> u64 {
-        self.sent + self.heard
+        match (&self.external, self.budget.team) {
+            (Some(x), Some(team)) => team.messages.saturating_sub(self.external_left(x)),
+            _ => self.sent + self.heard,
+        }
     }
 
     /// The share of the game played at `now`, in [0, 1].
@@ -323,12 +407,16 @@ impl BudgetState {
     /// Messages left in all: this robot's, or with a pool the team's (as far as this
     /// robot has heard).
     pub(crate) fn left(&self) -> u64 {
-        match self.budget.team {
+        let own = match self.budget.team {
             None => self.budget.messages.saturating_sub(self.sent),
             Some(team) => {
                 let cap = team.messages.saturating_sub(team.margin() / 2);
                 cap.saturating_sub(self.team_sent())
             }
+        };
+        match &self.external {
+            Some(x) => own.min(self.external_left(x)),
+            None => own,
         }
     }
 
@@ -342,8 +430,21 @@ impl BudgetState {
         cap.saturating_sub(self.sent_ordinary).min(self.left())
     }
 
-    /// When the next ordinary frame may go (`None`: never again this game).
+    /// When the next ordinary frame may go (`None`: never again this game, or until the
+    /// external figure changes).
     pub(crate) fn next_ordinary(&self, now: Instant) -> Option<Instant> {
+        match &self.external {
+            None => self.next_paced(now),
+            Some(x) if !x.cap.counted => Some(self.free.1.map_or(now, |t| t + FREE_GAP)),
+            Some(x) => {
+                let paced = self.next_paced(now)?;
+                Some(paced.max(self.external_line_open(now, x)?))
+            }
+        }
+    }
+
+    /// [`BudgetState::next_ordinary`] by this replica's own pacing.
+    fn next_paced(&self, now: Instant) -> Option<Instant> {
         if let Some(team) = self.budget.team {
             return self.next_pooled(now, team);
         }
@@ -425,6 +526,9 @@ impl BudgetState {
     pub(crate) fn allows(&self, now: Instant, class: Class) -> bool {
         // Pooled, the floor (its own credit) holds whatever the team's count says.
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
+        if self.external.is_some_and(|x| !x.cap.counted) {
+            return ordinary;
+        }
         if self.left() == 0 {
             return ordinary && self.budget.team.is_some();
         }
@@ -449,6 +553,10 @@ impl BudgetState {
 
     /// A frame of `class` went at `now`.
     pub(crate) fn spend(&mut self, now: Instant, class: Class) {
+        if self.external.is_some_and(|x| !x.cap.counted) {
+            self.free = (self.free.0 + 1, Some(now));
+            return;
+        }
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
         if let Some(team) = self.budget.team {
             // Every frame draws on the credit while there is some; borrowing owes nothing.
@@ -471,6 +579,84 @@ mod tests {
 
     fn at(ms: u64) -> Instant {
         Instant::from_micros(ms * 1000)
+    }
+
+    fn gc(counted: bool, team_left: u64) -> Option<ExternalCap> {
+        Some(ExternalCap {
+            counted,
+            team_left,
+            rate_per_s: 1.0,
+        })
+    }
+
+    /// The GameController says 3 frames are left (after its margin): whatever the robot's
+    /// own share says, at most three frames go, priority or not (a pooled team keeps its
+    /// own margins on top: none), and then none until it says more.
+    #[test]
+    fn an_external_figure_is_the_authority_on_frames_left() {
+        for (budget, expect) in [
+            (BudgetSpec::SPL.share(5).split(), 3),
+            (BudgetSpec::SPL.share(5), 0),
+        ] {
+            let mut b = BudgetState::new(budget, at(0));
+            b.set_clock(at(0), Duration::ZERO);
+            b.set_external(gc(true, 3));
+            let mut sent = 0;
+            for ms in (0..5_000).step_by(10) {
+                if b.allows(at(ms), Class::Priority) {
+                    b.spend(at(ms), Class::Priority);
+                    sent += 1;
+                }
+            }
+            assert_eq!(sent, expect, "{budget:?}");
+            assert!(b.next_ordinary(at(5_000)).is_none(), "no deadline at 0");
+            b.set_external(gc(true, 0));
+            assert!(
+                !b.allows(at(5_000), Class::Priority),
+                "never at the GC's zero"
+            );
+        }
+    }
+
+    /// In a state the GC does not count, frames are free: they spend nothing of the share
+    /// and go at most one per FREE_GAP; at the GC's zero nothing goes even then (its state
+    /// can lag one period behind a counted one).
+    #[test]
+    fn frames_the_gc_does_not_count_are_free_but_spaced() {
+        let budget = BudgetSpec::SPL.share(5).split();
+        let mut b = BudgetState::new(budget, at(0));
+        b.set_external(gc(false, 1000));
+        let mut sent = Vec::new();
+        for ms in (0..1_000).step_by(10) {
+            if b.allows(at(ms), Class::Ordinary) {
+                b.spend(at(ms), Class::Ordinary);
+                sent.push(ms);
+            }
+        }
+        assert_eq!(sent, vec![0, 250, 500, 750], "one per FREE_GAP");
+        assert_eq!(b.sent(), 0, "nothing counted");
+        b.set_external(gc(false, 0));
+        assert!(!b.allows(at(2_000), Class::Ordinary));
+    }
+
+    /// A pooled robot restarted mid-game (its own counters at 0) with the GC saying the
+    /// team is at its line: it does not spend a fresh share at once, it keeps to the
+    /// line; with the team 50 under its line it may go.
+    #[test]
+    fn a_robot_restarted_mid_game_resumes_from_the_gcs_figures() {
+        let budget = BudgetSpec::SPL.share(5);
+        let mut b = BudgetState::new(budget, at(0));
+        // Second half, 300 s left; the line keeps 300 for the rest and the pool's margins.
+        b.set_clock(at(0), Duration::from_secs(300));
+        b.set_external(gc(true, 300));
+        assert!(!b.allows(at(0), Class::Ordinary), "at the line: no burst");
+        assert!(b.headroom(at(0)) <= 0, "headroom {}", b.headroom(at(0)));
+        b.set_external(gc(true, 350));
+        assert!(b.allows(at(0), Class::Ordinary), "50 under the line");
+        // Without the GC's figure the fresh robot would have spent at once.
+        let mut fresh = BudgetState::new(budget, at(0));
+        fresh.set_clock(at(0), Duration::from_secs(300));
+        assert!(fresh.allows(at(0), Class::Ordinary));
     }
 
     #[test]
@@ -564,6 +750,51 @@ mod replica_tests {
 
     fn at(ms: u64) -> Instant {
         Instant::from_micros(ms * 1000)
+    }
+
+    /// Robot 1 (its own share) hears that the GameController leaves the team 5 frames;
+    /// teammate 2 then sends 3 frames it hears. Robot 1, which always has news, sends the 2
+    /// left and no more until the GC's next figure: the teammates' frames since the figure
+    /// use it up too.
+    #[test]
+    fn teammates_frames_heard_since_the_gcs_figure_count_against_it() {
+        let budget = crate::BudgetSpec::SPL.share(5).split();
+        let cfg = ReplicaConfig {
+            budget: Some(budget),
+            mtu: 128,
+            ..ReplicaConfig::new(1, 1)
+        };
+        let mut r1 = Replica::new(cfg, 1, at(0)).unwrap();
+        let mut r2 = Replica::new(ReplicaConfig::new(2, 1), 2, at(0)).unwrap();
+        let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
+        r1.set_game_clock(at(0), Duration::ZERO);
+        r1.set_external_budget(Some(crate::ExternalCap {
+            counted: true,
+            team_left: 5,
+            rate_per_s: 1.0,
+        }));
+        let x = Key::parse("*.var.x").unwrap();
+        let mut sent = 0;
+        for ms in (0..3000).step_by(10) {
+            if ms < 30 {
+                r2.set_key(at(ms), &x, Value::Int(ms as i64)).unwrap();
+                r2.handle_timeout(at(ms));
+                while let Some(t) = r2.poll_transmit() {
+                    r1.handle_datagram(at(ms), from, &t.payload);
+                }
+            }
+            r1.handle_timeout(at(ms));
+            r1.set_priority(at(ms), &x, Value::Int(ms as i64)).unwrap();
+            while r1.poll_transmit().is_some() {
+                sent += 1;
+            }
+        }
+        let heard = r1.peers().map(|p| p.frames).sum::<u64>();
+        assert!(heard >= 3, "robot 2's frames were heard: {heard}");
+        assert!(
+            sent <= 5u64.saturating_sub(heard),
+            "{sent} sent with {heard} of the team's 5 heard"
+        );
     }
 
     /// Drives a replica for `until_ms`, writing `*.var.x` every 10 ms and the priority key

@@ -41,7 +41,7 @@ mod talk;
 mod timers;
 mod transmit;
 
-pub use budget::{Budget, BudgetParseError, BudgetSpec};
+pub use budget::{Budget, BudgetParseError, BudgetSpec, ExternalCap, FREE_GAP};
 pub use config::{ConfigInvalid, ReplicaConfig};
 pub use events::{Destination, Event, Transmit};
 pub use peers::ordered_incarnation;
@@ -252,6 +252,18 @@ impl Replica {
         }
     }
 
+    /// The league's referee system's figures for the team's budget, the authority over
+    /// this replica's own accounting (see [`ExternalCap`]); `None` goes back to the
+    /// replica's own. Without a budget it is ignored.
+    pub fn set_external_budget(&mut self, cap: Option<ExternalCap>) {
+        // The teammates' frames heard so far are in the figure's "before".
+        let heard = self.peers.values().map(Peer::frames_sent).sum();
+        if let Some(b) = &mut self.budget {
+            b.set_heard(heard);
+            b.set_external(cap);
+        }
+    }
+
     /// Whether this robot's value at `key` changed and waits for a frame (a budget's
     /// pacing holds it): a caller that wants the newest value to go, not the one it had
     /// when it decided to send, sets it again until this is false.
@@ -265,17 +277,21 @@ impl Replica {
         self.budget.as_ref().map(|b| b.headroom(self.now))
     }
 
-    /// Tells a pooled budget how many frames teammates have sent: of every id heard,
-    /// the `robots - 1` that count most (a team of `robots` has no more teammates, so
-    /// frames forged under 250 other ids count as at most that many).
+    /// Tells a pooled budget, or one under an external cap (whose figure the teammates'
+    /// frames since use up), how many frames teammates have sent. Pooled, of every id
+    /// heard only the `robots - 1` that count most (a team of `robots` has no more
+    /// teammates, so frames forged under 250 other ids count as at most that many).
     fn note_team_frames(&mut self) {
         if let Some(b) = &mut self.budget {
-            if let Some(team) = b.budget.team {
+            let pooled = b.budget.team;
+            if pooled.is_some() || b.has_external() {
                 let mut counts: Vec<u64> = self.peers.values().map(Peer::frames_sent).collect();
-                let teammates = usize::try_from(team.robots.saturating_sub(1)).unwrap_or(0);
-                if counts.len() > teammates {
-                    counts.select_nth_unstable_by(teammates, |a, b| b.cmp(a));
-                    counts.truncate(teammates);
+                if let Some(team) = pooled {
+                    let teammates = usize::try_from(team.robots.saturating_sub(1)).unwrap_or(0);
+                    if counts.len() > teammates {
+                        counts.select_nth_unstable_by(teammates, |a, b| b.cmp(a));
+                        counts.truncate(teammates);
+                    }
                 }
                 b.set_heard(counts.iter().fold(0u64, |a, &c| a.saturating_add(c)));
             }

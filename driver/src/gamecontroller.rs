@@ -1,0 +1,379 @@
+//! The GameController listener: the league's referee system, heard on UDP port 3838,
+//! on the blackboard and in the budget; this robot's status (RGrt) sent back to it.
+//!
+//! Every datagram goes through a [`gamecontroller::GameTracker`]: bad ones (length,
+//! header, version, fields, another game) and stale ones are counted and ignored. The
+//! newest packet is written to `local` keys (this robot only, never sent to the team):
+//!
+//! | key | type | what |
+//! |---|---|---|
+//! | `local.var.gc.state` | string | `initial` `ready` `set` `playing` `finished` `standby` |
+//! | `local.var.gc.game_phase` | string | `normal` `penalty_shoot` `overtime` `timeout` |
+//! | `local.var.gc.set_play` | string | `none` `goal_kick` `pushing_free_kick` `corner_kick` `kick_in` `penalty_kick` |
+//! | `local.var.gc.kicking_team` | int | the kicking team's number, 255 none |
+//! | `local.var.gc.first_half` | bool | |
+//! | `local.var.gc.secs_remaining` | int | seconds left in the half |
+//! | `local.var.gc.secondary_time` | int | the secondary clock |
+//! | `local.var.gc.score` | int | this team's score |
+//! | `local.var.gc.opponent_score` | int | the other team's |
+//! | `local.var.gc.budget` | int | the team's messages left by the GC (`messageBudget`) |
+//! | `local.var.gc.counted` | bool | whether the GC counts a message sent now |
+//! | `local.var.gc.penalty` | int | this robot's penalty code (0 none, 14 substitute) |
+//! | `local.var.gc.penalty_secs` | int | seconds till this robot is unpenalised |
+//!
+//! Counters go to `local.var.huddle.stats.gc.*` (`huddle stats`): `accepted`, `stale`,
+//! `bad_length`, `bad_header`, `wrong_version`, `bad_field`, `wrong_team`, `status_sent`.
+//!
+//! With a [`GcBudget`], each packet also feeds the replica's budget
+//! ([`Handle::set_external_budget`]): the game clock over the halves and the GC's
+//! messages left less the margin, which no frame goes beyond. Without a packet for
+//! [`GameControllerConfig::lost_after`], the replica goes back to its own accounting (and
+//! the log says so loudly).
+//!
+//! Status packets go to the GC's address (its IP, port 3939) every
+//! [`GameControllerConfig::status_period`] once a packet was heard, from
+//! `local.var.robot.pose` (floats `[x_m, y_m, theta_rad, ...]`, field frame),
+//! `local.var.team.ball` (floats `[x_m, y_m, ...]`, field frame; its age is the entry's)
+//! and `local.var.robot.fallen` (bool).
+
+use std::cell::RefCell;
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+use std::rc::Rc;
+use std::time::Duration;
+
+use comms::{ExternalCap, Value};
+use gamecontroller::{GameTracker, GcBudget, StatusInputs, GAMECONTROLLER_RETURN_PORT};
+use tokio::net::UdpSocket;
+
+use crate::handle::Handle;
+
+/// The listener's settings.
+#[derive(Debug, Clone)]
+pub struct GameControllerConfig {
+    /// Where to listen (default `0.0.0.0:3838`: the GC broadcasts, and a socket bound to
+    /// one unicast address does not receive broadcasts).
+    pub listen: SocketAddr,
+    /// This team's number in the GC's packets.
+    pub team: u8,
+    /// This robot's player number (1–20 for status packets).
+    pub player: u8,
+    /// Pace the replica's budget by the GC's figures.
+    pub budget: Option<GcBudget>,
+    /// The status packets' period; `None`: none sent.
+    pub status_period: Option<Duration>,
+    /// The port status packets go to on the GC's IP (3939).
+    pub status_port: u16,
+    /// The local address status packets leave from.
+    pub status_from: SocketAddr,
+    /// The GC is taken as gone after this long without a packet.
+    pub lost_after: Duration,
+}
+
+impl GameControllerConfig {
+    /// Defaults for player `player` of team `team`: port 3838 on every interface, status
+    /// every 750 ms (1.3 Hz: the GC shows a robot connected if heard within 2 s).
+    pub fn new(team: u8, player: u8) -> GameControllerConfig {
+        GameControllerConfig {
+            listen: SocketAddr::V4(SocketAddrV4::new(
+                Ipv4Addr::UNSPECIFIED,
+                gamecontroller::GAMECONTROLLER_DATA_PORT,
+            )),
+            team,
+            player,
+            budget: None,
+            status_period: Some(Duration::from_millis(750)),
+            status_port: GAMECONTROLLER_RETURN_PORT,
+            status_from: SocketAddr::V4(SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, 0)),
+            lost_after: Duration::from_secs(5),
+        }
+    }
+}
+
+/// A running listener; it stops when dropped.
+pub struct GameController {
+    task: tokio::task::JoinHandle<()>,
+    tracker: Rc<RefCell<GameTracker>>,
+}
+
+impl Drop for GameController {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+impl GameController {
+    /// Binds the sockets and starts the listener on the current `LocalSet`.
+    pub fn start(handle: &Handle, config: GameControllerConfig) -> std::io::Result<GameController> {
+        let socket = socket2::Socket::new(
+            socket2::Domain::for_address(config.listen),
+            socket2::Type::DGRAM,
+            Some(socket2::Protocol::UDP),
+        )?;
+        // Several daemons on one host (a team rehearsed on one laptop) all hear the
+        // GC's broadcast.
+        socket.set_reuse_address(true)?;
+        socket.set_reuse_port(true)?;
+        socket.set_nonblocking(true)?;
+        socket.bind(&config.listen.into())?;
+        let listen = UdpSocket::from_std(socket.into())?;
+        let status = match config.status_period {
+            Some(_) => {
+                let s = std::net::UdpSocket::bind(config.status_from)?;
+                s.set_nonblocking(true)?;
+                Some(UdpSocket::from_std(s)?)
+            }
+            None => None,
+        };
+        if config.status_period.is_some() && !(1..=20).contains(&config.player) {
+            tracing::warn!(
+                player = config.player,
+                "GameController: player numbers are 1-20: no status packets will be sent"
+            );
+        }
+        let tracker = Rc::new(RefCell::new(GameTracker::new(config.team, config.player)));
+        let task =
+            tokio::task::spawn_local(run(handle.clone(), config, listen, status, tracker.clone()));
+        Ok(GameController { task, tracker })
+    }
+
+    /// The tracker's counters and newest packet so far.
+    pub fn tracker(&self) -> GameTracker {
+        self.tracker.borrow().clone()
+    }
+}
+
+/// The driver clock as the tracker's time.
+fn since_start(handle: &Handle) -> Duration {
+    Duration::from_micros(handle.now().as_micros())
+}
+
+async fn run(
+    handle: Handle,
+    config: GameControllerConfig,
+    listen: UdpSocket,
+    status: Option<UdpSocket>,
+    tracker: Rc<RefCell<GameTracker>>,
+) {
+    let mut buf = [0u8; 2048];
+    let period = config.status_period.unwrap_or(Duration::from_secs(3600));
+    let mut status_tick = tokio::time::interval(period);
+    status_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // The first check after a grace period: a GC sends twice a second.
+    let mut check = tokio::time::interval_at(
+        tokio::time::Instant::now() + Duration::from_secs(3),
+        Duration::from_secs(1),
+    );
+    let mut written = Written::default();
+    // Whether the replica's budget follows the GC now; when the last "no GC" warning was.
+    let mut following = false;
+    let mut warned_at: Option<Duration> = None;
+    let mut status_sent = 0u64;
+    loop {
+        tokio::select! {
+            r = listen.recv_from(&mut buf) => {
+                let (len, from) = match r {
+                    Ok(x) => x,
+                    Err(e) => {
+                        tracing::debug!(error = %e, "GameController socket");
+                        continue;
+                    }
+                };
+                let now = since_start(&handle);
+                let received = tracker.borrow_mut().receive(now, from, &buf[..len]);
+                match received {
+                    Ok(gamecontroller::Received::Accepted) => {
+                        let t = tracker.borrow().clone();
+                        written.write(&handle, &t);
+                        if let Some(budget) = &config.budget {
+                            if !following {
+                                tracing::info!(%from, "GameController heard: the message budget follows its figures");
+                            }
+                            following = true;
+                            feed_budget(&handle, budget, &t);
+                        }
+                    }
+                    Ok(gamecontroller::Received::Stale) => {}
+                    Err(e) => tracing::debug!(%from, error = %e, "GameController packet dropped"),
+                }
+                written.stats(&handle, &tracker.borrow(), status_sent);
+            }
+            _ = status_tick.tick(), if status.is_some() => {
+                let t = tracker.borrow().clone();
+                let now = since_start(&handle);
+                if let (Some(socket), Some(to)) = (&status, t.gc_address()) {
+                    if t.is_live(now, config.lost_after) && (1..=20).contains(&config.player) {
+                        let mut to = to;
+                        to.set_port(config.status_port);
+                        let msg = status_inputs(&handle).to_message(config.player, config.team);
+                        match socket.try_send_to(&msg.encode(), to) {
+                            Ok(_) => status_sent += 1,
+                            Err(e) => tracing::debug!(%to, error = %e, "status packet not sent"),
+                        }
+                        written.stats(&handle, &t, status_sent);
+                    }
+                }
+            }
+            _ = check.tick() => {
+                let now = since_start(&handle);
+                let live = tracker.borrow().is_live(now, config.lost_after);
+                if config.budget.is_some() && !live {
+                    if following {
+                        following = false;
+                        handle.set_external_budget(None, None);
+                        tracing::warn!(
+                            "GameController not heard for {:?}: the message budget is paced by this \
+                             daemon's own accounting again (it cannot know the team's count)",
+                            config.lost_after
+                        );
+                        warned_at = Some(now);
+                    } else if warned_at.is_none_or(|w| now.saturating_sub(w) >= Duration::from_secs(60)) {
+                        warned_at = Some(now);
+                        tracing::warn!(
+                            listen = %config.listen,
+                            "NO GAMECONTROLLER heard: the league budget is paced from this daemon's \
+                             start, not the game's clock, and cannot see the team's count; a GC's \
+                             messageBudget of 0 would not stop it (--no-gamecontroller to silence)"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The replica's budget from the GC's newest figures.
+fn feed_budget(handle: &Handle, budget: &GcBudget, t: &GameTracker) {
+    let Some(game) = t.game() else { return };
+    let Some(cap) = budget.cap(game, t.team_number()) else {
+        return;
+    };
+    handle.set_external_budget(
+        Some(cap.game_remaining),
+        Some(ExternalCap {
+            counted: cap.counted,
+            team_left: u64::from(cap.team_left),
+            rate_per_s: budget.rate_per_s(),
+        }),
+    );
+}
+
+/// The status packet's inputs from the documented keys.
+fn status_inputs(handle: &Handle) -> StatusInputs {
+    let floats = |key: &str| match handle.get(key) {
+        Ok(Some(e)) => match e.value {
+            Value::Floats(v) => Some((v, e.stamp)),
+            _ => None,
+        },
+        _ => None,
+    };
+    let now = handle.now();
+    let pose = floats("local.var.robot.pose")
+        .filter(|(v, _)| v.len() >= 3)
+        .map(|(v, _)| [v[0], v[1], v[2]]);
+    let ball = floats("local.var.team.ball")
+        .filter(|(v, _)| v.len() >= 2)
+        .map(|(v, stamp)| {
+            let age = now.saturating_duration_since(stamp).as_secs_f64();
+            ([v[0], v[1]], age)
+        });
+    let fallen = matches!(
+        handle.get("local.var.robot.fallen"),
+        Ok(Some(comms::Entry {
+            value: Value::Bool(true),
+            ..
+        }))
+    );
+    StatusInputs { pose, ball, fallen }
+}
+
+/// What was last written to the blackboard, so only changes are written.
+#[derive(Default)]
+struct Written {
+    values: Vec<(&'static str, Value)>,
+}
+
+impl Written {
+    fn put(&mut self, handle: &Handle, key: &'static str, value: Value) {
+        match self.values.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, v)) if *v == value => return,
+            Some((_, v)) => *v = value.clone(),
+            None => self.values.push((key, value.clone())),
+        }
+        if let Err(e) = handle.set(key, value) {
+            tracing::debug!(key, error = %e, "cannot write");
+        }
+    }
+
+    fn write(&mut self, handle: &Handle, t: &GameTracker) {
+        let Some(g) = t.game() else { return };
+        let int = |v: i64| Value::Int(v);
+        let text = |s: &str| Value::String(s.to_owned());
+        self.put(handle, "local.var.gc.state", text(g.state.name()));
+        self.put(handle, "local.var.gc.game_phase", text(g.game_phase.name()));
+        self.put(handle, "local.var.gc.set_play", text(g.set_play.name()));
+        self.put(
+            handle,
+            "local.var.gc.kicking_team",
+            int(g.kicking_team.into()),
+        );
+        self.put(handle, "local.var.gc.first_half", Value::Bool(g.first_half));
+        self.put(
+            handle,
+            "local.var.gc.secs_remaining",
+            int(g.secs_remaining.into()),
+        );
+        self.put(
+            handle,
+            "local.var.gc.secondary_time",
+            int(g.secondary_time.into()),
+        );
+        self.put(
+            handle,
+            "local.var.gc.counted",
+            Value::Bool(g.messages_counted()),
+        );
+        if let Some(team) = t.own_team() {
+            self.put(handle, "local.var.gc.score", int(team.score.into()));
+            self.put(
+                handle,
+                "local.var.gc.budget",
+                int(team.message_budget.into()),
+            );
+        }
+        if let Some(other) = t.opponent() {
+            self.put(
+                handle,
+                "local.var.gc.opponent_score",
+                int(other.score.into()),
+            );
+        }
+        if let Some(me) = t.robot(t.player_number()) {
+            self.put(handle, "local.var.gc.penalty", int(me.penalty.into()));
+            self.put(
+                handle,
+                "local.var.gc.penalty_secs",
+                int(me.secs_till_unpenalised.into()),
+            );
+        }
+    }
+
+    fn stats(&mut self, handle: &Handle, t: &GameTracker, status_sent: u64) {
+        let s = t.stats();
+        for (key, n) in [
+            ("local.var.huddle.stats.gc.accepted", s.accepted),
+            ("local.var.huddle.stats.gc.stale", s.stale),
+            ("local.var.huddle.stats.gc.bad_length", s.bad_length),
+            ("local.var.huddle.stats.gc.bad_header", s.bad_header),
+            ("local.var.huddle.stats.gc.wrong_version", s.wrong_version),
+            ("local.var.huddle.stats.gc.bad_field", s.bad_field),
+            ("local.var.huddle.stats.gc.wrong_team", s.wrong_team),
+            ("local.var.huddle.stats.gc.status_sent", status_sent),
+        ] {
+            self.put(
+                handle,
+                key,
+                Value::Int(i64::try_from(n).unwrap_or(i64::MAX)),
+            );
+        }
+    }
+}

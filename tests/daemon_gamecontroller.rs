@@ -1,0 +1,197 @@
+//! The league's GameController on a real daemon (`huddle daemon --budget spl`), over
+//! loopback: a scripted GC sends RGme packets by unicast to 127.0.0.1 on a port of the
+//! test's own and listens for the robot's RGrt status on another.
+//!
+//! Scenario: robot 1 of team 12 runs under the SPL budget; its program writes a value
+//! every 20 ms. The GC says Playing with plenty left: frames go and the game state is on
+//! the blackboard. A stale packet (an older packetNumber saying Set) and truncated,
+//! oversized, wrong-version and wrong-team packets are counted and change nothing. The GC
+//! penalizes the robot: its keys change. Its status packets carry the pose, the ball
+//! relative to the robot and `fallen`. Then the GC says the team's budget is 0: the
+//! daemon sends nothing more while the program keeps writing.
+
+#![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
+
+mod daemon_support;
+
+use std::net::UdpSocket;
+use std::time::{Duration, Instant};
+
+use daemon_support::{free_tcp_port, scratch_group, Client, Daemon};
+use gamecontroller::{GameControlData, State, StatusMessage};
+
+struct ScriptedGc {
+    socket: UdpSocket,
+    to: String,
+    game: GameControlData,
+}
+
+impl ScriptedGc {
+    /// Sends the game as it stands, numbered one after the last.
+    fn send(&mut self) {
+        self.game.packet_number = self.game.packet_number.wrapping_add(1);
+        self.socket.send_to(&self.game.encode(), &self.to).unwrap();
+    }
+
+    fn send_raw(&self, bytes: &[u8]) {
+        self.socket.send_to(bytes, &self.to).unwrap();
+    }
+}
+
+/// Writes `*.var.x` every 20 ms for `d`, sending the GC's packet every 100 ms.
+fn write_for(c: &mut Client, gc: &mut ScriptedGc, d: Duration) {
+    let start = Instant::now();
+    let mut k = 0;
+    while start.elapsed() < d {
+        let answer = c.ask(&format!("SETV *.var.x {k}"));
+        assert!(answer.starts_with("OK"), "{answer:?}");
+        if k % 5 == 0 {
+            gc.send();
+        }
+        k += 1;
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let gc_port = free_udp_port();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    status
+        .set_read_timeout(Some(Duration::from_secs(3)))
+        .unwrap();
+    let status_port = status.local_addr().unwrap().port().to_string();
+    let listen = format!("127.0.0.1:{gc_port}");
+    let d = Daemon::start(
+        1,
+        &scratch_group().to_string(),
+        free_tcp_port(),
+        &[
+            "--budget",
+            "spl",
+            "--team",
+            "12",
+            "--gc-listen",
+            &listen,
+            "--gc-status-port",
+            &status_port,
+        ],
+        dir.path(),
+    );
+    let mut c = d.client();
+    let mut gc = ScriptedGc {
+        socket: UdpSocket::bind("127.0.0.1:0").unwrap(),
+        to: listen.clone(),
+        game: GameControlData::new([12, 34]),
+    };
+    // Playing, first half, 500 s left, 1,150 of the team's messages left: ahead of the
+    // GC's line (1,100 for the 1,100 s to go).
+    gc.game.state = State::Playing;
+    gc.game.secs_remaining = 500;
+    gc.game.team_mut(12).unwrap().message_budget = 1150;
+    gc.send();
+    c.wait_for("local.var.gc.state", Duration::from_secs(5), |a| {
+        a.contains("\"playing\"")
+    });
+    let budget = c.ask("GETV local.var.gc.budget");
+    assert!(budget.contains(" 1150 "), "{budget:?}");
+    let counted = c.ask("GETV local.var.gc.counted");
+    assert!(counted.contains(" true "), "{counted:?}");
+
+    write_for(&mut c, &mut gc, Duration::from_secs(1));
+    let frames = c.stat("frames_out");
+    assert!(frames > 0, "frames go while the GC's budget has room");
+
+    // A stale packet (the number before the newest) saying Set: ignored.
+    let mut stale = gc.game;
+    stale.packet_number = gc.game.packet_number.wrapping_sub(1);
+    stale.state = State::Set;
+    gc.send_raw(&stale.encode());
+    // Bad packets: truncated, oversized, another version, another game.
+    let good = gc.game.encode();
+    gc.send_raw(&good[..60]);
+    gc.send_raw(&[&good[..], &[0u8; 4]].concat());
+    let mut v17 = good;
+    v17[4] = 17;
+    gc.send_raw(&v17);
+    let mut other = GameControlData::new([5, 6]);
+    other.packet_number = gc.game.packet_number.wrapping_add(1);
+    other.state = State::Finished;
+    gc.send_raw(&other.encode());
+    c.wait_for(
+        "local.var.huddle.stats.gc.wrong_team",
+        Duration::from_secs(5),
+        |a| a.contains(" 1 "),
+    );
+    assert_eq!(c.stat("gc.bad_length"), 2);
+    assert_eq!(c.stat("gc.wrong_version"), 1);
+    assert_eq!(c.stat("gc.stale"), 1);
+    let state = c.ask("GETV local.var.gc.state");
+    assert!(
+        state.contains("\"playing\""),
+        "neither the stale nor the bad packets moved the game: {state:?}"
+    );
+
+    // A penalty for robot 1: pushing, 45 s.
+    let me = &mut gc.game.team_mut(12).unwrap().players[0];
+    me.penalty = 2;
+    me.secs_till_unpenalised = 45;
+    gc.send();
+    c.wait_for("local.var.gc.penalty", Duration::from_secs(5), |a| {
+        a.contains(" 2 ")
+    });
+    let secs = c.ask("GETV local.var.gc.penalty_secs");
+    assert!(secs.contains(" 45 "), "{secs:?}");
+
+    // Status: pose (1 m, 2 m, facing +x), team ball at (2 m, 2 m): 1 m ahead; fallen.
+    for line in [
+        "SETV local.var.robot.pose [1.0, 2.0, 0.0]",
+        "SETV local.var.team.ball [2.0, 2.0]",
+        "SETV local.var.robot.fallen true",
+    ] {
+        assert!(c.ask(line).starts_with("OK"), "{line}");
+    }
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut buf = [0u8; 64];
+    let msg = loop {
+        let (n, _) = status.recv_from(&mut buf).expect("status packets arrive");
+        let msg = StatusMessage::decode(&buf[..n]).expect("a valid RGrt");
+        if msg.fallen || Instant::now() > deadline {
+            break msg;
+        }
+    };
+    assert_eq!((msg.player_num, msg.team_num, msg.fallen), (1, 12, true));
+    assert_eq!(msg.pose, [1000.0, 2000.0, 0.0]);
+    assert!(
+        (msg.ball[0] - 1000.0).abs() < 1e-3 && msg.ball[1].abs() < 1e-3,
+        "{msg:?}"
+    );
+    assert!((0.0..5.0).contains(&msg.ball_age), "{msg:?}");
+
+    // The GC says the team has nothing left: not one frame more.
+    gc.game.team_mut(12).unwrap().message_budget = 0;
+    gc.send();
+    c.wait_for("local.var.gc.budget", Duration::from_secs(5), |a| {
+        a.contains(" 0 ")
+    });
+    // Counters are mirrored with the refresh period.
+    std::thread::sleep(Duration::from_millis(300));
+    let at_zero = c.stat("frames_out");
+    write_for(&mut c, &mut gc, Duration::from_secs(2));
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(
+        c.stat("frames_out"),
+        at_zero,
+        "a frame sent at the GC's 0 makes the team illegal"
+    );
+    assert!(c.stat("gc.status_sent") > 0, "status packets still go");
+}
