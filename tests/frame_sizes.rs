@@ -236,6 +236,7 @@ fn league_frame(keyed: bool) -> Vec<u8> {
     }
     let key = keyed.then(|| TeamKey::new(&TEAM_KEY));
     let frame = decode_frame(&last, 7, key.as_ref()).expect("a valid frame");
+    eprintln!("DEBUG {frame:?} {:?}", r3.budget_status());
     assert!(frame.clock.echo.is_some(), "robot 1 is echoed");
     let paths: Vec<&str> = frame
         .items
