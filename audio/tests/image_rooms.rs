@@ -143,3 +143,34 @@ fn a_crowd_of_eight_talkers_says_nothing() {
         assert!(heard.is_empty(), "{}: false messages {heard:?}", room.name);
     }
 }
+
+mod manifest {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// A room set's manifest is a file from elsewhere: whatever it holds, reading it
+        /// gives a room set or an error, never a panic, and never a path outside the set.
+        #[test]
+        fn any_manifest_reads_or_is_refused(lines in proptest::collection::vec(
+            prop_oneof![
+                "[a-z ]{0,20}",
+                Just("room r 1.2 1.3".to_string()),
+                Just("room r nan 1".to_string()),
+                Just("sender r ../../etc/passwd".to_string()),
+                Just("talker r /etc/passwd".to_string()),
+                Just("babble missing.wav".to_string()),
+                Just("sender nowhere a.wav".to_string()),
+            ],
+            0..8,
+        ), case in 0u64..1_000_000) {
+            let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("manifest-{case}"));
+            std::fs::create_dir_all(&dir).unwrap();
+            std::fs::write(dir.join("manifest.txt"), lines.join("\n")).unwrap();
+            let read = load_room_set(&dir);
+            prop_assert!(read.is_err(), "no manifest here names readable audio: {read:?}");
+            std::fs::remove_dir_all(&dir).ok();
+        }
+    }
+}
