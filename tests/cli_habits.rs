@@ -135,7 +135,10 @@ fn a_robot_id_out_of_range_names_the_range_the_help_gives() {
         let out = run(&["daemon", "--id", id]);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--id {id}: {stderr}");
-        assert!(stderr.contains("1..=254"), "--id {id} should say 1..=254: {stderr}");
+        assert!(
+            stderr.contains("1..=254"),
+            "--id {id} should say 1..=254: {stderr}"
+        );
     }
     let help = text(&run(&["daemon", "--help"]).stdout);
     assert!(help.contains("1..=254"), "the help gives the same range");
