@@ -436,6 +436,8 @@ impl BudgetState {
         match &self.external {
             None => self.next_paced(now),
             Some(x) if !x.cap.counted => Some(self.free.1.map_or(now, |t| t + FREE_GAP)),
+            // At the GameController's zero nothing goes, the pool's floor included.
+            Some(_) if self.left() == 0 => None,
             Some(x) => {
                 let paced = self.next_paced(now)?;
                 Some(paced.max(self.external_line_open(now, x)?))
@@ -526,11 +528,13 @@ impl BudgetState {
     pub(crate) fn allows(&self, now: Instant, class: Class) -> bool {
         // Pooled, the floor (its own credit) holds whatever the team's count says.
         let ordinary = self.next_ordinary(now).is_some_and(|t| t <= now);
+        if self.left() == 0 {
+            // The GameController's zero is final; without one, a pooled robot keeps its
+            // own floor whatever the team's count says.
+            return ordinary && self.budget.team.is_some() && !self.has_external();
+        }
         if self.external.is_some_and(|x| !x.cap.counted) {
             return ordinary;
-        }
-        if self.left() == 0 {
-            return ordinary && self.budget.team.is_some();
         }
         match class {
             Class::Ordinary => ordinary,
