@@ -154,7 +154,7 @@ fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero()
 
     // Status: pose (1 m, 2 m, facing +x), team ball at (2 m, 2 m): 1 m ahead; fallen.
     for line in [
-        "SETV local.var.robot.pose [1.0, 2.0, 0.0]",
+        "SETV local.var.robot.pose [1.0, 2.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]",
         "SETV local.var.team.ball [2.0, 2.0]",
         "SETV local.var.robot.fallen true",
     ] {
