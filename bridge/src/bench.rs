@@ -1,0 +1,413 @@
+//! `huddle-bridge bench`: the bridge measured on loopback against baselines from the
+//! same run. A Zenoh router and a subscriber run in this process, daemons run
+//! in-process on a scratch group ([`crate::harness`]), and the bridge is a child
+//! process (this binary, started as `huddle-bridge --team … --connect …`) so that its
+//! CPU time is its own.
+//!
+//! Printed, in order:
+//! 1. first sample: from the bridge's start to the first sample at the subscriber;
+//! 2. one Zenoh hop (client → router → client) and set → teammate watch, the baselines;
+//!    set → Zenoh sample through the bridge; and the latency the bridge adds, per set:
+//!    (set → sample) − (set → teammate watch), p50 / p99;
+//! 3. load: `--keys` keys at `--rate` Hz from `--daemons` daemons for `--seconds`;
+//!    updates/s offered and received, whether every key's final value arrived, and the
+//!    bridge's CPU (cores).
+
+// A benchmark on real sockets: it reads the clock and sleeps.
+#![allow(clippy::disallowed_methods)]
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant as StdInstant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use comms::Value;
+use driver::Notice;
+use zenoh::Wait;
+
+use crate::harness::{client, free_port, router, Daemon, DaemonSpec};
+
+/// `huddle-bridge bench` flags.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// Latency samples (one set every 4 ms).
+    #[arg(long, default_value_t = 500)]
+    pub samples: usize,
+    /// Keys of the load phase, shared among the daemons.
+    #[arg(long, default_value_t = 1000)]
+    pub keys: usize,
+    /// Rate of every key in the load phase, Hz.
+    #[arg(long, default_value_t = 100)]
+    pub rate: u32,
+    /// Daemons of the load phase.
+    #[arg(long, default_value_t = 4)]
+    pub daemons: u8,
+    /// Length of the load phase, seconds.
+    #[arg(long, default_value_t = 10)]
+    pub seconds: u64,
+}
+
+const TEAM: u8 = 7;
+const VENUE: &str = "bench";
+
+/// What the subscriber saw.
+#[derive(Default)]
+struct Seen {
+    first: Option<StdInstant>,
+    samples: u64,
+    /// The latency key's arrivals, by value.
+    lat: HashMap<i64, StdInstant>,
+    /// The hop key's arrivals, by value.
+    hop: HashMap<i64, StdInstant>,
+    /// The last payload of every key.
+    last: HashMap<String, String>,
+}
+
+/// Runs the bench and prints its figures.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.daemons == 0 || args.keys == 0 || args.rate == 0 {
+        bail!("--daemons, --keys and --rate must be positive");
+    }
+    let port = free_port()?;
+    let _router = router(port, &[]).map_err(|e| anyhow::anyhow!("router: {e}"))?;
+    let group = driver::scratch_group()?;
+    let seen = Arc::new(Mutex::new(Seen::default()));
+    let sub_session = client(port, &[]).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
+    let lat_key = format!("huddle/@v1/{VENUE}/{TEAM}/1/var/lat");
+    let _sub = {
+        let seen = seen.clone();
+        let lat_key = lat_key.clone();
+        sub_session
+            .declare_subscriber(format!("huddle/@v1/{VENUE}/{TEAM}/**"))
+            .callback(move |s| {
+                let t = StdInstant::now();
+                let key = s.key_expr().as_str();
+                let payload = s.payload().try_to_string().unwrap_or_default().into_owned();
+                let mut seen = seen.lock().unwrap_or_else(|p| p.into_inner());
+                seen.first.get_or_insert(t);
+                seen.samples += 1;
+                if key == lat_key {
+                    if let Ok(i) = payload.parse() {
+                        seen.lat.insert(i, t);
+                    }
+                }
+                seen.last.insert(key.to_owned(), payload);
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
+    };
+    let _hop_sub = {
+        let seen = seen.clone();
+        sub_session
+            .declare_subscriber("bench_hop/x")
+            .callback(move |s| {
+                let t = StdInstant::now();
+                let i = s
+                    .payload()
+                    .try_to_string()
+                    .ok()
+                    .and_then(|p| p.parse().ok());
+                if let Some(i) = i {
+                    seen.lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .hop
+                        .insert(i, t);
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
+    };
+
+    let mut daemons = Vec::new();
+    for id in 1..=args.daemons.max(2) {
+        daemons.push(Daemon::start(DaemonSpec::new(id, TEAM, group))?);
+    }
+    for d in &daemons {
+        d.set("*.var.up", Value::Int(1));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+
+    // 1. First sample after the bridge starts.
+    let exe = std::env::current_exe()?;
+    let started = StdInstant::now();
+    let mut child = std::process::Command::new(exe)
+        .args(["--team", &TEAM.to_string(), "--venue", VENUE, "--group"])
+        .arg(group.to_string())
+        .args(["--iface", "127.0.0.1", "--connect"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .env("RUST_LOG", "warn")
+        .spawn()
+        .context("starting the bridge")?;
+    let pid = child.id();
+    let result = measure(
+        args,
+        &daemons,
+        &seen,
+        &sub_session,
+        port,
+        started,
+        pid,
+        &lat_key,
+    );
+    let _ = child.kill();
+    let _ = child.wait();
+    result
+}
+
+#[allow(clippy::too_many_arguments)]
+fn measure(
+    args: &BenchArgs,
+    daemons: &[Daemon],
+    seen: &Arc<Mutex<Seen>>,
+    sub_session: &zenoh::Session,
+    port: u16,
+    started: StdInstant,
+    pid: u32,
+    lat_key: &str,
+) -> Result<()> {
+    let lock = || seen.lock().unwrap_or_else(|p| p.into_inner());
+    let deadline = started + Duration::from_secs(10);
+    let first = loop {
+        if let Some(t) = lock().first {
+            break t;
+        }
+        if StdInstant::now() > deadline {
+            bail!("no sample within 10 s of the bridge's start");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    println!("huddle-bridge bench (loopback, same run)");
+    println!(
+        "first sample after the bridge started: {:.0} ms (target <= 1000 ms)",
+        ms(first - started)
+    );
+
+    // 2. Baselines and latency.
+    let publisher = client(port, &[]).map_err(|e| anyhow::anyhow!("publisher: {e}"))?;
+    let mut hop_sent = HashMap::new();
+    for i in 0..args.samples as i64 {
+        hop_sent.insert(i, StdInstant::now());
+        let _ = publisher.put("bench_hop/x", i.to_string()).wait();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let set_at: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
+    let watched: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
+    {
+        let watched = watched.clone();
+        daemons[1].run(move |h| {
+            h.watch("1.var.lat", move |_, notice| {
+                let t = StdInstant::now();
+                if let Notice::Changed { entry, .. } = notice {
+                    if let Value::Int(i) = entry.value {
+                        watched
+                            .lock()
+                            .unwrap_or_else(|p| p.into_inner())
+                            .insert(i, t);
+                    }
+                }
+            })
+            .ok()
+        });
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    for i in 0..args.samples as i64 {
+        let set_at = set_at.clone();
+        daemons[0].run(move |h| {
+            let t = StdInstant::now();
+            let _ = h.set("*.var.lat", Value::Int(i));
+            set_at
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .insert(i, t);
+            None
+        });
+        std::thread::sleep(Duration::from_millis(4));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let hop: Vec<Duration> = {
+        let s = lock();
+        hop_sent
+            .iter()
+            .filter_map(|(i, t)| s.hop.get(i).map(|r| r.saturating_duration_since(*t)))
+            .collect()
+    };
+    let (to_watch, to_zenoh, added) = {
+        let s = lock();
+        let set_at = set_at.lock().unwrap_or_else(|p| p.into_inner());
+        let watched = watched.lock().unwrap_or_else(|p| p.into_inner());
+        let mut to_watch = Vec::new();
+        let mut to_zenoh = Vec::new();
+        let mut added = Vec::new();
+        for (i, t) in set_at.iter() {
+            let w = watched.get(i).map(|w| w.saturating_duration_since(*t));
+            let z = s.lat.get(i).map(|z| z.saturating_duration_since(*t));
+            if let Some(w) = w {
+                to_watch.push(w);
+            }
+            if let Some(z) = z {
+                to_zenoh.push(z);
+            }
+            if let (Some(w), Some(z)) = (w, z) {
+                added.push(z.as_secs_f64() - w.as_secs_f64());
+            }
+        }
+        (to_watch, to_zenoh, added)
+    };
+    println!(
+        "latency over {} sets (received: watch {}, zenoh {}):",
+        args.samples,
+        to_watch.len(),
+        to_zenoh.len()
+    );
+    print_row("  one zenoh hop (client->router->client)", &hop);
+    print_row("  set -> teammate watch", &to_watch);
+    print_row("  set -> zenoh sample via the bridge", &to_zenoh);
+    let mut added_sorted = added;
+    added_sorted.sort_by(f64::total_cmp);
+    println!(
+        "  added by the bridge (per set: zenoh - watch): p50 {:.3} ms  p99 {:.3} ms  (targets 0.25 / 1 ms; floor: one zenoh hop p50 {:.3} ms)",
+        quantile_f(&added_sorted, 0.5) * 1e3,
+        quantile_f(&added_sorted, 0.99) * 1e3,
+        quantile(&sorted(&hop), 0.5).as_secs_f64() * 1e3,
+    );
+    let _ = lat_key;
+
+    // 3. Load.
+    let n = daemons.len().min(args.daemons as usize);
+    let per = args.keys.div_ceil(n);
+    let period = Duration::from_secs_f64(1.0 / f64::from(args.rate));
+    let ticks = args.seconds * u64::from(args.rate);
+    let (done_tx, done_rx) = std::sync::mpsc::channel::<(u8, u64)>();
+    let before_samples = lock().samples;
+    let cpu_before = cpu_ticks(pid);
+    let t0 = StdInstant::now();
+    let mut offered = 0u64;
+    for (k, d) in daemons.iter().take(n).enumerate() {
+        let count = per.min(args.keys.saturating_sub(k * per));
+        offered += count as u64 * ticks;
+        let keys: Vec<String> = (0..count).map(|j| format!("*.var.load.k{j}")).collect();
+        let done = done_tx.clone();
+        let id = d.id;
+        d.run(move |h| {
+            let h = h.clone();
+            tokio::task::spawn_local(async move {
+                let mut interval = tokio::time::interval(period);
+                interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+                for tick in 1..=ticks {
+                    interval.tick().await;
+                    h.batch(|b| {
+                        for key in &keys {
+                            let _ = b.set(key, Value::Int(tick as i64));
+                        }
+                    });
+                }
+                let _ = done.send((id, ticks));
+            });
+            None
+        });
+    }
+    drop(done_tx);
+    let finished: Vec<(u8, u64)> = done_rx.iter().collect();
+    let elapsed = t0.elapsed();
+    let cpu_after = cpu_ticks(pid);
+    std::thread::sleep(Duration::from_millis(1500));
+    let (received, missing) = {
+        let s = lock();
+        let received = s.samples - before_samples;
+        let mut missing = 0;
+        for (k, (id, last)) in finished.iter().enumerate() {
+            let count = per.min(args.keys.saturating_sub(k * per));
+            for j in 0..count {
+                let key = format!("huddle/@v1/{VENUE}/{TEAM}/{id}/var/load/k{j}");
+                if s.last.get(&key).map(String::as_str) != Some(last.to_string().as_str()) {
+                    missing += 1;
+                }
+            }
+        }
+        (received, missing)
+    };
+    let secs = elapsed.as_secs_f64();
+    println!(
+        "load: {} keys at {} Hz from {} daemons for {:.1} s",
+        args.keys, args.rate, n, secs
+    );
+    println!(
+        "  offered {:.0} updates/s, samples received {:.0}/s ({:.1}%), keys whose final value did not arrive: {}",
+        offered as f64 / secs,
+        received as f64 / secs,
+        100.0 * received as f64 / offered.max(1) as f64,
+        missing
+    );
+    match (cpu_before, cpu_after) {
+        (Some(a), Some(b)) => println!(
+            "  bridge CPU: {:.2} cores (target < 1)",
+            (b - a) as f64 / 100.0 / secs
+        ),
+        _ => println!("  bridge CPU: /proc/{pid}/stat unreadable"),
+    }
+    let stats = sub_session
+        .get(format!("huddle/@v1/{VENUE}/{TEAM}/@bridge/stats"))
+        .wait()
+        .ok()
+        .and_then(|replies| replies.recv_timeout(Duration::from_secs(2)).ok().flatten())
+        .and_then(|reply| reply.into_result().ok())
+        .and_then(|sample| {
+            sample
+                .payload()
+                .try_to_string()
+                .ok()
+                .map(|s| s.into_owned())
+        });
+    if let Some(stats) = stats {
+        println!("  @bridge/stats: {stats}");
+    }
+    Ok(())
+}
+
+/// utime + stime of `pid`, in clock ticks (100 per second on Linux).
+fn cpu_ticks(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name may hold spaces: fields start after the last ')'.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some(utime + stime)
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn sorted(v: &[Duration]) -> Vec<Duration> {
+    let mut v = v.to_vec();
+    v.sort();
+    v
+}
+
+fn quantile(sorted: &[Duration], q: f64) -> Duration {
+    if sorted.is_empty() {
+        return Duration::ZERO;
+    }
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn quantile_f(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn print_row(name: &str, v: &[Duration]) {
+    let s = sorted(v);
+    println!(
+        "{name:<44} p50 {:.3} ms  p99 {:.3} ms  (n={})",
+        ms(quantile(&s, 0.5)),
+        ms(quantile(&s, 0.99)),
+        s.len()
+    );
+}

@@ -1,0 +1,530 @@
+//! The bridge's I/O: the team's socket (listen only), the listening replica, one Zenoh
+//! session. The field side runs on one thread: a blocking receive with the next
+//! deadline as its timeout, each datagram fed to the replica, the replica's transmits
+//! discarded, its events handed to the [`Exporter`], the resulting operations sent to
+//! Zenoh after the lock is released. Zenoh puts use its default congestion control for
+//! puts (drop, never block), so a slow subscriber or a lost router never stalls the
+//! field side; the queryables run on Zenoh's threads and read the same replica under a
+//! mutex.
+
+use std::collections::HashMap;
+use std::io;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use comms::{DropReason, Event, Instant, Key, Pattern, Replica, ReplicaConfig, Scope};
+use driver::{Clock, SocketConfig};
+use thiserror::Error;
+use zenoh::bytes::Encoding;
+use zenoh::key_expr::KeyExpr;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::query::Query;
+use zenoh::{Session, Wait};
+
+use crate::export::{ExportConfig, Exporter, Op, Sample};
+use crate::keys::TeamKeys;
+use crate::transit::TransitEstimator;
+
+/// Everything the bridge needs to start.
+pub struct BridgeConfig {
+    /// The team's socket (transport, group or port, interface).
+    pub socket: SocketConfig,
+    /// The team id.
+    pub team: u8,
+    /// The team key, if the team signs its frames.
+    pub team_key: Option<Vec<u8>>,
+    /// The listening replica's robot id (one no robot of the team uses).
+    pub listener_id: u8,
+    /// Key expressions.
+    pub keys: TeamKeys,
+    /// What to export.
+    pub export: ExportConfig,
+    /// The Zenoh session's configuration (mode, endpoints, TLS, auth).
+    pub zenoh: zenoh::Config,
+}
+
+/// Why the bridge could not start.
+#[derive(Debug, Error)]
+pub enum BridgeError {
+    /// The team's socket could not be opened.
+    #[error("cannot listen to the team: {0}")]
+    Socket(#[from] driver::SocketError),
+    /// A socket option failed.
+    #[error("socket: {0}")]
+    Io(#[from] io::Error),
+    /// The listening replica's configuration is invalid.
+    #[error("listening replica: {0}")]
+    Replica(#[from] comms::ConfigInvalid),
+    /// Zenoh refused the configuration or could not open the session.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+}
+
+fn zerr(e: impl std::fmt::Display) -> BridgeError {
+    BridgeError::Zenoh(e.to_string())
+}
+
+/// Counters of the field side and the Zenoh side.
+#[derive(Clone, Debug, Default)]
+pub struct IoCounters {
+    /// Datagrams received from the team's socket.
+    pub datagrams: u64,
+    /// Receive errors other than timeouts.
+    pub recv_errors: u64,
+    /// Frames the listening replica wanted to send and the bridge discarded (it never
+    /// sends on the field).
+    pub transmits_discarded: u64,
+    /// Puts Zenoh refused.
+    pub put_errors: u64,
+    /// Liveliness declarations Zenoh refused.
+    pub token_errors: u64,
+    /// Queries answered.
+    pub queries: u64,
+    /// Replies sent.
+    pub replies: u64,
+    /// Queries refused (a payload: the bridge takes no input from Zenoh).
+    pub queries_refused: u64,
+    /// Times the session lost its last router or peer.
+    pub zenoh_lost: u64,
+}
+
+/// The state the field thread and the queryables share.
+struct Core {
+    replica: Replica,
+    transit: TransitEstimator,
+    team: u8,
+    team_key: Option<comms::wire::TeamKey>,
+    exporter: Exporter,
+    io: IoCounters,
+    reported_drops: Vec<DropReason>,
+}
+
+impl Core {
+    fn drain(&mut self, now: Instant) {
+        while self.replica.poll_transmit().is_some() {
+            self.io.transmits_discarded += 1;
+        }
+        while let Some(event) = self.replica.poll_event() {
+            match &event {
+                Event::FrameDropped { from, reason } if !self.reported_drops.contains(reason) => {
+                    self.reported_drops.push(*reason);
+                    tracing::warn!(
+                        "dropped a frame from {from}: {reason} (counted in @bridge/stats; \
+                         logged once per reason)"
+                    );
+                }
+                Event::PeerJoined { robot, incarnation } => {
+                    tracing::info!("robot {robot} joined (incarnation {incarnation:016x})")
+                }
+                Event::PeerRestarted {
+                    robot,
+                    new_incarnation,
+                    ..
+                } => tracing::info!("robot {robot} restarted ({new_incarnation:016x})"),
+                Event::PeerDeparted { robot } => tracing::info!("robot {robot} departed"),
+                Event::IncarnationConflict { robot, .. } => {
+                    tracing::warn!("two robots send as {robot}")
+                }
+                _ => {}
+            }
+            self.exporter.handle_event(now, &self.replica, event);
+        }
+    }
+
+    fn advance(&mut self, now: Instant) {
+        while let Some(deadline) = self.replica.poll_timeout() {
+            if deadline > now {
+                break;
+            }
+            self.replica.handle_timeout(deadline);
+            self.drain(deadline);
+        }
+        self.exporter.handle_timeout(now, &self.replica);
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        match (self.replica.poll_timeout(), self.exporter.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn stats_json(&self, now: Instant) -> serde_json::Value {
+        let s = self.replica.stats();
+        let e = self.exporter.stats();
+        let io = &self.io;
+        let drops: serde_json::Map<String, serde_json::Value> = DropReason::ALL
+            .iter()
+            .map(|r| (r.name().to_owned(), s.drops(*r).into()))
+            .collect();
+        serde_json::json!({
+            "uptime_s": now.saturating_duration_since(Instant::from_micros(0)).as_secs_f64(),
+            "field": {
+                "datagrams": io.datagrams,
+                "recv_errors": io.recv_errors,
+                "frames_in": s.frames_in,
+                "bytes_in": s.bytes_in,
+                "updates_applied": s.updates_applied,
+                "updates_stale": s.updates_stale,
+                "drops": drops,
+                "frames_sent": 0,
+                "transmits_discarded": io.transmits_discarded,
+            },
+            "transit": {
+                "floor_us": self.transit.floor().as_micros() as u64,
+                "round_trips": self.transit.stats().round_trips,
+                "implausible": self.transit.stats().implausible,
+                "implausible_round_trips": self.transit.stats().implausible_round_trips,
+            },
+            "export": {
+                "values_out": e.values_out,
+                "talk_out": e.talk_out,
+                "unchanged_skipped": e.unchanged_skipped,
+                "old_life_dropped": e.old_life_dropped,
+                "rate_held": e.rate_held,
+                "unmappable": e.unmappable,
+                "ros2_unmappable": e.ros2_unmappable,
+                "alive_declared": e.alive_declared,
+                "alive_withdrawn": e.alive_withdrawn,
+            },
+            "zenoh": {
+                "put_errors": io.put_errors,
+                "token_errors": io.token_errors,
+                "queries": io.queries,
+                "replies": io.replies,
+                "queries_refused": io.queries_refused,
+                "lost": io.zenoh_lost,
+            },
+        })
+    }
+
+    fn peers_json(&self, now: Instant) -> serde_json::Value {
+        let peers: Vec<_> = self
+            .replica
+            .peers()
+            .map(|p| {
+                serde_json::json!({
+                    "robot": p.robot,
+                    "incarnation": format!("{:016x}", p.incarnation),
+                    "present": p.present,
+                    "frames": p.frames,
+                    "silent_ms": now.saturating_duration_since(p.last_heard).as_secs_f64() * 1e3,
+                    "conflicting": p.conflicting,
+                })
+            })
+            .collect();
+        serde_json::Value::Array(peers)
+    }
+}
+
+/// A bridge that is up: socket open, session open, queryables declared.
+pub struct Bridge {
+    socket: std::net::UdpSocket,
+    core: Arc<Mutex<Core>>,
+    clock: Clock,
+    session: Session,
+    tokens: HashMap<u8, LivelinessToken>,
+    _queryables: Vec<zenoh::query::Queryable<()>>,
+    keys: TeamKeys,
+    shutdown: Arc<AtomicBool>,
+}
+
+fn lock(core: &Mutex<Core>) -> MutexGuard<'_, Core> {
+    // A panic elsewhere while holding the lock leaves counters possibly stale, never
+    // memory unsafe: carry on with the data.
+    core.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Bridge {
+    /// Opens the team's socket and the Zenoh session and declares the queryables.
+    pub fn start(cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
+        let opened = driver::open(&cfg.socket)?;
+        tracing::info!(
+            "listening to team {} on {} {} via {} (receive buffer {} bytes); sending nothing",
+            cfg.team,
+            cfg.socket.transport,
+            cfg.socket.group,
+            cfg.socket.iface,
+            opened.recv_buffer_granted
+        );
+        let socket = opened.socket;
+        socket.set_nonblocking(false)?;
+        let clock = Clock::new();
+        let mut rcfg = ReplicaConfig::new(cfg.listener_id, cfg.team);
+        if let Some(key) = &cfg.team_key {
+            rcfg = rcfg.with_team_key(key.clone());
+        }
+        let replica = Replica::new(rcfg, 1, clock.now())?;
+        let mut core = Core {
+            team_key: cfg.team_key.as_deref().map(comms::wire::TeamKey::new),
+            team: cfg.team,
+            transit: TransitEstimator::new(),
+            replica,
+            exporter: Exporter::new(cfg.keys.clone(), cfg.export),
+            io: IoCounters::default(),
+            reported_drops: Vec::new(),
+        };
+        core.drain(clock.now());
+        let core = Arc::new(Mutex::new(core));
+
+        let mut zcfg = cfg.zenoh;
+        // Explicit endpoints only: no multicast scouting from the bridge.
+        zcfg.insert_json5("scouting/multicast/enabled", "false")
+            .map_err(zerr)?;
+        let session = zenoh::open(zcfg).wait().map_err(zerr)?;
+        tracing::info!("zenoh session {} open", session.zid());
+
+        let values = {
+            let core = core.clone();
+            session
+                .declare_queryable(cfg.keys.all())
+                .callback(move |q| answer_values(&core, &clock, &q))
+                .wait()
+                .map_err(zerr)?
+        };
+        let bridge_keys = {
+            let core = core.clone();
+            let keys = cfg.keys.clone();
+            session
+                .declare_queryable(keys.bridge("*"))
+                .callback(move |q| answer_bridge(&core, &clock, &keys, &q))
+                .wait()
+                .map_err(zerr)?
+        };
+        Ok(Bridge {
+            socket,
+            core,
+            clock,
+            session,
+            tokens: HashMap::new(),
+            _queryables: vec![values, bridge_keys],
+            keys: cfg.keys,
+            shutdown: Arc::new(AtomicBool::new(false)),
+        })
+    }
+
+    /// A flag that stops [`Bridge::run`] within 50 ms when set.
+    pub fn shutdown_flag(&self) -> Arc<AtomicBool> {
+        self.shutdown.clone()
+    }
+
+    /// The key expressions in use.
+    pub fn keys(&self) -> &TeamKeys {
+        &self.keys
+    }
+
+    /// Runs the field side until the shutdown flag is set.
+    pub fn run(mut self) -> Result<(), BridgeError> {
+        let mut buf = vec![0u8; 65_536];
+        let mut ops = Vec::new();
+        let mut next_check = self.clock.now();
+        let mut connected = true;
+        while !self.shutdown.load(Ordering::Relaxed) {
+            let wait = {
+                let core = lock(&self.core);
+                let now = self.clock.now();
+                core.next_deadline()
+                    .map_or(Duration::from_millis(50), |d| {
+                        d.saturating_duration_since(now)
+                    })
+                    .clamp(Duration::from_micros(100), Duration::from_millis(50))
+            };
+            self.socket.set_read_timeout(Some(wait))?;
+            let got = self.socket.recv_from(&mut buf);
+            let now = self.clock.now();
+            {
+                let mut core = lock(&self.core);
+                match got {
+                    Ok((n, from)) => {
+                        core.io.datagrams += 1;
+                        feed(&mut core, now, from, &buf[..n]);
+                    }
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                        ) => {}
+                    Err(e) => {
+                        core.io.recv_errors += 1;
+                        tracing::warn!("receive: {e}");
+                    }
+                }
+                core.advance(now);
+                ops.extend(core.exporter.drain_ops());
+            }
+            self.apply(&mut ops);
+            if now >= next_check {
+                next_check = now + Duration::from_secs(1);
+                connected = self.check_zenoh(connected);
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the session has a router or peer; logs and counts a loss.
+    fn check_zenoh(&self, was: bool) -> bool {
+        let info = self.session.info();
+        let now =
+            info.routers_zid().wait().next().is_some() || info.peers_zid().wait().next().is_some();
+        if was && !now {
+            lock(&self.core).io.zenoh_lost += 1;
+            tracing::warn!(
+                "zenoh: no router or peer reachable; samples are dropped until one is back \
+                 (the field side carries on)"
+            );
+        } else if !was && now {
+            tracing::info!("zenoh: connected again");
+        }
+        now
+    }
+
+    fn apply(&mut self, ops: &mut Vec<Op>) {
+        let mut put_errors = 0;
+        let mut token_errors = 0;
+        for op in ops.drain(..) {
+            match op {
+                Op::Put(sample) => {
+                    if let Err(e) = self.put(sample) {
+                        put_errors += 1;
+                        tracing::debug!("put: {e}");
+                    }
+                }
+                Op::Alive { robot, key, .. } => {
+                    match self.session.liveliness().declare_token(key).wait() {
+                        Ok(token) => {
+                            if let Some(old) = self.tokens.insert(robot, token) {
+                                let _ = old.undeclare().wait();
+                            }
+                        }
+                        Err(e) => {
+                            token_errors += 1;
+                            tracing::warn!("liveliness token of robot {robot}: {e}");
+                        }
+                    }
+                }
+                Op::Gone { robot } => {
+                    if let Some(token) = self.tokens.remove(&robot) {
+                        if let Err(e) = token.undeclare().wait() {
+                            token_errors += 1;
+                            tracing::warn!("withdrawing robot {robot}'s token: {e}");
+                        }
+                    }
+                }
+            }
+        }
+        if put_errors + token_errors > 0 {
+            let mut core = lock(&self.core);
+            if core.io.put_errors == 0 && put_errors > 0 {
+                tracing::warn!("zenoh refused a put (counted in @bridge/stats put_errors)");
+            }
+            core.io.put_errors += put_errors;
+            core.io.token_errors += token_errors;
+        }
+    }
+
+    fn put(&self, sample: Sample) -> zenoh::Result<()> {
+        if let Some((key, cdr)) = sample.ros2 {
+            self.session
+                .put(key, cdr)
+                .encoding(Encoding::APPLICATION_CDR)
+                .wait()?;
+        }
+        self.session
+            .put(sample.key, sample.payload)
+            .encoding(Encoding::TEXT_PLAIN)
+            .attachment(sample.attachment)
+            .wait()
+    }
+}
+
+fn feed(core: &mut Core, now: Instant, from: SocketAddr, bytes: &[u8]) {
+    core.advance(now);
+    // The frame is decoded (and its tag checked) once more here for its clock fields;
+    // the replica decides what it applies, and counts what it drops.
+    let transit = match comms::wire::decode_frame(bytes, core.team, core.team_key.as_ref()) {
+        Ok(frame) => core.transit.frame(now, &frame),
+        Err(_) => Duration::ZERO,
+    };
+    core.exporter.set_frame_transit(transit);
+    core.replica.handle_datagram(now, from, bytes);
+    core.drain(now);
+    core.exporter.set_frame_transit(Duration::ZERO);
+}
+
+/// Answers a `get` on the team's values from the replica, ages at reply time.
+fn answer_values(core: &Mutex<Core>, clock: &Clock, query: &Query) {
+    let replies = {
+        let mut core = lock(core);
+        core.io.queries += 1;
+        if query.payload().is_some() {
+            core.io.queries_refused += 1;
+            drop(core);
+            tracing::warn!(
+                "refused a query on {} with a payload: the bridge is read-only",
+                query.key_expr()
+            );
+            let _ = query.reply_err("huddle-bridge is read-only").wait();
+            return;
+        }
+        let now = clock.now();
+        let Ok(pattern) = Pattern::parse("+.var.#") else {
+            return;
+        };
+        let entries: Vec<(Key, comms::Entry)> = core
+            .replica
+            .iter(&pattern)
+            .filter(|(k, _)| matches!(k.scope(), Scope::Robot(_)))
+            .map(|(k, e)| (k, e.clone()))
+            .collect();
+        let mut replies = Vec::new();
+        for (key, entry) in entries {
+            if let Some(sample) = core.exporter.sample(now, &key, &entry) {
+                let matches = KeyExpr::try_from(sample.key.as_str())
+                    .is_ok_and(|k| k.intersects(query.key_expr()));
+                if matches {
+                    replies.push(sample);
+                }
+            }
+        }
+        core.io.replies += replies.len() as u64;
+        replies
+    };
+    for s in replies {
+        if let Err(e) = query
+            .reply(s.key, s.payload)
+            .encoding(Encoding::TEXT_PLAIN)
+            .attachment(s.attachment)
+            .wait()
+        {
+            tracing::debug!("reply: {e}");
+        }
+    }
+}
+
+/// Answers `@bridge/stats` and `@bridge/peers` (JSON).
+fn answer_bridge(core: &Mutex<Core>, clock: &Clock, keys: &TeamKeys, query: &Query) {
+    let now = clock.now();
+    let mut replies = Vec::new();
+    {
+        let mut core = lock(core);
+        core.io.queries += 1;
+        for (what, json) in [
+            ("stats", core.stats_json(now)),
+            ("peers", core.peers_json(now)),
+        ] {
+            let key = keys.bridge(what);
+            if KeyExpr::try_from(key.as_str()).is_ok_and(|k| k.intersects(query.key_expr())) {
+                replies.push((key, json.to_string()));
+            }
+        }
+        core.io.replies += replies.len() as u64;
+    }
+    for (key, json) in replies {
+        let _ = query
+            .reply(key, json)
+            .encoding(Encoding::APPLICATION_JSON)
+            .wait();
+    }
+}

@@ -1,0 +1,307 @@
+//! Each frame's time on the air, estimated by a bridge that never sends.
+//!
+//! The robots measure transit from round trips of their own frames (echoes); the bridge
+//! sends no frames, so its listening replica would take every frame to have arrived
+//! instantly and report ages short by the transit (tens of ms on a loaded WLAN, more
+//! with an access point holding multicast). Two things it can hear instead:
+//!
+//! - **The excess over the fastest frame.** For a sender S, `raw = reception (bridge
+//!   clock) − send stamp (S's clock)` is S's clock offset plus the transit. Its minimum
+//!   over the last [`WINDOW`] is the offset plus the fastest transit, so
+//!   `raw − min(raw)` is how much longer this frame took than the fastest one.
+//! - **The fastest transit itself**, from the team's own round trips. When S's frame
+//!   echoes T's frame (T's seq, held `hold` at S), `(S's stamp − hold) − T's stamp` is
+//!   the one-way delay T → S plus the clock difference; adding the same for an echo of
+//!   S by T cancels the clocks and leaves the round trip T → S → T. Half the smallest
+//!   round trip in the window is the floor: the transit the fastest frame took, assuming
+//!   the two directions and the path to the bridge are alike (a shared medium).
+//!
+//! The estimate of a frame is `floor + excess`. What it cannot see is asymmetry between
+//! the path to the bridge and the paths between robots. Sans-IO: times are arguments.
+
+use std::collections::{HashMap, VecDeque};
+use std::time::Duration;
+
+use comms::wire::Frame;
+use comms::Instant;
+
+/// How long a minimum holds: long enough to contain a fast frame under bursty delay,
+/// short enough that clock drift (50 ppm: 0.5 ms per 10 s) does not matter.
+pub const WINDOW: Duration = Duration::from_secs(10);
+
+/// A round trip or excess beyond this is taken for a glitch (a restart, a stamp wrap).
+const MAX_PLAUSIBLE_US: i64 = 1_000_000;
+
+/// Frames remembered per sender for matching echoes.
+const RECENT: usize = 128;
+
+/// A windowed minimum in one-second buckets.
+#[derive(Debug, Default)]
+struct WindowMin {
+    buckets: VecDeque<(u64, i64)>,
+}
+
+impl WindowMin {
+    fn push(&mut self, now: Instant, x: i64) {
+        let second = now.as_micros() / 1_000_000;
+        match self.buckets.back_mut() {
+            Some((s, m)) if *s == second => *m = (*m).min(x),
+            _ => self.buckets.push_back((second, x)),
+        }
+        let keep = WINDOW.as_secs();
+        while self.buckets.front().is_some_and(|(s, _)| s + keep < second) {
+            self.buckets.pop_front();
+        }
+    }
+
+    fn min(&self) -> Option<i64> {
+        self.buckets.iter().map(|(_, m)| *m).min()
+    }
+}
+
+#[derive(Debug)]
+struct Sender {
+    incarnation: u64,
+    /// Unwrapped send stamps: the last raw u32 and the number of wraps.
+    last_stamp: u32,
+    wraps: i64,
+    raw_min: WindowMin,
+    /// (seq16, unwrapped stamp) of recent frames.
+    recent: VecDeque<(u16, i64)>,
+    /// Per echoed teammate: the last one-way delay plus clock difference, and when.
+    one_way: HashMap<u8, (i64, Instant)>,
+}
+
+impl Sender {
+    fn new(incarnation: u64, stamp: u32) -> Sender {
+        Sender {
+            incarnation,
+            last_stamp: stamp,
+            wraps: 0,
+            raw_min: WindowMin::default(),
+            recent: VecDeque::new(),
+            one_way: HashMap::new(),
+        }
+    }
+
+    fn unwrap(&mut self, stamp: u32) -> i64 {
+        // A stamp much smaller than the last one wrapped (every 71.6 minutes); one a
+        // little smaller is a reordered frame.
+        if stamp < self.last_stamp && self.last_stamp - stamp > u32::MAX / 2 {
+            self.wraps += 1;
+        }
+        self.last_stamp = stamp;
+        self.wraps * (1i64 << 32) + i64::from(stamp)
+    }
+}
+
+/// Counters of the estimator.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TransitStats {
+    /// Round trips measured from pairs of echoes.
+    pub round_trips: u64,
+    /// Implausible excesses ignored (taken as 0).
+    pub implausible: u64,
+    /// Implausible round trips ignored.
+    pub implausible_round_trips: u64,
+}
+
+/// The estimator; see the module docs.
+#[derive(Debug, Default)]
+pub struct TransitEstimator {
+    senders: HashMap<u8, Sender>,
+    rtt_min: WindowMin,
+    stats: TransitStats,
+}
+
+impl TransitEstimator {
+    /// A new estimator.
+    pub fn new() -> TransitEstimator {
+        TransitEstimator::default()
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> &TransitStats {
+        &self.stats
+    }
+
+    /// The floor: half the smallest round trip between two robots in the window.
+    pub fn floor(&self) -> Duration {
+        self.rtt_min
+            .min()
+            .map_or(Duration::ZERO, |rtt| micros(rtt / 2))
+    }
+
+    /// Takes a frame (already decoded and checked) received at `now`; returns its
+    /// estimated transit.
+    pub fn frame(&mut self, now: Instant, frame: &Frame) -> Duration {
+        let stamp = frame.clock.stamp_us;
+        let sender = self
+            .senders
+            .entry(frame.sender)
+            .or_insert_with(|| Sender::new(frame.incarnation, stamp));
+        if sender.incarnation != frame.incarnation {
+            if frame.incarnation < sender.incarnation {
+                return self.floor(); // an old life's frame; the replica drops it
+            }
+            *sender = Sender::new(frame.incarnation, stamp);
+        }
+        let s = sender.unwrap(stamp);
+        let raw = now.as_micros() as i64 - s;
+        sender.raw_min.push(now, raw);
+        sender.recent.push_back(((frame.seq & 0xffff) as u16, s));
+        if sender.recent.len() > RECENT {
+            sender.recent.pop_front();
+        }
+        let excess = raw - sender.raw_min.min().unwrap_or(raw);
+        if let Some(echo) = frame.clock.echo {
+            self.echo(now, frame.sender, s, echo);
+        }
+        let excess = if (0..MAX_PLAUSIBLE_US).contains(&excess) {
+            excess
+        } else {
+            self.stats.implausible += 1;
+            0
+        };
+        self.floor() + micros(excess)
+    }
+
+    fn echo(&mut self, now: Instant, from: u8, stamp: i64, echo: comms::wire::Echo) {
+        let Some(target) = self.senders.get(&echo.target) else {
+            return;
+        };
+        let Some(&(_, target_stamp)) = target.recent.iter().rev().find(|(q, _)| *q == echo.seq16)
+        else {
+            return;
+        };
+        let mixed = stamp - i64::from(echo.hold_us()) - target_stamp;
+        let back = target
+            .one_way
+            .get(&from)
+            .filter(|(_, at)| now.saturating_duration_since(*at) < WINDOW)
+            .map(|(m, _)| *m);
+        if let Some(sender) = self.senders.get_mut(&from) {
+            sender.one_way.insert(echo.target, (mixed, now));
+        }
+        if let Some(back) = back {
+            let rtt = mixed + back;
+            if (0..MAX_PLAUSIBLE_US).contains(&rtt) {
+                self.stats.round_trips += 1;
+                self.rtt_min.push(now, rtt);
+            } else {
+                self.stats.implausible_round_trips += 1;
+            }
+        }
+    }
+}
+
+fn micros(us: i64) -> Duration {
+    Duration::from_micros(u64::try_from(us).unwrap_or(0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use comms::wire::{Echo, FrameClock};
+
+    fn frame(sender: u8, seq: u64, stamp_us: u32, echo: Option<Echo>) -> Frame {
+        Frame {
+            team: 7,
+            sender,
+            incarnation: 1,
+            seq,
+            clock: FrameClock { stamp_us, echo },
+            items: Vec::new(),
+        }
+    }
+
+    /// Two robots whose clocks are off the bridge's by +5 s and −3 s exchange frames
+    /// over a link whose one-way delay is 10 ms + `extra[i]`; the bridge hears every
+    /// frame with the same delay as the teammate (one medium).
+    #[test]
+    fn the_floor_and_the_excess_add_up_to_the_true_transit() {
+        let off = [0i64, 5_000_000, -3_000_000]; // robot r's clock = bridge + off[r]
+        let base = 10_000i64;
+        let extra = [0i64, 7_000, 0, 15_000, 2_000, 0, 9_000, 0];
+        let mut est = TransitEstimator::new();
+        let mut worst_error = 0i64;
+        let mut last_heard: [Option<(u64, i64)>; 3] = [None, None, None];
+        for i in 0..200u64 {
+            let robot = (i % 2 + 1) as u8;
+            let other = (3 - robot) as usize;
+            let send = 1_000_000 + i as i64 * 50_000; // bridge clock, µs
+            let transit = base + extra[i as usize % extra.len()];
+            let stamp = (send + off[robot as usize]) as u32;
+            // Echo the other robot's last frame heard, held since its arrival.
+            let echo = last_heard[robot as usize].map(|(seq, arrived)| Echo {
+                target: other as u8,
+                seq16: seq as u16,
+                hold_10us: ((send - arrived) / 10) as u16,
+            });
+            let got = est.frame(
+                Instant::from_micros((send + transit) as u64),
+                &frame(robot, i / 2 + 1, stamp, echo),
+            );
+            last_heard[other] = Some((i / 2 + 1, send + transit));
+            if i > 20 {
+                worst_error = worst_error.max((got.as_micros() as i64 - transit).abs());
+            }
+        }
+        assert!(est.stats().round_trips > 50, "{:?}", est.stats());
+        assert_eq!(
+            est.floor(),
+            Duration::from_millis(10),
+            "half the fastest round trip"
+        );
+        assert!(
+            worst_error <= 20,
+            "each frame's transit within the hold's 10 µs rounding: off by {worst_error} µs"
+        );
+    }
+
+    #[test]
+    fn without_echoes_only_the_excess_is_known() {
+        let mut est = TransitEstimator::new();
+        let t = |ms: u64| Instant::from_micros(ms * 1000);
+        assert_eq!(
+            est.frame(t(100), &frame(1, 1, 90_000, None)),
+            Duration::ZERO
+        );
+        assert_eq!(
+            est.frame(t(230), &frame(1, 2, 200_000, None)),
+            Duration::from_millis(20),
+            "this frame took 20 ms longer than the fastest"
+        );
+    }
+
+    #[test]
+    fn a_stamp_wrap_is_not_a_huge_transit() {
+        let mut est = TransitEstimator::new();
+        let t = |us: u64| Instant::from_micros(us);
+        est.frame(t(10_000_000), &frame(1, 1, u32::MAX - 1000, None));
+        let got = est.frame(t(10_002_000), &frame(1, 2, 1000, None));
+        assert!(got < Duration::from_millis(1), "{got:?}");
+    }
+
+    proptest::proptest! {
+        /// Any sequence of frames (stamps, echoes, senders, lives, arrival times from the
+        /// network) gives an estimate below the floor plus a second, without panicking.
+        #[test]
+        fn arbitrary_frames_never_panic(
+            frames in proptest::collection::vec(
+                (1u8..5, 0u64..3, 0u64..1000, proptest::num::u32::ANY, proptest::option::of((1u8..5, proptest::num::u16::ANY, proptest::num::u16::ANY)), 0u64..5_000_000),
+                1..200,
+            )
+        ) {
+            let mut est = TransitEstimator::new();
+            let mut now = 0u64;
+            for (sender, inc, seq, stamp, echo, dt) in frames {
+                now += dt;
+                let mut f = frame(sender, seq, stamp, echo.map(|(target, seq16, hold_10us)| Echo { target, seq16, hold_10us }));
+                f.incarnation = inc;
+                let got = est.frame(Instant::from_micros(now), &f);
+                proptest::prop_assert!(got <= est.floor() + Duration::from_secs(1));
+            }
+        }
+    }
+}
