@@ -17,9 +17,6 @@ use crate::error::*;
 use crate::node::{get_value, huddle_node, set_value};
 use crate::typed::{read_array, wrong_type};
 
-/// The oldest a measurement may be when written (the contract's `age_s` limit).
-const MAX_AGE_S: f64 = 10.0;
-
 /// The team ball (`local.var.team.ball`), field frame.
 #[repr(C)]
 #[allow(non_camel_case_types)]
@@ -75,46 +72,12 @@ fn bad(what: &str, why: impl std::fmt::Display) -> Failure {
     Failure::new(HUDDLE_E_VALUE, format!("{what}: {why}; nothing written"))
 }
 
-fn finite(what: &str, values: &[f64]) -> Result<(), Failure> {
-    match values.iter().position(|v| !v.is_finite()) {
-        Some(i) => Err(bad(what, format!("element {i} is {}", values[i]))),
-        None => Ok(()),
-    }
-}
-
-fn age(what: &str, age_s: f64) -> Result<(), Failure> {
-    if (0.0..=MAX_AGE_S).contains(&age_s) {
-        Ok(())
-    } else {
-        Err(bad(
-            what,
-            format!("age_s {age_s} is outside 0..={MAX_AGE_S}"),
-        ))
-    }
-}
-
-/// Whether the symmetric matrix of upper triangle `upper` (2×2 or 3×3, row by row) is
-/// positive definite: every leading minor > 0 (Sylvester).
-fn positive_definite(upper: &[f64]) -> bool {
-    match *upper {
-        [a, b, c] => a > 0.0 && a * c - b * b > 0.0,
-        [a, b, c, d, e, f] => {
-            let m2 = a * d - b * b;
-            let det = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c);
-            a > 0.0 && m2 > 0.0 && det > 0.0
-        }
-        _ => false,
-    }
-}
-
-fn covariance(what: &str, upper: &[f64]) -> Result<(), Failure> {
-    if positive_definite(upper) {
-        Ok(())
-    } else {
-        Err(bad(
-            what,
-            format!("the covariance {upper:?} is not positive definite"),
-        ))
+/// The team layer's own check of a value for input `key` (`team::contract`, the one the
+/// daemon's relay guards run): a refusal is `HUDDLE_E_VALUE` with its reason.
+fn contract(key: &'static str, value: &Value) -> Result<(), Failure> {
+    match team::contract::check(key, value) {
+        Some(Err(e)) => Err(bad(key, e)),
+        _ => Ok(()),
     }
 }
 
@@ -148,7 +111,7 @@ pub unsafe extern "C" fn huddle_node_set_robot_pose(
     age_s: f64,
     err: *mut huddle_error,
 ) -> c_int {
-    let what = "local.var.robot.pose";
+    let what = team::contract::POSE_KEY;
     // SAFETY: `err` forwarded; `cov` readable for 6 doubles as the caller promises.
     unsafe {
         team_set(err, || {
@@ -156,10 +119,9 @@ pub unsafe extern "C" fn huddle_node_set_robot_pose(
             let mut v = vec![x, y, theta];
             v.extend_from_slice(cov);
             v.push(age_s);
-            finite(what, &v)?;
-            covariance(what, cov)?;
-            age(what, age_s)?;
-            set_value(node, what, Value::Floats(v), false)
+            let value = Value::Floats(v);
+            contract(what, &value)?;
+            set_value(node, what, value, false)
         })
     }
 }
@@ -183,7 +145,7 @@ pub unsafe extern "C" fn huddle_node_set_robot_ball(
     age_s: f64,
     err: *mut huddle_error,
 ) -> c_int {
-    let what = "local.var.robot.ball";
+    let what = team::contract::BALL_KEY;
     // SAFETY: `err` forwarded; `cov` readable for 3 doubles as the caller promises.
     unsafe {
         team_set(err, || {
@@ -191,10 +153,9 @@ pub unsafe extern "C" fn huddle_node_set_robot_ball(
             let mut v = vec![x, y];
             v.extend_from_slice(cov);
             v.push(age_s);
-            finite(what, &v)?;
-            covariance(what, cov)?;
-            age(what, age_s)?;
-            set_value(node, what, Value::Floats(v), false)
+            let value = Value::Floats(v);
+            contract(what, &value)?;
+            set_value(node, what, value, false)
         })
     }
 }
@@ -215,13 +176,13 @@ pub unsafe extern "C" fn huddle_node_set_robot_odometry(
     turn: f64,
     err: *mut huddle_error,
 ) -> c_int {
-    let what = "local.var.robot.odometry";
+    let what = team::contract::ODOMETRY_KEY;
     // SAFETY: forwarded from the caller.
     unsafe {
         team_set(err, || {
-            let v = vec![forward, left, turn];
-            finite(what, &v)?;
-            set_value(node, what, Value::Floats(v), false)
+            let value = Value::Floats(vec![forward, left, turn]);
+            contract(what, &value)?;
+            set_value(node, what, value, false)
         })
     }
 }
@@ -244,19 +205,13 @@ pub unsafe extern "C" fn huddle_node_set_robot_kick(
     contact_prob: f64,
     err: *mut huddle_error,
 ) -> c_int {
-    let what = "local.var.robot.kick";
+    let what = team::contract::KICK_KEY;
     // SAFETY: forwarded from the caller.
     unsafe {
         team_set(err, || {
-            let v = vec![direction, speed, contact_prob];
-            finite(what, &v)?;
-            if speed < 0.0 || !(0.0..=1.0).contains(&contact_prob) {
-                return Err(bad(
-                    what,
-                    format!("speed {speed} < 0 or contact_prob {contact_prob} outside 0..=1"),
-                ));
-            }
-            set_value(node, what, Value::Floats(v), true)
+            let value = Value::Floats(vec![direction, speed, contact_prob]);
+            contract(what, &value)?;
+            set_value(node, what, value, true)
         })
     }
 }
@@ -278,22 +233,16 @@ pub unsafe extern "C" fn huddle_node_set_robot_landmarks(
     count: usize,
     err: *mut huddle_error,
 ) -> c_int {
-    let what = "local.var.robot.landmarks";
+    let what = team::contract::LANDMARKS_KEY;
     // SAFETY: forwarded from the caller: `6 * count` readable doubles.
     unsafe {
         team_set(err, || {
             let n = count
                 .checked_mul(6)
                 .ok_or_else(|| bad(what, "count overflows"))?;
-            let v = read_array(sightings, n, "sightings")?;
-            finite(what, v)?;
-            if let Some(i) = v.chunks(6).position(|s| s[4] <= 0.0 || s[5] <= 0.0) {
-                return Err(bad(
-                    what,
-                    format!("sighting {i} has a sigma that is not > 0"),
-                ));
-            }
-            set_value(node, what, Value::Floats(v.to_vec()), false)
+            let value = Value::Floats(read_array(sightings, n, "sightings")?.to_vec());
+            contract(what, &value)?;
+            set_value(node, what, value, false)
         })
     }
 }
@@ -460,6 +409,16 @@ pub unsafe extern "C" fn huddle_node_get_team_mates(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 2×2 upper triangle as a ball sighting, a 3×3 one as a pose: what `contract` says.
+    fn positive_definite(upper: &[f64]) -> bool {
+        let (key, mut v) = match upper.len() {
+            6 => (team::contract::POSE_KEY, vec![0.0, 0.0, 0.0]),
+            _ => (team::contract::BALL_KEY, vec![1.0, 0.0]),
+        };
+        v.extend_from_slice(upper);
+        contract(key, &Value::Floats(v)).is_ok()
+    }
 
     #[test]
     fn covariances_must_be_positive_definite_by_their_leading_minors() {
