@@ -69,6 +69,8 @@ struct Inputs {
     goal_in_view: bool,
     cost: Option<f64>,
     goalkeeper: Option<bool>,
+    /// The referee put the ball back, when the robot program said so.
+    ball_reset: Option<Instant>,
     /// The robot program has said where it is: the layer runs.
     fed: bool,
 }
@@ -216,6 +218,16 @@ fn take(inputs: &mut Inputs, key: &str, value: &Value, stamp: Instant) {
         contract::GOALKEEPER_KEY => {
             inputs.goalkeeper = contract::parse_bool(contract::GOALKEEPER_KEY, value).ok();
         }
+        contract::BALL_RESET_KEY => {
+            if matches!(
+                contract::parse_bool(contract::BALL_RESET_KEY, value),
+                Ok(true)
+            ) {
+                inputs.ball_reset = Some(stamp);
+                // Sightings from before the restart are of a ball that is gone.
+                inputs.balls.clear();
+            }
+        }
         _ => {}
     }
 }
@@ -230,6 +242,9 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     let Shared { layer, cfg } = s;
     if let Some(gk) = inputs.goalkeeper.take() {
         layer.set_goalkeeper(gk);
+    }
+    if let Some(at) = inputs.ball_reset.take() {
+        layer.forget_ball(team::seconds(at));
     }
     let balls: Vec<_> = inputs
         .balls

@@ -27,6 +27,8 @@
 
 pub mod behaviour;
 pub mod perception;
+pub mod play;
+pub mod remote;
 pub mod robot;
 pub mod senses;
 pub mod tactics;

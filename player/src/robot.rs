@@ -34,10 +34,11 @@ pub use team::{
     TeamLayer, WorldModelConfig, WORLD_LOCAL_KEY,
 };
 
-use crate::behaviour::{self, Position};
+use crate::behaviour::Position;
+pub use crate::play::PlayCounts;
+use crate::play::{Belief, Tactician};
 use crate::senses::{Frame, MotionCommand, Odometry};
-use crate::tactics::{choose_play, mode, Mode, PassParams, Play};
-use team::calibration::FieldGeometry;
+use crate::tactics::PassParams;
 use team::{Pose, Vec2};
 
 /// How a robot turns sightings into a belief and a belief into play.
@@ -64,16 +65,6 @@ impl Default for BrainConfig {
             pass: PassParams::default(),
         }
     }
-}
-
-/// Counts of what the active robots tried (whether the foot met the ball is the world's
-/// business: see the simulation's counts).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct PlayCounts {
-    /// Shots attempted.
-    pub shots: u32,
-    /// Passes attempted.
-    pub passes: u32,
 }
 
 /// What a robot's sensors gave it this tick: all it knows of the world outside itself.
@@ -117,19 +108,12 @@ pub struct TickOutput {
 /// (its world models, its arbitration, what it told the team).
 #[derive(Debug, Clone)]
 pub struct Robot {
-    /// Its place in the formation.
-    pub position: Position,
     /// Its team layer: the product's code.
     pub brain: TeamLayer,
     /// The latest camera frame.
     pub frame: Frame,
-    /// Its CMUnited mode.
-    pub mode: Mode,
-    /// The play it has chosen while active.
-    pub play: Option<Play>,
-    /// Shots and passes kicked.
-    pub counts: PlayCounts,
-    kick_ready_at_s: f64,
+    /// Its place, mode and play.
+    pub tactics: Tactician,
 }
 
 impl Deref for Robot {
@@ -182,7 +166,6 @@ impl Robot {
         team: usize,
     ) -> Self {
         Self {
-            position,
             brain: TeamLayer::new(
                 id,
                 position == Position::Goalkeeper,
@@ -193,10 +176,7 @@ impl Robot {
                 team,
             ),
             frame: Frame::default(),
-            mode: Mode::Inactive,
-            play: None,
-            counts: PlayCounts::default(),
-            kick_ready_at_s: 0.0,
+            tactics: Tactician::new(position),
         }
     }
 
@@ -252,19 +232,38 @@ impl Robot {
         );
         let (decision, posted) = self.brain.decide(input.board, input.local_now);
         let pass_to = self.brain.goer_pass_to(input.board, input.local_now);
-        let goalkeeper = self.position == Position::Goalkeeper;
-        self.mode = if goalkeeper {
-            Mode::Goaltend
-        } else if self.brain.acts_as_goer() {
-            Mode::Active
-        } else {
-            match mode(self.id, goalkeeper, &decision, pass_to) {
-                Mode::Active => Mode::Inactive, // still listening after a start
-                m => m,
-            }
+        let acts_as_goer = self.brain.acts_as_goer();
+        self.tactics
+            .set_mode(self.brain.id, acts_as_goer, &decision, pass_to);
+        let now_s = seconds(input.local_now);
+        let brain = &mut self.brain;
+        let belief = Belief {
+            cal: &brain.cal,
+            pose: brain.pose_belief,
+            ball: brain.best_ball(),
+            own_ball: brain.ball.map(|b| b.at),
+            opponents: &self.frame.opponents,
         };
-        let field = self.brain.cal.field;
-        let (receiver, command, kick) = self.act(&field, cfg, &input);
+        let action = self
+            .tactics
+            .act(cfg, &belief, now_s, input.homes, input.holders, || {
+                brain.contact_probability(now_s)
+            });
+        // The robot knows what it just tried: its ball, and soon its team's, turns with
+        // the kick (weighted by its own odds that the foot met the ball) instead of
+        // waiting to see it.
+        let kick = action.swing.map(|s| KickAttempt {
+            direction_rad: s.direction_rad,
+            receiver: s.receiver,
+            report: self.brain.report_kick(
+                &cfg.team,
+                now_s,
+                s.direction_rad,
+                self.brain.cal.kick.speed_mps,
+                s.contact_prob,
+            ),
+        });
+        let (receiver, command) = (action.receiver, action.command);
         let (writes, priority) = self.brain.finish(
             &cfg.team,
             input.local_now,
@@ -294,98 +293,6 @@ impl Robot {
         world_model_waiting: bool,
     ) -> Vec<(Key, Value)> {
         self.brain.redecide(board, local_now, world_model_waiting)
-    }
-
-    /// Move (and maybe kick) according to the mode; returns the pass receiver to
-    /// announce (0: none), the motion command and a kick attempt.
-    fn act(
-        &mut self,
-        field: &FieldGeometry,
-        cfg: &BrainConfig,
-        input: &TickInput<'_>,
-    ) -> (i64, Option<MotionCommand>, Option<KickAttempt>) {
-        let now_s = seconds(input.local_now);
-        let top = self.brain.cal.body.top_speed_mps;
-        let pose = self.pose_belief;
-        let ball = self.best_ball();
-        let own_ball = self.ball.map(|b| b.at);
-        let my_home = |k: usize| behaviour::flexible_home(field, input.homes[k], ball);
-        let cmd = match (self.mode, self.position) {
-            (_, Position::Goalkeeper) => behaviour::keep_goal(field, &pose, ball, top),
-            (Mode::Active, Position::Field(k)) => {
-                // Its own ball, relative to its own pose: the geometry the camera measured.
-                // No ball at all: it carries on as it was.
-                let Some(b) = own_ball.or(ball) else {
-                    return (0, None, None);
-                };
-                let goal = field.opponent_goal();
-                let receivers: Vec<(u8, Vec2)> = behaviour::receivers_of(input.homes, k)
-                    .into_iter()
-                    .map(|j| {
-                        let at = behaviour::flexible_home(field, input.homes[j], ball);
-                        (input.holders[j], at)
-                    })
-                    .collect();
-                let opponents: Vec<Vec2> = self
-                    .frame
-                    .opponents
-                    .iter()
-                    .map(|s| pose.to_field(s.local()))
-                    .collect();
-                let play = choose_play(&cfg.pass, b, goal, &receivers, &opponents);
-                self.play = Some(play);
-                let (aim, receiver) = match play {
-                    Play::Pass { to, .. } => {
-                        let at = receivers.iter().find(|r| r.0 == to).map_or(goal, |r| r.1);
-                        (at, i64::from(to))
-                    }
-                    Play::Shoot { .. } => (goal, 0),
-                };
-                let contact = self.brain.cal.body.radius_m + self.brain.cal.ball.radius_m;
-                let action = behaviour::approach_and_push(contact, &pose, b, aim, top);
-                let in_range = receiver != 0 || b.distance(goal) <= cfg.shoot_range_m;
-                let direction_rad = (aim - b).angle();
-                let mut attempt = None;
-                if action.lined_up && in_range && now_s >= self.kick_ready_at_s {
-                    let contact_prob = self.brain.contact_probability(now_s);
-                    if contact_prob >= cfg.team.world_model.kick_min_contact_prob {
-                        // The robot knows what it just tried: its ball, and soon its
-                        // team's, turns with the kick (weighted by its own odds that the
-                        // foot met the ball) instead of waiting to see it.
-                        let speed = self.brain.cal.kick.speed_mps;
-                        let report = self.brain.report_kick(
-                            &cfg.team,
-                            now_s,
-                            direction_rad,
-                            speed,
-                            contact_prob,
-                        );
-                        self.kick_ready_at_s = now_s + cfg.kick_cooldown_s;
-                        if receiver != 0 {
-                            self.counts.passes += 1;
-                        } else {
-                            self.counts.shots += 1;
-                        }
-                        attempt = Some(KickAttempt {
-                            direction_rad,
-                            receiver,
-                            report,
-                        });
-                    }
-                }
-                return (receiver, Some(action.motion), attempt);
-            }
-            (Mode::Auxiliary, Position::Field(k)) => match ball {
-                // The intended receiver meets a ball that comes its way.
-                Some(b) if b.distance(pose.at) < 2.0 => {
-                    behaviour::go_to(&pose, b, (b - pose.at).angle(), top)
-                }
-                _ => behaviour::hold(&pose, my_home(k), ball, top),
-            },
-            (_, Position::Field(k)) => behaviour::hold(&pose, my_home(k), ball, top),
-        };
-        self.play = None;
-        (0, Some(cmd), None)
     }
 
     /// Switch the robot off: it falls silent. Returns the command that stops it where it

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::senses::Sighting;
+use crate::tactics::Mode;
 
 /// Robot 2 alone at (−1, 0) facing the opponent goal, in a team of five.
 fn lone_robot() -> (Robot, BrainConfig) {
@@ -66,7 +67,7 @@ fn a_robot_that_sees_the_ball_ahead_claims_it_and_heads_for_it() {
         "alone with the ball 1.5 m ahead, it goes: {:?}",
         r.decision
     );
-    assert_eq!(r.mode, Mode::Active, "the goer is active");
+    assert_eq!(r.tactics.mode, Mode::Active, "the goer is active");
     let ball = r.ball.expect("its own ball").at;
     assert!(
         (ball.x - 0.5).abs() < 0.1 && ball.y.abs() < 0.1,

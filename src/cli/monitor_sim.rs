@@ -153,7 +153,7 @@ fn truth(sim: &Simulation) -> Truth {
         .iter()
         .zip(&sim.world.robots)
         .map(|(r, body)| {
-            let role = match r.mode {
+            let role = match r.tactics.mode {
                 Mode::Active => "active",
                 Mode::Auxiliary => "auxiliary",
                 Mode::Inactive => "inactive",

@@ -138,6 +138,18 @@ pub struct SimArgs {
     /// sound, m.
     #[arg(long, value_name = "M")]
     pub critical_distance: Option<f64>,
+    /// Run each robot's team layer in a real `huddle daemon` on loopback (a scratch
+    /// multicast group, each daemon's sends impaired as the network says), the simulated
+    /// robots feeding their daemons through the relay as robot programs do, in real
+    /// time. The report adds the same match in process for comparison.
+    #[arg(long)]
+    pub daemons: bool,
+    /// With --daemons: each daemon's `--impair` spec (default: the match's network).
+    #[arg(long, value_name = "SPEC", requires = "daemons")]
+    pub impair: Option<String>,
+    /// With --daemons: keep each daemon's log (at info level) in this directory.
+    #[arg(long, value_name = "DIR", requires = "daemons")]
+    pub daemon_logs: Option<PathBuf>,
 }
 
 /// `30s@120s`: an outage of 30 s starting at 120 s.
@@ -184,6 +196,9 @@ impl Default for SimArgs {
             crowd_snr: None,
             t60: None,
             critical_distance: None,
+            daemons: false,
+            impair: None,
+            daemon_logs: None,
         }
     }
 }
@@ -212,6 +227,9 @@ pub fn run(args: SimArgs) -> Result<()> {
         return run_sweep(&args, sweep);
     }
     let cfg = config(&args);
+    if args.daemons {
+        return run_daemons(&args, cfg);
+    }
     let mut sim = Simulation::new(cfg).context("setting up the simulation")?;
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(
@@ -246,6 +264,54 @@ pub fn run(args: SimArgs) -> Result<()> {
         if let Some(path) = &args.svg {
             outln!("picture               {}", path.display());
         }
+    }
+    Ok(())
+}
+
+/// `--daemons`: the match with each robot's team layer in a daemon, then the same match
+/// in process for the ratio.
+fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
+    if args.svg.is_some()
+        || args.record.is_some()
+        || args.monitor.is_some()
+        || !args.kill.is_empty()
+    {
+        bail!("--daemons does not take --svg, --record, --monitor or --kill");
+    }
+    let opts = huddle::sim::daemons::DaemonsOptions {
+        exe: std::env::current_exe().context("finding the huddle binary")?,
+        impair: args.impair.clone(),
+        log_dir: args.daemon_logs.clone(),
+    };
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(
+            Some(args.duration.as_millis() as u64),
+            ProgressDrawTarget::stderr(),
+        )
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} daemons playing {bar:40} {pos}/{len} ms ({eta})")
+            .expect("a valid template"),
+    );
+    let mut report =
+        huddle::sim::daemons::run(&cfg, &opts, |t_s| bar.set_position((t_s * 1e3) as u64))
+            .context("playing the match with daemons")?;
+    bar.finish_and_clear();
+    let mut sim = Simulation::new(cfg).context("setting up the in-process match")?;
+    sim.run(|_| {});
+    let inproc = sim.report(0.0);
+    report.in_process = Some(huddle::sim::daemons::InProcess {
+        team_ball_rmse_m: inproc.team_ball_rmse_m,
+        exactly_one_goer_pct: inproc.exactly_one_goer_pct,
+        rmse_vs_in_process: (report.team_ball_rmse_m / inproc.team_ball_rmse_m * 1000.0).round()
+            / 1000.0,
+    });
+    if args.json {
+        outln!("{}", serde_json::to_string(&report)?);
+    } else {
+        outln!("{report}");
     }
     Ok(())
 }

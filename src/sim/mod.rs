@@ -14,6 +14,7 @@
 
 pub mod acoustic;
 mod acoustic_channel;
+pub mod daemons;
 pub mod metrics;
 /// What a simulated robot's senses mean to its team layer ([`player::perception`]).
 pub use player::perception;
@@ -851,6 +852,16 @@ impl Simulation {
             }
         }
         self.timeline.finish(self.time_s());
+    }
+
+    /// The formation's home spots of the field positions (as the robots know the field).
+    pub fn homes(&self) -> &[Vec2] {
+        &self.homes
+    }
+
+    /// The robot id holding each field position.
+    pub fn holders(&self) -> &[u8] {
+        &self.holders
     }
 
     /// Switch robot `i` off (it stops and falls silent).

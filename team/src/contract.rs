@@ -28,6 +28,9 @@ pub const COST_KEY: &str = "local.var.robot.cost";
 pub const GOALKEEPER_KEY: &str = "local.var.robot.goalkeeper";
 /// The robot is fallen (bool).
 pub const FALLEN_KEY: &str = "local.var.robot.fallen";
+/// The referee put the ball back (a kick-off after a goal): `true` makes the layer
+/// forget the ball it tracked, as a robot program that handles the game's restarts says.
+pub const BALL_RESET_KEY: &str = "local.var.robot.ball_reset";
 
 /// The team ball (floats `[x, y, vx, vy, var_x, cov_xy, var_y, confidence, age_s]`).
 pub const TEAM_BALL_KEY: &str = "local.var.team.ball";
@@ -348,13 +351,14 @@ pub fn check(key: &str, value: &comms::Value) -> Option<Result<(), ContractError
         GOAL_IN_VIEW_KEY => parse_bool(GOAL_IN_VIEW_KEY, value).map(drop),
         GOALKEEPER_KEY => parse_bool(GOALKEEPER_KEY, value).map(drop),
         FALLEN_KEY => parse_bool(FALLEN_KEY, value).map(drop),
+        BALL_RESET_KEY => parse_bool(BALL_RESET_KEY, value).map(drop),
         COST_KEY => parse_cost(value).map(drop),
         _ => return None,
     })
 }
 
 /// The input keys, for guards and watches.
-pub const INPUT_KEYS: [&str; 9] = [
+pub const INPUT_KEYS: [&str; 10] = [
     POSE_KEY,
     ODOMETRY_KEY,
     LANDMARKS_KEY,
@@ -364,6 +368,7 @@ pub const INPUT_KEYS: [&str; 9] = [
     COST_KEY,
     GOALKEEPER_KEY,
     FALLEN_KEY,
+    BALL_RESET_KEY,
 ];
 
 /// A pose estimate as [`POSE_OUT_KEY`] gives it (REP-103).

@@ -906,30 +906,12 @@ impl TeamLayer {
         let Some(ball) = self.lwm.ball_at(now_s) else {
             return 0.0;
         };
-        let pose = self.lwm.pose();
-        // REP-103's heading (x forward), from fusion's (y forward).
-        let (sin, cos) = frames::from_fusion_pose(pose).theta_rad.sin_cos();
-        // Field → robot frame, x forward.
-        let rot = Matrix2::new(cos, sin, -sin, cos);
-        let d_field = ball.position() - Vector2::new(pose.mean.x, pose.mean.y);
-        let rel = rot * d_field;
-        let cov_field = ball.position_cov() + pose.cov.fixed_view::<2, 2>(0, 0);
-        let mut cov = rot * cov_field * rot.transpose();
-        // The heading's σ moves the ball sideways by its distance.
-        cov[(1, 1)] += rel.norm_squared() * pose.cov[(2, 2)];
-        let cal = &self.cal;
-        let reach = cal.body.radius_m + cal.ball.radius_m + cal.kick.reach_margin_m;
-        let d = rel.norm();
-        let along = if d > 1e-9 {
-            rel / d
-        } else {
-            Vector2::new(1.0, 0.0)
-        };
-        let sigma_d = (along.transpose() * cov * along)[(0, 0)].max(1e-12).sqrt();
-        let p_range = fusion::consistency::normal_cdf((reach - d) / sigma_d);
-        let lateral_room = rel.x.max(0.0) * cal.kick.max_angle_rad.tan() - rel.y.abs();
-        let p_angle = fusion::consistency::normal_cdf(lateral_room / cov[(1, 1)].max(1e-12).sqrt());
-        (p_range * p_angle).clamp(0.0, 1.0)
+        contact_probability(
+            &self.cal,
+            self.lwm.pose(),
+            ball.position(),
+            ball.position_cov(),
+        )
     }
 
     /// The game controller says the ball was put back for a kick-off (`now_s` on the
@@ -951,6 +933,41 @@ impl TeamLayer {
     pub fn own_ball(&self, now_s: f64) -> Option<BallEstimate> {
         self.ball.and(self.lwm.ball_at(now_s))
     }
+}
+
+/// The odds that a robot posed at `pose` (fusion's convention, with its covariance)
+/// reaches a ball at field point `ball` (covariance `ball_cov`) with its foot: the ball
+/// within its reach and within its kick's angle, both estimates' uncertainty carried
+/// into its own frame. What [`TeamLayer::contact_probability`] asks of its own estimates;
+/// a robot program that reads the layer's pose and ball from the daemon asks the same.
+pub fn contact_probability(
+    cal: &Calibration,
+    pose: &fusion::PoseEstimate,
+    ball: Vector2<f64>,
+    ball_cov: Matrix2<f64>,
+) -> f64 {
+    // REP-103's heading (x forward), from fusion's (y forward).
+    let (sin, cos) = frames::from_fusion_pose(pose).theta_rad.sin_cos();
+    // Field → robot frame, x forward.
+    let rot = Matrix2::new(cos, sin, -sin, cos);
+    let d_field = ball - Vector2::new(pose.mean.x, pose.mean.y);
+    let rel = rot * d_field;
+    let cov_field = ball_cov + pose.cov.fixed_view::<2, 2>(0, 0);
+    let mut cov = rot * cov_field * rot.transpose();
+    // The heading's σ moves the ball sideways by its distance.
+    cov[(1, 1)] += rel.norm_squared() * pose.cov[(2, 2)];
+    let reach = cal.body.radius_m + cal.ball.radius_m + cal.kick.reach_margin_m;
+    let d = rel.norm();
+    let along = if d > 1e-9 {
+        rel / d
+    } else {
+        Vector2::new(1.0, 0.0)
+    };
+    let sigma_d = (along.transpose() * cov * along)[(0, 0)].max(1e-12).sqrt();
+    let p_range = fusion::consistency::normal_cdf((reach - d) / sigma_d);
+    let lateral_room = rel.x.max(0.0) * cal.kick.max_angle_rad.tan() - rel.y.abs();
+    let p_angle = fusion::consistency::normal_cdf(lateral_room / cov[(1, 1)].max(1e-12).sqrt());
+    (p_range * p_angle).clamp(0.0, 1.0)
 }
 
 #[cfg(test)]

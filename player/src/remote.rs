@@ -1,0 +1,495 @@
+//! One of our robots as a robot program driving a `huddle daemon`: the same perception,
+//! modes and plays as [`crate::Robot`], but its team layer runs in the daemon and it talks
+//! to it only through the contract's keys (`docs/team-layer.md`), as any robot program
+//! would. Sans-IO: a tick takes what the robot sensed and what it last read from the
+//! daemon's `local.var.team.*` outputs ([`TeamView`]), and returns the
+//! `local.var.robot.*` writes to make and the motion to carry out. `huddle sim --daemons`
+//! moves the bytes.
+//!
+//! What the contract gives a robot program is what this robot plays on: its pose as the
+//! layer holds it, its own ball and the team ball (each with covariance and age), the
+//! goer and whether it goes. Its odds of meeting the ball with a kick come from the same
+//! function the layer uses ([`team::contact_probability`]), on those outputs.
+
+use comms::arbitration::Decision;
+use comms::Value;
+use fusion::nalgebra::{Matrix2, Matrix3, Vector2};
+use fusion::Kick;
+use team::contract;
+use team::{Calibration, Pose, Vec2};
+
+use crate::behaviour::Position;
+use crate::play::{Belief, Tactician};
+use crate::robot::{BrainConfig, KickAttempt, Percepts};
+use crate::senses::{Frame, MotionCommand, Odometry, Sighting};
+
+/// A ball as the layer publishes it (`local.var.team.ball`, `local.var.team.own_ball`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PublishedBall {
+    /// Field place when published, m.
+    pub at: Vec2,
+    /// Field velocity, m/s.
+    pub velocity: Vec2,
+    /// Covariance of the place.
+    pub cov: Matrix2<f64>,
+    /// Age of the newest sighting in it when published, s.
+    pub age_s: f64,
+}
+
+impl PublishedBall {
+    /// Parses the layer's ball output: `[x, y, vx, vy, var_x, cov_xy, var_y, (conf,) age]`.
+    pub fn parse(value: &Value) -> Option<PublishedBall> {
+        let Value::Floats(v) = value else {
+            return None;
+        };
+        if !(v.len() == 8 || v.len() == 9) || v.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        Some(PublishedBall {
+            at: Vec2::new(v[0], v[1]),
+            velocity: Vec2::new(v[2], v[3]),
+            cov: Matrix2::new(v[4], v[5], v[5], v[6]),
+            age_s: v[v.len() - 1],
+        })
+    }
+
+    /// Where it is `dt_s` after it was published, at its published velocity.
+    pub fn at_after(&self, dt_s: f64) -> Vec2 {
+        self.at + self.velocity * dt_s
+    }
+}
+
+/// What the robot program last read from its daemon's team layer.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TeamView {
+    /// `local.var.team.pose`: the pose the layer holds, with its covariance.
+    pub pose: Option<(Pose, Matrix3<f64>)>,
+    /// Seconds since that pose was published.
+    pub pose_since_s: f64,
+    /// `local.var.team.own_ball`, and seconds since it was published.
+    pub own_ball: Option<(PublishedBall, f64)>,
+    /// `local.var.team.ball`, and seconds since it was published.
+    pub team_ball: Option<(PublishedBall, f64)>,
+    /// `local.var.team.goer` (0: none).
+    pub goer: u8,
+    /// `local.var.team.going`.
+    pub going: bool,
+    /// The goer's announced pass receiver (`n.var.machine.pass_to` of the goer).
+    pub pass_to: Option<u8>,
+}
+
+impl TeamView {
+    /// Takes one output binding `key = value` read from the daemon; `false` when the
+    /// key is not an output this robot plays on or the value does not parse.
+    pub fn take(&mut self, key: &str, value: &Value, since_s: f64) -> bool {
+        match key {
+            contract::POSE_OUT_KEY => match value {
+                Value::Floats(v) if v.len() == 9 && v.iter().all(|x| x.is_finite()) => {
+                    let cov = Matrix3::new(v[3], v[4], v[5], v[4], v[6], v[7], v[5], v[7], v[8]);
+                    self.pose = Some((
+                        Pose {
+                            at: Vec2::new(v[0], v[1]),
+                            theta_rad: v[2],
+                        },
+                        cov,
+                    ));
+                    self.pose_since_s = since_s;
+                    true
+                }
+                _ => false,
+            },
+            contract::OWN_BALL_KEY => {
+                self.own_ball = PublishedBall::parse(value).map(|b| (b, since_s));
+                self.own_ball.is_some()
+            }
+            contract::TEAM_BALL_KEY => {
+                self.team_ball = PublishedBall::parse(value).map(|b| (b, since_s));
+                self.team_ball.is_some()
+            }
+            contract::GOER_KEY => match value {
+                Value::Int(g) => {
+                    self.goer = u8::try_from(*g).unwrap_or(0);
+                    true
+                }
+                _ => false,
+            },
+            contract::GOING_KEY => match value {
+                Value::Bool(b) => {
+                    self.going = *b;
+                    true
+                }
+                _ => false,
+            },
+            _ => false,
+        }
+    }
+
+    /// The team ball now, `dt_s` after it was read (its age since publication added).
+    pub fn team_ball_now(&self, dt_s: f64) -> Option<Vec2> {
+        self.team_ball.map(|(b, since)| b.at_after(since + dt_s))
+    }
+
+    /// Forgets the balls the layer stopped publishing: it writes them every tick while
+    /// it holds them, so one not rewritten for `stale_s` is one it let go of (after a
+    /// ball reset, say), however young the value's own age says it is.
+    pub fn drop_stale(&mut self, stale_s: f64) {
+        self.own_ball = self.own_ball.filter(|&(_, since)| since <= stale_s);
+        self.team_ball = self.team_ball.filter(|&(_, since)| since <= stale_s);
+    }
+}
+
+/// The contract's inputs for one tick of senses, calibrated as `cal`: odometry, the
+/// landmarks seen (with their field places, from the field's lines as the robot knows
+/// them), a ball sighting in the robot frame with its covariance, and whether the
+/// opponent goal is in view.
+pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static str, Value)> {
+    let cam = &cal.sensors;
+    let sigma_r = |r: f64| cam.range_noise_m + cam.range_noise_frac * r;
+    let o = &percepts.odometry;
+    let mut out = vec![(
+        contract::ODOMETRY_KEY,
+        Value::Floats(vec![o.forward_m, o.left_m, o.turn_rad]),
+    )];
+    let marks = cal.field.landmarks();
+    let seen: Vec<f64> = percepts
+        .frame
+        .landmarks
+        .iter()
+        .filter_map(|(k, s)| marks.get(*k).map(|m| (m, s)))
+        .flat_map(|(m, s)| {
+            [
+                m.x,
+                m.y,
+                s.range_m,
+                s.bearing_rad,
+                sigma_r(s.range_m),
+                cam.bearing_noise_rad,
+            ]
+        })
+        .collect();
+    if !seen.is_empty() {
+        out.push((contract::LANDMARKS_KEY, Value::Floats(seen)));
+    }
+    if let Some(s) = &percepts.frame.ball {
+        let (local, cov) = ball_rep103(sigma_r(s.range_m), cam.bearing_noise_rad, s);
+        out.push((
+            contract::BALL_KEY,
+            Value::Floats(vec![
+                local.x,
+                local.y,
+                cov[(0, 0)],
+                cov[(0, 1)],
+                cov[(1, 1)],
+            ]),
+        ));
+    }
+    out.push((
+        contract::GOAL_IN_VIEW_KEY,
+        Value::Bool(percepts.frame.opponent_goal_in_view),
+    ));
+    out
+}
+
+/// A range-bearing ball sighting as a robot-frame point (REP-103: x forward, y left) and
+/// its covariance, the range and bearing σ carried through the polar → Cartesian map.
+fn ball_rep103(sigma_r: f64, sigma_b: f64, s: &Sighting) -> (Vector2<f64>, Matrix2<f64>) {
+    let (r, b) = (s.range_m, s.bearing_rad);
+    let (sin, cos) = b.sin_cos();
+    let j = Matrix2::new(cos, -r * sin, sin, r * cos);
+    let d = Matrix2::new(sigma_r * sigma_r, 0.0, 0.0, sigma_b * sigma_b);
+    let cov = j * d * j.transpose();
+    (
+        Vector2::new(r * cos, r * sin),
+        (cov + cov.transpose()) * 0.5,
+    )
+}
+
+/// The pose a robot is told at its start spot, as the contract's `local.var.robot.pose`:
+/// the spot, with the start σ the team configures.
+pub fn start_pose_value(pose: &Pose, sigma_m: f64, sigma_rad: f64) -> Value {
+    let (vm, vr) = (sigma_m.max(1e-3).powi(2), sigma_rad.max(1e-3).powi(2));
+    Value::Floats(vec![
+        pose.at.x,
+        pose.at.y,
+        pose.theta_rad,
+        vm,
+        0.0,
+        0.0,
+        vm,
+        0.0,
+        vr,
+    ])
+}
+
+/// What a tick hands back.
+#[derive(Debug, Clone)]
+pub struct RemoteTick {
+    /// Writes to make through the daemon's relay.
+    pub writes: Vec<(&'static str, Value)>,
+    /// The motion command, in the field frame as the robot believes it is posed.
+    pub command: Option<MotionCommand>,
+    /// The pose it believes.
+    pub believed: Pose,
+    /// A kick it swings, if any.
+    pub kick: Option<KickAttempt>,
+}
+
+/// A robot whose team layer runs in a daemon.
+#[derive(Debug, Clone)]
+pub struct RemoteRobot {
+    /// Its id.
+    pub id: u8,
+    /// Its place, mode and play.
+    pub tactics: Tactician,
+    /// What it knows of its field, body, ball and kick.
+    pub cal: Calibration,
+    /// The latest camera frame.
+    pub frame: Frame,
+    /// What it last read from the daemon.
+    pub view: TeamView,
+    /// The odometry it wrote, with when (its clock): what the layer's pose may not hold
+    /// yet.
+    odometry_log: std::collections::VecDeque<(f64, Odometry)>,
+}
+
+impl RemoteRobot {
+    /// Robot `id` in `position`, calibrated as `cal`.
+    pub fn new(id: u8, position: Position, cal: Calibration) -> Self {
+        Self {
+            id,
+            tactics: Tactician::new(position),
+            cal,
+            frame: Frame::default(),
+            view: TeamView::default(),
+            odometry_log: std::collections::VecDeque::new(),
+        }
+    }
+
+    /// The layer's pose brought up to `now_s`: the published pose followed by the motion
+    /// the robot wrote after it was published (the layer had not integrated it yet), as
+    /// a robot program dead-reckons between its localisation's updates.
+    fn pose_now(&mut self, now_s: f64) -> Option<(Pose, Matrix3<f64>)> {
+        let (pose, cov) = self.view.pose?;
+        let published_s = now_s - self.view.pose_since_s;
+        // Motion written more than a second before the pose is long in it.
+        while self
+            .odometry_log
+            .front()
+            .is_some_and(|&(t, _)| t < published_s - 1.0)
+        {
+            self.odometry_log.pop_front();
+        }
+        let since = self
+            .odometry_log
+            .iter()
+            .filter(|&&(t, _)| t > published_s)
+            .fold(Odometry::default(), |a, &(_, o)| a.then(o));
+        let at = pose.to_field(Vec2::new(since.forward_m, since.left_m));
+        Some((
+            Pose {
+                at,
+                theta_rad: fusion::wrap_angle(pose.theta_rad + since.turn_rad),
+            },
+            cov,
+        ))
+    }
+
+    /// Whether it is a field player (not the goalkeeper).
+    pub fn is_field_player(&self) -> bool {
+        !self.tactics.goalkeeper()
+    }
+
+    /// Whether it saw the ball in its latest camera frame.
+    pub fn sees_ball(&self) -> bool {
+        self.frame.ball.is_some()
+    }
+
+    /// Its own ball, if seen within `memory_s`, `dt_s` after its latest read.
+    fn own_ball(&self, memory_s: f64, dt_s: f64) -> Option<Vec2> {
+        self.view
+            .own_ball
+            .filter(|(b, since)| b.age_s + since + dt_s <= memory_s)
+            .map(|(b, since)| b.at_after(since + dt_s))
+    }
+
+    /// One control tick at `now_s` on the robot's clock, `dt_s` after the view was
+    /// last updated: what it sensed goes to the daemon, it plays on what the daemon's
+    /// layer last told it.
+    pub fn tick(
+        &mut self,
+        cfg: &BrainConfig,
+        now_s: f64,
+        percepts: Percepts,
+        dt_s: f64,
+        homes: &[Vec2],
+        holders: &[u8],
+    ) -> RemoteTick {
+        let mut writes = contract_inputs(&self.cal, &percepts);
+        // Five of the layer's ticks without a rewrite: it no longer holds that ball.
+        self.view.drop_stale(5.0 * cfg.team.control_period_s);
+        self.odometry_log.push_back((now_s, percepts.odometry));
+        self.frame = percepts.frame;
+        let Some((pose, pose_cov)) = self.pose_now(now_s) else {
+            // The layer has not published a pose yet: nothing to play on.
+            return RemoteTick {
+                writes,
+                command: None,
+                believed: Pose::default(),
+                kick: None,
+            };
+        };
+        let decision = Decision {
+            goer: (self.view.goer != 0).then_some(self.view.goer),
+            goer_cost: 0.0,
+        };
+        self.tactics
+            .set_mode(self.id, self.view.going, &decision, self.view.pass_to);
+        let own_ball = self.own_ball(cfg.team.ball_memory_s, dt_s);
+        let team_ball = self.view.team_ball_now(dt_s);
+        let belief = Belief {
+            cal: &self.cal,
+            pose,
+            ball: team_ball.or(own_ball),
+            own_ball,
+            opponents: &self.frame.opponents,
+        };
+        let cal = &self.cal;
+        let own = self.view.own_ball;
+        let action = self.tactics.act(cfg, &belief, now_s, homes, holders, || {
+            own.map_or(0.0, |(b, since)| {
+                let at = b.at_after(since + dt_s);
+                let est = team::frames::to_fusion_pose(&pose, pose_cov);
+                team::contact_probability(cal, &est, Vector2::new(at.x, at.y), b.cov)
+            })
+        });
+        let kick = action.swing.map(|s| {
+            let speed = self.cal.kick.speed_mps;
+            writes.push((
+                contract::KICK_KEY,
+                Value::Floats(vec![s.direction_rad, speed, s.contact_prob]),
+            ));
+            KickAttempt {
+                direction_rad: s.direction_rad,
+                receiver: s.receiver,
+                report: Kick {
+                    t_s: now_s,
+                    speed_mps: speed,
+                    direction_rad: s.direction_rad,
+                    speed_sigma_mps: cfg.team.world_model.kick_speed_sigma_mps,
+                    direction_sigma_rad: self.cal.kick.direction_sigma_rad,
+                    contact_prob: s.contact_prob,
+                },
+            }
+        });
+        RemoteTick {
+            writes,
+            command: action.command,
+            believed: pose,
+            kick,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_input_a_tick_writes_is_one_the_daemon_takes() {
+        // A frame with a ball 2 m ahead-left, two landmarks and some odometry: each write
+        // must pass the contract's check, exactly as the daemon's guards run it.
+        let cal = Calibration::default();
+        let percepts = Percepts {
+            frame: Frame {
+                ball: Some(Sighting {
+                    range_m: 2.0,
+                    bearing_rad: 0.3,
+                }),
+                opponent_goal_in_view: true,
+                landmarks: vec![
+                    (
+                        0,
+                        Sighting {
+                            range_m: 3.0,
+                            bearing_rad: -0.2,
+                        },
+                    ),
+                    (
+                        3,
+                        Sighting {
+                            range_m: 4.5,
+                            bearing_rad: 1.0,
+                        },
+                    ),
+                ],
+                opponents: vec![],
+            },
+            odometry: Odometry {
+                forward_m: 0.02,
+                left_m: 0.0,
+                turn_rad: 0.01,
+            },
+        };
+        let writes = contract_inputs(&cal, &percepts);
+        let keys: Vec<&str> = writes.iter().map(|(k, _)| *k).collect();
+        assert_eq!(
+            keys,
+            [
+                contract::ODOMETRY_KEY,
+                contract::LANDMARKS_KEY,
+                contract::BALL_KEY,
+                contract::GOAL_IN_VIEW_KEY
+            ]
+        );
+        for (key, value) in &writes {
+            assert!(
+                !matches!(contract::check(key, value), Some(Err(_))),
+                "{key} = {value:?} is refused: {:?}",
+                contract::check(key, value)
+            );
+        }
+        // The ball is where the camera put it, in the robot frame.
+        let b = contract::parse_ball(&writes[2].1).expect("a ball the contract takes");
+        assert!((b.local.x - 2.0 * 0.3f64.cos()).abs() < 1e-12);
+        assert!((b.local.y - 2.0 * 0.3f64.sin()).abs() < 1e-12);
+        let start = start_pose_value(&Pose::default(), 0.1, 0.05);
+        assert!(
+            contract::parse_pose(&start).is_ok(),
+            "the start pose is taken"
+        );
+    }
+
+    #[test]
+    fn a_goer_told_by_its_daemon_plays_the_ball_it_was_told_about() {
+        // The daemon says: this robot (2) goes; its pose is at the origin facing +x; its
+        // own ball 1 m ahead. It heads for the ball.
+        let cal = Calibration::default();
+        let mut r = RemoteRobot::new(2, Position::Field(0), cal);
+        let pose = |v: Vec<f64>| Value::Floats(v);
+        assert!(r.view.take(
+            contract::POSE_OUT_KEY,
+            &pose(vec![0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]),
+            0.0
+        ));
+        let ball = Value::Floats(vec![1.0, 0.0, 0.0, 0.0, 0.01, 0.0, 0.01, 0.05]);
+        assert!(r.view.take(contract::OWN_BALL_KEY, &ball, 0.0));
+        assert!(r.view.take(contract::GOER_KEY, &Value::Int(2), 0.0));
+        assert!(r.view.take(contract::GOING_KEY, &Value::Bool(true), 0.0));
+        assert!(
+            !r.view.take(contract::GOING_KEY, &Value::Int(1), 0.0),
+            "a wrong type is not taken"
+        );
+        let cfg = BrainConfig::default();
+        let homes = [Vec2::new(-2.0, 0.0)];
+        let out = r.tick(&cfg, 1.0, Percepts::default(), 0.02, &homes, &[2]);
+        assert_eq!(r.tactics.mode, crate::tactics::Mode::Active);
+        let cmd = out.command.expect("a motion");
+        assert!(cmd.velocity.x > 0.0, "it heads for the ball: {cmd:?}");
+        // Told another robot goes, it holds its place instead.
+        assert!(r.view.take(contract::GOER_KEY, &Value::Int(3), 0.0));
+        assert!(r.view.take(contract::GOING_KEY, &Value::Bool(false), 0.0));
+        let out = r.tick(&cfg, 1.04, Percepts::default(), 0.02, &homes, &[2]);
+        assert_eq!(r.tactics.mode, crate::tactics::Mode::Inactive);
+        assert!(out.kick.is_none());
+    }
+}

@@ -1,0 +1,701 @@
+//! `huddle sim --daemons`: the same match, with each robot's team layer in a real
+//! `huddle daemon` on loopback instead of in this process. The simulated robots are robot
+//! programs ([`player::remote::RemoteRobot`]): each control tick they write what they
+//! sensed to their daemon's `local.var.robot.*` keys through the relay, and play on what
+//! the daemon's team layer last published on `local.var.team.*` (watched with `REFR 0`,
+//! so each output arrives as it is written). The daemons talk to each other over a
+//! scratch multicast group on 127.0.0.1, each sender impaired by netsim's link model
+//! (`huddle daemon --impair`), so the network is the preset's. The world runs at real
+//! time: one physics step per 10 ms of wall clock.
+//!
+//! The report carries the figures the in-process report has where they mean the same
+//! thing here: exactly one goer over ball-visible time, the team ball's error against the
+//! truth (each robot's `local.var.team.ball` carried forward by its published velocity to
+//! the instant it is judged), the centralized reference fed the same sightings at the
+//! poses the daemons held, messages sent. What it cannot have: the references that need a
+//! replica's inside (delivery, delayed-centralized) and the world-model NEES bands.
+//!
+//! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
+//! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
+
+// A real-time loop over real processes: it reads the wall clock and sleeps.
+#![allow(clippy::disallowed_methods)]
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{Ipv4Addr, SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use comms::relay::Binding;
+use comms::Value;
+use fusion::CentralizedBall;
+use player::remote::{start_pose_value, RemoteRobot, TeamView};
+use player::Percepts;
+use serde::Serialize;
+use team::contract;
+
+use super::{Metrics, SimConfig, Simulation, Transport};
+use crate::field::World;
+
+/// How `--daemons` runs the team.
+#[derive(Debug, Clone)]
+pub struct DaemonsOptions {
+    /// The `huddle` binary to start as `huddle daemon`.
+    pub exe: PathBuf,
+    /// netsim spec for each daemon's `--impair` (`None`: the match's network as a spec).
+    pub impair: Option<String>,
+    /// Keep each daemon's log (`RUST_LOG=info`) in this directory.
+    pub log_dir: Option<PathBuf>,
+}
+
+/// Why a `--daemons` match could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonsError {
+    /// The match's configuration is not one daemons can play.
+    #[error("{0}")]
+    Config(String),
+    /// Starting or talking to a daemon failed.
+    #[error("{what}: {source}")]
+    Io {
+        /// What was being done.
+        what: String,
+        /// The failure.
+        source: std::io::Error,
+    },
+    /// A daemon stopped during the match.
+    #[error("robot {id}'s daemon exited during the match ({status}); its log: {log}")]
+    Exited {
+        /// The robot.
+        id: u8,
+        /// Its exit status.
+        status: String,
+        /// Where its log is.
+        log: String,
+    },
+    /// The simulation could not be set up.
+    #[error(transparent)]
+    Sim(#[from] super::SimError),
+}
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> DaemonsError {
+    let what = what.into();
+    move |source| DaemonsError::Io { what, source }
+}
+
+/// The report of a `--daemons` match (the in-process report's names where the figure is
+/// the same).
+#[derive(Debug, Clone, Serialize)]
+pub struct DaemonsReport {
+    /// Always `"daemons"`.
+    pub mode: &'static str,
+    /// The league budget, if any.
+    pub budget: Option<String>,
+    /// Our robots.
+    pub robots: usize,
+    /// Played duration, s (wall clock).
+    pub duration_s: f64,
+    /// The network preset.
+    pub preset: String,
+    /// What each daemon's `--impair` was.
+    pub impair: String,
+    /// The match's seed.
+    pub seed: u64,
+    /// Ball-visible time, s.
+    pub ball_visible_s: f64,
+    /// Ball-visible time with exactly one goer, %.
+    pub exactly_one_goer_pct: f64,
+    /// … with two or more, %.
+    pub conflict_pct: f64,
+    /// … with none, %.
+    pub no_goer_pct: f64,
+    /// Longest conflict, ms.
+    pub longest_conflict_ms: f64,
+    /// Handovers of the ball between robots.
+    pub handovers: u64,
+    /// Goals for and against.
+    pub goals_for: u32,
+    /// Goals against.
+    pub goals_against: u32,
+    /// Kicks the robots swung.
+    pub kick_attempts: u64,
+    /// Frames the daemons sent (their `frames_out`).
+    pub team_messages_sent: u64,
+    /// Per robot.
+    pub messages_per_robot: Vec<u64>,
+    /// RMSE of the team ball the robots read from their daemons, ball visible, m.
+    pub team_ball_rmse_m: f64,
+    /// The centralized filter fed every sighting at the poses the daemons held, m.
+    pub centralized_rmse_m: f64,
+    /// `team_ball_rmse_m / centralized_rmse_m`.
+    pub rmse_ratio: f64,
+    /// Samples of the team ball error.
+    pub team_ball_samples: u64,
+    /// Samples taken while the robot did not see the ball itself.
+    pub blind_samples: u64,
+    /// RMSE over those, m.
+    pub blind_team_ball_rmse_m: f64,
+    /// RMSE of the pose the daemons held against the truth, m.
+    pub pose_rmse_m: f64,
+    /// Relay writes the daemons refused (`ERR`): each is a bug in the robot program.
+    pub relay_errors: u64,
+    /// Physics steps that started more than one step late (the machine was busy).
+    pub late_steps: u64,
+    /// The same match in process (same seed and configuration), for the ratio.
+    pub in_process: Option<InProcess>,
+}
+
+/// The in-process figures `--daemons` is judged against.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct InProcess {
+    /// Its team-ball RMSE, m.
+    pub team_ball_rmse_m: f64,
+    /// Its exactly-one-goer, %.
+    pub exactly_one_goer_pct: f64,
+    /// Daemons' team-ball RMSE over it.
+    pub rmse_vs_in_process: f64,
+}
+
+impl std::fmt::Display for DaemonsReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "huddle sim --daemons: {} robots in {} daemons, {:.0} s real time, {} ({}), seed {}",
+            self.robots, self.robots, self.duration_s, self.preset, self.impair, self.seed
+        )?;
+        writeln!(
+            f,
+            "exactly one goer      {:.2}% of {:.1} s ball-visible (conflict {:.2}%, none {:.2}%, longest conflict {:.0} ms)",
+            self.exactly_one_goer_pct,
+            self.ball_visible_s,
+            self.conflict_pct,
+            self.no_goer_pct,
+            self.longest_conflict_ms
+        )?;
+        writeln!(
+            f,
+            "team ball RMSE        {:.3} m ({} samples; blind {:.3} m over {}); centralized {:.3} m, ratio {:.3}",
+            self.team_ball_rmse_m,
+            self.team_ball_samples,
+            self.blind_team_ball_rmse_m,
+            self.blind_samples,
+            self.centralized_rmse_m,
+            self.rmse_ratio
+        )?;
+        if let Some(p) = &self.in_process {
+            writeln!(
+                f,
+                "in process            team ball RMSE {:.3} m, one goer {:.2}%: daemons / in-process RMSE {:.3}",
+                p.team_ball_rmse_m, p.exactly_one_goer_pct, p.rmse_vs_in_process
+            )?;
+        }
+        writeln!(
+            f,
+            "messages              {} ({:?}); goals {}:{}; kicks {}; pose RMSE {:.3} m",
+            self.team_messages_sent,
+            self.messages_per_robot,
+            self.goals_for,
+            self.goals_against,
+            self.kick_attempts,
+            self.pose_rmse_m
+        )?;
+        write!(
+            f,
+            "relay errors          {}; late physics steps {}",
+            self.relay_errors, self.late_steps
+        )
+    }
+}
+
+/// What a robot's relay reader has seen.
+#[derive(Debug, Default)]
+struct Heard {
+    view: TeamView,
+    /// When each ball output and the pose arrived.
+    pose_at: Option<Instant>,
+    own_ball_at: Option<Instant>,
+    team_ball_at: Option<Instant>,
+    /// Each robot's announced pass receiver.
+    pass_to: BTreeMap<u8, u8>,
+    errors: u64,
+    /// The daemon's `frames_out` (from `GETV local.var.huddle.stats.frames_out`).
+    frames_out: Option<u64>,
+}
+
+/// A robot's daemon: its process and its relay connection.
+struct Daemon {
+    id: u8,
+    child: Child,
+    log: PathBuf,
+    writer: TcpStream,
+    heard: Arc<Mutex<Heard>>,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Daemon {
+    fn send(&mut self, lines: &str) -> Result<(), DaemonsError> {
+        self.writer
+            .write_all(lines.as_bytes())
+            .map_err(io(format!("writing to robot {}'s relay", self.id)))
+    }
+
+    fn check_alive(&mut self) -> Result<(), DaemonsError> {
+        match self.child.try_wait() {
+            Ok(Some(status)) => Err(DaemonsError::Exited {
+                id: self.id,
+                status: status.to_string(),
+                log: self.log.display().to_string(),
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The netsim spec of the match's network, for `huddle daemon --impair`.
+pub fn impair_spec(cfg: &SimConfig) -> String {
+    let n = &cfg.network;
+    let mut spec = format!("preset={}", n.preset.name());
+    if let Some(loss) = n.loss {
+        spec.push_str(&format!(",loss={loss}"));
+    }
+    if let Some(l) = n.latency {
+        spec.push_str(&format!(",delay={}us", l.as_micros()));
+    }
+    if let Some(j) = n.jitter {
+        spec.push_str(&format!(",jitter={}us", j.as_micros()));
+    }
+    if let Some(d) = n.dtim_period {
+        let beacon_us = 102_400 * u64::from(d);
+        spec.push_str(&format!(",beacon={beacon_us}us"));
+    }
+    spec
+}
+
+fn free_tcp_port() -> Result<u16, DaemonsError> {
+    let l = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0))
+        .map_err(io("finding a free relay port"))?;
+    Ok(l.local_addr()
+        .map_err(io("finding a free relay port"))?
+        .port())
+}
+
+/// Starts robot `id`'s daemon and connects to its relay.
+fn start_daemon(
+    id: u8,
+    cfg: &SimConfig,
+    opts: &DaemonsOptions,
+    group: std::net::SocketAddrV4,
+    spec: &str,
+    dir: &Path,
+) -> Result<Daemon, DaemonsError> {
+    let relay: SocketAddr = (Ipv4Addr::LOCALHOST, free_tcp_port()?).into();
+    let log = dir.join(format!("daemon-{id}.log"));
+    let log_file =
+        std::fs::File::create(&log).map_err(io(format!("creating {}", log.display())))?;
+    let mut cmd = Command::new(&opts.exe);
+    cmd.args(["daemon", "--id", &id.to_string()])
+        .args(["--group", &group.to_string(), "--iface", "127.0.0.1"])
+        .args(["--relay", &relay.to_string()])
+        .arg("--config-dir")
+        .arg(dir)
+        .args(["--team-size", &cfg.robots.to_string()])
+        .args(["--impair", spec])
+        .args([
+            "--impair-seed",
+            &(cfg.seed * 1000 + u64::from(id)).to_string(),
+        ])
+        .args([
+            "--refresh",
+            &format!("{}ms", cfg.refresh_period.as_millis().max(1)),
+        ]);
+    if let Some(b) = &cfg.budget {
+        // The simulated team pools its budget (every robot runs huddle).
+        cmd.args(["--budget", &b.to_string(), "--budget-pool"]);
+        // No GameController here: the budget paces itself, as the daemon does without one.
+        cmd.arg("--no-gamecontroller");
+    }
+    let policy = clap::ValueEnum::to_possible_value(&cfg.brain.team.send_policy)
+        .map(|v| v.get_name().to_owned())
+        .unwrap_or_else(|| "every".into());
+    cmd.args(["--policy", &policy])
+        .env(
+            "RUST_LOG",
+            if opts.log_dir.is_some() {
+                "info"
+            } else {
+                "warn"
+            },
+        )
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(log_file));
+    let mut child = cmd
+        .spawn()
+        .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
+    // Wait for its relay to answer.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let stream = loop {
+        match TcpStream::connect(relay) {
+            Ok(s) => break s,
+            Err(e) => {
+                if let Ok(Some(status)) = child.try_wait() {
+                    return Err(DaemonsError::Exited {
+                        id,
+                        status: status.to_string(),
+                        log: log.display().to_string(),
+                    });
+                }
+                if Instant::now() > deadline {
+                    let _ = child.kill();
+                    return Err(DaemonsError::Io {
+                        what: format!("robot {id}'s relay at {relay} never answered"),
+                        source: e,
+                    });
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    };
+    let _ = stream.set_nodelay(true);
+    let reader = stream.try_clone().map_err(io("cloning a relay socket"))?;
+    let heard = Arc::new(Mutex::new(Heard::default()));
+    let sink = Arc::clone(&heard);
+    std::thread::Builder::new()
+        .name(format!("relay-{id}"))
+        .spawn(move || read_relay(id, reader, &sink))
+        .map_err(io("starting a relay reader"))?;
+    Ok(Daemon {
+        id,
+        child,
+        log,
+        writer: stream,
+        heard,
+    })
+}
+
+/// Reads robot `id`'s relay until it closes: outputs into the view, errors counted.
+fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
+    let mut lines = BufReader::new(stream).lines();
+    while let Some(Ok(line)) = lines.next() {
+        let mut h = heard.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(text) = line.strip_prefix("ERR ") {
+            h.errors += 1;
+            if h.errors <= 5 {
+                tracing::warn!(robot = id, "relay refused a write: {text}");
+            }
+            continue;
+        }
+        let Some(b) = Binding::parse(&line) else {
+            continue;
+        };
+        let Ok(value) = comms::literal::parse_literal(&b.value) else {
+            continue;
+        };
+        let now = Instant::now();
+        if b.key == "local.var.huddle.stats.frames_out" {
+            if let Value::Int(n) = value {
+                h.frames_out = u64::try_from(n).ok();
+            }
+            continue;
+        }
+        if let Some(owner) = b.key.strip_suffix(".var.machine.pass_to") {
+            if let (Ok(owner), Value::Int(to)) = (owner.parse::<u8>(), &value) {
+                h.pass_to.insert(owner, u8::try_from(*to).unwrap_or(0));
+            }
+            continue;
+        }
+        if h.view.take(&b.key, &value, b.age_ms as f64 * 1e-3) {
+            match b.key.as_str() {
+                contract::OWN_BALL_KEY => h.own_ball_at = Some(now),
+                contract::TEAM_BALL_KEY => h.team_ball_at = Some(now),
+                contract::POSE_OUT_KEY => h.pose_at = Some(now),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// The view robot `i` plays on at `now`: what it heard, the balls' time since they were
+/// published brought up to `now`.
+fn view_at(heard: &Heard, now: Instant) -> TeamView {
+    let mut view = heard.view.clone();
+    let since = |at: Option<Instant>, published: f64| {
+        published + at.map_or(0.0, |a| now.saturating_duration_since(a).as_secs_f64())
+    };
+    if let Some((b, s)) = view.own_ball {
+        view.own_ball = Some((b, since(heard.own_ball_at, s)));
+    }
+    view.pose_since_s = since(heard.pose_at, view.pose_since_s);
+    if let Some((b, s)) = view.team_ball {
+        view.team_ball = Some((b, since(heard.team_ball_at, s)));
+    }
+    view.pass_to = (view.goer != 0)
+        .then(|| heard.pass_to.get(&view.goer).copied())
+        .flatten()
+        .filter(|&r| r != 0);
+    view
+}
+
+/// Runs the match `cfg` with each robot's team layer in a daemon, in real time, calling
+/// `progress(seconds played)` every step.
+pub fn run(
+    cfg: &SimConfig,
+    opts: &DaemonsOptions,
+    mut progress: impl FnMut(f64),
+) -> Result<DaemonsReport, DaemonsError> {
+    if cfg.transport != Transport::Multicast {
+        return Err(DaemonsError::Config(
+            "--daemons plays over a loopback multicast group: use --transport multicast".into(),
+        ));
+    }
+    if cfg.outage.is_some() || cfg.acoustic.enabled {
+        return Err(DaemonsError::Config(
+            "--daemons does not model a WLAN outage or the acoustic channel".into(),
+        ));
+    }
+    // The lineup, the world and each robot's start belief, exactly as in process.
+    let setup = Simulation::new(cfg.clone())?;
+    let homes = setup.homes().to_vec();
+    let holders = setup.holders().to_vec();
+    let mut world: World = setup.world.clone();
+    let calibration = setup.robots[0].brain.cal;
+    let wm = cfg.brain.team.world_model;
+    let mut robots: Vec<RemoteRobot> = setup
+        .robots
+        .iter()
+        .map(|r| RemoteRobot::new(r.id, r.tactics.position, calibration))
+        .collect();
+    let starts: Vec<_> = setup.robots.iter().map(|r| r.pose_belief).collect();
+    drop(setup);
+
+    let spec = opts.impair.clone().unwrap_or_else(|| impair_spec(cfg));
+    let group = driver::scratch_group().map_err(io("picking a scratch group"))?;
+    let dir = match &opts.log_dir {
+        Some(d) => d.clone(),
+        None => std::env::temp_dir().join(format!(
+            "huddle-sim-daemons-{}-{}",
+            std::process::id(),
+            cfg.seed
+        )),
+    };
+    std::fs::create_dir_all(&dir).map_err(io(format!("creating {}", dir.display())))?;
+    let mut daemons = Vec::with_capacity(robots.len());
+    for r in &robots {
+        daemons.push(start_daemon(r.id, cfg, opts, group, &spec, &dir)?);
+    }
+    // Each program says who it is and where it was put, then watches its layer.
+    for ((d, r), start) in daemons.iter_mut().zip(&robots).zip(&starts) {
+        let mut hello = String::new();
+        let keeper = !r.is_field_player();
+        hello += &format!(
+            "SETV {} {}\n",
+            contract::GOALKEEPER_KEY,
+            Value::Bool(keeper)
+        );
+        hello += &format!(
+            "SETV {} {}\n",
+            contract::POSE_KEY,
+            start_pose_value(start, wm.start_sigma_m, wm.start_sigma_rad)
+        );
+        hello += "ADDW local.var.team.#\nADDW +.var.machine.pass_to\nREFR 0\n";
+        d.send(&hello)?;
+    }
+
+    let n = robots.len();
+    let dt = cfg.physics_dt_s;
+    let period = cfg.brain.team.control_period_s;
+    let mut next_tick_s: Vec<f64> = (0..n)
+        .map(|i| period * (1.0 + i as f64 / n as f64))
+        .collect();
+    let mut metrics = Metrics::default();
+    let mut central = CentralizedBall::new(cfg.references.central);
+    let (mut team_sq, mut team_n, mut central_sq) = (0.0, 0u64, 0.0);
+    let (mut blind_sq, mut blind_n) = (0.0, 0u64);
+    let (mut pose_sq, mut pose_n) = (0.0, 0u64);
+    let mut kick_attempts = 0u64;
+    let mut late_steps = 0u64;
+    let steps = (cfg.duration_s / dt).round() as u64;
+    let started = Instant::now();
+    for step in 0..steps {
+        let t = step as f64 * dt;
+        let due = started + Duration::from_secs_f64(t);
+        let now = Instant::now();
+        if now < due {
+            std::thread::sleep(due - now);
+        } else if now - due > Duration::from_secs_f64(dt) {
+            late_steps += 1;
+        }
+        if step % 100 == 0 {
+            for d in &mut daemons {
+                d.check_alive()?;
+            }
+        }
+        let now = Instant::now();
+        let mut ticked = Vec::new();
+        for i in 0..n {
+            if next_tick_s[i] > t + 1e-9 {
+                continue;
+            }
+            next_tick_s[i] += period;
+            let view = view_at(
+                &daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner()),
+                now,
+            );
+            robots[i].view = view;
+            let percepts = Percepts {
+                frame: world.look(i),
+                odometry: world.read_odometry(i),
+            };
+            let seen = percepts.frame.ball;
+            let out = robots[i].tick(&cfg.brain, t, percepts, 0.0, &homes, &holders);
+            let mut lines = String::new();
+            for (key, value) in &out.writes {
+                lines += &format!("SETV {key} {value}\n");
+            }
+            daemons[i].send(&lines)?;
+            if let Some(cmd) = out.command {
+                world.command_believed(i, cmd, &out.believed);
+            }
+            if let Some(k) = &out.kick {
+                kick_attempts += 1;
+                let off =
+                    fusion::wrap_angle(world.robots[i].pose.theta_rad - out.believed.theta_rad);
+                world.kick(i, k.direction_rad + off);
+            }
+            if robots[i].view.pose.is_some() {
+                // The pose it played on: the layer's, brought up to now by its odometry.
+                let pose = out.believed;
+                let cov = robots[i].view.pose.map(|p| p.1).unwrap_or_default();
+                let truth = world.robots[i].pose.at;
+                pose_sq += truth.distance(pose.at).powi(2);
+                pose_n += 1;
+                if let Some(s) = &seen {
+                    let est = team::frames::to_fusion_pose(&pose, cov);
+                    central.sighting(
+                        t,
+                        &est,
+                        &player::perception::ball_sighting(&calibration.sensors, s),
+                    );
+                }
+            }
+            ticked.push(i);
+        }
+        let visible = robots.iter().any(|r| r.is_field_player() && r.sees_ball());
+        if visible {
+            let truth = world.ball.at;
+            let c = central.estimate_at(t);
+            for &i in &ticked {
+                let r = &robots[i];
+                let (Some(team), Some(c)) = (r.view.team_ball_now(0.0), c) else {
+                    continue;
+                };
+                let e2 = team.distance(truth).powi(2);
+                let c2 = (c.position() - fusion::nalgebra::Vector2::new(truth.x, truth.y))
+                    .norm_squared();
+                team_sq += e2;
+                central_sq += c2;
+                team_n += 1;
+                if !r.sees_ball()
+                    && r.view
+                        .own_ball
+                        .is_none_or(|(b, s)| b.age_s + s > cfg.brain.team.ball_memory_s)
+                {
+                    blind_sq += e2;
+                    blind_n += 1;
+                }
+            }
+        }
+        if world.step(dt).is_some() {
+            // The referee puts the ball back on the centre spot; each robot program tells
+            // its layer, as the in-process robots are told.
+            central.forget();
+            for d in &mut daemons {
+                d.send(&format!("SETV {} true\n", contract::BALL_RESET_KEY))?;
+            }
+        }
+        let goers: Vec<u8> = robots
+            .iter()
+            .filter(|r| r.is_field_player() && r.view.going)
+            .map(|r| r.id)
+            .collect();
+        metrics.sample(t + dt, dt, visible, &goers);
+        progress(t + dt);
+    }
+    let played_s = started.elapsed().as_secs_f64();
+    // What each daemon sent, from its own counters.
+    for d in &mut daemons {
+        d.send("GETV local.var.huddle.stats.frames_out\n")?;
+    }
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < deadline
+        && daemons
+            .iter()
+            .any(|d| d.heard.lock().map_or(true, |h| h.frames_out.is_none()))
+    {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let per_robot: Vec<u64> = daemons
+        .iter()
+        .map(|d| d.heard.lock().map_or(0, |h| h.frames_out.unwrap_or(0)))
+        .collect();
+    let relay_errors = daemons
+        .iter()
+        .map(|d| d.heard.lock().map_or(0, |h| h.errors))
+        .sum();
+    for d in &mut daemons {
+        let _ = d.send("QUIT\n");
+    }
+    drop(daemons);
+    if opts.log_dir.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let rmse = |sq: f64, n: u64| {
+        if n == 0 {
+            f64::NAN
+        } else {
+            (sq / n as f64).sqrt()
+        }
+    };
+    let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+    let r4 = |x: f64| (x * 10_000.0).round() / 10_000.0;
+    let team_rmse = rmse(team_sq, team_n);
+    let central_rmse = rmse(central_sq, team_n);
+    Ok(DaemonsReport {
+        mode: "daemons",
+        budget: cfg.budget.map(|b| b.to_string()),
+        robots: n,
+        duration_s: r3(played_s),
+        preset: cfg.network.preset.name().to_string(),
+        impair: spec,
+        seed: cfg.seed,
+        ball_visible_s: r3(metrics.visible_s),
+        exactly_one_goer_pct: r3(metrics.exactly_one_pct()),
+        conflict_pct: r3(metrics.conflict_pct()),
+        no_goer_pct: r3(metrics.no_goer_pct()),
+        longest_conflict_ms: r3(metrics.longest_conflict_s * 1e3),
+        handovers: metrics.handovers,
+        goals_for: world.goals_for,
+        goals_against: world.goals_against,
+        kick_attempts,
+        team_messages_sent: per_robot.iter().sum(),
+        messages_per_robot: per_robot,
+        team_ball_rmse_m: r4(team_rmse),
+        centralized_rmse_m: r4(central_rmse),
+        rmse_ratio: r3(team_rmse / central_rmse),
+        team_ball_samples: team_n,
+        blind_samples: blind_n,
+        blind_team_ball_rmse_m: r4(rmse(blind_sq, blind_n)),
+        pose_rmse_m: r4(rmse(pose_sq, pose_n)),
+        relay_errors,
+        late_steps,
+        in_process: None,
+    })
+}
