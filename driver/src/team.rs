@@ -93,6 +93,8 @@ impl Drop for TeamRunner {
 struct Shared {
     layer: TeamLayer,
     cfg: TeamLayerConfig,
+    /// Ticks so far (`local.var.team.tick`).
+    ticks: i64,
 }
 
 /// Starts robot `handle`'s team layer: guards on the inputs, a watch that collects them,
@@ -110,7 +112,14 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
         cfg.team_size.max(usize::from(id)),
     );
     let inputs = Rc::new(RefCell::new(Inputs::default()));
-    let shared = Rc::new(RefCell::new(Shared { layer, cfg }));
+    let shared = Rc::new(RefCell::new(Shared {
+        layer,
+        cfg,
+        ticks: 0,
+    }));
+    // The robot program's cycle drives the layer: its odometry (or pose) closes a cycle's
+    // inputs, and the layer ticks on it at once, so what it publishes holds that cycle.
+    let cycle = Rc::new(tokio::sync::Notify::new());
     // Each client's SETV passes its key's guard exactly once, identical values included
     // (a robot walking steadily writes the same odometry every period): the guard both
     // refuses a bad value and takes a good one, stamped on the driver's clock.
@@ -119,6 +128,7 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
         .iter()
         .map(|&key| {
             let inputs = Rc::clone(&inputs);
+            let cycle = Rc::clone(&cycle);
             handle
                 .guard(key, move |value| match contract::check(key, value) {
                     Some(Err(e)) => Err(Rejected {
@@ -127,6 +137,9 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                     }),
                     _ => {
                         take(&mut inputs.borrow_mut(), key, value, clock.now());
+                        if key == contract::ODOMETRY_KEY || key == contract::POSE_KEY {
+                            cycle.notify_one();
+                        }
                         Ok(())
                     }
                 })
@@ -161,8 +174,23 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
     let task = tokio::task::spawn_local(async move {
         let mut every = tokio::time::interval(period);
         every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        // A cycle closing sooner than half a period after the last tick waits for the
+        // timer: a program writing odometry faster than the control period does not make
+        // the layer tick (and send) faster.
+        let mut last = tokio::time::Instant::now() - period;
         loop {
-            every.tick().await;
+            tokio::select! {
+                _ = every.tick() => {}
+                () = cycle.notified() => {
+                    if last.elapsed() < period / 2 {
+                        continue;
+                    }
+                    // While the program drives, the timer only stands in for a missed
+                    // cycle: it must not tick just before the next cycle closes.
+                    every.reset_at(tokio::time::Instant::now() + period * 3 / 2);
+                }
+            }
+            last = tokio::time::Instant::now();
             let mut inputs = inputs.borrow_mut();
             if !inputs.fed {
                 continue;
@@ -239,7 +267,7 @@ fn since(now: Instant, earlier: Instant) -> f64 {
 
 /// One control tick of the layer on what the robot program wrote since the previous one.
 fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs) {
-    let Shared { layer, cfg } = s;
+    let Shared { layer, cfg, ticks } = s;
     if let Some(gk) = inputs.goalkeeper.take() {
         layer.set_goalkeeper(gk);
     }
@@ -300,6 +328,11 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     );
     apply(replica, now, writes, priority);
     publish(replica, now, layer, cfg);
+    // Last, so a program that sees the tick change finds this tick's outputs in place.
+    *ticks += 1;
+    if let Err(e) = replica.set(now, contract::TICK_KEY, Value::Int(*ticks)) {
+        tracing::warn!(error = %e, "team layer: the tick count was refused");
+    }
 }
 
 /// The layer's messages to the team, through the replica.

@@ -138,18 +138,14 @@ impl TeamView {
     }
 }
 
-/// The contract's inputs for one tick of senses, calibrated as `cal`: odometry, the
-/// landmarks seen (with their field places, from the field's lines as the robot knows
+/// The contract's inputs for one tick of senses, calibrated as `cal`: the landmarks seen (with their field places, from the field's lines as the robot knows
 /// them), a ball sighting in the robot frame with its covariance, and whether the
-/// opponent goal is in view.
+/// opponent goal is in view, and last the odometry (the daemon's layer ticks when it
+/// arrives).
 pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static str, Value)> {
     let cam = &cal.sensors;
     let sigma_r = |r: f64| cam.range_noise_m + cam.range_noise_frac * r;
-    let o = &percepts.odometry;
-    let mut out = vec![(
-        contract::ODOMETRY_KEY,
-        Value::Floats(vec![o.forward_m, o.left_m, o.turn_rad]),
-    )];
+    let mut out = Vec::new();
     let marks = cal.field.landmarks();
     let seen: Vec<f64> = percepts
         .frame
@@ -186,6 +182,12 @@ pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static 
     out.push((
         contract::GOAL_IN_VIEW_KEY,
         Value::Bool(percepts.frame.opponent_goal_in_view),
+    ));
+    // Last: the layer ticks on the odometry, with everything written before it.
+    let o = &percepts.odometry;
+    out.push((
+        contract::ODOMETRY_KEY,
+        Value::Floats(vec![o.forward_m, o.left_m, o.turn_rad]),
     ));
     out
 }
@@ -250,6 +252,8 @@ pub struct RemoteRobot {
     /// The odometry it wrote, with when (its clock): what the layer's pose may not hold
     /// yet.
     odometry_log: std::collections::VecDeque<(f64, Odometry)>,
+    /// When it last told the layer the ball was put back (its clock).
+    reset_at_s: f64,
 }
 
 impl RemoteRobot {
@@ -262,7 +266,17 @@ impl RemoteRobot {
             frame: Frame::default(),
             view: TeamView::default(),
             odometry_log: std::collections::VecDeque::new(),
+            reset_at_s: f64::NEG_INFINITY,
         }
+    }
+
+    /// The referee put the ball back at `now_s`: the write that tells the layer. Until
+    /// the layer publishes again the robot plays on no ball rather than the old one.
+    pub fn ball_reset(&mut self, now_s: f64) -> (&'static str, Value) {
+        self.reset_at_s = now_s;
+        self.view.own_ball = None;
+        self.view.team_ball = None;
+        (contract::BALL_RESET_KEY, Value::Bool(true))
     }
 
     /// The layer's pose brought up to `now_s`: the published pose followed by the motion
@@ -314,7 +328,7 @@ impl RemoteRobot {
 
     /// One control tick at `now_s` on the robot's clock, `dt_s` after the view was
     /// last updated: what it sensed goes to the daemon, it plays on what the daemon's
-    /// layer last told it.
+    /// layer last told it ([`RemoteRobot::sense`] then [`RemoteRobot::act`]).
     pub fn tick(
         &mut self,
         cfg: &BrainConfig,
@@ -324,11 +338,40 @@ impl RemoteRobot {
         homes: &[Vec2],
         holders: &[u8],
     ) -> RemoteTick {
-        let mut writes = contract_inputs(&self.cal, &percepts);
-        // Five of the layer's ticks without a rewrite: it no longer holds that ball.
-        self.view.drop_stale(5.0 * cfg.team.control_period_s);
+        let mut writes = self.sense(now_s, percepts);
+        let mut out = self.act(cfg, now_s, dt_s, homes, holders);
+        writes.append(&mut out.writes);
+        out.writes = writes;
+        out
+    }
+
+    /// The first half of a tick at `now_s`: what the robot sensed, as the contract's
+    /// writes, its odometry last (the write that closes a cycle: the layer ticks on it).
+    pub fn sense(&mut self, now_s: f64, percepts: Percepts) -> Vec<(&'static str, Value)> {
+        let writes = contract_inputs(&self.cal, &percepts);
         self.odometry_log.push_back((now_s, percepts.odometry));
         self.frame = percepts.frame;
+        writes
+    }
+
+    /// The second half: play on the view, `dt_s` after it was last updated. The writes
+    /// returned are a kick's report, if it swings.
+    pub fn act(
+        &mut self,
+        cfg: &BrainConfig,
+        now_s: f64,
+        dt_s: f64,
+        homes: &[Vec2],
+        holders: &[u8],
+    ) -> RemoteTick {
+        let mut writes = Vec::new();
+        // Five of the layer's ticks without a rewrite: it no longer holds that ball.
+        self.view.drop_stale(5.0 * cfg.team.control_period_s);
+        // Balls published before its latest ball reset are of a ball that is gone.
+        let reset = self.reset_at_s;
+        let after_reset = |b: &(PublishedBall, f64)| now_s - b.1 > reset;
+        self.view.own_ball = self.view.own_ball.filter(after_reset);
+        self.view.team_ball = self.view.team_ball.filter(after_reset);
         let Some((pose, pose_cov)) = self.pose_now(now_s) else {
             // The layer has not published a pose yet: nothing to play on.
             return RemoteTick {
@@ -435,10 +478,10 @@ mod tests {
         assert_eq!(
             keys,
             [
-                contract::ODOMETRY_KEY,
                 contract::LANDMARKS_KEY,
                 contract::BALL_KEY,
-                contract::GOAL_IN_VIEW_KEY
+                contract::GOAL_IN_VIEW_KEY,
+                contract::ODOMETRY_KEY,
             ]
         );
         for (key, value) in &writes {
@@ -449,7 +492,7 @@ mod tests {
             );
         }
         // The ball is where the camera put it, in the robot frame.
-        let b = contract::parse_ball(&writes[2].1).expect("a ball the contract takes");
+        let b = contract::parse_ball(&writes[1].1).expect("a ball the contract takes");
         assert!((b.local.x - 2.0 * 0.3f64.cos()).abs() < 1e-12);
         assert!((b.local.y - 2.0 * 0.3f64.sin()).abs() < 1e-12);
         let start = start_pose_value(&Pose::default(), 0.1, 0.05);

@@ -40,6 +40,9 @@ use team::contract;
 use super::{Metrics, SimConfig, Simulation, Transport};
 use crate::field::World;
 
+/// The longest a robot program waits for its layer's tick on the senses it just wrote.
+const FRESH_WAIT: Duration = Duration::from_millis(8);
+
 /// How `--daemons` runs the team.
 #[derive(Debug, Clone)]
 pub struct DaemonsOptions {
@@ -143,6 +146,9 @@ pub struct DaemonsReport {
     pub relay_errors: u64,
     /// Physics steps that started more than one step late (the machine was busy).
     pub late_steps: u64,
+    /// Robot ticks that played on the layer's previous outputs (its tick on the new
+    /// senses did not come within the wait).
+    pub stale_views: u64,
     /// The same match in process (same seed and configuration), for the ratio.
     pub in_process: Option<InProcess>,
 }
@@ -203,8 +209,8 @@ impl std::fmt::Display for DaemonsReport {
         )?;
         write!(
             f,
-            "relay errors          {}; late physics steps {}",
-            self.relay_errors, self.late_steps
+            "relay errors          {}; late physics steps {}; stale views {}",
+            self.relay_errors, self.late_steps, self.stale_views
         )
     }
 }
@@ -213,8 +219,9 @@ impl std::fmt::Display for DaemonsReport {
 #[derive(Debug, Default)]
 struct Heard {
     view: TeamView,
-    /// When each ball output and the pose arrived.
+    /// When each ball output, the pose and the latest tick count arrived.
     pose_at: Option<Instant>,
+    tick_at: Option<Instant>,
     own_ball_at: Option<Instant>,
     team_ball_at: Option<Instant>,
     /// Each robot's announced pass receiver.
@@ -406,6 +413,10 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
             }
             continue;
         }
+        if b.key == contract::TICK_KEY {
+            h.tick_at = Some(now);
+            continue;
+        }
         if let Some(owner) = b.key.strip_suffix(".var.machine.pass_to") {
             if let (Ok(owner), Value::Int(to)) = (owner.parse::<u8>(), &value) {
                 h.pass_to.insert(owner, u8::try_from(*to).unwrap_or(0));
@@ -522,6 +533,7 @@ pub fn run(
     let (mut pose_sq, mut pose_n) = (0.0, 0u64);
     let mut kick_attempts = 0u64;
     let mut late_steps = 0u64;
+    let mut stale_views = 0u64;
     let steps = (cfg.duration_s / dt).round() as u64;
     let started = Instant::now();
     for step in 0..steps {
@@ -538,29 +550,50 @@ pub fn run(
                 d.check_alive()?;
             }
         }
-        let now = Instant::now();
         let mut ticked = Vec::new();
         for i in 0..n {
             if next_tick_s[i] > t + 1e-9 {
                 continue;
             }
             next_tick_s[i] += period;
-            let view = view_at(
-                &daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner()),
-                now,
-            );
-            robots[i].view = view;
             let percepts = Percepts {
                 frame: world.look(i),
                 odometry: world.read_odometry(i),
             };
             let seen = percepts.frame.ball;
-            let out = robots[i].tick(&cfg.brain, t, percepts, 0.0, &homes, &holders);
+            // Write the cycle's senses (odometry last: the layer ticks on it), then wait
+            // for the layer's pose from that tick, as a robot program reading its
+            // team's decisions each cycle does; a layer slower than a few ms leaves the
+            // robot to play on what it last had.
+            let mut lines = String::new();
+            let clock = |at: Instant| at.saturating_duration_since(started).as_secs_f64();
+            for (key, value) in robots[i].sense(clock(Instant::now()), percepts) {
+                lines += &format!("SETV {key} {value}\n");
+            }
+            let sent = Instant::now();
+            daemons[i].send(&lines)?;
+            let fresh = sent + FRESH_WAIT;
+            let (view, now) = loop {
+                let heard = daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner());
+                let now = Instant::now();
+                if heard.tick_at.is_some_and(|a| a > sent) || now > fresh {
+                    if heard.tick_at.is_none_or(|a| a <= sent) {
+                        stale_views += 1;
+                    }
+                    break (view_at(&heard, now), now);
+                }
+                drop(heard);
+                std::thread::sleep(Duration::from_micros(200));
+            };
+            robots[i].view = view;
+            let out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
             let mut lines = String::new();
             for (key, value) in &out.writes {
                 lines += &format!("SETV {key} {value}\n");
             }
-            daemons[i].send(&lines)?;
+            if !lines.is_empty() {
+                daemons[i].send(&lines)?;
+            }
             if let Some(cmd) = out.command {
                 world.command_believed(i, cmd, &out.believed);
             }
@@ -600,6 +633,14 @@ pub fn run(
                 let e2 = team.distance(truth).powi(2);
                 let c2 = (c.position() - fusion::nalgebra::Vector2::new(truth.x, truth.y))
                     .norm_squared();
+                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() && e2 > 0.04 {
+                    eprintln!(
+                        "trace t={t:.2} robot={} err={:.2} team={team:?} truth={truth:?} sees={}",
+                        r.id,
+                        e2.sqrt(),
+                        r.sees_ball()
+                    );
+                }
                 team_sq += e2;
                 central_sq += c2;
                 team_n += 1;
@@ -617,8 +658,9 @@ pub fn run(
             // The referee puts the ball back on the centre spot; each robot program tells
             // its layer, as the in-process robots are told.
             central.forget();
-            for d in &mut daemons {
-                d.send(&format!("SETV {} true\n", contract::BALL_RESET_KEY))?;
+            for (d, r) in daemons.iter_mut().zip(&mut robots) {
+                let (key, value) = r.ball_reset(started.elapsed().as_secs_f64());
+                d.send(&format!("SETV {key} {value}\n"))?;
             }
         }
         let goers: Vec<u8> = robots
@@ -696,6 +738,7 @@ pub fn run(
         pose_rmse_m: r4(rmse(pose_sq, pose_n)),
         relay_errors,
         late_steps,
+        stale_views,
         in_process: None,
     })
 }

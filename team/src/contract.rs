@@ -48,6 +48,9 @@ pub const OWN_BALL_KEY: &str = "local.var.team.own_ball";
 pub const POSE_OUT_KEY: &str = "local.var.team.pose";
 /// Messages this robot may still send now under its budget (int).
 pub const BUDGET_KEY: &str = "local.var.team.budget";
+/// The layer's ticks so far (int): it changes every tick, so a program that wrote a
+/// cycle's senses can wait for the tick that took them.
+pub const TICK_KEY: &str = "local.var.team.tick";
 
 /// Oldest observation the layer takes, s.
 pub const MAX_AGE_S: f64 = 10.0;

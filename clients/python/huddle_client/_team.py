@@ -26,6 +26,7 @@ GOAL_IN_VIEW = "local.var.robot.goal_in_view"
 COST = "local.var.robot.cost"
 GOALKEEPER = "local.var.robot.goalkeeper"
 FALLEN = "local.var.robot.fallen"
+BALL_RESET = "local.var.robot.ball_reset"
 TEAM_BALL = "local.var.team.ball"
 TEAM_GOER = "local.var.team.goer"
 TEAM_GOING = "local.var.team.going"
@@ -225,6 +226,10 @@ class TeamMixin:
     def set_fallen(self, fallen: bool) -> None:
         self.set(FALLEN, bool(fallen))
 
+    def ball_reset(self) -> None:
+        """The referee put the ball back (a kick-off): the layer forgets the ball it tracked."""
+        self.set(BALL_RESET, True)
+
     def team_ball(self) -> Optional[TeamBall]:
         """The team ball now, or ``None`` until some robot saw the ball."""
         return team_ball_of(self.get(TEAM_BALL))
@@ -292,6 +297,9 @@ class AsyncTeamMixin:
 
     async def set_fallen(self, fallen: bool) -> None:
         await self.set(FALLEN, bool(fallen))
+
+    async def ball_reset(self) -> None:
+        await self.set(BALL_RESET, True)
 
     async def team_ball(self) -> Optional[TeamBall]:
         return team_ball_of(await self.get(TEAM_BALL))
