@@ -129,6 +129,7 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
         .map(|&key| {
             let inputs = Rc::clone(&inputs);
             let cycle = Rc::clone(&cycle);
+            let layer = Rc::clone(&shared);
             handle
                 .guard(key, move |value| match contract::check(key, value) {
                     Some(Err(e)) => Err(Rejected {
@@ -137,6 +138,15 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                     }),
                     _ => {
                         take(&mut inputs.borrow_mut(), key, value, clock.now());
+                        if key == contract::BALL_RESET_KEY {
+                            if let Some(at) = inputs.borrow_mut().ball_reset.take() {
+                                // At once, not at the next tick: a teammate's message that
+                                // arrives in between must already meet a forgotten ball.
+                                if let Ok(mut s) = layer.try_borrow_mut() {
+                                    s.layer.forget_ball(team::seconds(at));
+                                }
+                            }
+                        }
                         if key == contract::ODOMETRY_KEY || key == contract::POSE_KEY {
                             cycle.notify_one();
                         }

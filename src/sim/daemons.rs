@@ -332,18 +332,24 @@ fn start_daemon(
     let policy = clap::ValueEnum::to_possible_value(&cfg.brain.team.send_policy)
         .map(|v| v.get_name().to_owned())
         .unwrap_or_else(|| "every".into());
-    cmd.args(["--policy", &policy])
-        .env(
-            "RUST_LOG",
-            if opts.log_dir.is_some() {
-                "info"
-            } else {
-                "warn"
-            },
-        )
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::from(log_file));
+    cmd.args(["--policy", &policy]);
+    if cfg.compensate_latency {
+        // As the in-process team sets it: the network's expected delay.
+        let l = cfg.arbitration.latency_compensation;
+        let l = if l.is_zero() { cfg.expected_delay() } else { l };
+        cmd.args(["--latency-compensation", &format!("{}us", l.as_micros())]);
+    }
+    cmd.env(
+        "RUST_LOG",
+        if opts.log_dir.is_some() {
+            "info"
+        } else {
+            "warn"
+        },
+    )
+    .stdin(Stdio::null())
+    .stdout(Stdio::null())
+    .stderr(Stdio::from(log_file));
     let mut child = cmd
         .spawn()
         .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
@@ -633,11 +639,12 @@ pub fn run(
                 let e2 = team.distance(truth).powi(2);
                 let c2 = (c.position() - fusion::nalgebra::Vector2::new(truth.x, truth.y))
                     .norm_squared();
-                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() && e2 > 0.04 {
+                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
                     eprintln!(
-                        "trace t={t:.2} robot={} err={:.2} team={team:?} truth={truth:?} sees={}",
+                        "trace t={t:.2} robot={} err={:.3} speed={:.2} team={team:?} truth={truth:?} sees={}",
                         r.id,
                         e2.sqrt(),
+                        world.ball.velocity.norm(),
                         r.sees_ball()
                     );
                 }
