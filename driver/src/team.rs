@@ -139,11 +139,13 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                     _ => {
                         take(&mut inputs.borrow_mut(), key, value, clock.now());
                         if key == contract::BALL_RESET_KEY {
-                            if let Some(at) = inputs.borrow_mut().ball_reset.take() {
-                                // At once, not at the next tick: a teammate's message that
-                                // arrives in between must already meet a forgotten ball.
-                                if let Ok(mut s) = layer.try_borrow_mut() {
+                            // At once, not at the next tick: a teammate's message that
+                            // arrives in between must already meet a forgotten ball. (If
+                            // the layer is busy, its next tick applies it.)
+                            if let Ok(mut s) = layer.try_borrow_mut() {
+                                if let Some(at) = inputs.borrow_mut().ball_reset.take() {
                                     s.layer.forget_ball(team::seconds(at));
+                                    tracing::info!("team layer: ball reset");
                                 }
                             }
                         }
@@ -283,6 +285,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     }
     if let Some(at) = inputs.ball_reset.take() {
         layer.forget_ball(team::seconds(at));
+        tracing::info!("team layer: ball reset (at the tick)");
     }
     let balls: Vec<_> = inputs
         .balls

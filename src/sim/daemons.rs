@@ -15,6 +15,9 @@
 //! poses the daemons held, messages sent. What it cannot have: the references that need a
 //! replica's inside (delivery, delayed-centralized) and the world-model NEES bands.
 //!
+//! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed)
+//! and each goal to stderr, for finding where an error comes from.
+//!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
 
@@ -420,7 +423,14 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
             continue;
         }
         if b.key == contract::TICK_KEY {
-            h.tick_at = Some(now);
+            if line.starts_with("VAL ") {
+                // The answer to the GETV sent right after a ball reset: every ball pushed
+                // before it is of the ball that is gone, every one after it is new.
+                h.view.own_ball = None;
+                h.view.team_ball = None;
+            } else {
+                h.tick_at = Some(now);
+            }
             continue;
         }
         if let Some(owner) = b.key.strip_suffix(".var.machine.pass_to") {
@@ -662,12 +672,19 @@ pub fn run(
             }
         }
         if world.step(dt).is_some() {
+            if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
+                eprintln!("goal t={t:.2} ball now {:?}", world.ball.at);
+            }
             // The referee puts the ball back on the centre spot; each robot program tells
             // its layer, as the in-process robots are told.
             central.forget();
             for (d, r) in daemons.iter_mut().zip(&mut robots) {
-                let (key, value) = r.ball_reset(started.elapsed().as_secs_f64());
-                d.send(&format!("SETV {key} {value}\n"))?;
+                let (key, value) = r.ball_reset();
+                // The GETV marks the reset's place in the relay's ordered output.
+                d.send(&format!(
+                    "SETV {key} {value}\nGETV {}\n",
+                    contract::TICK_KEY
+                ))?;
             }
         }
         let goers: Vec<u8> = robots
