@@ -315,6 +315,7 @@ fn measure(
     // 3. Load. The baseline: a plain client puts the same number of keys round-robin,
     // as fast as blocking congestion control lets it, for the same time.
     let raw_before = lock().raw;
+    let own_before = cpu_ticks(std::process::id());
     let raw_t0 = StdInstant::now();
     let raw_keys: Vec<String> = (0..args.keys)
         .map(|j| format!("bench_hop/raw/k{j}"))
@@ -330,6 +331,9 @@ fn measure(
         }
     }
     let raw_secs = raw_t0.elapsed().as_secs_f64();
+    let own_raw = cpu_ticks(std::process::id())
+        .zip(own_before)
+        .map(|(b, a)| (b - a) as f64 / 100.0 / raw_secs);
     std::thread::sleep(Duration::from_millis(500));
     let raw_got = lock().raw - raw_before;
     println!(
@@ -339,6 +343,9 @@ fn measure(
         raw_put as f64 / raw_secs,
         raw_got as f64 / raw_secs
     );
+    if let Some(cores) = own_raw {
+        println!("  this process (router, publisher, subscriber): {cores:.2} cores");
+    }
     let raw_rate = raw_got as f64 / raw_secs;
 
     let n = daemons.len().min(args.daemons as usize);
@@ -348,6 +355,7 @@ fn measure(
     let (done_tx, done_rx) = std::sync::mpsc::channel::<(u8, u64)>();
     let before_samples = lock().samples;
     let cpu_before = cpu_ticks(pid);
+    let own_before = cpu_ticks(std::process::id());
     let t0 = StdInstant::now();
     let mut offered = 0u64;
     for (k, d) in daemons.iter().take(n).enumerate() {
@@ -378,6 +386,7 @@ fn measure(
     let finished: Vec<(u8, u64)> = done_rx.iter().collect();
     let elapsed = t0.elapsed();
     let cpu_after = cpu_ticks(pid);
+    let own_after = cpu_ticks(std::process::id());
     std::thread::sleep(Duration::from_millis(1500));
     let (received, missing) = {
         let s = lock();
@@ -414,6 +423,17 @@ fn measure(
             (b - a) as f64 / 100.0 / secs
         ),
         _ => println!("  bridge CPU: /proc/{pid}/stat unreadable"),
+    }
+    if let (Some(a), Some(b)) = (own_before, own_after) {
+        println!(
+            "  this process (router, subscriber, {n} daemons): {:.2} cores; load average {}",
+            (b - a) as f64 / 100.0 / secs,
+            std::fs::read_to_string("/proc/loadavg")
+                .unwrap_or_default()
+                .split_whitespace()
+                .next()
+                .unwrap_or("?")
+        );
     }
     let stats = sub_session
         .get(format!("huddle/@v1/{VENUE}/{TEAM}/@bridge/stats"))
