@@ -9,9 +9,12 @@
 //! 2. one Zenoh hop (client → router → client) and set → teammate watch, the baselines;
 //!    set → Zenoh sample through the bridge; and the latency the bridge adds, per set:
 //!    (set → sample) − (set → teammate watch), p50 / p99;
-//! 3. load: `--keys` keys at `--rate` Hz from `--daemons` daemons for `--seconds`;
-//!    updates/s offered and received, whether every key's final value arrived, and the
-//!    bridge's CPU (cores).
+//! 3. load: first the baseline, a plain Zenoh client putting the same keys as fast as
+//!    blocking congestion control lets it, to the same subscriber, for `--seconds`: what
+//!    this machine's Zenoh path carries; then `--keys` keys at `--rate` Hz from
+//!    `--daemons` daemons for `--seconds` through the bridge: updates/s offered, samples
+//!    received (and their ratio to the baseline), values merged in the bridge's outbox,
+//!    whether every key's final value arrived, and the bridge's CPU (cores).
 
 // A benchmark on real sockets: it reads the clock and sleeps.
 #![allow(clippy::disallowed_methods)]
@@ -24,6 +27,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use comms::Value;
 use driver::Notice;
+use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
 use crate::harness::{client, free_port, router, Daemon, DaemonSpec};
@@ -60,6 +64,10 @@ struct Seen {
     lat: HashMap<i64, StdInstant>,
     /// The hop key's arrivals, by value.
     hop: HashMap<i64, StdInstant>,
+    /// The express hop key's arrivals, by value.
+    hop_express: HashMap<i64, StdInstant>,
+    /// Samples of the raw throughput baseline.
+    raw: u64,
     /// The last payload of every key.
     last: HashMap<String, String>,
 }
@@ -100,19 +108,29 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let _hop_sub = {
         let seen = seen.clone();
         sub_session
-            .declare_subscriber("bench_hop/x")
+            .declare_subscriber("bench_hop/**")
             .callback(move |s| {
                 let t = StdInstant::now();
+                let key = s.key_expr().as_str();
+                let mut seen = seen.lock().unwrap_or_else(|p| p.into_inner());
+                if key.starts_with("bench_hop/raw") {
+                    // The same work per sample as the bridge's samples get.
+                    let payload = s.payload().try_to_string().unwrap_or_default().into_owned();
+                    seen.raw += 1;
+                    seen.last.insert(key.to_owned(), payload);
+                    return;
+                }
                 let i = s
                     .payload()
                     .try_to_string()
                     .ok()
                     .and_then(|p| p.parse().ok());
                 if let Some(i) = i {
-                    seen.lock()
-                        .unwrap_or_else(|p| p.into_inner())
-                        .hop
-                        .insert(i, t);
+                    if key == "bench_hop/express" {
+                        seen.hop_express.insert(i, t);
+                    } else {
+                        seen.hop.insert(i, t);
+                    }
                 }
             })
             .wait()
@@ -191,6 +209,18 @@ fn measure(
         let _ = publisher.put("bench_hop/x", i.to_string()).wait();
         std::thread::sleep(Duration::from_millis(2));
     }
+    // The bridge puts a lone value express with blocking congestion control: the same
+    // hop, as the bridge takes it.
+    let mut express_sent = HashMap::new();
+    for i in 0..args.samples as i64 {
+        express_sent.insert(i, StdInstant::now());
+        let _ = publisher
+            .put("bench_hop/express", i.to_string())
+            .congestion_control(CongestionControl::Block)
+            .express(true)
+            .wait();
+        std::thread::sleep(Duration::from_millis(2));
+    }
     let set_at: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
     let watched: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
     {
@@ -225,12 +255,17 @@ fn measure(
         std::thread::sleep(Duration::from_millis(4));
     }
     std::thread::sleep(Duration::from_millis(300));
-    let hop: Vec<Duration> = {
+    let (hop, hop_express): (Vec<Duration>, Vec<Duration>) = {
         let s = lock();
-        hop_sent
-            .iter()
-            .filter_map(|(i, t)| s.hop.get(i).map(|r| r.saturating_duration_since(*t)))
-            .collect()
+        let arrivals = |sent: &HashMap<i64, StdInstant>, got: &HashMap<i64, StdInstant>| {
+            sent.iter()
+                .filter_map(|(i, t)| got.get(i).map(|r| r.saturating_duration_since(*t)))
+                .collect()
+        };
+        (
+            arrivals(&hop_sent, &s.hop),
+            arrivals(&express_sent, &s.hop_express),
+        )
     };
     let (to_watch, to_zenoh, added) = {
         let s = lock();
@@ -261,6 +296,10 @@ fn measure(
         to_zenoh.len()
     );
     print_row("  one zenoh hop (client->router->client)", &hop);
+    print_row(
+        "  the same hop, express + block (as the bridge)",
+        &hop_express,
+    );
     print_row("  set -> teammate watch", &to_watch);
     print_row("  set -> zenoh sample via the bridge", &to_zenoh);
     let mut added_sorted = added;
@@ -273,7 +312,42 @@ fn measure(
     );
     let _ = lat_key;
 
-    // 3. Load.
+    // 3. Load. The baseline: a plain client puts the same number of keys round-robin,
+    // as fast as blocking congestion control lets it, for the same time.
+    let raw_before = lock().raw;
+    let own_before = cpu_ticks(std::process::id());
+    let raw_t0 = StdInstant::now();
+    let raw_keys: Vec<String> = (0..args.keys)
+        .map(|j| format!("bench_hop/raw/k{j}"))
+        .collect();
+    let mut raw_put = 0u64;
+    while raw_t0.elapsed() < Duration::from_secs(args.seconds) {
+        for key in &raw_keys {
+            let _ = publisher
+                .put(key.as_str(), raw_put.to_string())
+                .congestion_control(CongestionControl::Block)
+                .wait();
+            raw_put += 1;
+        }
+    }
+    let raw_secs = raw_t0.elapsed().as_secs_f64();
+    let own_raw = cpu_ticks(std::process::id())
+        .zip(own_before)
+        .map(|(b, a)| (b - a) as f64 / 100.0 / raw_secs);
+    std::thread::sleep(Duration::from_millis(500));
+    let raw_got = lock().raw - raw_before;
+    println!(
+        "load baseline: a zenoh client putting {} keys round-robin (block) to the same subscriber for {:.1} s: put {:.0}/s, received {:.0}/s",
+        args.keys,
+        raw_secs,
+        raw_put as f64 / raw_secs,
+        raw_got as f64 / raw_secs
+    );
+    if let Some(cores) = own_raw {
+        println!("  this process (router, publisher, subscriber): {cores:.2} cores");
+    }
+    let raw_rate = raw_got as f64 / raw_secs;
+
     let n = daemons.len().min(args.daemons as usize);
     let per = args.keys.div_ceil(n);
     let period = Duration::from_secs_f64(1.0 / f64::from(args.rate));
@@ -281,6 +355,7 @@ fn measure(
     let (done_tx, done_rx) = std::sync::mpsc::channel::<(u8, u64)>();
     let before_samples = lock().samples;
     let cpu_before = cpu_ticks(pid);
+    let own_before = cpu_ticks(std::process::id());
     let t0 = StdInstant::now();
     let mut offered = 0u64;
     for (k, d) in daemons.iter().take(n).enumerate() {
@@ -311,6 +386,7 @@ fn measure(
     let finished: Vec<(u8, u64)> = done_rx.iter().collect();
     let elapsed = t0.elapsed();
     let cpu_after = cpu_ticks(pid);
+    let own_after = cpu_ticks(std::process::id());
     std::thread::sleep(Duration::from_millis(1500));
     let (received, missing) = {
         let s = lock();
@@ -333,11 +409,13 @@ fn measure(
         args.keys, args.rate, n, secs
     );
     println!(
-        "  offered {:.0} updates/s, samples received {:.0}/s ({:.1}%), keys whose final value did not arrive: {}",
+        "  offered {:.0} updates/s, samples received {:.0}/s ({:.1}% of offered, {:.2}x the baseline's), keys whose final value did not arrive: {} of {}",
         offered as f64 / secs,
         received as f64 / secs,
         100.0 * received as f64 / offered.max(1) as f64,
-        missing
+        received as f64 / secs / raw_rate.max(1.0),
+        missing,
+        args.keys
     );
     match (cpu_before, cpu_after) {
         (Some(a), Some(b)) => println!(
@@ -345,6 +423,17 @@ fn measure(
             (b - a) as f64 / 100.0 / secs
         ),
         _ => println!("  bridge CPU: /proc/{pid}/stat unreadable"),
+    }
+    if let (Some(a), Some(b)) = (own_before, own_after) {
+        println!(
+            "  this process (router, subscriber, {n} daemons): {:.2} cores; load average {}",
+            (b - a) as f64 / 100.0 / secs,
+            std::fs::read_to_string("/proc/loadavg")
+                .unwrap_or_default()
+                .split_whitespace()
+                .next()
+                .unwrap_or("?")
+        );
     }
     let stats = sub_session
         .get(format!("huddle/@v1/{VENUE}/{TEAM}/@bridge/stats"))

@@ -35,8 +35,11 @@ pub struct ExportConfig {
 /// One thing to do on the Zenoh side.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Op {
-    /// Publish a sample.
+    /// Publish a value's sample (a newer value of the same key may supersede it before
+    /// it goes: [`crate::outbox`]).
     Put(Sample),
+    /// Publish a talk message (each one goes).
+    Talk(Sample),
     /// Declare the liveliness token of `robot`'s life `incarnation` at `key`.
     Alive {
         /// The robot.
@@ -335,7 +338,7 @@ impl Exporter {
             .find(|p| p.robot == from)
             .map_or(0, |p| p.incarnation);
         self.stats.talk_out += 1;
-        self.ops.push(Op::Put(Sample {
+        self.ops.push(Op::Talk(Sample {
             key,
             payload: value.to_string(),
             attachment: format!("incarnation={incarnation:016x} seq={seq}"),

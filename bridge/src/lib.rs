@@ -36,5 +36,6 @@ pub mod cli;
 pub mod export;
 pub mod harness;
 pub mod keys;
+pub mod outbox;
 pub mod run;
 pub mod transit;

@@ -1,17 +1,19 @@
 //! The bridge's I/O: the team's socket (listen only), the listening replica, one Zenoh
 //! session. The field side runs on one thread: a blocking receive with the next
 //! deadline as its timeout, each datagram fed to the replica, the replica's transmits
-//! discarded, its events handed to the [`Exporter`], the resulting operations sent to
-//! Zenoh after the lock is released. Zenoh puts use its default congestion control for
-//! puts (drop, never block), so a slow subscriber or a lost router never stalls the
-//! field side; the queryables run on Zenoh's threads and read the same replica under a
-//! mutex.
+//! discarded, its events handed to the [`Exporter`], the resulting operations queued in
+//! the latest-value [`Outbox`]. A publisher thread hands what waits there to Zenoh with
+//! blocking congestion control, so Zenoh drops nothing: when it blocks (a slow
+//! subscriber, a busy router) only superseded values are merged away in the outbox and
+//! every key's last value still goes, while the field side never waits for Zenoh. The
+//! queryables run on Zenoh's threads and read the same replica under the same mutex.
 
 use std::collections::HashMap;
 use std::io;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use comms::{DropReason, Event, Instant, Key, Pattern, Replica, ReplicaConfig, Scope};
@@ -20,11 +22,13 @@ use thiserror::Error;
 use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
+use zenoh::qos::CongestionControl;
 use zenoh::query::Query;
 use zenoh::{Session, Wait};
 
 use crate::export::{ExportConfig, Exporter, Op, Sample};
 use crate::keys::TeamKeys;
+use crate::outbox::Outbox;
 use crate::transit::TransitEstimator;
 
 /// Everything the bridge needs to start.
@@ -97,6 +101,8 @@ struct Core {
     team: u8,
     team_key: Option<comms::wire::TeamKey>,
     exporter: Exporter,
+    /// What waits for the publisher thread.
+    outbox: Outbox,
     io: IoCounters,
     reported_drops: Vec<DropReason>,
 }
@@ -188,6 +194,8 @@ impl Core {
                 "ros2_unmappable": e.ros2_unmappable,
                 "alive_declared": e.alive_declared,
                 "alive_withdrawn": e.alive_withdrawn,
+                "coalesced": self.outbox.stats().coalesced,
+                "outbox_high_water": self.outbox.stats().high_water,
             },
             "zenoh": {
                 "put_errors": io.put_errors,
@@ -219,15 +227,26 @@ impl Core {
     }
 }
 
+/// The core and the signal that the outbox has something (or that the bridge stops).
+type Shared = Arc<(Mutex<Core>, Condvar)>;
+
 /// A bridge that is up: socket open, session open, queryables declared.
 pub struct Bridge {
     socket: std::net::UdpSocket,
-    core: Arc<Mutex<Core>>,
+    core: Shared,
+    clock: Clock,
+    session: Session,
+    _queryables: Vec<zenoh::query::Queryable<()>>,
+    keys: TeamKeys,
+    shutdown: Arc<AtomicBool>,
+}
+
+/// The publisher thread's side: the session and the liveliness tokens it declared.
+struct Publisher {
+    core: Shared,
     clock: Clock,
     session: Session,
     tokens: HashMap<u8, LivelinessToken>,
-    _queryables: Vec<zenoh::query::Queryable<()>>,
-    keys: TeamKeys,
     shutdown: Arc<AtomicBool>,
 }
 
@@ -263,11 +282,12 @@ impl Bridge {
             transit: TransitEstimator::new(),
             replica,
             exporter: Exporter::new(cfg.keys.clone(), cfg.export),
+            outbox: Outbox::new(),
             io: IoCounters::default(),
             reported_drops: Vec::new(),
         };
         core.drain(clock.now());
-        let core = Arc::new(Mutex::new(core));
+        let core: Shared = Arc::new((Mutex::new(core), Condvar::new()));
 
         let mut zcfg = cfg.zenoh;
         // Explicit endpoints only: no multicast scouting from the bridge.
@@ -280,7 +300,7 @@ impl Bridge {
             let core = core.clone();
             session
                 .declare_queryable(cfg.keys.all())
-                .callback(move |q| answer_values(&core, &clock, &q))
+                .callback(move |q| answer_values(&core.0, &clock, &q))
                 .wait()
                 .map_err(zerr)?
         };
@@ -289,7 +309,7 @@ impl Bridge {
             let keys = cfg.keys.clone();
             session
                 .declare_queryable(keys.bridge("*"))
-                .callback(move |q| answer_bridge(&core, &clock, &keys, &q))
+                .callback(move |q| answer_bridge(&core.0, &clock, &keys, &q))
                 .wait()
                 .map_err(zerr)?
         };
@@ -298,7 +318,6 @@ impl Bridge {
             core,
             clock,
             session,
-            tokens: HashMap::new(),
             _queryables: vec![values, bridge_keys],
             keys: cfg.keys,
             shutdown: Arc::new(AtomicBool::new(false)),
@@ -315,15 +334,33 @@ impl Bridge {
         &self.keys
     }
 
-    /// Runs the field side until the shutdown flag is set.
-    pub fn run(mut self) -> Result<(), BridgeError> {
+    /// Runs the field side until the shutdown flag is set (and the publisher thread
+    /// beside it, which hands over what is still queued before it ends).
+    pub fn run(self) -> Result<(), BridgeError> {
+        let publisher = Publisher {
+            core: self.core.clone(),
+            clock: self.clock,
+            session: self.session.clone(),
+            tokens: HashMap::new(),
+            shutdown: self.shutdown.clone(),
+        };
+        let publisher: JoinHandle<()> = std::thread::Builder::new()
+            .name("zenoh-publisher".into())
+            .spawn(move || publisher.run())?;
+        let result = self.field();
+        self.shutdown.store(true, Ordering::Relaxed);
+        self.core.1.notify_all();
+        let _ = publisher.join();
+        result
+    }
+
+    fn field(&self) -> Result<(), BridgeError> {
         let mut buf = vec![0u8; 65_536];
-        let mut ops = Vec::new();
         let mut next_check = self.clock.now();
         let mut connected = true;
         while !self.shutdown.load(Ordering::Relaxed) {
             let wait = {
-                let core = lock(&self.core);
+                let core = lock(&self.core.0);
                 let now = self.clock.now();
                 core.next_deadline()
                     .map_or(Duration::from_millis(50), |d| {
@@ -334,8 +371,8 @@ impl Bridge {
             self.socket.set_read_timeout(Some(wait))?;
             let got = self.socket.recv_from(&mut buf);
             let now = self.clock.now();
-            {
-                let mut core = lock(&self.core);
+            let queued = {
+                let mut core = lock(&self.core.0);
                 match got {
                     Ok((n, from)) => {
                         core.io.datagrams += 1;
@@ -352,9 +389,15 @@ impl Bridge {
                     }
                 }
                 core.advance(now);
-                ops.extend(core.exporter.drain_ops());
+                let core = &mut *core;
+                for op in core.exporter.drain_ops() {
+                    core.outbox.push(now, op);
+                }
+                !core.outbox.is_empty()
+            };
+            if queued {
+                self.core.1.notify_one();
             }
-            self.apply(&mut ops);
             if now >= next_check {
                 next_check = now + Duration::from_secs(1);
                 connected = self.check_zenoh(connected);
@@ -369,7 +412,7 @@ impl Bridge {
         let now =
             info.routers_zid().wait().next().is_some() || info.peers_zid().wait().next().is_some();
         if was && !now {
-            lock(&self.core).io.zenoh_lost += 1;
+            lock(&self.core.0).io.zenoh_lost += 1;
             tracing::warn!(
                 "zenoh: no router or peer reachable; samples are dropped until one is back \
                  (the field side carries on)"
@@ -379,14 +422,41 @@ impl Bridge {
         }
         now
     }
+}
 
-    fn apply(&mut self, ops: &mut Vec<Op>) {
+impl Publisher {
+    /// Hands the outbox's operations to Zenoh until the bridge stops, then what is left.
+    fn run(mut self) {
+        loop {
+            let ops = {
+                let mut core = lock(&self.core.0);
+                while core.outbox.is_empty() && !self.shutdown.load(Ordering::Relaxed) {
+                    core = self
+                        .core
+                        .1
+                        .wait_timeout(core, Duration::from_millis(50))
+                        .map(|(g, _)| g)
+                        .unwrap_or_else(|p| p.into_inner().0);
+                }
+                if core.outbox.is_empty() {
+                    return; // stopping, nothing left
+                }
+                core.outbox.take(self.clock.now())
+            };
+            self.apply(ops);
+        }
+    }
+
+    fn apply(&mut self, ops: Vec<Op>) {
         let mut put_errors = 0;
         let mut token_errors = 0;
-        for op in ops.drain(..) {
+        // One value alone goes at once (express: not held for a batch); under load
+        // Zenoh batches.
+        let express = ops.len() == 1;
+        for op in ops {
             match op {
-                Op::Put(sample) => {
-                    if let Err(e) = self.put(sample) {
+                Op::Put(sample) | Op::Talk(sample) => {
+                    if let Err(e) = self.put(sample, express) {
                         put_errors += 1;
                         tracing::debug!("put: {e}");
                     }
@@ -415,7 +485,7 @@ impl Bridge {
             }
         }
         if put_errors + token_errors > 0 {
-            let mut core = lock(&self.core);
+            let mut core = lock(&self.core.0);
             if core.io.put_errors == 0 && put_errors > 0 {
                 tracing::warn!("zenoh refused a put (counted in @bridge/stats put_errors)");
             }
@@ -424,17 +494,23 @@ impl Bridge {
         }
     }
 
-    fn put(&self, sample: Sample) -> zenoh::Result<()> {
+    /// Blocking congestion control: Zenoh drops nothing the outbox handed it (the
+    /// outbox merged what was superseded while this thread waited).
+    fn put(&self, sample: Sample, express: bool) -> zenoh::Result<()> {
         if let Some((key, cdr)) = sample.ros2 {
             self.session
                 .put(key, cdr)
                 .encoding(Encoding::APPLICATION_CDR)
+                .congestion_control(CongestionControl::Block)
+                .express(express)
                 .wait()?;
         }
         self.session
             .put(sample.key, sample.payload)
             .encoding(Encoding::TEXT_PLAIN)
             .attachment(sample.attachment)
+            .congestion_control(CongestionControl::Block)
+            .express(express)
             .wait()
     }
 }

@@ -157,11 +157,14 @@ impl TransitEstimator {
         if let Some(echo) = frame.clock.echo {
             self.echo(now, frame.sender, s, echo);
         }
-        let excess = if (0..MAX_PLAUSIBLE_US).contains(&excess) {
+        // An excess past the bound is counted, and capped rather than dropped: it is
+        // mostly the bridge reading its socket late (a backlog under load), and taking it
+        // for 0 would make every value in that backlog look younger than it is.
+        let excess = if excess < MAX_PLAUSIBLE_US {
             excess
         } else {
             self.stats.implausible += 1;
-            0
+            MAX_PLAUSIBLE_US
         };
         self.floor() + micros(excess)
     }
@@ -281,6 +284,19 @@ mod tests {
         est.frame(t(10_000_000), &frame(1, 1, u32::MAX - 1000, None));
         let got = est.frame(t(10_002_000), &frame(1, 2, 1000, None));
         assert!(got < Duration::from_millis(1), "{got:?}");
+    }
+
+    /// The bridge reads a frame 3 s after the fastest one's transit (its socket backed
+    /// up under load): the excess is counted as implausible and capped at 1 s, never taken
+    /// for 0, which made the values it carried 3 s younger than they were.
+    #[test]
+    fn a_backlog_is_capped_not_forgotten() {
+        let mut est = TransitEstimator::new();
+        let t = |ms: u64| Instant::from_micros(ms * 1000);
+        est.frame(t(100), &frame(1, 1, 90_000, None));
+        let got = est.frame(t(3_300), &frame(1, 2, 200_000, None));
+        assert_eq!(got, Duration::from_secs(1), "capped at the plausible bound");
+        assert_eq!(est.stats().implausible, 1, "and counted");
     }
 
     proptest::proptest! {
