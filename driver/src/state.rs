@@ -1,0 +1,632 @@
+//! The state a driver shares with its handles and relay connections on its one thread:
+//! the replica, the sockets it sends on, the send backlog, relay sessions, subscribers,
+//! watches and their queued reactions. Every method runs synchronously inside a turn of
+//! the driver task or of a handle call; the task itself is in `driver.rs`.
+
+use std::cell::{Cell, RefCell};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, VecDeque};
+use std::io;
+use std::net::SocketAddr;
+use std::rc::{Rc, Weak};
+use std::task::{Context, Poll, Waker};
+
+use tokio::net::UdpSocket;
+use tokio::sync::Notify;
+
+use comms::relay::{Session, SessionLimits};
+use comms::{DropReason, Event, Instant, Kind, Pattern, Replica, Scope, Value};
+
+use crate::guard::{GuardSlot, GuardedBoard};
+use crate::impair::{Held, Impairment};
+use crate::notice::{Notice, SubQueue};
+use crate::rate_limit::RateLimit;
+
+/// Frames kept while the kernel's send buffer is full; beyond this they are dropped
+/// (and counted): the periodic refresh repairs values, NACKs repair talk.
+const SEND_BACKLOG_FRAMES: usize = 1024;
+/// Copies an [`Impairment`] may hold back at once; beyond this they are dropped (and
+/// counted), so a model with huge delays cannot exhaust memory.
+const HELD_LIMIT: usize = 65_536;
+/// At most one warning per this period about frames dropped for a team-key mismatch.
+pub(crate) const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+/// At most one warning per this period about sends the OS refused.
+pub(crate) const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// The monotonic clock an I/O shell hands to the replica: microseconds since it started.
+#[derive(Clone, Copy, Debug)]
+pub struct Clock {
+    origin: std::time::Instant,
+}
+
+impl Default for Clock {
+    fn default() -> Clock {
+        Clock::new()
+    }
+}
+
+impl Clock {
+    /// A clock starting at zero now.
+    // The I/O shell is the one place that reads the clock: it hands `now` to the sans-IO
+    // replica.
+    #[allow(clippy::disallowed_methods)]
+    pub fn new() -> Clock {
+        Clock {
+            origin: std::time::Instant::now(),
+        }
+    }
+
+    /// Microseconds since [`Clock::new`], as the replica's time.
+    #[must_use]
+    pub fn now(&self) -> Instant {
+        let us = self.origin.elapsed().as_micros();
+        Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
+    }
+
+    pub(crate) fn to_tokio(self, t: Instant) -> tokio::time::Instant {
+        let at = self.origin + std::time::Duration::from_micros(t.as_micros());
+        tokio::time::Instant::from_std(at)
+    }
+}
+
+/// A relay session and how to wake its connection.
+pub(crate) struct SessionSlot {
+    pub(crate) session: Session,
+    pub(crate) notify: Rc<Notify>,
+}
+
+/// Counters of the I/O layer itself (the replica counts the protocol).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct IoStats {
+    /// `SO_RCVBUF` granted by the kernel.
+    pub recv_buffer_bytes: usize,
+    /// Datagrams sent (to the group or broadcast address, and to peers).
+    pub datagrams_sent: u64,
+    /// Datagrams received (on the team's socket and, with peers, the unicast socket).
+    pub datagrams_received: u64,
+    /// Unicast datagrams refused because they did not come from a configured peer. The
+    /// check is on the source address, which anyone on the network can forge: it keeps
+    /// strays out, it is not authentication (a team key is). Mirrored to
+    /// `local.var.huddle.stats.unicast_refused` (`huddle stats`).
+    pub unicast_refused: u64,
+    /// `LOST` lines not sent to relay clients over their rate limit
+    /// ([`comms::relay::LOST_LINES_PER_S`]); mirrored to
+    /// `local.var.huddle.stats.relay_lost_suppressed`.
+    pub relay_lost_suppressed: u64,
+    /// Sends that failed with an error other than a full buffer (a peer or network
+    /// unreachable, a broadcast refused): logged, at most one warning per 10 s.
+    pub send_errors: u64,
+    /// Frames dropped because the send backlog was full.
+    pub send_backlog_drops: u64,
+    /// Relay clients cut off for not reading.
+    pub relay_cutoffs: u64,
+    /// Datagrams an [`Impairment`] lost (or that found its hold queue full).
+    pub impair_dropped: u64,
+    /// Extra copies an [`Impairment`] made (duplicates).
+    pub impair_duplicated: u64,
+}
+
+/// The state shared by the driver task, its handles and the relay connections.
+pub(crate) struct Inner {
+    pub(crate) clock: Clock,
+    pub(crate) replica: Replica,
+    pub(crate) socket: Rc<UdpSocket>,
+    /// The `--peer` socket (`<iface>:<port>`), only when peers are configured and the
+    /// transport is not unicast (then `socket` is that socket).
+    pub(crate) unicast: Option<Rc<UdpSocket>>,
+    /// The group or broadcast address every frame goes to; `None` with unicast.
+    pub(crate) destination: Option<SocketAddr>,
+    pub(crate) peers: Vec<SocketAddr>,
+    pub(crate) backlog: VecDeque<(Vec<u8>, SocketAddr)>,
+    pub(crate) subscribers: Vec<Weak<RefCell<SubQueue>>>,
+    /// Reactions registered with [`crate::Handle::watch`].
+    pub(crate) watches: Vec<Weak<WatchSlot>>,
+    /// Reactions due, run once the shared state is no longer borrowed.
+    pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
+    /// Reactions are running further up the stack.
+    pub(crate) reacting: bool,
+    /// Checks in front of relay clients' writes of some keys ([`crate::Handle::guard`]).
+    pub(crate) guards: Vec<Weak<GuardSlot>>,
+    pub(crate) subscriber_backlog: usize,
+    pub(crate) sessions: BTreeMap<u64, SessionSlot>,
+    pub(crate) next_session: u64,
+    pub(crate) session_limits: SessionLimits,
+    pub(crate) io: IoStats,
+    /// Wakes the driver task when deadlines or the backlog changed from outside it.
+    pub(crate) wake: Rc<Nudge>,
+    /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
+    pub(crate) impairment: Option<Box<dyn Impairment>>,
+    pub(crate) held: BinaryHeap<Reverse<Held>>,
+    pub(crate) held_order: u64,
+    pub(crate) copies: Vec<Instant>,
+    /// Notices handed to subscribers and relay sessions so far: tells the receive loop
+    /// that a task is now waiting to run.
+    pub(crate) handed_up: u64,
+    /// Warnings about frames dropped for a team-key mismatch, rate-limited.
+    pub(crate) key_mismatch: RateLimit,
+    /// Warnings about sends the OS refused, rate-limited.
+    pub(crate) send_failures: RateLimit,
+    /// Warnings about given-up talk messages.
+    pub(crate) give_up_warnings: RateLimit,
+}
+
+impl Inner {
+    /// Drains the replica: frames to the socket, events to sessions and subscribers.
+    pub(crate) fn pump(&mut self) {
+        while let Some(transmit) = self.replica.poll_transmit() {
+            let payload = transmit.payload;
+            for i in 0..self.peers.len() {
+                let peer = self.peers[i];
+                self.emit(&payload, peer);
+            }
+            if let Some(destination) = self.destination {
+                self.emit(&payload, destination);
+            }
+        }
+        self.dispatch_events();
+    }
+
+    /// Sends now, or through the impairment: lost, or held for its copies' times.
+    fn emit(&mut self, payload: &[u8], to: SocketAddr) {
+        let Some(model) = self.impairment.as_mut() else {
+            return self.send(payload, to);
+        };
+        let now = self.clock.now();
+        let mut copies = std::mem::take(&mut self.copies);
+        copies.clear();
+        model.judge(now, to, payload.len(), &mut copies);
+        if copies.is_empty() {
+            self.io.impair_dropped += 1;
+        }
+        self.io.impair_duplicated += copies.len().saturating_sub(1) as u64;
+        let earliest = self.held.peek().map(|Reverse(h)| h.at);
+        let shared: Rc<[u8]> = Rc::from(payload);
+        for &at in &copies {
+            if self.held.len() >= HELD_LIMIT {
+                self.io.impair_dropped += 1;
+                continue;
+            }
+            self.held_order += 1;
+            self.held.push(Reverse(Held {
+                at,
+                order: self.held_order,
+                payload: shared.clone(),
+                to,
+            }));
+        }
+        self.copies = copies;
+        if self.held.peek().map(|Reverse(h)| h.at) != earliest {
+            // The driver task may be asleep until a later deadline.
+            self.wake.notify_one();
+        }
+    }
+
+    /// Sends every held copy whose time has come.
+    fn release_held(&mut self) {
+        let now = self.clock.now();
+        while self.held.peek().is_some_and(|Reverse(h)| h.at <= now) {
+            let Some(Reverse(h)) = self.held.pop() else {
+                break;
+            };
+            self.send(&h.payload, h.to);
+        }
+    }
+
+    /// The socket a datagram to `to` leaves from: the unicast one for peers (when open),
+    /// the team's socket otherwise.
+    pub(crate) fn socket_for(&self, to: SocketAddr) -> &Rc<UdpSocket> {
+        match &self.unicast {
+            Some(unicast) if Some(to) != self.destination => unicast,
+            _ => &self.socket,
+        }
+    }
+
+    /// Counts a send the OS refused and says so, at most once per
+    /// [`SEND_WARNING_PERIOD`]: a peer that is down must not flood the log.
+    fn send_failed(&mut self, to: SocketAddr, error: &io::Error) {
+        self.io.send_errors += 1;
+        tracing::debug!(%to, %error, "send failed");
+        if let Some(count) = self.send_failures.record(self.clock.now()) {
+            tracing::warn!(
+                count,
+                latest_to = %to,
+                latest_error = %error,
+                "{count} send(s) refused by the OS since the last such warning (at most one \
+                 every 10 s)"
+            );
+        }
+    }
+
+    fn send(&mut self, payload: &[u8], to: SocketAddr) {
+        if !self.backlog.is_empty() {
+            return self.enqueue(payload.to_vec(), to);
+        }
+        match self.socket_for(to).try_send_to(payload, to) {
+            Ok(_) => self.io.datagrams_sent += 1,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                self.enqueue(payload.to_vec(), to);
+                self.wake.notify_one();
+            }
+            Err(e) => self.send_failed(to, &e),
+        }
+    }
+
+    fn enqueue(&mut self, payload: Vec<u8>, to: SocketAddr) {
+        if self.backlog.len() >= SEND_BACKLOG_FRAMES {
+            self.io.send_backlog_drops += 1;
+        } else {
+            self.backlog.push_back((payload, to));
+        }
+    }
+
+    /// Sends what the backlog holds until the kernel refuses again.
+    pub(crate) fn flush_backlog(&mut self) {
+        while let Some((payload, to)) = self.backlog.front() {
+            let to = *to;
+            match self.socket_for(to).try_send_to(payload, to) {
+                Ok(_) => self.io.datagrams_sent += 1,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return,
+                Err(e) => self.send_failed(to, &e),
+            }
+            self.backlog.pop_front();
+        }
+    }
+
+    fn dispatch_events(&mut self) {
+        // The clock is read only if a relay session needs it (not on every pump).
+        let clock = self.clock;
+        let mut now = None;
+        while let Some(event) = self.replica.poll_event() {
+            match event {
+                Event::ValueChanged { key } => {
+                    for slot in self.sessions.values_mut() {
+                        if slot.session.wants_changes() {
+                            let before = slot.session.pending_output().len();
+                            let now = *now.get_or_insert_with(|| clock.now());
+                            slot.session.handle_change(now, &key, &self.replica);
+                            self.handed_up += u64::from(wake_if_changed(slot, before));
+                        }
+                    }
+                    // Most changes (this robot's own writes among them) have no
+                    // listener: skip the lookup and the copy for those.
+                    let matches = |p: &comms::Pattern| p.matches(&key);
+                    if !listened(&self.watches, &self.subscribers, matches) {
+                        continue;
+                    }
+                    let entry = self.replica.blackboard().get(&key);
+                    if let Some(entry) = entry {
+                        let notice = || Notice::Changed {
+                            key: key.clone(),
+                            entry: entry.clone(),
+                        };
+                        queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
+                        self.handed_up += deliver(&mut self.subscribers, matches, notice);
+                    }
+                }
+                Event::TalkDelivered {
+                    queue,
+                    from,
+                    seq,
+                    value,
+                } => {
+                    for slot in self.sessions.values_mut() {
+                        let before = slot.session.pending_output().len();
+                        slot.session.handle_talk(from, &queue, &value);
+                        self.handed_up += u64::from(wake_if_changed(slot, before));
+                    }
+                    let notice = || Notice::Talk {
+                        from,
+                        queue: queue.clone(),
+                        seq,
+                        value: value.clone(),
+                    };
+                    let matches = |p: &comms::Pattern| {
+                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
+                    };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
+                }
+                Event::TalkGivenUp {
+                    queue,
+                    from,
+                    first,
+                    last,
+                } => {
+                    let now = *now.get_or_insert_with(|| clock.now());
+                    // Unkeyed talk heads can cause give-ups as fast as they are sent: one
+                    // warning per period, with the count it stands for.
+                    if let Some(times) = self.give_up_warnings.record(now) {
+                        tracing::warn!(from, %queue, first, last, times, "talk messages given up");
+                    }
+                    for slot in self.sessions.values_mut() {
+                        let before = slot.session.pending_output().len();
+                        let suppressed = slot.session.lost_suppressed();
+                        slot.session
+                            .handle_talk_lost(now, from, &queue, first, last);
+                        self.io.relay_lost_suppressed +=
+                            slot.session.lost_suppressed() - suppressed;
+                        self.handed_up += u64::from(wake_if_changed(slot, before));
+                    }
+                    let notice = || Notice::TalkLost {
+                        from,
+                        queue: queue.clone(),
+                        first,
+                        last,
+                    };
+                    let matches = |p: &comms::Pattern| {
+                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
+                    };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
+                }
+                Event::PeerJoined { robot, incarnation } => {
+                    tracing::info!(
+                        robot,
+                        incarnation = format_args!("{incarnation:016x}"),
+                        "peer joined"
+                    )
+                }
+                Event::PeerRestarted {
+                    robot,
+                    new_incarnation,
+                    ..
+                } => tracing::info!(
+                    robot,
+                    incarnation = format_args!("{new_incarnation:016x}"),
+                    "peer restarted"
+                ),
+                Event::PeerDeparted { robot } => tracing::info!(robot, "peer departed"),
+                // The replica reports each pair at most once a second.
+                Event::IncarnationConflict {
+                    robot,
+                    current,
+                    other,
+                } => tracing::error!(
+                    robot,
+                    current = format_args!("{current:016x}"),
+                    other = format_args!("{other:016x}"),
+                    "two robots are sending with id {robot}: frames of the other incarnation \
+                     are dropped while the current one is heard"
+                ),
+                Event::FrameDropped { from, reason } => {
+                    tracing::debug!(%from, %reason, "datagram dropped");
+                    let key_mismatch = matches!(
+                        reason,
+                        DropReason::MissingTag | DropReason::UnexpectedTag | DropReason::BadTag
+                    );
+                    if key_mismatch {
+                        let now = *now.get_or_insert_with(|| clock.now());
+                        if let Some(count) = self.key_mismatch.record(now) {
+                            tracing::warn!(
+                                count,
+                                latest_from = %from,
+                                latest_reason = %reason,
+                                "{count} frame(s) dropped for a team-key mismatch since the \
+                                 last such warning (at most one every 10 s): does every \
+                                 robot use the same --key-file?"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The earliest deadline of the replica, the relay sessions and held copies.
+    pub(crate) fn next_deadline(&self) -> Option<Instant> {
+        let sessions = self
+            .sessions
+            .values()
+            .filter_map(|s| s.session.poll_timeout());
+        self.replica
+            .poll_timeout()
+            .into_iter()
+            .chain(sessions)
+            .chain(self.held.peek().map(|Reverse(h)| h.at))
+            .min()
+    }
+
+    pub(crate) fn handle_timeout(&mut self) {
+        self.release_held();
+        let now = self.clock.now();
+        self.replica.handle_timeout(now);
+        self.mirror_io(now);
+        for slot in self.sessions.values_mut() {
+            if slot.session.poll_timeout().is_some_and(|t| t <= now) {
+                let before = slot.session.pending_output().len();
+                slot.session.handle_timeout(now, &self.replica);
+                wake_if_changed(slot, before);
+            }
+        }
+        self.pump();
+    }
+
+    /// Mirrors the I/O counters `huddle stats` shows into `local.var.huddle.stats.*`
+    /// (written when they change).
+    fn mirror_io(&mut self, now: Instant) {
+        let counters = [
+            ("unicast_refused", self.io.unicast_refused),
+            ("relay_lost_suppressed", self.io.relay_lost_suppressed),
+        ];
+        for (name, count) in counters {
+            let key = format!("local.var.huddle.stats.{name}");
+            let value = Value::Int(i64::try_from(count).unwrap_or(i64::MAX));
+            let same = self
+                .replica
+                .get(&key)
+                .ok()
+                .flatten()
+                .is_some_and(|e| e.value == value);
+            if !same {
+                // A local key of valid shape: only the local-key limit could refuse it.
+                let _ = self.replica.set(now, &key, value);
+            }
+        }
+    }
+
+    /// A new relay session: its id and the notifier its connection waits on.
+    pub(crate) fn open_session(&mut self) -> (u64, Rc<Notify>) {
+        let id = self.next_session;
+        self.next_session += 1;
+        let notify = Rc::new(Notify::new());
+        let session = Session::new(self.replica.robot_id(), self.session_limits.clone());
+        self.sessions.insert(
+            id,
+            SessionSlot {
+                session,
+                notify: notify.clone(),
+            },
+        );
+        (id, notify)
+    }
+
+    /// Feeds a relay client's bytes to its session; writes go through the replica.
+    pub(crate) fn session_input(&mut self, id: u64, bytes: &[u8]) {
+        let now = self.clock.now();
+        let Some(slot) = self.sessions.get_mut(&id) else {
+            return;
+        };
+        let timer_before = slot.session.poll_timeout();
+        self.guards.retain(|g| g.strong_count() > 0);
+        let mut board = GuardedBoard {
+            replica: &mut self.replica,
+            guards: &self.guards,
+        };
+        slot.session.handle_input(now, bytes, &mut board);
+        if slot.session.poll_timeout() != timer_before {
+            self.wake.notify_one();
+        }
+        self.pump();
+        if !self.reactions.is_empty() {
+            // The caller holds the shared state: the driver task runs them.
+            self.wake.notify_one();
+        }
+    }
+}
+
+/// Wakes the session's connection if it has something new to write; returns whether.
+fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
+    let after = slot.session.pending_output().len();
+    let wake = after != before || slot.session.is_finished();
+    if wake {
+        slot.notify.notify_one();
+    }
+    wake
+}
+
+/// Whether a live watch or subscriber has a pattern that matches.
+fn listened(
+    watches: &[Weak<WatchSlot>],
+    subscribers: &[Weak<RefCell<SubQueue>>],
+    matches: impl Fn(&comms::Pattern) -> bool,
+) -> bool {
+    watches
+        .iter()
+        .filter_map(Weak::upgrade)
+        .any(|w| matches(&w.pattern))
+        || subscribers
+            .iter()
+            .filter_map(Weak::upgrade)
+            .any(|s| matches(&s.borrow().pattern))
+}
+
+/// Queues a notice for every live watch whose pattern matches; forgets dropped ones.
+fn queue_reactions(
+    watches: &mut Vec<Weak<WatchSlot>>,
+    reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
+    matches: impl Fn(&comms::Pattern) -> bool,
+    notice: impl Fn() -> Notice,
+) {
+    watches.retain(|weak| {
+        let Some(watch) = weak.upgrade() else {
+            return false;
+        };
+        if matches(&watch.pattern) {
+            reactions.push_back((weak.clone(), notice()));
+        }
+        true
+    });
+}
+
+/// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
+/// Returns how many got it.
+fn deliver(
+    subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
+    matches: impl Fn(&comms::Pattern) -> bool,
+    notice: impl Fn() -> Notice,
+) -> u64 {
+    let mut handed = 0;
+    subscribers.retain(|weak| {
+        let Some(sub) = weak.upgrade() else {
+            return false;
+        };
+        let mut sub = sub.borrow_mut();
+        if matches(&sub.pattern) {
+            sub.push(notice());
+            handed += 1;
+        }
+        true
+    });
+    handed
+}
+
+/// Wakes the driver task from its handles (deadlines or the backlog changed, reactions
+/// are due): a flag and one waker, all on one thread.
+#[derive(Default)]
+pub(crate) struct Nudge {
+    pending: Cell<bool>,
+    waker: RefCell<Option<Waker>>,
+}
+
+impl Nudge {
+    /// Makes the driver's next (or current) wait end.
+    pub(crate) fn notify_one(&self) {
+        self.pending.set(true);
+        if let Some(waker) = self.waker.borrow_mut().take() {
+            waker.wake();
+        }
+    }
+
+    pub(crate) fn poll(&self, cx: &mut Context<'_>) -> Poll<()> {
+        if self.pending.replace(false) {
+            return Poll::Ready(());
+        }
+        let mut slot = self.waker.borrow_mut();
+        if !slot.as_ref().is_some_and(|w| w.will_wake(cx.waker())) {
+            *slot = Some(cx.waker().clone());
+        }
+        Poll::Pending
+    }
+}
+
+/// What a watch runs: the robot's reaction to a notice, given the shared state to make a
+/// handle from (`Handle::watch` wraps the robot's closure).
+pub(crate) type Reaction = dyn FnMut(&Rc<RefCell<Inner>>, Notice);
+
+/// A watch's pattern and reaction, shared (weakly) with the driver.
+pub(crate) struct WatchSlot {
+    pub(crate) pattern: Pattern,
+    pub(crate) reaction: RefCell<Box<Reaction>>,
+}
+
+/// Runs the reactions the driver has queued, unless some are already running further
+/// up the stack (a reaction that writes queues more; the outermost call runs them).
+/// The shared state is not borrowed while a reaction runs, so it may use the handle.
+pub(crate) fn run_reactions(inner: &Rc<RefCell<Inner>>) {
+    {
+        let mut state = inner.borrow_mut();
+        if state.reacting || state.reactions.is_empty() {
+            return;
+        }
+        state.reacting = true;
+    }
+    loop {
+        let next = inner.borrow_mut().reactions.pop_front();
+        let Some((slot, notice)) = next else { break };
+        // A watch dropped after its notice was queued no longer reacts.
+        if let Some(slot) = Weak::upgrade(&slot) {
+            (slot.reaction.borrow_mut())(inner, notice);
+        }
+    }
+    inner.borrow_mut().reacting = false;
+}
