@@ -271,7 +271,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use crate::driver::{Driver, DriverConfig};
+    use crate::run::{Driver, DriverConfig};
     use comms::ReplicaConfig;
 
     fn config(id: u8, group: SocketAddrV4) -> DriverConfig {

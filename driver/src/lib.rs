@@ -63,7 +63,7 @@
 
 pub mod audio;
 mod config_files;
-mod driver;
+mod run;
 mod gamecontroller;
 mod guard;
 mod handle;
@@ -82,7 +82,7 @@ pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
-pub use driver::{Driver, DriverConfig, DriverError};
+pub use run::{Driver, DriverConfig, DriverError};
 pub use gamecontroller::{GameController, GameControllerConfig};
 pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Watch};

@@ -28,7 +28,7 @@ use comms::{
     SetError, Value,
 };
 
-use crate::driver::{DriverConfig, DriverError};
+use crate::run::{DriverConfig, DriverError};
 use crate::handle::DriverStats;
 use crate::incarnation::new_incarnation;
 use crate::notice::Notice;

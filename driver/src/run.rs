@@ -1,5 +1,5 @@
-//! The driver proper: one task owning the socket, the replica, its timers, relay
-//! sessions and in-process subscribers; what they share is in `state.rs`.
+//! The driver task: one task owning the socket, the replica, its timers, relay sessions
+//! and in-process subscribers; what they share is in `state.rs`.
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
