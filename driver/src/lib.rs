@@ -63,7 +63,6 @@
 
 pub mod audio;
 mod config_files;
-mod run;
 mod gamecontroller;
 mod guard;
 mod handle;
@@ -73,6 +72,7 @@ mod incarnation;
 mod notice;
 mod rate_limit;
 mod relay;
+mod run;
 mod session;
 mod socket;
 mod state;
@@ -82,7 +82,6 @@ pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
-pub use run::{Driver, DriverConfig, DriverError};
 pub use gamecontroller::{GameController, GameControllerConfig};
 pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Watch};
@@ -92,6 +91,7 @@ pub use incarnation::new_incarnation;
 pub use notice::{Notice, Subscription};
 pub use rate_limit::RateLimit;
 pub use relay::serve;
+pub use run::{Driver, DriverConfig, DriverError};
 pub use session::{PeerEvent, PeerEvents, Session, Updates};
 pub use socket::{
     broadcast_destination, open, open_broadcast, open_multicast, open_unicast, scratch_group,

@@ -28,10 +28,10 @@ use comms::{
     SetError, Value,
 };
 
-use crate::run::{DriverConfig, DriverError};
 use crate::handle::DriverStats;
 use crate::incarnation::new_incarnation;
 use crate::notice::Notice;
+use crate::run::{DriverConfig, DriverError};
 use crate::socket::{open, open_unicast, Transport};
 use crate::state::{Clock, IoStats};
 
