@@ -58,12 +58,14 @@
 
 mod config;
 pub mod field;
-pub mod harness;
 pub mod impair;
 pub mod sim;
 pub mod summary;
 
 pub use comms::{Entry, Instant, Key, Value, ValueType, WrongType};
+/// N replicas over a netsim network in virtual time (the `comms-netsim` crate), for the
+/// simulator and tests.
+pub use comms_netsim as harness;
 pub use config::{open, Config};
 pub use driver::{
     scratch_group, DriverError as Error, DriverStats as Stats, Notice, PeerEvent, PeerEvents,
