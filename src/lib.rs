@@ -1,15 +1,48 @@
-//! The `huddle` package: it ties the crates together. It holds what needs more than one of
-//! them: the harness that runs comms replicas over netsim, and the field simulator behind
-//! `huddle sim`. The protocol itself lives in `comms`, the filters in `fusion`, the tone
-//! codec in `audio` and the network model in `netsim`, the sockets in `driver`; this crate
-//! adds no protocol logic. Its field behaviour (formations, CMUnited-97's modes and
-//! pass-or-shoot choice) sits in [`field`], above the team communication it uses.
+//! huddle: team communication for robot teams. Each robot holds a blackboard of
+//! `key = value` bindings; what it writes under `*.var.` reaches every teammate over
+//! multicast (or broadcast, or unicast), where it reads as `<robot>.var.`, stamped on the
+//! reader's own clock; `*.talk.` queues deliver messages in order, exactly once.
 //!
-//! **What it is not.** Not a library robots link for communication (that is `comms`,
-//! with `driver` around it): the simulator here plays robots whose software is written
-//! for the simulation.
+//! This crate is the front door for Rust robot software: [`open`] a [`Session`] (a
+//! `Send + Sync + Clone` handle, usable from any task of an ordinary `#[tokio::main]`
+//! program), [`Session::set`] and [`Session::get_as`] values, [`Session::subscribe`] to
+//! changes as a [`Stream`](futures_util::Stream) and follow teammates joining and leaving
+//! with [`Session::peer_events`]. Values convert with [`Value::as_f64`] and friends or
+//! `f64::try_from(&value)`.
 //!
-//! Two seconds of the default match (five robots, the `competition` network):
+//! **What it is not.** The protocol is not here: it is the sans-IO `comms` crate, run by
+//! the tokio shell in `driver`. For the lowest latency (an answer sent in the very turn
+//! that received the question) run a [`driver::Driver`] on one thread and react with
+//! [`driver::Handle::watch`]; that handle is `!Send` on purpose. The rest of this crate
+//! is the team simulator behind `huddle sim` ([`sim`], [`field`], [`harness`]), whose
+//! robots are written for the simulation.
+//!
+//! Two robots in one process, on loopback:
+//!
+//! ```
+//! use huddle::{Config, Notice, StreamExt};
+//!
+//! # #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+//! # async fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let group = huddle::scratch_group()?; // a group no other run uses
+//! let one = huddle::open(Config::new(1, 0).group(group)).await?;
+//! let mut balls = one.subscribe("+.var.ball.#")?;
+//! let two = huddle::open(Config::new(2, 0).group(group)).await?;
+//! two.set("*.var.ball.dist", 1.5)?;
+//!
+//! let wait = std::time::Duration::from_secs(5);
+//! let Some(Notice::Changed { key, entry }) = tokio::time::timeout(wait, balls.next()).await?
+//! else {
+//!     panic!("robot 1 hears robot 2's ball")
+//! };
+//! assert_eq!(key.to_string(), "2.var.ball.dist");
+//! assert_eq!(entry.value.as_f64(), Some(1.5));
+//! assert_eq!(one.get_as::<f64>("2.var.ball.dist")?, Some(1.5));
+//! # Ok(()) }
+//! ```
+//!
+//! The simulator: two seconds of the default match (five robots, the `competition`
+//! network):
 //!
 //! ```
 //! use huddle::sim::{SimConfig, Simulation};
@@ -23,8 +56,21 @@
 
 #![forbid(unsafe_code)]
 
+mod config;
 pub mod field;
-pub mod harness;
 pub mod impair;
 pub mod sim;
 pub mod summary;
+
+pub use comms::{Entry, Instant, Key, Value, ValueType, WrongType};
+/// N replicas over a netsim network in virtual time (the `comms-netsim` crate), for the
+/// simulator and tests.
+pub use comms_netsim as harness;
+pub use config::{open, Config};
+pub use driver::{
+    scratch_group, DriverError as Error, DriverStats as Stats, Notice, PeerEvent, PeerEvents,
+    Session, Transport, Updates,
+};
+pub use futures_util::StreamExt;
+/// The crates behind the front door, for what it does not re-export.
+pub use {comms, driver};

@@ -8,7 +8,6 @@ use anyhow::Result;
 use clap::{ArgAction, CommandFactory, Parser, Subcommand};
 
 mod cli;
-mod monitor;
 
 /// huddle: team communication and world-model fusion for robot teams.
 #[derive(Parser, Debug)]

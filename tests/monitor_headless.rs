@@ -245,7 +245,7 @@ fn page_only_server() -> SocketAddr {
             let n = s.read(&mut buf).unwrap_or(0);
             let request = String::from_utf8_lossy(&buf[..n]).into_owned();
             let path = request.split_whitespace().nth(1).unwrap_or("/").to_owned();
-            let page = include_str!("../src/monitor/web/index.html");
+            let page = include_str!("../monitor/src/web/index.html");
             let reply = if path == "/" || path.starts_with("/?") {
                 format!(
                     "HTTP/1.1 200 OK\r\nContent-Type: text/html; charset=utf-8\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{page}",

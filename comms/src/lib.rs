@@ -179,4 +179,4 @@ pub use replica::{
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;
 pub use time::Instant;
-pub use value::{UnknownType, Value, ValueType};
+pub use value::{UnknownType, Value, ValueType, WrongType};

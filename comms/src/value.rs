@@ -114,7 +114,100 @@ impl Value {
             _ => self == other,
         }
     }
+
+    /// The integer, if this is an [`Value::Int`].
+    pub fn as_i64(&self) -> Option<i64> {
+        match self {
+            Value::Int(v) => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// The number as an `f64`: a [`Value::Float`], or a [`Value::Int`] converted (a
+    /// relay client's `SETV key 2` binds an int where a float was meant; the conversion
+    /// rounds beyond 2^53).
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Value::Float(v) => Some(*v),
+            Value::Int(v) => Some(*v as f64),
+            _ => None,
+        }
+    }
+
+    /// The boolean, if this is a [`Value::Bool`].
+    pub fn as_bool(&self) -> Option<bool> {
+        match self {
+            Value::Bool(v) => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// The text, if this is a [`Value::String`].
+    pub fn as_str(&self) -> Option<&str> {
+        match self {
+            Value::String(v) => Some(v),
+            _ => None,
+        }
+    }
+
+    /// The floats, if this is a [`Value::Floats`].
+    pub fn as_floats(&self) -> Option<&[f64]> {
+        match self {
+            Value::Floats(v) => Some(v),
+            _ => None,
+        }
+    }
+
+    /// The bytes, if this is a [`Value::Bytes`].
+    pub fn as_bytes(&self) -> Option<&[u8]> {
+        match self {
+            Value::Bytes(v) => Some(v),
+            _ => None,
+        }
+    }
 }
+
+/// A [`Value`] of another type than the one asked for (`f64::try_from(&value)`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Error)]
+#[error("expected a value of type {expected}, found {found}")]
+pub struct WrongType {
+    /// The type asked for.
+    pub expected: ValueType,
+    /// The value's type.
+    pub found: ValueType,
+}
+
+/// `TryFrom<&Value>` for a Rust type through one of the `as_*` accessors.
+macro_rules! try_from_value {
+    ($ty:ty, $expected:ident, $get:expr) => {
+        impl TryFrom<&Value> for $ty {
+            type Error = WrongType;
+
+            fn try_from(value: &Value) -> Result<$ty, WrongType> {
+                let get: fn(&Value) -> Option<$ty> = $get;
+                get(value).ok_or(WrongType {
+                    expected: ValueType::$expected,
+                    found: value.value_type(),
+                })
+            }
+        }
+
+        impl TryFrom<Value> for $ty {
+            type Error = WrongType;
+
+            fn try_from(value: Value) -> Result<$ty, WrongType> {
+                <$ty>::try_from(&value)
+            }
+        }
+    };
+}
+
+try_from_value!(i64, Int, Value::as_i64);
+try_from_value!(f64, Float, Value::as_f64);
+try_from_value!(bool, Bool, Value::as_bool);
+try_from_value!(String, String, |v| v.as_str().map(str::to_owned));
+try_from_value!(Vec<f64>, Floats, |v| v.as_floats().map(<[f64]>::to_vec));
+try_from_value!(Vec<u8>, Bytes, |v| v.as_bytes().map(<[u8]>::to_vec));
 
 impl From<i64> for Value {
     fn from(v: i64) -> Value {
@@ -170,5 +263,33 @@ mod tests {
         assert!(Value::Float(f64::NAN).same_as(&Value::Float(f64::NAN)));
         assert!(!Value::Float(0.0).same_as(&Value::Float(-0.0)));
         assert!(!Value::Int(1).same_as(&Value::Float(1.0)));
+    }
+
+    #[test]
+    fn typed_reads_take_their_type_and_name_the_other() {
+        let ball = Value::Floats(vec![1.5, -2.0]);
+        assert_eq!(Vec::<f64>::try_from(&ball), Ok(vec![1.5, -2.0]));
+        assert_eq!(ball.as_floats(), Some(&[1.5, -2.0][..]));
+        assert_eq!(
+            f64::try_from(&ball),
+            Err(WrongType {
+                expected: ValueType::Float,
+                found: ValueType::Floats
+            }),
+            "a vector is not a number"
+        );
+        // A relay client's `SETV x 2` binds an int: a float reader still gets its 2.0,
+        // but an int reader never gets a truncated float.
+        assert_eq!(f64::try_from(Value::Int(2)), Ok(2.0));
+        assert_eq!(Value::Float(2.5).as_i64(), None);
+        assert_eq!(bool::try_from(&Value::Bool(true)), Ok(true));
+        assert_eq!(Value::from("go").as_str(), Some("go"));
+        assert_eq!(String::try_from(Value::from("go")).as_deref(), Ok("go"));
+        assert_eq!(Vec::<u8>::try_from(&Value::Bytes(vec![7])), Ok(vec![7]));
+        let err = i64::try_from(&Value::from("7")).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "expected a value of type int, found string"
+        );
     }
 }

@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use comms::wire::{encode_frame, Frame, Item};
 use comms::{DropReason, Event, Instant, PostError, Replica, ReplicaConfig, Value};
-use netsim::{Dest, LinkConfig, Sim, Time};
+use comms_netsim::Harness;
+use netsim::{LinkConfig, Sim, Time};
 
 const TEAM: u8 = 7;
 const KEY: &[u8] = b"robocup team key";
@@ -367,47 +368,25 @@ fn talk_at_100_per_second(seed: u64) {
         loss: 0.3,
         ..LinkConfig::default()
     };
-    let mut net = Sim::builder()
-        .seed(seed)
-        .link(link)
-        .record_trace(false)
-        .build()
-        .expect("a valid link");
-    let nodes = net.add_nodes(3);
-    let team = net.add_group(&nodes).expect("a group");
-    let mut replicas: Vec<Replica> = (0..3u8)
-        .map(|i| robot(i + 1, (100 + u64::from(i)) << 16, false))
-        .collect();
+    let net = Sim::builder().link(link).record_trace(false);
+    let mut team = Harness::new(3, net, ReplicaConfig::new(1, TEAM), seed).expect("a valid team");
+    // Robot 1 posts every 10 ms for 20 s; 5 s more for the last repairs.
+    for k in 1..=2_000i64 {
+        team.run_until(Time::from_millis(10 * (k as u64 - 1)));
+        team.post(0, "*.talk.q", Value::Int(k)).unwrap();
+    }
+    team.run_until(Time::from_secs(25));
     let mut delivered: Vec<Vec<i64>> = vec![Vec::new(); 3];
     let mut given_up = 0u64;
-    for tick_ms in 0..25_000u64 {
-        let now = t(tick_ms);
-        net.run_until(Time::from_millis(tick_ms));
-        for (r, &node) in replicas.iter_mut().zip(&nodes) {
-            while let Some(d) = net.recv(node) {
-                r.handle_datagram(now, addr(), &d.bytes);
-            }
-        }
-        if tick_ms % 10 == 0 && tick_ms < 20_000 {
-            let k = (tick_ms / 10) as i64 + 1;
-            replicas[0].post(now, "*.talk.q", Value::Int(k)).unwrap();
-        }
-        for (i, r) in replicas.iter_mut().enumerate() {
-            if r.poll_timeout().is_some_and(|t| t <= now) {
-                r.handle_timeout(now);
-            }
-            while let Some(tx) = r.poll_transmit() {
-                net.send(nodes[i], Dest::Group(team), tx.payload).unwrap();
-            }
-            while let Some(e) = r.poll_event() {
-                match e {
-                    Event::TalkDelivered {
-                        value: Value::Int(v),
-                        ..
-                    } => delivered[i].push(v),
-                    Event::TalkGivenUp { first, last, .. } => given_up += last - first + 1,
-                    _ => {}
-                }
+    for (i, got) in delivered.iter_mut().enumerate() {
+        for e in team.drain_events(i) {
+            match e {
+                Event::TalkDelivered {
+                    value: Value::Int(v),
+                    ..
+                } => got.push(v),
+                Event::TalkGivenUp { first, last, .. } => given_up += last - first + 1,
+                _ => {}
             }
         }
     }

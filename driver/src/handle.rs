@@ -1,10 +1,9 @@
-//! The in-process API for Rust robot software: set, get, post, subscribe.
+//! The in-process API for Rust robot software on the driver's thread: set, get, post,
+//! subscribe, watch, guard.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
-use std::future::poll_fn;
-use std::rc::{Rc, Weak};
-use std::task::{Poll, Waker};
+use std::rc::Rc;
 use std::time::Duration;
 
 use comms::{
@@ -12,147 +11,13 @@ use comms::{
     Value,
 };
 
-use crate::driver::{Clock, Inner, IoStats};
 use crate::guard::{Guard, GuardSlot};
-
-/// Something a subscription reports.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Notice {
-    /// A matching binding was inserted or changed (key as stored: `n.var.x`,
-    /// `local.var.x`).
-    Changed {
-        /// The key.
-        key: Key,
-        /// The binding as it is now.
-        entry: Entry,
-    },
-    /// A teammate's message on a matching `n.talk.queue`, in order, exactly once.
-    Talk {
-        /// The sender.
-        from: u8,
-        /// The queue path.
-        queue: String,
-        /// Its sequence number.
-        seq: u64,
-        /// The message.
-        value: Value,
-    },
-    /// Messages `first..=last` of a matching queue could not be recovered.
-    TalkLost {
-        /// The sender.
-        from: u8,
-        /// The queue path.
-        queue: String,
-        /// First lost sequence number.
-        first: u64,
-        /// Last lost sequence number.
-        last: u64,
-    },
-    /// The subscriber fell behind: this many older notices were dropped.
-    Lagged(u64),
-}
-
-/// A subscriber's queue, shared with the driver.
-pub(crate) struct SubQueue {
-    pub(crate) pattern: Pattern,
-    queue: VecDeque<Notice>,
-    capacity: usize,
-    lagged: u64,
-    waker: Option<Waker>,
-    closed: bool,
-}
-
-impl SubQueue {
-    pub(crate) fn push(&mut self, notice: Notice) {
-        if self.queue.len() >= self.capacity {
-            self.queue.pop_front();
-            self.lagged += 1;
-        }
-        self.queue.push_back(notice);
-        if let Some(w) = self.waker.take() {
-            w.wake();
-        }
-    }
-
-    pub(crate) fn close(&mut self) {
-        self.closed = true;
-        if let Some(w) = self.waker.take() {
-            w.wake();
-        }
-    }
-}
-
-/// Notices for one pattern; see [`Handle::subscribe`].
-pub struct Subscription {
-    queue: Rc<RefCell<SubQueue>>,
-}
-
-impl Subscription {
-    /// The next notice; `None` once the driver has stopped and everything was read.
-    pub async fn next(&mut self) -> Option<Notice> {
-        poll_fn(|cx| {
-            let mut q = self.queue.borrow_mut();
-            if q.lagged > 0 {
-                let n = std::mem::take(&mut q.lagged);
-                return Poll::Ready(Some(Notice::Lagged(n)));
-            }
-            if let Some(n) = q.queue.pop_front() {
-                return Poll::Ready(Some(n));
-            }
-            if q.closed {
-                return Poll::Ready(None);
-            }
-            q.waker = Some(cx.waker().clone());
-            Poll::Pending
-        })
-        .await
-    }
-
-    /// The next notice if one is waiting, without waiting.
-    pub fn try_next(&mut self) -> Option<Notice> {
-        let mut q = self.queue.borrow_mut();
-        if q.lagged > 0 {
-            return Some(Notice::Lagged(std::mem::take(&mut q.lagged)));
-        }
-        q.queue.pop_front()
-    }
-}
-
-/// What a [`Watch`] runs: the robot's reaction to a notice.
-type Reaction = dyn FnMut(&Handle, Notice);
-
-/// A watch's pattern and reaction, shared (weakly) with the driver.
-pub(crate) struct WatchSlot {
-    pub(crate) pattern: Pattern,
-    reaction: RefCell<Box<Reaction>>,
-}
+use crate::notice::{Notice, SubQueue, Subscription};
+use crate::state::{run_reactions, Clock, Inner, IoStats, WatchSlot};
 
 /// A reaction registered with [`Handle::watch`]; dropping it stops the reaction.
 pub struct Watch {
     _slot: Rc<WatchSlot>,
-}
-
-/// Runs the reactions the driver has queued, unless some are already running further
-/// up the stack (a reaction that writes queues more; the outermost call runs them).
-/// The shared state is not borrowed while a reaction runs, so it may use the handle.
-pub(crate) fn run_reactions(inner: &Rc<RefCell<Inner>>) {
-    {
-        let mut state = inner.borrow_mut();
-        if state.reacting || state.reactions.is_empty() {
-            return;
-        }
-        state.reacting = true;
-    }
-    let handle = Handle::new(inner.clone());
-    loop {
-        let next = inner.borrow_mut().reactions.pop_front();
-        let Some((slot, notice)) = next else { break };
-        // A watch dropped after its notice was queued no longer reacts.
-        if let Some(slot) = Weak::upgrade(&slot) {
-            (slot.reaction.borrow_mut())(&handle, notice);
-        }
-    }
-    inner.borrow_mut().reacting = false;
 }
 
 /// Counters of a running driver.
@@ -176,7 +41,7 @@ pub struct Handle {
 }
 
 impl Handle {
-    pub(super) fn new(inner: Rc<RefCell<Inner>>) -> Handle {
+    pub(crate) fn new(inner: Rc<RefCell<Inner>>) -> Handle {
         Handle { inner }
     }
 
@@ -302,12 +167,15 @@ impl Handle {
     pub fn watch(
         &self,
         pattern: &str,
-        reaction: impl FnMut(&Handle, Notice) + 'static,
+        mut reaction: impl FnMut(&Handle, Notice) + 'static,
     ) -> Result<Watch, PatternError> {
         let pattern = Pattern::parse(pattern)?;
+        // The shared state knows no handles: it gives the reaction itself, wrapped.
         let slot = Rc::new(WatchSlot {
             pattern,
-            reaction: RefCell::new(Box::new(reaction)),
+            reaction: RefCell::new(Box::new(move |inner: &Rc<RefCell<Inner>>, notice| {
+                reaction(&Handle::new(inner.clone()), notice)
+            })),
         });
         self.inner.borrow_mut().watches.push(Rc::downgrade(&slot));
         Ok(Watch { _slot: slot })
@@ -403,7 +271,7 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use crate::driver::{Driver, DriverConfig};
+    use crate::run::{Driver, DriverConfig};
     use comms::ReplicaConfig;
 
     fn config(id: u8, group: SocketAddrV4) -> DriverConfig {

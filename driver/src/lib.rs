@@ -63,32 +63,38 @@
 
 pub mod audio;
 mod config_files;
-mod driver;
 mod gamecontroller;
 mod guard;
 mod handle;
 mod iface;
 mod impair;
 mod incarnation;
+mod notice;
 mod rate_limit;
 mod relay;
+mod run;
+mod session;
 mod socket;
+mod state;
 pub mod team;
 
 pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
-pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
 pub use gamecontroller::{GameController, GameControllerConfig};
 pub use guard::Guard;
-pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
+pub use handle::{Batch, DriverStats, Handle, Watch};
 pub use iface::{broadcast_address, resolve_iface, IfaceError};
 pub use impair::Impairment;
 pub use incarnation::new_incarnation;
+pub use notice::{Notice, Subscription};
 pub use rate_limit::RateLimit;
 pub use relay::serve;
+pub use run::{Driver, DriverConfig, DriverError};
+pub use session::{PeerEvent, PeerEvents, Session, Updates};
 pub use socket::{
     broadcast_destination, open, open_broadcast, open_multicast, open_unicast, scratch_group,
     Opened, SocketConfig, SocketError, Transport,
 };
+pub use state::{Clock, IoStats};

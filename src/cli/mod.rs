@@ -28,6 +28,7 @@ pub mod monitor_sim;
 pub mod record;
 pub mod relay;
 pub mod sim;
+pub mod sim_tap;
 pub mod transport;
 pub mod watch;
 

@@ -12,9 +12,9 @@ use clap::Args;
 use driver::resolve_iface;
 
 use super::transport::{listening_on, TransportArgs};
-use crate::monitor::listen::LISTENER_ID;
-use crate::monitor::model::Model;
-use crate::monitor::server;
+use monitor::listen::LISTENER_ID;
+use monitor::model::Model;
+use monitor::server;
 
 /// Arguments of `huddle monitor`.
 #[derive(Args, Debug)]

@@ -4,6 +4,8 @@
 //! off on cue.
 
 use std::io::BufWriter;
+use std::net::SocketAddr;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -11,11 +13,10 @@ use huddle::sim::Simulation;
 use indicatif::ProgressBar;
 
 use super::duration;
-use super::sim::SimArgs;
-use crate::monitor::model::{Field, Model, Truth};
-use crate::monitor::pcapng::Writer;
-use crate::monitor::server;
-use crate::monitor::tap::SimTap;
+use super::sim_tap::SimTap;
+use monitor::model::{Field, Model, Truth};
+use monitor::pcapng::Writer;
+use monitor::server;
 
 /// `ID@T`: a robot id and a simulated time (`3@20s`).
 pub fn parse_kill(s: &str) -> Result<(u8, Duration), String> {
@@ -32,13 +33,33 @@ pub fn parse_kill(s: &str) -> Result<(u8, Duration), String> {
     Ok((id, duration::parse(t)?))
 }
 
-/// Whether the match needs stepping here (any of the flags that watch or pace it).
-pub fn wanted(args: &SimArgs) -> bool {
-    args.record.is_some() || args.speed.is_some() || args.monitor.is_some() || !args.kill.is_empty()
+/// What `huddle sim` asks of a match stepped here (its flags `--record`, `--speed`,
+/// `--monitor`, `--kill`, and how many robots there are).
+pub struct Stepping<'a> {
+    /// Where to record the traffic (pcapng).
+    pub record: Option<&'a Path>,
+    /// Simulated seconds per wall-clock second.
+    pub speed: Option<f64>,
+    /// Where to serve the monitor.
+    pub monitor: Option<SocketAddr>,
+    /// Robots to switch off, and when (simulated time).
+    pub kill: &'a [(u8, Duration)],
+    /// The team's size.
+    pub robots: usize,
+}
+
+impl Stepping<'_> {
+    /// Whether the match needs stepping here (any of the flags that watch or pace it).
+    pub fn wanted(&self) -> bool {
+        self.record.is_some()
+            || self.speed.is_some()
+            || self.monitor.is_some()
+            || !self.kill.is_empty()
+    }
 }
 
 /// Steps `sim` to its end: paced, recorded, robots switched off as asked.
-pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()> {
+pub fn run(sim: &mut Simulation, args: &Stepping<'_>, bar: &ProgressBar) -> Result<()> {
     let speed = match (args.speed, args.monitor) {
         (Some(s), _) if !(s.is_finite() && s > 0.0) => {
             bail!("--speed must be a positive number, not {s}")
@@ -47,12 +68,12 @@ pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()
         (None, Some(_)) => Some(1.0),
         (None, None) => None,
     };
-    for &(id, _) in &args.kill {
+    for &(id, _) in args.kill {
         if usize::from(id) > args.robots {
             bail!("--kill {id}@…: there are only {} robots", args.robots);
         }
     }
-    let mut recorder = match &args.record {
+    let mut recorder = match args.record {
         Some(path) => {
             let file = std::fs::File::create(path)
                 .with_context(|| format!("creating {}", path.display()))?;
@@ -62,8 +83,7 @@ pub fn run(sim: &mut Simulation, args: &SimArgs, bar: &ProgressBar) -> Result<()
     };
     let monitor = match args.monitor {
         Some(addr) => {
-            let mut model =
-                Model::new(1, None, crate::monitor::listen::LISTENER_ID, 0, "sim", None)?;
+            let mut model = Model::new(1, None, monitor::listen::LISTENER_ID, 0, "sim", None)?;
             let f = &sim.config().field;
             model.set_field(Field {
                 length_m: f.length_m,

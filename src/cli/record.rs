@@ -1,7 +1,7 @@
 //! `huddle record` and `huddle replay`: a team's traffic to a pcapng file, listen-only,
 //! and back through the same replica code, as JSON lines.
 //!
-//! The file format is in `src/monitor/pcapng.rs`: pcapng with one IPv4/UDP packet per
+//! The file format is in `monitor/src/pcapng.rs`: pcapng with one IPv4/UDP packet per
 //! datagram and its reception time on the recording machine's clock (nanoseconds), so
 //! Wireshark and tshark open it as they are (`tshark -r match.pcapng`).
 
@@ -18,10 +18,10 @@ use super::duration;
 use super::transport::{listening_on, TransportArgs};
 use std::sync::{Arc, Mutex};
 
-use crate::monitor::listen::{Heard, LISTENER_ID, REPLAY_TAIL};
-use crate::monitor::model::Model;
-use crate::monitor::pcapng::{self, Packet, Writer};
-use crate::monitor::server;
+use monitor::listen::{Heard, LISTENER_ID, REPLAY_TAIL};
+use monitor::model::Model;
+use monitor::pcapng::{self, Packet, Writer};
+use monitor::server;
 
 /// Arguments of `huddle record`.
 #[derive(Args, Debug)]

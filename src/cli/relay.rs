@@ -11,7 +11,6 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use comms::relay::Binding;
-use comms::Value;
 use serde_json::json;
 
 /// The relay's port when only a host is given.
@@ -235,21 +234,8 @@ impl RelayClient {
     }
 }
 
-/// A value literal as JSON: numbers, booleans, strings, arrays of numbers; bytes as a
-/// `0x…` hex string; a float that JSON cannot hold (NaN, ±inf) as its literal string.
-pub fn value_json(literal: &str) -> serde_json::Value {
-    match comms::parse_literal(literal) {
-        Ok(Value::Int(v)) => json!(v),
-        Ok(Value::Float(v)) if v.is_finite() => json!(v),
-        Ok(Value::Bool(v)) => json!(v),
-        Ok(Value::String(s)) => json!(s),
-        Ok(Value::Floats(v)) if v.iter().all(|x| x.is_finite()) => {
-            json!(v)
-        }
-        // Bytes, non-finite floats, or a type this build does not know: the literal.
-        _ => json!(literal),
-    }
-}
+/// A value literal as JSON (the monitor's form, shared with `huddle get --json`).
+pub use monitor::value_json;
 
 /// The robot a binding belongs to, as a number: the key's first level (`3.var.x` -> 3),
 /// or for a `local.` key the relay's own robot (`robot`, from its greeting).

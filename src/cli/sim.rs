@@ -246,8 +246,15 @@ pub fn run(args: SimArgs) -> Result<()> {
         .expect("a valid template"),
     );
     let started = Instant::now();
-    if super::monitor_sim::wanted(&args) {
-        super::monitor_sim::run(&mut sim, &args, &bar)?;
+    let stepping = super::monitor_sim::Stepping {
+        record: args.record.as_deref(),
+        speed: args.speed,
+        monitor: args.monitor,
+        kill: &args.kill,
+        robots: args.robots,
+    };
+    if stepping.wanted() {
+        super::monitor_sim::run(&mut sim, &stepping, &bar)?;
     }
     sim.run(|t_s| bar.set_position((t_s * 1e3) as u64));
     let wall_s = started.elapsed().as_secs_f64();

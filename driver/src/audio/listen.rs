@@ -9,7 +9,7 @@ use std::sync::Arc;
 use audio::{Decoder, DecoderConfig, S16leDecoder};
 
 use super::{pause, ChildSlot, Heard, Restart, Shared, StreamClock, BACKOFF_FIRST, BACKOFF_LAST};
-use crate::driver::Clock;
+use crate::state::Clock;
 
 /// What the listening thread needs.
 pub(crate) struct ListenConfig {

@@ -11,7 +11,7 @@ use audio::{i16_to_s16le, Encoder, EncoderConfig, Message};
 use comms::Instant;
 
 use super::{Shared, BACKOFF_FIRST, BACKOFF_LAST};
-use crate::driver::Clock;
+use crate::state::Clock;
 
 /// What the speaking thread needs.
 pub(crate) struct SpeakConfig {

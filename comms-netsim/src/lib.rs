@@ -1,4 +1,4 @@
-//! The harness: N comms replicas over one netsim network, in virtual time.
+//! comms-netsim, the harness: N comms replicas over one netsim network, in virtual time.
 //!
 //! Each robot is a node of the simulated network with its own clock (offset, drift) and a
 //! [`comms::Replica`] that only ever sees that clock. The harness runs the sans-IO loop
@@ -15,11 +15,11 @@
 //! that same instant on the next call to `run_until` (or [`Harness::flush`]).
 //!
 //! It is not a driver for real sockets (that is the `driver` crate), and it judges
-//! nothing: tests and the simulator do.
+//! nothing: tests (comms' own among them), benches and the simulator do.
 //!
 //! ```
 //! use comms::{Key, ReplicaConfig, Value};
-//! use huddle::harness::Harness;
+//! use comms_netsim::Harness;
 //! use netsim::{Preset, Sim, Time};
 //!
 //! // Three robots on a competition WLAN (20% loss in bursts, 20 ms ± 10 ms).
@@ -31,11 +31,13 @@
 //! assert_eq!(copy.value, Value::Floats(vec![1.0, 2.0]));
 //! ```
 
+#![forbid(unsafe_code)]
+
 use std::collections::VecDeque;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 use std::time::Duration;
 
-use comms::{Event, Instant, Key, Replica, ReplicaConfig, SetError, Value};
+use comms::{Event, Instant, Key, PostError, Replica, ReplicaConfig, SetError, Value};
 use netsim::{ConfigError, Dest, GroupId, NodeClock, NodeId, Sim, SimBuilder, Time};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -216,6 +218,16 @@ impl Harness {
         match self.replicas[i].as_mut() {
             Some(r) => r.set_priority(now, key, value),
             None => Ok(()),
+        }
+    }
+
+    /// Robot `i` posts `value` to its talk queue `key` (`*.talk.plan`) now; its sequence
+    /// number (a switched-off robot posts nothing: `None`).
+    pub fn post(&mut self, i: usize, key: &str, value: Value) -> Result<Option<u64>, PostError> {
+        let now = self.local_now(i);
+        match self.replicas[i].as_mut() {
+            Some(r) => r.post(now, key, value).map(Some),
+            None => Ok(None),
         }
     }
 

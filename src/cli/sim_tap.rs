@@ -8,7 +8,7 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use huddle::sim::Simulation;
 use netsim::TraceKind;
 
-use super::pcapng::Packet;
+use monitor::pcapng::Packet;
 
 /// The group a simulated match's packets are addressed to in a recording (netsim's pcap
 /// convention: group 1 is 224.0.0.1, port 2000).

@@ -33,7 +33,7 @@ use axum::Router;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::sync::Notify;
 
-use super::model::Model;
+use crate::model::Model;
 
 /// The page, built into the binary.
 pub const PAGE: &str = include_str!("web/index.html");

@@ -10,6 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use comms::{Event, Instant, Replica, ReplicaConfig, Scope, Value};
+use serde_json::json;
 
 /// The robot id a listener takes unless told otherwise: one no team uses.
 pub const LISTENER_ID: u8 = 254;
@@ -69,7 +70,7 @@ impl Heard {
             "owner": owner,
             "key": key,
             "type": value.value_type().name(),
-            "value": crate::cli::relay::value_json(&value.to_string()),
+            "value": value_json(&value.to_string()),
         }))
     }
 }
@@ -202,3 +203,19 @@ impl Listener {
 /// How long after the last datagram a recording's replay still runs timers, so that
 /// robots that fell silent at the end are reported departed.
 pub const REPLAY_TAIL: Duration = Duration::from_secs(1);
+
+/// A value literal as JSON: numbers, booleans, strings, arrays of numbers; bytes as a
+/// `0x…` hex string; a float that JSON cannot hold (NaN, ±inf) as its literal string.
+pub fn value_json(literal: &str) -> serde_json::Value {
+    match comms::parse_literal(literal) {
+        Ok(Value::Int(v)) => json!(v),
+        Ok(Value::Float(v)) if v.is_finite() => json!(v),
+        Ok(Value::Bool(v)) => json!(v),
+        Ok(Value::String(s)) => json!(s),
+        Ok(Value::Floats(v)) if v.iter().all(|x| x.is_finite()) => {
+            json!(v)
+        }
+        // Bytes, non-finite floats, or a type this build does not know: the literal.
+        _ => json!(literal),
+    }
+}

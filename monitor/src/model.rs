@@ -19,7 +19,7 @@ use comms::{Pattern, Value};
 use fusion::{GlobalConfig, GlobalModel, LocalWorldModel};
 use serde_json::{json, Value as Json};
 
-use super::listen::{Heard, Listener};
+use crate::listen::{Heard, Listener};
 
 /// The field drawn: sizes in metres (the simulator's field by default).
 #[derive(Clone, Copy, Debug)]
@@ -36,7 +36,8 @@ pub struct Field {
 
 impl Default for Field {
     fn default() -> Self {
-        let f = huddle::field::FieldConfig::default();
+        // The field a team's robots believe they play on, until told otherwise.
+        let f = team::Calibration::default().field;
         Self {
             length_m: f.length_m,
             width_m: f.width_m,
@@ -247,7 +248,7 @@ impl Model {
             if key.contains(".talk.") {
                 self.talk.push_back(json!({
                     "t": t_s, "owner": owner, "key": key,
-                    "value": crate::cli::relay::value_json(&value.to_string()),
+                    "value": crate::value_json(&value.to_string()),
                 }));
                 while self.talk.len() > TALK_KEPT {
                     self.talk.pop_front();
@@ -392,7 +393,7 @@ impl Model {
                     "key": k.to_string(),
                     "owner": e.owner,
                     "type": e.value.value_type().name(),
-                    "value": crate::cli::relay::value_json(&e.value.to_string()),
+                    "value": crate::value_json(&e.value.to_string()),
                     "age_ms": e.age(now).as_secs_f64() * 1e3,
                     "departed": replica.is_departed(e.owner),
                 });

@@ -1,119 +1,37 @@
-//! The driver proper: one task owning the socket, the replica, its timers, relay
-//! sessions and in-process subscribers.
+//! The state a driver shares with its handles and relay connections on its one thread:
+//! the replica, the sockets it sends on, the send backlog, relay sessions, subscribers,
+//! watches and their queued reactions. Every method runs synchronously inside a turn of
+//! the driver task or of a handle call; the task itself is in `driver.rs`.
 
 use std::cell::{Cell, RefCell};
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, VecDeque};
-use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::rc::{Rc, Weak};
 use std::task::{Context, Poll, Waker};
 
-use thiserror::Error;
 use tokio::net::UdpSocket;
 use tokio::sync::Notify;
 
 use comms::relay::{Session, SessionLimits};
-use comms::{
-    ConfigInvalid, DropReason, Event, Instant, Key, Kind, Replica, ReplicaConfig, Scope, SetError,
-    Value,
-};
+use comms::{DropReason, Event, Instant, Kind, Pattern, Replica, Scope, Value};
 
 use crate::guard::{GuardSlot, GuardedBoard};
-pub use crate::handle::Handle;
-use crate::handle::{run_reactions, Notice, SubQueue, WatchSlot};
 use crate::impair::{Held, Impairment};
-use crate::incarnation::new_incarnation;
+use crate::notice::{Notice, SubQueue};
 use crate::rate_limit::RateLimit;
-use crate::socket::{open, open_unicast, SocketConfig, SocketError, Transport};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped
 /// (and counted): the periodic refresh repairs values, NACKs repair talk.
 const SEND_BACKLOG_FRAMES: usize = 1024;
-/// Datagrams handled per wake-up before the loop looks at timers and wake-ups again.
-const RECV_BATCH: usize = 256;
 /// Copies an [`Impairment`] may hold back at once; beyond this they are dropped (and
 /// counted), so a model with huge delays cannot exhaust memory.
 const HELD_LIMIT: usize = 65_536;
 /// At most one warning per this period about frames dropped for a team-key mismatch.
-const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+pub(crate) const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
 /// At most one warning per this period about sends the OS refused.
-const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
-
-/// Everything the driver needs to start.
-#[derive(Clone, Debug)]
-pub struct DriverConfig {
-    /// The replica's settings (robot and team id, refresh period, MTU, key, talk).
-    pub replica: ReplicaConfig,
-    /// The team's socket: transport (multicast, broadcast, unicast), group or port,
-    /// interface.
-    pub socket: SocketConfig,
-    /// Teammates that also get every frame by unicast (WLAN access points often drop
-    /// or delay multicast). Duplicates are harmless. With peers, a second socket bound to
-    /// `<iface>:<port>` sends to them and receives their unicast; datagrams on it from any
-    /// other address are dropped (counted in [`IoStats::unicast_refused`]). Without peers
-    /// no unicast is received at all. Note: on one host, unicast to a port shared by
-    /// several replicas reaches only one of them.
-    ///
-    /// With [`Transport::Unicast`] the peers are the only destinations and the only
-    /// accepted senders, on the one socket bound to `<iface>:<port>`; at least one is
-    /// needed.
-    pub peers: Vec<SocketAddr>,
-    /// Values set before the first frame goes out (`config.dat`, `config-<id>.dat`).
-    pub start_values: Vec<(Key, Value)>,
-    /// Notices an in-process subscriber may leave unread before the oldest are dropped
-    /// (it then gets [`Notice::Lagged`]).
-    pub subscriber_backlog: usize,
-    /// Limits of each relay session.
-    pub session_limits: SessionLimits,
-    /// The incarnation; `None`: a random one (it must differ between starts).
-    pub incarnation: Option<u64>,
-}
-
-impl DriverConfig {
-    /// Defaults around `replica`: the seed's group `224.0.0.1:2000` on loopback, TTL 1,
-    /// a 4 MiB receive buffer, no peers.
-    pub fn new(replica: ReplicaConfig) -> DriverConfig {
-        DriverConfig {
-            replica,
-            socket: SocketConfig::default(),
-            peers: Vec::new(),
-            start_values: Vec::new(),
-            subscriber_backlog: 4096,
-            session_limits: SessionLimits::default(),
-            incarnation: None,
-        }
-    }
-}
-
-/// Why the driver could not start.
-#[derive(Debug, Error)]
-pub enum DriverError {
-    /// The team's socket could not be set up.
-    #[error(transparent)]
-    Socket(#[from] SocketError),
-    /// [`Transport::Unicast`] without a peer: no frame would go anywhere.
-    #[error("the unicast transport sends to each --peer only, and none is given")]
-    NoPeers,
-    /// The replica configuration is invalid.
-    #[error("invalid replica configuration: {0}")]
-    Replica(#[from] ConfigInvalid),
-    /// A start value was refused (e.g. a config line sets another robot's key).
-    #[error("start value {key}: {source}")]
-    StartValue {
-        /// The key.
-        key: String,
-        /// Why.
-        source: SetError,
-    },
-    /// Registering the socket with tokio failed (no runtime?).
-    #[error("cannot register the socket with tokio: {0}")]
-    Runtime(io::Error),
-    /// Receiving or waiting on the socket failed for good.
-    #[error("socket error: {0}")]
-    Io(io::Error),
-}
+pub(crate) const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The monotonic clock an I/O shell hands to the replica: microseconds since it started.
 #[derive(Clone, Copy, Debug)]
@@ -145,7 +63,7 @@ impl Clock {
         Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
     }
 
-    fn to_tokio(self, t: Instant) -> tokio::time::Instant {
+    pub(crate) fn to_tokio(self, t: Instant) -> tokio::time::Instant {
         let at = self.origin + std::time::Duration::from_micros(t.as_micros());
         tokio::time::Instant::from_std(at)
     }
@@ -192,44 +110,44 @@ pub struct IoStats {
 pub(crate) struct Inner {
     pub(crate) clock: Clock,
     pub(crate) replica: Replica,
-    socket: Rc<UdpSocket>,
+    pub(crate) socket: Rc<UdpSocket>,
     /// The `--peer` socket (`<iface>:<port>`), only when peers are configured and the
     /// transport is not unicast (then `socket` is that socket).
-    unicast: Option<Rc<UdpSocket>>,
+    pub(crate) unicast: Option<Rc<UdpSocket>>,
     /// The group or broadcast address every frame goes to; `None` with unicast.
-    destination: Option<SocketAddr>,
-    peers: Vec<SocketAddr>,
-    backlog: VecDeque<(Vec<u8>, SocketAddr)>,
+    pub(crate) destination: Option<SocketAddr>,
+    pub(crate) peers: Vec<SocketAddr>,
+    pub(crate) backlog: VecDeque<(Vec<u8>, SocketAddr)>,
     pub(crate) subscribers: Vec<Weak<RefCell<SubQueue>>>,
-    /// Reactions registered with [`Handle::watch`].
+    /// Reactions registered with [`crate::Handle::watch`].
     pub(crate) watches: Vec<Weak<WatchSlot>>,
     /// Reactions due, run once the shared state is no longer borrowed.
     pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
     /// Reactions are running further up the stack.
     pub(crate) reacting: bool,
-    /// Checks in front of relay clients' writes of some keys ([`Handle::guard`]).
+    /// Checks in front of relay clients' writes of some keys ([`crate::Handle::guard`]).
     pub(crate) guards: Vec<Weak<GuardSlot>>,
     pub(crate) subscriber_backlog: usize,
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
-    next_session: u64,
+    pub(crate) next_session: u64,
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
-    impairment: Option<Box<dyn Impairment>>,
-    held: BinaryHeap<Reverse<Held>>,
-    held_order: u64,
-    copies: Vec<Instant>,
+    pub(crate) impairment: Option<Box<dyn Impairment>>,
+    pub(crate) held: BinaryHeap<Reverse<Held>>,
+    pub(crate) held_order: u64,
+    pub(crate) copies: Vec<Instant>,
     /// Notices handed to subscribers and relay sessions so far: tells the receive loop
     /// that a task is now waiting to run.
-    handed_up: u64,
+    pub(crate) handed_up: u64,
     /// Warnings about frames dropped for a team-key mismatch, rate-limited.
-    key_mismatch: RateLimit,
+    pub(crate) key_mismatch: RateLimit,
     /// Warnings about sends the OS refused, rate-limited.
-    send_failures: RateLimit,
+    pub(crate) send_failures: RateLimit,
     /// Warnings about given-up talk messages.
-    give_up_warnings: RateLimit,
+    pub(crate) give_up_warnings: RateLimit,
 }
 
 impl Inner {
@@ -296,7 +214,7 @@ impl Inner {
 
     /// The socket a datagram to `to` leaves from: the unicast one for peers (when open),
     /// the team's socket otherwise.
-    fn socket_for(&self, to: SocketAddr) -> &Rc<UdpSocket> {
+    pub(crate) fn socket_for(&self, to: SocketAddr) -> &Rc<UdpSocket> {
         match &self.unicast {
             Some(unicast) if Some(to) != self.destination => unicast,
             _ => &self.socket,
@@ -342,7 +260,7 @@ impl Inner {
     }
 
     /// Sends what the backlog holds until the kernel refuses again.
-    fn flush_backlog(&mut self) {
+    pub(crate) fn flush_backlog(&mut self) {
         while let Some((payload, to)) = self.backlog.front() {
             let to = *to;
             match self.socket_for(to).try_send_to(payload, to) {
@@ -495,7 +413,7 @@ impl Inner {
     }
 
     /// The earliest deadline of the replica, the relay sessions and held copies.
-    fn next_deadline(&self) -> Option<Instant> {
+    pub(crate) fn next_deadline(&self) -> Option<Instant> {
         let sessions = self
             .sessions
             .values()
@@ -508,7 +426,7 @@ impl Inner {
             .min()
     }
 
-    fn handle_timeout(&mut self) {
+    pub(crate) fn handle_timeout(&mut self) {
         self.release_held();
         let now = self.clock.now();
         self.replica.handle_timeout(now);
@@ -652,15 +570,6 @@ fn deliver(
     handed
 }
 
-/// What ended a wait of the run loop.
-enum Cause {
-    Shutdown,
-    Readable,
-    Deadline,
-    Writable,
-    Nudged,
-}
-
 /// Wakes the driver task from its handles (deadlines or the backlog changed, reactions
 /// are due): a flag and one waker, all on one thread.
 #[derive(Default)]
@@ -678,7 +587,7 @@ impl Nudge {
         }
     }
 
-    fn poll(&self, cx: &mut Context<'_>) -> Poll<()> {
+    pub(crate) fn poll(&self, cx: &mut Context<'_>) -> Poll<()> {
         if self.pending.replace(false) {
             return Poll::Ready(());
         }
@@ -690,268 +599,34 @@ impl Nudge {
     }
 }
 
-/// The driver: owns the socket and the replica; run it with [`Driver::run`].
-pub struct Driver {
-    inner: Rc<RefCell<Inner>>,
-    socket: Rc<UdpSocket>,
-    unicast: Option<Rc<UdpSocket>>,
-    /// `socket` takes datagrams from peers only (the unicast transport).
-    peers_only: bool,
-    wake: Rc<Nudge>,
+/// What a watch runs: the robot's reaction to a notice, given the shared state to make a
+/// handle from (`Handle::watch` wraps the robot's closure).
+pub(crate) type Reaction = dyn FnMut(&Rc<RefCell<Inner>>, Notice);
+
+/// A watch's pattern and reaction, shared (weakly) with the driver.
+pub(crate) struct WatchSlot {
+    pub(crate) pattern: Pattern,
+    pub(crate) reaction: RefCell<Box<Reaction>>,
 }
 
-impl Driver {
-    /// Opens the transport's socket (joining the group for multicast) and starts the
-    /// replica with the start values. Call it inside a tokio runtime (the socket
-    /// registers with its reactor).
-    pub fn bind(config: DriverConfig) -> Result<Driver, DriverError> {
-        let transport = config.socket.transport;
-        let peers_only = transport == Transport::Unicast;
-        if peers_only && config.peers.is_empty() {
-            return Err(DriverError::NoPeers);
+/// Runs the reactions the driver has queued, unless some are already running further
+/// up the stack (a reaction that writes queues more; the outermost call runs them).
+/// The shared state is not borrowed while a reaction runs, so it may use the handle.
+pub(crate) fn run_reactions(inner: &Rc<RefCell<Inner>>) {
+    {
+        let mut state = inner.borrow_mut();
+        if state.reacting || state.reactions.is_empty() {
+            return;
         }
-        let opened = open(&config.socket)?;
-        let destination = opened.destination.map(SocketAddr::V4);
-        let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
-        let unicast = if config.peers.is_empty() || peers_only {
-            None
-        } else {
-            let std_socket = open_unicast(&config.socket)?;
-            Some(Rc::new(
-                UdpSocket::from_std(std_socket).map_err(DriverError::Runtime)?,
-            ))
-        };
-        let clock = Clock::new();
-        let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
-        let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
-        for (key, value) in config.start_values {
-            replica
-                .set_key(clock.now(), &key, value)
-                .map_err(|source| DriverError::StartValue {
-                    key: key.to_string(),
-                    source,
-                })?;
-        }
-        // Start values are this robot's business, not changes anyone waits for.
-        while replica.poll_event().is_some() {}
-        let wake = Rc::new(Nudge::default());
-        let inner = Inner {
-            clock,
-            replica,
-            socket: socket.clone(),
-            unicast: unicast.clone(),
-            destination,
-            peers: config.peers,
-            backlog: VecDeque::new(),
-            subscribers: Vec::new(),
-            watches: Vec::new(),
-            reactions: VecDeque::new(),
-            reacting: false,
-            guards: Vec::new(),
-            subscriber_backlog: config.subscriber_backlog.max(1),
-            sessions: BTreeMap::new(),
-            next_session: 0,
-            session_limits: config.session_limits,
-            io: IoStats {
-                recv_buffer_bytes: opened.recv_buffer_granted,
-                ..IoStats::default()
-            },
-            wake: wake.clone(),
-            impairment: None,
-            held: BinaryHeap::new(),
-            held_order: 0,
-            copies: Vec::new(),
-            handed_up: 0,
-            key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
-            send_failures: RateLimit::new(SEND_WARNING_PERIOD),
-            give_up_warnings: RateLimit::new(SEND_WARNING_PERIOD),
-        };
-        tracing::info!(
-            robot = inner.replica.robot_id(),
-            %transport,
-            to = %destination.map_or_else(|| "each peer".to_owned(), |d| d.to_string()),
-            port = config.socket.group.port(),
-            iface = %config.socket.iface,
-            recv_buffer_bytes = opened.recv_buffer_granted,
-            requested = config.socket.recv_buffer_bytes,
-            peers = inner.peers.len(),
-            "{transport} socket ready"
-        );
-        Ok(Driver {
-            inner: Rc::new(RefCell::new(inner)),
-            socket,
-            unicast,
-            peers_only,
-            wake,
-        })
+        state.reacting = true;
     }
-
-    /// Passes every outgoing datagram through `impairment` from now on (`None`: send
-    /// directly again; copies already held still leave at their times). See
-    /// [`Impairment`] for why outgoing.
-    pub fn set_impairment(&self, impairment: Option<Box<dyn Impairment>>) {
-        self.inner.borrow_mut().impairment = impairment;
-    }
-
-    /// A handle for reading, writing and subscribing from tasks on this thread.
-    pub fn handle(&self) -> Handle {
-        Handle::new(self.inner.clone())
-    }
-
-    /// Runs until `shutdown` completes: receives datagrams, runs timers, sends. On
-    /// return, subscriptions end (their `next` gives `None`).
-    pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), DriverError> {
-        let result = self.run_loop(shutdown).await;
-        let mut inner = self.inner.borrow_mut();
-        for weak in inner.subscribers.drain(..) {
-            if let Some(sub) = weak.upgrade() {
-                sub.borrow_mut().close();
-            }
-        }
-        for slot in inner.sessions.values() {
-            slot.notify.notify_one();
-        }
-        result
-    }
-
-    async fn run_loop(&self, shutdown: impl Future<Output = ()>) -> Result<(), DriverError> {
-        tokio::pin!(shutdown);
-        let clock = self.inner.borrow().clock;
-        // The first frame (heartbeat, start values) goes out at once.
-        self.inner.borrow_mut().pump();
-        let far = || tokio::time::Instant::now() + std::time::Duration::from_secs(3600);
-        let sleep = tokio::time::sleep_until(far());
-        tokio::pin!(sleep);
-        let mut buf = vec![0u8; 65_536];
-        loop {
-            let (deadline, backlog) = {
-                let inner = self.inner.borrow();
-                // The socket the oldest waiting frame leaves from.
-                let backlog = inner
-                    .backlog
-                    .front()
-                    .map(|(_, to)| inner.socket_for(*to).clone());
-                (inner.next_deadline(), backlog)
-            };
-            let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
-            if sleep.deadline() != at {
-                sleep.as_mut().reset(at);
-            }
-            // One hand-written poll instead of `select!`: nothing is built, registered
-            // and dropped again on every pass (the socket keeps one waker per direction,
-            // the nudge one waker), which matters at one pass per datagram.
-            let cause = std::future::poll_fn(|cx| {
-                if shutdown.as_mut().poll(cx).is_ready() {
-                    return Poll::Ready(Ok(Cause::Shutdown));
-                }
-                if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {
-                    return Poll::Ready(ready.map(|()| Cause::Readable));
-                }
-                if let Some(unicast) = &self.unicast {
-                    if let Poll::Ready(ready) = unicast.poll_recv_ready(cx) {
-                        return Poll::Ready(ready.map(|()| Cause::Readable));
-                    }
-                }
-                if sleep.as_mut().poll(cx).is_ready() {
-                    return Poll::Ready(Ok(Cause::Deadline));
-                }
-                if let Some(socket) = &backlog {
-                    if let Poll::Ready(ready) = socket.poll_send_ready(cx) {
-                        return Poll::Ready(ready.map(|()| Cause::Writable));
-                    }
-                }
-                self.wake.poll(cx).map(|()| Ok(Cause::Nudged))
-            })
-            .await
-            .map_err(DriverError::Io)?;
-            match cause {
-                Cause::Shutdown => return Ok(()),
-                Cause::Readable => {
-                    let handed_before = self.inner.borrow().handed_up;
-                    if self.receive_batch(&mut buf)? {
-                        // Watches react (and answer) right here, in this turn.
-                        run_reactions(&self.inner);
-                        if self.inner.borrow().handed_up != handed_before {
-                            // A subscriber or relay session has a notice: let it run
-                            // (and answer) before this task reads on, so the read that
-                            // finds the socket empty is not on the critical path of a
-                            // reply.
-                            tokio::task::yield_now().await;
-                        }
-                    }
-                }
-                Cause::Deadline => {
-                    self.inner.borrow_mut().handle_timeout();
-                    run_reactions(&self.inner);
-                }
-                Cause::Writable => self.inner.borrow_mut().flush_backlog(),
-                Cause::Nudged => run_reactions(&self.inner),
-            }
+    loop {
+        let next = inner.borrow_mut().reactions.pop_front();
+        let Some((slot, notice)) = next else { break };
+        // A watch dropped after its notice was queued no longer reacts.
+        if let Some(slot) = Weak::upgrade(&slot) {
+            (slot.reaction.borrow_mut())(inner, notice);
         }
     }
-
-    /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
-    /// or one of them gave a waiting task or a watch something to do; returns whether
-    /// that happened.
-    ///
-    /// With peers, the team's and the unicast socket take turns, so neither starves the
-    /// other; unicast from anyone but a configured peer is dropped and counted (with the
-    /// unicast transport, on its one socket).
-    fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
-        let mut inner = self.inner.borrow_mut();
-        let handed_before = inner.handed_up;
-        let sockets = [Some(&self.socket), self.unicast.as_ref()];
-        let mut drained = sockets.map(|s| s.is_none());
-        let mut turn = 0;
-        for _ in 0..RECV_BATCH {
-            if drained[turn] {
-                turn ^= 1;
-            }
-            let (Some(socket), false) = (sockets[turn], drained[turn]) else {
-                break; // both drained
-            };
-            let unicast = turn == 1 || self.peers_only;
-            let read = socket.try_recv_from(buf);
-            if read
-                .as_ref()
-                .is_err_and(|e| e.kind() == io::ErrorKind::WouldBlock)
-            {
-                drained[turn] = true;
-            }
-            turn ^= 1;
-            match read {
-                Ok((_, from)) if unicast && !inner.peers.contains(&from) => {
-                    inner.io.datagrams_received += 1;
-                    inner.io.unicast_refused += 1;
-                    tracing::debug!(%from, "unicast from an address that is not a --peer dropped");
-                }
-                Ok((n, from)) => {
-                    inner.io.datagrams_received += 1;
-                    let now = inner.clock.now();
-                    inner.replica.handle_datagram(now, from, &buf[..n]);
-                    inner.pump();
-                    if inner.handed_up != handed_before || !inner.reactions.is_empty() {
-                        return Ok(true);
-                    }
-                }
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => continue,
-                // An ICMP error from an earlier unicast send to a `--peer` that is down
-                // surfaces here on Linux; it is no reason to stop.
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::ConnectionRefused
-                            | io::ErrorKind::HostUnreachable
-                            | io::ErrorKind::NetworkUnreachable
-                    ) =>
-                {
-                    tracing::debug!(error = %e, "an earlier send was not delivered");
-                    continue;
-                }
-                Err(e) => return Err(DriverError::Io(e)),
-            }
-        }
-        inner.pump();
-        Ok(inner.handed_up != handed_before || !inner.reactions.is_empty())
-    }
+    inner.borrow_mut().reacting = false;
 }
