@@ -126,8 +126,8 @@ enum AudioCommand {
     /// pause, a crowd that comes and goes, whistles, music-like tones, doors, and all of
     /// them at once, each falling to digital silence between spells, dry and in a hall.
     Backgrounds {
-        /// Audio in all, split evenly over the 6 backgrounds × dry and hall (`10h`, `20min`).
-        #[arg(long, default_value = "10h", value_parser = duration::parse_positive)]
+        /// Audio in all, split evenly over the 6 backgrounds × dry and hall (`600min`, `20min`).
+        #[arg(long, default_value = "600min", value_parser = duration::parse_positive)]
         time: Duration,
         /// Seed of every background (report seeds: 101 and up).
         #[arg(long, default_value_t = 101)]
