@@ -135,32 +135,56 @@ fn two_robots_sounding_in_the_same_slot_collide() {
     );
 }
 
+/// The channel's 1/r, probed on what the microphones pick up (the decoder's tone SNR no
+/// longer follows the level: its noise floor is held within 13 dB of the band's tone
+/// power, #33). Listeners 1.5 m and 9 m from the sender, each with its own crowd at 40 dB
+/// under the sender's level at 1 m, in a dry room: the message's in-band power over each
+/// microphone's crowd is its received SNR, 15.6 dB lower at 9 m by 1/r, and both decode it.
 #[test]
-#[ignore = "the decoder's noise floor (never below -13 dB of the band's held tone power, \
-            #33) caps the tone SNR it reports at 22-26 dB whatever the crowd or distance, \
-            so it no longer probes the channel's 1/r: to be measured on the channel's \
-            received level instead"]
 fn distance_lowers_the_snr() {
+    use audio::channel::in_band_power;
     let m = claim(0.7, false);
     let positions = [(0.0, 0.0), (1.5, 0.0), (9.0, 0.0)];
-    // A quieter crowd (40 dB at 1 m) so that both decode and their SNRs can be compared.
     let room = AcousticConfig {
         crowd_snr_db_at_1m: 40.0,
         ..dry_room()
     };
-    let (heard, _) = sound_once(&room, &positions, &[(0, m)]);
-    let snr = |j: usize| {
-        heard
-            .iter()
-            .find(|h| h.listener == j)
-            .map(|h| h.detection.tone_snr_db)
-            .unwrap_or_else(|| panic!("listener {j} decoded nothing: {heard:?}"))
+    let fs = 16_000.0;
+    let mut ch = AcousticChannel::new(&room, positions.len(), 7).expect("a valid room");
+    // The crowd alone for 1.5 s, then the message and its flight, heard in one block.
+    let mut heard = ch.advance_to(1.5);
+    let crowd: Vec<Vec<f32>> = (0..3).map(|j| ch.microphone(j).to_vec()).collect();
+    ch.sound(0, &m, &positions);
+    let sounding = room.tone_s * m.frames().len() as f64;
+    heard.extend(ch.advance_to(1.5 + sounding + 9.0 / SPEED_OF_SOUND_MPS));
+    let received_snr_db = |j: usize| {
+        let flight = (positions[j].0 / SPEED_OF_SOUND_MPS * fs) as usize;
+        let mic = &ch.microphone(j)[flight..];
+        let band = |x: &[f32]| in_band_power(x, fs, 500.0, 4000.0);
+        // The crowd's own level from its last second (its first is the babble settling).
+        let noise = band(&crowd[j][crowd[j].len() - 16_000..]);
+        10.0 * ((band(mic) - noise) / noise).log10()
     };
-    let (near, far) = (snr(1), snr(2));
+    let (near, far) = (received_snr_db(1), received_snr_db(2));
+    let by_distance = 20.0 * (9.0f64 / 1.5).log10();
     assert!(
-        near - far > 6.0,
-        "1/r from 1.5 m to 9 m is 15.6 dB less direct sound; measured {near:.1} dB vs {far:.1} dB"
+        (near - far - by_distance).abs() < 3.0,
+        "1/r from 1.5 m to 9 m is {by_distance:.1} dB less direct sound; received SNR \
+         {near:.1} dB vs {far:.1} dB"
     );
+    // Not asserted: the level itself. Measured 42.0 dB at 1.5 m where the configured
+    // 40 dB at 1 m gives 36.5 dB, because the crowd is calibrated on its whole-band
+    // power, and the synthetic babble has about 5 dB of its power outside 500–4000 Hz.
+    // That is a calibration note for the channel (#33), not the 1/r this test probes.
+    ch.advance_to(4.0).into_iter().for_each(|h| heard.push(h));
+    for j in [1, 2] {
+        assert!(
+            heard
+                .iter()
+                .any(|h| h.listener == j && h.detection.message == m),
+            "listener {j} decoded the claim: {heard:?}"
+        );
+    }
 }
 
 /// Four robots at typical spots of a 9 × 6 m field take turns in their slots (robot 0,

@@ -23,6 +23,7 @@ fn main() {
         long_share: a[4].parse().expect("long share"),
         two_senders: a.get(7).is_some_and(|s| s == "two"),
         max_clock_error: 0.005,
+        team: audio::TeamPlan::Three,
     };
     let out = run_scene_trial(room, &set.babble, &trial).expect("trial");
     println!(

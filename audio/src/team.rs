@@ -14,6 +14,20 @@
 //! values, and a decoder set to it drops what the plan cannot have sent (data 20, a long
 //! message whose frames lie in different banks). The price is fewer values per robot:
 //! 10 instead of 21 per frame.
+//!
+//! **A frame that says what it is** ([`TeamPlan::Checked`], issue #33). Under the seed's
+//! plan every frame of a long message is also a valid short message, so a long message
+//! whose second frame is lost (a hall's echo, babble, a second robot sounding over it)
+//! comes out as a *wrong* short one, and no end test can rule that out. The checked plan
+//! splits the data basics: a short message says 0 … 9 on basics 3 … 12, a long message's
+//! two frames each say 0 … 10 on basics 13 … 23 (`11 · first + second`, 0 … 120). A
+//! long message cut to either frame, a first frame heard while another robot sounds, and
+//! two short messages run together are then messages the plan cannot have sent, and a
+//! decoder set to it drops them: lost, never wrong. It costs no airtime and no change on
+//! the air (every frame is still one sender and one data basic, so detection and the
+//! false-alarm reasoning are untouched); the price is values: 10 instead of 21 for a
+//! short message, 121 instead of 441 for a long one (an 11 × 11 grid over the field
+//! instead of 21 × 21).
 
 use std::fmt;
 
@@ -27,10 +41,15 @@ pub enum TeamPlan {
     Three,
     /// Up to 6 robots: values 0 … 9 (short) and 0 … 99 (long).
     Six,
+    /// 3 robots whose long frames never read as a short message: values 0 … 9 (short,
+    /// data basics 3 … 12) and 0 … 120 (long, both frames on data basics 13 … 23).
+    Checked,
 }
 
-/// Values per frame in a [`TeamPlan::Six`] bank.
+/// Values per frame in a [`TeamPlan::Six`] bank, and of a [`TeamPlan::Checked`] short.
 const BANK_VALUES: u8 = 10;
+/// Values per frame of a [`TeamPlan::Checked`] long message (data 10 … 20).
+const CHECKED_LONG_VALUES: u8 = DATA_VALUES - BANK_VALUES;
 
 /// Why a team message cannot be sent under a plan.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -75,12 +94,12 @@ pub struct TeamMessage {
 
 impl TeamPlan {
     /// Both plans.
-    pub const ALL: [TeamPlan; 2] = [TeamPlan::Three, TeamPlan::Six];
+    pub const ALL: [TeamPlan; 3] = [TeamPlan::Three, TeamPlan::Six, TeamPlan::Checked];
 
     /// Number of robots.
     pub fn robots(self) -> u8 {
         match self {
-            TeamPlan::Three => SENDER_COUNT as u8,
+            TeamPlan::Three | TeamPlan::Checked => SENDER_COUNT as u8,
             TeamPlan::Six => 2 * SENDER_COUNT as u8,
         }
     }
@@ -89,13 +108,21 @@ impl TeamPlan {
     pub fn short_values(self) -> u16 {
         match self {
             TeamPlan::Three => u16::from(DATA_VALUES),
-            TeamPlan::Six => u16::from(BANK_VALUES),
+            TeamPlan::Six | TeamPlan::Checked => u16::from(BANK_VALUES),
+        }
+    }
+
+    /// Values per frame of a long message (`long_values` is its square).
+    fn long_frame_values(self) -> u16 {
+        match self {
+            TeamPlan::Checked => u16::from(CHECKED_LONG_VALUES),
+            _ => self.short_values(),
         }
     }
 
     /// Values of a long message (0 … this − 1).
     pub fn long_values(self) -> u16 {
-        self.short_values() * self.short_values()
+        self.long_frame_values() * self.long_frame_values()
     }
 
     /// The name used on the command line and in configuration ("three", "six").
@@ -103,14 +130,23 @@ impl TeamPlan {
         match self {
             TeamPlan::Three => "three",
             TeamPlan::Six => "six",
+            TeamPlan::Checked => "checked",
         }
     }
 
-    /// The frames' data values for robot `robot`'s values (bank offset applied).
-    fn data(self, robot: u8, value: u8) -> u8 {
+    /// The frames' data values for robot `robot`'s values (bank offset applied) in a
+    /// short (`long` false) or a long message.
+    fn data(self, robot: u8, value: u8, long: bool) -> u8 {
         match self {
             TeamPlan::Three => value,
             TeamPlan::Six => (robot / SENDER_COUNT as u8) * BANK_VALUES + value,
+            TeamPlan::Checked => {
+                if long {
+                    BANK_VALUES + value
+                } else {
+                    value
+                }
+            }
         }
     }
 
@@ -124,11 +160,11 @@ impl TeamPlan {
             });
         }
         let sender = Sender::ALL[usize::from(m.robot) % SENDER_COUNT];
-        let n = self.short_values();
+        let n = self.long_frame_values();
         let (max, kind) = if m.long {
             (self.long_values(), "long")
         } else {
-            (n, "short")
+            (self.short_values(), "short")
         };
         if m.value >= max {
             return Err(TeamError::Value {
@@ -139,14 +175,14 @@ impl TeamPlan {
             });
         }
         Ok(if m.long {
-            let first = self.data(m.robot, (m.value / n) as u8);
-            let second = self.data(m.robot, (m.value % n) as u8);
+            let first = self.data(m.robot, (m.value / n) as u8, true);
+            let second = self.data(m.robot, (m.value % n) as u8, true);
             Message::long(
                 sender,
                 u16::from(DATA_VALUES) * u16::from(first) + u16::from(second),
             )?
         } else {
-            Message::short(sender, self.data(m.robot, m.value as u8))?
+            Message::short(sender, self.data(m.robot, m.value as u8, false))?
         })
     }
 
@@ -185,6 +221,23 @@ impl TeamPlan {
                     }
                 }
             }
+            TeamPlan::Checked => match *m {
+                Message::Short { data, .. } => (data < BANK_VALUES).then_some(TeamMessage {
+                    robot: sender,
+                    long: false,
+                    value: u16::from(data),
+                }),
+                Message::Long { value, .. } => {
+                    let first = (value / u16::from(DATA_VALUES)) as u8;
+                    let second = (value % u16::from(DATA_VALUES)) as u8;
+                    let n = u16::from(CHECKED_LONG_VALUES);
+                    (first >= BANK_VALUES && second >= BANK_VALUES).then_some(TeamMessage {
+                        robot: sender,
+                        long: true,
+                        value: u16::from(first - BANK_VALUES) * n + u16::from(second - BANK_VALUES),
+                    })
+                }
+            },
         }
     }
 }
@@ -201,7 +254,10 @@ impl std::str::FromStr for TeamPlan {
         match s {
             "three" | "3" => Ok(TeamPlan::Three),
             "six" | "6" => Ok(TeamPlan::Six),
-            other => Err(format!("unknown team plan {other:?} (three or six)")),
+            "checked" => Ok(TeamPlan::Checked),
+            other => Err(format!(
+                "unknown team plan {other:?} (three, six or checked)"
+            )),
         }
     }
 }
@@ -263,5 +319,42 @@ mod tests {
             })
             .unwrap();
         assert_eq!(m, Message::short(Sender::LeftAttacker, 17).unwrap());
+    }
+
+    /// Every way a long message of the checked plan can come out cut, and two shorts run
+    /// together, is a message the plan cannot have sent (the wrong messages of #33's
+    /// room tests: long (15, 2) heard as short 15, long (10, 8) as short 8, a long
+    /// message's first frame read while another robot sounded).
+    #[test]
+    fn a_checked_long_message_cut_to_one_frame_is_never_a_message() {
+        let plan = TeamPlan::Checked;
+        for robot in 0..3 {
+            for value in 0..plan.long_values() {
+                let long = TeamMessage {
+                    robot,
+                    long: true,
+                    value,
+                };
+                let air = plan.encode(long).unwrap();
+                let frames = air.frames();
+                for f in frames {
+                    let cut = Message::short(f.sender, f.data).unwrap();
+                    assert_eq!(plan.decode(&cut), None, "{long:?} cut to {cut}");
+                }
+            }
+            for a in 0..plan.short_values() {
+                for b in 0..plan.short_values() {
+                    let sender = Sender::ALL[usize::from(robot)];
+                    let together = Message::long(sender, 21 * a + b).unwrap();
+                    assert_eq!(
+                        plan.decode(&together),
+                        None,
+                        "shorts {a} and {b} run together"
+                    );
+                }
+            }
+        }
+        assert_eq!((plan.short_values(), plan.long_values()), (10, 121));
+        assert_eq!("checked".parse::<TeamPlan>(), Ok(TeamPlan::Checked));
     }
 }

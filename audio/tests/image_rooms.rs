@@ -60,6 +60,7 @@ fn trial(seed: u64, snr_db: Option<f64>, talkers: usize, messages: usize) -> Sce
         long_share: 0.0,
         two_senders: false,
         max_clock_error: 0.005,
+        team: audio::TeamPlan::Three,
     }
 }
 

@@ -120,6 +120,8 @@ struct Listener {
     diffuse: Vec<f32>,
     reverb: Reverb,
     crowd: Babble,
+    /// What the microphone picked up in the last [`AcousticChannel::advance_to`].
+    heard: Vec<f32>,
 }
 
 /// Why the channel could not be set up.
@@ -175,6 +177,7 @@ impl AcousticChannel {
                         6,
                         crowd_rms,
                     ),
+                    heard: Vec::new(),
                 })
             })
             .collect::<Result<Vec<_>, AcousticError>>()?;
@@ -192,6 +195,14 @@ impl AcousticChannel {
     /// Simulated time the decoders have heard up to, s.
     pub fn time_s(&self) -> f64 {
         self.cursor as f64 / f64::from(SAMPLE_RATE_HZ)
+    }
+
+    /// The samples listener `listener`'s microphone picked up in the last
+    /// [`AcousticChannel::advance_to`] (direct sound, reverberation and crowd): the
+    /// channel's received level, which the decoder's tone SNR no longer follows (its noise
+    /// floor is held within 13 dB of the band's tone power). Empty for no such listener.
+    pub fn microphone(&self, listener: usize) -> &[f32] {
+        self.listeners.get(listener).map_or(&[], |l| &l.heard)
     }
 
     /// Robot `from` sounds `message` now (at the channel's cursor) from `positions[from]`;
@@ -269,6 +280,7 @@ impl AcousticChannel {
             l.direct.drain(..take);
             l.diffuse.drain(..take);
             l.decoder.push_f32(&block);
+            l.heard.clone_from(&block);
             while let Some(d) = l.decoder.poll_message() {
                 heard.push(Heard {
                     listener: j,

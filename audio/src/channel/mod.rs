@@ -4,8 +4,10 @@
 //! All sources *add* into a buffer ([`Source::add_to`]) so they can be mixed. Levels are
 //! RMS amplitudes (full scale 1.0).
 
+mod intermittent;
 mod room;
 
+pub use intermittent::{Door, Gated, Melody};
 pub use room::{band_limit, in_band_power, Convolver, RoomSpec};
 
 use rand::{RngExt, SeedableRng};

@@ -4,9 +4,11 @@
 //! flat for any length) and scores what comes out. No clock is read here: the caller
 //! times a trial if it wants a speed.
 
+mod backgrounds;
 mod room;
 mod scene;
 
+pub use backgrounds::{run_background_false_alarm_trial, Background};
 pub use room::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
 pub use scene::{
     load_room_set, run_scene_false_alarm_trial, run_scene_trial, ExternalRoom, RoomSet,

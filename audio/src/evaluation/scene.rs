@@ -23,6 +23,7 @@ use super::{random_message, shifted, TrialError, SIGNAL_POWER};
 use crate::channel::{in_band_power, Convolver};
 use crate::decoder::{Decoder, DecoderConfig, Detection};
 use crate::encoder::{Encoder, EncoderConfig};
+use crate::team::TeamPlan;
 use crate::tones::{Message, Sender, HIGHEST_TONE_HZ, LOWEST_TONE_HZ};
 
 /// One room of a set: impulse responses from robot and talker positions to the microphone.
@@ -215,6 +216,11 @@ pub struct SceneTrial {
     pub two_senders: bool,
     /// Largest sender clock error; each message draws one uniformly in ± this.
     pub max_clock_error: f64,
+    /// The team plan messages are drawn from. The decoder itself runs with the seed's
+    /// plan (which drops nothing), and a report the trial's plan cannot have sent is
+    /// counted as *refused* (a decoder set to the plan drops it, and dropping changes
+    /// none of its state), so one run shows what the plan's check catches.
+    pub team: TeamPlan,
 }
 
 /// Outcome of a [`SceneTrial`].
@@ -224,8 +230,14 @@ pub struct SceneOutcome {
     pub sent: usize,
     /// Decoded right.
     pub correct: usize,
-    /// Reports over a sent message that say something no overlapping message said.
+    /// Reports over a sent message that say something no overlapping message said (and
+    /// that the trial's plan could have sent).
     pub wrong: usize,
+    /// Reports the trial's team plan cannot have sent (a decoder set to it drops them):
+    /// with the checked plan, the long messages cut to one frame.
+    pub refused: usize,
+    /// The refused reports and what was sent around them.
+    pub refused_reports: Vec<(Detection, Vec<Message>)>,
     /// Reports over nothing sent (or a second report of one message).
     pub spurious: usize,
     /// Long messages sent and decoded right.
@@ -375,7 +387,7 @@ pub fn run_scene_trial(
         for (i, &position) in positions.iter().enumerate() {
             let sender = if i == 0 { s0 } else { s1 };
             let m = loop {
-                let m = random_message(&mut rng, trial.long_share, crate::team::TeamPlan::Three);
+                let m = random_message(&mut rng, trial.long_share, trial.team);
                 if m.sender() == sender {
                     break m;
                 }
@@ -475,7 +487,11 @@ pub fn run_scene_trial(
         let near: Vec<usize> = (0..sent.len())
             .filter(|&i| d.start_s < sent[i].end_s + SLACK_S && sent[i].start_s < d.end_s + SLACK_S)
             .collect();
-        if let Some(&i) = near
+        if trial.team.decode(&d.message).is_none() {
+            out.refused += 1;
+            out.refused_reports
+                .push((*d, near.iter().map(|&i| sent[i].message).collect()));
+        } else if let Some(&i) = near
             .iter()
             .find(|&&i| !sent[i].matched && sent[i].message == d.message)
         {
