@@ -955,6 +955,38 @@ impl GlobalModel {
     }
 }
 
+/// What a teammate's compact message adds to a filter that took its previous one: the
+/// information its track gained since, as a measurement of the whole state (x, y, vx, vy)
+/// at the message's time (see [`track_gain`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackGain {
+    /// When the state was measured (the message's snapshot time), s.
+    pub t_s: f64,
+    /// The measured state.
+    pub mean: Vector4<f64>,
+    /// Its covariance (directions the track learnt nothing in carry 10⁶).
+    pub cov: Matrix4<f64>,
+}
+
+/// The measurement the GWM takes from a sparse teammate message (`GlobalConfig::
+/// track_after_s`): `lwm`'s track's information minus what `previous` (the sender's
+/// track in the message taken before, if it continues into this one), rolled forward,
+/// already held. For a reference that should read the compact world model exactly as the
+/// team does.
+pub fn track_gain(
+    model: &BallModel,
+    previous: Option<&BallEstimate>,
+    lwm: &LocalWorldModel,
+) -> Option<TrackGain> {
+    let m = track_measurement(model, previous, lwm)?;
+    let (mean, cov) = m.state?;
+    Some(TrackGain {
+        t_s: m.obs.t_s,
+        mean,
+        cov,
+    })
+}
+
 /// The information a teammate's track gained since its previous message, as a measurement
 /// of the whole state at the new message's time: the new track's information minus what
 /// the previous track, rolled forward, already held (the receiver took that one before).

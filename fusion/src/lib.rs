@@ -219,7 +219,8 @@ pub use geometry::{
     rotation, wrap_angle,
 };
 pub use global::{
-    GlobalConfig, GlobalModel, GlobalStats, Ingest, TeamBall, TeamBallSource, Teammate,
+    track_gain, GlobalConfig, GlobalModel, GlobalStats, Ingest, TeamBall, TeamBallSource, Teammate,
+    TrackGain,
 };
 pub use kalman::UpdateError;
 pub use local::{Heard, KickReport, LocalConfig, LocalModel, LocalWorldModel, KICK_REPORTED_FOR_S};

@@ -45,8 +45,9 @@ pub struct SimArgs {
     pub policy: Option<huddle::sim::policy::SendPolicy>,
     /// The world: ideal (its physics are exactly the robots' calibration; ideal clocks)
     /// or drawn (physics drawn per match around the nominal field, which the robots'
-    /// calibration keeps; start poses off by their σ; clocks with offsets and drifts).
-    #[arg(long, value_enum, default_value = "ideal")]
+    /// calibration keeps; start poses off by their σ; clocks with offsets and drifts;
+    /// docs/sim-world.md).
+    #[arg(long, value_enum, default_value = "drawn")]
     pub world: WorldKind,
     /// How frames travel: multicast, broadcast (SPL), unicast (one copy per teammate).
     #[arg(long, value_enum, default_value = "multicast")]
@@ -173,7 +174,7 @@ impl Default for SimArgs {
             dtim: None,
             budget: None,
             policy: None,
-            world: WorldKind::Ideal,
+            world: WorldKind::Drawn,
             transport: huddle::sim::Transport::Multicast,
             sweep: None,
             reference_q: None,

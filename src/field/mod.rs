@@ -62,6 +62,10 @@ pub struct FieldConfig {
     pub shove_seen_frac: f64,
     /// Probability that a camera frame reports a ball that is not there (a white blob).
     pub false_ball_per_frame: f64,
+    /// Probability that a landmark the camera detects is taken for its twin on the other
+    /// half (the field is point-symmetric: a goal post, corner or halfway-line end looks
+    /// like the one mirrored through the centre spot).
+    pub landmark_confusion: f64,
 }
 
 /// How far beyond touching (robot radius + ball radius) a robot's foot reaches, metres.
@@ -91,6 +95,7 @@ impl Default for FieldConfig {
             odometry_scale: 1.0,
             shove_seen_frac: 1.0,
             false_ball_per_frame: 0.0,
+            landmark_confusion: 0.0,
         }
     }
 }
@@ -109,6 +114,7 @@ impl Default for FieldConfig {
 /// | odometry scale | 1 + 0.03·N |
 /// | share of a shove odometry sees | U(0, 0.5) |
 /// | false balls | 1 frame in 500 (one every 20 s at 25 Hz) |
+/// | landmark confusion | 1 landmark sighting in 100 named as its mirror twin |
 ///
 /// N is a standard normal. The simulation adds per robot: a start pose off by its
 /// start σ, and a clock with an offset U(0, 20) s and a drift N(0, 30) ppm.
@@ -131,6 +137,7 @@ pub fn drawn_field(nominal: &FieldConfig, seed: u64) -> FieldConfig {
     let u = (0.5 * n()).abs().min(1.0) * 0.5; // within [0, 0.5]
     f.shove_seen_frac = u;
     f.false_ball_per_frame = 0.002;
+    f.landmark_confusion = 0.01;
     f
 }
 
@@ -343,12 +350,24 @@ impl World {
         let goal = self.cfg.opponent_goal();
         let opponent_goal_in_view = camera::in_view(&cam, &pose, goal, cam.landmark_range_m)
             && rng.random::<f64>() < cam.detect_prob;
-        let landmarks = self
-            .cfg
-            .landmarks()
+        let marks = self.cfg.landmarks();
+        let confusion = self.cfg.landmark_confusion;
+        let landmarks = marks
             .iter()
             .enumerate()
-            .filter_map(|(k, &p)| sight(&cam, &pose, p, cam.landmark_range_m, rng).map(|s| (k, s)))
+            .filter_map(|(k, &p)| {
+                let s = sight(&cam, &pose, p, cam.landmark_range_m, rng)?;
+                // Only a world with confusion draws for it: the ideal stream is unchanged.
+                if confusion > 0.0 && rng.random::<f64>() < confusion {
+                    let twin = Vec2::default() - p;
+                    let k = marks
+                        .iter()
+                        .position(|&m| m.distance(twin) < 1e-9)
+                        .unwrap_or(k);
+                    return Some((k, s));
+                }
+                Some((k, s))
+            })
             .collect();
         let opponents = self
             .opponents
@@ -609,5 +628,51 @@ mod tests {
         w.ball = Ball::default();
         w.robots[0].pose.theta_rad = std::f64::consts::PI;
         assert!(!w.kick(0, 0.0), "ball behind the robot");
+    }
+
+    #[test]
+    fn a_confused_landmark_is_named_as_its_mirror_twin_at_the_documented_rate() {
+        // A robot on the centre spot facing the opponent goal sees the goal posts and the
+        // corners of that half; with the camera's noise off every sighting lands on the
+        // landmark it is named as, or on its twin mirrored through the centre spot.
+        let mut cfg = FieldConfig::default();
+        cfg.camera.detect_prob = 1.0;
+        cfg.camera.range_noise_m = 0.0;
+        cfg.camera.range_noise_frac = 0.0;
+        cfg.camera.bearing_noise_rad = 0.0;
+        cfg.landmark_confusion = 0.1;
+        let marks = cfg.landmarks();
+        let mut w = World::new(cfg, &[Pose::default()], 0, 11);
+        let (mut right, mut twin) = (0u32, 0u32);
+        for _ in 0..2000 {
+            for (k, s) in w.look(0).landmarks {
+                let seen = s.local();
+                if seen.distance(marks[k]) < 1e-6 {
+                    right += 1;
+                } else {
+                    assert!(
+                        seen.distance(Vec2::default() - marks[k]) < 1e-6,
+                        "landmark {k} seen at {seen:?}: neither it nor its twin"
+                    );
+                    twin += 1;
+                }
+            }
+        }
+        let rate = f64::from(twin) / f64::from(right + twin);
+        assert!(
+            (rate - 0.1).abs() < 0.01,
+            "seed 11: {twin} of {} sightings confused ({rate:.3}), configured 0.1",
+            right + twin
+        );
+        cfg.landmark_confusion = 0.0;
+        let mut w = World::new(cfg, &[Pose::default()], 0, 11);
+        assert!(
+            (0..200).all(|_| w
+                .look(0)
+                .landmarks
+                .iter()
+                .all(|(k, s)| s.local().distance(marks[*k]) < 1e-6)),
+            "without confusion every landmark is named right"
+        );
     }
 }

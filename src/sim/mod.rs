@@ -236,6 +236,23 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
+    /// Under a budget, the longest two robots can both go by the arbitration's own
+    /// parameters (`params` as the team runs them, budget and latency compensation
+    /// applied), not by the run's gaps: a new claimant B backs off once it hears the old
+    /// goer A still claiming in a post made `2 × latency_compensation + ack_margin` after
+    /// B's claim; A posts at least every keepalive (`stale_after / 2` under a budget), that
+    /// post takes at most `delay` (the measured p99) and B decides within a control
+    /// period. It assumes the keepalive that matters is not lost: each lost one adds a
+    /// keepalive period, and the report counts the matches where the longest conflict
+    /// went past it.
+    pub fn conflict_bound_budgeted(&self, params: &ArbitrationParams, delay: Duration) -> Duration {
+        params.latency_compensation * 2
+            + params.ack_margin
+            + params.stale_after / 2
+            + delay
+            + Duration::from_secs_f64(self.brain.team.control_period_s)
+    }
+
     /// The longest two robots can both go, given the longest time the network kept one
     /// robot's claims from another (`claim_gap`, measured: bursts and beacon holds
     /// included) and the one-way delay (`delay`, the measured 99th percentile): see
@@ -294,10 +311,11 @@ pub struct Simulation {
     pub metrics: Metrics,
     /// World-model figures so far.
     pub fusion: FusionMetrics,
-    /// The reference: one ball filter fed every robot's sightings at once, no network.
+    /// The reference: one ball filter fed every robot's sightings, kick reports and push
+    /// reports at once, no network.
     pub central: CentralizedBall,
-    /// The same told every kick that met the ball, as it happens (cK): the ceiling for a
-    /// team that reports its kicks.
+    /// The same told every kick that met the ball, as it happens, for sure (cK): the
+    /// ceiling for a team that reports its kicks.
     pub central_kicks: CentralizedBall,
     /// Per robot: the centralized filter fed what that robot received, at true times.
     pub delivery: Vec<DeliveryReference>,
@@ -334,6 +352,11 @@ pub struct Simulation {
     acoustic: Option<acoustic::AcousticChannel>,
     /// Arbitration figures inside the outage window (and just before it).
     outage_metrics: acoustic::OutageFigures,
+    /// The arbitration's parameters as the robots run them (budget and latency
+    /// compensation applied), for the budgeted conflict bound.
+    arbitration_run: ArbitrationParams,
+    /// |estimated − true| teammate clock offsets, µs, sampled once a simulated second.
+    clock_errors_us: Vec<f64>,
 }
 
 impl Simulation {
@@ -437,13 +460,22 @@ impl Simulation {
                 )
             })
             .collect();
-        let central = CentralizedBall::new(cfg.references.central);
-        let central_kicks = CentralizedBall::new(cfg.references.central_kicks);
+        // The references know the ball as the team does (its calibration), not the world.
+        let references = cfg.references.on_team(fusion::BallFilterConfig {
+            model: world_model.global.ball,
+            ..world_model.local.ball
+        });
+        let central = CentralizedBall::new(references.central);
+        let central_kicks = CentralizedBall::new(references.central_kicks);
         let delivery = (0..n)
             .map(|_| {
-                DeliveryReference::new(cfg.references.delivery, n, world_model.global.stale_after_s)
+                let c = references.delivery_filter();
+                let g = &world_model.global;
+                DeliveryReference::new(c, n, g.stale_after_s, g.track_after_s)
             })
             .collect();
+        let cfg = SimConfig { references, ..cfg };
+        let arbitration_run = params;
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
         let mut replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
@@ -490,6 +522,8 @@ impl Simulation {
             kick_met: None,
             acoustic: None,
             outage_metrics: acoustic::OutageFigures::default(),
+            arbitration_run,
+            clock_errors_us: Vec::new(),
         };
         sim.setup_fallback()?;
         Ok(sim)
@@ -584,8 +618,12 @@ impl Simulation {
             }
             self.judge_kick(i, t, out.kick.as_ref());
             if let (None, Some(push)) = (&out.kick, &self.robots[i].kicked) {
-                // A push the robot reported: the team knows it as it knows a kick.
-                self.delayed.kick(&fusion::Kick { t_s: t, ..*push });
+                // A push the robot reported: the team knows it as it knows a kick, and so
+                // does every reference.
+                let push = fusion::Kick { t_s: t, ..*push };
+                self.delayed.kick(&push);
+                self.central.kick(&push);
+                self.central_kicks.kick(&push);
             }
             self.feed_references(i, t);
             ticked.push(i);
@@ -610,6 +648,9 @@ impl Simulation {
             self.delayed.forget(t + dt);
         }
         self.step += 1;
+        if self.step.is_multiple_of(CLOCK_SAMPLE_STEPS) {
+            self.sample_clocks();
+        }
         let t_end = self.time_s();
         let visible = self
             .robots
@@ -715,6 +756,7 @@ impl Simulation {
         let met = self.world.kick(i, a.direction_rad + off);
         // The team knows the attempt (the kicker's report, its contact odds included).
         self.delayed.kick(&fusion::Kick { t_s, ..a.report });
+        self.central.kick(&fusion::Kick { t_s, ..a.report });
         if met {
             self.kick_met = Some(i);
             self.kick_contacts += 1;
@@ -757,6 +799,28 @@ impl Simulation {
                 harness.local_at(i, Time::from_secs_f64(sent)),
             ))
         });
+    }
+
+    /// Each live robot's estimate of each teammate's clock offset against the truth.
+    fn sample_clocks(&mut self) {
+        for i in 0..self.robots.len() {
+            let Some(replica) = self.harness.replica(i) else {
+                continue;
+            };
+            let mine = self.harness.local_now(i).as_micros() as i64;
+            for p in replica.peers() {
+                let (Some(est), Some(j)) = (p.clock_offset_us, usize::from(p.robot).checked_sub(1))
+                else {
+                    continue;
+                };
+                if j >= self.robots.len() || self.harness.replica(j).is_none() {
+                    continue;
+                }
+                let truth = self.harness.local_now(j).as_micros() as i64 - mine;
+                self.clock_errors_us
+                    .push((est - truth).unsigned_abs() as f64);
+            }
+        }
     }
 
     /// How old the live teammates' claims were that each live robot decided on.
@@ -974,9 +1038,15 @@ impl Simulation {
             longest_conflict_ms: round3(m.longest_conflict_s * 1e3),
             longest_conflict_at_s: round3(m.longest_conflict_at_s),
             conflict_bound_ms: round3(
-                self.cfg
-                    .conflict_bound(Duration::from_secs_f64(m.longest_claim_gap_s), delay_p99)
-                    .as_secs_f64()
+                match self.cfg.budget {
+                    Some(_) => self
+                        .cfg
+                        .conflict_bound_budgeted(&self.arbitration_run, delay_p99),
+                    None => self
+                        .cfg
+                        .conflict_bound(Duration::from_secs_f64(m.longest_claim_gap_s), delay_p99),
+                }
+                .as_secs_f64()
                     * 1e3,
             ),
             longest_claim_gap_ms: round3(m.longest_claim_gap_s * 1e3),
@@ -1025,6 +1095,20 @@ impl Simulation {
             pose_rmse_m: round4(f.pose_rmse_m()),
             heading_rmse_rad: round4(f.heading_rmse_rad()),
             pose_nees: round3(f.pose_nees()),
+            clock_offset_error_rms_us: round3(
+                (self.clock_errors_us.iter().map(|e| e * e).sum::<f64>()
+                    / self.clock_errors_us.len().max(1) as f64)
+                    .sqrt(),
+            ),
+            clock_offset_error_p95_us: {
+                let mut e = self.clock_errors_us.clone();
+                e.sort_by(f64::total_cmp);
+                e.get((e.len() * 95 / 100).min(e.len().saturating_sub(1)))
+                    .copied()
+                    .unwrap_or(0.0)
+            },
+            clock_offset_error_max_us: self.clock_errors_us.iter().copied().fold(0.0, f64::max),
+            clock_offset_samples: self.clock_errors_us.len() as u64,
             sim_speed_x: if wall_s > 0.0 {
                 round3(simulated_s / wall_s)
             } else {
@@ -1034,6 +1118,9 @@ impl Simulation {
         }
     }
 }
+
+/// Teammates' clock offsets are sampled every this many physics steps (1 s at 10 ms).
+const CLOCK_SAMPLE_STEPS: u64 = 100;
 
 fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0

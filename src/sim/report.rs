@@ -55,7 +55,10 @@ pub struct Report {
     pub longest_conflict_ms: f64,
     /// When it started, seconds.
     pub longest_conflict_at_s: f64,
-    /// The bound it stays under, ms: the longest claim gap
+    /// The bound it stays under, ms. Under a budget it comes from the arbitration's
+    /// parameters alone (`SimConfig::conflict_bound_budgeted`: 2 × latency compensation +
+    /// ack margin + one keepalive + p99 delay + control period; a lost keepalive can take
+    /// a conflict past it). Without one: the longest claim gap
     /// ([`Report::longest_claim_gap_ms`]) plus the measured one-way delay's 99th
     /// percentile (all delivered frames) plus one control period. Why it holds: a
     /// conflict starts when a robot B claims the ball while another, A, still goes. It ends when A hears a post B made after claiming and
@@ -122,7 +125,9 @@ pub struct Report {
     pub delivery_ratio: f64,
     /// delivery_rmse_m / centralized_kicks_rmse_m: what the network costs.
     pub network_ratio: f64,
-    /// The delayed-centralized bound, m: every sighting and kick report, no loss, each
+    /// The delayed-centralized reference (not a bound: a robot hears its own sightings at
+    /// once and some frames sooner than the median), m: every sighting, kick and push
+    /// report, no loss, each
     /// exactly the median delay (`delay_p50_ms`) late.
     pub delayed_centralized_rmse_m: f64,
     /// team_ball_rmse_m / delayed_centralized_rmse_m (over the samples where the bound has
@@ -166,6 +171,17 @@ pub struct Report {
     pub heading_rmse_rad: f64,
     /// Average pose NEES (3 dof).
     pub pose_nees: f64,
+    /// The shared-time estimate's error: each robot's estimate of each teammate's clock
+    /// offset (comms' echo fit, `PeerInfo::clock_offset_us`) against the true offset,
+    /// sampled once a simulated second, root mean square, µs (0 with ideal clocks
+    /// would still show the estimate's own error).
+    pub clock_offset_error_rms_us: f64,
+    /// … its 95th percentile, µs.
+    pub clock_offset_error_p95_us: f64,
+    /// … its largest, µs.
+    pub clock_offset_error_max_us: f64,
+    /// … the samples (robot, teammate, second) it is over.
+    pub clock_offset_samples: u64,
     /// Simulated seconds per wall-clock second (the only field that varies between runs
     /// with the same seed).
     pub sim_speed_x: f64,
@@ -265,8 +281,26 @@ impl std::fmt::Display for Report {
         writeln!(f, "no goer               {:>9.2} %", self.no_goer_pct)?;
         writeln!(
             f,
-            "longest conflict      {:>9.0} ms (at {:.1} s; bound = longest claim gap {:.0} ms + p99 delay {:.0} ms + control period = {:.0} ms; median delay {:.0} ms)",
-            self.longest_conflict_ms, self.longest_conflict_at_s, self.longest_claim_gap_ms, self.delay_p99_ms, self.conflict_bound_ms, self.delay_p50_ms
+            "longest conflict      {:>9.0} ms (at {:.1} s; bound {:.0} ms = {} + p99 delay {:.0} ms + control period; longest claim gap {:.0} ms; median delay {:.0} ms)",
+            self.longest_conflict_ms,
+            self.longest_conflict_at_s,
+            self.conflict_bound_ms,
+            if self.budget.is_some() {
+                "2 latency compensations + ack margin + keepalive"
+            } else {
+                "longest claim gap"
+            },
+            self.delay_p99_ms,
+            self.longest_claim_gap_ms,
+            self.delay_p50_ms
+        )?;
+        writeln!(
+            f,
+            "shared time           {:>9.0} µs rms error of the teammates' clock offsets (p95 {:.0} µs, max {:.0} µs, {} samples)",
+            self.clock_offset_error_rms_us,
+            self.clock_offset_error_p95_us,
+            self.clock_offset_error_max_us,
+            self.clock_offset_samples
         )?;
         writeln!(
             f,

@@ -212,6 +212,60 @@ impl BallFilter {
         }
     }
 
+    /// Applies a measurement of the whole state (`z`, covariance `r`) at `t_s`: a
+    /// teammate's track ([`crate::TrackGain`]). Gated on its position like a sighting; a
+    /// track that keeps failing the gate restarts the filter on it.
+    pub fn measure_state(&mut self, t_s: f64, z: &Vector4<f64>, r: &Matrix4<f64>) -> BallUpdate {
+        if !t_s.is_finite() || !z.iter().chain(r.iter()).all(|v| v.is_finite()) {
+            return BallUpdate::Rejected(UpdateError::NonFinite);
+        }
+        let fresh = BallEstimate {
+            t_s,
+            mean: *z,
+            cov: *r,
+        };
+        let Some(est) = self.estimate else {
+            self.estimate = Some(fresh);
+            return BallUpdate::Initialised;
+        };
+        let prior = est.predict_to(&self.config.model, t_s.max(est.t_s));
+        let d2 = crate::kalman::mahalanobis_sq(
+            &(z.fixed_rows::<2>(0) - prior.position()),
+            &(prior.position_cov() + r.fixed_view::<2, 2>(0, 0)),
+        );
+        if d2.is_none_or(|d2| d2 > self.config.outlier_chi2) {
+            self.outliers_in_a_row += 1;
+            if self.outliers_in_a_row >= self.config.reset_after_outliers {
+                self.outliers_in_a_row = 0;
+                self.estimate = Some(BallEstimate {
+                    t_s: prior.t_s,
+                    ..fresh
+                });
+                return BallUpdate::Restarted;
+            }
+            return BallUpdate::Outlier(d2.unwrap_or(f64::INFINITY));
+        }
+        match crate::kalman::update(
+            &prior.mean,
+            &prior.cov,
+            &(z - prior.mean),
+            &Matrix4::identity(),
+            r,
+            None,
+        ) {
+            Ok(u) => {
+                self.estimate = Some(BallEstimate {
+                    t_s: prior.t_s,
+                    mean: u.mean,
+                    cov: (u.cov + u.cov.transpose()) * 0.5,
+                });
+                self.outliers_in_a_row = 0;
+                BallUpdate::Updated(d2.unwrap_or(0.0))
+            }
+            Err(e) => BallUpdate::Rejected(e),
+        }
+    }
+
     /// Applies a sighting in robot coordinates made from `pose` at `t_s`.
     pub fn sighting(
         &mut self,

@@ -221,6 +221,46 @@ fn the_network_limited_reference_is_the_centralized_filter_fed_out_of_order() {
 }
 
 #[test]
+fn a_teammate_track_is_a_measurement_of_the_whole_state() {
+    // Robot A saw the ball at (1, 0.5) standing still; a teammate's compact message says
+    // it is rolling at 1 m/s along x from (1.02, 0.5), well measured: the reference takes
+    // the velocity from the track and the position from both.
+    let cfg = BallFilterConfig::default();
+    let mut reference = NetworkLimitedBall::new(cfg, 0.3);
+    let seen = FieldObservation {
+        t_s: 1.0,
+        position: Vector2::new(1.0, 0.5),
+        cov: Matrix2::identity() * 4e-4,
+    };
+    assert!(reference.observe(&seen));
+    let gain = crate::TrackGain {
+        t_s: 1.0,
+        mean: Vector4::new(1.02, 0.5, 1.0, 0.0),
+        cov: Matrix4::from_diagonal(&Vector4::new(4e-4, 4e-4, 1e-3, 1e-3)),
+    };
+    assert!(reference.track(&gain));
+    let b = reference.estimate_at(1.0).expect("a ball");
+    assert!(
+        (b.position().x - 1.01).abs() < 0.005 && b.velocity().x > 0.9,
+        "the sighting and the track fused: {}",
+        b.mean
+    );
+    // A track far from the ball fails the gate and leaves it where it was.
+    let far = crate::TrackGain {
+        t_s: 1.01,
+        mean: Vector4::new(4.0, -2.0, 0.0, 0.0),
+        ..gain
+    };
+    assert!(reference.track(&far));
+    let c = reference.estimate_at(1.01).expect("a ball");
+    assert!(
+        (c.position() - b.predict_to(&cfg.model, 1.01).position()).norm() < 1e-9,
+        "an outlying track is not fused: {}",
+        c.mean
+    );
+}
+
+#[test]
 fn a_kick_sets_the_velocity_and_keeps_the_position() {
     let model = BallModel::Rolling {
         friction_per_s: 1.0,
