@@ -181,7 +181,9 @@ fn in_a_team_the_world_model_frame_carries_an_echo() {
 /// (versions past 250: 3-byte varints), echoing a teammate (`keyed`: with a team key).
 fn league_frame(keyed: bool) -> Vec<u8> {
     let robots = 5;
-    let mut cfg = ReplicaConfig::new(3, 7).with_budget(&comms::BudgetSpec::SPL, robots);
+    let mut cfg = ReplicaConfig::new(3, 7)
+        .with_budget(&comms::BudgetSpec::SPL, robots)
+        .with_known_paths(team::known_paths());
     if keyed {
         cfg = cfg.with_team_key(TEAM_KEY);
     }

@@ -230,13 +230,15 @@ pub(crate) struct Inner {
     send_failures: RateLimit,
     /// Warnings about given-up talk messages.
     give_up_warnings: RateLimit,
+    /// The buffer every outgoing frame is written into (reused: no allocation per frame).
+    tx_buf: Vec<u8>,
 }
 
 impl Inner {
     /// Drains the replica: frames to the socket, events to sessions and subscribers.
     pub(crate) fn pump(&mut self) {
-        while let Some(transmit) = self.replica.poll_transmit() {
-            let payload = transmit.payload;
+        let mut payload = std::mem::take(&mut self.tx_buf);
+        while self.replica.poll_transmit_into(&mut payload).is_some() {
             for i in 0..self.peers.len() {
                 let peer = self.peers[i];
                 self.emit(&payload, peer);
@@ -245,6 +247,7 @@ impl Inner {
                 self.emit(&payload, destination);
             }
         }
+        self.tx_buf = payload;
         self.dispatch_events();
     }
 
@@ -765,6 +768,7 @@ impl Driver {
             key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
             send_failures: RateLimit::new(SEND_WARNING_PERIOD),
             give_up_warnings: RateLimit::new(SEND_WARNING_PERIOD),
+            tx_buf: Vec::with_capacity(2048),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),
