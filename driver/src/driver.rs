@@ -75,6 +75,13 @@ impl DriverConfig {
     /// Defaults around `replica`: the seed's group `224.0.0.1:2000` on loopback, TTL 1,
     /// a 4 MiB receive buffer, no peers.
     pub fn new(replica: ReplicaConfig) -> DriverConfig {
+        // The driver runs the team layer: its keys go by index unless the application
+        // registered a table of its own (which must then include them).
+        let replica = if replica.known_paths.is_empty() {
+            replica.with_known_paths(team::known_paths())
+        } else {
+            replica
+        };
         DriverConfig {
             replica,
             socket: SocketConfig::default(),
