@@ -119,15 +119,15 @@ fn a_newer_builds_unknown_items_are_skipped_and_every_shared_key_replicates() {
             );
         }
     }
-    for i in 0..2 {
-        let s = team[i].stats();
+    for (i, r) in team.iter().take(2).enumerate() {
+        let s = r.stats();
         assert!(
             s.items_skipped >= 2 * 200,
             "robot {}: robot 3's item 9 and its newer known path skipped and counted ({})",
             i + 1,
             s.items_skipped
         );
-        assert!(team[i].get("3.var.ball.seen_by_feet").unwrap().is_none());
+        assert!(r.get("3.var.ball.seen_by_feet").unwrap().is_none());
     }
     assert_eq!(
         team[2].get("1.var.pose.x").unwrap().map(|e| &e.value),
