@@ -181,7 +181,9 @@ fn in_a_team_the_world_model_frame_carries_an_echo() {
 /// (versions past 250: 3-byte varints), echoing a teammate (`keyed`: with a team key).
 fn league_frame(keyed: bool) -> Vec<u8> {
     let robots = 5;
-    let mut cfg = ReplicaConfig::new(3, 7).with_budget(&comms::BudgetSpec::SPL, robots);
+    let mut cfg = ReplicaConfig::new(3, 7)
+        .with_budget(&comms::BudgetSpec::SPL, robots)
+        .with_known_paths(team::known_paths());
     if keyed {
         cfg = cfg.with_team_key(TEAM_KEY);
     }
@@ -235,7 +237,10 @@ fn league_frame(keyed: bool) -> Vec<u8> {
         }
     }
     let key = keyed.then(|| TeamKey::new(&TEAM_KEY));
-    let frame = decode_frame(&last, 7, key.as_ref()).expect("a valid frame");
+    let table = team::known_paths();
+    let frame = comms::wire::decode_frame_with(&last, 7, key.as_ref(), &table)
+        .expect("a valid frame")
+        .to_frame();
     assert!(frame.clock.echo.is_some(), "robot 1 is echoed");
     let paths: Vec<&str> = frame
         .items
@@ -253,9 +258,11 @@ fn league_frame(keyed: bool) -> Vec<u8> {
     last
 }
 
-/// With the paths of huddle's own keys as one byte (wire item 4, used under a budget),
-/// a claim, a pass receiver and a world model share one frame within SPL's limit, with a
-/// team key too. As text they took 43 bytes more: the world model then waited for the
+/// With the paths of huddle's own keys as one byte (wire item 4, the team layer's
+/// registered table), a claim, a pass receiver and a world model share one frame within
+/// SPL's limit, with a team key too. Format 4 adds a length byte to each of the three
+/// items and drops the item count: 2 bytes more than format 3's 108 and 124. As text
+/// they took 43 bytes more: the world model then waited for the
 /// robot's next frame, seconds later under the budget.
 #[test]
 fn under_an_spl_budget_claim_pass_receiver_and_world_model_share_one_frame() {
@@ -264,9 +271,9 @@ fn under_an_spl_budget_claim_pass_receiver_and_world_model_share_one_frame() {
     // unbudgeted frames drained robot 3's pool and its last frame went in the first
     // seconds, with 1-byte versions: 102 and 118 bytes.
     let (plain, keyed) = (league_frame(false).len(), league_frame(true).len());
-    assert_eq!(plain, 108, "108 bytes without a key");
+    assert_eq!(plain, 110, "110 bytes without a key");
     assert_eq!(
-        keyed, 124,
-        "124 bytes with the 16-byte tag: within SPL's {SPL_MESSAGE_LIMIT}"
+        keyed, 126,
+        "126 bytes with the 16-byte tag: within SPL's {SPL_MESSAGE_LIMIT}"
     );
 }

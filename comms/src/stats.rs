@@ -111,6 +111,10 @@ pub struct Stats {
     pub bytes_out: u64,
     /// This robot's own frames looped back by multicast (ignored, not dropped).
     pub own_frames: u64,
+    /// Items of received frames skipped as unknown (a newer build's item type, value type
+    /// or known path; see the wire module's "Unknown items"): the rest of the frame was
+    /// applied.
+    pub items_skipped: u64,
     /// Updates that changed or refreshed a stored value.
     pub updates_applied: u64,
     /// Updates older than the stored version (ignored).

@@ -61,6 +61,13 @@ impl DriverConfig {
     /// Defaults around `replica`: the seed's group `224.0.0.1:2000` on loopback, TTL 1,
     /// a 4 MiB receive buffer, no peers.
     pub fn new(replica: ReplicaConfig) -> DriverConfig {
+        // The driver runs the team layer: its keys go by index unless the application
+        // registered a table of its own (which must then include them).
+        let replica = if replica.known_paths.is_empty() {
+            replica.with_known_paths(team::known_paths())
+        } else {
+            replica
+        };
         DriverConfig {
             replica,
             socket: SocketConfig::default(),
@@ -185,6 +192,7 @@ impl Driver {
             key_mismatch: RateLimit::new(KEY_WARNING_PERIOD),
             send_failures: RateLimit::new(SEND_WARNING_PERIOD),
             give_up_warnings: RateLimit::new(SEND_WARNING_PERIOD),
+            tx_buf: Vec::with_capacity(2048),
         };
         tracing::info!(
             robot = inner.replica.robot_id(),

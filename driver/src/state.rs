@@ -148,13 +148,15 @@ pub(crate) struct Inner {
     pub(crate) send_failures: RateLimit,
     /// Warnings about given-up talk messages.
     pub(crate) give_up_warnings: RateLimit,
+    /// The buffer every outgoing frame is written into (reused: no allocation per frame).
+    pub(crate) tx_buf: Vec<u8>,
 }
 
 impl Inner {
     /// Drains the replica: frames to the socket, events to sessions and subscribers.
     pub(crate) fn pump(&mut self) {
-        while let Some(transmit) = self.replica.poll_transmit() {
-            let payload = transmit.payload;
+        let mut payload = std::mem::take(&mut self.tx_buf);
+        while self.replica.poll_transmit_into(&mut payload).is_some() {
             for i in 0..self.peers.len() {
                 let peer = self.peers[i];
                 self.emit(&payload, peer);
@@ -163,6 +165,7 @@ impl Inner {
                 self.emit(&payload, destination);
             }
         }
+        self.tx_buf = payload;
         self.dispatch_events();
     }
 

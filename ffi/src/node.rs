@@ -129,7 +129,8 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
         cfg.refresh_ms
     };
     let mut replica = ReplicaConfig::new(robot_id, cfg.team_id)
-        .with_refresh_period(Duration::from_millis(refresh_ms.into()));
+        .with_refresh_period(Duration::from_millis(refresh_ms.into()))
+        .with_known_paths(team::known_paths());
     // SAFETY (all reads of the config's strings): the caller promises they are NULL or
     // NUL-terminated and alive for the call.
     let group = unsafe { read_opt_str(cfg.group_address, "group_address") }?;

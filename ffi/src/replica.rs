@@ -136,7 +136,8 @@ pub unsafe extern "C" fn huddle_replica_new(
             cfg.refresh_ms
         };
         let mut config = ReplicaConfig::new(cfg.robot_id, cfg.team_id)
-            .with_refresh_period(Duration::from_millis(refresh.into()));
+            .with_refresh_period(Duration::from_millis(refresh.into()))
+            .with_known_paths(team::known_paths());
         if cfg.mtu != 0 {
             config.mtu = cfg.mtu as usize;
         }

@@ -96,7 +96,8 @@ impl Listener {
     /// A listener for team `team` (with its key, if frames are tagged), whose clock
     /// starts at `start_ns` (nanoseconds on the clock the datagrams will be stamped with).
     pub fn new(team: u8, key: Option<Vec<u8>>, listener_id: u8, start_ns: u64) -> Result<Self> {
-        let mut cfg = ReplicaConfig::new(listener_id, team);
+        // The daemons send the team layer's keys by index: read them by the same table.
+        let mut cfg = ReplicaConfig::new(listener_id, team).with_known_paths(team::known_paths());
         if let Some(key) = key {
             cfg = cfg.with_team_key(key);
         }

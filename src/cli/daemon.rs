@@ -256,7 +256,9 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     if args.refresh.is_zero() {
         bail!("--refresh must be positive");
     }
-    let mut replica = ReplicaConfig::new(id, args.team).with_refresh_period(args.refresh);
+    let mut replica = ReplicaConfig::new(id, args.team)
+        .with_refresh_period(args.refresh)
+        .with_known_paths(team::known_paths());
     if let Some(spec) = args.budget {
         let share = spec.share(usize::from(args.team_size));
         if share.messages == 0 {

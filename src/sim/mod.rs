@@ -478,7 +478,9 @@ impl Simulation {
         let arbitration_run = params;
         let (link, uplink) = cfg.network.links();
         let net = Net::builder().link(link).uplink(uplink);
-        let mut replica = ReplicaConfig::new(1, 1).with_refresh_period(cfg.refresh_period);
+        let mut replica = ReplicaConfig::new(1, 1)
+            .with_refresh_period(cfg.refresh_period)
+            .with_known_paths(team::known_paths());
         if let Some(spec) = &cfg.budget {
             replica = replica.with_budget(spec, n);
         }

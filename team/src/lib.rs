@@ -50,3 +50,20 @@ pub use layer::{
     BallBelief, Senses, TeamConfig, TeamLayer, PASS_TO_KEY, WORLD_LOCAL_KEY,
 };
 pub use policy::SendPolicy;
+
+/// The team layer's keys sent as a one-byte index on the wire (comms' item 4): its
+/// arbitration claim, world model, pass receiver and heard tones, in the order format 3
+/// fixed them (robots on older builds read them so). Append only: an index, once given,
+/// is part of every build's format. Every robot of a team registers the same table
+/// (`ReplicaConfig::with_known_paths`).
+pub const KNOWN_PATHS: [&str; 4] = [
+    "machine.heuristic",
+    "world.local",
+    "machine.pass_to",
+    "audio.heard",
+];
+
+/// [`KNOWN_PATHS`] as the table a replica takes.
+pub fn known_paths() -> comms::wire::KnownPaths {
+    comms::wire::KnownPaths::new(KNOWN_PATHS).expect("the team layer's paths are valid keys")
+}

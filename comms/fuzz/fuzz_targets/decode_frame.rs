@@ -5,7 +5,7 @@
 
 use std::net::SocketAddr;
 
-use comms::wire::{decode_frame, encode_frame, TeamKey};
+use comms::wire::{decode_frame, decode_frame_with, encode_frame, KnownPaths, TeamKey};
 use comms::{Instant, Replica, ReplicaConfig};
 use libfuzzer_sys::fuzz_target;
 
@@ -15,6 +15,13 @@ fuzz_target!(|data: &[u8]| {
         let canonical = encode_frame(&frame, None);
         let again = decode_frame(&canonical, team, None).expect("canonical bytes decode");
         assert_eq!(encode_frame(&again, None), canonical, "encoding is stable");
+    }
+    // With a table of known paths (format 3 and 4 item 4): the borrowed view, walked
+    // twice (validation, then the items) must agree with itself.
+    let known = KnownPaths::new(["machine.heuristic", "world.local"]).expect("valid");
+    if let Ok(frame) = decode_frame_with(data, team, None, &known) {
+        let owned = frame.to_frame();
+        assert_eq!(owned.items.len(), frame.items().count(), "items are stable");
     }
     let key = TeamKey::new(b"fuzz");
     let _ = decode_frame(data, team, Some(&key));

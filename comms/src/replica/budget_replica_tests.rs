@@ -202,10 +202,12 @@ fn an_echo_gives_way_to_news_that_fits_without_it() {
         going: true,
     };
     let mut crowded = 0;
+    let known = crate::wire::KnownPaths::new(["machine.heuristic", "world.local"]).unwrap();
     for len in 20..=90 {
         let cfg = ReplicaConfig::new(3, 1)
             .with_budget(&crate::BudgetSpec::SPL, 5)
-            .with_team_key(key);
+            .with_team_key(key)
+            .with_known_paths(known.clone());
         let mut r3 = Replica::new(cfg, 3, at(0)).unwrap();
         let mut r1 = Replica::new(ReplicaConfig::new(1, 1).with_team_key(key), 1, at(0)).unwrap();
         r1.handle_timeout(at(0));
@@ -223,12 +225,18 @@ fn an_echo_gives_way_to_news_that_fits_without_it() {
         r3.handle_timeout(at(10));
         let frame = r3.poll_transmit().expect("the claim goes").payload;
         assert!(frame.len() <= 128, "len {len}: {} bytes", frame.len());
-        let decoded =
-            crate::wire::decode_frame(&frame, 1, Some(&crate::wire::TeamKey::new(&key))).unwrap();
+        let decoded = crate::wire::decode_frame_with(
+            &frame,
+            1,
+            Some(&crate::wire::TeamKey::new(&key)),
+            &known,
+        )
+        .unwrap()
+        .to_frame();
         // Both values, written as the replica does, in a frame without an echo.
         let tk = crate::wire::TeamKey::new(&key);
         let mut w =
-            crate::wire::FrameWriter::new(1, 3, 3, 1, 128, Some(&tk)).with_known_paths(true);
+            crate::wire::FrameWriter::new(1, 3, 3, 1, 128, Some(&tk)).with_known_paths(&known);
         let both = [(&claim, Value::from(posted)), (&blob, value)]
             .iter()
             .all(|(k, v)| {
@@ -256,10 +264,10 @@ fn an_echo_gives_way_to_news_that_fits_without_it() {
     assert!(crowded > 0, "some length fits only without the echo");
 }
 
-/// Known paths go as one byte under a budget only: without one a frame is what every
-/// format-3 reader takes.
+/// A path the application registered goes as one byte, with or without a budget; one it
+/// did not register goes as text.
 #[test]
-fn known_paths_are_short_under_a_budget_only() {
+fn registered_paths_go_as_one_byte() {
     let claim = crate::arbitration::heuristic_key();
     let frame_len = |cfg: ReplicaConfig| {
         let mut r = Replica::new(cfg, 1, at(0)).unwrap();
@@ -273,8 +281,16 @@ fn known_paths_are_short_under_a_budget_only() {
         r.handle_timeout(at(10));
         r.poll_transmit().expect("the claim goes").payload.len()
     };
-    let free = frame_len(ReplicaConfig::new(3, 1));
-    let league = frame_len(ReplicaConfig::new(3, 1).with_budget(&crate::BudgetSpec::SPL, 5));
+    let table = crate::wire::KnownPaths::new(["world.local", "machine.heuristic"]).unwrap();
+    let text = frame_len(ReplicaConfig::new(3, 1));
+    let known = frame_len(ReplicaConfig::new(3, 1).with_known_paths(table.clone()));
+    let league = frame_len(
+        ReplicaConfig::new(3, 1)
+            .with_budget(&crate::BudgetSpec::SPL, 5)
+            .with_known_paths(table),
+    );
+    assert_eq!(known, league, "a budget does not change the path's coding");
+    let (free, league) = (text, known);
     assert_eq!(
         free - league,
         "machine.heuristic".len(),

@@ -7,7 +7,7 @@ use thiserror::Error;
 use crate::blackboard::BoardLimits;
 use crate::key::ROBOT_IDS;
 use crate::talk::TalkLimits;
-use crate::wire::{MAX_FRAME_LEN, MIN_MTU};
+use crate::wire::{KnownPaths, MAX_FRAME_LEN, MIN_MTU};
 
 /// Settings of a replica. Every robot of a team should use the same `team_id`,
 /// `refresh_period`, `mtu` and `team_key`.
@@ -54,6 +54,14 @@ pub struct ReplicaConfig {
     /// (its first round trip), or with `clock_sync` off (default 0: until the first echo,
     /// ages leave the transit out).
     pub default_transit: Duration,
+    /// Paths sent as a one-byte index instead of as text (item 4 of the wire format): the
+    /// application's table, the same on every robot of the team (huddle's team layer
+    /// registers its own, `team::known_paths()`). Default: empty.
+    pub known_paths: KnownPaths,
+    /// Frames go out in format 3 ([`LEGACY_VERSION`]) while a present teammate's last
+    /// frame was in format 3: an older build that cannot read format 4 keeps hearing this
+    /// robot during a rolling upgrade (default on). Off: always format 4.
+    pub legacy_fallback: bool,
 }
 
 impl ReplicaConfig {
@@ -74,6 +82,8 @@ impl ReplicaConfig {
             budget: None,
             clock_sync: true,
             default_transit: Duration::ZERO,
+            known_paths: KnownPaths::EMPTY,
+            legacy_fallback: true,
         }
     }
 
@@ -97,6 +107,12 @@ impl ReplicaConfig {
             .departed_after
             .max(share.interval() * 3 + Duration::from_secs(10));
         self.budget = Some(share);
+        self
+    }
+
+    /// Sets the table of paths sent as an index (see [`ReplicaConfig::known_paths`]).
+    pub fn with_known_paths(mut self, known: KnownPaths) -> ReplicaConfig {
+        self.known_paths = known;
         self
     }
 

@@ -84,6 +84,8 @@ pub struct Replica {
     urgent: BTreeSet<String>,
     /// Under a budget: frames that went with NACKs and re-sends only (at most half).
     repair_frames: u64,
+    /// The paths of a frame's news, kept only while it is built (its capacity reused).
+    sent_scratch: Vec<String>,
 }
 
 impl Replica {
@@ -126,6 +128,7 @@ impl Replica {
             budget: config_budget.map(|b| budget::BudgetState::new(b, now)),
             urgent: BTreeSet::new(),
             repair_frames: 0,
+            sent_scratch: Vec::new(),
         })
     }
 

@@ -129,6 +129,9 @@ pub(super) struct Peer {
     /// its NACKs may still cause ([`crate::talk::AMPLIFICATION`] per byte heard from it).
     pub(super) nack_credit: f64,
     pub(super) repair_credit: f64,
+    /// Its last frame was in format 3 ([`crate::wire::LEGACY_VERSION`]): an older build
+    /// that cannot read format 4, so frames go out in format 3 while it is present.
+    pub(super) legacy_format: bool,
 }
 
 impl Peer {
@@ -166,6 +169,7 @@ impl Peer {
             clock: PeerClock::default(),
             nack_credit: 0.0,
             repair_credit: 0.0,
+            legacy_format: false,
         }
     }
 

@@ -8,7 +8,7 @@ use std::time::Duration;
 use crate::stats::DropReason;
 use crate::talk::{AMPLIFICATION, CREDIT_MAX_BYTES};
 use crate::time::Instant;
-use crate::wire::{self, FrameClock, Item};
+use crate::wire::{self, FrameClock, ItemView};
 
 use super::clock::{SampleOutcome, IMPLAUSIBLE_MARGIN, MAX_TRANSIT};
 use super::talk::TalkItem;
@@ -38,10 +38,14 @@ impl Replica {
             self.stats.own_frames += 1;
             return;
         }
-        let frame = match wire::decode_frame(bytes, self.cfg.team_id, self.key.as_ref()) {
-            Ok(frame) => frame,
-            Err(e) => return self.drop_frame(from, DropReason::from(&e)),
-        };
+        // The table is shared (a reference count, no copy): the frame borrows it while
+        // its items are applied to `self`.
+        let known = self.cfg.known_paths.clone();
+        let frame =
+            match wire::decode_frame_with(bytes, self.cfg.team_id, self.key.as_ref(), &known) {
+                Ok(frame) => frame,
+                Err(e) => return self.drop_frame(from, DropReason::from(&e)),
+            };
         let sender = frame.sender;
         if sender == self.cfg.robot_id {
             if frame.incarnation == self.incarnation {
@@ -66,16 +70,18 @@ impl Replica {
         if let Err(reason) = self.admit(now, sender, frame.incarnation, frame.seq) {
             return self.drop_frame(from, reason);
         }
+        self.stats.items_skipped += frame.skipped() as u64;
         if let Some(peer) = self.peers.get_mut(&sender) {
+            peer.legacy_format = frame.version == wire::LEGACY_VERSION;
             // What its frames cost on the air pays for the NACKs and re-sends they cause.
             let earned = AMPLIFICATION * bytes.len() as f64;
             peer.nack_credit = (peer.nack_credit + earned).min(CREDIT_MAX_BYTES);
             peer.repair_credit = (peer.repair_credit + earned).min(CREDIT_MAX_BYTES);
         }
         let transit = self.on_frame_clock(now, sender, frame.seq, &frame.clock);
-        for item in frame.items {
+        for item in frame.items() {
             match item {
-                Item::Update {
+                ItemView::Update {
                     path,
                     value,
                     version,
@@ -85,21 +91,34 @@ impl Replica {
                     let stamp = now
                         .saturating_sub(transit)
                         .saturating_sub(Duration::from_micros(age_us));
-                    self.apply_update(sender, frame.incarnation, &path, value, version, stamp);
+                    self.apply_update(
+                        sender,
+                        frame.incarnation,
+                        path,
+                        value.to_value(),
+                        version,
+                        stamp,
+                    );
                 }
-                Item::Talk { queue, seq, value } => {
-                    self.on_talk_item(now, sender, &queue, TalkItem::Message { seq, value })
+                ItemView::Talk { queue, seq, value } => self.on_talk_item(
+                    now,
+                    sender,
+                    queue,
+                    TalkItem::Message {
+                        seq,
+                        value: value.to_value(),
+                    },
+                ),
+                ItemView::TalkHead { queue, first, last } => {
+                    self.on_talk_item(now, sender, queue, TalkItem::Head { first, last })
                 }
-                Item::TalkHead { queue, first, last } => {
-                    self.on_talk_item(now, sender, &queue, TalkItem::Head { first, last })
-                }
-                Item::Nack {
+                ItemView::Nack {
                     target,
                     queue,
                     first,
                     last,
-                } if target == self.cfg.robot_id => self.repair(now, sender, &queue, first, last),
-                Item::Nack { .. } => {}
+                } if target == self.cfg.robot_id => self.repair(now, sender, queue, first, last),
+                ItemView::Nack { .. } => {}
             }
         }
     }

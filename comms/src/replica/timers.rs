@@ -156,6 +156,7 @@ impl Replica {
             ("bytes_out".into(), s.bytes_out as i64),
             ("updates_applied".into(), s.updates_applied as i64),
             ("updates_stale".into(), s.updates_stale as i64),
+            ("items_skipped".into(), s.items_skipped as i64),
             ("updates_refused".into(), s.updates_refused as i64),
             (
                 "updates_unconfirmed_replaced".into(),

@@ -7,8 +7,8 @@ use crate::blackboard::{Blackboard, Entry};
 use crate::key::Scope;
 use crate::time::{duration_to_micros, Instant};
 use crate::wire::{
-    self, varint_len, Echo, FrameClock, FrameWriter, ItemRef, ECHO_HOLD_UNIT_US, ECHO_LEN,
-    HEADER_LEN, MAX_ECHO_HOLD_US, TAG_LEN,
+    self, varint_len, Echo, FrameClock, FrameWriter, ItemRef, KnownPaths, ECHO_HOLD_UNIT_US,
+    ECHO_LEN, HEADER_LEN, LEGACY_VERSION, MAX_ECHO_HOLD_US, TAG_LEN, VERSION,
 };
 
 use super::budget::Class;
@@ -29,11 +29,21 @@ impl Replica {
         }
     }
 
-    /// Whether frames send huddle's own paths as one byte (`wire::KNOWN_PATHS`): under a
-    /// budget, where every byte of a league's payload limit counts. Without one, frames
-    /// stay in the layout every format-3 reader takes.
-    pub(crate) fn known_paths(&self) -> bool {
-        self.budget.is_some()
+    /// The paths frames send as a one-byte index: the application's table.
+    pub(crate) fn known_paths(&self) -> &KnownPaths {
+        &self.cfg.known_paths
+    }
+
+    /// The format the next frame goes out in: format 3 while a present teammate speaks
+    /// only that (see [`crate::ReplicaConfig::legacy_fallback`]), else format 4.
+    pub(super) fn write_version(&self) -> u8 {
+        let legacy =
+            self.cfg.legacy_fallback && self.peers.values().any(|p| p.present && p.legacy_format);
+        if legacy {
+            LEGACY_VERSION
+        } else {
+            VERSION
+        }
     }
 
     /// The widest version and age an update item may carry: under a budget, ages are
@@ -67,7 +77,13 @@ impl Replica {
             }
         }
         let tag = if self.key.is_some() { TAG_LEN } else { 0 };
-        let frame = HEADER_LEN + varint_len(self.seq + 1) + varint_len(items) + len + tag;
+        // Format 3 counts its items; format 4 gives each a length (in `item_len_coded`).
+        let count = if self.write_version() == LEGACY_VERSION {
+            varint_len(items)
+        } else {
+            0
+        };
+        let frame = HEADER_LEN + varint_len(self.seq + 1) + count + len + tag;
         frame <= self.cfg.mtu && frame + ECHO_LEN > self.cfg.mtu
     }
 
@@ -105,6 +121,18 @@ impl Replica {
     /// when the budget allows one (a priority item may draw on the reserve); the refresh
     /// and talk heads ride along in the room left.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        let mut payload = Vec::new();
+        let destination = self.poll_transmit_into(&mut payload)?;
+        Some(Transmit {
+            destination,
+            payload,
+        })
+    }
+
+    /// [`Replica::poll_transmit`] writing the frame into `buf` (cleared first) and
+    /// returning where it goes: a driver that keeps one buffer allocates nothing per
+    /// frame (quinn-proto's way).
+    pub fn poll_transmit_into(&mut self, buf: &mut Vec<u8>) -> Option<Destination> {
         let pending = !(self.nacks_out.is_empty()
             && self.talk_out.is_empty()
             && self.dirty.is_empty()
@@ -146,7 +174,9 @@ impl Replica {
         } else {
             self.next_echo(now)
         };
-        let mut w = FrameWriter::new(
+        let version = self.write_version();
+        let mut w = FrameWriter::new_in(
+            std::mem::take(buf),
             self.cfg.team_id,
             self.cfg.robot_id,
             self.incarnation,
@@ -154,7 +184,8 @@ impl Replica {
             self.cfg.mtu,
             self.key.as_ref(),
         )
-        .with_known_paths(self.known_paths());
+        .with_known_paths(&self.cfg.known_paths)
+        .with_version(version);
         w.set_clock(FrameClock {
             stamp_us: stamp_of(now),
             echo,
@@ -164,7 +195,7 @@ impl Replica {
         // quarter of the frame: a flood of gaps must not crowd its news out.
         let budgeted = class.is_some();
         let refreshing = !self.refresh_queue.is_empty();
-        let mut sent: Vec<String> = Vec::new();
+        let mut sent = std::mem::take(&mut self.sent_scratch);
         if budgeted {
             full |= push_values(
                 &self.board,
@@ -274,13 +305,12 @@ impl Replica {
         }
         self.seq += 1;
         self.sent.record(self.seq, now);
-        let payload = w.finish();
+        *buf = w.finish();
+        sent.clear();
+        self.sent_scratch = sent;
         self.stats.frames_out += 1;
-        self.stats.bytes_out += payload.len() as u64;
-        Some(Transmit {
-            destination: Destination::Group,
-            payload,
-        })
+        self.stats.bytes_out += buf.len() as u64;
+        Some(Destination::Group)
     }
 }
 
@@ -302,15 +332,19 @@ fn push_values(
     // Values in this frame as news: the refresh does not repeat them. Kept only when a
     // refresh is due (no list on the busy path of a frame of news).
     let mut full = false;
-    let first: Vec<String> = urgent.iter().cloned().collect();
-    for path in first {
-        match board.get_stored(me, &path) {
-            Some(e) if !w.push(update_ref(&path, e, now, age_cap)) => full = true,
-            _ => {
-                dirty.remove(&path);
-                urgent.remove(&path);
-                if refreshing {
-                    sent.push(path);
+    if !urgent.is_empty() {
+        let first = std::mem::take(urgent);
+        for path in first {
+            match board.get_stored(me, &path) {
+                Some(e) if !w.push(update_ref(&path, e, now, age_cap)) => {
+                    full = true;
+                    urgent.insert(path);
+                }
+                _ => {
+                    dirty.remove(&path);
+                    if refreshing {
+                        sent.push(path);
+                    }
                 }
             }
         }

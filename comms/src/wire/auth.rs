@@ -18,7 +18,9 @@ impl TeamKey {
         TeamKey(Hmac::<Sha256>::new_from_slice(key).expect("HMAC takes keys of any length"))
     }
 
-    pub(super) fn tag(&self, data: &[u8]) -> [u8; TAG_LEN] {
+    /// The frame tag over `data` (everything before the tag): for tools and tests that
+    /// build frames by hand.
+    pub fn tag(&self, data: &[u8]) -> [u8; TAG_LEN] {
         let mut mac = self.0.clone();
         mac.update(data);
         let full = mac.finalize().into_bytes();

@@ -1,77 +1,253 @@
-//! The body's encoding by bincode 2 (`config::standard()`): the one file that uses
+//! The body's primitives by bincode 2 (`config::standard()`): the one file that uses
 //! bincode (see the module docs for why, and how to leave it). The impls are written by
 //! hand so the item and value layouts stay as the format table says.
+//!
+//! Writing appends to the caller's buffer; reading borrows from the datagram (paths and
+//! queues are `&str` into it, values stay encoded until asked for): neither allocates.
 
 use bincode::de::{Decode, Decoder};
 use bincode::enc::{Encode, Encoder};
 use bincode::error::{AllowedEnumVariants, DecodeError as BincodeDecodeError, EncodeError};
 
-use super::{known_path_index, DecodeError, Item, ItemRef, KNOWN_PATHS, MAX_FRAME_LEN};
+use super::{ItemRef, ItemView, KnownPaths, RawValue, MAX_FRAME_LEN};
 use crate::value::Value;
 
 fn config() -> impl bincode::config::Config {
     bincode::config::standard().with_limit::<MAX_FRAME_LEN>()
 }
 
-/// Appends the encoding of `item` to `out`, an update of a known path as item 4 when
-/// `known_paths`; false if it could not be encoded (writing into a `Vec` does not fail).
-pub(super) fn encode_item(item: ItemRef<'_>, known_paths: bool, out: &mut Vec<u8>) -> bool {
-    if let ItemRef::Update {
-        path,
-        value,
-        version,
-        age_us,
-    } = item
-    {
-        if let Some(index) = known_path_index(path).filter(|_| known_paths) {
-            let known = KnownUpdate {
-                index,
-                value,
-                version,
-                age_us,
-            };
-            return bincode::encode_into_std_write(known, out, config()).is_ok();
-        }
-    }
-    bincode::encode_into_std_write(item, out, config()).is_ok()
-}
-
-/// The indices item 4 may carry.
-const KNOWN_PATH_INDICES: AllowedEnumVariants = AllowedEnumVariants::Range {
-    min: 0,
-    max: KNOWN_PATHS.len() as u32 - 1,
-};
-
-/// Item 4: an update whose path is [`KNOWN_PATHS`]`[index]`.
-struct KnownUpdate<'a> {
-    index: u8,
-    value: &'a Value,
-    version: u64,
-    age_us: u64,
-}
-
-impl Encode for KnownUpdate<'_> {
-    fn encode<E: Encoder>(&self, e: &mut E) -> Result<(), EncodeError> {
-        4u32.encode(e)?;
-        u32::from(self.index).encode(e)?;
-        self.value.encode(e)?;
-        self.version.encode(e)?;
-        self.age_us.encode(e)
-    }
-}
+/// Item types (the varint before each item; see the module docs' table).
+pub(super) const ITEM_UPDATE: u64 = 0;
+pub(super) const ITEM_TALK: u64 = 1;
+pub(super) const ITEM_TALK_HEAD: u64 = 2;
+pub(super) const ITEM_NACK: u64 = 3;
+pub(super) const ITEM_KNOWN_UPDATE: u64 = 4;
 
 /// Appends `v` as a varint to `out`.
-pub(super) fn encode_varint(v: u64, out: &mut Vec<u8>) {
-    // Writing a varint into a Vec cannot fail.
+pub(super) fn put_varint(v: u64, out: &mut Vec<u8>) {
+    // Writing into a Vec cannot fail.
     let _ = bincode::encode_into_std_write(v, out, config());
 }
 
-/// Decodes a body, `seq` then the items; returns them and the bytes used.
-pub(super) fn decode_body(body: &[u8]) -> Result<(u64, Vec<Item>, usize), DecodeError> {
-    let ((seq, items), used): ((u64, Vec<Item>), usize) =
-        bincode::decode_from_slice(body, config())
-            .map_err(|e| DecodeError::Malformed(e.to_string()))?;
-    Ok((seq, items, used))
+/// The type an item goes out as, and its known-path index if it is item 4.
+pub(super) fn item_type(item: &ItemRef<'_>, known: &KnownPaths) -> (u64, Option<u8>) {
+    match item {
+        ItemRef::Update { path, .. } => match known.index(path) {
+            Some(i) => (ITEM_KNOWN_UPDATE, Some(i)),
+            None => (ITEM_UPDATE, None),
+        },
+        ItemRef::Talk { .. } => (ITEM_TALK, None),
+        ItemRef::TalkHead { .. } => (ITEM_TALK_HEAD, None),
+        ItemRef::Nack { .. } => (ITEM_NACK, None),
+    }
+}
+
+/// An item's fields (everything after its type and length).
+struct Fields<'a> {
+    item: ItemRef<'a>,
+    index: Option<u8>,
+}
+
+impl Encode for Fields<'_> {
+    fn encode<E: Encoder>(&self, e: &mut E) -> Result<(), EncodeError> {
+        match self.item {
+            ItemRef::Update {
+                path,
+                value,
+                version,
+                age_us,
+            } => {
+                match self.index {
+                    Some(i) => u64::from(i).encode(e)?,
+                    None => path.encode(e)?,
+                }
+                value.encode(e)?;
+                version.encode(e)?;
+                age_us.encode(e)
+            }
+            ItemRef::Talk { queue, seq, value } => {
+                queue.encode(e)?;
+                seq.encode(e)?;
+                value.encode(e)
+            }
+            ItemRef::TalkHead { queue, first, last } => {
+                queue.encode(e)?;
+                first.encode(e)?;
+                last.encode(e)
+            }
+            ItemRef::Nack {
+                target,
+                queue,
+                first,
+                last,
+            } => {
+                target.encode(e)?;
+                queue.encode(e)?;
+                first.encode(e)?;
+                last.encode(e)
+            }
+        }
+    }
+}
+
+/// Appends an item: its type, its fields' length `fields_len` when `with_len` (format 4;
+/// format 3 items carry none), then the fields.
+pub(super) fn put_item(
+    item: ItemRef<'_>,
+    (ty, index): (u64, Option<u8>),
+    fields_len: Option<usize>,
+    out: &mut Vec<u8>,
+) {
+    put_varint(ty, out);
+    if let Some(len) = fields_len {
+        put_varint(len as u64, out);
+    }
+    let _ = bincode::encode_into_std_write(Fields { item, index }, out, config());
+}
+
+/// Why bytes being read are not what they should be.
+#[derive(Debug)]
+pub(super) enum Fault {
+    /// Something this build does not know, whose end is not known without the item's
+    /// length (an item type, a value type): skipped in format 4, malformed in format 3.
+    Unknown,
+    /// An item read to its end that this build cannot use (a known-path index beyond its
+    /// table): skipped.
+    Skip,
+    /// Truncated or invalid: the frame is malformed.
+    Malformed(&'static str),
+}
+
+/// A cursor over bytes being decoded.
+#[derive(Clone, Debug)]
+pub(super) struct Reader<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> Reader<'a> {
+    pub(super) fn new(bytes: &'a [u8]) -> Reader<'a> {
+        Reader { bytes }
+    }
+
+    pub(super) fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+
+    pub(super) fn remaining(&self) -> usize {
+        self.bytes.len()
+    }
+
+    pub(super) fn varint(&mut self) -> Result<u64, Fault> {
+        let (v, used): (u64, usize) = bincode::decode_from_slice(self.bytes, config())
+            .map_err(|_| Fault::Malformed("bad varint"))?;
+        self.bytes = &self.bytes[used..];
+        Ok(v)
+    }
+
+    pub(super) fn take(&mut self, n: usize) -> Result<&'a [u8], Fault> {
+        if n > self.bytes.len() {
+            return Err(Fault::Malformed("truncated"));
+        }
+        let (head, rest) = self.bytes.split_at(n);
+        self.bytes = rest;
+        Ok(head)
+    }
+
+    fn u8(&mut self) -> Result<u8, Fault> {
+        Ok(self.take(1)?[0])
+    }
+
+    fn len(&mut self) -> Result<usize, Fault> {
+        usize::try_from(self.varint()?).map_err(|_| Fault::Malformed("length"))
+    }
+
+    pub(super) fn str(&mut self) -> Result<&'a str, Fault> {
+        let n = self.len()?;
+        std::str::from_utf8(self.take(n)?).map_err(|_| Fault::Malformed("not UTF-8"))
+    }
+
+    /// A value, checked (every byte a valid encoding) but left encoded.
+    fn value(&mut self) -> Result<RawValue<'a>, Fault> {
+        let start = self.bytes;
+        // Writers put the tag in one byte; anything else (another tag, a wider varint)
+        // is a value type this build does not know.
+        match self.u8()? {
+            0 => {
+                self.varint()?;
+            }
+            1 => {
+                self.take(8)?;
+            }
+            2 => {
+                if self.u8()? > 1 {
+                    return Err(Fault::Malformed("bool"));
+                }
+            }
+            3 => {
+                self.str()?;
+            }
+            4 => {
+                let n = self.len()?;
+                self.take(n.checked_mul(8).ok_or(Fault::Malformed("length"))?)?;
+            }
+            5 => {
+                let n = self.len()?;
+                self.take(n)?;
+            }
+            // A value type of a newer build.
+            _ => return Err(Fault::Unknown),
+        }
+        Ok(RawValue(&start[..start.len() - self.bytes.len()]))
+    }
+
+    /// The fields of an item of type `ty`. `Fault::Unknown` for a type or a value type
+    /// this build does not know, `Fault::Skip` for a known-path index beyond its table.
+    pub(super) fn item(&mut self, ty: u64, known: &'a KnownPaths) -> Result<ItemView<'a>, Fault> {
+        Ok(match ty {
+            ITEM_UPDATE | ITEM_KNOWN_UPDATE => {
+                let path = if ty == ITEM_UPDATE {
+                    Ok(self.str()?)
+                } else {
+                    let index = self.varint()?;
+                    known.get(index).ok_or(Fault::Skip)
+                };
+                let value = self.value()?;
+                let version = self.varint()?;
+                let age_us = self.varint()?;
+                // An index beyond our table is known only once the item was read through.
+                ItemView::Update {
+                    path: path?,
+                    value,
+                    version,
+                    age_us,
+                }
+            }
+            ITEM_TALK => ItemView::Talk {
+                queue: self.str()?,
+                seq: self.varint()?,
+                value: self.value()?,
+            },
+            ITEM_TALK_HEAD => ItemView::TalkHead {
+                queue: self.str()?,
+                first: self.varint()?,
+                last: self.varint()?,
+            },
+            ITEM_NACK => ItemView::Nack {
+                target: self.u8()?,
+                queue: self.str()?,
+                first: self.varint()?,
+                last: self.varint()?,
+            },
+            _ => return Err(Fault::Unknown),
+        })
+    }
+}
+
+/// The value a checked [`RawValue`] holds.
+pub(super) fn decode_value(raw: &[u8]) -> Option<Value> {
+    bincode::decode_from_slice::<Value, _>(raw, config())
+        .ok()
+        .map(|(v, _)| v)
 }
 
 impl Encode for Value {
@@ -118,102 +294,6 @@ impl<Ctx> Decode<Ctx> for Value {
                 return Err(BincodeDecodeError::UnexpectedVariant {
                     type_name: "Value",
                     allowed: &AllowedEnumVariants::Range { min: 0, max: 5 },
-                    found,
-                })
-            }
-        })
-    }
-}
-
-impl Encode for ItemRef<'_> {
-    fn encode<E: Encoder>(&self, e: &mut E) -> Result<(), EncodeError> {
-        match *self {
-            ItemRef::Update {
-                path,
-                value,
-                version,
-                age_us,
-            } => {
-                0u32.encode(e)?;
-                path.encode(e)?;
-                value.encode(e)?;
-                version.encode(e)?;
-                age_us.encode(e)
-            }
-            ItemRef::Talk { queue, seq, value } => {
-                1u32.encode(e)?;
-                queue.encode(e)?;
-                seq.encode(e)?;
-                value.encode(e)
-            }
-            ItemRef::TalkHead { queue, first, last } => {
-                2u32.encode(e)?;
-                queue.encode(e)?;
-                first.encode(e)?;
-                last.encode(e)
-            }
-            ItemRef::Nack {
-                target,
-                queue,
-                first,
-                last,
-            } => {
-                3u32.encode(e)?;
-                target.encode(e)?;
-                queue.encode(e)?;
-                first.encode(e)?;
-                last.encode(e)
-            }
-        }
-    }
-}
-
-impl<Ctx> Decode<Ctx> for Item {
-    fn decode<D: Decoder<Context = Ctx>>(d: &mut D) -> Result<Self, BincodeDecodeError> {
-        Ok(match u32::decode(d)? {
-            0 => Item::Update {
-                path: String::decode(d)?,
-                value: Value::decode(d)?,
-                version: u64::decode(d)?,
-                age_us: u64::decode(d)?,
-            },
-            1 => Item::Talk {
-                queue: String::decode(d)?,
-                seq: u64::decode(d)?,
-                value: Value::decode(d)?,
-            },
-            2 => Item::TalkHead {
-                queue: String::decode(d)?,
-                first: u64::decode(d)?,
-                last: u64::decode(d)?,
-            },
-            3 => Item::Nack {
-                target: u8::decode(d)?,
-                queue: String::decode(d)?,
-                first: u64::decode(d)?,
-                last: u64::decode(d)?,
-            },
-            4 => {
-                let index = u32::decode(d)?;
-                let Some(path) = usize::try_from(index).ok().and_then(|i| KNOWN_PATHS.get(i))
-                else {
-                    return Err(BincodeDecodeError::UnexpectedVariant {
-                        type_name: "known path",
-                        allowed: &KNOWN_PATH_INDICES,
-                        found: index,
-                    });
-                };
-                Item::Update {
-                    path: (*path).to_owned(),
-                    value: Value::decode(d)?,
-                    version: u64::decode(d)?,
-                    age_us: u64::decode(d)?,
-                }
-            }
-            found => {
-                return Err(BincodeDecodeError::UnexpectedVariant {
-                    type_name: "Item",
-                    allowed: &AllowedEnumVariants::Range { min: 0, max: 4 },
                     found,
                 })
             }

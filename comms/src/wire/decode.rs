@@ -4,10 +4,10 @@
 use thiserror::Error;
 
 use super::auth::TeamKey;
-use super::codec;
+use super::codec::{Fault, Reader};
 use super::{
-    Echo, Frame, FrameClock, Item, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN, MAGIC,
-    MAX_FRAME_LEN, MAX_TALK_SEQ, TAG_LEN, VERSION,
+    Echo, Frame, FrameClock, ItemView, KnownPaths, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN,
+    LEGACY_VERSION, MAGIC, MAX_FRAME_LEN, MAX_TALK_SEQ, TAG_LEN, VERSION,
 };
 use crate::key::{validate_path, ROBOT_IDS};
 
@@ -48,7 +48,7 @@ pub enum DecodeError {
 /// recognising one's own looped-back frames cheaply: never trust it for anything else.
 pub fn peek_origin(bytes: &[u8], team: u8) -> Option<(u8, u64)> {
     let header = bytes.get(..HEADER_LEN)?;
-    if header[..2] != MAGIC || header[2] != VERSION || header[4] != team {
+    if header[..2] != MAGIC || !readable(header[2]) || header[4] != team {
         return None;
     }
     let mut incarnation = [0u8; 8];
@@ -56,9 +56,144 @@ pub fn peek_origin(bytes: &[u8], team: u8) -> Option<(u8, u64)> {
     Some((header[5], u64::from_le_bytes(incarnation)))
 }
 
-/// Decodes and validates a frame addressed to `team`; with `key`, it must carry a valid
-/// tag, and without one it must carry none. Safe on untrusted input.
+fn readable(version: u8) -> bool {
+    version == VERSION || version == LEGACY_VERSION
+}
+
+/// A received frame, checked and validated, borrowing the datagram (see the module docs).
+#[derive(Clone, Debug)]
+pub struct FrameRef<'a> {
+    /// The format version it came in ([`VERSION`] or [`LEGACY_VERSION`]).
+    pub version: u8,
+    /// Team id.
+    pub team: u8,
+    /// Sending robot (1..=254).
+    pub sender: u8,
+    /// Sender's incarnation.
+    pub incarnation: u64,
+    /// Sender's frame counter.
+    pub seq: u64,
+    /// The sender's send stamp and echo.
+    pub clock: FrameClock,
+    items: &'a [u8],
+    known: &'a KnownPaths,
+    skipped: usize,
+}
+
+impl<'a> FrameRef<'a> {
+    /// The items this build can read, in frame order (validated already: iterating
+    /// cannot fail).
+    pub fn items(&self) -> Items<'a> {
+        Items {
+            r: Reader::new(self.items),
+            legacy: self.version == LEGACY_VERSION,
+            known: self.known,
+        }
+    }
+
+    /// Items skipped: of a type, with a value type, or of a known-path index this build
+    /// does not know (see "Unknown items" in the module docs).
+    pub fn skipped(&self) -> usize {
+        self.skipped
+    }
+
+    /// An owned copy (unknown items left out).
+    pub fn to_frame(&self) -> Frame {
+        Frame {
+            team: self.team,
+            sender: self.sender,
+            incarnation: self.incarnation,
+            seq: self.seq,
+            clock: self.clock,
+            items: self.items().map(|i| i.to_item()).collect(),
+        }
+    }
+}
+
+/// The readable items of a [`FrameRef`].
+#[derive(Clone, Debug)]
+pub struct Items<'a> {
+    r: Reader<'a>,
+    legacy: bool,
+    known: &'a KnownPaths,
+}
+
+impl<'a> Items<'a> {
+    /// The next item: `Some(Ok(None))` for one skipped, `None` at the end.
+    fn next_raw(&mut self) -> Option<Result<Option<ItemView<'a>>, DecodeError>> {
+        if self.r.is_empty() {
+            return None;
+        }
+        Some(self.read_one())
+    }
+
+    fn read_one(&mut self) -> Result<Option<ItemView<'a>>, DecodeError> {
+        let ty = self.r.varint().map_err(fault)?;
+        if self.legacy {
+            // No length: nothing can be skipped.
+            return match self.r.item(ty, self.known) {
+                Ok(item) => Ok(Some(item)),
+                Err(Fault::Skip) => Ok(None),
+                Err(Fault::Unknown) => Err(DecodeError::Malformed(format!(
+                    "format 3 item of type {ty}, or a value or known path this build lacks"
+                ))),
+                Err(e) => Err(fault(e)),
+            };
+        }
+        let len = self.r.varint().map_err(fault)?;
+        let len = usize::try_from(len)
+            .ok()
+            .filter(|&n| n <= self.r.remaining())
+            .ok_or_else(|| DecodeError::Malformed(format!("item of {len} bytes past the body")))?;
+        let mut fields = Reader::new(self.r.take(len).map_err(fault)?);
+        match fields.item(ty, self.known) {
+            // Bytes after the fields we know: a newer build's added fields.
+            Ok(item) => Ok(Some(item)),
+            Err(Fault::Unknown | Fault::Skip) => Ok(None),
+            Err(e) => Err(fault(e)),
+        }
+    }
+}
+
+impl<'a> Iterator for Items<'a> {
+    type Item = ItemView<'a>;
+
+    fn next(&mut self) -> Option<ItemView<'a>> {
+        loop {
+            match self.next_raw()? {
+                Ok(Some(item)) => return Some(item),
+                Ok(None) => continue,
+                // Validated when the frame was decoded: cannot happen.
+                Err(_) => return None,
+            }
+        }
+    }
+}
+
+fn fault(f: Fault) -> DecodeError {
+    match f {
+        Fault::Unknown | Fault::Skip => DecodeError::Malformed("unknown item".into()),
+        Fault::Malformed(what) => DecodeError::Malformed(what.into()),
+    }
+}
+
+/// Decodes and validates a frame addressed to `team` into an owned [`Frame`], with no
+/// known paths (updates by index are skipped): for tools and tests. See
+/// [`decode_frame_with`].
 pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Frame, DecodeError> {
+    decode_frame_with(bytes, team, key, KnownPaths::none()).map(|f| f.to_frame())
+}
+
+/// Decodes and validates a frame addressed to `team`; with `key`, it must carry a valid
+/// tag, and without one it must carry none; updates by index are read with `known`.
+/// Every item is validated before this returns. Safe on untrusted input; allocates
+/// nothing unless the frame is malformed.
+pub fn decode_frame_with<'a>(
+    bytes: &'a [u8],
+    team: u8,
+    key: Option<&TeamKey>,
+    known: &'a KnownPaths,
+) -> Result<FrameRef<'a>, DecodeError> {
     if bytes.len() > MAX_FRAME_LEN {
         return Err(DecodeError::Oversized);
     }
@@ -71,8 +206,9 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
     if bytes.len() < HEADER_LEN {
         return Err(DecodeError::TooShort);
     }
-    if bytes[2] != VERSION {
-        return Err(DecodeError::UnknownVersion(bytes[2]));
+    let version = bytes[2];
+    if !readable(version) {
+        return Err(DecodeError::UnknownVersion(version));
     }
     let flags = bytes[3];
     if flags & !(FLAG_TAGGED | FLAG_ECHO) != 0 {
@@ -121,52 +257,81 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
     } else {
         (None, body)
     };
-    let (seq, items, used) = codec::decode_body(body)?;
-    if used != body.len() {
+    let mut r = Reader::new(body);
+    let seq = r.varint().map_err(fault)?;
+    let legacy = version == LEGACY_VERSION;
+    let count = if legacy {
+        Some(r.varint().map_err(fault)?)
+    } else {
+        None
+    };
+    let items_bytes = body.get(body.len() - r.remaining()..).unwrap_or_default();
+    let mut items = Items { r, legacy, known };
+    // Every item is checked before any is handed out: a malformed frame applies nothing.
+    let (mut read, mut skipped) = (0u64, 0usize);
+    loop {
+        if count.is_some_and(|c| read == c) {
+            break;
+        }
+        match items.next_raw() {
+            None if count.is_some() => {
+                return Err(DecodeError::Malformed(format!(
+                    "{read} of {} items",
+                    count.unwrap_or_default()
+                )))
+            }
+            None => break,
+            Some(Err(e)) => return Err(e),
+            Some(Ok(None)) => skipped += 1,
+            Some(Ok(Some(item))) => validate_item(&item)?,
+        }
+        read += 1;
+    }
+    if legacy && !items.r.is_empty() {
+        let rest = items.r.remaining();
         return Err(DecodeError::Malformed(format!(
-            "{} bytes after the items",
-            body.len() - used
+            "{rest} bytes after the items"
         )));
     }
-    for item in &items {
-        validate_item(item)?;
-    }
-    Ok(Frame {
+    Ok(FrameRef {
+        version,
         team,
         sender,
         incarnation: u64::from_le_bytes(incarnation),
         seq,
         clock: FrameClock { stamp_us, echo },
-        items,
+        items: items_bytes,
+        known,
+        skipped,
     })
 }
 
-fn validate_item(item: &Item) -> Result<(), DecodeError> {
+fn validate_item(item: &ItemView<'_>) -> Result<(), DecodeError> {
     let bad_path = |e: crate::KeyError| DecodeError::Malformed(e.to_string());
-    match item {
-        Item::Update { path, .. } => validate_path(path).map_err(bad_path),
-        Item::Talk { queue, seq, .. } => {
+    match *item {
+        ItemView::Update { path, .. } => validate_path(path).map_err(bad_path),
+        ItemView::Talk { queue, seq, .. } => {
             validate_path(queue).map_err(bad_path)?;
-            if *seq == 0 || *seq > MAX_TALK_SEQ {
+            if seq == 0 || seq > MAX_TALK_SEQ {
                 return Err(DecodeError::Malformed(format!("talk seq {seq}")));
             }
             Ok(())
         }
-        Item::TalkHead { queue, first, last } => {
+        ItemView::TalkHead { queue, first, last } => {
             validate_path(queue).map_err(bad_path)?;
-            if *first == 0 || *first > last.saturating_add(1) || *last > MAX_TALK_SEQ {
+            if first == 0 || first > last.saturating_add(1) || last > MAX_TALK_SEQ {
                 return Err(DecodeError::Malformed(format!("talk head {first}..{last}")));
             }
             Ok(())
         }
-        Item::Nack {
+        ItemView::Nack {
             target,
             queue,
             first,
             last,
         } => {
             validate_path(queue).map_err(bad_path)?;
-            if !ROBOT_IDS.contains(target) || *first == 0 || first > last || *last > MAX_TALK_SEQ {
+            if !ROBOT_IDS.contains(&target) || first == 0 || first > last || last > MAX_TALK_SEQ {
                 return Err(DecodeError::Malformed(format!(
                     "nack {target} {first}..{last}"
                 )));

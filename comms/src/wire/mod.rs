@@ -26,45 +26,96 @@
 //! A frame echoes one teammate, the one whose echo is oldest, so the cost is 4 bytes per
 //! frame plus 5 when an echo rides along.
 //!
-//! Items (varint variant index, then the fields in order):
+//! The body is the frame counter `seq` (varint), then items to the end of the body. Each
+//! item is its **type** (varint), the **length** of its fields in bytes (varint), then
+//! the fields:
 //!
-//! | idx | item       | fields                                            |
-//! |-----|------------|---------------------------------------------------|
-//! | 0   | `Update`   | path (str), value, version (varint), age_us (varint) |
-//! | 1   | `Talk`     | queue (str), seq (varint), value                  |
-//! | 2   | `TalkHead` | queue (str), first retained seq, last posted seq  |
-//! | 3   | `Nack`     | target robot (u8), queue (str), first, last (missing seqs) |
-//! | 4   | `Update` of a known path | index into [`KNOWN_PATHS`] (varint), value, version (varint), age_us (varint) |
+//! | type | item       | fields                                            |
+//! |------|------------|---------------------------------------------------|
+//! | 0    | `Update`   | path (str), value, version (varint), age_us (varint) |
+//! | 1    | `Talk`     | queue (str), seq (varint), value                  |
+//! | 2    | `TalkHead` | queue (str), first retained seq, last posted seq  |
+//! | 3    | `Nack`     | target robot (u8), queue (str), first, last (missing seqs) |
+//! | 4    | `Update` of a known path | index into the [`KnownPaths`] table (varint), value, version (varint), age_us (varint) |
 //!
-//! Item 4 is item 0 with the path as one byte: huddle's own keys (the arbitration claim,
-//! the world model, the pass receiver) cost 12 to 18 bytes of a frame as text, and a
-//! league's 128 bytes hold a claim, a pass receiver and a world model only without them.
-//! Writers use it only when asked ([`FrameWriter::with_known_paths`]; a replica does
-//! under a message budget), so frames without a budget stay byte for byte what earlier
-//! builds of format 3 read; readers take both. A reader from before item 4 drops a
-//! frame carrying one as malformed.
+//! Item 4 is item 0 with the path as one byte: a team's busiest keys (huddle's team
+//! layer registers its arbitration claim, world model, pass receiver and heard tones)
+//! cost 12 to 18 bytes of a frame as text, and a league's 128 bytes hold a claim, a pass
+//! receiver and a world model only without them. The table is the application's
+//! ([`KnownPaths`], in [`crate::ReplicaConfig::known_paths`]), not the protocol's: comms
+//! names no application key.
 //!
-//! Values: varint tag 0..=5 (`Int` zigzag varint, `Float` 8 bytes LE, `Bool` 1 byte,
+//! Values: a tag byte 0..=5 (`Int` zigzag varint, `Float` 8 bytes LE, `Bool` 1 byte,
 //! `String` varint length + UTF-8, `Floats` varint count + 8 bytes LE each (f64), `Bytes`
 //! varint length + bytes). Strings are validated as UTF-8 and paths as key paths on decode.
 //! A varint is one byte below 251, else a marker byte (251, 252, 253) and the value as a
 //! little-endian u16, u32 or u64.
 //!
+//! # Unknown items: the one rule
+//!
+//! A reader **skips an item it cannot read to the end of its length and counts it**
+//! ([`FrameRef::skipped`], the replica's `items_skipped`); the rest of the frame is
+//! applied. An item it cannot read is one of a type it does not know, one whose value has
+//! a tag it does not know, and an item 4 whose index is beyond its table. Bytes after
+//! the fields a reader knows, inside an item's length, are ignored. Anything else wrong
+//! (a length running past the body, a truncated or invalid field of a known item, a bad
+//! path, a talk seq out of range) makes the frame malformed: it is dropped whole and
+//! nothing in it applied.
+//!
+//! # The compatibility promise
+//!
+//! Within format 4, these changes keep every older build of format 4 reading the frame
+//! (minus what it does not know), and need **no new VERSION**:
+//! - a new item type (the next free number; never reuse one);
+//! - new fields at the end of an existing item's fields;
+//! - a new value tag (an older reader skips the items that carry it);
+//! - new entries at the end of the application's [`KnownPaths`] table.
+//!
+//! These need a **new VERSION** (and the reader of the old one kept, as format 3 is):
+//! - anything in the 18-byte header or the echo, or a new flag bit (readers drop frames
+//!   with flags they do not know: a flag can change how the whole frame reads);
+//! - removing a field, changing its meaning, width or encoding, or reordering fields;
+//! - changing how an item's type or length, a varint or a value tag is encoded;
+//! - reusing an item type number, a value tag, or a table index for something else.
+//!
+//! # Format 3, still read
+//!
+//! Format 3 (the builds up to the change to format 4) has the same header with version
+//! byte 3, and a body of `seq` (varint), an item count (varint), then the items as type
+//! and fields with no length, so it cannot skip anything: an item, value type or index it
+//! does not know makes its frame malformed. Item 4 there indexes the same table; huddle's
+//! team layer registers its paths in format 3's fixed order, so format 3 frames from older
+//! robots read the same. This build reads both, and writes format 3 on request
+//! ([`FrameWriter::with_version`]): a replica does while a teammate still speaks format 3
+//! (see `Replica`'s docs), so a team upgrades one robot at a time. Version 2 (no stamp)
+//! and version 1 (`Floats` as f32) are dropped ([`DecodeError::UnknownVersion`]).
+//!
 //! # A frame's size
 //!
-//! Overhead per frame: the 18-byte header, the 5-byte echo when present, the seq and item-count varints (1 to 9 bytes
-//! each) and, with a team key, the 16-byte tag. Per update item: 1 byte of item index,
-//! the path (length varint and bytes, or one byte for a known path under item 4), the value (1 tag byte, then its encoding; `Bytes`
-//! adds a length varint), and the version and age varints (1 to 9 bytes each). So the
-//! same payload costs more as a match goes on and its counters grow; [`FrameWriter::len`]
-//! and [`item_len`] ([`item_len_coded`] for a writer with known paths) compute it
-//! exactly without encoding.
+//! Overhead per frame: the 18-byte header, the 5-byte echo when present, the seq varint
+//! (1 to 9 bytes) and, with a team key, the 16-byte tag. Per update item: the type byte,
+//! the length varint (1 byte below 251 bytes of fields, else 3), the path (length varint
+//! and bytes, or one byte for a known path under item 4), the value (1 tag byte, then
+//! its encoding; `Bytes` adds a length varint), and the version and age varints (1 to 9
+//! bytes each). So the same payload costs more as a match goes on and its counters grow;
+//! [`FrameWriter::len`] and [`item_len`] ([`item_len_coded`] for a writer with known
+//! paths) compute it exactly without encoding.
 //!
 //! # Reading frames
 //!
 //! Decoding happens in two steps, smoltcp-style: the fixed header is checked first (magic,
-//! version, team, tag), then the body is decoded into owned values and validated.
-//! [`decode_frame`] is safe on any input: it returns a [`DecodeError`], never panics.
+//! version, team, tag), then the body is walked once and every item validated, before
+//! anything is handed out. [`decode_frame_with`] gives a [`FrameRef`] borrowing the
+//! datagram: its items are [`ItemView`]s whose paths are `&str` into the bytes and whose
+//! values stay encoded until [`RawValue::to_value`], so the receive path allocates only
+//! for the values it stores. [`decode_frame`] gives an owned [`Frame`]. Both are safe on
+//! any input: a [`DecodeError`], never a panic.
+//!
+//! # Writing frames
+//!
+//! [`FrameWriter::new_in`] writes into a buffer the caller hands in and gets back from
+//! [`FrameWriter::finish`] (quinn-proto's way): a sender that keeps one buffer allocates
+//! nothing per frame.
 //!
 //! # Why bincode, and the way out
 //!
@@ -73,6 +124,8 @@
 //! is what the project asked for. It is pinned (`=2.0.1`), built without its default
 //! features (no derive macros, no serde: the encode and decode impls are written by
 //! hand) and used in one file of this module, `codec.rs`, and nowhere else in huddle.
+//! It encodes and decodes the primitives (varints, strings, values); the framing around
+//! them (header, item types and lengths) is this module's.
 //!
 //! RustSec advisory RUSTSEC-2025-0141 marks bincode unmaintained: its team stopped work
 //! on it. It reports no vulnerability, and the format needs no further work from
@@ -87,35 +140,24 @@ use crate::value::Value;
 mod auth;
 mod codec;
 mod decode;
+mod known;
 mod writer;
 
 pub use auth::TeamKey;
-pub use decode::{decode_frame, peek_origin, DecodeError};
+pub use decode::{decode_frame, decode_frame_with, peek_origin, DecodeError, FrameRef, Items};
+pub use known::{KnownPaths, KnownPathsError, MAX_KNOWN_PATHS};
 pub use writer::{encode_frame, item_len, item_len_coded, value_len, varint_len, FrameWriter};
-
-/// Paths sent as one byte (item 4) by writers that use known paths: huddle's own keys,
-/// by index. Append only: an index, once given, is part of the format.
-pub const KNOWN_PATHS: [&str; 4] = [
-    "machine.heuristic",
-    "world.local",
-    "machine.pass_to",
-    "audio.heard",
-];
-
-/// The index of `path` in [`KNOWN_PATHS`].
-pub fn known_path_index(path: &str) -> Option<u8> {
-    KNOWN_PATHS
-        .iter()
-        .position(|&k| k == path)
-        .and_then(|i| u8::try_from(i).ok())
-}
 
 /// The first two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"HD";
-/// The format version this code speaks. Version 3: the header carries a send stamp and
-/// may be followed by an echo ([`FrameClock`]). Version 2 (no stamp) and version 1
-/// (`Floats` as f32) are dropped ([`DecodeError::UnknownVersion`]) rather than misread.
-pub const VERSION: u8 = 3;
+/// The format version this code writes. Version 4: every item carries its type and length,
+/// and a reader skips the ones it does not know. Version 3 ([`LEGACY_VERSION`]) is read,
+/// and written on request; version 2 (no stamp) and version 1 (`Floats` as f32) are
+/// dropped ([`DecodeError::UnknownVersion`]) rather than misread.
+pub const VERSION: u8 = 4;
+/// The older format still read (and written to teammates that speak only it): items with
+/// no length, after an item count.
+pub const LEGACY_VERSION: u8 = 3;
 /// Bytes of the fixed header (the echo, when present, follows it).
 pub const HEADER_LEN: usize = 18;
 /// Bytes of an echo.
@@ -315,6 +357,109 @@ impl Item {
                 last: *last,
             },
         }
+    }
+}
+
+/// A borrowed, validated item of a received frame ([`FrameRef::items`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ItemView<'a> {
+    /// See [`Item::Update`].
+    Update {
+        /// Key path.
+        path: &'a str,
+        /// The value, still encoded.
+        value: RawValue<'a>,
+        /// Version.
+        version: u64,
+        /// Age in microseconds.
+        age_us: u64,
+    },
+    /// See [`Item::Talk`].
+    Talk {
+        /// Queue path.
+        queue: &'a str,
+        /// Sequence number.
+        seq: u64,
+        /// The message, still encoded.
+        value: RawValue<'a>,
+    },
+    /// See [`Item::TalkHead`].
+    TalkHead {
+        /// Queue path.
+        queue: &'a str,
+        /// Oldest retained.
+        first: u64,
+        /// Newest posted.
+        last: u64,
+    },
+    /// See [`Item::Nack`].
+    Nack {
+        /// Robot asked to repair.
+        target: u8,
+        /// Queue path.
+        queue: &'a str,
+        /// First missing.
+        first: u64,
+        /// Last missing.
+        last: u64,
+    },
+}
+
+impl ItemView<'_> {
+    /// An owned copy.
+    pub fn to_item(&self) -> Item {
+        match *self {
+            ItemView::Update {
+                path,
+                value,
+                version,
+                age_us,
+            } => Item::Update {
+                path: path.to_owned(),
+                value: value.to_value(),
+                version,
+                age_us,
+            },
+            ItemView::Talk { queue, seq, value } => Item::Talk {
+                queue: queue.to_owned(),
+                seq,
+                value: value.to_value(),
+            },
+            ItemView::TalkHead { queue, first, last } => Item::TalkHead {
+                queue: queue.to_owned(),
+                first,
+                last,
+            },
+            ItemView::Nack {
+                target,
+                queue,
+                first,
+                last,
+            } => Item::Nack {
+                target,
+                queue: queue.to_owned(),
+                first,
+                last,
+            },
+        }
+    }
+}
+
+/// A value as it was received: checked, still encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RawValue<'a>(&'a [u8]);
+
+impl RawValue<'_> {
+    /// The value (allocates only for strings, vectors and bytes).
+    pub fn to_value(&self) -> Value {
+        // Checked on decode, so this cannot fail; should it, an empty value is stored
+        // rather than a panic.
+        codec::decode_value(self.0).unwrap_or(Value::Bytes(Vec::new()))
+    }
+
+    /// Its encoded bytes.
+    pub fn as_bytes(&self) -> &[u8] {
+        self.0
     }
 }
 

@@ -1,6 +1,18 @@
 use super::*;
 use proptest::prelude::*;
 
+/// The team layer's table, as `team::known_paths()` registers it.
+const TEAM_PATHS: [&str; 4] = [
+    "machine.heuristic",
+    "world.local",
+    "machine.pass_to",
+    "audio.heard",
+];
+
+fn team_paths() -> KnownPaths {
+    KnownPaths::new(TEAM_PATHS).unwrap()
+}
+
 fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
@@ -70,9 +82,85 @@ fn sample() -> Frame {
     }
 }
 
-// Frozen bytes: if this test fails, the wire format changed. Bump VERSION instead of
-// editing the fixture, or robots running different builds stop understanding each other.
+// Frozen bytes: if this test fails, the wire format changed. See the compatibility
+// promise in the module docs before editing a fixture: most changes need a new VERSION.
 const GOLDEN: &str = concat!(
+    "4844",
+    "04", // format version 4: items with a type and a length
+    "02", // flags: an echo follows the header
+    "07",
+    "03",
+    "0807060504030201",
+    "78563412", // header: send stamp 0x12345678 µs
+    "05",
+    "0201",
+    "0403",   // echo: robot 5's frame ...0x0102, held 0x0304 × 10 µs
+    "fb2c01", // seq 300; no item count: items run to the end
+    "00",
+    "17", // Update, 23 bytes of fields
+    "09",
+    "62616c6c2e64697374",
+    "01",
+    "000000000000f83f",
+    "02",
+    "fbe803",
+    "00",
+    "09",
+    "04",
+    "6d6f6465",
+    "00",
+    "03",
+    "01",
+    "00",
+    "01",
+    "0a", // Talk, 10 bytes
+    "04",
+    "706c616e",
+    "01",
+    "03",
+    "02",
+    "676f",
+    "02",
+    "07", // TalkHead
+    "04",
+    "706c616e",
+    "01",
+    "01",
+    "03",
+    "05", // Nack
+    "05",
+    "0171",
+    "04",
+    "06",
+    "00",
+    "16",
+    "0176",
+    "04",
+    "02",
+    "000000000000f03f",
+    "00000000000000c0",
+    "01",
+    "00",
+    "00",
+    "07",
+    "0162",
+    "05",
+    "01",
+    "ab",
+    "01",
+    "00",
+    "00",
+    "06",
+    "0174",
+    "02",
+    "01",
+    "01",
+    "00",
+);
+
+// Format 3 frozen as earlier builds wrote it: still read, and written to teammates that
+// speak only format 3.
+const GOLDEN_V3: &str = concat!(
     "4844",
     "03", // format version 3: send stamps and echoes
     "02", // flags: an echo follows the header
@@ -146,6 +234,115 @@ fn golden_bytes_freeze_the_format() {
     assert_eq!(decode_frame(&bytes, 7, None), Ok(sample()));
 }
 
+/// Writes `frame` in format 3, as a replica does for a teammate on an older build.
+fn encode_v3(frame: &Frame, key: Option<&TeamKey>, known: &KnownPaths) -> Vec<u8> {
+    let mut w = FrameWriter::new(
+        frame.team,
+        frame.sender,
+        frame.incarnation,
+        frame.seq,
+        usize::MAX,
+        key,
+    )
+    .with_known_paths(known)
+    .with_version(LEGACY_VERSION);
+    w.set_clock(frame.clock);
+    for item in &frame.items {
+        assert!(w.push(item.as_ref()));
+    }
+    let len = w.len();
+    let bytes = w.finish();
+    assert_eq!(bytes.len(), len, "len() predicts a format 3 frame too");
+    bytes
+}
+
+#[test]
+fn format_3_is_still_read_and_written_byte_for_byte() {
+    let bytes = hex_bytes(GOLDEN_V3);
+    assert_eq!(decode_frame(&bytes, 7, None), Ok(sample()));
+    let read = decode_frame_with(&bytes, 7, None, KnownPaths::none()).unwrap();
+    assert_eq!((read.version, read.skipped()), (LEGACY_VERSION, 0));
+    assert_eq!(
+        hex(&encode_v3(&sample(), None, KnownPaths::none())),
+        GOLDEN_V3
+    );
+}
+
+fn hex_bytes(hex: &str) -> Vec<u8> {
+    (0..hex.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap())
+        .collect()
+}
+
+/// A frame from a newer build: between two updates this build knows, an item of a type
+/// it does not (9), an update whose value has a tag it does not (6), an update of a known
+/// path index beyond its table, and an update with a field appended after the ones it
+/// knows. It reads the frame minus the three it cannot use, counted.
+const GOLDEN_FUTURE: &str = concat!(
+    "4844040007030807060504030201", // format 4, no flags, team 7, robot 3, incarnation
+    "00000000",                     // stamp 0
+    "01",                           // seq 1
+    "00",
+    "06",
+    "0161",
+    "0005",
+    "01",
+    "00", // Update a = Int(-3)
+    "09",
+    "04",
+    "deadbeef", // type 9, 4 bytes: unknown, skipped
+    "00",
+    "07",
+    "0162",
+    "06",
+    "0102",
+    "01",
+    "00", // Update b with value tag 6: skipped
+    "04",
+    "05",
+    "07",
+    "0200",
+    "01",
+    "00", // Update of known path 7 (the table has 4): skipped
+    "00",
+    "08",
+    "0163",
+    "0201",
+    "02",
+    "00",
+    "aaaa", // Update c = Bool(true), version 2, then 2 bytes of a newer field
+);
+
+#[test]
+fn a_newer_builds_frame_is_read_minus_what_this_build_does_not_know() {
+    let bytes = hex_bytes(GOLDEN_FUTURE);
+    let known = team_paths();
+    let frame = decode_frame_with(&bytes, 7, None, &known).expect("not malformed");
+    assert_eq!(frame.skipped(), 3, "the unknown type, value tag and index");
+    let items: Vec<Item> = frame.items().map(|i| i.to_item()).collect();
+    let update = |path: &str, value, version| Item::Update {
+        path: path.into(),
+        value,
+        version,
+        age_us: 0,
+    };
+    assert_eq!(
+        items,
+        [
+            update("a", Value::Int(-3), 1),
+            update("c", Value::Bool(true), 2)
+        ],
+        "the items this build knows, the appended field ignored"
+    );
+    // The same frame cut inside an item's length is malformed, not skipped.
+    let cut = &bytes[..bytes.len() - 1];
+    assert!(matches!(
+        decode_frame_with(cut, 7, None, &known),
+        Err(DecodeError::Malformed(_))
+    ));
+}
+
 #[test]
 fn floats_that_do_not_fit_f32_cross_the_wire_exactly() {
     let wide = vec![123_456_789.123, 1e-50, -1e300, f64::MIN_POSITIVE, 0.1];
@@ -196,11 +393,18 @@ fn golden_tag_is_truncated_hmac_sha256_over_everything_before_it() {
     let bytes = encode_frame(&frame, Some(&key));
     assert_eq!(
         hex(&bytes),
-        "484403010703080706050403020178563412fb2c010099560cde6deefcc7399a0c168688ff92",
-        "header with flag 1 (no echo), stamp, seq, 0 items, 16-byte tag (checked against \
+        "484404010703080706050403020178563412fb2c012ae1b29e9444c0a37346c4dc01c51089",
+        "header with flag 1 (no echo), stamp, seq, no items, 16-byte tag (checked against \
          Python's hmac)"
     );
-    assert_eq!(decode_frame(&bytes, 7, Some(&key)), Ok(frame));
+    assert_eq!(decode_frame(&bytes, 7, Some(&key)), Ok(frame.clone()));
+    let v3 = encode_v3(&frame, Some(&key), KnownPaths::none());
+    assert_eq!(
+        hex(&v3),
+        "484403010703080706050403020178563412fb2c010099560cde6deefcc7399a0c168688ff92",
+        "format 3: the same with a count of 0 items"
+    );
+    assert_eq!(decode_frame(&v3, 7, Some(&key)), Ok(frame));
 }
 
 // Frozen bytes for every varint width (1, 3, 5 and 9 bytes) and the zigzag of a signed
@@ -265,9 +469,15 @@ fn golden_bytes_freeze_every_varint_width() {
         ],
         ..sample()
     };
-    let bytes = encode_frame(&frame, None);
-    assert_eq!(hex(&bytes), GOLDEN_VARINTS);
-    assert_eq!(decode_frame(&bytes, 7, None), Ok(frame));
+    let bytes = encode_v3(&frame, None, KnownPaths::none());
+    assert_eq!(
+        hex(&bytes),
+        GOLDEN_VARINTS,
+        "format 3 (format 4 shares the varints)"
+    );
+    assert_eq!(decode_frame(&bytes, 7, None), Ok(frame.clone()));
+    let v4 = encode_frame(&frame, None);
+    assert_eq!(decode_frame(&v4, 7, None), Ok(frame));
 }
 
 /// A league's frame: the claim, the pass receiver and the world model under item 4
@@ -290,8 +500,10 @@ fn golden_bytes_freeze_known_paths() {
         ],
         ..sample()
     };
-    let mut w =
-        FrameWriter::new(7, 3, frame.incarnation, frame.seq, 1200, None).with_known_paths(true);
+    let known = team_paths();
+    let mut w = FrameWriter::new(7, 3, frame.incarnation, frame.seq, 1200, None)
+        .with_known_paths(&known)
+        .with_version(LEGACY_VERSION);
     for item in &frame.items {
         assert!(w.push(item.as_ref()));
     }
@@ -329,18 +541,42 @@ fn golden_bytes_freeze_known_paths() {
         "fb2c01",
         "07",
     );
-    assert_eq!(hex(&bytes[HEADER_LEN..]), body);
-    assert_eq!(decode_frame(&bytes, 7, None), Ok(frame.clone()));
+    assert_eq!(
+        hex(&bytes[HEADER_LEN..]),
+        body,
+        "format 3, as earlier builds wrote it"
+    );
+    let read = decode_frame_with(&bytes, 7, None, &known).map(|f| f.to_frame());
+    assert_eq!(read, Ok(frame.clone()));
+    // Format 4: each item gains its length byte, and the count goes.
+    let v4 = encode_v4_known(&frame, &known);
+    assert_eq!(v4.len(), bytes.len() + 4 - 1);
+    let read = decode_frame_with(&v4, 7, None, &known).map(|f| f.to_frame());
+    assert_eq!(read, Ok(frame.clone()));
+    // A reader without the table skips the three, counted.
+    let bare = decode_frame_with(&v4, 7, None, KnownPaths::none()).unwrap();
+    assert_eq!((bare.skipped(), bare.items().count()), (3, 1));
     // The same items without known paths: item 0 throughout, each path's length and
     // text (18, 16 and 12 bytes) instead of one byte.
-    let plain = encode_frame(&frame, None);
+    let plain = encode_v3(&frame, None, KnownPaths::none());
     assert_eq!(plain.len(), bytes.len() + 17 + 15 + 11);
     assert_eq!(decode_frame(&plain, 7, None), Ok(frame));
 }
 
+fn encode_v4_known(frame: &Frame, known: &KnownPaths) -> Vec<u8> {
+    let mut w =
+        FrameWriter::new(7, 3, frame.incarnation, frame.seq, 1200, None).with_known_paths(known);
+    w.set_clock(frame.clock);
+    for item in &frame.items {
+        assert!(w.push(item.as_ref()));
+    }
+    w.finish()
+}
+
 #[test]
-fn an_unknown_known_path_index_is_malformed() {
-    let mut w = FrameWriter::new(7, 3, 1, 1, 1200, None).with_known_paths(true);
+fn a_known_path_index_beyond_the_table_is_skipped_and_counted() {
+    let known = team_paths();
+    let mut w = FrameWriter::new(7, 3, 1, 1, 1200, None).with_known_paths(&known);
     assert!(w.push(ItemRef::Update {
         path: "world.local",
         value: &Value::Int(1),
@@ -348,17 +584,16 @@ fn an_unknown_known_path_index_is_malformed() {
         age_us: 0,
     }));
     let mut bytes = w.finish();
-    // seq, count, item 4, then the index: point it past the table.
+    // seq, item 4, its length, then the index: point it past the table.
     let at = HEADER_LEN + 3;
     assert_eq!(bytes[at], 1, "world.local is index 1");
-    for index in [KNOWN_PATHS.len() as u8, 250] {
+    for index in [TEAM_PATHS.len() as u8, 250] {
         bytes[at] = index;
-        assert!(
-            matches!(
-                decode_frame(&bytes, 7, None),
-                Err(DecodeError::Malformed(_))
-            ),
-            "index {index} names no path"
+        let frame = decode_frame_with(&bytes, 7, None, &known).expect("not malformed");
+        assert_eq!(
+            (frame.skipped(), frame.items().count()),
+            (1, 0),
+            "index {index} names no path this robot knows: a newer table's, skipped"
         );
     }
 }
@@ -500,7 +735,7 @@ fn any_value() -> impl Strategy<Value = Value> {
 fn any_path() -> impl Strategy<Value = String> {
     prop_oneof![
         3 => "[a-z0-9_-]{1,8}(\\.[a-z0-9_-]{1,8}){0,2}".boxed(),
-        1 => proptest::sample::select(&KNOWN_PATHS[..]).prop_map(str::to_owned).boxed(),
+        1 => proptest::sample::select(&TEAM_PATHS[..]).prop_map(str::to_owned).boxed(),
     ]
 }
 
@@ -572,8 +807,10 @@ proptest! {
     fn decode_inverts_encode_for_any_frame(frame in any_frame(), keyed in any::<bool>(), known in any::<bool>()) {
         let key = TeamKey::new(b"secret");
         let key = keyed.then_some(&key);
+        let table = team_paths();
+        let table = if known { &table } else { KnownPaths::none() };
         let mut w = FrameWriter::new(frame.team, frame.sender, frame.incarnation, frame.seq, usize::MAX, key)
-            .with_known_paths(known);
+            .with_known_paths(table);
         w.set_clock(frame.clock);
         for item in &frame.items {
             prop_assert!(w.push(item.as_ref()));
@@ -584,14 +821,19 @@ proptest! {
         if !known {
             prop_assert_eq!(&bytes, &encode_frame(&frame, key));
         }
-        prop_assert_eq!(decode_frame(&bytes, frame.team, key), Ok(frame));
+        let read = decode_frame_with(&bytes, frame.team, key, table).map(|f| f.to_frame());
+        prop_assert_eq!(read, Ok(frame));
     }
 
     #[test]
     fn computed_item_sizes_match_the_encoder(item in any_item(), known in any::<bool>()) {
-        let mut sink = Vec::new();
-        prop_assert!(super::codec::encode_item(item.as_ref(), known, &mut sink));
-        prop_assert_eq!(item_len_coded(item.as_ref(), known), sink.len());
+        let table = team_paths();
+        let table = if known { &table } else { KnownPaths::none() };
+        let mut w = FrameWriter::new(7, 3, 1, 1, usize::MAX, None).with_known_paths(table);
+        let before = w.len();
+        prop_assert!(w.push(item.as_ref()));
+        prop_assert_eq!(item_len_coded(item.as_ref(), table), w.len() - before);
+        let sink = vec![0; w.len() - before];
         if !known {
             prop_assert_eq!(item_len(item.as_ref()), sink.len());
         }

@@ -3,8 +3,8 @@
 use super::auth::TeamKey;
 use super::codec;
 use super::{
-    Frame, FrameClock, ItemRef, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN, MAGIC, TAG_LEN,
-    VERSION,
+    Frame, FrameClock, ItemRef, KnownPaths, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN,
+    LEGACY_VERSION, MAGIC, TAG_LEN, VERSION,
 };
 use crate::value::Value;
 
@@ -18,22 +18,24 @@ pub fn varint_len(v: u64) -> usize {
     }
 }
 
-/// Builds one frame item by item within a byte budget (the MTU).
+/// Builds one frame item by item within a byte budget (the MTU), writing into a buffer
+/// the caller hands in and gets back ([`FrameWriter::new_in`], [`FrameWriter::finish`]).
 #[derive(Debug)]
 pub struct FrameWriter<'k> {
-    header: [u8; HEADER_LEN],
-    echo: Option<[u8; ECHO_LEN]>,
-    seq: u64,
-    items: Vec<u8>,
+    /// Header, echo, seq and the items so far.
+    buf: Vec<u8>,
+    /// Where the items start in `buf`.
+    items_at: usize,
     count: usize,
     budget: usize,
     key: Option<&'k TeamKey>,
-    known_paths: bool,
+    known: &'k KnownPaths,
+    version: u8,
 }
 
 impl<'k> FrameWriter<'k> {
     /// A writer for a frame of at most `budget` bytes (tag included), with a send stamp
-    /// of 0 and no echo until [`FrameWriter::set_clock`].
+    /// of 0 and no echo until [`FrameWriter::set_clock`], in a buffer of its own.
     pub fn new(
         team: u8,
         sender: u8,
@@ -42,59 +44,99 @@ impl<'k> FrameWriter<'k> {
         budget: usize,
         key: Option<&'k TeamKey>,
     ) -> FrameWriter<'k> {
-        let mut header = [0u8; HEADER_LEN];
-        header[..2].copy_from_slice(&MAGIC);
-        header[2] = VERSION;
-        header[3] = if key.is_some() { FLAG_TAGGED } else { 0 };
-        header[4] = team;
-        header[5] = sender;
-        header[6..14].copy_from_slice(&incarnation.to_le_bytes());
+        let buf = Vec::with_capacity(budget.min(2048));
+        FrameWriter::new_in(buf, team, sender, incarnation, seq, budget, key)
+    }
+
+    /// [`FrameWriter::new`] writing into `buf` (cleared first; its capacity is reused).
+    pub fn new_in(
+        mut buf: Vec<u8>,
+        team: u8,
+        sender: u8,
+        incarnation: u64,
+        seq: u64,
+        budget: usize,
+        key: Option<&'k TeamKey>,
+    ) -> FrameWriter<'k> {
+        buf.clear();
+        buf.extend_from_slice(&MAGIC);
+        buf.push(VERSION);
+        buf.push(if key.is_some() { FLAG_TAGGED } else { 0 });
+        buf.push(team);
+        buf.push(sender);
+        buf.extend_from_slice(&incarnation.to_le_bytes());
+        buf.extend_from_slice(&[0; 4]);
+        codec::put_varint(seq, &mut buf);
         FrameWriter {
-            header,
-            echo: None,
-            seq,
-            items: Vec::with_capacity(budget.min(2048)),
+            items_at: buf.len(),
+            buf,
             count: 0,
             budget,
             key,
-            known_paths: false,
+            known: KnownPaths::none(),
+            version: VERSION,
         }
     }
 
-    /// The writer sends the paths of [`super::KNOWN_PATHS`] as one byte (item 4; see
-    /// the module docs). Off by default.
-    pub fn with_known_paths(mut self, on: bool) -> Self {
-        self.known_paths = on;
+    /// The writer sends the paths of `known` as an index (item 4; see the module docs).
+    /// Off (an empty table) by default.
+    pub fn with_known_paths(mut self, known: &'k KnownPaths) -> Self {
+        self.known = known;
         self
     }
 
-    /// Sets the frame's send stamp and echo (call before pushing items: an echo takes
-    /// [`ECHO_LEN`] bytes of the budget).
+    /// Writes format `version`: [`VERSION`] (the default) or [`LEGACY_VERSION`], for
+    /// teammates that read only it; any other is ignored. Call before pushing items.
+    pub fn with_version(mut self, version: u8) -> Self {
+        if (version == VERSION || version == LEGACY_VERSION) && self.count == 0 {
+            self.version = version;
+            self.buf[2] = version;
+        }
+        self
+    }
+
+    /// Sets the frame's send stamp and echo (best before pushing items: an echo takes
+    /// [`ECHO_LEN`] bytes of the budget, and items already pushed move to make room).
     pub fn set_clock(&mut self, clock: FrameClock) {
-        self.header[14..18].copy_from_slice(&clock.stamp_us.to_le_bytes());
-        self.echo = clock.echo.map(|e| {
-            let mut b = [0u8; ECHO_LEN];
-            b[0] = e.target;
-            b[1..3].copy_from_slice(&e.seq16.to_le_bytes());
-            b[3..5].copy_from_slice(&e.hold_10us.to_le_bytes());
-            b
-        });
-        if self.echo.is_some() {
-            self.header[3] |= FLAG_ECHO;
-        } else {
-            self.header[3] &= !FLAG_ECHO;
+        self.buf[14..HEADER_LEN].copy_from_slice(&clock.stamp_us.to_le_bytes());
+        let had = self.buf[3] & FLAG_ECHO != 0;
+        match clock.echo {
+            Some(e) => {
+                let mut b = [0u8; ECHO_LEN];
+                b[0] = e.target;
+                b[1..3].copy_from_slice(&e.seq16.to_le_bytes());
+                b[3..5].copy_from_slice(&e.hold_10us.to_le_bytes());
+                if had {
+                    self.buf[HEADER_LEN..HEADER_LEN + ECHO_LEN].copy_from_slice(&b);
+                } else {
+                    self.buf.splice(HEADER_LEN..HEADER_LEN, b);
+                    self.items_at += ECHO_LEN;
+                    self.buf[3] |= FLAG_ECHO;
+                }
+            }
+            None if had => {
+                self.buf.drain(HEADER_LEN..HEADER_LEN + ECHO_LEN);
+                self.items_at -= ECHO_LEN;
+                self.buf[3] &= !FLAG_ECHO;
+            }
+            None => {}
         }
     }
 
-    fn total_len(&self, items_len: usize, count: usize) -> usize {
+    fn total_len(&self, count: usize) -> usize {
         let tag = if self.key.is_some() { TAG_LEN } else { 0 };
-        let echo = if self.echo.is_some() { ECHO_LEN } else { 0 };
-        HEADER_LEN + echo + varint_len(self.seq) + varint_len(count as u64) + items_len + tag
+        // Format 3 puts an item count before the items.
+        let count = if self.version == LEGACY_VERSION {
+            varint_len(count as u64)
+        } else {
+            0
+        };
+        self.buf.len() + count + tag
     }
 
     /// Frame size so far.
     pub fn len(&self) -> usize {
-        self.total_len(self.items.len(), self.count)
+        self.total_len(self.count)
     }
 
     /// Whether no item was added.
@@ -104,57 +146,62 @@ impl<'k> FrameWriter<'k> {
 
     /// Appends `item` if the frame stays within budget; returns whether it did.
     pub fn push(&mut self, item: ItemRef<'_>) -> bool {
-        let before = self.items.len();
-        if !codec::encode_item(item, self.known_paths, &mut self.items)
-            || self.total_len(self.items.len(), self.count + 1) > self.budget
-        {
-            self.items.truncate(before);
+        let shape = codec::item_type(&item, self.known);
+        let fields = fields_len(&item, shape.1.is_some());
+        let with_len = self.version != LEGACY_VERSION;
+        let item_len = varint_len(shape.0)
+            + if with_len {
+                varint_len(fields as u64)
+            } else {
+                0
+            }
+            + fields;
+        if self.total_len(self.count + 1) + item_len > self.budget {
             return false;
         }
+        let before = self.buf.len();
+        codec::put_item(item, shape, with_len.then_some(fields), &mut self.buf);
+        debug_assert_eq!(
+            self.buf.len() - before,
+            item_len,
+            "item sizes are computed exactly"
+        );
         self.count += 1;
         true
     }
 
-    /// The finished frame, tagged if a key was given.
-    pub fn finish(self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.len());
-        out.extend_from_slice(&self.header);
-        if let Some(echo) = &self.echo {
-            out.extend_from_slice(echo);
+    /// The finished frame, tagged if a key was given: the buffer handed to
+    /// [`FrameWriter::new_in`], to hand back to the next writer.
+    pub fn finish(mut self) -> Vec<u8> {
+        if self.version == LEGACY_VERSION {
+            // Only known now; format 3 is the path of teammates on older builds.
+            let mut count = Vec::with_capacity(9);
+            codec::put_varint(self.count as u64, &mut count);
+            self.buf.splice(self.items_at..self.items_at, count);
         }
-        codec::encode_varint(self.seq, &mut out);
-        codec::encode_varint(self.count as u64, &mut out);
-        out.extend_from_slice(&self.items);
         if let Some(key) = self.key {
-            let tag = key.tag(&out);
-            out.extend_from_slice(&tag);
+            let tag = key.tag(&self.buf);
+            self.buf.extend_from_slice(&tag);
         }
-        out
+        self.buf
     }
 }
 
-/// Encoded size of one item (what it adds to a frame's body), computed without encoding,
-/// as a writer without known paths writes it.
-pub fn item_len(item: ItemRef<'_>) -> usize {
-    item_len_coded(item, false)
-}
-
-/// [`item_len`] for a writer that sends known paths as one byte (`known_paths`, see
-/// [`FrameWriter::with_known_paths`]) or not.
-pub fn item_len_coded(item: ItemRef<'_>, known_paths: bool) -> usize {
+/// Bytes of an item's fields (after its type and length), the path as an index if
+/// `indexed`.
+fn fields_len(item: &ItemRef<'_>, indexed: bool) -> usize {
     let str_len = |s: &str| varint_len(s.len() as u64) + s.len();
-    let path_len = |s: &str| match super::known_path_index(s).filter(|_| known_paths) {
-        Some(i) => varint_len(u64::from(i)),
-        None => str_len(s),
-    };
-    // Every variant index is below 251: one byte.
-    1 + match item {
+    match *item {
         ItemRef::Update {
             path,
             value,
             version,
             age_us,
-        } => path_len(path) + value_len(value) + varint_len(version) + varint_len(age_us),
+        } => {
+            // Indices are below 251: one byte.
+            let path = if indexed { 1 } else { str_len(path) };
+            path + value_len(value) + varint_len(version) + varint_len(age_us)
+        }
         ItemRef::Talk { queue, seq, value } => str_len(queue) + varint_len(seq) + value_len(value),
         ItemRef::TalkHead { queue, first, last } => {
             str_len(queue) + varint_len(first) + varint_len(last)
@@ -163,6 +210,20 @@ pub fn item_len_coded(item: ItemRef<'_>, known_paths: bool) -> usize {
             queue, first, last, ..
         } => 1 + str_len(queue) + varint_len(first) + varint_len(last),
     }
+}
+
+/// Encoded size of one item in format 4 (what it adds to a frame's body: type, length and
+/// fields), computed without encoding, as a writer without known paths writes it.
+pub fn item_len(item: ItemRef<'_>) -> usize {
+    item_len_coded(item, KnownPaths::none())
+}
+
+/// [`item_len`] for a writer that sends the paths of `known` as an index
+/// ([`FrameWriter::with_known_paths`]).
+pub fn item_len_coded(item: ItemRef<'_>, known: &KnownPaths) -> usize {
+    let (ty, index) = codec::item_type(&item, known);
+    let fields = fields_len(&item, index.is_some());
+    varint_len(ty) + varint_len(fields as u64) + fields
 }
 
 /// Encoded size of a value.
