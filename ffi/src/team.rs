@@ -80,7 +80,11 @@ fn bad(what: &str, why: impl std::fmt::Display) -> Failure {
 /// daemon's relay guards run): a refusal is `HUDDLE_E_VALUE` with its reason.
 fn contract(key: &'static str, value: &Value) -> Result<(), Failure> {
     match team::contract::check(key, value) {
-        Some(Err(e)) => Err(bad(key, e)),
+        // The contract's reason names the key already.
+        Some(Err(e)) => Err(Failure::new(
+            HUDDLE_E_VALUE,
+            format!("{e}; nothing written"),
+        )),
         _ => Ok(()),
     }
 }
