@@ -98,7 +98,7 @@ fn a_scripted_gamecontroller_drives_a_nodes_keys_status_and_budget() {
     game.state = State::Playing;
     game.secs_remaining = 500;
     game.team_mut(12).unwrap().message_budget = 1150;
-    let mut send = |game: &mut GameControlData| {
+    let send = |game: &mut GameControlData| {
         game.packet_number = game.packet_number.wrapping_add(1);
         gc.send_to(&game.encode(), listen).unwrap();
     };
