@@ -239,6 +239,12 @@ impl TeamCore {
             Some(Err(e)) => Err(e),
             Some(Ok(())) => {
                 take(&mut self.inputs, key, value, now);
+                if let Some(at) = self.inputs.ball_reset.take() {
+                    // At once, not at the next tick: a teammate's message that arrives in
+                    // between must already meet a forgotten ball.
+                    self.shared.layer.forget_ball(team::seconds(at));
+                    tracing::info!("team layer: ball reset");
+                }
                 Ok(key == contract::ODOMETRY_KEY || key == contract::POSE_KEY)
             }
         }
@@ -330,6 +336,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     }
     if let Some(at) = inputs.ball_reset.take() {
         layer.forget_ball(team::seconds(at));
+        tracing::info!("team layer: ball reset (at the tick)");
     }
     let balls: Vec<_> = inputs
         .balls

@@ -252,8 +252,6 @@ pub struct RemoteRobot {
     /// The odometry it wrote, with when (its clock): what the layer's pose may not hold
     /// yet.
     odometry_log: std::collections::VecDeque<(f64, Odometry)>,
-    /// When it last told the layer the ball was put back (its clock).
-    reset_at_s: f64,
 }
 
 impl RemoteRobot {
@@ -266,14 +264,14 @@ impl RemoteRobot {
             frame: Frame::default(),
             view: TeamView::default(),
             odometry_log: std::collections::VecDeque::new(),
-            reset_at_s: f64::NEG_INFINITY,
         }
     }
 
-    /// The referee put the ball back at `now_s`: the write that tells the layer. Until
-    /// the layer publishes again the robot plays on no ball rather than the old one.
-    pub fn ball_reset(&mut self, now_s: f64) -> (&'static str, Value) {
-        self.reset_at_s = now_s;
+    /// The referee put the ball back: the write that tells the layer. The robot plays
+    /// on no ball rather than the old one until the layer publishes again; whoever reads
+    /// the layer's outputs must drop the balls published before the reset (the relay's
+    /// output is in order: a `GETV` right after the reset marks the point).
+    pub fn ball_reset(&mut self) -> (&'static str, Value) {
         self.view.own_ball = None;
         self.view.team_ball = None;
         (contract::BALL_RESET_KEY, Value::Bool(true))
@@ -367,11 +365,6 @@ impl RemoteRobot {
         let mut writes = Vec::new();
         // Five of the layer's ticks without a rewrite: it no longer holds that ball.
         self.view.drop_stale(5.0 * cfg.team.control_period_s);
-        // Balls published before its latest ball reset are of a ball that is gone.
-        let reset = self.reset_at_s;
-        let after_reset = |b: &(PublishedBall, f64)| now_s - b.1 > reset;
-        self.view.own_ball = self.view.own_ball.filter(after_reset);
-        self.view.team_ball = self.view.team_ball.filter(after_reset);
         let Some((pose, pose_cov)) = self.pose_now(now_s) else {
             // The layer has not published a pose yet: nothing to play on.
             return RemoteTick {

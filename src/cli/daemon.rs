@@ -83,6 +83,11 @@ pub struct DaemonArgs {
     /// without one.
     #[arg(long, value_enum)]
     pub policy: Option<team::SendPolicy>,
+    /// The WLAN's expected one-way delay (`10ms`): the team layer's arbitration
+    /// compensates a teammate's claim for it, as the simulator's robots do for theirs.
+    /// Default: none.
+    #[arg(long, value_name = "DURATION", value_parser = duration::parse)]
+    pub latency_compensation: Option<std::time::Duration>,
     /// Listen to the league's GameController (RoboCup SPL, UDP port 3838): the game's
     /// state, penalties and score go to `local.var.gc.*`, this robot's status (RGrt) goes
     /// back to it, and under --budget the pacing follows its clock and its count of the
@@ -407,6 +412,9 @@ pub fn run(args: DaemonArgs) -> Result<()> {
             let mut cfg = driver::team::TeamLayerConfig::new(team_size, interval);
             if let Some(p) = args.policy {
                 cfg.team.send_policy = p;
+            }
+            if let Some(l) = args.latency_compensation {
+                cfg.params.latency_compensation = l;
             }
             tracing::info!(
                 policy = ?cfg.team.send_policy,

@@ -539,6 +539,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_daemon_s_default_calibration_is_the_simulator_s_nominal_world() {
+        // `huddle daemon` runs its team layer with `Calibration::default()`; `huddle sim
+        // --daemons` compares it with robots calibrated to the nominal field, so the two
+        // must be the same figures.
+        assert_eq!(
+            FieldConfig::default().exact_calibration(),
+            team::Calibration::default()
+        );
+    }
+
+    #[test]
     fn a_ball_rolled_into_the_opponent_goal_counts_and_is_put_back() {
         let mut w = World::new(FieldConfig::default(), &[], 0, 1);
         w.ball = Ball {

@@ -15,6 +15,9 @@
 //! poses the daemons held, messages sent. What it cannot have: the references that need a
 //! replica's inside (delivery, delayed-centralized) and the world-model NEES bands.
 //!
+//! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed)
+//! and each goal to stderr, for finding where an error comes from.
+//!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
 
@@ -332,18 +335,24 @@ fn start_daemon(
     let policy = clap::ValueEnum::to_possible_value(&cfg.brain.team.send_policy)
         .map(|v| v.get_name().to_owned())
         .unwrap_or_else(|| "every".into());
-    cmd.args(["--policy", &policy])
-        .env(
-            "RUST_LOG",
-            if opts.log_dir.is_some() {
-                "info"
-            } else {
-                "warn"
-            },
-        )
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::from(log_file));
+    cmd.args(["--policy", &policy]);
+    if cfg.compensate_latency {
+        // As the in-process team sets it: the network's expected delay.
+        let l = cfg.arbitration.latency_compensation;
+        let l = if l.is_zero() { cfg.expected_delay() } else { l };
+        cmd.args(["--latency-compensation", &format!("{}us", l.as_micros())]);
+    }
+    cmd.env(
+        "RUST_LOG",
+        if opts.log_dir.is_some() {
+            "info"
+        } else {
+            "warn"
+        },
+    )
+    .stdin(Stdio::null())
+    .stdout(Stdio::null())
+    .stderr(Stdio::from(log_file));
     let mut child = cmd
         .spawn()
         .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
@@ -414,7 +423,14 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
             continue;
         }
         if b.key == contract::TICK_KEY {
-            h.tick_at = Some(now);
+            if line.starts_with("VAL ") {
+                // The answer to the GETV sent right after a ball reset: every ball pushed
+                // before it is of the ball that is gone, every one after it is new.
+                h.view.own_ball = None;
+                h.view.team_ball = None;
+            } else {
+                h.tick_at = Some(now);
+            }
             continue;
         }
         if let Some(owner) = b.key.strip_suffix(".var.machine.pass_to") {
@@ -633,11 +649,12 @@ pub fn run(
                 let e2 = team.distance(truth).powi(2);
                 let c2 = (c.position() - fusion::nalgebra::Vector2::new(truth.x, truth.y))
                     .norm_squared();
-                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() && e2 > 0.04 {
+                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
                     eprintln!(
-                        "trace t={t:.2} robot={} err={:.2} team={team:?} truth={truth:?} sees={}",
+                        "trace t={t:.2} robot={} err={:.3} speed={:.2} team={team:?} truth={truth:?} sees={}",
                         r.id,
                         e2.sqrt(),
+                        world.ball.velocity.norm(),
                         r.sees_ball()
                     );
                 }
@@ -655,12 +672,19 @@ pub fn run(
             }
         }
         if world.step(dt).is_some() {
+            if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
+                eprintln!("goal t={t:.2} ball now {:?}", world.ball.at);
+            }
             // The referee puts the ball back on the centre spot; each robot program tells
             // its layer, as the in-process robots are told.
             central.forget();
             for (d, r) in daemons.iter_mut().zip(&mut robots) {
-                let (key, value) = r.ball_reset(started.elapsed().as_secs_f64());
-                d.send(&format!("SETV {key} {value}\n"))?;
+                let (key, value) = r.ball_reset();
+                // The GETV marks the reset's place in the relay's ordered output.
+                d.send(&format!(
+                    "SETV {key} {value}\nGETV {}\n",
+                    contract::TICK_KEY
+                ))?;
             }
         }
         let goers: Vec<u8> = robots
