@@ -35,6 +35,10 @@
 //! `local.var.robot.pose` (floats `[x_m, y_m, theta_rad, ...]`, field frame),
 //! `local.var.team.ball` (floats `[x_m, y_m, ...]`, field frame; its age is the entry's)
 //! and `local.var.robot.fallen` (bool).
+//!
+//! The logic is [`GcListener`] over a [`GcBoard`]: [`GameController`] runs it on the
+//! daemon's thread with its [`Handle`], the C node (`huddle-ffi`) on a thread of its own
+//! with its replica.
 
 use std::cell::RefCell;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
@@ -92,7 +96,7 @@ impl GameControllerConfig {
 /// A running listener; it stops when dropped.
 pub struct GameController {
     task: tokio::task::JoinHandle<()>,
-    tracker: Rc<RefCell<GameTracker>>,
+    listener: Rc<RefCell<GcListener>>,
 }
 
 impl Drop for GameController {
@@ -124,38 +128,188 @@ impl GameController {
             }
             None => None,
         };
+        let listener = Rc::new(RefCell::new(GcListener::new(config)));
+        let task = tokio::task::spawn_local(run(handle.clone(), listen, status, listener.clone()));
+        Ok(GameController { task, listener })
+    }
+
+    /// The tracker's counters and newest packet so far.
+    pub fn tracker(&self) -> GameTracker {
+        self.listener.borrow().tracker.clone()
+    }
+}
+
+/// What the listener reads and writes: the daemon's [`Handle`], or a node's replica
+/// under its lock.
+pub trait GcBoard {
+    /// The driver's clock.
+    fn now(&self) -> comms::Instant;
+    /// Writes `key` (the listener's `local` keys); a refusal is logged and dropped.
+    fn set(&mut self, key: &'static str, value: Value);
+    /// The value at `key`.
+    fn get(&self, key: &str) -> Option<comms::Entry>;
+    /// The GC's figures for the replica's budget, as [`Handle::set_external_budget`].
+    fn set_external_budget(&mut self, game_remaining: Option<Duration>, cap: Option<ExternalCap>);
+}
+
+impl GcBoard for Handle {
+    fn now(&self) -> comms::Instant {
+        Handle::now(self)
+    }
+
+    fn set(&mut self, key: &'static str, value: Value) {
+        if let Err(e) = Handle::set(self, key, value) {
+            tracing::debug!(key, error = %e, "cannot write");
+        }
+    }
+
+    fn get(&self, key: &str) -> Option<comms::Entry> {
+        Handle::get(self, key).ok().flatten()
+    }
+
+    fn set_external_budget(&mut self, game_remaining: Option<Duration>, cap: Option<ExternalCap>) {
+        Handle::set_external_budget(self, game_remaining, cap);
+    }
+}
+
+/// The listener without its sockets or timers: a GC datagram in ([`GcListener::receive`]),
+/// a status packet out every [`GameControllerConfig::status_period`]
+/// ([`GcListener::status`]), the GC's silence checked every second after the first three
+/// ([`GcListener::check`]).
+pub struct GcListener {
+    config: GameControllerConfig,
+    tracker: GameTracker,
+    written: Written,
+    /// Whether the replica's budget follows the GC now.
+    following: bool,
+    /// When the last "no GC" warning was.
+    warned_at: Option<Duration>,
+    status_sent: u64,
+}
+
+impl GcListener {
+    /// A listener with `config`, having heard nothing.
+    pub fn new(config: GameControllerConfig) -> GcListener {
         if config.status_period.is_some() && !(1..=20).contains(&config.player) {
             tracing::warn!(
                 player = config.player,
                 "GameController: player numbers are 1-20: no status packets will be sent"
             );
         }
-        let tracker = Rc::new(RefCell::new(GameTracker::new(config.team, config.player)));
-        let task =
-            tokio::task::spawn_local(run(handle.clone(), config, listen, status, tracker.clone()));
-        Ok(GameController { task, tracker })
+        GcListener {
+            tracker: GameTracker::new(config.team, config.player),
+            config,
+            written: Written::default(),
+            following: false,
+            warned_at: None,
+            status_sent: 0,
+        }
+    }
+
+    /// Its settings.
+    pub fn config(&self) -> &GameControllerConfig {
+        &self.config
     }
 
     /// The tracker's counters and newest packet so far.
-    pub fn tracker(&self) -> GameTracker {
-        self.tracker.borrow().clone()
+    pub fn tracker(&self) -> &GameTracker {
+        &self.tracker
+    }
+
+    /// A datagram from `from` on the GC port: tracked, written, fed to the budget.
+    pub fn receive(&mut self, board: &mut impl GcBoard, from: SocketAddr, bytes: &[u8]) {
+        let now = since_start(board);
+        match self.tracker.receive(now, from, bytes) {
+            Ok(gamecontroller::Received::Accepted) => {
+                self.written.write(board, &self.tracker);
+                if let Some(budget) = &self.config.budget {
+                    if !self.following {
+                        tracing::info!(%from, "GameController heard: the message budget follows its figures");
+                    }
+                    self.following = true;
+                    feed_budget(board, budget, &self.tracker);
+                }
+            }
+            Ok(gamecontroller::Received::Stale) => {}
+            Err(e) => tracing::debug!(%from, error = %e, "GameController packet dropped"),
+        }
+        self.written.stats(board, &self.tracker, self.status_sent);
+    }
+
+    /// The status period's turn: this robot's status to the GC through `send` (the packet
+    /// and the GC's status address), if a GC is heard and the player number is valid.
+    pub fn status(
+        &mut self,
+        board: &mut impl GcBoard,
+        send: impl FnOnce(&[u8], SocketAddr) -> std::io::Result<usize>,
+    ) {
+        let now = since_start(board);
+        let Some(mut to) = self.tracker.gc_address() else {
+            return;
+        };
+        if !(self.tracker.is_live(now, self.config.lost_after)
+            && (1..=20).contains(&self.config.player))
+        {
+            return;
+        }
+        to.set_port(self.config.status_port);
+        let msg = status_inputs(board).to_message(self.config.player, self.config.team);
+        match send(&msg.encode(), to) {
+            Ok(_) => self.status_sent += 1,
+            Err(e) => tracing::debug!(%to, error = %e, "status packet not sent"),
+        }
+        self.written.stats(board, &self.tracker, self.status_sent);
+    }
+
+    /// The once-a-second check: a GC gone silent gives the budget back to the replica's
+    /// own accounting; a GC never heard under a budget is said loudly, once a minute.
+    pub fn check(&mut self, board: &mut impl GcBoard) {
+        let now = since_start(board);
+        let live = self.tracker.is_live(now, self.config.lost_after);
+        if self.config.budget.is_none() || live {
+            return;
+        }
+        if self.following {
+            self.following = false;
+            board.set_external_budget(None, None);
+            tracing::warn!(
+                "GameController not heard for {:?}: the message budget is paced by this \
+                 daemon's own accounting again (it cannot know the team's count)",
+                self.config.lost_after
+            );
+            self.warned_at = Some(now);
+        } else if self
+            .warned_at
+            .is_none_or(|w| now.saturating_sub(w) >= Duration::from_secs(60))
+        {
+            self.warned_at = Some(now);
+            tracing::warn!(
+                listen = %self.config.listen,
+                "NO GAMECONTROLLER heard: the league budget is paced from this daemon's \
+                 start, not the game's clock, and cannot see the team's count; a GC's \
+                 messageBudget of 0 would not stop it (--no-gamecontroller to silence)"
+            );
+        }
     }
 }
 
 /// The driver clock as the tracker's time.
-fn since_start(handle: &Handle) -> Duration {
-    Duration::from_micros(handle.now().as_micros())
+fn since_start(board: &impl GcBoard) -> Duration {
+    Duration::from_micros(board.now().as_micros())
 }
 
 async fn run(
-    handle: Handle,
-    config: GameControllerConfig,
+    mut handle: Handle,
     listen: UdpSocket,
     status: Option<UdpSocket>,
-    tracker: Rc<RefCell<GameTracker>>,
+    listener: Rc<RefCell<GcListener>>,
 ) {
     let mut buf = [0u8; 2048];
-    let period = config.status_period.unwrap_or(Duration::from_secs(3600));
+    let period = listener
+        .borrow()
+        .config
+        .status_period
+        .unwrap_or(Duration::from_secs(3600));
     let mut status_tick = tokio::time::interval(period);
     status_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // The first check after a grace period: a GC sends twice a second.
@@ -163,91 +317,33 @@ async fn run(
         tokio::time::Instant::now() + Duration::from_secs(3),
         Duration::from_secs(1),
     );
-    let mut written = Written::default();
-    // Whether the replica's budget follows the GC now; when the last "no GC" warning was.
-    let mut following = false;
-    let mut warned_at: Option<Duration> = None;
-    let mut status_sent = 0u64;
     loop {
         tokio::select! {
             r = listen.recv_from(&mut buf) => {
-                let (len, from) = match r {
-                    Ok(x) => x,
-                    Err(e) => {
-                        tracing::debug!(error = %e, "GameController socket");
-                        continue;
-                    }
-                };
-                let now = since_start(&handle);
-                let received = tracker.borrow_mut().receive(now, from, &buf[..len]);
-                match received {
-                    Ok(gamecontroller::Received::Accepted) => {
-                        let t = tracker.borrow().clone();
-                        written.write(&handle, &t);
-                        if let Some(budget) = &config.budget {
-                            if !following {
-                                tracing::info!(%from, "GameController heard: the message budget follows its figures");
-                            }
-                            following = true;
-                            feed_budget(&handle, budget, &t);
-                        }
-                    }
-                    Ok(gamecontroller::Received::Stale) => {}
-                    Err(e) => tracing::debug!(%from, error = %e, "GameController packet dropped"),
+                match r {
+                    Ok((len, from)) => listener.borrow_mut().receive(&mut handle, from, &buf[..len]),
+                    Err(e) => tracing::debug!(error = %e, "GameController socket"),
                 }
-                written.stats(&handle, &tracker.borrow(), status_sent);
             }
             _ = status_tick.tick(), if status.is_some() => {
-                let t = tracker.borrow().clone();
-                let now = since_start(&handle);
-                if let (Some(socket), Some(to)) = (&status, t.gc_address()) {
-                    if t.is_live(now, config.lost_after) && (1..=20).contains(&config.player) {
-                        let mut to = to;
-                        to.set_port(config.status_port);
-                        let msg = status_inputs(&handle).to_message(config.player, config.team);
-                        match socket.try_send_to(&msg.encode(), to) {
-                            Ok(_) => status_sent += 1,
-                            Err(e) => tracing::debug!(%to, error = %e, "status packet not sent"),
-                        }
-                        written.stats(&handle, &t, status_sent);
-                    }
+                if let Some(socket) = &status {
+                    listener
+                        .borrow_mut()
+                        .status(&mut handle, |packet, to| socket.try_send_to(packet, to));
                 }
             }
-            _ = check.tick() => {
-                let now = since_start(&handle);
-                let live = tracker.borrow().is_live(now, config.lost_after);
-                if config.budget.is_some() && !live {
-                    if following {
-                        following = false;
-                        handle.set_external_budget(None, None);
-                        tracing::warn!(
-                            "GameController not heard for {:?}: the message budget is paced by this \
-                             daemon's own accounting again (it cannot know the team's count)",
-                            config.lost_after
-                        );
-                        warned_at = Some(now);
-                    } else if warned_at.is_none_or(|w| now.saturating_sub(w) >= Duration::from_secs(60)) {
-                        warned_at = Some(now);
-                        tracing::warn!(
-                            listen = %config.listen,
-                            "NO GAMECONTROLLER heard: the league budget is paced from this daemon's \
-                             start, not the game's clock, and cannot see the team's count; a GC's \
-                             messageBudget of 0 would not stop it (--no-gamecontroller to silence)"
-                        );
-                    }
-                }
-            }
+            _ = check.tick() => listener.borrow_mut().check(&mut handle),
         }
     }
 }
 
 /// The replica's budget from the GC's newest figures.
-fn feed_budget(handle: &Handle, budget: &GcBudget, t: &GameTracker) {
+fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) {
     let Some(game) = t.game() else { return };
     let Some(cap) = budget.cap(game, t.team_number()) else {
         return;
     };
-    handle.set_external_budget(
+    board.set_external_budget(
         Some(cap.game_remaining),
         Some(ExternalCap {
             counted: cap.counted,
@@ -258,15 +354,15 @@ fn feed_budget(handle: &Handle, budget: &GcBudget, t: &GameTracker) {
 }
 
 /// The status packet's inputs from the documented keys.
-fn status_inputs(handle: &Handle) -> StatusInputs {
-    let floats = |key: &str| match handle.get(key) {
-        Ok(Some(e)) => match e.value {
+fn status_inputs(board: &impl GcBoard) -> StatusInputs {
+    let floats = |key: &str| match board.get(key) {
+        Some(e) => match e.value {
             Value::Floats(v) => Some((v, e.stamp)),
             _ => None,
         },
         _ => None,
     };
-    let now = handle.now();
+    let now = board.now();
     let pose = floats("local.var.robot.pose")
         .filter(|(v, _)| v.len() >= 3)
         .map(|(v, _)| [v[0], v[1], v[2]]);
@@ -277,11 +373,11 @@ fn status_inputs(handle: &Handle) -> StatusInputs {
             ([v[0], v[1]], age)
         });
     let fallen = matches!(
-        handle.get("local.var.robot.fallen"),
-        Ok(Some(comms::Entry {
+        board.get("local.var.robot.fallen"),
+        Some(comms::Entry {
             value: Value::Bool(true),
             ..
-        }))
+        })
     );
     StatusInputs { pose, ball, fallen }
 }
@@ -293,18 +389,16 @@ struct Written {
 }
 
 impl Written {
-    fn put(&mut self, handle: &Handle, key: &'static str, value: Value) {
+    fn put(&mut self, board: &mut impl GcBoard, key: &'static str, value: Value) {
         match self.values.iter_mut().find(|(k, _)| *k == key) {
             Some((_, v)) if *v == value => return,
             Some((_, v)) => *v = value.clone(),
             None => self.values.push((key, value.clone())),
         }
-        if let Err(e) = handle.set(key, value) {
-            tracing::debug!(key, error = %e, "cannot write");
-        }
+        board.set(key, value);
     }
 
-    fn write(&mut self, handle: &Handle, t: &GameTracker) {
+    fn write(&mut self, handle: &mut impl GcBoard, t: &GameTracker) {
         let Some(g) = t.game() else { return };
         let int = |v: i64| Value::Int(v);
         let text = |s: &str| Value::String(s.to_owned());
@@ -357,7 +451,7 @@ impl Written {
         }
     }
 
-    fn stats(&mut self, handle: &Handle, t: &GameTracker, status_sent: u64) {
+    fn stats(&mut self, handle: &mut impl GcBoard, t: &GameTracker, status_sent: u64) {
         let s = t.stats();
         for (key, n) in [
             ("local.var.huddle.stats.gc.accepted", s.accepted),

@@ -102,21 +102,7 @@ struct Shared {
 /// [`tokio::task::LocalSet`] (the driver's thread).
 pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
     let id = handle.robot_id();
-    let layer = TeamLayer::new(
-        id,
-        false,
-        cfg.params,
-        Pose::default(),
-        &cfg.calibration,
-        &cfg.team.world_model,
-        cfg.team_size.max(usize::from(id)),
-    );
-    let inputs = Rc::new(RefCell::new(Inputs::default()));
-    let shared = Rc::new(RefCell::new(Shared {
-        layer,
-        cfg,
-        ticks: 0,
-    }));
+    let core = Rc::new(RefCell::new(TeamCore::new(id, cfg)));
     // The robot program's cycle drives the layer: its odometry (or pose) closes a cycle's
     // inputs, and the layer ticks on it at once, so what it publishes holds that cycle.
     let cycle = Rc::new(tokio::sync::Notify::new());
@@ -127,39 +113,27 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
     let guards = contract::INPUT_KEYS
         .iter()
         .map(|&key| {
-            let inputs = Rc::clone(&inputs);
+            let core = Rc::clone(&core);
             let cycle = Rc::clone(&cycle);
-            let layer = Rc::clone(&shared);
             handle
-                .guard(key, move |value| match contract::check(key, value) {
-                    Some(Err(e)) => Err(Rejected {
-                        code: ErrCode::BadValue,
-                        text: e.to_string(),
-                    }),
-                    _ => {
-                        take(&mut inputs.borrow_mut(), key, value, clock.now());
-                        if key == contract::BALL_RESET_KEY {
-                            // At once, not at the next tick: a teammate's message that
-                            // arrives in between must already meet a forgotten ball. (If
-                            // the layer is busy, its next tick applies it.)
-                            if let Ok(mut s) = layer.try_borrow_mut() {
-                                if let Some(at) = inputs.borrow_mut().ball_reset.take() {
-                                    s.layer.forget_ball(team::seconds(at));
-                                    tracing::info!("team layer: ball reset");
-                                }
+                .guard(key, move |value| {
+                    match core.borrow_mut().input(key, value, clock.now()) {
+                        Err(e) => Err(Rejected {
+                            code: ErrCode::BadValue,
+                            text: e.to_string(),
+                        }),
+                        Ok(closes_cycle) => {
+                            if closes_cycle {
+                                cycle.notify_one();
                             }
+                            Ok(())
                         }
-                        if key == contract::ODOMETRY_KEY || key == contract::POSE_KEY {
-                            cycle.notify_one();
-                        }
-                        Ok(())
                     }
                 })
                 .expect("the contract's keys are valid")
         })
         .collect();
-    let claims = Rc::clone(&shared);
-    let fed = Rc::clone(&inputs);
+    let claims = Rc::clone(&core);
     let react = handle
         .watch("+.var.machine.heuristic", move |h, notice| {
             let Notice::Changed { key, .. } = notice else {
@@ -169,20 +143,12 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                 return;
             }
             // A teammate's claim as it arrives, not at the next tick.
-            if !fed.borrow().fed {
-                return;
-            }
-            let mut s = claims.borrow_mut();
-            h.with_replica(|replica, now| {
-                let waiting = replica.is_pending(&team::world_local_key());
-                let writes = s.layer.redecide(replica.blackboard(), now, waiting);
-                apply(replica, now, writes, true);
-                publish(replica, now, &s.layer, &s.cfg);
-            });
+            let mut core = claims.borrow_mut();
+            h.with_replica(|replica, now| core.react(replica, now));
         })
         .expect("a valid pattern");
     let ticker = handle.clone();
-    let period = Duration::from_secs_f64(cfg.team.control_period_s.max(0.005));
+    let period = core.borrow().period();
     let task = tokio::task::spawn_local(async move {
         let mut every = tokio::time::interval(period);
         every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -203,19 +169,104 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                 }
             }
             last = tokio::time::Instant::now();
-            let mut inputs = inputs.borrow_mut();
-            if !inputs.fed {
-                continue;
-            }
-            let mut s = shared.borrow_mut();
-            let s = &mut *s;
-            ticker.with_replica(|replica, now| tick(replica, now, s, &mut inputs));
+            let mut core = core.borrow_mut();
+            ticker.with_replica(|replica, now| core.tick(replica, now));
         }
     });
     TeamRunner {
         _guards: guards,
         _watches: vec![react],
         task,
+    }
+}
+
+/// The team layer and what the robot program wrote, without a driver around them: what
+/// [`start`] runs on the daemon's thread, and what a driver of its own (the C node's
+/// engine) runs on its replica. The driver hands it every write of an input key
+/// ([`TeamCore::input`]), ticks it every control period and when an input closes a cycle
+/// ([`TeamCore::tick`]), and tells it when a teammate's claim changed
+/// ([`TeamCore::react`]). Until a pose or odometry came, it writes and sends nothing.
+pub struct TeamCore {
+    inputs: Inputs,
+    shared: Shared,
+}
+
+impl TeamCore {
+    /// Robot `id`'s layer, dormant until fed.
+    pub fn new(id: u8, cfg: TeamLayerConfig) -> TeamCore {
+        let layer = TeamLayer::new(
+            id,
+            false,
+            cfg.params,
+            Pose::default(),
+            &cfg.calibration,
+            &cfg.team.world_model,
+            cfg.team_size.max(usize::from(id)),
+        );
+        TeamCore {
+            inputs: Inputs::default(),
+            shared: Shared {
+                layer,
+                cfg,
+                ticks: 0,
+            },
+        }
+    }
+
+    /// The control period: the longest between two ticks.
+    pub fn period(&self) -> Duration {
+        Duration::from_secs_f64(self.shared.cfg.team.control_period_s.max(0.005))
+    }
+
+    /// Whether the robot program has said where it is (the layer runs).
+    pub fn fed(&self) -> bool {
+        self.inputs.fed
+    }
+
+    /// One write of `key` by the robot program at `now`: checked by the contract and, if
+    /// it is an input, taken for the next tick. `Err`: refused, nothing taken (the write
+    /// must not happen either). `Ok(true)`: it closes the program's cycle (a pose or
+    /// odometry), so the layer should tick now (at most twice a period). Keys that are
+    /// not inputs are `Ok(false)`.
+    pub fn input(
+        &mut self,
+        key: &str,
+        value: &Value,
+        now: Instant,
+    ) -> Result<bool, contract::ContractError> {
+        match contract::check(key, value) {
+            None => Ok(false),
+            Some(Err(e)) => Err(e),
+            Some(Ok(())) => {
+                take(&mut self.inputs, key, value, now);
+                if let Some(at) = self.inputs.ball_reset.take() {
+                    // At once, not at the next tick: a teammate's message that arrives in
+                    // between must already meet a forgotten ball.
+                    self.shared.layer.forget_ball(team::seconds(at));
+                    tracing::info!("team layer: ball reset");
+                }
+                Ok(key == contract::ODOMETRY_KEY || key == contract::POSE_KEY)
+            }
+        }
+    }
+
+    /// One control tick on what came since the previous one; nothing while dormant.
+    pub fn tick(&mut self, replica: &mut Replica, now: Instant) {
+        if self.inputs.fed {
+            tick(replica, now, &mut self.shared, &mut self.inputs);
+        }
+    }
+
+    /// A teammate's claim changed: decide again at once; nothing while dormant.
+    pub fn react(&mut self, replica: &mut Replica, now: Instant) {
+        if !self.inputs.fed {
+            return;
+        }
+        let s = &mut self.shared;
+        let waiting = replica.is_pending(&team::world_local_key());
+        let writes = s.layer.redecide(replica.blackboard(), now, waiting);
+        apply(replica, now, writes, true);
+        publish(replica, now, &s.layer, &s.cfg);
     }
 }
 

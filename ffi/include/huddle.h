@@ -119,6 +119,15 @@
 // at most once a second while it lasts (counted in `huddle_stats.id_conflicts`).
 #define HUDDLE_EVENT_ID_CONFLICT 10
 
+// `huddle_node_config.gamecontroller`: on with the `"spl"` budget (the default).
+#define HUDDLE_GC_AUTO 0
+
+// `huddle_node_config.gamecontroller`: on; the start fails if the port cannot be bound.
+#define HUDDLE_GC_ON 1
+
+// `huddle_node_config.gamecontroller`: off.
+#define HUDDLE_GC_OFF 2
+
 // `huddle_node_config.transport`: every frame to the multicast group (the default).
 #define HUDDLE_TRANSPORT_MULTICAST 0
 
@@ -244,6 +253,27 @@ typedef struct {
   // refresh periods suffice (teammates send at least once per refresh). 0: start at
   // once; a conflict is still reported later as `HUDDLE_EVENT_ID_CONFLICT`.
   uint32_t id_check_ms;
+  // Non-zero: do not run the team layer (`huddle daemon --no-team-layer`): the
+  // `local.var.robot.*` keys are then plain keys, unchecked, and nothing writes
+  // `local.var.team.*`. By default the node runs it as the daemon does
+  // (docs/team-layer.md), dormant until the program writes a pose or odometry.
+  uint8_t no_team_layer;
+  // The team layer's sending policy, as `huddle daemon --policy`: `"voi"`,
+  // `"baseline"` or `"every"`; NULL: `voi` under a budget, `every` without.
+  const char *team_policy;
+  // The GameController listener, as `huddle daemon --gamecontroller`:
+  // `HUDDLE_GC_AUTO` (0: on with the `"spl"` budget, and a node that cannot bind its
+  // port starts without it, saying so on stderr), `HUDDLE_GC_ON` (a node that cannot
+  // listen does not start) or `HUDDLE_GC_OFF`. It writes the GC's packets to
+  // `local.var.gc.*`, under a budget paces it by the GC's game clock and message count,
+  // and sends this robot's status (from `local.var.robot.pose`, `local.var.team.ball`,
+  // `local.var.robot.fallen`) to the GC's port 3939; `team_id` and `robot_id` are the
+  // team and player numbers.
+  int32_t gamecontroller;
+  // Where it listens (`"ADDR:PORT"`); NULL: `"0.0.0.0:3838"` (the GC broadcasts).
+  const char *gc_listen;
+  // The port status packets go to on the GC's address; 0: 3939.
+  uint16_t gc_status_port;
 } huddle_node_config;
 
 // One binding as read by `huddle_node_get` or `huddle_replica_get`.
@@ -946,6 +976,19 @@ int huddle_node_set_robot_landmarks(huddle_node *node,
                                     const double *sightings,
                                     size_t count,
                                     huddle_error *err);
+
+// Reads who goes to the ball: `goer` gets the robot the team layer says goes
+// (`local.var.team.goer`, 0: none), `going` 1 if it is this robot
+// (`local.var.team.going`), else 0. Returns 1, 0 while the layer has not decided yet
+// (dormant: no pose or odometry written; or no team layer), -1 on error
+// (`HUDDLE_E_TYPE`).
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `goer`, `going` and `err` are NULL or writable.
+int huddle_node_get_team_goer(huddle_node *node, uint8_t *goer, int *going, huddle_error *err);
 
 // Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while no robot
 // has seen the ball (or no team layer runs), -1 on error (`HUDDLE_E_TYPE`: the key holds

@@ -11,6 +11,13 @@
 //! next deadline (`poll_timeout`) comes, and feeds either to the replica under the same
 //! lock. Stopping sets a flag the thread sees within [`STOP_CHECK`].
 //!
+//! The team layer (`driver::team::TeamCore`, the code `huddle daemon` runs for its robot)
+//! runs under the same lock: every write of a `local.var.robot.*` input is checked by
+//! its contract and taken ([`State::set`]); it ticks every control period on the receive
+//! thread, and at once on the caller's thread when a pose or odometry write closes the
+//! program's cycle (at most twice a period, as the daemon); a teammate's changed claim
+//! makes it decide again as the change is drained ([`State::pump`]).
+//!
 //! Like `driver::Driver` without relay or impairment: the sockets are the driver's
 //! (`driver::open` for the transport, multicast, broadcast or unicast, and
 //! `driver::open_unicast` for listed peers), every frame goes to the group or broadcast
@@ -25,7 +32,8 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use comms::{Event, Instant, Pattern, Replica};
+use comms::{Event, Instant, Pattern, Replica, Scope, Value};
+use driver::team::{TeamCore, TeamLayerConfig};
 use driver::{new_incarnation, Clock, DriverConfig, Transport};
 
 use crate::error::*;
@@ -97,6 +105,39 @@ pub(crate) struct State {
     pub(crate) watches: Vec<Pattern>,
     /// Datagram counters for `huddle_node_stats`.
     pub(crate) io: Io,
+    /// The robot's team layer, unless the config turned it off.
+    team: Option<TeamRun>,
+    /// Teammates' should-I-go claims (`+.var.machine.heuristic`, as the daemon's layer
+    /// watches them).
+    claims: Pattern,
+}
+
+/// The team layer on the node and when it ticks.
+struct TeamRun {
+    core: TeamCore,
+    period: Duration,
+    /// The next timer tick; `None` while the layer is dormant (no pose or odometry yet).
+    next: Option<Instant>,
+    /// The latest tick.
+    last: Option<Instant>,
+}
+
+impl TeamRun {
+    fn new(robot: u8, cfg: TeamLayerConfig) -> TeamRun {
+        let core = TeamCore::new(robot, cfg);
+        TeamRun {
+            period: core.period(),
+            core,
+            next: None,
+            last: None,
+        }
+    }
+
+    fn tick(&mut self, replica: &mut Replica, now: Instant) {
+        self.core.tick(replica, now);
+        self.last = Some(now);
+        self.next = Some(now + self.period);
+    }
 }
 
 /// The node's sockets: the transport's, and the `--peer` one when peers are listed and
@@ -117,8 +158,67 @@ pub(crate) struct Io {
 }
 
 impl State {
-    /// Drains the replica: frames to the group, events to the queue.
-    pub(crate) fn pump(&mut self) {
+    /// Writes `value` to `key` for the robot program with `write` (a set, or a set on the
+    /// priority path). A team-layer input is checked by its contract first
+    /// (`HUDDLE_E_VALUE`, nothing written), then taken; a pose or odometry closes the
+    /// program's cycle and the layer ticks at once, unless it ticked less than half a
+    /// period ago (the timer then takes it), as in the daemon. An input `write` then
+    /// refuses was still taken, as at the daemon's guard: that cannot happen, the input
+    /// keys being valid `local` keys.
+    pub(crate) fn set(
+        &mut self,
+        now: Instant,
+        key: &str,
+        value: Value,
+        write: impl FnOnce(&mut Replica, Value) -> Result<(), Failure>,
+    ) -> Result<(), Failure> {
+        let closes_cycle = match &mut self.team {
+            Some(team) => team
+                .core
+                .input(key, &value, now)
+                .map_err(|e| Failure::new(HUDDLE_E_VALUE, format!("{e}; nothing written")))?,
+            None => false,
+        };
+        write(&mut self.replica, value)?;
+        if let Some(team) = self.team.as_mut().filter(|_| closes_cycle) {
+            let since = team.last.map(|t| now.saturating_duration_since(t));
+            if since.is_none_or(|s| s >= team.period / 2) {
+                team.tick(&mut self.replica, now);
+                // While the program drives, the timer only stands in for a missed cycle:
+                // it must not tick just before the next cycle closes.
+                team.next = Some(now + team.period * 3 / 2);
+            }
+        }
+        Ok(())
+    }
+
+    /// The team layer's timer: its tick if due, and when the next one is.
+    fn team_timer(&mut self, now: Instant) -> Option<Instant> {
+        let team = self.team.as_mut()?;
+        if team.next.is_some_and(|t| t <= now) {
+            team.tick(&mut self.replica, now);
+        }
+        team.next
+    }
+
+    /// Drains the replica: frames to the group, events to the queue; a teammate's claim
+    /// among the changes makes the team layer decide again, and what that writes is
+    /// drained too.
+    pub(crate) fn pump(&mut self, now: Instant) {
+        let own = Scope::Robot(self.replica.robot_id());
+        // The layer's reaction writes only this robot's keys: the second round drains
+        // them and ends.
+        while self.drain(own) {
+            match &mut self.team {
+                Some(team) => team.core.react(&mut self.replica, now),
+                None => break,
+            }
+        }
+    }
+
+    /// [`State::pump`] once; whether a teammate's claim changed.
+    fn drain(&mut self, own: Scope) -> bool {
+        let mut claim = false;
         while let Some(transmit) = self.replica.poll_transmit() {
             let Some(sockets) = &self.sockets else {
                 continue;
@@ -138,6 +238,7 @@ impl State {
         }
         while let Some(event) = self.replica.poll_event() {
             if let Event::ValueChanged { key } = &event {
+                claim |= key.scope() != own && self.claims.matches(key);
                 if self.watches.iter().any(|p| p.matches(key)) {
                     if let Ok(Some(entry)) = self.replica.get(&key.to_string()) {
                         self.events.push(NodeEvent::Changed {
@@ -153,6 +254,7 @@ impl State {
                 self.events.push(event);
             }
         }
+        claim
     }
 
     /// Whether the node still runs (a call racing `huddle_node_stop` may find it not).
@@ -217,7 +319,7 @@ pub(crate) struct Shared {
     state: Mutex<State>,
     pub(crate) clock: Clock,
     pub(crate) events: Arc<EventQueue>,
-    stopping: AtomicBool,
+    pub(crate) stopping: AtomicBool,
 }
 
 impl Shared {
@@ -238,7 +340,10 @@ pub(crate) struct Engine {
 impl Engine {
     /// Opens the socket, starts the replica with the start values, sends its first frame
     /// and starts the receive thread.
-    pub(crate) fn start(config: DriverConfig) -> Result<Engine, Failure> {
+    pub(crate) fn start(
+        config: DriverConfig,
+        team_layer: Option<TeamLayerConfig>,
+    ) -> Result<Engine, Failure> {
         let transport = config.socket.transport;
         let peers_only = transport == Transport::Unicast;
         if peers_only && config.peers.is_empty() {
@@ -279,6 +384,7 @@ impl Engine {
         }
         // Start values are this robot's business, not changes anyone waits for.
         while replica.poll_event().is_some() {}
+        let robot_id = replica.robot_id();
 
         let events = Arc::new(EventQueue::default());
         let shared = Arc::new(Shared {
@@ -290,13 +396,15 @@ impl Engine {
                 events: events.clone(),
                 watches: Vec::new(),
                 io: Io::default(),
+                team: team_layer.map(|cfg| TeamRun::new(robot_id, cfg)),
+                claims: Pattern::parse("+.var.machine.heuristic").expect("a valid pattern"),
             }),
             clock,
             events,
             stopping: AtomicBool::new(false),
         });
         // The first frame (heartbeat, start values) goes out at once.
-        shared.lock().pump();
+        shared.lock().pump(shared.clock.now());
         let robot = shared.lock().replica.robot_id();
         let engine = Engine {
             shared,
@@ -322,6 +430,28 @@ impl Engine {
         Ok(engine)
     }
 
+    /// Starts the GameController listener on a thread of its own (`crate::gc`); it stops
+    /// with the node.
+    pub(crate) fn start_gc(&self, config: driver::GameControllerConfig) -> Result<(), Failure> {
+        let (listen, status) = crate::gc::open(&config)?;
+        if let Some(status) = &status {
+            status.set_write_timeout(Some(SEND_TIMEOUT)).map_err(|e| {
+                Failure::new(
+                    HUDDLE_E_NETWORK,
+                    format!("GameController status socket: {e}"),
+                )
+            })?;
+        }
+        let shared = self.shared.clone();
+        let listener = driver::GcListener::new(config);
+        let thread = std::thread::Builder::new()
+            .name("huddle-node-gc".into())
+            .spawn(move || crate::gc::run(&shared, listen, status, listener))
+            .map_err(|e| Failure::new(HUDDLE_E_INTERNAL, format!("cannot start a thread: {e}")))?;
+        self.threads().push(thread);
+        Ok(())
+    }
+
     fn threads(&self) -> MutexGuard<'_, Vec<JoinHandle<()>>> {
         self.threads.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -338,7 +468,7 @@ impl Engine {
         }
         let now = self.shared.clock.now();
         let result = f(&mut state, now);
-        state.pump();
+        state.pump(now);
         Ok(result)
     }
 
@@ -398,10 +528,14 @@ fn receive_loop(shared: &Shared, socket: UdpSocket, accept: Option<Vec<SocketAdd
             if state.replica.poll_timeout().is_some_and(|t| t <= now) {
                 state.replica.handle_timeout(now);
             }
-            state.pump();
+            let team_tick = state.team_timer(now);
+            state.pump(now);
             state
                 .replica
                 .poll_timeout()
+                .into_iter()
+                .chain(team_tick)
+                .min()
                 .map_or(STOP_CHECK, |t| t.saturating_duration_since(now))
         };
         // Whole milliseconds, rounded up (as tokio's timers, which the driver uses): the
@@ -428,7 +562,7 @@ fn receive_loop(shared: &Shared, socket: UdpSocket, accept: Option<Vec<SocketAdd
 
 /// An error `recv_from` may give that is no reason to stop: the wait timed out, a
 /// signal interrupted it, an ICMP error of an earlier send surfaced.
-fn is_transient(e: &io::Error) -> bool {
+pub(crate) fn is_transient(e: &io::Error) -> bool {
     matches!(
         e.kind(),
         io::ErrorKind::WouldBlock

@@ -14,8 +14,11 @@
 //!   no socket round trip per update; a thread of the node's own receives and runs the
 //!   timers; talk messages, peer changes, id conflicts and watched value changes arrive
 //!   as events (`huddle_node_next_event`); `huddle_node_keys` and `huddle_node_stats`
-//!   list what it holds. Typed calls for the team layer's keys (`docs/team-layer.md`)
-//!   write its inputs and read its outputs;
+//!   list what it holds. It runs the team layer as `huddle daemon` does (the daemon's
+//!   own `driver::team::TeamCore`, `docs/team-layer.md`): typed calls write its inputs
+//!   (any write of an input key is checked by the contract) and read its outputs, the
+//!   team ball, the goer and whether this robot goes; and, on the `spl` budget or when
+//!   asked, the daemon's GameController listener (`driver::GcListener`);
 //! - **the replica** (`huddle_replica_*`): `comms::Replica`, the sans-IO state machine,
 //!   for programs that own their socket and their clock.
 //!
@@ -25,8 +28,8 @@
 //!
 //! **What it is not.** No protocol logic: every frame is decided by `comms`, every socket
 //! is opened by the `driver` (`driver::open`, `driver::open_unicast`); the node only moves
-//! datagrams between them. Not (yet) the team layer itself: the in-process node stores
-//! its keys, `huddle daemon` runs it.
+//! datagrams between them; no team logic of its own either: the team layer and the
+//! GameController listener are the driver's, run on the node's lock and threads.
 //!
 //! **Linking.** `cargo build --profile ffi -p huddle-ffi` makes `target/ffi/libhuddle.a`
 //! without huddle's debug info; `ffi/install.sh PREFIX` installs it stripped with the headers,
@@ -79,6 +82,7 @@ mod control;
 mod engine;
 mod error;
 mod event;
+mod gc;
 mod handles;
 mod node;
 mod replica;

@@ -13,7 +13,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use comms::{BudgetSpec, Entry, Key, PostError, ReplicaConfig, SetError, Value};
-use driver::{resolve_iface, DriverConfig, SocketConfig, Transport};
+use driver::team::TeamLayerConfig;
+use driver::{resolve_iface, DriverConfig, GameControllerConfig, SocketConfig, Transport};
+use team::SendPolicy;
 
 use crate::binding::{fill_binding, huddle_binding};
 use crate::engine::Engine;
@@ -82,7 +84,35 @@ pub struct huddle_node_config {
     /// refresh periods suffice (teammates send at least once per refresh). 0: start at
     /// once; a conflict is still reported later as `HUDDLE_EVENT_ID_CONFLICT`.
     pub id_check_ms: u32,
+    /// Non-zero: do not run the team layer (`huddle daemon --no-team-layer`): the
+    /// `local.var.robot.*` keys are then plain keys, unchecked, and nothing writes
+    /// `local.var.team.*`. By default the node runs it as the daemon does
+    /// (docs/team-layer.md), dormant until the program writes a pose or odometry.
+    pub no_team_layer: u8,
+    /// The team layer's sending policy, as `huddle daemon --policy`: `"voi"`,
+    /// `"baseline"` or `"every"`; NULL: `voi` under a budget, `every` without.
+    pub team_policy: *const c_char,
+    /// The GameController listener, as `huddle daemon --gamecontroller`:
+    /// `HUDDLE_GC_AUTO` (0: on with the `"spl"` budget, and a node that cannot bind its
+    /// port starts without it, saying so on stderr), `HUDDLE_GC_ON` (a node that cannot
+    /// listen does not start) or `HUDDLE_GC_OFF`. It writes the GC's packets to
+    /// `local.var.gc.*`, under a budget paces it by the GC's game clock and message count,
+    /// and sends this robot's status (from `local.var.robot.pose`, `local.var.team.ball`,
+    /// `local.var.robot.fallen`) to the GC's port 3939; `team_id` and `robot_id` are the
+    /// team and player numbers.
+    pub gamecontroller: i32,
+    /// Where it listens (`"ADDR:PORT"`); NULL: `"0.0.0.0:3838"` (the GC broadcasts).
+    pub gc_listen: *const c_char,
+    /// The port status packets go to on the GC's address; 0: 3939.
+    pub gc_status_port: u16,
 }
+
+/// `huddle_node_config.gamecontroller`: on with the `"spl"` budget (the default).
+pub const HUDDLE_GC_AUTO: i32 = 0;
+/// `huddle_node_config.gamecontroller`: on; the start fails if the port cannot be bound.
+pub const HUDDLE_GC_ON: i32 = 1;
+/// `huddle_node_config.gamecontroller`: off.
+pub const HUDDLE_GC_OFF: i32 = 2;
 
 /// `huddle_node_config.transport`: every frame to the multicast group (the default).
 pub const HUDDLE_TRANSPORT_MULTICAST: i32 = 0;
@@ -97,9 +127,17 @@ type Node = Engine;
 
 static NODES: Handles<Node> = Handles::new();
 
+/// What a node runs: the driver's settings, the team layer's unless it is off, the
+/// GameController listener's if it is on (and whether it was asked for).
+struct NodeConfig {
+    driver: DriverConfig,
+    team: Option<TeamLayerConfig>,
+    gc: Option<(GameControllerConfig, bool)>,
+}
+
 /// The settings checked and resolved on the caller's thread, so that a bad one fails
 /// the start with a clear reason.
-fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
+fn driver_config(cfg: &huddle_node_config) -> Result<NodeConfig, Failure> {
     let robot_id = match cfg.robot_id {
         0 => {
             let raw = std::env::var("ROBOT_ID").map_err(|_| {
@@ -140,6 +178,8 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
     let config_dir = unsafe { read_opt_str(cfg.config_dir, "config_dir") }?;
     let broadcast = unsafe { read_opt_str(cfg.broadcast_address, "broadcast_address") }?;
     let budget = unsafe { read_opt_str(cfg.budget, "budget") }?;
+    let policy = unsafe { read_opt_str(cfg.team_policy, "team_policy") }?;
+    let gc_listen = unsafe { read_opt_str(cfg.gc_listen, "gc_listen") }?;
     // SAFETY: as above, for `peer_count` strings.
     let peers = unsafe { read_peers(cfg.peers, cfg.peer_count) }?;
 
@@ -212,11 +252,16 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
     }
     let iface = resolve_iface(iface)
         .map_err(|e| Failure::new(HUDDLE_E_NETWORK, format!("interface_address: {e}")))?;
+    let team_size = if cfg.team_size == 0 { 5 } else { cfg.team_size };
+    let mut budget_interval = None;
+    let budget = budget
+        .map(|spec| {
+            spec.parse::<BudgetSpec>()
+                .map_err(|e| Failure::new(HUDDLE_E_CONFIG, e.to_string()))
+        })
+        .transpose()?;
     if let Some(spec) = budget {
-        let spec: BudgetSpec = spec
-            .parse()
-            .map_err(|e: comms::BudgetParseError| Failure::new(HUDDLE_E_CONFIG, e.to_string()))?;
-        let team_size = if cfg.team_size == 0 { 5 } else { cfg.team_size };
+        budget_interval = Some(spec.share(usize::from(team_size)).interval());
         if spec.share(usize::from(team_size)).messages == 0 {
             return Err(Failure::new(
                 HUDDLE_E_CONFIG,
@@ -260,7 +305,65 @@ fn driver_config(cfg: &huddle_node_config) -> Result<DriverConfig, Failure> {
         ..SocketConfig::default()
     };
     config.peers = peers;
-    Ok(config)
+    let policy = match policy {
+        None => None,
+        Some("voi") => Some(SendPolicy::Voi),
+        Some("baseline") => Some(SendPolicy::Baseline),
+        Some("every") => Some(SendPolicy::Every),
+        Some(other) => {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!("team_policy {other:?} is not \"voi\", \"baseline\" or \"every\""),
+            ))
+        }
+    };
+    let team = (cfg.no_team_layer == 0).then(|| {
+        let mut team = TeamLayerConfig::new(usize::from(team_size), budget_interval);
+        if let Some(policy) = policy {
+            team.team.send_policy = policy;
+        }
+        team
+    });
+    // As `huddle daemon`'s `gamecontroller_config`.
+    let asked = match cfg.gamecontroller {
+        HUDDLE_GC_AUTO => budget == Some(BudgetSpec::SPL),
+        HUDDLE_GC_ON => true,
+        HUDDLE_GC_OFF => false,
+        other => {
+            return Err(Failure::new(
+                HUDDLE_E_CONFIG,
+                format!("gamecontroller {other} is not HUDDLE_GC_AUTO, _ON or _OFF"),
+            ))
+        }
+    };
+    let gc = if asked {
+        let mut gc = GameControllerConfig::new(cfg.team_id, robot_id);
+        if let Some(listen) = gc_listen {
+            gc.listen = listen.parse().map_err(|_| {
+                Failure::new(
+                    HUDDLE_E_NETWORK,
+                    format!("gc_listen {listen:?} is not ADDR:PORT"),
+                )
+            })?;
+        }
+        if cfg.gc_status_port != 0 {
+            gc.status_port = cfg.gc_status_port;
+        }
+        if let Some(spec) = budget {
+            let mut b = gamecontroller::GcBudget::spl(team_size);
+            b.messages_per_game = u32::try_from(spec.team_messages).unwrap_or(u32::MAX);
+            b.half = spec.game / 2;
+            gc.budget = Some(b);
+        }
+        Some((gc, cfg.gamecontroller == HUDDLE_GC_ON))
+    } else {
+        None
+    };
+    Ok(NodeConfig {
+        driver: config,
+        team,
+        gc,
+    })
 }
 
 /// The caller's `peers`, each `ADDR:PORT`.
@@ -323,13 +426,15 @@ pub(crate) fn set_value(
     let node = lookup(node)?;
     let key = Key::parse(key).map_err(|e| Failure::new(HUDDLE_E_KEY, e.to_string()))?;
     node.with_state(|state, now| {
-        if priority {
-            state.replica.set_priority(now, &key, value)
-        } else {
-            state.replica.set_key(now, &key, value)
-        }
+        state.set(now, &key.to_string(), value, |replica, value| {
+            if priority {
+                replica.set_priority(now, &key, value)
+            } else {
+                replica.set_key(now, &key, value)
+            }
+            .map_err(set_failure)
+        })
     })?
-    .map_err(set_failure)
 }
 
 /// The value at `key` (as `huddle_node_get` reads it), if there is one.
@@ -378,7 +483,25 @@ pub unsafe extern "C" fn huddle_node_start(
     let body = || {
         // SAFETY: the caller promises `cfg` is NULL or valid for reads.
         let cfg = unsafe { cfg.as_ref() }.ok_or_else(|| Failure::null("cfg"))?;
-        let node = Engine::start(driver_config(cfg)?)?;
+        let config = driver_config(cfg)?;
+        let node = Engine::start(config.driver, config.team)?;
+        if let Some((gc, required)) = config.gc {
+            let listen = gc.listen;
+            match node.start_gc(gc) {
+                Ok(()) => {}
+                Err(e) if required => {
+                    node.stop();
+                    return Err(e);
+                }
+                // On by default with the SPL budget: run as before, loudly (the C caller
+                // has no log: stderr is all there is).
+                Err(e) => eprintln!(
+                    "huddle node: CANNOT LISTEN FOR THE GAMECONTROLLER on {listen}: the budget \
+                     is paced from the node's start and cannot see the team's count ({})",
+                    e.message
+                ),
+            }
+        }
         if cfg.id_check_ms > 0 {
             // The I/O shell waits on the caller's thread, as it asked (not the sans-IO core).
             #[allow(clippy::disallowed_methods)]
@@ -425,8 +548,11 @@ pub unsafe extern "C" fn huddle_node_set(
         let key = unsafe { read_str(key, "key") }?;
         // SAFETY: as above.
         let value = parse_value(unsafe { read_str(literal, "literal") }?)?;
-        node.with_state(|state, now| state.replica.set(now, key, value))?
-            .map_err(set_failure)?;
+        node.with_state(|state, now| {
+            state.set(now, key, value, |replica, value| {
+                replica.set(now, key, value).map_err(set_failure)
+            })
+        })??;
         Ok(0)
     };
     // SAFETY: the caller promises `err` is NULL or writable.

@@ -3,11 +3,15 @@
 //! wrappers over the typed float-vector set and get, in the contract's order and units
 //! (field frame, metres, radians, seconds; covariances as their upper triangle).
 //!
-//! The in-process node does not run the team layer itself (a later step; `huddle daemon`
-//! does): these calls write and read the keys the contract names, so a program written
-//! for them works against either. Inputs are checked as the daemon checks them (finite
-//! numbers, a positive definite covariance, `age_s` in 0..=10): a bad one is refused
-//! with `HUDDLE_E_VALUE` and nothing is written.
+//! The node runs the team layer itself, the code `huddle daemon` runs for its robot
+//! (`driver::team::TeamCore`, see `engine`): the inputs written here (or with any set
+//! call on their keys) feed it, and it writes the outputs read here every tick, so a C
+//! program gets the team ball, the goer and whether it goes without a daemon. Inputs are
+//! checked by the contract the daemon's relay guards run (`team::contract`: finite
+//! numbers, a positive definite covariance, `age_s` in 0..=10, ranges): a bad one is
+//! refused with `HUDDLE_E_VALUE` and the contract's reason, and nothing is written.
+//! With `no_team_layer` set, the calls still check their values, and the output keys
+//! hold whatever the program writes there.
 
 use std::ffi::c_int;
 
@@ -76,7 +80,11 @@ fn bad(what: &str, why: impl std::fmt::Display) -> Failure {
 /// daemon's relay guards run): a refusal is `HUDDLE_E_VALUE` with its reason.
 fn contract(key: &'static str, value: &Value) -> Result<(), Failure> {
     match team::contract::check(key, value) {
-        Some(Err(e)) => Err(bad(key, e)),
+        // The contract's reason names the key already.
+        Some(Err(e)) => Err(Failure::new(
+            HUDDLE_E_VALUE,
+            format!("{e}; nothing written"),
+        )),
         _ => Ok(()),
     }
 }
@@ -245,6 +253,67 @@ pub unsafe extern "C" fn huddle_node_set_robot_landmarks(
             set_value(node, what, value, false)
         })
     }
+}
+
+/// Reads who goes to the ball: `goer` gets the robot the team layer says goes
+/// (`local.var.team.goer`, 0: none), `going` 1 if it is this robot
+/// (`local.var.team.going`), else 0. Returns 1, 0 while the layer has not decided yet
+/// (dormant: no pose or odometry written; or no team layer), -1 on error
+/// (`HUDDLE_E_TYPE`).
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `goer`, `going` and `err` are NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_get_team_goer(
+    node: *mut huddle_node,
+    goer: *mut u8,
+    going: *mut std::ffi::c_int,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        // SAFETY: the caller promises both are NULL or valid for writes.
+        let (goer, going) = unsafe { (goer.as_mut(), going.as_mut()) };
+        let goer = goer.ok_or_else(|| Failure::null("goer"))?;
+        let going = going.ok_or_else(|| Failure::null("going"))?;
+        // One read under one lock: a tick between two reads could pair a goer with
+        // another tick's `going`.
+        let read = crate::node::lookup(node)?.with_state(|state, _| {
+            let get = |key| {
+                state
+                    .replica
+                    .get(key)
+                    .ok()
+                    .flatten()
+                    .map(|e| e.value.clone())
+            };
+            (
+                get(team::contract::GOER_KEY),
+                get(team::contract::GOING_KEY),
+            )
+        })?;
+        Ok(match read {
+            (None, _) | (_, None) => 0,
+            (Some(Value::Int(g)), Some(Value::Bool(me))) => {
+                *goer = u8::try_from(g).map_err(|_| {
+                    Failure::new(
+                        HUDDLE_E_TYPE,
+                        format!("local.var.team.goer holds {g}, not a robot id"),
+                    )
+                })?;
+                *going = c_int::from(me);
+                1
+            }
+            (Some(Value::Int(_)), Some(other)) => {
+                return Err(wrong_type(team::contract::GOING_KEY, &other, "bool"))
+            }
+            (Some(other), _) => return Err(wrong_type(team::contract::GOER_KEY, &other, "int")),
+        })
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
 }
 
 /// The floats at `key`, checked to have `len` elements (any of `lens`).

@@ -44,6 +44,8 @@ const KEYS: &[&[u8]] = &[
     b"\0",
     b"*.var.\xff\xfe\0",
     b"*.var..x\0",
+    b"local.var.robot.pose\0",
+    b"local.var.robot.ball\0",
 ];
 const LITERALS: &[&[u8]] = &[
     b"1\0",
@@ -140,8 +142,9 @@ fn bad_arguments_to_the_node_are_errors_and_use_after_stop_is_refused() {
         };
         assert!((-1..=1).contains(&rc), "step {step}: rc {rc}");
         if rc == -1 && !err_ptr.is_null() {
+            // HUDDLE_E_VALUE: the team layer's contract refused a write to its input key.
             assert!(
-                (HUDDLE_E_NULL..=HUDDLE_E_POST).contains(&err.code),
+                (HUDDLE_E_NULL..=HUDDLE_E_POST).contains(&err.code) || err.code == HUDDLE_E_VALUE,
                 "step {step}: code {} {}",
                 err.code,
                 message(&err)
@@ -298,6 +301,8 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
     let peers = [bad_peer.as_ptr()];
     let bcast = CString::new("10.0.255.255").unwrap();
     let budget = CString::new("1200 per game").unwrap();
+    let policy = CString::new("fastest").unwrap();
+    let gc_listen = CString::new("3838").unwrap();
     type Edit = Box<dyn Fn(&mut huddle_node_config)>;
     let cases: Vec<(&str, Edit, i32)> = vec![
         (
@@ -328,6 +333,24 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
             Box::new(move |c| c.budget = budget.as_ptr()),
             HUDDLE_E_CONFIG,
         ),
+        (
+            "gamecontroller 7",
+            Box::new(|c| c.gamecontroller = 7),
+            HUDDLE_E_CONFIG,
+        ),
+        (
+            "a team policy that is none",
+            Box::new(move |c| c.team_policy = policy.as_ptr()),
+            HUDDLE_E_CONFIG,
+        ),
+        (
+            "a GameController address that is none",
+            Box::new(move |c| {
+                c.gamecontroller = HUDDLE_GC_ON;
+                c.gc_listen = gc_listen.as_ptr();
+            }),
+            HUDDLE_E_NETWORK,
+        ),
     ];
     for (what, edit, code) in &cases {
         let mut bad: huddle_node_config = zeroed();
@@ -356,6 +379,7 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
     let mut stats: huddle_stats = zeroed();
     let mut budget: huddle_budget = zeroed();
     let mut ball: huddle_team_ball = zeroed();
+    let (mut goer, mut going) = (0u8, 0);
     let cov = [0.01, 0.0, 0.01, 0.01, 0.0, 0.01];
     for step in 0..3000 {
         let key = if rng.next().is_multiple_of(10) {
@@ -451,7 +475,7 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
                     0.0,
                     err_ptr,
                 ),
-                _ => match rng.next() % 4 {
+                _ => match rng.next() % 5 {
                     0 => huddle_node_stats(
                         node,
                         if null_out { null_mut() } else { &mut stats },
@@ -465,6 +489,12 @@ fn bad_arguments_to_the_typed_budget_and_team_calls_are_errors() {
                     2 => huddle_node_get_team_ball(
                         node,
                         if null_out { null_mut() } else { &mut ball },
+                        err_ptr,
+                    ),
+                    3 => huddle_node_get_team_goer(
+                        node,
+                        if null_out { null_mut() } else { &mut goer },
+                        &mut going,
                         err_ptr,
                     ),
                     _ => huddle_node_keys(node, key, text.as_mut_ptr(), cap, &mut len, err_ptr)

@@ -237,6 +237,56 @@ fn a_c_program_uses_the_typed_calls_events_keys_and_stats() {
     assert!(out.ends_with("typed_node: OK\n"), "{out}");
 }
 
+/// Three robots' team layers in one C program, no daemon: robots 1 and 2 see the ball,
+/// robot 3 is blind. Each node's layer fuses the teammates' world models into one team
+/// ball, all three name robot 1 (nearest the ball) the goer and only it goes; bad inputs
+/// get the contract's reason.
+#[test]
+fn three_c_nodes_run_the_team_layer_one_goer_one_team_ball() {
+    let lib = lib_dir().join("libhuddle.a");
+    let args = [
+        "-std=c11".into(),
+        "-Wall".into(),
+        "-Wextra".into(),
+        "-Werror".into(),
+        "-I".into(),
+        crate_dir().join("include").display().to_string(),
+        lib.display().to_string(),
+        "-lpthread".into(),
+        "-ldl".into(),
+        "-lm".into(),
+    ];
+    let source = crate_dir().join("examples/team_node.c");
+    let Some(out) = build_and_run("cc", &source, &args, "team_node", &scratch_args()) else {
+        return;
+    };
+    for robot in ["robot 1:", "robot 2:", "robot 3 (blind):"] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(robot))
+            .unwrap_or_else(|| panic!("no line for {robot}: {out}"));
+        let going = if robot == "robot 1:" { 1 } else { 0 };
+        assert!(
+            line.ends_with(&format!("goer 1, going {going}")),
+            "robot 1 is nearest the ball and the only one going: {line}"
+        );
+    }
+    assert!(
+        out.contains("0 changes of mind in 25 more"),
+        "the goer holds while nothing changes: {out}"
+    );
+    assert!(out.contains("robot 3 knows 2 teammates"), "{out}");
+    for reason in [
+        "refused (1): local.var.robot.pose: element 0 is not finite (NaN)",
+        "refused (1): local.var.robot.ball: the covariance is not positive definite",
+        "refused (1): local.var.robot.pose takes 9 or 10",
+        "refused (1): local.var.robot.ball: age_s 7200 is not within [0, 10] s",
+    ] {
+        assert!(out.contains(reason), "missing {reason:?} in {out}");
+    }
+    assert!(out.ends_with("team_node: OK\n"), "{out}");
+}
+
 #[test]
 fn the_cpp_wrapper_polls_datagrams_without_a_64_kib_buffer_each() {
     let dir = lib_dir();

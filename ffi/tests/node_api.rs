@@ -549,7 +549,15 @@ fn a_second_node_with_a_running_robots_id_is_refused() {
 #[test]
 fn team_layer_inputs_are_checked_and_outputs_read_typed() {
     let group = driver::scratch_group().unwrap();
-    let node = multicast(1, group);
+    // No layer: the outputs below are written by hand, and a layer's tick would overwrite
+    // them. The typed calls check their inputs all the same.
+    let ip = c(&group.ip().to_string());
+    let node = start(1, |cfg| {
+        cfg.group_address = ip.as_ptr();
+        cfg.group_port = group.port();
+        cfg.no_team_layer = 1;
+    })
+    .unwrap();
     let mut err: huddle_error = zeroed();
     // SAFETY (all calls below): a live node, arrays of the lengths given, writable outputs.
     unsafe {
@@ -614,7 +622,7 @@ fn team_layer_inputs_are_checked_and_outputs_read_typed() {
             0
         );
 
-        // The outputs, as the daemon's team layer writes them.
+        // The outputs, in the layout the team layer writes them.
         let mut ball: huddle_team_ball = zeroed();
         assert_eq!(
             huddle_node_get_team_ball(node.0, &mut ball, &mut err),
@@ -655,6 +663,81 @@ fn team_layer_inputs_are_checked_and_outputs_read_typed() {
             1
         );
         assert_eq!((out[1].robot, out[1].silent_s), (3, 4.0));
+    }
+}
+
+/// The node's layer guards its input keys whatever call writes them, as the daemon's
+/// relay guards do; with `no_team_layer` they are plain keys.
+#[test]
+fn the_team_layer_refuses_a_bad_input_from_any_set_call_and_runs_on_a_pose() {
+    let group = driver::scratch_group().unwrap();
+    let ip = c(&group.ip().to_string());
+    let with_layer = |off: u8| {
+        start(1, |cfg| {
+            cfg.group_address = ip.as_ptr();
+            cfg.group_port = group.port();
+            cfg.no_team_layer = off;
+        })
+        .unwrap()
+    };
+    let not_pd = [1.0, 0.0, 0.04, 0.05, 0.04];
+    let key = c("local.var.robot.ball");
+    let mut err: huddle_error = zeroed();
+    let node = with_layer(0);
+    // SAFETY (all calls below): a live node, NUL-terminated strings, arrays of the
+    // lengths given, writable outputs.
+    unsafe {
+        let rc = huddle_node_set_floats(node.0, key.as_ptr(), not_pd.as_ptr(), 5, &mut err);
+        assert_eq!(
+            (rc, err.code),
+            (-1, HUDDLE_E_VALUE),
+            "a layer guards its inputs"
+        );
+        assert_eq!(
+            text(&err.message),
+            "local.var.robot.ball: the covariance is not positive definite; nothing written"
+        );
+        let rc = huddle_node_set(node.0, key.as_ptr(), c("true").as_ptr(), &mut err);
+        assert_eq!(
+            (rc, err.code),
+            (-1, HUDDLE_E_VALUE),
+            "{}",
+            text(&err.message)
+        );
+        let mut goer = 9;
+        let mut going = 9;
+        assert_eq!(
+            huddle_node_get_team_goer(node.0, &mut goer, &mut going, &mut err),
+            0,
+            "dormant until a pose or odometry"
+        );
+        let cov = [0.01, 0.0, 0.0, 0.01, 0.0, 0.001];
+        let pose = c("local.var.robot.pose");
+        let mut values = vec![0.5, -1.0, 0.0];
+        values.extend(cov);
+        assert_eq!(
+            huddle_node_set_floats(node.0, pose.as_ptr(), values.as_ptr(), 9, &mut err),
+            0
+        );
+        // The pose closed a cycle: the layer ticked before the call returned.
+        assert_eq!(
+            huddle_node_get_team_goer(node.0, &mut goer, &mut going, &mut err),
+            1
+        );
+        assert_eq!((goer, going), (0, 0), "no ball seen: nobody goes");
+        let mut held: huddle_pose = zeroed();
+        assert_eq!(huddle_node_get_team_pose(node.0, &mut held, &mut err), 1);
+        assert!(
+            (held.x - 0.5).abs() < 1e-6 && (held.y + 1.0).abs() < 1e-6,
+            "the layer holds the pose written: ({}, {})",
+            held.x,
+            held.y
+        );
+        drop(node);
+
+        let plain = with_layer(1);
+        let rc = huddle_node_set_floats(plain.0, key.as_ptr(), not_pd.as_ptr(), 5, &mut err);
+        assert_eq!(rc, 0, "no layer: a plain key ({})", text(&err.message));
     }
 }
 
