@@ -113,6 +113,19 @@ pub struct TickOutput {
     pub kick: Option<KickAttempt>,
 }
 
+/// What the referee lets a robot do, as the robot heard it from the GameController.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub enum Order {
+    /// Play (Playing, or no referee at all).
+    #[default]
+    Play,
+    /// Walk to its kick-off spot (Ready): its formation home in its own half, the
+    /// goalkeeper to its goal.
+    KickOffSpot,
+    /// Stand still (Initial, Standby, Set, Finished, or penalised).
+    Stand,
+}
+
 /// One of our robots: a body's senses and play around its team layer, which it derefs to
 /// (its world models, its arbitration, what it told the team).
 #[derive(Debug, Clone)]
@@ -129,6 +142,9 @@ pub struct Robot {
     pub play: Option<Play>,
     /// Shots and passes kicked.
     pub counts: PlayCounts,
+    /// What the referee lets it do; it keeps sensing and telling its team whatever this
+    /// says (the team layer runs in every state).
+    pub order: Order,
     kick_ready_at_s: f64,
 }
 
@@ -196,6 +212,7 @@ impl Robot {
             mode: Mode::Inactive,
             play: None,
             counts: PlayCounts::default(),
+            order: Order::Play,
             kick_ready_at_s: 0.0,
         }
     }
@@ -264,7 +281,11 @@ impl Robot {
             }
         };
         let field = self.brain.cal.field;
-        let (receiver, command, kick) = self.act(&field, cfg, &input);
+        let (receiver, command, kick) = match self.order {
+            Order::Play => self.act(&field, cfg, &input),
+            Order::Stand => (0, Some(self.stand()), None),
+            Order::KickOffSpot => (0, Some(self.to_kick_off_spot(&field, &input)), None),
+        };
         let (writes, priority) = self.brain.finish(
             &cfg.team,
             input.local_now,
@@ -386,6 +407,30 @@ impl Robot {
         };
         self.play = None;
         (0, Some(cmd), None)
+    }
+
+    /// Stand where it is (in the frame of [`TeamLayer::pose_belief`]).
+    fn stand(&self) -> MotionCommand {
+        MotionCommand {
+            velocity: Vec2::default(),
+            heading_rad: self.pose_belief.theta_rad,
+        }
+    }
+
+    /// Walk to its kick-off spot, facing the centre: the goalkeeper to its goal line, a
+    /// field player to its formation home kept in its own half.
+    fn to_kick_off_spot(&self, field: &FieldGeometry, input: &TickInput<'_>) -> MotionCommand {
+        let top = self.brain.cal.body.top_speed_mps;
+        let pose = self.pose_belief;
+        let spot = match self.position {
+            Position::Goalkeeper => Vec2::new(-field.length_m / 2.0 + 0.3, 0.0),
+            Position::Field(k) => {
+                let home = input.homes.get(k).copied().unwrap_or_default();
+                Vec2::new(home.x.min(-0.5), home.y)
+            }
+        };
+        let facing = (Vec2::default() - spot).angle();
+        behaviour::go_to(&pose, spot, facing, top)
     }
 
     /// Switch the robot off: it falls silent. Returns the command that stops it where it

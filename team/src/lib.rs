@@ -47,6 +47,6 @@ pub use calibration::{Calibration, WorldModelConfig};
 pub use geometry::{Pose, Vec2};
 pub use layer::{
     adapt_to_budget, pass_to_key, seconds, world_local_key, world_local_of, BallBelief, Senses,
-    TeamConfig, TeamLayer, PASS_TO_KEY, WORLD_LOCAL_KEY,
+    TeamConfig, TeamLayer, PASS_TO_KEY, PENALIZED_COST, WORLD_LOCAL_KEY,
 };
 pub use policy::SendPolicy;
