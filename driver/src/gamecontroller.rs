@@ -256,14 +256,28 @@ fn feed_budget(handle: &Handle, budget: &GcBudget, t: &GameTracker) {
 /// What the GC's newest packet in `t` gives a replica's budget: the game time left over
 /// the halves and the team's cap (`None`: no packet of this team's game yet). The
 /// daemon's listener and the simulator's robots feed their replicas with this.
+///
+/// The line is drawn on what the team may spend, the GC's messages less the margin
+/// (1,186 of 1,200 over the game for five robots), so that the margin is never counted
+/// as spent: drawn on the whole 1,200, the team was 14 messages behind its line at the
+/// kick-off and sent nothing, claims included, for the first 10–20 s of play, while
+/// every robot went for the ball (`huddle sim --game full`, seeds 1–3: a 17 s conflict
+/// at the first kick-off).
 pub fn budget_figures(budget: &GcBudget, t: &GameTracker) -> Option<(Duration, ExternalCap)> {
     let cap = budget.cap(t.game()?, t.team_number())?;
+    let game_s = 2.0 * budget.half.as_secs_f64();
+    let usable = budget.messages_per_game.saturating_sub(budget.margin);
     Some((
         cap.game_remaining,
         ExternalCap {
             counted: cap.counted,
             team_left: u64::from(cap.team_left),
-            rate_per_s: budget.rate_per_s(),
+            rate_per_s: if game_s > 0.0 {
+                f64::from(usable) / game_s
+            } else {
+                0.0
+            },
+            margin: u64::from(budget.margin),
         },
     ))
 }
