@@ -243,7 +243,10 @@ impl Harness {
 
     /// The frames sent since the last call (empty unless [`Harness::log_sent`]).
     pub fn take_sent(&mut self) -> Vec<(usize, usize)> {
-        self.sent_log.as_mut().map(std::mem::take).unwrap_or_default()
+        self.sent_log
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
     }
 
     /// Keep each replica's events for [`Harness::drain_events`] (default) or drop them
@@ -288,7 +291,11 @@ impl Harness {
             while let Some(t) = r.poll_transmit() {
                 self.max_payload = self.max_payload.max(t.payload.len());
                 if let Some(log) = &mut self.sent_log {
-                    let copies = if self.unicast { self.nodes.len() - 1 } else { 1 };
+                    let copies = if self.unicast {
+                        self.nodes.len() - 1
+                    } else {
+                        1
+                    };
                     log.extend(std::iter::repeat_n((i, t.payload.len()), copies));
                 }
                 // Known nodes and group: sending cannot fail.

@@ -198,7 +198,13 @@ fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero()
 
 /// A daemon of team 12 with the GC listener on `gc_port` (status packets to `status_port`)
 /// and its team layer.
-fn team_daemon(id: u8, group: &str, gc_port: u16, status_port: u16, dir: &std::path::Path) -> Daemon {
+fn team_daemon(
+    id: u8,
+    group: &str,
+    gc_port: u16,
+    status_port: u16,
+    dir: &std::path::Path,
+) -> Daemon {
     Daemon::start(
         id,
         group,

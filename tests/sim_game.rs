@@ -6,9 +6,9 @@
 //!
 //! Claims: the team is never illegal (no message at the GC's 0, none over 128 B); it uses
 //! most of its budget (what the margin, the reserve and the priority room leave: at
-//! least 80% of so small a budget); it sends in the uncounted states (free) without the
-//! GC counting them; robot 3's body leaves the field and comes back, and while it is off
-//! no robot of the team counts its claim.
+//! least 75% of so small a budget); out of play it tells the team nothing, so hardly a
+//! frame goes in the states the GC does not count; robot 3's body leaves the field and
+//! comes back, and while it is off no robot of the team counts its claim.
 
 use huddle::sim::referee::{GameScript, ScriptedPenalty};
 use huddle::sim::{Report, SimConfig, Simulation};
@@ -69,14 +69,18 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
         "the team must never be illegal: {} illegal messages, first at {:?} s",
         g.game_illegal_messages, g.game_illegal_at_s
     );
-    assert_eq!(g.game_messages_oversized, 0, "largest {} B", r.max_payload_bytes);
+    assert_eq!(
+        g.game_messages_oversized, 0,
+        "largest {} B",
+        r.max_payload_bytes
+    );
     assert!(
-        g.game_budget_used_pct >= 80.0,
+        g.game_budget_used_pct >= 75.0,
         "most of the budget is used: {g}"
     );
     assert!(
-        g.game_messages_uncounted > 0,
-        "the uncounted states' frames are free: {g}"
+        g.game_messages_uncounted <= 20,
+        "out of play the team is quiet: {g}"
     );
     assert_eq!(g.game_penalties, 1);
     assert!((g.game_playing_s - 120.0).abs() < 1.0, "{g}");
@@ -96,7 +100,9 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
         "while off the field, no teammate counts robot 3's claim"
     );
     assert!(
-        seen.iter().filter(told).all(|s| s.2 >= team::PENALIZED_COST),
+        seen.iter()
+            .filter(told)
+            .all(|s| s.2 >= team::PENALIZED_COST),
         "robot 3 claims nothing while penalised"
     );
 }

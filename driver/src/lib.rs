@@ -80,9 +80,7 @@ pub use config_files::{
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
 pub use driver::{Clock, Driver, DriverConfig, DriverError, IoStats};
-pub use gamecontroller::{
-    budget_figures, penalized_players, GameController, GameControllerConfig,
-};
+pub use gamecontroller::{budget_figures, penalized_players, GameController, GameControllerConfig};
 pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Notice, Subscription, Watch};
 pub use iface::{broadcast_address, resolve_iface, IfaceError};

@@ -231,10 +231,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     let length_ms = (cfg.game.as_ref().map_or(cfg.duration_s, |g| g.length_s()) * 1e3) as u64;
     let mut sim = Simulation::new(cfg).context("setting up the simulation")?;
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(
-            Some(length_ms),
-            ProgressDrawTarget::stderr(),
-        )
+        ProgressBar::with_draw_target(Some(length_ms), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
     };

@@ -192,13 +192,11 @@ impl Simulation {
                 let local = self.harness.local_now(i);
                 let now = Duration::from_micros(local.as_micros());
                 let tracker = &mut game.trackers[i];
-                if tracker.receive(now, game.gc, &bytes) != Ok(gamecontroller::Received::Accepted)
-                {
+                if tracker.receive(now, game.gc, &bytes) != Ok(gamecontroller::Received::Accepted) {
                     continue;
                 }
                 // What the daemon does with each packet (driver::gamecontroller).
-                if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i))
-                {
+                if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i)) {
                     if let Some((remaining, cap)) = driver::budget_figures(budget, tracker) {
                         replica.set_game_clock(local, remaining);
                         replica.set_external_budget(Some(cap));
@@ -281,7 +279,11 @@ impl Simulation {
                 // Back on the touchline in its own half, on the side away from the ball,
                 // facing into the field: the spot the rules name, so the robot knows it.
                 let f = &self.cfg.field;
-                let side = if self.world.ball.at.y > 0.0 { -1.0 } else { 1.0 };
+                let side = if self.world.ball.at.y > 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                };
                 let spot = Pose {
                     at: Vec2::new(-f.length_m / 4.0, side * f.width_m / 2.0),
                     theta_rad: -side * std::f64::consts::FRAC_PI_2,
@@ -299,10 +301,7 @@ impl Simulation {
 fn sideline_spot(cfg: &super::SimConfig, i: usize) -> Pose {
     let f = &cfg.field;
     Pose {
-        at: Vec2::new(
-            -0.5 - 0.6 * i as f64,
-            -(f.width_m / 2.0 + 0.6 * f.border_m),
-        ),
+        at: Vec2::new(-0.5 - 0.6 * i as f64, -(f.width_m / 2.0 + 0.6 * f.border_m)),
         theta_rad: std::f64::consts::FRAC_PI_2,
     }
 }

@@ -357,7 +357,10 @@ impl Referee {
     }
 
     /// The packet the GC broadcasts at `now_s`, if one is due (every 500 ms).
-    pub fn packet(&mut self, now_s: f64) -> Option<[u8; gamecontroller::GAMECONTROLLER_STRUCT_SIZE]> {
+    pub fn packet(
+        &mut self,
+        now_s: f64,
+    ) -> Option<[u8; gamecontroller::GAMECONTROLLER_STRUCT_SIZE]> {
         if now_s + 1e-9 < self.next_packet_s {
             return None;
         }
@@ -453,7 +456,10 @@ mod tests {
         use State::*;
         assert_eq!(
             states,
-            [Standby, Ready, Set, Playing, Finished, Initial, Standby, Ready, Set, Playing, Finished],
+            [
+                Standby, Ready, Set, Playing, Finished, Initial, Standby, Ready, Set, Playing,
+                Finished
+            ],
             "the SPL's order of states"
         );
         let pens: Vec<_> = events
@@ -462,14 +468,21 @@ mod tests {
             .collect();
         assert_eq!(pens.len(), 4, "two penalties, each with its end: {pens:?}");
         let (on, off) = (pens[0].0, pens[1].0);
-        assert!((off - on - 45.0).abs() < 0.02, "45 s off the field: {pens:?}");
+        assert!(
+            (off - on - 45.0).abs() < 0.02,
+            "45 s off the field: {pens:?}"
+        );
         let c = r.count();
         // Counted: 10 s Standby + 35 s Ready/Set + 600 s play, twice.
         assert!(
             (c.counted as f64 - 2.0 * 645.0).abs() <= 3.0,
             "counted {c:?}"
         );
-        assert_eq!(c.illegal, c.counted - 1200, "every counted message past 1,200 is illegal: {c:?}");
+        assert_eq!(
+            c.illegal,
+            c.counted - 1200,
+            "every counted message past 1,200 is illegal: {c:?}"
+        );
         assert_eq!(r.budget_left(), 0);
         assert!(c.illegal_at_s.is_some());
     }
@@ -478,14 +491,23 @@ mod tests {
     fn a_goal_restarts_with_ready_and_set_and_the_conceding_team_kicks_off() {
         let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
         run_to(&mut r, 0.0, 60.0);
-        assert!(r.playing(), "playing after 55 s of Initial/Standby/Ready/Set");
+        assert!(
+            r.playing(),
+            "playing after 55 s of Initial/Standby/Ready/Set"
+        );
         let left = r.data().secs_remaining;
-        assert!(r.goal(60.0, true).contains(&RefereeEvent::State(State::Ready)));
+        assert!(r
+            .goal(60.0, true)
+            .contains(&RefereeEvent::State(State::Ready)));
         assert_eq!(r.data().team(12).map(|t| t.score), Some(1));
         assert_eq!(r.data().kicking_team, 34, "the conceding team kicks off");
         run_to(&mut r, 60.0, 91.0);
         assert_eq!(r.state(), State::Set, "30 s of Ready");
-        assert_eq!(r.data().secs_remaining, left, "the clock stands in Ready and Set");
+        assert_eq!(
+            r.data().secs_remaining,
+            left,
+            "the clock stands in Ready and Set"
+        );
         run_to(&mut r, 91.0, 96.0);
         assert!(r.playing(), "5 s of Set");
         // A goal outside Playing is not a goal.

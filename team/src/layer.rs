@@ -350,7 +350,8 @@ impl TeamLayer {
             self.policy
                 .wrote_claim(false, PENALIZED_COST, PENALIZED_COST);
         } else {
-            self.policy.sent_going(false, PENALIZED_COST, PENALIZED_COST);
+            self.policy
+                .sent_going(false, PENALIZED_COST, PENALIZED_COST);
         }
     }
 

@@ -218,7 +218,11 @@ fn a_teammate_the_gamecontroller_penalised_no_longer_holds_the_ball() {
     hear_claim(&mut board, 3, 0.5, true, 1, now);
     r.h = 1.0;
     let (decision, _) = r.decide(&board, now);
-    assert_eq!(decision.goer, Some(3), "robot 3's fresh claim wins: {decision:?}");
+    assert_eq!(
+        decision.goer,
+        Some(3),
+        "robot 3's fresh claim wins: {decision:?}"
+    );
     r.set_penalties(&[3]);
     let later = Instant::from_micros(1_040_000);
     let (decision, posted) = r.decide(&board, later);
@@ -249,10 +253,17 @@ fn a_penalised_robot_claims_nothing_and_tells_its_team_once() {
     let now = Instant::from_micros(1_040_000);
     let lwm = r.sense(&cfg, now, &Senses::default(), &board, false);
     let (_, posted) = r.decide(&board, now);
-    assert!(!posted.going && !r.going(), "penalised, it never goes: {posted:?}");
+    assert!(
+        !posted.going && !r.going(),
+        "penalised, it never goes: {posted:?}"
+    );
     let (writes, priority) = r.finish(&cfg, now, lwm, posted, 0, false, false, false, None);
     assert!(priority, "the team must hear it at once");
-    assert_eq!(writes.len(), 1, "its claim alone, no world model: {writes:?}");
+    assert_eq!(
+        writes.len(),
+        1,
+        "its claim alone, no world model: {writes:?}"
+    );
     let told = match &writes[0] {
         (k, Value::Floats(v)) if *k == arbitration::heuristic_key() => Posted::from_floats(v),
         other => panic!("not a claim: {other:?}"),

@@ -11,7 +11,11 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(d) = GameControlData::decode(data) {
-        assert_eq!(&d.encode()[..], data, "a decoded packet re-encodes to its bytes");
+        assert_eq!(
+            &d.encode()[..],
+            data,
+            "a decoded packet re-encodes to its bytes"
+        );
     }
     // A tracker holding a valid packet of team 12's game, then the fuzzed one.
     let from = SocketAddr::from(([10, 0, 0, 1], 3838));
@@ -29,7 +33,11 @@ fuzz_target!(|data: &[u8]| {
             assert_eq!(&after.encode()[..], data);
         }
         Ok(gamecontroller::Received::Stale) | Err(_) => {
-            assert_eq!(tracker.game(), Some(&before), "a refused packet changes nothing");
+            assert_eq!(
+                tracker.game(),
+                Some(&before),
+                "a refused packet changes nothing"
+            );
             assert_eq!(tracker.stats().accepted, stats.accepted);
         }
     }

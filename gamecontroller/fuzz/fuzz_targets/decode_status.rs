@@ -11,7 +11,12 @@ fuzz_target!(|data: &[u8]| {
         let bytes = m.encode();
         let again = StatusMessage::decode(&bytes).expect("its own bytes decode");
         assert_eq!(again.encode(), bytes, "encoding is stable");
-        if m.pose.iter().chain(&m.ball).chain([&m.ball_age]).all(|v| v.is_finite()) {
+        if m.pose
+            .iter()
+            .chain(&m.ball)
+            .chain([&m.ball_age])
+            .all(|v| v.is_finite())
+        {
             assert_eq!(&bytes[..], data, "finite values re-encode to their bytes");
         }
     }
