@@ -195,3 +195,104 @@ fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero()
     );
     assert!(c.stat("gc.status_sent") > 0, "status packets still go");
 }
+
+/// A daemon of team 12 with the GC listener on `gc_port` (status packets to `status_port`)
+/// and its team layer.
+fn team_daemon(
+    id: u8,
+    group: &str,
+    gc_port: u16,
+    status_port: u16,
+    dir: &std::path::Path,
+) -> Daemon {
+    Daemon::start(
+        id,
+        group,
+        free_tcp_port(),
+        &[
+            "--team",
+            "12",
+            "--refresh",
+            "50ms",
+            "--gamecontroller",
+            "--gc-listen",
+            &format!("127.0.0.1:{gc_port}"),
+            "--gc-status-port",
+            &status_port.to_string(),
+        ],
+        dir,
+    )
+}
+
+#[test]
+fn a_penalised_robot_leaves_the_arbitration_and_its_teammates_drop_its_claim() {
+    // Robots 1 and 2 of team 12, each with its program's cost: robot 1 is nearer the ball
+    // (0.5 against 1.0) and goes. The GameController penalises robot 1 and robot 2 hears
+    // it first: robot 2 goes at once, by the GC's word alone (robot 1 still claims).
+    // Then robot 1 hears it too: it stops, and tells the team (its claim turns to the
+    // penalised cost). Its penalty over, it is back in the arbitration.
+    let dir = tempfile::tempdir().unwrap();
+    let group = scratch_group().to_string();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let status_port = status.local_addr().unwrap().port();
+    let (p1, p2) = (free_udp_port(), free_udp_port());
+    let d1 = team_daemon(1, &group, p1, status_port, dir.path());
+    let d2 = team_daemon(2, &group, p2, status_port, dir.path());
+    let (mut c1, mut c2) = (d1.client(), d2.client());
+    let pose = "[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
+    for (c, cost) in [(&mut c1, "0.5"), (&mut c2, "1.0")] {
+        for line in [
+            format!("SETV local.var.robot.pose {pose}"),
+            format!("SETV local.var.robot.cost {cost}"),
+        ] {
+            assert!(c.ask(&line).starts_with("OK"), "{line}");
+        }
+    }
+    let mut gc = ScriptedGc {
+        socket: UdpSocket::bind("127.0.0.1:0").unwrap(),
+        to: format!("127.0.0.1:{p2}"),
+        game: GameControlData::new([12, 34]),
+    };
+    gc.game.state = State::Playing;
+    gc.send();
+    let goer = |a: &str| a.contains(" int 1 ");
+    c2.wait_for("local.var.team.goer", Duration::from_secs(5), goer);
+    c1.wait_for("local.var.team.goer", Duration::from_secs(5), goer);
+
+    // Robot 1 penalised; only robot 2's listener hears it for now.
+    let me = &mut gc.game.team_mut(12).unwrap().players[0];
+    me.penalty = 2;
+    me.secs_till_unpenalised = 45;
+    gc.send();
+    c2.wait_for("local.var.gc.penalized", Duration::from_secs(5), |a| {
+        a.contains("[1")
+    });
+    c2.wait_for("local.var.team.goer", Duration::from_secs(3), |a| {
+        a.contains(" int 2 ")
+    });
+    let claim = c2.ask("GETV 1.var.machine.heuristic");
+    assert!(
+        claim.starts_with("VAL") && !claim.contains("1000000"),
+        "robot 1 is unaware and still posts its cost; robot 2 goes anyway: {claim:?}"
+    );
+
+    // Now robot 1 hears it: it stops claiming and says so.
+    gc.to = format!("127.0.0.1:{p1}");
+    gc.send();
+    c1.wait_for("local.var.team.going", Duration::from_secs(3), |a| {
+        a.contains(" false ")
+    });
+    c2.wait_for("1.var.machine.heuristic", Duration::from_secs(3), |a| {
+        a.contains("[1000000")
+    });
+
+    // Unpenalised (both hear it): robot 1 is back in the arbitration with its cost.
+    gc.game.team_mut(12).unwrap().players[0] = Default::default();
+    for to in [p1, p2] {
+        gc.to = format!("127.0.0.1:{to}");
+        gc.send();
+    }
+    c2.wait_for("1.var.machine.heuristic", Duration::from_secs(3), |a| {
+        a.contains("[0.5")
+    });
+}

@@ -73,6 +73,8 @@ pub struct Harness {
     rng: ChaCha8Rng,
     max_payload: usize,
     unicast: bool,
+    /// Every frame sent (robot index, bytes), when asked for (a referee counts them).
+    sent_log: Option<Vec<(usize, usize)>>,
 }
 
 impl Harness {
@@ -106,6 +108,7 @@ impl Harness {
             rng: ChaCha8Rng::seed_from_u64(0),
             max_payload: 0,
             unicast: false,
+            sent_log: None,
         };
         for i in 0..n {
             // Ordered like the driver's: a later start has a larger incarnation.
@@ -244,6 +247,20 @@ impl Harness {
         self.max_payload
     }
 
+    /// Log every frame sent (robot index, bytes; one per copy with unicast) for
+    /// [`Harness::take_sent`].
+    pub fn log_sent(&mut self, on: bool) {
+        self.sent_log = on.then(Vec::new);
+    }
+
+    /// The frames sent since the last call (empty unless [`Harness::log_sent`]).
+    pub fn take_sent(&mut self) -> Vec<(usize, usize)> {
+        self.sent_log
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
     /// Keep each replica's events for [`Harness::drain_events`] (default) or drop them
     /// (long runs that do not look at them).
     pub fn keep_events(&mut self, keep: bool) {
@@ -285,6 +302,14 @@ impl Harness {
             };
             while let Some(t) = r.poll_transmit() {
                 self.max_payload = self.max_payload.max(t.payload.len());
+                if let Some(log) = &mut self.sent_log {
+                    let copies = if self.unicast {
+                        self.nodes.len() - 1
+                    } else {
+                        1
+                    };
+                    log.extend(std::iter::repeat_n((i, t.payload.len()), copies));
+                }
                 // Known nodes and group: sending cannot fail.
                 if self.unicast {
                     for (j, &to) in self.nodes.iter().enumerate() {

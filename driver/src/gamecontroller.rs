@@ -20,6 +20,11 @@
 //! | `local.var.gc.counted` | bool | whether the GC counts a message sent now |
 //! | `local.var.gc.penalty` | int | this robot's penalty code (0 none, 14 substitute) |
 //! | `local.var.gc.penalty_secs` | int | seconds till this robot is unpenalised |
+//! | `local.var.gc.penalized` | floats | this team's penalised player numbers (this robot's included; substitutes count) |
+//!
+//! The team layer ([`crate::team`]) reads `local.var.gc.penalized` each tick: a penalised
+//! robot leaves the arbitration and tells its team, and its teammates stop counting its
+//! claim ([`team::TeamLayer::set_penalties`]).
 //!
 //! Counters go to `local.var.huddle.stats.gc.*` (`huddle stats`): `accepted`, `stale`,
 //! `bad_length`, `bad_header`, `wrong_version`, `bad_field`, `wrong_team`, `status_sent`.
@@ -339,18 +344,51 @@ async fn run(
 
 /// The replica's budget from the GC's newest figures.
 fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) {
-    let Some(game) = t.game() else { return };
-    let Some(cap) = budget.cap(game, t.team_number()) else {
-        return;
-    };
-    board.set_external_budget(
-        Some(cap.game_remaining),
-        Some(ExternalCap {
+    if let Some((remaining, cap)) = budget_figures(budget, t) {
+        board.set_external_budget(Some(remaining), Some(cap));
+    }
+}
+
+/// What the GC's newest packet in `t` gives a replica's budget: the game time left over
+/// the halves and the team's cap (`None`: no packet of this team's game yet). The
+/// daemon's listener and the simulator's robots feed their replicas with this.
+///
+/// The line is drawn on what the team may spend, the GC's messages less the margin
+/// (1,186 of 1,200 over the game for five robots), so that the margin is never counted
+/// as spent: drawn on the whole 1,200, the team was 14 messages behind its line at the
+/// kick-off and sent nothing, claims included, for the first 10–20 s of play, while
+/// every robot went for the ball (`huddle sim --game full`, seeds 1–3: a 17 s conflict
+/// at the first kick-off).
+pub fn budget_figures(budget: &GcBudget, t: &GameTracker) -> Option<(Duration, ExternalCap)> {
+    let cap = budget.cap(t.game()?, t.team_number())?;
+    let game_s = 2.0 * budget.half.as_secs_f64();
+    let usable = budget.messages_per_game.saturating_sub(budget.margin);
+    Some((
+        cap.game_remaining,
+        ExternalCap {
             counted: cap.counted,
             team_left: u64::from(cap.team_left),
-            rate_per_s: budget.rate_per_s(),
-        }),
-    );
+            rate_per_s: if game_s > 0.0 {
+                f64::from(usable) / game_s
+            } else {
+                0.0
+            },
+            margin: u64::from(budget.margin),
+        },
+    ))
+}
+
+/// This team's penalised player numbers in the GC's newest packet (substitutes count:
+/// they are not on the field).
+pub fn penalized_players(t: &GameTracker) -> Vec<u8> {
+    t.own_team().map_or_else(Vec::new, |team| {
+        (1..=gamecontroller::MAX_NUM_PLAYERS as u8)
+            .filter(|&n| {
+                team.player(n)
+                    .is_some_and(|r| r.penalty != gamecontroller::PENALTY_NONE)
+            })
+            .collect()
+    })
 }
 
 /// The status packet's inputs from the documented keys.
@@ -441,6 +479,11 @@ impl Written {
                 int(other.score.into()),
             );
         }
+        self.put(
+            handle,
+            crate::team::PENALIZED_KEY,
+            Value::Floats(penalized_players(t).into_iter().map(f64::from).collect()),
+        );
         if let Some(me) = t.robot(t.player_number()) {
             self.put(handle, "local.var.gc.penalty", int(me.penalty.into()));
             self.put(

@@ -82,7 +82,9 @@ pub use config_files::{
     load_config, load_config_files, read_key_file, read_regular_file, FileError, KeyFileError,
     LoadConfigError, LoadedConfig, MAX_CONFIG_FILE_BYTES, MAX_KEY_FILE_BYTES,
 };
-pub use gamecontroller::{GameController, GameControllerConfig, GcBoard, GcListener};
+pub use gamecontroller::{
+    budget_figures, penalized_players, GameController, GameControllerConfig, GcBoard, GcListener,
+};
 pub use guard::Guard;
 pub use handle::{Batch, DriverStats, Handle, Watch};
 pub use iface::{broadcast_address, resolve_iface, IfaceError};

@@ -323,6 +323,26 @@ fn take(inputs: &mut Inputs, key: &str, value: &Value, stamp: Instant) {
     }
 }
 
+/// The penalised player numbers `local.var.gc.penalized` holds (floats; anything else,
+/// or a number out of 1–255, is nobody).
+fn penalized(board: &comms::Blackboard) -> Vec<u8> {
+    let key = Key::parse(PENALIZED_KEY).expect("a valid key");
+    match board.get(&key).map(|e| &e.value) {
+        Some(Value::Floats(v)) => v
+            .iter()
+            .filter(|x| x.is_finite() && **x >= 1.0 && **x <= 255.0)
+            .map(|&x| x as u8)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Where the GameController listener writes the game's state.
+pub const GC_STATE_KEY: &str = "local.var.gc.state";
+
+/// Where the GameController listener writes this team's penalised player numbers.
+pub const PENALIZED_KEY: &str = "local.var.gc.penalized";
+
 /// Seconds from `earlier` to `now` on the driver's clock.
 fn since(now: Instant, earlier: Instant) -> f64 {
     now.saturating_duration_since(earlier).as_secs_f64()
@@ -338,6 +358,14 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
         layer.forget_ball(team::seconds(at));
         tracing::info!("team layer: ball reset (at the tick)");
     }
+    // The GameController listener's word on who is off the field (none without one).
+    layer.set_penalties(&penalized(replica.blackboard()));
+    // Out of play (the GC's state is not Playing) the layer tells the team nothing.
+    let state = Key::parse(GC_STATE_KEY).expect("a valid key");
+    layer.set_in_play(match replica.blackboard().get(&state).map(|e| &e.value) {
+        Some(Value::String(s)) => s == "playing",
+        _ => true,
+    });
     let balls: Vec<_> = inputs
         .balls
         .drain(..)

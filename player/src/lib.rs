@@ -33,4 +33,6 @@ pub mod robot;
 pub mod senses;
 pub mod tactics;
 
-pub use robot::{BrainConfig, KickAttempt, Percepts, PlayCounts, Robot, TickInput, TickOutput};
+pub use robot::{
+    BrainConfig, KickAttempt, Order, Percepts, PlayCounts, Robot, TickInput, TickOutput,
+};

@@ -104,6 +104,19 @@ pub struct TickOutput {
     pub kick: Option<KickAttempt>,
 }
 
+/// What the referee lets a robot do, as the robot heard it from the GameController.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub enum Order {
+    /// Play (Playing, or no referee at all).
+    #[default]
+    Play,
+    /// Walk to its kick-off spot (Ready): its formation home in its own half, the
+    /// goalkeeper to its goal.
+    KickOffSpot,
+    /// Stand still (Initial, Standby, Set, Finished, or penalised).
+    Stand,
+}
+
 /// One of our robots: a body's senses and play around its team layer, which it derefs to
 /// (its world models, its arbitration, what it told the team).
 #[derive(Debug, Clone)]
@@ -114,6 +127,9 @@ pub struct Robot {
     pub frame: Frame,
     /// Its place, mode and play.
     pub tactics: Tactician,
+    /// What the referee lets it do; it keeps sensing and telling its team whatever this
+    /// says (the team layer runs in every state).
+    pub order: Order,
 }
 
 impl Deref for Robot {
@@ -177,6 +193,7 @@ impl Robot {
             ),
             frame: Frame::default(),
             tactics: Tactician::new(position),
+            order: Order::Play,
         }
     }
 
@@ -236,34 +253,11 @@ impl Robot {
         self.tactics
             .set_mode(self.brain.id, acts_as_goer, &decision, pass_to);
         let now_s = seconds(input.local_now);
-        let brain = &mut self.brain;
-        let belief = Belief {
-            cal: &brain.cal,
-            pose: brain.pose_belief,
-            ball: brain.best_ball(),
-            own_ball: brain.ball.map(|b| b.at),
-            opponents: &self.frame.opponents,
+        let (receiver, command, kick) = match self.order {
+            Order::Play => self.play(cfg, &input, now_s),
+            Order::Stand => (0, Some(self.stand()), None),
+            Order::KickOffSpot => (0, Some(self.to_kick_off_spot(&input)), None),
         };
-        let action = self
-            .tactics
-            .act(cfg, &belief, now_s, input.homes, input.holders, || {
-                brain.contact_probability(now_s)
-            });
-        // The robot knows what it just tried: its ball, and soon its team's, turns with
-        // the kick (weighted by its own odds that the foot met the ball) instead of
-        // waiting to see it.
-        let kick = action.swing.map(|s| KickAttempt {
-            direction_rad: s.direction_rad,
-            receiver: s.receiver,
-            report: self.brain.report_kick(
-                &cfg.team,
-                now_s,
-                s.direction_rad,
-                self.brain.cal.kick.speed_mps,
-                s.contact_prob,
-            ),
-        });
-        let (receiver, command) = (action.receiver, action.command);
         let (writes, priority) = self.brain.finish(
             &cfg.team,
             input.local_now,
@@ -293,6 +287,69 @@ impl Robot {
         world_model_waiting: bool,
     ) -> Vec<(Key, Value)> {
         self.brain.redecide(board, local_now, world_model_waiting)
+    }
+
+    /// Play on what it believes: the mode's motion, and a kick it swings (reported to
+    /// its team layer at once).
+    fn play(
+        &mut self,
+        cfg: &BrainConfig,
+        input: &TickInput<'_>,
+        now_s: f64,
+    ) -> (i64, Option<MotionCommand>, Option<KickAttempt>) {
+        let brain = &mut self.brain;
+        let belief = Belief {
+            cal: &brain.cal,
+            pose: brain.pose_belief,
+            ball: brain.best_ball(),
+            own_ball: brain.ball.map(|b| b.at),
+            opponents: &self.frame.opponents,
+        };
+        let action = self
+            .tactics
+            .act(cfg, &belief, now_s, input.homes, input.holders, || {
+                brain.contact_probability(now_s)
+            });
+        // The robot knows what it just tried: its ball, and soon its team's, turns with
+        // the kick (weighted by its own odds that the foot met the ball) instead of
+        // waiting to see it.
+        let kick = action.swing.map(|s| KickAttempt {
+            direction_rad: s.direction_rad,
+            receiver: s.receiver,
+            report: self.brain.report_kick(
+                &cfg.team,
+                now_s,
+                s.direction_rad,
+                self.brain.cal.kick.speed_mps,
+                s.contact_prob,
+            ),
+        });
+        (action.receiver, action.command, kick)
+    }
+
+    /// Stand where it is (in the frame of [`TeamLayer::pose_belief`]).
+    fn stand(&self) -> MotionCommand {
+        MotionCommand {
+            velocity: Vec2::default(),
+            heading_rad: self.pose_belief.theta_rad,
+        }
+    }
+
+    /// Walk to its kick-off spot, facing the centre: the goalkeeper to its goal line, a
+    /// field player to its formation home kept in its own half.
+    fn to_kick_off_spot(&self, input: &TickInput<'_>) -> MotionCommand {
+        let field = self.brain.cal.field;
+        let top = self.brain.cal.body.top_speed_mps;
+        let pose = self.pose_belief;
+        let spot = match self.tactics.position {
+            Position::Goalkeeper => Vec2::new(-field.length_m / 2.0 + 0.3, 0.0),
+            Position::Field(k) => {
+                let home = input.homes.get(k).copied().unwrap_or_default();
+                Vec2::new(home.x.min(-0.5), home.y)
+            }
+        };
+        let facing = (Vec2::default() - spot).angle();
+        crate::behaviour::go_to(&pose, spot, facing, top)
     }
 
     /// Switch the robot off: it falls silent. Returns the command that stops it where it

@@ -151,6 +151,21 @@ pub struct SimArgs {
     /// With --daemons: keep each daemon's log (at info level) in this directory.
     #[arg(long, value_name = "DIR", requires = "daemons")]
     pub daemon_logs: Option<PathBuf>,
+    /// Play a whole game under a simulated GameController: `full` (two 10-minute halves
+    /// and a 10-minute break, Initial/Standby/Ready/Set/Playing/Finished, goals with their
+    /// Ready/Set restarts, two 45 s penalties, the GC's count of the team's messages).
+    /// The robots hear its packets and, under `--budget spl`, pace by its figures as
+    /// `huddle daemon` does; the report says whether the team was ever illegal.
+    /// `--duration` is ignored: the game ends when the referee says so.
+    #[arg(long, value_enum)]
+    pub game: Option<GameKind>,
+}
+
+/// A game `--game` plays.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GameKind {
+    /// Two 10-minute halves, a 10-minute break, two penalties.
+    Full,
 }
 
 /// `30s@120s`: an outage of 30 s starting at 120 s.
@@ -200,6 +215,7 @@ impl Default for SimArgs {
             daemons: false,
             impair: None,
             daemon_logs: None,
+            game: None,
         }
     }
 }
@@ -231,12 +247,10 @@ pub fn run(args: SimArgs) -> Result<()> {
     if args.daemons {
         return run_daemons(&args, cfg);
     }
+    let length_ms = (cfg.game.as_ref().map_or(cfg.duration_s, |g| g.length_s()) * 1e3) as u64;
     let mut sim = Simulation::new(cfg).context("setting up the simulation")?;
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(
-            Some(args.duration.as_millis() as u64),
-            ProgressDrawTarget::stderr(),
-        )
+        ProgressBar::with_draw_target(Some(length_ms), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
     };
@@ -283,8 +297,9 @@ fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
         || args.record.is_some()
         || args.monitor.is_some()
         || !args.kill.is_empty()
+        || args.game.is_some()
     {
-        bail!("--daemons does not take --svg, --record, --monitor or --kill");
+        bail!("--daemons does not take --svg, --record, --monitor, --kill or --game");
     }
     let opts = huddle::sim::daemons::DaemonsOptions {
         exe: std::env::current_exe().context("finding the huddle binary")?,
@@ -354,12 +369,20 @@ fn config(args: &SimArgs) -> SimConfig {
     if let Some(spec) = &args.team_ball {
         tune_team_ball(&mut brain.team.world_model, spec);
     }
+    let game = args.game.map(|g| match g {
+        GameKind::Full => huddle::sim::referee::GameScript::spl_full(args.robots),
+    });
+    // A game ends when its referee says so; the duration only caps it (an hour of goals).
+    let duration_s = game
+        .as_ref()
+        .map_or(args.duration.as_secs_f64(), |g| g.length_s() + 3600.0);
     SimConfig {
         brain,
         drawn_world: args.world == WorldKind::Drawn,
         robots: args.robots,
         opponents: args.opponents,
-        duration_s: args.duration.as_secs_f64(),
+        duration_s,
+        game,
         network: NetworkConfig {
             preset: args.preset,
             loss: args.loss,

@@ -15,11 +15,13 @@
 pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
+mod game;
 pub mod metrics;
 /// What a simulated robot's senses mean to its team layer ([`player::perception`]).
 pub use player::perception;
 /// The sending policies: the team layer's ([`team::policy`]).
 pub use team::policy;
+pub mod referee;
 pub mod references;
 mod report;
 /// One of our robots: the simulated player ([`player::robot`]).
@@ -38,6 +40,7 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use crate::harness::{Harness, HarnessError};
+pub use game::GameReport;
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{DelayedCentral, DeliveryReference, Publications, ReferenceConfig};
 pub use report::{NeesBand, NeesCause, Report, SweepRow};
@@ -207,6 +210,10 @@ pub struct SimConfig {
     /// each robot believing a pose off by its start σ, and give each robot a clock with
     /// an offset and a drift; the robots' calibration stays `field`'s nominal figures.
     pub drawn_world: bool,
+    /// Play a whole game under a simulated GameController ([`referee`]): it ends when
+    /// the referee says so (`duration_s` is then only a cap). `None`: a plain match.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub game: Option<referee::GameScript>,
 }
 
 impl Default for SimConfig {
@@ -231,6 +238,7 @@ impl Default for SimConfig {
             acoustic: acoustic::AcousticConfig::default(),
             calibration: None,
             drawn_world: false,
+            game: None,
         }
     }
 }
@@ -357,6 +365,8 @@ pub struct Simulation {
     arbitration_run: ArbitrationParams,
     /// |estimated − true| teammate clock offsets, µs, sampled once a simulated second.
     clock_errors_us: Vec<f64>,
+    /// The GameController and what each robot heard of it (`--game`).
+    game: Option<game::Game>,
 }
 
 impl Simulation {
@@ -494,6 +504,18 @@ impl Simulation {
             }
         }
         harness.keep_events(false);
+        let game = cfg.game.clone().map(|script| {
+            harness.log_sent(true);
+            // Under a budget the replicas follow the GC's figures, as a daemon's do.
+            let budget = cfg.budget.map(|_| gamecontroller::GcBudget {
+                half: Duration::from_secs_f64(script.half_s),
+                messages_per_game: u32::from(script.messages_per_game),
+                ..gamecontroller::GcBudget::spl(u8::try_from(n).unwrap_or(u8::MAX))
+            });
+            let spots = world.opponents.iter().map(|b| b.pose).collect();
+            let loss = cfg.network.mean_loss();
+            game::Game::new(script, n, budget, loss, spots, cfg.seed)
+        });
         let period = cfg.brain.team.control_period_s;
         let next_tick_s = (0..n).map(|i| period * i as f64 / n as f64).collect();
         let mut sim = Self {
@@ -526,6 +548,7 @@ impl Simulation {
             outage_metrics: acoustic::OutageFigures::default(),
             arbitration_run,
             clock_errors_us: Vec::new(),
+            game,
         };
         sim.setup_fallback()?;
         Ok(sim)
@@ -543,7 +566,8 @@ impl Simulation {
 
     /// Whether the configured duration has been simulated.
     pub fn finished(&self) -> bool {
-        self.time_s() >= self.cfg.duration_s - 1e-9
+        self.game.as_ref().is_some_and(|g| g.referee.over())
+            || self.time_s() >= self.cfg.duration_s - 1e-9
     }
 
     /// One physics step: network up to now, due control ticks, physics, a metrics sample.
@@ -551,6 +575,8 @@ impl Simulation {
         let dt = self.cfg.physics_dt_s;
         let t = self.time_s();
         self.harness.run_until(Time::from_secs_f64(t));
+        self.referee_count(t);
+        self.referee_step(t);
         self.acoustic_step(t);
         let mut ticked = Vec::new();
         for i in 0..self.robots.len() {
@@ -631,10 +657,18 @@ impl Simulation {
             ticked.push(i);
         }
         self.harness.flush();
-        self.sample_claim_ages();
-        self.sample_world_models(t, &ticked);
+        self.referee_count(t);
+        let in_play = self.in_play();
+        if in_play {
+            self.sample_claim_ages();
+            self.sample_world_models(t, &ticked);
+        }
         let ball_before = self.world.ball;
         let goal = self.world.step(dt);
+        if let Some(g) = goal {
+            self.referee_goal(t + dt, g == crate::field::Goal::For);
+        }
+        self.referee_hold();
         self.note_ball_event(t + dt, &ball_before);
         if goal.is_some() {
             // The referee puts the ball back on the centre spot and the game controller
@@ -657,15 +691,17 @@ impl Simulation {
         let visible = self
             .robots
             .iter()
-            .any(|r| r.is_field_player() && r.sees_ball());
+            .any(|r| r.is_field_player() && r.sees_ball() && !r.penalized());
         let goers: Vec<u8> = self
             .robots
             .iter()
             .filter(|r| r.is_field_player() && r.going())
             .map(|r| r.id)
             .collect();
-        self.metrics.sample(t_end, dt, visible, &goers);
-        self.sample_outage(t_end, visible, &goers);
+        if in_play {
+            self.metrics.sample(t_end, dt, visible, &goers);
+            self.sample_outage(t_end, visible, &goers);
+        }
         self.timeline
             .sample(t_end, visible, self.robots.iter().map(|r| r.going()));
         if self.cfg.snapshot_every_s > 0.0 && t_end >= self.next_snapshot_s {
@@ -1117,6 +1153,7 @@ impl Simulation {
                 0.0
             },
             outage: self.outage_report(),
+            game: self.game.as_ref().map(game::Game::report),
         }
     }
 }

@@ -188,6 +188,9 @@ pub struct Report {
     /// The outage and the acoustic fallback (flattened; absent without an outage).
     #[serde(flatten)]
     pub outage: Option<acoustic::OutageReport>,
+    /// The GameController's books (flattened; absent without `--game`).
+    #[serde(flatten)]
+    pub game: Option<super::GameReport>,
 }
 
 /// The team-ball NEES over one band of true ball speeds (see [`metrics`](super::metrics)).
@@ -392,6 +395,9 @@ impl std::fmt::Display for Report {
         )?;
         if let Some(o) = &self.outage {
             writeln!(f, "{o}")?;
+        }
+        if let Some(g) = &self.game {
+            writeln!(f, "{g}")?;
         }
         write!(
             f,

@@ -35,6 +35,12 @@ use crate::policy::{self, Action, PolicyState, SendPolicy};
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
 pub const WORLD_LOCAL_KEY: &str = "*.var.world.local";
 
+/// The cost a penalised robot posts on the claim key (with `going` false): it is off the
+/// field (the GameController removed it) and claims nothing. Any cost at or above the
+/// no-ball cost already counts for nothing in the arbitration; this one also tells a
+/// teammate that has not heard the GameController's packet that the robot is out.
+pub const PENALIZED_COST: f64 = 1.0e6;
+
 /// The key the active robot announces its intended pass receiver on (`Int`, 0 = shot).
 pub const PASS_TO_KEY: &str = "*.var.machine.pass_to";
 
@@ -227,6 +233,13 @@ pub struct TeamLayer {
     /// Whether it goes by the fallback's decision while the radio is silent (`None`: the
     /// arbiter decides).
     sound_going: Option<bool>,
+    /// Per robot (index = id − 1): the GameController says it is penalised (this robot
+    /// included). See [`TeamLayer::set_penalties`].
+    penalized: Vec<bool>,
+    /// While penalised: its "penalised" claim was handed to the replica.
+    penalty_told: bool,
+    /// The ball is in play (the GameController says Playing, or there is none).
+    in_play: bool,
 }
 
 /// The robot id at index `k` of a team's per-robot vectors.
@@ -291,7 +304,81 @@ impl TeamLayer {
             policy: PolicyState::default(),
             sound: None,
             sound_going: None,
+            penalized: vec![false; team.max(usize::from(id))],
+            penalty_told: false,
+            in_play: true,
         }
+    }
+
+    /// Whether the ball is in play: the GameController says Playing (true when there is
+    /// no GameController). Out of play (Initial, Standby, Ready, Set, Finished) nobody
+    /// plays the ball, so the layer keeps deciding for itself but tells the team nothing
+    /// (a penalty aside): a league counts messages in Standby, Ready and Set, and a claim
+    /// there is spent on nothing. At the kick-off every robot's last claim is old and
+    /// the budget's room for claims is whole, so the team settles its goer at once.
+    pub fn set_in_play(&mut self, in_play: bool) {
+        self.in_play = in_play;
+    }
+
+    /// The robots the GameController says are penalised (player numbers, this robot's
+    /// included; substitutes count: they are not on the field). A penalised robot leaves
+    /// the arbitration: it claims nothing (it posts [`PENALIZED_COST`], not going, once,
+    /// with priority, and is otherwise silent), and its teammates stop counting its claim
+    /// at once, whatever it last said. Called with each new GameController packet.
+    pub fn set_penalties(&mut self, penalized: &[u8]) {
+        let was = self.penalized();
+        self.penalized.iter_mut().for_each(|p| *p = false);
+        for &id in penalized {
+            if let Some(p) = usize::from(id)
+                .checked_sub(1)
+                .and_then(|k| self.penalized.get_mut(k))
+            {
+                *p = true;
+            }
+        }
+        if self.penalized() && !was {
+            self.penalty_told = false;
+            self.h = PENALIZED_COST;
+        }
+    }
+
+    /// Its "penalised" claim goes to the replica: the sending policy takes it as told.
+    fn told_penalty(&mut self) {
+        self.penalty_told = true;
+        self.untold_claim = None;
+        if self.compact {
+            self.policy
+                .wrote_claim(false, PENALIZED_COST, PENALIZED_COST);
+        } else {
+            self.policy
+                .sent_going(false, PENALIZED_COST, PENALIZED_COST);
+        }
+    }
+
+    /// Whether the GameController says this robot is penalised.
+    pub fn penalized(&self) -> bool {
+        self.is_out(self.id)
+    }
+
+    /// Whether robot `id` is penalised by the GameController's word.
+    fn is_out(&self, id: u8) -> bool {
+        usize::from(id)
+            .checked_sub(1)
+            .and_then(|k| self.penalized.get(k))
+            .copied()
+            .unwrap_or(false)
+    }
+
+    /// The robot was put down at `pose` by hand (a penalised robot re-enters at a spot
+    /// the rules name): it believes it, give or take the configured start σ.
+    pub fn place(&mut self, pose: Pose, world_model: &WorldModelConfig) {
+        let cov = fusion::nalgebra::Matrix3::from_diagonal(&fusion::nalgebra::Vector3::new(
+            world_model.start_sigma_m.powi(2),
+            world_model.start_sigma_m.powi(2),
+            world_model.start_sigma_rad.powi(2),
+        ));
+        self.lwm.set_pose(frames::to_fusion_pose(&pose, cov));
+        self.pose_belief = pose;
     }
 
     /// Whether it competes for the ball.
@@ -319,7 +406,7 @@ impl TeamLayer {
     /// teammates still hold its claim and none of them goes, so stopping unannounced
     /// would leave the ball to nobody.
     pub fn going(&self) -> bool {
-        self.alive && self.acts_as_goer()
+        self.alive && !self.penalized() && self.acts_as_goer()
     }
 
     /// Whether it decided to go: by the fallback while the radio is silent, else by the
@@ -454,6 +541,10 @@ impl TeamLayer {
                 heuristic(self.arbiter.params(), view)
             }
         };
+        if self.penalized() {
+            // Off the field: whatever it sees, it claims nothing.
+            self.h = PENALIZED_COST;
+        }
         if self.compact {
             // Only a budget's ride-along reads it (see `redecide`).
             self.latest_lwm.clone_from(&bytes);
@@ -465,7 +556,12 @@ impl TeamLayer {
     /// the acoustic fallback's claims while the radio is silent).
     pub fn decide(&mut self, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
         let t_s = seconds(local_now);
-        let heard = arbitration::heard(board, local_now);
+        let mut heard = arbitration::heard(board, local_now);
+        // A penalised teammate is off the field: its last claim (going, perhaps) no longer
+        // counts, by the GameController's word or by its own.
+        heard.retain(|c| {
+            c.robot == self.id || !(self.is_out(c.robot) || c.posted.h >= PENALIZED_COST)
+        });
         let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
         self.decided_at_s = t_s;
         let stale_after = self.arbiter.params().stale_after;
@@ -582,6 +678,22 @@ impl TeamLayer {
     ) -> (Vec<(Key, Value)>, bool) {
         let t = seconds(local_now);
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        if self.penalized() {
+            // It tells the team once that it is out (a goer's teammates must not wait
+            // for it), then keeps quiet: its world model off the field helps nobody.
+            if self.penalty_told {
+                return (Vec::new(), false);
+            }
+            self.told_penalty();
+            let out = Posted {
+                h: PENALIZED_COST,
+                going: false,
+            };
+            return (vec![(arbitration::heuristic_key(), Value::from(out))], true);
+        }
+        if !self.in_play {
+            return (Vec::new(), false);
+        }
         if let Some(bytes) = lwm {
             writes.push((world_local_key(), bytes));
         }
@@ -648,7 +760,7 @@ impl TeamLayer {
         local_now: Instant,
         world_model_waiting: bool,
     ) -> Vec<(Key, Value)> {
-        if !self.alive {
+        if !self.alive || !self.in_play {
             return Vec::new();
         }
         let was = self.claims_ball();
@@ -657,6 +769,11 @@ impl TeamLayer {
             return Vec::new();
         }
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
+        if self.penalized() {
+            // Just penalised: this is its "penalised" claim (see `finish`), alone.
+            self.told_penalty();
+            return writes;
+        }
         let cost = self.arbiter.params().effective_cost(&posted);
         if self.compact {
             // Told once it went out (see `Arbiter::set_told`).

@@ -193,3 +193,101 @@ fn a_robots_world_model_fits_the_spl_message_limit_even_with_a_kick() {
     );
     assert_eq!(tagged, plain + 16, "the HMAC tag adds 16 bytes");
 }
+
+/// Robot `id`'s claim `[h, going]` as robot 2's blackboard holds it, heard at `at`.
+fn hear_claim(board: &mut Blackboard, id: u8, h: f64, going: bool, version: u64, at: Instant) {
+    let posted = Posted { h, going };
+    board.apply_remote(
+        id,
+        1,
+        "machine.heuristic".into(),
+        Value::from(posted),
+        version,
+        at,
+    );
+}
+
+#[test]
+fn a_teammate_the_gamecontroller_penalised_no_longer_holds_the_ball() {
+    // Robot 3 claimed the ball a moment ago (cost 0.5, going); robot 2 sees it 1 m away.
+    // Then the GameController's packet says robot 3 is penalised: it was carried off the
+    // field, so robot 2 must take the ball now, not when robot 3's claim goes stale.
+    let (mut r, _cal, _cfg) = robot_at_a_still_ball(1.0, 0.0);
+    let mut board = Blackboard::new(2);
+    let now = Instant::from_micros(1_000_000);
+    hear_claim(&mut board, 3, 0.5, true, 1, now);
+    r.h = 1.0;
+    let (decision, _) = r.decide(&board, now);
+    assert_eq!(
+        decision.goer,
+        Some(3),
+        "robot 3's fresh claim wins: {decision:?}"
+    );
+    r.set_penalties(&[3]);
+    let later = Instant::from_micros(1_040_000);
+    let (decision, posted) = r.decide(&board, later);
+    assert_eq!(
+        decision.goer,
+        Some(2),
+        "a penalised teammate's claim is dropped at once: {decision:?}"
+    );
+    assert!(posted.going && r.going(), "robot 2 goes: {posted:?}");
+    // Unpenalised, robot 3's claim counts again (a fresh one from its return).
+    r.set_penalties(&[]);
+    hear_claim(&mut board, 3, 0.5, true, 2, later);
+    let (decision, _) = r.decide(&board, Instant::from_micros(1_080_000));
+    assert_eq!(decision.goer, Some(3), "back on the field: {decision:?}");
+}
+
+#[test]
+fn a_penalised_robot_claims_nothing_and_tells_its_team_once() {
+    // Robot 2 was the goer (the ball 1 m away, nobody else). Penalised, it posts the
+    // penalised cost, not going, with priority, once; then it is silent until it returns.
+    let (mut r, _cal, cfg) = robot_at_a_still_ball(1.0, 0.0);
+    let board = Blackboard::new(2);
+    r.h = 1.0;
+    let (_, posted) = r.decide(&board, Instant::from_micros(1_000_000));
+    assert!(posted.going, "alone with the ball, it goes: {posted:?}");
+    r.set_penalties(&[2, 4]);
+    assert!(r.penalized());
+    let now = Instant::from_micros(1_040_000);
+    let lwm = r.sense(&cfg, now, &Senses::default(), &board, false);
+    let (_, posted) = r.decide(&board, now);
+    assert!(
+        !posted.going && !r.going(),
+        "penalised, it never goes: {posted:?}"
+    );
+    let (writes, priority) = r.finish(&cfg, now, lwm, posted, 0, false, false, false, None);
+    assert!(priority, "the team must hear it at once");
+    assert_eq!(
+        writes.len(),
+        1,
+        "its claim alone, no world model: {writes:?}"
+    );
+    let told = match &writes[0] {
+        (k, Value::Floats(v)) if *k == arbitration::heuristic_key() => Posted::from_floats(v),
+        other => panic!("not a claim: {other:?}"),
+    };
+    assert_eq!(
+        told,
+        Some(Posted {
+            h: PENALIZED_COST,
+            going: false
+        })
+    );
+    let now = Instant::from_micros(1_080_000);
+    let lwm = r.sense(&cfg, now, &Senses::default(), &board, false);
+    let (_, posted) = r.decide(&board, now);
+    let (writes, _) = r.finish(&cfg, now, lwm, posted, 0, false, false, false, None);
+    assert!(writes.is_empty(), "told once, then quiet: {writes:?}");
+    // A teammate holding that claim drops robot 2 even without the GC's packet.
+    let mut mate_board = Blackboard::new(3);
+    hear_claim(&mut mate_board, 2, PENALIZED_COST, false, 1, now);
+    let heard = arbitration::heard(&mate_board, now);
+    assert!(
+        heard
+            .iter()
+            .all(|c| !ArbitrationParams::default().counts(c)),
+        "the penalised claim counts for nothing: {heard:?}"
+    );
+}

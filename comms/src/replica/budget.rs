@@ -255,6 +255,10 @@ pub struct ExternalCap {
     /// The league's messages per second of game time: ordinary frames leave
     /// `ceil(rate_per_s · time left)` for the rest of the game.
     pub rate_per_s: f64,
+    /// Frames `team_left` keeps short of the referee's own figure: not spent, so a pooled
+    /// line does not count them as sent (at the kick-off the team is on its line, not a
+    /// margin behind it).
+    pub margin: u64,
 }
 
 /// The shortest gap between two frames in a state the referee system does not count: its
@@ -370,7 +374,9 @@ impl BudgetState {
     /// there is one).
     pub(crate) fn team_sent(&self) -> u64 {
         match (&self.external, self.budget.team) {
-            (Some(x), Some(team)) => team.messages.saturating_sub(self.external_left(x)),
+            (Some(x), Some(team)) => team
+                .messages
+                .saturating_sub(self.external_left(x).saturating_add(x.cap.margin)),
             _ => self.sent + self.heard,
         }
     }
@@ -590,6 +596,7 @@ mod tests {
             counted,
             team_left,
             rate_per_s: 1.0,
+            margin: 0,
         })
     }
 

@@ -28,6 +28,7 @@ fn teammates_frames_heard_since_the_gcs_figure_count_against_it() {
         counted: true,
         team_left: 5,
         rate_per_s: 1.0,
+        margin: 0,
     }));
     let x = Key::parse("*.var.x").unwrap();
     let mut sent = 0;

@@ -1,0 +1,307 @@
+//! `huddle sim --game full`: the match played under a simulated GameController
+//! ([`Referee`]).
+//!
+//! Each step the referee runs to the step's instant; every 500 ms its packet's encoded
+//! bytes go to each robot (lost as often as the network loses a group-addressed frame),
+//! and each robot decodes them through its own [`GameTracker`]. From what the robot heard
+//! (never the referee's truth) it feeds its replica's budget with
+//! [`driver::budget_figures`] (what `huddle daemon` does with each packet), tells its team
+//! layer who is penalised ([`driver::penalized_players`]) and takes its order: play in
+//! Playing, walk to its kick-off spot in Ready, stand otherwise. The referee counts every
+//! frame the team's replicas send, with its size, in the state it was sent in.
+//!
+//! The field follows the referee's truth: outside Playing the ball lies on the centre spot
+//! and the opponents on their kick-off spots; a penalised robot's body is carried to the
+//! sideline and comes back, 45 s later, on the touchline in its own half on the side away
+//! from the ball (it is told where, as a team is by the rules). Arbitration and
+//! world-model figures are sampled in Playing only.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use gamecontroller::{GameTracker, GcBudget, State};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use super::referee::{GameScript, Referee, RefereeEvent};
+use super::robot::Order;
+use super::Simulation;
+use crate::field::geometry::{Pose, Vec2};
+
+/// Our team's number in the simulated game (any; the opponents are `OUR_TEAM + 1`).
+pub const OUR_TEAM: u8 = 12;
+
+/// What the referee's books say at the end (flattened into the report; absent without
+/// `--game`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GameReport {
+    /// The team became illegal at least once (a message over 128 B or at a budget of 0).
+    pub game_illegal: bool,
+    /// Messages that made the team illegal.
+    pub game_illegal_messages: u64,
+    /// When it first became illegal, simulated seconds.
+    pub game_illegal_at_s: Option<f64>,
+    /// Messages the GC counted (sent in Standby, Ready, Set or Playing).
+    pub game_messages_counted: u64,
+    /// Frames sent in states the GC does not count (Initial, Finished, the break).
+    pub game_messages_uncounted: u64,
+    /// Messages over 128 B.
+    pub game_messages_oversized: u64,
+    /// The GC's `messageBudget` for the team at the end.
+    pub game_budget_left: u16,
+    /// Counted messages as a share of the game's budget, %.
+    pub game_budget_used_pct: f64,
+    /// The score, ours first.
+    pub game_score: [u8; 2],
+    /// Penalties given to our robots.
+    pub game_penalties: u32,
+    /// Seconds of Playing.
+    pub game_playing_s: f64,
+    /// GC packets broadcast, and the robots' receptions lost.
+    pub game_packets: u64,
+    /// Packet receptions lost on the way to the robots.
+    pub game_packets_lost: u64,
+}
+
+impl std::fmt::Display for GameReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "game                  score {}–{}, {:.0} s played, {} penalties; {} GC packets ({} receptions lost)",
+            self.game_score[0], self.game_score[1], self.game_playing_s, self.game_penalties, self.game_packets, self.game_packets_lost
+        )?;
+        write!(
+            f,
+            "GC's count            {} counted ({:.1}% of the budget, {} left), {} in uncounted states, {} over 128 B; illegal: {}",
+            self.game_messages_counted,
+            self.game_budget_used_pct,
+            self.game_budget_left,
+            self.game_messages_uncounted,
+            self.game_messages_oversized,
+            match self.game_illegal_at_s {
+                Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
+                None => "never".to_string(),
+            }
+        )
+    }
+}
+
+/// The referee and what each robot heard of it.
+#[derive(Debug, Clone)]
+pub(crate) struct Game {
+    pub(crate) referee: Referee,
+    script: GameScript,
+    trackers: Vec<GameTracker>,
+    budget: Option<GcBudget>,
+    rng: ChaCha8Rng,
+    loss: f64,
+    gc: SocketAddr,
+    packets: u64,
+    packets_lost: u64,
+    penalties: u32,
+    opponent_spots: Vec<Pose>,
+}
+
+impl Game {
+    /// The game of `script` for a team of `robots`; `budget`: the replicas' budgets
+    /// follow the GC; `loss`: the chance a robot misses a packet.
+    pub(crate) fn new(
+        script: GameScript,
+        robots: usize,
+        budget: Option<GcBudget>,
+        loss: f64,
+        opponent_spots: Vec<Pose>,
+        seed: u64,
+    ) -> Game {
+        Game {
+            referee: Referee::new(script.clone(), OUR_TEAM, OUR_TEAM + 1, 0.0),
+            script,
+            trackers: (0..robots)
+                .map(|i| GameTracker::new(OUR_TEAM, crate::harness::robot_id(i)))
+                .collect(),
+            budget,
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x0063_0063_0063_0063),
+            loss: loss.clamp(0.0, 1.0),
+            gc: SocketAddr::from(([10, 0, 0, 1], gamecontroller::GAMECONTROLLER_DATA_PORT)),
+            packets: 0,
+            packets_lost: 0,
+            penalties: 0,
+            opponent_spots,
+        }
+    }
+
+    /// The referee's books as the report shows them.
+    pub(crate) fn report(&self) -> GameReport {
+        let c = self.referee.count();
+        let d = self.referee.data();
+        let score = |n: u8| d.team(n).map_or(0, |t| t.score);
+        GameReport {
+            game_illegal: c.illegal > 0,
+            game_illegal_messages: c.illegal,
+            game_illegal_at_s: c.illegal_at_s.map(|t| (t * 1000.0).round() / 1000.0),
+            game_messages_counted: c.counted,
+            game_messages_uncounted: c.uncounted,
+            game_messages_oversized: c.oversized,
+            game_budget_left: self.referee.budget_left(),
+            game_budget_used_pct: (1000.0 * c.counted as f64
+                / f64::from(self.script.messages_per_game.max(1)))
+            .round()
+                / 10.0,
+            game_score: [score(OUR_TEAM), score(OUR_TEAM + 1)],
+            game_penalties: self.penalties,
+            game_playing_s: (self.referee.playing_s() * 1000.0).round() / 1000.0,
+            game_packets: self.packets,
+            game_packets_lost: self.packets_lost,
+        }
+    }
+}
+
+impl Simulation {
+    /// Whether arbitration and world-model figures are sampled now: always without a
+    /// referee, in Playing with one.
+    pub(super) fn in_play(&self) -> bool {
+        self.game.as_ref().is_none_or(|g| g.referee.playing())
+    }
+
+    /// The referee counts the frames the team sent since the last call, each in the
+    /// state it is in now.
+    pub(super) fn referee_count(&mut self, t_s: f64) {
+        let Some(game) = &mut self.game else { return };
+        for (_, len) in self.harness.take_sent() {
+            game.referee.team_message(t_s, len);
+        }
+    }
+
+    /// The referee's part of a step at `t_s`, before the robots tick: the game runs on,
+    /// its packet reaches the robots, the field follows its decisions.
+    pub(super) fn referee_step(&mut self, t_s: f64) {
+        let Some(game) = &mut self.game else { return };
+        let events = game.referee.advance(t_s);
+        for e in events {
+            self.referee_event(e);
+        }
+        let Some(game) = &mut self.game else { return };
+        if let Some(bytes) = game.referee.packet(t_s) {
+            game.packets += 1;
+            for i in 0..self.robots.len() {
+                if game.rng.random::<f64>() < game.loss {
+                    game.packets_lost += 1;
+                    continue;
+                }
+                let local = self.harness.local_now(i);
+                let now = Duration::from_micros(local.as_micros());
+                let tracker = &mut game.trackers[i];
+                if tracker.receive(now, game.gc, &bytes) != Ok(gamecontroller::Received::Accepted) {
+                    continue;
+                }
+                // What the daemon does with each packet (driver::gamecontroller).
+                if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i)) {
+                    if let Some((remaining, cap)) = driver::budget_figures(budget, tracker) {
+                        replica.set_game_clock(local, remaining);
+                        replica.set_external_budget(Some(cap));
+                    }
+                }
+                self.robots[i].set_penalties(&driver::penalized_players(tracker));
+            }
+        }
+        let Some(game) = &self.game else { return };
+        // Each robot's order from what it heard; a body off the field stands.
+        for i in 0..self.robots.len() {
+            let heard = game.trackers[i].state();
+            let penalised = game.trackers[i].penalized() == Some(true)
+                || game.referee.penalised(crate::harness::robot_id(i));
+            self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
+            self.robots[i].order = match heard {
+                _ if penalised => Order::Stand,
+                Some(State::Playing) => Order::Play,
+                Some(State::Ready) => Order::KickOffSpot,
+                _ => Order::Stand,
+            };
+        }
+    }
+
+    /// After the world's step: outside Playing the ball and the opponents wait on their
+    /// kick-off spots; penalised bodies stay on the sideline.
+    pub(super) fn referee_hold(&mut self) {
+        let Some(game) = &self.game else { return };
+        if !game.referee.playing() {
+            self.world.ball.at = Vec2::default();
+            self.world.ball.velocity = Vec2::default();
+            for (body, spot) in self.world.opponents.iter_mut().zip(&game.opponent_spots) {
+                body.pose = *spot;
+                body.velocity = Vec2::default();
+            }
+        }
+        for i in 0..self.robots.len() {
+            if game.referee.penalised(crate::harness::robot_id(i)) {
+                self.world.robots[i].pose = sideline_spot(&self.cfg, i);
+                self.world.robots[i].velocity = Vec2::default();
+            }
+        }
+    }
+
+    /// A goal in the world, for the referee (`for_us`: ours).
+    pub(super) fn referee_goal(&mut self, t_s: f64, for_us: bool) {
+        if let Some(game) = &mut self.game {
+            for e in game.referee.goal(t_s, for_us) {
+                self.referee_event(e);
+            }
+        }
+    }
+
+    fn referee_event(&mut self, e: RefereeEvent) {
+        match e {
+            RefereeEvent::State(_) => {}
+            RefereeEvent::Penalised(id) => {
+                let Some(i) = usize::from(id)
+                    .checked_sub(1)
+                    .filter(|&i| i < self.robots.len())
+                else {
+                    return;
+                };
+                if let Some(g) = &mut self.game {
+                    g.penalties += 1;
+                }
+                // Picked up and put on the sideline: it looks around and knows it.
+                let spot = sideline_spot(&self.cfg, i);
+                self.world.robots[i].pose = spot;
+                let wm = self.cfg.brain.team.world_model;
+                self.robots[i].place(spot, &wm);
+            }
+            RefereeEvent::Unpenalised(id) => {
+                let Some(i) = usize::from(id)
+                    .checked_sub(1)
+                    .filter(|&i| i < self.robots.len())
+                else {
+                    return;
+                };
+                // Back on the touchline in its own half, on the side away from the ball,
+                // facing into the field: the spot the rules name, so the robot knows it.
+                let f = &self.cfg.field;
+                let side = if self.world.ball.at.y > 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                };
+                let spot = Pose {
+                    at: Vec2::new(-f.length_m / 4.0, side * f.width_m / 2.0),
+                    theta_rad: -side * std::f64::consts::FRAC_PI_2,
+                };
+                self.world.robots[i].pose = spot;
+                self.world.robots[i].velocity = Vec2::default();
+                let wm = self.cfg.brain.team.world_model;
+                self.robots[i].place(spot, &wm);
+            }
+        }
+    }
+}
+
+/// Where penalised robot `i` waits: beyond the touchline of its own half, robots apart.
+fn sideline_spot(cfg: &super::SimConfig, i: usize) -> Pose {
+    let f = &cfg.field;
+    Pose {
+        at: Vec2::new(-0.5 - 0.6 * i as f64, -(f.width_m / 2.0 + 0.6 * f.border_m)),
+        theta_rad: std::f64::consts::FRAC_PI_2,
+    }
+}

@@ -1,0 +1,559 @@
+//! A simulated GameController: the referee of `huddle sim --game full`, sans I/O.
+//!
+//! [`Referee`] runs a whole SPL game as GameController3 does and keeps its books: the
+//! states (Initial → Standby → Ready → Set → Playing, Finished), two halves and the break
+//! between them, the game clock (it runs in Playing only), goals with their Ready/Set
+//! restarts (the conceding team kicks off), penalties (a robot removed for 45 s) and the
+//! team's message budget as the GC counts it:
+//!
+//! - a team message is counted when the true state is Standby, Ready, Set or Playing
+//!   ([`GameControlData::messages_counted`]); each takes 1 from `messageBudget` (1,200 per
+//!   game, not refilled at half-time);
+//! - a message over 128 B, or one sent while the budget is 0, makes the team illegal
+//!   (GameController3 `team_message.rs`): the report says whether that ever happened.
+//!
+//! It broadcasts a [`GameControlData`] every 500 ms ([`Referee::packet`]); the simulator
+//! hands each robot the packet's **encoded bytes**, which the robot decodes through its
+//! own [`gamecontroller::GameTracker`] and feeds to its replica's budget exactly as
+//! `huddle daemon` does (`driver::gamecontroller`). What it simplifies: the state it shows
+//! is the true state (GameController3 can show Playing up to 15 s late; both are counted
+//! states, so the count is the same), a penalty's 45 s run in every state of the half,
+//! and a goal's Ready and Set take fixed times ([`GameScript`]).
+//!
+//! No clock and no randomness: every call takes the simulated time, seconds.
+
+use gamecontroller::{GameControlData, SetPlay, State, KICKING_TEAM_NONE};
+use serde::Serialize;
+
+/// GameController3's `PENALTY_SPL_PLAYER_PUSHING`: the scripted penalties' code.
+pub const PENALTY_PUSHING: u8 = 2;
+
+/// Largest team message the SPL allows, bytes.
+pub const MAX_MESSAGE_BYTES: usize = 128;
+
+/// The GC broadcasts its packet this often, seconds.
+pub const PACKET_PERIOD_S: f64 = 0.5;
+
+/// One scripted penalty.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ScriptedPenalty {
+    /// Our player number (robot id).
+    pub robot: u8,
+    /// The half (1 or 2).
+    pub half: u8,
+    /// After this much play in the half, seconds.
+    pub after_play_s: f64,
+}
+
+/// How the game goes: the league's timings and the scripted penalties.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GameScript {
+    /// A half's playing time, seconds (SPL: 600).
+    pub half_s: f64,
+    /// The half-time break, seconds (SPL: 600).
+    pub break_s: f64,
+    /// Initial before each half, seconds.
+    pub initial_s: f64,
+    /// Standby before each half's first Ready, seconds.
+    pub standby_s: f64,
+    /// Ready before each kick-off, seconds (the rules allow up to 45).
+    pub ready_s: f64,
+    /// Set before each kick-off, seconds.
+    pub set_s: f64,
+    /// Finished shown at the end of the game before the simulation stops, seconds.
+    pub finished_s: f64,
+    /// How long a penalised robot stays off the field, seconds (SPL: 45).
+    pub penalty_s: f64,
+    /// Team messages per game (SPL: 1,200).
+    pub messages_per_game: u16,
+    /// The penalties, in any order.
+    pub penalties: Vec<ScriptedPenalty>,
+}
+
+impl GameScript {
+    /// An SPL game (two 10-minute halves, a 10-minute break) with two penalties: robot
+    /// 3 after 200 s of the first half, robot 4 after 300 s of the second (when a team
+    /// has them; the last robot otherwise).
+    pub fn spl_full(robots: usize) -> GameScript {
+        let last = u8::try_from(robots.max(1)).unwrap_or(u8::MAX);
+        GameScript {
+            half_s: 600.0,
+            break_s: 600.0,
+            initial_s: 10.0,
+            standby_s: 10.0,
+            ready_s: 30.0,
+            set_s: 5.0,
+            finished_s: 5.0,
+            penalty_s: 45.0,
+            messages_per_game: 1200,
+            penalties: vec![
+                ScriptedPenalty {
+                    robot: 3.min(last),
+                    half: 1,
+                    after_play_s: 200.0,
+                },
+                ScriptedPenalty {
+                    robot: 4.min(last),
+                    half: 2,
+                    after_play_s: 300.0,
+                },
+            ],
+        }
+    }
+
+    /// The game's length if no goal is scored, seconds (each goal adds a Ready and a Set).
+    pub fn length_s(&self) -> f64 {
+        let half = self.initial_s + self.standby_s + self.ready_s + self.set_s + self.half_s;
+        2.0 * half + self.break_s + self.finished_s
+    }
+}
+
+/// Something the referee did that the field must show.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefereeEvent {
+    /// The true state changed.
+    State(State),
+    /// Our robot (player number) was penalised: carry it off the field.
+    Penalised(u8),
+    /// Our robot's penalty is over: put it back on the field.
+    Unpenalised(u8),
+}
+
+/// The GC's count of the team's messages.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct MessageCount {
+    /// Messages in counted states (each took one from `messageBudget`).
+    pub counted: u64,
+    /// Messages in states the GC does not count (Initial, Finished, the break).
+    pub uncounted: u64,
+    /// Messages over 128 B.
+    pub oversized: u64,
+    /// Messages that made the team illegal (over 128 B, or counted at a budget of 0).
+    pub illegal: u64,
+    /// When the team first became illegal, simulated seconds.
+    pub illegal_at_s: Option<f64>,
+}
+
+/// Where the game is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    /// Before the half's first Ready (Initial, then Standby).
+    Start,
+    /// Ready, Set or Playing in a half.
+    Half,
+    /// The half-time break (Finished).
+    Break,
+    /// The game is over (Finished).
+    Over,
+}
+
+/// The simulated GameController. See the module docs.
+#[derive(Debug, Clone)]
+pub struct Referee {
+    script: GameScript,
+    ours: u8,
+    data: GameControlData,
+    stage: Stage,
+    /// When the current state ends (Initial, Standby, Ready, Set, the break), seconds.
+    state_until_s: f64,
+    /// Play left in the half, seconds.
+    play_left_s: f64,
+    /// Penalties still to come, and those running: (robot, until seconds).
+    to_come: Vec<ScriptedPenalty>,
+    running: Vec<(u8, f64)>,
+    next_packet_s: f64,
+    count: MessageCount,
+    /// Seconds spent in each state (for the report).
+    playing_s: f64,
+    last_s: f64,
+}
+
+impl Referee {
+    /// A game of our team `ours` against `theirs`, starting at `now_s` in Initial.
+    pub fn new(script: GameScript, ours: u8, theirs: u8, now_s: f64) -> Referee {
+        let mut data = GameControlData::new([ours, theirs]);
+        data.secs_remaining = script.half_s.round() as i16;
+        for t in &mut data.teams {
+            t.message_budget = script.messages_per_game;
+        }
+        // We kick off the first half (the coin toss's winner, fixed for a seed-free script).
+        data.kicking_team = ours;
+        Referee {
+            ours,
+            stage: Stage::Start,
+            state_until_s: now_s + script.initial_s,
+            play_left_s: script.half_s,
+            to_come: script.penalties.clone(),
+            running: Vec::new(),
+            next_packet_s: now_s,
+            count: MessageCount::default(),
+            playing_s: 0.0,
+            last_s: now_s,
+            data,
+            script,
+        }
+    }
+
+    /// The game as the GC shows it now.
+    pub fn data(&self) -> &GameControlData {
+        &self.data
+    }
+
+    /// The true state.
+    pub fn state(&self) -> State {
+        self.data.state
+    }
+
+    /// Whether the ball is in play.
+    pub fn playing(&self) -> bool {
+        self.data.state == State::Playing
+    }
+
+    /// Whether the game is over.
+    pub fn over(&self) -> bool {
+        self.stage == Stage::Over && self.last_s >= self.state_until_s
+    }
+
+    /// Whether our robot `robot` is penalised now.
+    pub fn penalised(&self, robot: u8) -> bool {
+        self.running.iter().any(|&(r, _)| r == robot)
+    }
+
+    /// The team's messages as the GC counted them.
+    pub fn count(&self) -> MessageCount {
+        self.count
+    }
+
+    /// Our team's `messageBudget` now.
+    pub fn budget_left(&self) -> u16 {
+        self.data.team(self.ours).map_or(0, |t| t.message_budget)
+    }
+
+    /// Seconds of Playing so far.
+    pub fn playing_s(&self) -> f64 {
+        self.playing_s
+    }
+
+    /// Runs the game up to `now_s`; returns what happened, in order.
+    pub fn advance(&mut self, now_s: f64) -> Vec<RefereeEvent> {
+        let mut events = Vec::new();
+        let dt = (now_s - self.last_s).max(0.0);
+        self.last_s = now_s;
+        let state = self.data.state;
+        if state == State::Playing {
+            self.playing_s += dt;
+            self.play_left_s -= dt;
+            let played = self.script.half_s - self.play_left_s;
+            let half = if self.data.first_half { 1 } else { 2 };
+            let (due, later): (Vec<_>, Vec<_>) = self
+                .to_come
+                .iter()
+                .copied()
+                .partition(|p| p.half == half && played >= p.after_play_s);
+            self.to_come = later;
+            for p in due {
+                if !self.penalised(p.robot) {
+                    self.running.push((p.robot, now_s + self.script.penalty_s));
+                    events.push(RefereeEvent::Penalised(p.robot));
+                }
+            }
+        }
+        let (over, still): (Vec<_>, Vec<_>) = self
+            .running
+            .iter()
+            .copied()
+            .partition(|&(_, until)| now_s >= until);
+        self.running = still;
+        events.extend(over.into_iter().map(|(r, _)| RefereeEvent::Unpenalised(r)));
+        match (self.stage, state) {
+            (Stage::Start, State::Initial) if now_s >= self.state_until_s => {
+                self.enter(State::Standby, now_s + self.script.standby_s, &mut events);
+            }
+            (Stage::Start, State::Standby) if now_s >= self.state_until_s => {
+                self.stage = Stage::Half;
+                self.enter(State::Ready, now_s + self.script.ready_s, &mut events);
+            }
+            (Stage::Half, State::Ready) if now_s >= self.state_until_s => {
+                self.enter(State::Set, now_s + self.script.set_s, &mut events);
+            }
+            (Stage::Half, State::Set) if now_s >= self.state_until_s => {
+                self.enter(State::Playing, f64::INFINITY, &mut events);
+            }
+            (Stage::Half, State::Playing) if self.play_left_s <= 0.0 => {
+                self.play_left_s = 0.0;
+                // A half's end ends its penalties.
+                events.extend(
+                    self.running
+                        .drain(..)
+                        .map(|(r, _)| RefereeEvent::Unpenalised(r)),
+                );
+                if self.data.first_half {
+                    self.stage = Stage::Break;
+                    self.enter(State::Finished, now_s + self.script.break_s, &mut events);
+                } else {
+                    self.stage = Stage::Over;
+                    self.enter(State::Finished, now_s + self.script.finished_s, &mut events);
+                }
+            }
+            (Stage::Break, _) if now_s >= self.state_until_s => {
+                // The second half: the other team kicks off.
+                self.data.first_half = false;
+                self.play_left_s = self.script.half_s;
+                self.data.kicking_team = self.theirs();
+                self.stage = Stage::Start;
+                self.enter(State::Initial, now_s + self.script.initial_s, &mut events);
+            }
+            _ => {}
+        }
+        self.refresh(now_s);
+        events
+    }
+
+    /// A goal: `for_us` says whose. Counted in Playing only; the conceding team kicks
+    /// off after Ready and Set.
+    pub fn goal(&mut self, now_s: f64, for_us: bool) -> Vec<RefereeEvent> {
+        let mut events = Vec::new();
+        if self.data.state != State::Playing {
+            return events;
+        }
+        let (scorer, conceding) = if for_us {
+            (self.ours, self.theirs())
+        } else {
+            (self.theirs(), self.ours)
+        };
+        if let Some(t) = self.data.team_mut(scorer) {
+            t.score = t.score.saturating_add(1);
+        }
+        self.data.kicking_team = conceding;
+        self.enter(State::Ready, now_s + self.script.ready_s, &mut events);
+        self.refresh(now_s);
+        events
+    }
+
+    /// One message of our team, `len` bytes, sent at `now_s`: counted as the GC counts.
+    pub fn team_message(&mut self, now_s: f64, len: usize) {
+        let mut illegal = false;
+        if len > MAX_MESSAGE_BYTES {
+            self.count.oversized += 1;
+            illegal = true;
+        }
+        if self.data.messages_counted() {
+            self.count.counted += 1;
+            let ours = self.ours;
+            if let Some(t) = self.data.team_mut(ours) {
+                if t.message_budget == 0 {
+                    illegal = true;
+                } else {
+                    t.message_budget -= 1;
+                }
+            }
+        } else {
+            self.count.uncounted += 1;
+        }
+        if illegal {
+            self.count.illegal += 1;
+            self.count.illegal_at_s.get_or_insert(now_s);
+        }
+    }
+
+    /// The packet the GC broadcasts at `now_s`, if one is due (every 500 ms).
+    pub fn packet(
+        &mut self,
+        now_s: f64,
+    ) -> Option<[u8; gamecontroller::GAMECONTROLLER_STRUCT_SIZE]> {
+        if now_s + 1e-9 < self.next_packet_s {
+            return None;
+        }
+        self.next_packet_s += PACKET_PERIOD_S;
+        self.data.packet_number = self.data.packet_number.wrapping_add(1);
+        Some(self.data.encode())
+    }
+
+    fn theirs(&self) -> u8 {
+        self.data
+            .teams
+            .iter()
+            .map(|t| t.team_number)
+            .find(|&n| n != self.ours)
+            .unwrap_or(self.ours)
+    }
+
+    fn enter(&mut self, state: State, until_s: f64, events: &mut Vec<RefereeEvent>) {
+        self.data.state = state;
+        self.data.set_play = SetPlay::None;
+        self.state_until_s = until_s;
+        events.push(RefereeEvent::State(state));
+    }
+
+    /// The packet's clocks and penalties from the books.
+    fn refresh(&mut self, now_s: f64) {
+        self.data.secs_remaining = self.play_left_s.ceil().clamp(0.0, 32767.0) as i16;
+        let secondary = match self.data.state {
+            State::Ready | State::Set | State::Initial | State::Standby => {
+                self.state_until_s - now_s
+            }
+            State::Finished if self.stage == Stage::Break => self.state_until_s - now_s,
+            _ => 0.0,
+        };
+        self.data.secondary_time = secondary.ceil().clamp(0.0, 32767.0) as i16;
+        if self.stage == Stage::Over {
+            self.data.kicking_team = KICKING_TEAM_NONE;
+        }
+        let running = self.running.clone();
+        let ours = self.ours;
+        if let Some(t) = self.data.team_mut(ours) {
+            for (k, p) in t.players.iter_mut().enumerate() {
+                let id = u8::try_from(k + 1).unwrap_or(u8::MAX);
+                match running.iter().find(|&&(r, _)| r == id) {
+                    Some(&(_, until)) => {
+                        p.penalty = PENALTY_PUSHING;
+                        p.secs_till_unpenalised = (until - now_s).ceil().clamp(0.0, 255.0) as u8;
+                    }
+                    None => *p = gamecontroller::RobotInfo::default(),
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs the referee in 10 ms steps to `until_s`, collecting its events.
+    fn run_to(r: &mut Referee, from_s: f64, until_s: f64) -> Vec<(f64, RefereeEvent)> {
+        let mut out = Vec::new();
+        let mut t = from_s;
+        while t < until_s {
+            t += 0.01;
+            out.extend(r.advance(t).into_iter().map(|e| (t, e)));
+        }
+        out
+    }
+
+    #[test]
+    fn a_goalless_game_runs_the_spl_timeline_and_counts_only_counted_states() {
+        // Script: two 600 s halves, a 600 s break, two penalties. One message a second
+        // throughout: the GC counts those in Standby, Ready, Set and Playing only.
+        let script = GameScript::spl_full(5);
+        let length = script.length_s();
+        let mut r = Referee::new(script, 12, 34, 0.0);
+        let mut events = Vec::new();
+        let mut t = 0.0;
+        while !r.over() {
+            events.extend(run_to(&mut r, t, t + 1.0));
+            t += 1.0;
+            r.team_message(t, 100);
+            assert!(t < length + 10.0, "the game ends");
+        }
+        let states: Vec<State> = events
+            .iter()
+            .filter_map(|(_, e)| match e {
+                RefereeEvent::State(s) => Some(*s),
+                _ => None,
+            })
+            .collect();
+        use State::*;
+        assert_eq!(
+            states,
+            [
+                Standby, Ready, Set, Playing, Finished, Initial, Standby, Ready, Set, Playing,
+                Finished
+            ],
+            "the SPL's order of states"
+        );
+        let pens: Vec<_> = events
+            .iter()
+            .filter(|(_, e)| !matches!(e, RefereeEvent::State(_)))
+            .collect();
+        assert_eq!(pens.len(), 4, "two penalties, each with its end: {pens:?}");
+        let (on, off) = (pens[0].0, pens[1].0);
+        assert!(
+            (off - on - 45.0).abs() < 0.02,
+            "45 s off the field: {pens:?}"
+        );
+        let c = r.count();
+        // Counted: 10 s Standby + 35 s Ready/Set + 600 s play, twice.
+        assert!(
+            (c.counted as f64 - 2.0 * 645.0).abs() <= 3.0,
+            "counted {c:?}"
+        );
+        assert_eq!(
+            c.illegal,
+            c.counted - 1200,
+            "every counted message past 1,200 is illegal: {c:?}"
+        );
+        assert_eq!(r.budget_left(), 0);
+        assert!(c.illegal_at_s.is_some());
+    }
+
+    #[test]
+    fn a_goal_restarts_with_ready_and_set_and_the_conceding_team_kicks_off() {
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        run_to(&mut r, 0.0, 60.0);
+        assert!(
+            r.playing(),
+            "playing after 55 s of Initial/Standby/Ready/Set"
+        );
+        let left = r.data().secs_remaining;
+        assert!(r
+            .goal(60.0, true)
+            .contains(&RefereeEvent::State(State::Ready)));
+        assert_eq!(r.data().team(12).map(|t| t.score), Some(1));
+        assert_eq!(r.data().kicking_team, 34, "the conceding team kicks off");
+        run_to(&mut r, 60.0, 91.0);
+        assert_eq!(r.state(), State::Set, "30 s of Ready");
+        assert_eq!(
+            r.data().secs_remaining,
+            left,
+            "the clock stands in Ready and Set"
+        );
+        run_to(&mut r, 91.0, 96.0);
+        assert!(r.playing(), "5 s of Set");
+        // A goal outside Playing is not a goal.
+        let mut r2 = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        assert!(r2.goal(1.0, false).is_empty());
+        assert_eq!(r2.data().team(34).map(|t| t.score), Some(0));
+    }
+
+    #[test]
+    fn a_message_over_128_bytes_or_at_zero_makes_the_team_illegal() {
+        let mut script = GameScript::spl_full(5);
+        script.messages_per_game = 2;
+        let mut r = Referee::new(script, 12, 34, 0.0);
+        r.team_message(0.0, 129);
+        assert_eq!(r.count().illegal, 1, "oversized, even when uncounted");
+        assert_eq!(r.count().uncounted, 1);
+        run_to(&mut r, 0.0, 11.0);
+        assert_eq!(r.state(), State::Standby);
+        r.team_message(11.0, 60);
+        r.team_message(11.0, 60);
+        assert_eq!((r.budget_left(), r.count().illegal), (0, 1));
+        r.team_message(11.1, 60);
+        assert_eq!(r.count().illegal, 2, "one message at 0 is one too many");
+    }
+
+    #[test]
+    fn packets_go_every_half_second_and_decode_with_the_penalty() {
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        let mut tracker = gamecontroller::GameTracker::new(12, 3);
+        let from = "10.0.0.1:3838".parse().expect("an address");
+        let mut sent: i32 = 0;
+        let mut t = 0.0;
+        while t < 300.0 {
+            t += 0.01;
+            r.advance(t);
+            if let Some(bytes) = r.packet(t) {
+                sent += 1;
+                tracker
+                    .receive(std::time::Duration::from_secs_f64(t), from, &bytes)
+                    .expect("the GC's own packets decode");
+            }
+        }
+        assert!((sent - 600).abs() <= 1, "{sent} packets in 300 s");
+        // Robot 3 is penalised after 200 s of play (play began at 55 s): off till 300 s.
+        assert_eq!(tracker.penalized(), Some(true), "robot 3 is off the field");
+        assert!(tracker.own_secs_till_unpenalised().is_some_and(|s| s <= 45));
+        assert_eq!(tracker.state(), Some(State::Playing));
+    }
+}
