@@ -231,7 +231,9 @@ impl TeamPlan {
                     let first = (value / u16::from(DATA_VALUES)) as u8;
                     let second = (value % u16::from(DATA_VALUES)) as u8;
                     let n = u16::from(CHECKED_LONG_VALUES);
-                    (first >= BANK_VALUES && second >= BANK_VALUES).then_some(TeamMessage {
+                    // Lazily: the subtraction is only valid once both halves are checked
+                    // (a decoded message is untrusted input and must not overflow).
+                    (first >= BANK_VALUES && second >= BANK_VALUES).then(|| TeamMessage {
                         robot: sender,
                         long: true,
                         value: u16::from(first - BANK_VALUES) * n + u16::from(second - BANK_VALUES),
