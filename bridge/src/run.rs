@@ -273,8 +273,8 @@ impl Bridge {
         let clock = Clock::new();
         // The robots' team layers send their keys by index: the listener reads them with
         // the same table (without it they would be skipped and counted).
-        let mut rcfg = ReplicaConfig::new(cfg.listener_id, cfg.team)
-            .with_known_paths(team::known_paths());
+        let mut rcfg =
+            ReplicaConfig::new(cfg.listener_id, cfg.team).with_known_paths(team::known_paths());
         if let Some(key) = &cfg.team_key {
             rcfg = rcfg.with_team_key(key.clone());
         }
