@@ -127,40 +127,90 @@ pub struct Driver {
     wake: Rc<Nudge>,
 }
 
+/// The transport's sockets, registered with the current tokio runtime: what
+/// [`Driver::bind`] and [`crate::Session::open`] both open.
+pub(crate) struct Sockets {
+    /// The team's socket (the group's for multicast).
+    pub(crate) team: UdpSocket,
+    /// A second socket for `--peer` unicast copies beside multicast or broadcast.
+    pub(crate) unicast: Option<UdpSocket>,
+    /// Where frames to the team go (none for unicast: each peer gets its copy).
+    pub(crate) destination: Option<SocketAddr>,
+    /// `team` takes datagrams from peers only (the unicast transport).
+    pub(crate) peers_only: bool,
+    /// The receive buffer the kernel granted the team's socket, bytes.
+    pub(crate) recv_buffer_granted: usize,
+}
+
+/// Opens the sockets `config` asks for.
+pub(crate) fn open_sockets(config: &DriverConfig) -> Result<Sockets, DriverError> {
+    let peers_only = config.socket.transport == Transport::Unicast;
+    if peers_only && config.peers.is_empty() {
+        return Err(DriverError::NoPeers);
+    }
+    let opened = open(&config.socket)?;
+    let destination = opened.destination.map(SocketAddr::V4);
+    let team = UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?;
+    let unicast = if config.peers.is_empty() || peers_only {
+        None
+    } else {
+        let std_socket = open_unicast(&config.socket)?;
+        Some(UdpSocket::from_std(std_socket).map_err(DriverError::Runtime)?)
+    };
+    Ok(Sockets {
+        team,
+        unicast,
+        destination,
+        peers_only,
+        recv_buffer_granted: opened.recv_buffer_granted,
+    })
+}
+
+/// The replica `config` describes in this life (`incarnation`, or a new one), its start
+/// values set and their events dropped.
+pub(crate) fn start_replica(
+    config: ReplicaConfig,
+    incarnation: Option<u64>,
+    start_values: Vec<(Key, Value)>,
+    clock: &Clock,
+) -> Result<Replica, DriverError> {
+    let incarnation = incarnation.unwrap_or_else(new_incarnation);
+    let mut replica = Replica::new(config, incarnation, clock.now())?;
+    for (key, value) in start_values {
+        replica
+            .set_key(clock.now(), &key, value)
+            .map_err(|source| DriverError::StartValue {
+                key: key.to_string(),
+                source,
+            })?;
+    }
+    // Start values are this robot's business, not changes anyone waits for.
+    while replica.poll_event().is_some() {}
+    Ok(replica)
+}
+
 impl Driver {
     /// Opens the transport's socket (joining the group for multicast) and starts the
     /// replica with the start values. Call it inside a tokio runtime (the socket
     /// registers with its reactor).
     pub fn bind(config: DriverConfig) -> Result<Driver, DriverError> {
         let transport = config.socket.transport;
-        let peers_only = transport == Transport::Unicast;
-        if peers_only && config.peers.is_empty() {
-            return Err(DriverError::NoPeers);
-        }
-        let opened = open(&config.socket)?;
-        let destination = opened.destination.map(SocketAddr::V4);
-        let socket = Rc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
-        let unicast = if config.peers.is_empty() || peers_only {
-            None
-        } else {
-            let std_socket = open_unicast(&config.socket)?;
-            Some(Rc::new(
-                UdpSocket::from_std(std_socket).map_err(DriverError::Runtime)?,
-            ))
-        };
+        let Sockets {
+            team,
+            unicast,
+            destination,
+            peers_only,
+            recv_buffer_granted,
+        } = open_sockets(&config)?;
+        let socket = Rc::new(team);
+        let unicast = unicast.map(Rc::new);
         let clock = Clock::new();
-        let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
-        let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
-        for (key, value) in config.start_values {
-            replica
-                .set_key(clock.now(), &key, value)
-                .map_err(|source| DriverError::StartValue {
-                    key: key.to_string(),
-                    source,
-                })?;
-        }
-        // Start values are this robot's business, not changes anyone waits for.
-        while replica.poll_event().is_some() {}
+        let replica = start_replica(
+            config.replica,
+            config.incarnation,
+            config.start_values,
+            &clock,
+        )?;
         let wake = Rc::new(Nudge::default());
         let inner = Inner {
             clock,
@@ -180,7 +230,7 @@ impl Driver {
             next_session: 0,
             session_limits: config.session_limits,
             io: IoStats {
-                recv_buffer_bytes: opened.recv_buffer_granted,
+                recv_buffer_bytes: recv_buffer_granted,
                 ..IoStats::default()
             },
             wake: wake.clone(),
@@ -200,7 +250,7 @@ impl Driver {
             to = %destination.map_or_else(|| "each peer".to_owned(), |d| d.to_string()),
             port = config.socket.group.port(),
             iface = %config.socket.iface,
-            recv_buffer_bytes = opened.recv_buffer_granted,
+            recv_buffer_bytes = recv_buffer_granted,
             requested = config.socket.recv_buffer_bytes,
             peers = inner.peers.len(),
             "{transport} socket ready"

@@ -29,10 +29,8 @@ use comms::{
 };
 
 use crate::handle::DriverStats;
-use crate::incarnation::new_incarnation;
 use crate::notice::Notice;
-use crate::run::{DriverConfig, DriverError};
-use crate::socket::{open, open_unicast, Transport};
+use crate::run::{open_sockets, start_replica, DriverConfig, DriverError, Sockets};
 use crate::state::{Clock, IoStats};
 
 /// Frames kept while the kernel's send buffer is full; beyond this they are dropped and
@@ -395,35 +393,22 @@ impl Session {
     /// its first frame and spawns its receive task on the current tokio runtime (any
     /// flavour).
     pub async fn open(config: DriverConfig) -> Result<Session, DriverError> {
-        let transport = config.socket.transport;
-        let peers_only = transport == Transport::Unicast;
-        if peers_only && config.peers.is_empty() {
-            return Err(DriverError::NoPeers);
-        }
-        let opened = open(&config.socket)?;
-        let destination = opened.destination.map(SocketAddr::V4);
-        let team = Arc::new(UdpSocket::from_std(opened.socket).map_err(DriverError::Runtime)?);
-        let unicast = if config.peers.is_empty() || peers_only {
-            None
-        } else {
-            let std_socket = open_unicast(&config.socket)?;
-            Some(Arc::new(
-                UdpSocket::from_std(std_socket).map_err(DriverError::Runtime)?,
-            ))
-        };
+        let Sockets {
+            team,
+            unicast,
+            destination,
+            peers_only,
+            recv_buffer_granted,
+        } = open_sockets(&config)?;
+        let team = Arc::new(team);
+        let unicast = unicast.map(Arc::new);
         let clock = Clock::new();
-        let incarnation = config.incarnation.unwrap_or_else(new_incarnation);
-        let mut replica = Replica::new(config.replica, incarnation, clock.now())?;
-        for (key, value) in config.start_values {
-            replica
-                .set_key(clock.now(), &key, value)
-                .map_err(|source| DriverError::StartValue {
-                    key: key.to_string(),
-                    source,
-                })?;
-        }
-        // Start values are this robot's business, not changes anyone waits for.
-        while replica.poll_event().is_some() {}
+        let replica = start_replica(
+            config.replica,
+            config.incarnation,
+            config.start_values,
+            &clock,
+        )?;
         let mut state = State {
             replica,
             team: team.clone(),
@@ -435,7 +420,7 @@ impl Session {
             peer_events: Vec::new(),
             feed_capacity: config.subscriber_backlog.max(1),
             io: IoStats {
-                recv_buffer_bytes: opened.recv_buffer_granted,
+                recv_buffer_bytes: recv_buffer_granted,
                 ..IoStats::default()
             },
             sleeping_until: None,
