@@ -26,7 +26,7 @@ pub fn to_fusion_odometry(odo: &Odometry) -> fusion::Odometry {
 }
 
 /// σ of a range measured at `range_m`.
-fn range_sigma(cam: &SensorCalibration, range_m: f64) -> f64 {
+pub fn range_sigma(cam: &SensorCalibration, range_m: f64) -> f64 {
     cam.range_noise_m + cam.range_noise_frac * range_m
 }
 
@@ -47,22 +47,28 @@ pub fn landmark_sighting(
     )
 }
 
-/// A ball sighting in `fusion`'s robot coordinates, its range/bearing noise carried into
-/// x/y through the Jacobian of the polar → Cartesian map.
-pub fn ball_sighting(cam: &SensorCalibration, s: &Sighting) -> BallSighting {
+/// A ball sighting as the contract takes it: a robot-frame point (REP-103: x forward,
+/// y left) and its covariance, the range and bearing noise carried through the Jacobian
+/// of the polar → Cartesian map.
+pub fn ball_rep103(cam: &SensorCalibration, s: &Sighting) -> (Vector2<f64>, Matrix2<f64>) {
     let (r, b) = (s.range_m, s.bearing_rad);
     let (sin, cos) = b.sin_cos();
-    // Simulator frame: p = r (cos b, sin b); fusion frame: (−p_y, p_x).
-    let local = Vector2::new(-r * sin, r * cos);
-    // ∂(−r sin b, r cos b)/∂(r, b)
-    let j = Matrix2::new(-sin, -r * cos, cos, -r * sin);
+    // ∂(r cos b, r sin b)/∂(r, b)
+    let j = Matrix2::new(cos, -r * sin, sin, r * cos);
     let sr = range_sigma(cam, r);
     let d = Matrix2::new(sr * sr, 0.0, 0.0, cam.bearing_noise_rad.powi(2));
     let cov = j * d * j.transpose();
-    BallSighting {
-        local,
-        cov: (cov + cov.transpose()) * 0.5,
-    }
+    (
+        Vector2::new(r * cos, r * sin),
+        (cov + cov.transpose()) * 0.5,
+    )
+}
+
+/// A ball sighting in `fusion`'s robot coordinates: [`ball_rep103`] turned into fusion's
+/// frame, as the team layer turns a robot program's sighting.
+pub fn ball_sighting(cam: &SensorCalibration, s: &Sighting) -> BallSighting {
+    let (local, cov) = ball_rep103(cam, s);
+    team::frames::ball_sighting_from_rep103(local, cov)
 }
 
 #[cfg(test)]

@@ -19,9 +19,10 @@ use team::contract;
 use team::{Calibration, Pose, Vec2};
 
 use crate::behaviour::Position;
+use crate::perception;
 use crate::play::{Belief, Tactician};
 use crate::robot::{BrainConfig, KickAttempt, Percepts};
-use crate::senses::{Frame, MotionCommand, Odometry, Sighting};
+use crate::senses::{Frame, MotionCommand, Odometry};
 
 /// A ball as the layer publishes it (`local.var.team.ball`, `local.var.team.own_ball`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -144,7 +145,7 @@ impl TeamView {
 /// arrives).
 pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static str, Value)> {
     let cam = &cal.sensors;
-    let sigma_r = |r: f64| cam.range_noise_m + cam.range_noise_frac * r;
+    let sigma_r = |r: f64| perception::range_sigma(cam, r);
     let mut out = Vec::new();
     let marks = cal.field.landmarks();
     let seen: Vec<f64> = percepts
@@ -167,7 +168,7 @@ pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static 
         out.push((contract::LANDMARKS_KEY, Value::Floats(seen)));
     }
     if let Some(s) = &percepts.frame.ball {
-        let (local, cov) = ball_rep103(sigma_r(s.range_m), cam.bearing_noise_rad, s);
+        let (local, cov) = perception::ball_rep103(cam, s);
         out.push((
             contract::BALL_KEY,
             Value::Floats(vec![
@@ -190,20 +191,6 @@ pub fn contract_inputs(cal: &Calibration, percepts: &Percepts) -> Vec<(&'static 
         Value::Floats(vec![o.forward_m, o.left_m, o.turn_rad]),
     ));
     out
-}
-
-/// A range-bearing ball sighting as a robot-frame point (REP-103: x forward, y left) and
-/// its covariance, the range and bearing σ carried through the polar → Cartesian map.
-fn ball_rep103(sigma_r: f64, sigma_b: f64, s: &Sighting) -> (Vector2<f64>, Matrix2<f64>) {
-    let (r, b) = (s.range_m, s.bearing_rad);
-    let (sin, cos) = b.sin_cos();
-    let j = Matrix2::new(cos, -r * sin, sin, r * cos);
-    let d = Matrix2::new(sigma_r * sigma_r, 0.0, 0.0, sigma_b * sigma_b);
-    let cov = j * d * j.transpose();
-    (
-        Vector2::new(r * cos, r * sin),
-        (cov + cov.transpose()) * 0.5,
-    )
 }
 
 /// The pose a robot is told at its start spot, as the contract's `local.var.robot.pose`:
@@ -429,6 +416,7 @@ impl RemoteRobot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::senses::Sighting;
 
     #[test]
     fn every_input_a_tick_writes_is_one_the_daemon_takes() {
