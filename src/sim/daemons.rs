@@ -269,6 +269,14 @@ impl Daemon {
     }
 }
 
+/// The relay lines that write `writes`, one `SETV` each.
+fn setv_lines(writes: &[(&str, Value)]) -> String {
+    writes
+        .iter()
+        .map(|(key, value)| format!("SETV {key} {value}\n"))
+        .collect()
+}
+
 /// The netsim spec of the match's network, for `huddle daemon --impair`.
 pub fn impair_spec(cfg: &SimConfig) -> String {
     let n = &cfg.network;
@@ -581,13 +589,10 @@ pub fn run(
             // for the layer's pose from that tick, as a robot program reading its
             // team's decisions each cycle does; a layer slower than a few ms leaves the
             // robot to play on what it last had.
-            let mut lines = String::new();
             let clock = |at: Instant| at.saturating_duration_since(started).as_secs_f64();
-            for (key, value) in robots[i].sense(clock(Instant::now()), percepts) {
-                lines += &format!("SETV {key} {value}\n");
-            }
+            let senses = robots[i].sense(clock(Instant::now()), percepts);
             let sent = Instant::now();
-            daemons[i].send(&lines)?;
+            daemons[i].send(&setv_lines(&senses))?;
             let fresh = sent + FRESH_WAIT;
             let (view, now) = loop {
                 let heard = daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner());
@@ -603,12 +608,8 @@ pub fn run(
             };
             robots[i].view = view;
             let out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
-            let mut lines = String::new();
-            for (key, value) in &out.writes {
-                lines += &format!("SETV {key} {value}\n");
-            }
-            if !lines.is_empty() {
-                daemons[i].send(&lines)?;
+            if !out.writes.is_empty() {
+                daemons[i].send(&setv_lines(&out.writes))?;
             }
             if let Some(cmd) = out.command {
                 world.command_believed(i, cmd, &out.believed);
