@@ -13,9 +13,10 @@
 //! **What it is not.** The protocol is not here: it is the sans-IO `comms` crate, run by
 //! the tokio shell in `driver`. For the lowest latency (an answer sent in the very turn
 //! that received the question) run a [`driver::Driver`] on one thread and react with
-//! [`driver::Handle::watch`]; that handle is `!Send` on purpose. The rest of this crate
-//! is the team simulator behind `huddle sim` ([`sim`], [`field`], [`harness`]), whose
-//! robots are written for the simulation.
+//! [`driver::Handle::watch`]; that handle is `!Send` on purpose. The team simulator
+//! behind `huddle sim` is the `teamsim` crate, re-exported here as [`sim`] and [`field`]
+//! with the netsim harness as [`harness`]; the binary's command line is this crate's
+//! `main.rs` and `cli` modules.
 //!
 //! Two robots in one process, on loopback:
 //!
@@ -57,10 +58,13 @@
 #![forbid(unsafe_code)]
 
 mod config;
-pub mod field;
 pub mod impair;
-pub mod sim;
 pub mod summary;
+
+/// The team simulator behind `huddle sim` (the `teamsim` crate).
+pub use teamsim as sim;
+/// The simulated field's truth: ball, bodies, cameras (the `teamsim` crate's `field`).
+pub use teamsim::field;
 
 pub use comms::{Entry, Instant, Key, Value, ValueType, WrongType};
 /// N replicas over a netsim network in virtual time (the `comms-netsim` crate), for the

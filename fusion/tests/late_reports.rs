@@ -151,3 +151,44 @@ fn a_message_sent_just_before_the_ball_was_put_back_does_not_start_the_new_team_
          off): this test would not show what the margin buys"
     );
 }
+
+#[test]
+fn a_teammate_told_of_the_reset_after_us_does_not_start_the_new_team_ball_on_its_old_track() {
+    // Each robot program tells its own layer of the kick-off at its own control cycle, so
+    // robot 1 keeps its track of the old ball (at (2, 0)) for 60 ms after robot 3 forgot
+    // it, while its camera already sees the ball on the centre spot. Its messages in
+    // between carry the old track with a new sighting. Robot 3 must start the new team
+    // ball where the sightings are, not where robot 1's stale track is.
+    let forget_s = 0.975;
+    let told_s = forget_s + 0.06;
+    let mut watcher = local_model(1.0);
+    let mut g = gwm(GlobalConfig::default());
+    let mut forgotten = false;
+    let mut told = false;
+    let mut worst_m: f64 = 0.0;
+    for k in 0..=40 {
+        let t_s = k as f64 * PERIOD_S;
+        if !told && t_s >= told_s {
+            watcher.forget_ball();
+            told = true;
+        }
+        let x = if t_s < forget_s { 2.0 } else { 0.0 };
+        watcher.ball_sighting(t_s, &sighting(x, 1.0));
+        let bytes = watcher.publish(t_s).to_bytes().expect("encodes");
+        if !forgotten && t_s > forget_s {
+            g.forget_ball(forget_s);
+            forgotten = true;
+        }
+        g.receive(1, &bytes, t_s, 0.0).expect("valid");
+        if forgotten {
+            if let Some(team) = g.team_ball(t_s, None) {
+                worst_m = worst_m.max(team.estimate.position().norm());
+            }
+        }
+    }
+    assert!(
+        worst_m < 0.3,
+        "after the reset the team ball was once {worst_m:.3} m from the centre spot: robot \
+         1's stale track started it"
+    );
+}

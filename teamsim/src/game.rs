@@ -118,7 +118,7 @@ impl Game {
             referee: Referee::new(script.clone(), OUR_TEAM, OUR_TEAM + 1, 0.0),
             script,
             trackers: (0..robots)
-                .map(|i| GameTracker::new(OUR_TEAM, crate::harness::robot_id(i)))
+                .map(|i| GameTracker::new(OUR_TEAM, comms_netsim::robot_id(i)))
                 .collect(),
             budget,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x0063_0063_0063_0063),
@@ -210,7 +210,7 @@ impl Simulation {
         for i in 0..self.robots.len() {
             let heard = game.trackers[i].state();
             let penalised = game.trackers[i].penalized() == Some(true)
-                || game.referee.penalised(crate::harness::robot_id(i));
+                || game.referee.penalised(comms_netsim::robot_id(i));
             self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
             self.robots[i].order = match heard {
                 _ if penalised => Order::Stand,
@@ -234,7 +234,7 @@ impl Simulation {
             }
         }
         for i in 0..self.robots.len() {
-            if game.referee.penalised(crate::harness::robot_id(i)) {
+            if game.referee.penalised(comms_netsim::robot_id(i)) {
                 self.world.robots[i].pose = sideline_spot(&self.cfg, i);
                 self.world.robots[i].velocity = Vec2::default();
             }

@@ -1,5 +1,14 @@
-//! `huddle sim`: a whole team on one field, talking only through comms replicas over
-//! netsim, and a report on how well should-I-go arbitration held up.
+//! The team simulator behind `huddle sim`: a whole team on one field, talking only
+//! through comms replicas over netsim, and a report on how well the team layer's world
+//! model, sending policy and should-I-go arbitration held up against references given
+//! the same information.
+//!
+//! **What it is not.** No robot runs this crate. The field's truth ([`field`]: the ball,
+//! the bodies, the cameras, the goals) lives here and only here; the robots' brains are
+//! the `player` crate (perception, tactics, motion) around the product's `team` layer,
+//! and neither of those depends on this crate, so a brain cannot read the truth or the
+//! world's constants: the crate boundary enforces it. `huddle sim --daemons`
+//! ([`daemons`]) runs the same robots against real `huddle daemon`s instead.
 //!
 //! The loop runs on a fixed physics step (10 ms). Before each step the network and the
 //! replicas are brought up to the step's instant ([`Harness::run_until`]); every robot
@@ -7,11 +16,24 @@
 //! blackboard writes go into its replica (and out at once), the world moves one step,
 //! and the arbitration [`Metrics`] take a sample. Robots' control ticks are spread over
 //! the control period (robot k starts k/N of a period late), as unsynchronised robots are.
+//! Each tick a robot gets its camera [`Frame`](crate::field::camera::Frame), its
+//! [`Odometry`](crate::field::body::Odometry) and its replica's blackboard.
 //!
-//! To add per-robot processing (a world model), extend [`Robot`] and
-//! [`Robot::tick`]: each tick has the robot's camera [`Frame`](crate::field::camera::Frame),
-//! its [`Odometry`](crate::field::body::Odometry) and its replica's blackboard.
+//! Two seconds of the default match (five robots, the `competition` network):
+//!
+//! ```
+//! use teamsim::{SimConfig, Simulation};
+//!
+//! let cfg = SimConfig { duration_s: 2.0, seed: 7, ..SimConfig::default() };
+//! let mut sim = Simulation::new(cfg).expect("the defaults are valid");
+//! sim.run(|_t_s| {});
+//! let report = sim.report(0.0);
+//! assert!(report.frames_sent > 0, "the robots talked");
+//! ```
 
+#![forbid(unsafe_code)]
+
+pub mod field;
 pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
@@ -39,7 +61,7 @@ use serde::Serialize;
 use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
-use crate::harness::{Harness, HarnessError};
+use comms_netsim::{Harness, HarnessError};
 pub use game::GameReport;
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{DelayedCentral, DeliveryReference, Publications, ReferenceConfig};
@@ -403,7 +425,7 @@ impl Simulation {
         }
         positions.extend((0..field_players).map(Position::Field));
         let holders: Vec<u8> = (0..field_players)
-            .map(|k| crate::harness::robot_id(k + usize::from(with_keeper)))
+            .map(|k| comms_netsim::robot_id(k + usize::from(with_keeper)))
             .collect();
         let starts: Vec<Pose> = positions
             .iter()
@@ -460,7 +482,7 @@ impl Simulation {
                     truth
                 };
                 Robot::new(
-                    crate::harness::robot_id(i),
+                    comms_netsim::robot_id(i),
                     p,
                     params,
                     pose,

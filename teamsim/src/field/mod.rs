@@ -1,7 +1,7 @@
 //! The field simulator: a rectangle of carpet, a ball, our robots and a few opponents, in
 //! simulated time. It knows the truth (true poses, the true ball) and gives each robot
 //! only what its camera and wheels would: noisy sightings in the robot's frame and noisy
-//! odometry. What robots decide lives in [`behaviour`] and in `crate::sim`; the world only
+//! odometry. What robots decide lives in [`behaviour`] and in the `player` crate; the world only
 //! moves bodies, rolls the ball, resolves contacts and kicks, and counts goals.
 //!
 //! Not modelled: robots' shapes beyond a disc, occlusions, the ball leaving the ground.

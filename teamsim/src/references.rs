@@ -233,7 +233,7 @@ impl DeliveryReference {
             if j == me {
                 continue;
             }
-            let id = crate::harness::robot_id(j);
+            let id = comms_netsim::robot_id(j);
             let Some(e) = board.get(&world_local_of(id)) else {
                 continue;
             };
