@@ -443,6 +443,15 @@ fn apply(replica: &mut Replica, now: Instant, writes: Vec<(Key, Value)>, priorit
 }
 
 /// The layer's decisions on `local.var.team.*` for the robot program.
+/// Whether `key` holds a ball the layer published (not absent, not already `[]`).
+fn holds_a_ball(replica: &Replica, key: &str) -> bool {
+    let key = Key::parse(key).expect("a contract key");
+    matches!(
+        replica.blackboard().get(&key).map(|e| &e.value),
+        Some(Value::Floats(v)) if !v.is_empty()
+    )
+}
+
 fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLayerConfig) {
     let now_s = team::seconds(now);
     let mut out: Vec<(&str, Value)> = vec![
@@ -457,6 +466,9 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLay
             contract::pose_value(layer.pose_estimate()),
         ),
     ];
+    // No ball is said as `[]`, not by leaving the key alone: after a kick-off's reset
+    // the last published ball is where the ball was before the goal, and a robot program
+    // reading it would walk there.
     if let Some(b) = layer.team_ball_held {
         let age_s = layer
             .gwm
@@ -474,6 +486,8 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLay
             contract::TEAM_BALL_KEY,
             contract::ball_value(&b.estimate, Some(b.gbc), age_s),
         ));
+    } else if holds_a_ball(replica, contract::TEAM_BALL_KEY) {
+        out.push((contract::TEAM_BALL_KEY, contract::no_ball_value()));
     }
     if let Some(b) = layer.own_ball(now_s) {
         let age_s = layer.ball_seen_at_s.map_or(0.0, |t| now_s - t);
@@ -481,6 +495,8 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLay
             contract::OWN_BALL_KEY,
             contract::ball_value(&b, None, age_s),
         ));
+    } else if holds_a_ball(replica, contract::OWN_BALL_KEY) {
+        out.push((contract::OWN_BALL_KEY, contract::no_ball_value()));
     }
     let mates: Vec<f64> = layer
         .gwm

@@ -324,6 +324,8 @@ fn team_floats(
 ) -> Result<Option<Vec<f64>>, Failure> {
     match get_value(node, key)? {
         None => Ok(None),
+        // `[]`: the layer had a ball and has none now (a kick-off's reset).
+        Some(Value::Floats(v)) if v.is_empty() => Ok(None),
         Some(Value::Floats(v)) if lens.contains(&v.len()) => Ok(Some(v)),
         Some(Value::Floats(v)) => Err(Failure::new(
             HUDDLE_E_TYPE,
@@ -333,8 +335,9 @@ fn team_floats(
     }
 }
 
-/// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while no robot
-/// has seen the ball (or no team layer runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
+/// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while there is
+/// none (no robot has seen the ball, it was forgotten at a kick-off, or no team layer
+/// runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
 /// something else than the contract's 9 floats).
 ///
 /// Thread safety: may be called from any thread, concurrently with any node function.

@@ -401,6 +401,12 @@ pub fn ball_value(b: &BallEstimate, confidence: Option<f64>, age_s: f64) -> comm
     comms::Value::Floats(out)
 }
 
+/// No ball: what [`TEAM_BALL_KEY`] / [`OWN_BALL_KEY`] hold once a ball they gave is gone
+/// (forgotten at a kick-off, or no longer seen by anyone): no floats.
+pub fn no_ball_value() -> comms::Value {
+    comms::Value::Floats(Vec::new())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -33,10 +33,10 @@
 
 #![forbid(unsafe_code)]
 
-pub mod field;
 pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
+pub mod field;
 mod game;
 pub mod metrics;
 /// What a simulated robot's senses mean to its team layer ([`player::perception`]).

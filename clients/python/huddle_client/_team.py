@@ -150,6 +150,9 @@ class Mate:
 def _floats(b: Optional[Binding], n: int, key: str) -> Optional[List[float]]:
     if b is None:
         return None
+    if isinstance(b.value, list) and len(b.value) == 0:
+        # ``[]``: the layer had one and has none now (forgotten at a kick-off).
+        return None
     if not isinstance(b.value, list) or len(b.value) < n:
         raise ValueError(f"{key}: expected at least {n} floats, got {b.value!r}")
     return b.value
@@ -231,7 +234,8 @@ class TeamMixin:
         self.set(BALL_RESET, True)
 
     def team_ball(self) -> Optional[TeamBall]:
-        """The team ball now, or ``None`` until some robot saw the ball."""
+        """The team ball now, or ``None`` until some robot saw the ball (and
+        again after a kick-off's ``ball_reset``, until somebody sees it)."""
         return team_ball_of(self.get(TEAM_BALL))
 
     def own_ball(self) -> Optional[OwnBall]:
