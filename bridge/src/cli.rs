@@ -70,6 +70,9 @@ pub struct RunArgs {
     /// First chunk of the --ros2 keys.
     #[arg(long, default_value = "huddle_ros")]
     pub ros2_prefix: String,
+    /// Always hand samples to the publisher thread (for `bench --compare-fast-path`).
+    #[arg(long, hide = true)]
+    pub no_fast_path: bool,
 }
 
 /// `--transport`.
@@ -166,6 +169,7 @@ impl RunArgs {
                 ros2: self.ros2,
             },
             zenoh: self.zenoh_config()?,
+            fast_path: !self.no_fast_path,
         })
     }
 
