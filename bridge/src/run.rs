@@ -508,12 +508,14 @@ impl Bridge {
                     core.outbox.push(now, op);
                 }
                 if datagram && !core.outbox.is_empty() {
-                    core.timings.field.push(self.clock.now().saturating_duration_since(now));
+                    core.timings
+                        .field
+                        .push(self.clock.now().saturating_duration_since(now));
                 }
                 self.fast_path(core, now)
             };
-            if let Some(ops) = direct {
-                let slow = put_samples(&self.session, &self.clock, ops, &self.core.0);
+            if let Some((taken, ops)) = direct {
+                let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
                 let mut core = lock(&self.core.0);
                 core.putting = false;
                 if slow {
@@ -528,12 +530,38 @@ impl Bridge {
                 connected = self.check_zenoh(connected);
             }
         }
+        self.read_what_is_left(&mut buf)
+    }
+
+    /// On shutdown: what the robots sent before it is still in the socket's buffer;
+    /// read it (up to a bound) so that its values go out with the flush.
+    fn read_what_is_left(&self, buf: &mut [u8]) -> Result<(), BridgeError> {
+        self.socket.set_nonblocking(true)?;
+        let mut core = lock(&self.core.0);
+        let core = &mut *core;
+        let mut read = 0;
+        while read < 100_000 {
+            let Ok((n, from)) = self.socket.recv_from(buf) else {
+                break;
+            };
+            read += 1;
+            core.io.datagrams += 1;
+            feed(core, self.clock.now(), from, &buf[..n]);
+        }
+        let now = self.clock.now();
+        core.advance(now);
+        for op in core.exporter.drain_ops() {
+            core.outbox.push(now, op);
+        }
+        if read > 0 {
+            tracing::info!("stopping: read the {read} datagrams left in the socket");
+        }
         Ok(())
     }
 
     /// What the field thread puts itself (see the module docs); otherwise wakes the
     /// publisher thread if something waits.
-    fn fast_path(&self, core: &mut Core, now: Instant) -> Option<Vec<Op>> {
+    fn fast_path(&self, core: &mut Core, now: Instant) -> Option<(Instant, Vec<Op>)> {
         if core.outbox.is_empty() {
             return None;
         }
@@ -548,7 +576,8 @@ impl Bridge {
         core.putting = true;
         core.io.inline_puts += 1;
         core.timings.handoff.push(Duration::ZERO);
-        Some(core.outbox.take(self.clock.now()))
+        let taken = self.clock.now();
+        Some((taken, core.outbox.take(taken)))
     }
 
     /// Whether the session has a router or peer; logs and counts a loss, and puts every
@@ -610,13 +639,13 @@ impl Publisher {
                 }
                 core.putting = true;
                 core.io.handed_over += 1;
-                core.outbox.take(now)
+                (now, core.outbox.take(now))
             };
-            self.apply(ops);
+            self.apply(ops.0, ops.1);
         }
     }
 
-    fn apply(&mut self, ops: Vec<Op>) {
+    fn apply(&mut self, taken: Instant, ops: Vec<Op>) {
         let mut token_errors = 0;
         let mut samples = Vec::with_capacity(ops.len());
         for op in ops {
@@ -627,6 +656,7 @@ impl Publisher {
                     put_samples(
                         &self.session,
                         &self.clock,
+                        taken,
                         std::mem::take(&mut samples),
                         &self.core.0,
                     );
@@ -646,6 +676,7 @@ impl Publisher {
                     put_samples(
                         &self.session,
                         &self.clock,
+                        taken,
                         std::mem::take(&mut samples),
                         &self.core.0,
                     );
@@ -658,7 +689,7 @@ impl Publisher {
                 }
             }
         }
-        let slow = put_samples(&self.session, &self.clock, samples, &self.core.0);
+        let slow = put_samples(&self.session, &self.clock, taken, samples, &self.core.0);
         let mut core = lock(&self.core.0);
         core.putting = false;
         core.io.token_errors += token_errors;
@@ -668,11 +699,18 @@ impl Publisher {
     }
 }
 
-/// Puts `ops` (values and talk messages) in order, with blocking congestion control
-/// (Zenoh drops nothing the outbox handed it; the outbox merged what was superseded
-/// while Zenoh blocked). A lone sample goes express (not held for a batch); under load
-/// Zenoh batches. Counts errors and the put times; returns whether a put was slow.
-fn put_samples(session: &Session, clock: &Clock, ops: Vec<Op>, core: &Mutex<Core>) -> bool {
+/// Puts `ops` (values and talk messages, taken from the outbox at `taken`) in order,
+/// with blocking congestion control (Zenoh drops nothing the outbox handed it; the outbox
+/// merged what was superseded while Zenoh blocked). A lone sample goes express (not held
+/// for a batch); under load Zenoh batches. Counts errors and the put times; returns
+/// whether a put was slow.
+fn put_samples(
+    session: &Session,
+    clock: &Clock,
+    taken: Instant,
+    ops: Vec<Op>,
+    core: &Mutex<Core>,
+) -> bool {
     if ops.is_empty() {
         return false;
     }
@@ -684,7 +722,12 @@ fn put_samples(session: &Session, clock: &Clock, ops: Vec<Op>, core: &Mutex<Core
             continue;
         };
         let t0 = clock.now();
-        if let Err(e) = put(session, sample, express) {
+        // Zenoh's timestamp first (the moment of publication, for a subscriber that wants
+        // one; never the age's source), then the age brought up to this moment: the
+        // time since `taken` (earlier puts of the batch) is added.
+        let timestamp = session.new_timestamp();
+        let sample = sample.aged(clock.now().saturating_duration_since(taken));
+        if let Err(e) = put(session, sample, timestamp, express) {
             put_errors += 1;
             tracing::debug!("put: {e}");
         }
@@ -703,7 +746,12 @@ fn put_samples(session: &Session, clock: &Clock, ops: Vec<Op>, core: &Mutex<Core
     slow
 }
 
-fn put(session: &Session, sample: Sample, express: bool) -> zenoh::Result<()> {
+fn put(
+    session: &Session,
+    sample: Sample,
+    timestamp: zenoh::time::Timestamp,
+    express: bool,
+) -> zenoh::Result<()> {
     let attachment = sample.attachment();
     if let Some((key, cdr)) = sample.ros2 {
         session
@@ -717,6 +765,7 @@ fn put(session: &Session, sample: Sample, express: bool) -> zenoh::Result<()> {
         .put(sample.key, sample.payload)
         .encoding(Encoding::TEXT_PLAIN)
         .attachment(attachment)
+        .timestamp(timestamp)
         .congestion_control(CongestionControl::Block)
         .express(express)
         .wait()

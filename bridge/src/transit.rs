@@ -44,6 +44,11 @@ pub const WINDOW: Duration = Duration::from_secs(10);
 /// (one or two of its frames on a team of two or more; a robot alone has no echo).
 pub const ANCHOR_WAIT: Duration = Duration::from_millis(500);
 
+/// Echoes a sender's clock needs before its values go without waiting: each anchor is
+/// late by however late the bridge read the echoed frame (scheduling, a busy socket), and
+/// the smallest offset of a few is the least late.
+pub const ANCHORS_NEEDED: u32 = 3;
+
 /// A round trip or excess beyond this is taken for a glitch (a restart, a stamp wrap).
 const MAX_PLAUSIBLE_US: i64 = 1_000_000;
 
@@ -85,6 +90,8 @@ struct Sender {
     off_min: WindowMin,
     /// When the bridge first heard this life.
     first_heard: Instant,
+    /// Echoes that anchored this life's clock.
+    anchors: u32,
     /// (seq16, unwrapped stamp, reception on the bridge's clock in µs) of recent frames.
     recent: VecDeque<(u16, i64, i64)>,
     /// Per echoed teammate: the last one-way delay plus clock difference, and when.
@@ -100,6 +107,7 @@ impl Sender {
             raw_min: WindowMin::default(),
             off_min: WindowMin::default(),
             first_heard: now,
+            anchors: 0,
             recent: VecDeque::new(),
             one_way: HashMap::new(),
         }
@@ -255,10 +263,13 @@ impl TransitEstimator {
         }
     }
 
-    /// Whether the clock of `timing`'s sender (in that life) is anchored by an echo.
+    /// Whether the clock of `timing`'s sender (in that life) is anchored by
+    /// [`ANCHORS_NEEDED`] echoes.
     pub fn anchored(&self, timing: &FrameTiming) -> bool {
         self.senders.get(&timing.sender).is_some_and(|s| {
-            s.incarnation == timing.incarnation && s.off_min.min().is_some()
+            s.incarnation == timing.incarnation
+                && s.anchors >= ANCHORS_NEEDED
+                && s.off_min.min().is_some()
         })
     }
 
@@ -311,6 +322,7 @@ impl TransitEstimator {
         if (0..MAX_PLAUSIBLE_US).contains(&(raw - offset)) {
             if let Some(sender) = self.senders.get_mut(&from) {
                 sender.off_min.push(now, offset);
+                sender.anchors = sender.anchors.saturating_add(1);
                 self.stats.anchors += 1;
             }
         } else {
@@ -443,10 +455,11 @@ mod tests {
         );
     }
 
-    /// A sender is anchored by its first echo of a frame the bridge heard; before that,
-    /// the exporter knows to wait (its deadline is the first frame plus ANCHOR_WAIT).
+    /// A sender is anchored by its echoes of frames the bridge heard (ANCHORS_NEEDED of
+    /// them); before that, the exporter knows to wait (its deadline is the first frame
+    /// plus ANCHOR_WAIT).
     #[test]
-    fn a_sender_is_anchored_by_its_first_echo() {
+    fn a_sender_is_anchored_by_its_echoes() {
         let mut est = TransitEstimator::new();
         let t = |ms: u64| Instant::from_micros(ms * 1000);
         let a = est.heard(t(100), Heard::from(&frame(1, 1, 100_000, None)));
@@ -458,12 +471,22 @@ mod tests {
             hold_10us: 500,
         };
         // Robot 2 heard robot 1's frame at 100 ms (bridge clock), held it 5 ms, and its
-        // frame took 12 ms: 117 ms.
+        // frame took 12 ms: 117 ms. Its clock is 98 ms behind the bridge's.
         let b = est.heard(t(117), Heard::from(&frame(2, 1, 7_000, Some(echo))));
+        assert!(!est.anchored(&b), "one echo is not enough");
+        for (seq, at) in [(2u64, 140u64), (3, 160)] {
+            // Sent 12 ms before `at`, holding robot 1's frame since 100 ms.
+            let echo = Echo {
+                hold_10us: (at as u16 - 112) * 100,
+                ..echo
+            };
+            let stamp = ((at - 110) * 1000) as u32;
+            est.heard(t(at), Heard::from(&frame(2, seq, stamp, Some(echo))));
+        }
         assert!(est.anchored(&b));
         assert!(!est.anchored(&a), "robot 1 has echoed nobody yet");
         assert_eq!(est.transit(&b), Duration::from_millis(12));
-        assert_eq!(est.stats().anchors, 1);
+        assert_eq!(est.stats().anchors, 3);
     }
 
     #[test]
