@@ -589,8 +589,8 @@ impl Bridge {
         if was && !now {
             lock(&self.core.0).io.zenoh_lost += 1;
             tracing::warn!(
-                "zenoh: no router or peer reachable; samples are dropped until one is back \
-                 (the field side carries on)"
+                "zenoh: no router or peer reachable; samples go nowhere until one is back, \
+                 then every key's value goes once more (the field side carries on)"
             );
         } else if !was && now {
             let n = {
