@@ -50,8 +50,8 @@ pub struct BenchArgs {
     /// Length of the load phase, seconds.
     #[arg(long, default_value_t = 10)]
     pub seconds: u64,
-    /// Also run a second bridge that always hands samples to its publisher thread (the
-    /// path before the field thread's fast path), to compare the two in the same run.
+    /// Also run a second bridge with `--fast-path` (the field thread puts when nothing
+    /// waits), to compare the two paths in the same run.
     #[arg(long)]
     pub compare_fast_path: bool,
 }
@@ -59,7 +59,7 @@ pub struct BenchArgs {
 const TEAM: u8 = 7;
 const VENUE: &str = "bench";
 /// The venue of the `--compare-fast-path` bridge.
-const VENUE_HANDOVER: &str = "bench-handover";
+const VENUE_FAST: &str = "bench-fastpath";
 
 /// What the subscriber saw.
 #[derive(Default)]
@@ -68,8 +68,8 @@ struct Seen {
     samples: u64,
     /// The latency key's arrivals, by value.
     lat: HashMap<i64, StdInstant>,
-    /// The same through the `--compare-fast-path` bridge.
-    lat_handover: HashMap<i64, StdInstant>,
+    /// The same through the `--compare-fast-path` bridge (`--fast-path`).
+    lat_fast: HashMap<i64, StdInstant>,
     /// The hop key's arrivals, by value.
     hop: HashMap<i64, StdInstant>,
     /// The express hop key's arrivals, by value.
@@ -116,13 +116,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let _handover_sub = {
         let seen = seen.clone();
         sub_session
-            .declare_subscriber(format!("huddle/@v1/{VENUE_HANDOVER}/{TEAM}/1/var/lat"))
+            .declare_subscriber(format!("huddle/@v1/{VENUE_FAST}/{TEAM}/1/var/lat"))
             .callback(move |s| {
                 let t = StdInstant::now();
                 let payload = s.payload().try_to_string().unwrap_or_default().into_owned();
                 if let Ok(i) = payload.parse() {
                     let mut seen = seen.lock().unwrap_or_else(|p| p.into_inner());
-                    seen.lat_handover.insert(i, t);
+                    seen.lat_fast.insert(i, t);
                 }
             })
             .wait()
@@ -184,10 +184,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut handover = if args.compare_fast_path {
         Some(
             std::process::Command::new(std::env::current_exe()?)
-                .args(["--team", &TEAM.to_string(), "--venue", VENUE_HANDOVER])
+                .args(["--team", &TEAM.to_string(), "--venue", VENUE_FAST])
                 .arg("--group")
                 .arg(group.to_string())
-                .args(["--iface", "127.0.0.1", "--no-fast-path", "--connect"])
+                .args(["--iface", "127.0.0.1", "--fast-path", "--connect"])
                 .arg(format!("tcp/127.0.0.1:{port}"))
                 .env("RUST_LOG", "warn")
                 .spawn()
@@ -359,13 +359,13 @@ fn measure(
             .iter()
             .filter_map(|(i, t)| {
                 let w = watched.get(i)?.saturating_duration_since(*t);
-                let z = s.lat_handover.get(i)?.saturating_duration_since(*t);
+                let z = s.lat_fast.get(i)?.saturating_duration_since(*t);
                 Some(z.as_secs_f64() - w.as_secs_f64())
             })
             .collect();
         added.sort_by(f64::total_cmp);
         println!(
-            "  added by a bridge without the fast path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
+            "  added by a second bridge with --fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
             added.len(),
             quantile_f(&added, 0.5) * 1e3,
             quantile_f(&added, 0.99) * 1e3,

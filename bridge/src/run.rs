@@ -8,13 +8,15 @@
 //! every key's last value still goes, while the field side never waits for Zenoh. The
 //! queryables run on Zenoh's threads and read the same replica under the same mutex.
 //!
-//! **The fast path.** Waking the publisher thread costs a scheduler hand-over per sample
-//! (on a loaded two-core machine, most of the bridge's added latency). When nothing
-//! waits, the publisher is idle and no put has been slow in the last second, the field
-//! thread puts the few samples of the datagram itself (Zenoh's put only copies them into
-//! its queue; it blocks only on a full queue, which a recent slow put would have shown).
-//! Otherwise the publisher thread takes them, as before. One of the two puts at a time,
-//! so samples keep their order.
+//! **The fast path** (`--fast-path`, off by default). Waking the publisher thread is a
+//! scheduler hand-over per sample. With the fast path, when nothing waits, the publisher
+//! is idle and no put has been slow in the last second, the field thread puts the few
+//! samples of the datagram itself (Zenoh's put only copies them into its queue). Its
+//! price: a Zenoh queue that fills at once (a router stalling after a second of fast
+//! puts) holds the field thread up to Zenoh's block timeout, and the frames read late
+//! then look up to a second slower than they were (the transit's cap). On the loaded
+//! two-core test machine it measured no gain (docs/bridge.md), so it is not the default.
+//! One of the two threads puts at a time, so samples keep their order.
 //!
 //! **Zenoh going away.** The bridge declares a liveliness token
 //! `…/<team>/@bridge/alive`: a subscriber that sees it appear (at start, or again after
