@@ -50,10 +50,16 @@ pub struct BenchArgs {
     /// Length of the load phase, seconds.
     #[arg(long, default_value_t = 10)]
     pub seconds: u64,
+    /// Also run a second bridge with `--fast-path` (the field thread puts when nothing
+    /// waits), to compare the two paths in the same run.
+    #[arg(long)]
+    pub compare_fast_path: bool,
 }
 
 const TEAM: u8 = 7;
 const VENUE: &str = "bench";
+/// The venue of the `--compare-fast-path` bridge.
+const VENUE_FAST: &str = "bench-fastpath";
 
 /// What the subscriber saw.
 #[derive(Default)]
@@ -62,6 +68,8 @@ struct Seen {
     samples: u64,
     /// The latency key's arrivals, by value.
     lat: HashMap<i64, StdInstant>,
+    /// The same through the `--compare-fast-path` bridge (`--fast-path`).
+    lat_fast: HashMap<i64, StdInstant>,
     /// The hop key's arrivals, by value.
     hop: HashMap<i64, StdInstant>,
     /// The express hop key's arrivals, by value.
@@ -101,6 +109,21 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                     }
                 }
                 seen.last.insert(key.to_owned(), payload);
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
+    };
+    let _handover_sub = {
+        let seen = seen.clone();
+        sub_session
+            .declare_subscriber(format!("huddle/@v1/{VENUE_FAST}/{TEAM}/1/var/lat"))
+            .callback(move |s| {
+                let t = StdInstant::now();
+                let payload = s.payload().try_to_string().unwrap_or_default().into_owned();
+                if let Ok(i) = payload.parse() {
+                    let mut seen = seen.lock().unwrap_or_else(|p| p.into_inner());
+                    seen.lat_fast.insert(i, t);
+                }
             })
             .wait()
             .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
@@ -158,6 +181,21 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         .spawn()
         .context("starting the bridge")?;
     let pid = child.id();
+    let mut handover = if args.compare_fast_path {
+        Some(
+            std::process::Command::new(std::env::current_exe()?)
+                .args(["--team", &TEAM.to_string(), "--venue", VENUE_FAST])
+                .arg("--group")
+                .arg(group.to_string())
+                .args(["--iface", "127.0.0.1", "--fast-path", "--connect"])
+                .arg(format!("tcp/127.0.0.1:{port}"))
+                .env("RUST_LOG", "warn")
+                .spawn()
+                .context("starting the second bridge")?,
+        )
+    } else {
+        None
+    };
     let result = measure(
         args,
         &daemons,
@@ -168,8 +206,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         pid,
         &lat_key,
     );
-    let _ = child.kill();
-    let _ = child.wait();
+    for c in std::iter::once(&mut child).chain(handover.as_mut()) {
+        let _ = c.kill();
+        let _ = c.wait();
+    }
     result
 }
 
@@ -311,6 +351,43 @@ fn measure(
         quantile(&sorted(&hop), 0.5).as_secs_f64() * 1e3,
     );
     let _ = lat_key;
+    if args.compare_fast_path {
+        let s = lock();
+        let watched = watched.lock().unwrap_or_else(|p| p.into_inner());
+        let set_at = set_at.lock().unwrap_or_else(|p| p.into_inner());
+        let mut added: Vec<f64> = set_at
+            .iter()
+            .filter_map(|(i, t)| {
+                let w = watched.get(i)?.saturating_duration_since(*t);
+                let z = s.lat_fast.get(i)?.saturating_duration_since(*t);
+                Some(z.as_secs_f64() - w.as_secs_f64())
+            })
+            .collect();
+        added.sort_by(f64::total_cmp);
+        println!(
+            "  added by a second bridge with --fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
+            added.len(),
+            quantile_f(&added, 0.5) * 1e3,
+            quantile_f(&added, 0.99) * 1e3,
+        );
+    }
+    if let Some(stats) = bridge_stats(sub_session, VENUE) {
+        let t = &stats["timing_us"];
+        println!(
+            "  inside the bridge, p50/p99 us: datagram -> queued {}/{}, queued -> put {}/{}, put {}/{} ({} fast-path batches, {} handed over)",
+            t["field"]["p50"], t["field"]["p99"], t["handoff"]["p50"], t["handoff"]["p99"],
+            t["put"]["p50"], t["put"]["p99"], t["inline_puts"], t["handed_over"]
+        );
+    }
+    println!(
+        "  load average {}",
+        std::fs::read_to_string("/proc/loadavg")
+            .unwrap_or_default()
+            .split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
 
     // 3. Load. The baseline: a plain client puts the same number of keys round-robin,
     // as fast as blocking congestion control lets it, for the same time.
@@ -417,6 +494,37 @@ fn measure(
         missing,
         args.keys
     );
+    if missing > 0 {
+        // What a subscriber following the protocol does when the bridge's token appears
+        // again (a link closed): get the prefix.
+        let mut recovered = 0;
+        if let Ok(replies) = sub_session
+            .get(format!("huddle/@v1/{VENUE}/{TEAM}/*/var/load/**"))
+            .wait()
+        {
+            let mut s = lock();
+            while let Ok(Some(reply)) = replies.recv_timeout(Duration::from_secs(5)) {
+                if let Ok(sample) = reply.into_result() {
+                    let payload = sample.payload().try_to_string().unwrap_or_default();
+                    s.last
+                        .insert(sample.key_expr().as_str().to_owned(), payload.into_owned());
+                }
+            }
+            for (k, (id, last)) in finished.iter().enumerate() {
+                let count = per.min(args.keys.saturating_sub(k * per));
+                for j in 0..count {
+                    let key = format!("huddle/@v1/{VENUE}/{TEAM}/{id}/var/load/k{j}");
+                    if s.last.get(&key).map(String::as_str) == Some(last.to_string().as_str()) {
+                        recovered += 1;
+                    }
+                }
+            }
+        }
+        println!(
+            "  after one get of the prefix (the protocol's recovery): {} of {} keys hold their final value",
+            recovered, args.keys
+        );
+    }
     match (cpu_before, cpu_after) {
         (Some(a), Some(b)) => println!(
             "  bridge CPU: {:.2} cores (target < 1)",
@@ -435,23 +543,21 @@ fn measure(
                 .unwrap_or("?")
         );
     }
-    let stats = sub_session
-        .get(format!("huddle/@v1/{VENUE}/{TEAM}/@bridge/stats"))
+    if let Some(stats) = bridge_stats(sub_session, VENUE) {
+        println!("  @bridge/stats: {stats}");
+    }
+    Ok(())
+}
+
+/// The bridge's `@bridge/stats` of `venue`.
+fn bridge_stats(session: &zenoh::Session, venue: &str) -> Option<serde_json::Value> {
+    session
+        .get(format!("huddle/@v1/{venue}/{TEAM}/@bridge/stats"))
         .wait()
         .ok()
         .and_then(|replies| replies.recv_timeout(Duration::from_secs(2)).ok().flatten())
         .and_then(|reply| reply.into_result().ok())
-        .and_then(|sample| {
-            sample
-                .payload()
-                .try_to_string()
-                .ok()
-                .map(|s| s.into_owned())
-        });
-    if let Some(stats) = stats {
-        println!("  @bridge/stats: {stats}");
-    }
-    Ok(())
+        .and_then(|sample| serde_json::from_slice(&sample.payload().to_bytes()).ok())
 }
 
 /// utime + stime of `pid`, in clock ticks (100 per second on Linux).

@@ -70,6 +70,12 @@ pub struct RunArgs {
     /// First chunk of the --ros2 keys.
     #[arg(long, default_value = "huddle_ros")]
     pub ros2_prefix: String,
+    /// Let the field thread put a datagram's samples itself when nothing waits (one
+    /// thread hand-over less per sample; a Zenoh queue filling at once can then hold the
+    /// field thread up to Zenoh's block timeout). Off by default: it measured no gain on
+    /// the loaded test machine (docs/bridge.md).
+    #[arg(long)]
+    pub fast_path: bool,
 }
 
 /// `--transport`.
@@ -166,6 +172,7 @@ impl RunArgs {
                 ros2: self.ros2,
             },
             zenoh: self.zenoh_config()?,
+            fast_path: self.fast_path,
         })
     }
 

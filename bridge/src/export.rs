@@ -13,7 +13,10 @@
 //! The age in each sample's attachment is measured on the bridge's clock from the
 //! replica's stamp (reception − the sender's reported age) plus the transit of the frame
 //! that brought the value ([`crate::transit`]), never from Zenoh's timestamps, which are
-//! a hybrid logical clock on wall time.
+//! a hybrid logical clock on wall time. The exporter owns the transit estimator: a value
+//! whose sender's clock is not anchored by an echo yet waits for it (at most
+//! [`crate::transit::ANCHOR_WAIT`] after the bridge first heard that robot's life), so
+//! that no age goes out below the true one while the bridge warms up.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Duration;
@@ -22,6 +25,7 @@ use comms::{Entry, Event, Instant, Key, Kind, Replica, Scope, Value};
 
 use crate::cdr;
 use crate::keys::TeamKeys;
+use crate::transit::{FrameTiming, Heard, TransitEstimator};
 
 /// What the bridge exports and how often.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -63,10 +67,56 @@ pub struct Sample {
     pub key: String,
     /// The relay's literal text (`2.5`, `"x"`, `[1,2]`, `0x0a`).
     pub payload: String,
-    /// `incarnation=<16 hex> version=<n> age_us=<n>` (talk: `seq=<n>` for `version`).
-    pub attachment: String,
+    /// What the attachment says; kept as numbers until the put, so that the time a value
+    /// waits in the outbox is added without re-parsing text.
+    pub meta: Meta,
     /// With `--ros2`: the ROS-style key and the CDR message.
     pub ros2: Option<(String, Vec<u8>)>,
+}
+
+/// A sample's attachment, as numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Meta {
+    /// A value: its life, version and age at the bridge.
+    Value {
+        /// The owner's incarnation.
+        incarnation: u64,
+        /// The value's version.
+        version: u64,
+        /// Its age at the bridge.
+        age: Duration,
+    },
+    /// A talk message: its sender's life and the message's sequence number.
+    Talk {
+        /// The sender's incarnation.
+        incarnation: u64,
+        /// The message's sequence number.
+        seq: u64,
+    },
+}
+
+impl Sample {
+    /// `incarnation=<16 hex> version=<n> age_us=<n>` (talk: `incarnation=… seq=<n>`).
+    pub fn attachment(&self) -> String {
+        match self.meta {
+            Meta::Value {
+                incarnation,
+                version,
+                age,
+            } => attachment(incarnation, version, age),
+            Meta::Talk { incarnation, seq } => {
+                format!("incarnation={incarnation:016x} seq={seq}")
+            }
+        }
+    }
+
+    /// The same sample `waited` older (talk messages carry no age).
+    pub fn aged(mut self, waited: Duration) -> Sample {
+        if let Meta::Value { age, .. } = &mut self.meta {
+            *age += waited;
+        }
+        self
+    }
 }
 
 /// The attachment text: incarnation, version, and the age at the bridge.
@@ -115,6 +165,15 @@ pub struct ExportStats {
     pub alive_declared: u64,
     /// Liveliness tokens withdrawn.
     pub alive_withdrawn: u64,
+    /// Changes held while their sender's clock was not anchored yet (the bridge's first
+    /// moments with a robot's life).
+    pub anchor_held: u64,
+    /// Values that went out unanchored: the sender was not anchored within
+    /// [`crate::transit::ANCHOR_WAIT`] (a robot alone has no teammate to echo), so their
+    /// transit is the lower bound.
+    pub unanchored_out: u64,
+    /// Values published once more after Zenoh came back ([`Exporter::republish`]).
+    pub republished: u64,
 }
 
 #[derive(Debug, Default)]
@@ -124,9 +183,9 @@ struct KeyState {
     last_put: Option<Instant>,
     /// A change waits for the rate cap.
     held: bool,
-    /// The transit of the frame that brought the current value (see [`crate::transit`]),
-    /// added to the replica's age, which leaves it out.
-    transit: Duration,
+    /// The timing of the frame that brought the current value (see [`crate::transit`]):
+    /// its transit is added to the replica's age, which leaves it out.
+    timing: Option<FrameTiming>,
 }
 
 /// The export decisions; see the module docs.
@@ -141,8 +200,11 @@ pub struct Exporter {
     reported: BTreeSet<String>,
     ops: Vec<Op>,
     stats: ExportStats,
-    /// The transit of the frame whose events are being handled.
-    frame_transit: Duration,
+    transit: TransitEstimator,
+    /// The timing of the frame whose events are being handled.
+    frame: Option<FrameTiming>,
+    /// Keys waiting for their sender's anchor, by sender: `(deadline, key)` as in `held`.
+    awaiting: BTreeMap<u8, Vec<(Instant, Key)>>,
 }
 
 impl Exporter {
@@ -157,7 +219,9 @@ impl Exporter {
             reported: BTreeSet::new(),
             ops: Vec::new(),
             stats: ExportStats::default(),
-            frame_transit: Duration::ZERO,
+            transit: TransitEstimator::new(),
+            frame: None,
+            awaiting: BTreeMap::new(),
         }
     }
 
@@ -176,10 +240,32 @@ impl Exporter {
         &self.alive
     }
 
-    /// The estimated transit of the frame whose events come next (zero for events of a
-    /// timeout): the age of a value it changed is the replica's plus this.
-    pub fn set_frame_transit(&mut self, transit: Duration) {
-        self.frame_transit = transit;
+    /// The transit estimator (its counters and floor for `@bridge/stats`).
+    pub fn transit(&self) -> &TransitEstimator {
+        &self.transit
+    }
+
+    /// Takes the header of a frame received at `now` whose events come next: the age of
+    /// a value it changes is the replica's plus the frame's transit. If it anchors its
+    /// sender's clock, that sender's waiting values go at the next
+    /// [`Exporter::handle_timeout`].
+    pub fn frame(&mut self, now: Instant, heard: Heard) {
+        let timing = self.transit.heard(now, heard);
+        if self.transit.anchored(&timing) {
+            if let Some(waiting) = self.awaiting.remove(&timing.sender) {
+                for (due, key) in waiting {
+                    if self.held.remove(&(due, key.clone())) {
+                        self.held.insert((now, key));
+                    }
+                }
+            }
+        }
+        self.frame = Some(timing);
+    }
+
+    /// The frame's events are handled: events after this (a timeout's) have no frame.
+    pub fn frame_done(&mut self) {
+        self.frame = None;
     }
 
     /// Takes one event of `replica` (drained by the caller at `now`).
@@ -187,7 +273,7 @@ impl Exporter {
         match event {
             Event::ValueChanged { key } => {
                 if matches!(key.scope(), Scope::Robot(_)) {
-                    self.state.entry(key.clone()).or_default().transit = self.frame_transit;
+                    self.state.entry(key.clone()).or_default().timing = self.frame;
                 }
                 self.value_changed(now, replica, key)
             }
@@ -215,8 +301,16 @@ impl Exporter {
         self.held.first().map(|(t, _)| *t)
     }
 
-    /// Publishes what the rate cap held until `now`, the replica's newest value.
+    /// Publishes what the rate cap (or a sender's anchor) held until `now`, the replica's
+    /// newest value.
     pub fn handle_timeout(&mut self, now: Instant, replica: &Replica) {
+        if !self.awaiting.is_empty() {
+            // Entries whose deadline passed were released through `held`.
+            self.awaiting.retain(|_, keys| {
+                keys.retain(|(due, _)| *due > now);
+                !keys.is_empty()
+            });
+        }
         while let Some((due, key)) = self.held.first().cloned() {
             if due > now {
                 break;
@@ -227,6 +321,34 @@ impl Exporter {
             }
             self.value_changed(now, replica, key);
         }
+    }
+
+    /// Queues the value last published of every key once more (after Zenoh came back: a
+    /// value in flight when a link closed may never have arrived). Keys whose newer value
+    /// is held (rate cap, anchor) are left to go when released. Returns how many.
+    pub fn republish(&mut self, now: Instant, replica: &Replica) -> usize {
+        let keys: Vec<Key> = self
+            .state
+            .iter()
+            .filter(|(_, s)| s.published.is_some() && !s.held)
+            .map(|(k, _)| k.clone())
+            .collect();
+        let mut n = 0;
+        for key in keys {
+            let Some(entry) = replica.blackboard().get(&key) else {
+                continue;
+            };
+            let published = self.state.get(&key).and_then(|s| s.published);
+            if published != Some((entry.incarnation, entry.version)) {
+                continue; // a newer value is on its way already
+            }
+            if let Some(sample) = self.sample(now, &key, entry) {
+                self.ops.push(Op::Put(sample));
+                n += 1;
+            }
+        }
+        self.stats.republished += n as u64;
+        n
     }
 
     /// The operations decided so far, oldest first.
@@ -258,11 +380,19 @@ impl Exporter {
         } else {
             None
         };
-        let transit = self.state.get(key).map_or(Duration::ZERO, |s| s.transit);
+        let transit = self
+            .state
+            .get(key)
+            .and_then(|s| s.timing)
+            .map_or(Duration::ZERO, |t| self.transit.transit(&t));
         Some(Sample {
             key: zkey,
             payload: entry.value.to_string(),
-            attachment: attachment(entry.incarnation, entry.version, entry.age(now) + transit),
+            meta: Meta::Value {
+                incarnation: entry.incarnation,
+                version: entry.version,
+                age: entry.age(now) + transit,
+            },
             ros2,
         })
     }
@@ -311,6 +441,25 @@ impl Exporter {
             }
             _ => {}
         }
+        // The sender's clock is not anchored yet: wait for its first echo (released by
+        // `frame`), or until the deadline, when the value goes with the lower bound.
+        if let Some(timing) = state.timing {
+            if !self.transit.anchored(&timing) {
+                match self.transit.anchor_deadline(&timing) {
+                    Some(due) if due > now => {
+                        state.held = true;
+                        self.stats.anchor_held += 1;
+                        self.held.insert((due, key.clone()));
+                        self.awaiting
+                            .entry(timing.sender)
+                            .or_default()
+                            .push((due, key));
+                        return;
+                    }
+                    _ => self.stats.unanchored_out += 1,
+                }
+            }
+        }
         if let (Some(min), Some(last)) = (self.cfg.min_interval, state.last_put) {
             let due = last + min;
             if due > now {
@@ -341,7 +490,7 @@ impl Exporter {
         self.ops.push(Op::Talk(Sample {
             key,
             payload: value.to_string(),
-            attachment: format!("incarnation={incarnation:016x} seq={seq}"),
+            meta: Meta::Talk { incarnation, seq },
             ros2: None,
         }));
     }

@@ -1,6 +1,9 @@
 //! `huddle-bridge`: one team's field, listened to, mirrored into Zenoh. See the crate
 //! docs and docs/bridge.md.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use huddle_bridge::cli::RunArgs;
@@ -39,9 +42,39 @@ fn main() -> Result<()> {
         (Some(Command::Bench(args)), _) => huddle_bridge::bench::run(&args),
         (None, Some(run)) => {
             let bridge = Bridge::start(run.config()?)?;
+            stop_on_signal(bridge.shutdown_flag())?;
             bridge.run()?;
             Ok(())
         }
         (None, None) => anyhow::bail!("give --team, --venue and --connect, or `bench`"),
     }
+}
+
+/// SIGTERM or SIGINT stops the bridge cleanly: what waits in its outbox and in Zenoh's
+/// queue is written out before the session closes (the latest-value guarantee holds
+/// through a shutdown). A second signal is not needed; a SIGKILL loses the queue.
+fn stop_on_signal(flag: Arc<AtomicBool>) -> Result<()> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_io()
+        .build()?;
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            rt.block_on(async {
+                let Ok(mut term) =
+                    tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                else {
+                    tracing::warn!("no SIGTERM handler: a SIGTERM ends the bridge unflushed");
+                    let _ = tokio::signal::ctrl_c().await;
+                    return;
+                };
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            });
+            tracing::info!("stopping: flushing the outbox and Zenoh's queue");
+            flag.store(true, Ordering::Relaxed);
+        })?;
+    Ok(())
 }

@@ -16,11 +16,10 @@
 //! below the true one however long Zenoh blocked. Sans-IO: times are arguments.
 
 use std::collections::{HashMap, VecDeque};
-use std::time::Duration;
 
 use comms::Instant;
 
-use crate::export::{attachment, parse_attachment, Op, Sample};
+use crate::export::{Op, Sample};
 
 /// Counters of the queue.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -46,6 +45,8 @@ pub struct Outbox {
     order: VecDeque<Slot>,
     /// The waiting value of each key, with when its age was computed.
     values: HashMap<String, (Sample, Instant)>,
+    /// When the queue last went from empty to waiting.
+    since: Option<Instant>,
     stats: OutboxStats,
 }
 
@@ -70,8 +71,21 @@ impl Outbox {
         self.order.is_empty()
     }
 
+    /// Whether only values and talk messages wait (no liveliness change).
+    pub fn only_samples(&self) -> bool {
+        self.order
+            .iter()
+            .all(|slot| matches!(slot, Slot::Value(_) | Slot::Other(Op::Talk(_), _)))
+    }
+
+    /// Since when the oldest waiting operation has waited.
+    pub fn waiting_since(&self) -> Option<Instant> {
+        self.since
+    }
+
     /// Queues `op`, decided at `now`: a value replaces its key's waiting value in place.
     pub fn push(&mut self, now: Instant, op: Op) {
+        self.since.get_or_insert(now);
         match op {
             Op::Put(sample) => {
                 if let Some(waiting) = self.values.get_mut(&sample.key) {
@@ -90,16 +104,17 @@ impl Outbox {
     /// Takes everything waiting at `now`, oldest first, each value's age advanced by the
     /// time it waited.
     pub fn take(&mut self, now: Instant) -> Vec<Op> {
+        self.since = None;
         let mut out = Vec::with_capacity(self.order.len());
         for slot in self.order.drain(..) {
             match slot {
                 Slot::Value(key) => {
                     if let Some((sample, at)) = self.values.remove(&key) {
-                        out.push(Op::Put(aged(sample, now.saturating_duration_since(at))));
+                        out.push(Op::Put(sample.aged(now.saturating_duration_since(at))));
                     }
                 }
                 Slot::Other(Op::Talk(sample), at) => {
-                    out.push(Op::Talk(aged(sample, now.saturating_duration_since(at))));
+                    out.push(Op::Talk(sample.aged(now.saturating_duration_since(at))));
                 }
                 Slot::Other(op, _) => out.push(op),
             }
@@ -108,21 +123,11 @@ impl Outbox {
     }
 }
 
-/// `sample` with `waited` added to the age of its attachment (talk attachments carry no
-/// age and are left as they are).
-fn aged(mut sample: Sample, waited: Duration) -> Sample {
-    if waited.is_zero() {
-        return sample;
-    }
-    if let Some((incarnation, version, age)) = parse_attachment(&sample.attachment) {
-        sample.attachment = attachment(incarnation, version, age + waited);
-    }
-    sample
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::export::{parse_attachment, Meta};
+    use std::time::Duration;
 
     fn at(ms: u64) -> Instant {
         Instant::from_micros(ms * 1000)
@@ -132,7 +137,11 @@ mod tests {
         Op::Put(Sample {
             key: key.to_owned(),
             payload: v.to_string(),
-            attachment: attachment(1, v, Duration::from_millis(age_ms)),
+            meta: Meta::Value {
+                incarnation: 1,
+                version: v,
+                age: Duration::from_millis(age_ms),
+            },
             ros2: None,
         })
     }
@@ -178,7 +187,10 @@ mod tests {
             Op::Talk(Sample {
                 key: "t".into(),
                 payload: n.to_string(),
-                attachment: format!("incarnation={:016x} seq={n}", 1),
+                meta: Meta::Talk {
+                    incarnation: 1,
+                    seq: n,
+                },
                 ros2: None,
             })
         };
@@ -221,7 +233,7 @@ mod tests {
             panic!("a value: {out:?}")
         };
         assert_eq!(
-            parse_attachment(&s.attachment),
+            parse_attachment(&s.attachment()),
             Some((1, 2, Duration::from_millis(3 + 40))),
             "3 ms at the exporter + 40 ms in the queue"
         );

@@ -7,6 +7,23 @@
 //! subscriber, a busy router) only superseded values are merged away in the outbox and
 //! every key's last value still goes, while the field side never waits for Zenoh. The
 //! queryables run on Zenoh's threads and read the same replica under the same mutex.
+//!
+//! **The fast path** (`--fast-path`, off by default). Waking the publisher thread is a
+//! scheduler hand-over per sample. With the fast path, when nothing waits, the publisher
+//! is idle and no put has been slow in the last second, the field thread puts the few
+//! samples of the datagram itself (Zenoh's put only copies them into its queue). Its
+//! price: a Zenoh queue that fills at once (a router stalling after a second of fast
+//! puts) holds the field thread up to Zenoh's block timeout, and the frames read late
+//! then look up to a second slower than they were (the transit's cap). On the loaded
+//! two-core test machine it measured no gain (docs/bridge.md), so it is not the default.
+//! One of the two threads puts at a time, so samples keep their order.
+//!
+//! **Zenoh going away.** The bridge declares a liveliness token
+//! `…/<team>/@bridge/alive`: a subscriber that sees it appear (at start, or again after
+//! its own link or the router came back) gets the team's prefix and recovers every value
+//! it missed. When the bridge's own session comes back, it puts every key's current
+//! value once more. On SIGTERM/SIGINT ([`Bridge::shutdown_flag`]) the outbox is handed
+//! over and the session closed, which writes Zenoh's queue out before the links close.
 
 use std::collections::HashMap;
 use std::io;
@@ -29,7 +46,15 @@ use zenoh::{Session, Wait};
 use crate::export::{ExportConfig, Exporter, Op, Sample};
 use crate::keys::TeamKeys;
 use crate::outbox::Outbox;
-use crate::transit::TransitEstimator;
+use crate::transit::Heard;
+
+/// A put longer than this counts as slow: Zenoh's queue was full (or the machine very
+/// busy), and the field thread leaves puts to the publisher thread for [`SLOW_HOLD`].
+const SLOW_PUT: Duration = Duration::from_millis(2);
+/// How long after a slow put the field thread does not put itself.
+const SLOW_HOLD: Duration = Duration::from_secs(1);
+/// How often the session's router or peer is checked.
+const ZENOH_CHECK: Duration = Duration::from_millis(250);
 
 /// Everything the bridge needs to start.
 pub struct BridgeConfig {
@@ -47,6 +72,8 @@ pub struct BridgeConfig {
     pub export: ExportConfig,
     /// The Zenoh session's configuration (mode, endpoints, TLS, auth).
     pub zenoh: zenoh::Config,
+    /// Whether the field thread may put samples itself (see the module docs).
+    pub fast_path: bool,
 }
 
 /// Why the bridge could not start.
@@ -92,12 +119,59 @@ pub struct IoCounters {
     pub queries_refused: u64,
     /// Times the session lost its last router or peer.
     pub zenoh_lost: u64,
+    /// Times it found one again (every key's value was put once more).
+    pub zenoh_back: u64,
+    /// Batches of samples the field thread put itself (the fast path).
+    pub inline_puts: u64,
+    /// Batches handed over to the publisher thread.
+    pub handed_over: u64,
+}
+
+/// The last few thousand durations of one step, in µs, for `@bridge/stats`.
+#[derive(Debug, Default)]
+struct Ring {
+    us: Vec<u32>,
+    next: usize,
+}
+
+impl Ring {
+    const LEN: usize = 4096;
+
+    fn push(&mut self, d: Duration) {
+        let us = u32::try_from(d.as_micros()).unwrap_or(u32::MAX);
+        if self.us.len() < Self::LEN {
+            self.us.push(us);
+        } else {
+            self.us[self.next] = us;
+        }
+        self.next = (self.next + 1) % Self::LEN;
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let mut v = self.us.clone();
+        v.sort_unstable();
+        let q = |q: f64| {
+            v.get(((v.len().saturating_sub(1)) as f64 * q).round() as usize)
+                .copied()
+        };
+        serde_json::json!({ "n": v.len(), "p50": q(0.5), "p99": q(0.99) })
+    }
+}
+
+/// Where a sample's time in the bridge goes (see the module docs).
+#[derive(Debug, Default)]
+struct Timings {
+    /// From the datagram's reception to its samples queued.
+    field: Ring,
+    /// From queued to taken by the publisher thread (the hand-over; 0 on the fast path).
+    handoff: Ring,
+    /// One put (Zenoh copying the sample into its queue).
+    put: Ring,
 }
 
 /// The state the field thread and the queryables share.
 struct Core {
     replica: Replica,
-    transit: TransitEstimator,
     team: u8,
     team_key: Option<comms::wire::TeamKey>,
     exporter: Exporter,
@@ -105,6 +179,13 @@ struct Core {
     outbox: Outbox,
     io: IoCounters,
     reported_drops: Vec<DropReason>,
+    timings: Timings,
+    /// A thread is putting (the publisher, or the field thread on the fast path).
+    putting: bool,
+    /// No fast path before this (a put was slow).
+    slow_until: Option<Instant>,
+    /// The fast path is allowed at all.
+    fast_path: bool,
 }
 
 impl Core {
@@ -179,10 +260,14 @@ impl Core {
                 "transmits_discarded": io.transmits_discarded,
             },
             "transit": {
-                "floor_us": self.transit.floor().as_micros() as u64,
-                "round_trips": self.transit.stats().round_trips,
-                "implausible": self.transit.stats().implausible,
-                "implausible_round_trips": self.transit.stats().implausible_round_trips,
+                "floor_us": self.exporter.transit().floor().as_micros() as u64,
+                "round_trips": self.exporter.transit().stats().round_trips,
+                "implausible": self.exporter.transit().stats().implausible,
+                "implausible_round_trips": self.exporter.transit().stats().implausible_round_trips,
+                "anchors": self.exporter.transit().stats().anchors,
+                "implausible_anchors": self.exporter.transit().stats().implausible_anchors,
+                "anchor_held": e.anchor_held,
+                "unanchored_out": e.unanchored_out,
             },
             "export": {
                 "values_out": e.values_out,
@@ -196,6 +281,14 @@ impl Core {
                 "alive_withdrawn": e.alive_withdrawn,
                 "coalesced": self.outbox.stats().coalesced,
                 "outbox_high_water": self.outbox.stats().high_water,
+                "republished": e.republished,
+            },
+            "timing_us": {
+                "field": self.timings.field.json(),
+                "handoff": self.timings.handoff.json(),
+                "put": self.timings.put.json(),
+                "inline_puts": io.inline_puts,
+                "handed_over": io.handed_over,
             },
             "zenoh": {
                 "put_errors": io.put_errors,
@@ -204,6 +297,7 @@ impl Core {
                 "replies": io.replies,
                 "queries_refused": io.queries_refused,
                 "lost": io.zenoh_lost,
+                "back": io.zenoh_back,
             },
         })
     }
@@ -237,6 +331,8 @@ pub struct Bridge {
     clock: Clock,
     session: Session,
     _queryables: Vec<zenoh::query::Queryable<()>>,
+    /// `…/@bridge/alive`: subscribers get the prefix when it appears.
+    _alive: LivelinessToken,
     keys: TeamKeys,
     shutdown: Arc<AtomicBool>,
 }
@@ -282,12 +378,15 @@ impl Bridge {
         let mut core = Core {
             team_key: cfg.team_key.as_deref().map(comms::wire::TeamKey::new),
             team: cfg.team,
-            transit: TransitEstimator::new(),
             replica,
             exporter: Exporter::new(cfg.keys.clone(), cfg.export),
             outbox: Outbox::new(),
             io: IoCounters::default(),
             reported_drops: Vec::new(),
+            timings: Timings::default(),
+            putting: false,
+            slow_until: None,
+            fast_path: cfg.fast_path,
         };
         core.drain(clock.now());
         let core: Shared = Arc::new((Mutex::new(core), Condvar::new()));
@@ -316,12 +415,18 @@ impl Bridge {
                 .wait()
                 .map_err(zerr)?
         };
+        let alive = session
+            .liveliness()
+            .declare_token(cfg.keys.bridge("alive"))
+            .wait()
+            .map_err(zerr)?;
         Ok(Bridge {
             socket,
             core,
             clock,
             session,
             _queryables: vec![values, bridge_keys],
+            _alive: alive,
             keys: cfg.keys,
             shutdown: Arc::new(AtomicBool::new(false)),
         })
@@ -338,7 +443,8 @@ impl Bridge {
     }
 
     /// Runs the field side until the shutdown flag is set (and the publisher thread
-    /// beside it, which hands over what is still queued before it ends).
+    /// beside it, which hands over what is still queued before it ends); then closes the
+    /// session, which writes out what Zenoh still queues.
     pub fn run(self) -> Result<(), BridgeError> {
         let publisher = Publisher {
             core: self.core.clone(),
@@ -354,6 +460,12 @@ impl Bridge {
         self.shutdown.store(true, Ordering::Relaxed);
         self.core.1.notify_all();
         let _ = publisher.join();
+        let values_out = lock(&self.core.0).exporter.stats().values_out;
+        drop(self._queryables);
+        if let Err(e) = self.session.close().wait() {
+            tracing::warn!("closing the zenoh session: {e}");
+        }
+        tracing::info!("stopped: {values_out} values out, the outbox and Zenoh's queue flushed");
         result
     }
 
@@ -374,8 +486,9 @@ impl Bridge {
             self.socket.set_read_timeout(Some(wait))?;
             let got = self.socket.recv_from(&mut buf);
             let now = self.clock.now();
-            let queued = {
+            let direct = {
                 let mut core = lock(&self.core.0);
+                let datagram = got.is_ok();
                 match got {
                     Ok((n, from)) => {
                         core.io.datagrams += 1;
@@ -384,7 +497,9 @@ impl Bridge {
                     Err(e)
                         if matches!(
                             e.kind(),
-                            io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                            io::ErrorKind::WouldBlock
+                                | io::ErrorKind::TimedOut
+                                | io::ErrorKind::Interrupted
                         ) => {}
                     Err(e) => {
                         core.io.recv_errors += 1;
@@ -396,20 +511,81 @@ impl Bridge {
                 for op in core.exporter.drain_ops() {
                     core.outbox.push(now, op);
                 }
-                !core.outbox.is_empty()
+                if datagram && !core.outbox.is_empty() {
+                    core.timings
+                        .field
+                        .push(self.clock.now().saturating_duration_since(now));
+                }
+                self.fast_path(core, now)
             };
-            if queued {
-                self.core.1.notify_one();
+            if let Some((taken, ops)) = direct {
+                let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
+                let mut core = lock(&self.core.0);
+                core.putting = false;
+                if slow {
+                    core.slow_until = Some(self.clock.now() + SLOW_HOLD);
+                }
+                if !core.outbox.is_empty() {
+                    self.core.1.notify_one();
+                }
             }
             if now >= next_check {
-                next_check = now + Duration::from_secs(1);
+                next_check = now + ZENOH_CHECK;
                 connected = self.check_zenoh(connected);
             }
+        }
+        self.read_what_is_left(&mut buf)
+    }
+
+    /// On shutdown: what the robots sent before it is still in the socket's buffer;
+    /// read it (up to a bound) so that its values go out with the flush.
+    fn read_what_is_left(&self, buf: &mut [u8]) -> Result<(), BridgeError> {
+        self.socket.set_nonblocking(true)?;
+        let mut core = lock(&self.core.0);
+        let core = &mut *core;
+        let mut read = 0;
+        while read < 100_000 {
+            let Ok((n, from)) = self.socket.recv_from(buf) else {
+                break;
+            };
+            read += 1;
+            core.io.datagrams += 1;
+            feed(core, self.clock.now(), from, &buf[..n]);
+        }
+        let now = self.clock.now();
+        core.advance(now);
+        for op in core.exporter.drain_ops() {
+            core.outbox.push(now, op);
+        }
+        if read > 0 {
+            tracing::info!("stopping: read the {read} datagrams left in the socket");
         }
         Ok(())
     }
 
-    /// Whether the session has a router or peer; logs and counts a loss.
+    /// What the field thread puts itself (see the module docs); otherwise wakes the
+    /// publisher thread if something waits.
+    fn fast_path(&self, core: &mut Core, now: Instant) -> Option<(Instant, Vec<Op>)> {
+        if core.outbox.is_empty() {
+            return None;
+        }
+        let fast = core.fast_path
+            && !core.putting
+            && core.slow_until.is_none_or(|t| now >= t)
+            && core.outbox.only_samples();
+        if !fast {
+            self.core.1.notify_one();
+            return None;
+        }
+        core.putting = true;
+        core.io.inline_puts += 1;
+        core.timings.handoff.push(Duration::ZERO);
+        let taken = self.clock.now();
+        Some((taken, core.outbox.take(taken)))
+    }
+
+    /// Whether the session has a router or peer; logs and counts a loss, and puts every
+    /// key's value once more when one is back.
     fn check_zenoh(&self, was: bool) -> bool {
         let info = self.session.info();
         let now =
@@ -417,11 +593,23 @@ impl Bridge {
         if was && !now {
             lock(&self.core.0).io.zenoh_lost += 1;
             tracing::warn!(
-                "zenoh: no router or peer reachable; samples are dropped until one is back \
-                 (the field side carries on)"
+                "zenoh: no router or peer reachable; samples go nowhere until one is back, \
+                 then every key's value goes once more (the field side carries on)"
             );
         } else if !was && now {
-            tracing::info!("zenoh: connected again");
+            let n = {
+                let mut core = lock(&self.core.0);
+                let core = &mut *core;
+                core.io.zenoh_back += 1;
+                let at = self.clock.now();
+                let n = core.exporter.republish(at, &core.replica);
+                for op in core.exporter.drain_ops() {
+                    core.outbox.push(at, op);
+                }
+                n
+            };
+            self.core.1.notify_one();
+            tracing::info!("zenoh: connected again; every key's value goes once more ({n})");
         }
         now
     }
@@ -433,7 +621,9 @@ impl Publisher {
         loop {
             let ops = {
                 let mut core = lock(&self.core.0);
-                while core.outbox.is_empty() && !self.shutdown.load(Ordering::Relaxed) {
+                while (core.outbox.is_empty() || core.putting)
+                    && !self.shutdown.load(Ordering::Relaxed)
+                {
                     core = self
                         .core
                         .1
@@ -444,27 +634,36 @@ impl Publisher {
                 if core.outbox.is_empty() {
                     return; // stopping, nothing left
                 }
-                core.outbox.take(self.clock.now())
+                let now = self.clock.now();
+                let since = core.outbox.waiting_since();
+                if let Some(since) = since {
+                    core.timings
+                        .handoff
+                        .push(now.saturating_duration_since(since));
+                }
+                core.putting = true;
+                core.io.handed_over += 1;
+                (now, core.outbox.take(now))
             };
-            self.apply(ops);
+            self.apply(ops.0, ops.1);
         }
     }
 
-    fn apply(&mut self, ops: Vec<Op>) {
-        let mut put_errors = 0;
+    fn apply(&mut self, taken: Instant, ops: Vec<Op>) {
         let mut token_errors = 0;
-        // One value alone goes at once (express: not held for a batch); under load
-        // Zenoh batches.
-        let express = ops.len() == 1;
+        let mut samples = Vec::with_capacity(ops.len());
         for op in ops {
             match op {
-                Op::Put(sample) | Op::Talk(sample) => {
-                    if let Err(e) = self.put(sample, express) {
-                        put_errors += 1;
-                        tracing::debug!("put: {e}");
-                    }
-                }
+                sample @ (Op::Put(_) | Op::Talk(_)) => samples.push(sample),
                 Op::Alive { robot, key, .. } => {
+                    // Samples before a liveliness change go before it.
+                    put_samples(
+                        &self.session,
+                        &self.clock,
+                        taken,
+                        std::mem::take(&mut samples),
+                        &self.core.0,
+                    );
                     match self.session.liveliness().declare_token(key).wait() {
                         Ok(token) => {
                             if let Some(old) = self.tokens.insert(robot, token) {
@@ -478,6 +677,13 @@ impl Publisher {
                     }
                 }
                 Op::Gone { robot } => {
+                    put_samples(
+                        &self.session,
+                        &self.clock,
+                        taken,
+                        std::mem::take(&mut samples),
+                        &self.core.0,
+                    );
                     if let Some(token) = self.tokens.remove(&robot) {
                         if let Err(e) = token.undeclare().wait() {
                             token_errors += 1;
@@ -487,49 +693,104 @@ impl Publisher {
                 }
             }
         }
-        if put_errors + token_errors > 0 {
-            let mut core = lock(&self.core.0);
-            if core.io.put_errors == 0 && put_errors > 0 {
-                tracing::warn!("zenoh refused a put (counted in @bridge/stats put_errors)");
-            }
-            core.io.put_errors += put_errors;
-            core.io.token_errors += token_errors;
+        let slow = put_samples(&self.session, &self.clock, taken, samples, &self.core.0);
+        let mut core = lock(&self.core.0);
+        core.putting = false;
+        core.io.token_errors += token_errors;
+        if slow {
+            core.slow_until = Some(self.clock.now() + SLOW_HOLD);
         }
     }
+}
 
-    /// Blocking congestion control: Zenoh drops nothing the outbox handed it (the
-    /// outbox merged what was superseded while this thread waited).
-    fn put(&self, sample: Sample, express: bool) -> zenoh::Result<()> {
-        if let Some((key, cdr)) = sample.ros2 {
-            self.session
-                .put(key, cdr)
-                .encoding(Encoding::APPLICATION_CDR)
-                .congestion_control(CongestionControl::Block)
-                .express(express)
-                .wait()?;
+/// Puts `ops` (values and talk messages, taken from the outbox at `taken`) in order,
+/// with blocking congestion control (Zenoh drops nothing the outbox handed it; the outbox
+/// merged what was superseded while Zenoh blocked). A lone sample goes express (not held
+/// for a batch); under load Zenoh batches. Counts errors and the put times; returns
+/// whether a put was slow.
+fn put_samples(
+    session: &Session,
+    clock: &Clock,
+    taken: Instant,
+    ops: Vec<Op>,
+    core: &Mutex<Core>,
+) -> bool {
+    if ops.is_empty() {
+        return false;
+    }
+    let express = ops.len() == 1;
+    let mut put_errors = 0;
+    let mut times = Vec::with_capacity(ops.len());
+    for op in ops {
+        let (Op::Put(sample) | Op::Talk(sample)) = op else {
+            continue;
+        };
+        let t0 = clock.now();
+        // Zenoh's timestamp first (the moment of publication, for a subscriber that wants
+        // one; never the age's source), then the age brought up to this moment: the
+        // time since `taken` (earlier puts of the batch) is added.
+        let timestamp = session.new_timestamp();
+        let sample = sample.aged(clock.now().saturating_duration_since(taken));
+        if let Err(e) = put(session, sample, timestamp, express) {
+            put_errors += 1;
+            tracing::debug!("put: {e}");
         }
-        self.session
-            .put(sample.key, sample.payload)
-            .encoding(Encoding::TEXT_PLAIN)
-            .attachment(sample.attachment)
+        times.push(clock.now().saturating_duration_since(t0));
+    }
+    let mut core = lock(core);
+    if core.io.put_errors == 0 && put_errors > 0 {
+        tracing::warn!("zenoh refused a put (counted in @bridge/stats put_errors)");
+    }
+    core.io.put_errors += put_errors;
+    let mut slow = false;
+    for t in times {
+        slow |= t > SLOW_PUT;
+        core.timings.put.push(t);
+    }
+    slow
+}
+
+fn put(
+    session: &Session,
+    sample: Sample,
+    timestamp: zenoh::time::Timestamp,
+    express: bool,
+) -> zenoh::Result<()> {
+    let attachment = sample.attachment();
+    if let Some((key, cdr)) = sample.ros2 {
+        session
+            .put(key, cdr)
+            .encoding(Encoding::APPLICATION_CDR)
             .congestion_control(CongestionControl::Block)
             .express(express)
-            .wait()
+            .wait()?;
     }
+    session
+        .put(sample.key, sample.payload)
+        .encoding(Encoding::TEXT_PLAIN)
+        .attachment(attachment)
+        .timestamp(timestamp)
+        .congestion_control(CongestionControl::Block)
+        .express(express)
+        .wait()
 }
 
 fn feed(core: &mut Core, now: Instant, from: SocketAddr, bytes: &[u8]) {
     core.advance(now);
-    // The frame is decoded (and its tag checked) once more here for its clock fields;
-    // the replica decides what it applies, and counts what it drops.
-    let transit = match comms::wire::decode_frame(bytes, core.team, core.team_key.as_ref()) {
-        Ok(frame) => core.transit.frame(now, &frame),
-        Err(_) => Duration::ZERO,
-    };
-    core.exporter.set_frame_transit(transit);
+    // The frame's header is read (and its tag checked) once more here for its clock
+    // fields, without allocating; the replica decides what it applies, and counts what
+    // it drops.
+    if let Ok(frame) = comms::wire::decode_frame_with(
+        bytes,
+        core.team,
+        core.team_key.as_ref(),
+        comms::wire::KnownPaths::none(),
+    ) {
+        core.exporter.frame(now, Heard::from(&frame));
+    }
     core.replica.handle_datagram(now, from, bytes);
     core.drain(now);
-    core.exporter.set_frame_transit(Duration::ZERO);
+    core.exporter.frame_done();
 }
 
 /// Answers a `get` on the team's values from the replica, ages at reply time.
@@ -571,10 +832,11 @@ fn answer_values(core: &Mutex<Core>, clock: &Clock, query: &Query) {
         replies
     };
     for s in replies {
+        let attachment = s.attachment();
         if let Err(e) = query
             .reply(s.key, s.payload)
             .encoding(Encoding::TEXT_PLAIN)
-            .attachment(s.attachment)
+            .attachment(attachment)
             .wait()
         {
             tracing::debug!("reply: {e}");

@@ -3,8 +3,7 @@
 //! `huddle daemon --impair preset=competition` does. Each robot changes five keys every
 //! 50 ms for 2 s, then stops. Every key's final value reaches the Zenoh subscriber within
 //! the refresh period plus the link's worst case, and no sample's age (the attachment,
-//! at the bridge) is more than [`AGE_ERROR`] below the true age: the time since the
-//! daemon's `set`, measured on
+//! at the bridge) is below the true age: the time since the daemon's `set`, measured on
 //! this process's clock, less the Zenoh hop from the bridge to the subscriber.
 
 #![allow(clippy::disallowed_methods)] // real sockets, real time
@@ -13,15 +12,15 @@ mod common;
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 use common::{wait_until, BridgeProcess, Recorder};
 use comms::Value;
 use huddle::impair::LinkImpairment;
 use huddle_bridge::harness::{client, free_port, router, Daemon, DaemonSpec};
 
-/// (robot, key index, value) -> when it was set.
-type SetTimes = HashMap<(u8, usize, i64), Instant>;
+/// (robot, key index, value) -> when it was set (monotonic, and wall clock).
+type SetTimes = HashMap<(u8, usize, i64), (Instant, SystemTime)>;
 
 const TEAM: u8 = 7;
 const VENUE: &str = "lab";
@@ -34,16 +33,18 @@ const LINK_WORST: Duration = Duration::from_millis(100 + 30 + 100);
 /// The bridge → router → subscriber hop on loopback, an upper bound: the subscriber's
 /// reception is later than the bridge's publication by at most this.
 const HOP_ALLOWANCE: Duration = Duration::from_millis(3);
-/// How far below the true age the bridge's age may be. The target is zero
-/// ("never below"); the passive transit estimate (`huddle_bridge::transit`) measured
-/// from −10 (one run below −15) to +21 ms against the true age on this link over several
-/// runs, biased high by up to a floor: the target does not hold, and this bound is what
-/// holds reliably on the loaded 2-core VM. It still catches ages that leave out most of
-/// the link's 10..30 ms delay.
-const AGE_ERROR: Duration = Duration::from_millis(25);
+/// How far below the true age the bridge's age may be. Each sender's clock is anchored
+/// by its echoes of frames the bridge heard, and its values wait for three of them
+/// (`huddle_bridge::transit`); what is left is the bridge reading an echoed frame later
+/// than the echoing teammate did (the scheduler, on a loaded machine): up to 0.09 ms
+/// measured at load average 16. The estimator before the anchor took the first frames'
+/// minimum for the fastest transit and had no round trip for its floor yet: ages down to
+/// 12.4 ms below the true age in the first second, which this test (with a 25 ms
+/// allowance then) let through.
+const AGE_ERROR: Duration = Duration::from_micros(250);
 
 #[test]
-fn final_values_arrive_and_ages_stay_within_25_ms_below_the_true_age() {
+fn final_values_arrive_and_no_age_is_below_the_true_age() {
     let port = free_port().unwrap();
     let _router = router(port, &[]).expect("router");
     let group = driver::scratch_group().unwrap();
@@ -61,7 +62,7 @@ fn final_values_arrive_and_ages_stay_within_25_ms_below_the_true_age() {
         daemons.push(Daemon::start(spec).unwrap());
     }
     let _bridge = BridgeProcess::start(group, TEAM, VENUE, port, &[]);
-    std::thread::sleep(Duration::from_millis(500));
+    std::thread::sleep(Duration::from_millis(150));
 
     // (robot, key index, value) -> when it was set.
     let set_at: Arc<Mutex<SetTimes>> = Arc::default();
@@ -76,7 +77,7 @@ fn final_values_arrive_and_ages_stay_within_25_ms_below_the_true_age() {
                         let _ = b.set(&format!("*.var.k{k}"), Value::Int(round));
                     }
                 });
-                let t = Instant::now();
+                let t = (Instant::now(), SystemTime::now());
                 let mut s = set_at.lock().unwrap();
                 for k in 0..KEYS {
                     s.insert((id, k, round), t);
@@ -112,19 +113,24 @@ fn final_values_arrive_and_ages_stay_within_25_ms_below_the_true_age() {
         let Ok(v) = s.payload.parse::<i64>() else {
             continue;
         };
-        let Some(t_set) = set_at.get(&(id, k, v)) else {
+        let Some(&(t_set, wall_set)) = set_at.get(&(id, k, v)) else {
             continue;
         };
         let (_, _, age) = s.meta();
-        let true_age_at_subscriber = s.at.saturating_duration_since(*t_set);
-        // Published at most HOP_ALLOWANCE before the subscriber got it.
-        let true_age_at_bridge = true_age_at_subscriber.saturating_sub(HOP_ALLOWANCE);
+        let true_age_at_subscriber = s.at.saturating_duration_since(t_set);
+        // The bridge stamps each sample (Zenoh's timestamp, this machine's wall clock)
+        // just before it computes the age it attaches: the true age at publication.
+        // Without a stamp: published at most HOP_ALLOWANCE before the subscriber got it.
+        let true_age_at_bridge = match s.published {
+            Some(p) => p.duration_since(wall_set).unwrap_or_default(),
+            None => true_age_at_subscriber.saturating_sub(HOP_ALLOWANCE),
+        };
         margins.push(age.as_secs_f64() * 1e3 - true_age_at_bridge.as_secs_f64() * 1e3);
         if age + AGE_ERROR < true_age_at_bridge {
             below.push((s.key.clone(), v, age, true_age_at_subscriber));
         }
-        if v == rounds && s.at.saturating_duration_since(*t_set) > bound {
-            late.push((s.key.clone(), s.at.saturating_duration_since(*t_set)));
+        if v == rounds && s.at.saturating_duration_since(t_set) > bound {
+            late.push((s.key.clone(), s.at.saturating_duration_since(t_set)));
         }
     }
     margins.sort_by(f64::total_cmp);

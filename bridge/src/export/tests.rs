@@ -71,7 +71,7 @@ impl Rig {
                 Op::Put(s) => Some((
                     s.key.clone(),
                     s.payload.clone(),
-                    parse_attachment(&s.attachment).unwrap().1,
+                    parse_attachment(&s.attachment()).unwrap().1,
                 )),
                 _ => None,
             })
@@ -122,7 +122,7 @@ fn the_attachment_carries_the_age_at_the_bridge() {
     let Some(Op::Put(sample)) = rig.ops.iter().find(|op| matches!(op, Op::Put(_))) else {
         panic!("no sample: {:?}", rig.ops);
     };
-    let (inc, ver, age) = parse_attachment(&sample.attachment).unwrap();
+    let (inc, ver, age) = parse_attachment(&sample.attachment()).unwrap();
     assert_eq!((inc, ver), (0x22, 1));
     assert_eq!(
         age,
@@ -133,7 +133,7 @@ fn the_attachment_carries_the_age_at_the_bridge() {
     let entry = rig.listener.blackboard().get(&key).unwrap().clone();
     let later = rig.exporter.sample(at(251), &key, &entry).unwrap();
     assert_eq!(
-        parse_attachment(&later.attachment).unwrap().2,
+        parse_attachment(&later.attachment()).unwrap().2,
         Duration::from_millis(250),
         "a reply later computes the age at its own time"
     );

@@ -51,6 +51,8 @@ pub struct Got {
     pub payload: String,
     pub attachment: String,
     pub at: Instant,
+    /// Zenoh's timestamp: when the bridge published it (wall clock, this machine's).
+    pub published: Option<std::time::SystemTime>,
 }
 
 impl Got {
@@ -91,6 +93,7 @@ impl Recorder {
                         .and_then(|a| a.try_to_string().ok().map(|c| c.into_owned()))
                         .unwrap_or_default(),
                     at: Instant::now(),
+                    published: s.timestamp().map(|t| t.get_time().to_system_time()),
                 };
                 d.lock().unwrap().samples.push(got);
             })
