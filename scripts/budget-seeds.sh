@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # The SPL budget table over seeds: VOI against the baseline, 600 s, competition preset.
 #   scripts/budget-seeds.sh [HUDDLE_BIN] SEED...   (prints one line per seed, then the means)
+#   WORLD=ideal|drawn picks the simulated world (default: drawn, the CLI's default).
 # Seeds 1-3 are the issue's; 4-51 were tuning/check seeds of earlier rounds; 401-424 were
 # never used before this round (docs/seeds.md).
 set -euo pipefail
 bin=${1:-target/release/huddle}; shift
 for s in "$@"; do
   for p in voi baseline; do
-    "$bin" sim --preset competition --seed "$s" --duration 600s --budget spl --policy "$p" --json \
-      > "/tmp/budget-$s-$p.json"
+    "$bin" sim --preset competition --seed "$s" --duration 600s --budget spl --policy "$p" \
+      --world "${WORLD:-drawn}" --json > "/tmp/budget-$s-$p.json"
   done
   python3 - "$s" <<'PY'
 import json, sys

@@ -316,22 +316,19 @@ pub unsafe extern "C" fn huddle_node_get_team_goer(
     unsafe { guard(err, -1, body) }
 }
 
-/// The floats at `key`, checked to have `len` elements (any of `lens`).
-fn team_floats(
+/// Reads output `key` through the contract's parser (`team::contract`, the reading the
+/// simulator's robot programs use too): absent is `Ok(None)`; a value that is not what
+/// the contract says is `HUDDLE_E_TYPE` with the contract's reason.
+fn team_output<T>(
     node: *mut huddle_node,
-    key: &str,
-    lens: &[usize],
-) -> Result<Option<Vec<f64>>, Failure> {
+    key: &'static str,
+    parse: impl FnOnce(&Value) -> Result<T, team::contract::ContractError>,
+) -> Result<Option<T>, Failure> {
     match get_value(node, key)? {
         None => Ok(None),
-        // `[]`: the layer had a ball and has none now (a kick-off's reset).
-        Some(Value::Floats(v)) if v.is_empty() => Ok(None),
-        Some(Value::Floats(v)) if lens.contains(&v.len()) => Ok(Some(v)),
-        Some(Value::Floats(v)) => Err(Failure::new(
-            HUDDLE_E_TYPE,
-            format!("{key} holds {} floats, the contract says {lens:?}", v.len()),
-        )),
-        Some(other) => Err(wrong_type(key, &other, "floats")),
+        Some(v) => parse(&v)
+            .map(Some)
+            .map_err(|e| Failure::new(HUDDLE_E_TYPE, e.to_string())),
     }
 }
 
@@ -354,19 +351,22 @@ pub unsafe extern "C" fn huddle_node_get_team_ball(
     let body = || {
         // SAFETY: the caller promises `out` is NULL or valid for writes.
         let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
-        Ok(match team_floats(node, "local.var.team.ball", &[9])? {
-            Some(v) => {
+        let key = team::contract::TEAM_BALL_KEY;
+        let ball = team_output(node, key, |v| team::contract::parse_ball_output(key, v))?;
+        Ok(match ball.flatten() {
+            Some(b) => {
                 *out = huddle_team_ball {
-                    x: v[0],
-                    y: v[1],
-                    vx: v[2],
-                    vy: v[3],
-                    cov: [v[4], v[5], v[6]],
-                    confidence: v[7],
-                    age_s: v[8],
+                    x: b.at.x,
+                    y: b.at.y,
+                    vx: b.velocity.x,
+                    vy: b.velocity.y,
+                    cov: [b.cov[(0, 0)], b.cov[(0, 1)], b.cov[(1, 1)]],
+                    confidence: b.confidence.unwrap_or(0.0),
+                    age_s: b.age_s,
                 };
                 1
             }
+            // Absent, or `[]`: the layer has no team ball now.
             None => 0,
         })
     };
@@ -391,18 +391,29 @@ pub unsafe extern "C" fn huddle_node_get_team_pose(
     let body = || {
         // SAFETY: the caller promises `out` is NULL or valid for writes.
         let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
-        Ok(match team_floats(node, "local.var.team.pose", &[9])? {
-            Some(v) => {
-                *out = huddle_pose {
-                    x: v[0],
-                    y: v[1],
-                    theta: v[2],
-                    cov: [v[3], v[4], v[5], v[6], v[7], v[8]],
-                };
-                1
-            }
-            None => 0,
-        })
+        let key = team::contract::POSE_OUT_KEY;
+        Ok(
+            match team_output(node, key, team::contract::parse_pose_output)? {
+                Some(p) => {
+                    let c = p.cov;
+                    *out = huddle_pose {
+                        x: p.pose.at.x,
+                        y: p.pose.at.y,
+                        theta: p.pose.theta_rad,
+                        cov: [
+                            c[(0, 0)],
+                            c[(0, 1)],
+                            c[(0, 2)],
+                            c[(1, 1)],
+                            c[(1, 2)],
+                            c[(2, 2)],
+                        ],
+                    };
+                    1
+                }
+                None => 0,
+            },
+        )
     };
     // SAFETY: the caller promises `err` is NULL or writable.
     unsafe { guard(err, -1, body) }
@@ -430,29 +441,19 @@ pub unsafe extern "C" fn huddle_node_get_team_mates(
     let body = || {
         // SAFETY: the caller promises `count` is NULL or valid for writes.
         let count = unsafe { count.as_mut() }.ok_or_else(|| Failure::null("count"))?;
-        let key = "local.var.team.mates";
-        let Some(v) = get_value(node, key)? else {
+        let key = team::contract::MATES_KEY;
+        let Some(mates) = team_output(node, key, team::contract::parse_mates)? else {
             *count = 0;
             return Ok(0);
         };
-        let v = match v {
-            Value::Floats(v) if v.len() % 5 == 0 => v,
-            Value::Floats(v) => {
-                return Err(Failure::new(
-                    HUDDLE_E_TYPE,
-                    format!("{key} holds {} floats, not 5 per teammate", v.len()),
-                ))
-            }
-            other => return Err(wrong_type(key, &other, "floats")),
-        };
-        let mates: Vec<huddle_teammate> = v
-            .chunks(5)
+        let mates: Vec<huddle_teammate> = mates
+            .into_iter()
             .map(|m| huddle_teammate {
-                robot: m[0] as u8,
-                x: m[1],
-                y: m[2],
-                theta: m[3],
-                silent_s: m[4],
+                robot: m.id,
+                x: m.pose.at.x,
+                y: m.pose.at.y,
+                theta: m.pose.theta_rad,
+                silent_s: m.silent_s,
             })
             .collect();
         *count = mates.len();

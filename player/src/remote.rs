@@ -13,7 +13,7 @@
 
 use comms::arbitration::Decision;
 use comms::Value;
-use fusion::nalgebra::{Matrix2, Matrix3, Vector2};
+use fusion::nalgebra::{Matrix3, Vector2};
 use fusion::Kick;
 use team::contract;
 use team::{Calibration, Pose, Vec2};
@@ -24,41 +24,9 @@ use crate::play::{Belief, Tactician};
 use crate::robot::{BrainConfig, KickAttempt, Percepts};
 use crate::senses::{Frame, MotionCommand, Odometry};
 
-/// A ball as the layer publishes it (`local.var.team.ball`, `local.var.team.own_ball`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PublishedBall {
-    /// Field place when published, m.
-    pub at: Vec2,
-    /// Field velocity, m/s.
-    pub velocity: Vec2,
-    /// Covariance of the place.
-    pub cov: Matrix2<f64>,
-    /// Age of the newest sighting in it when published, s.
-    pub age_s: f64,
-}
-
-impl PublishedBall {
-    /// Parses the layer's ball output: `[x, y, vx, vy, var_x, cov_xy, var_y, (conf,) age]`.
-    pub fn parse(value: &Value) -> Option<PublishedBall> {
-        let Value::Floats(v) = value else {
-            return None;
-        };
-        if !(v.len() == 8 || v.len() == 9) || v.iter().any(|x| !x.is_finite()) {
-            return None;
-        }
-        Some(PublishedBall {
-            at: Vec2::new(v[0], v[1]),
-            velocity: Vec2::new(v[2], v[3]),
-            cov: Matrix2::new(v[4], v[5], v[5], v[6]),
-            age_s: v[v.len() - 1],
-        })
-    }
-
-    /// Where it is `dt_s` after it was published, at its published velocity.
-    pub fn at_after(&self, dt_s: f64) -> Vec2 {
-        self.at + self.velocity * dt_s
-    }
-}
+/// A ball as the layer publishes it (`local.var.team.ball`, `local.var.team.own_ball`):
+/// the contract's reading of it.
+pub type PublishedBall = contract::BallOutput;
 
 /// What the robot program last read from its daemon's team layer.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -84,28 +52,32 @@ impl TeamView {
     /// key is not an output this robot plays on or the value does not parse.
     pub fn take(&mut self, key: &str, value: &Value, since_s: f64) -> bool {
         match key {
-            contract::POSE_OUT_KEY => match value {
-                Value::Floats(v) if v.len() == 9 && v.iter().all(|x| x.is_finite()) => {
-                    let cov = Matrix3::new(v[3], v[4], v[5], v[4], v[6], v[7], v[5], v[7], v[8]);
-                    self.pose = Some((
-                        Pose {
-                            at: Vec2::new(v[0], v[1]),
-                            theta_rad: v[2],
-                        },
-                        cov,
-                    ));
+            contract::POSE_OUT_KEY => match contract::parse_pose_output(value) {
+                Ok(p) => {
+                    self.pose = Some((p.pose, p.cov));
                     self.pose_since_s = since_s;
                     true
                 }
-                _ => false,
+                Err(_) => false,
             },
-            contract::OWN_BALL_KEY => {
-                self.own_ball = PublishedBall::parse(value).map(|b| (b, since_s));
-                self.own_ball.is_some()
-            }
-            contract::TEAM_BALL_KEY => {
-                self.team_ball = PublishedBall::parse(value).map(|b| (b, since_s));
-                self.team_ball.is_some()
+            contract::OWN_BALL_KEY | contract::TEAM_BALL_KEY => {
+                let team = key == contract::TEAM_BALL_KEY;
+                let form = if team {
+                    contract::TEAM_BALL_KEY
+                } else {
+                    contract::OWN_BALL_KEY
+                };
+                // `[]` (no ball now) and a malformed value both leave no ball.
+                let held = contract::parse_ball_output(form, value)
+                    .ok()
+                    .flatten()
+                    .map(|b| (b, since_s));
+                *(if team {
+                    &mut self.team_ball
+                } else {
+                    &mut self.own_ball
+                }) = held;
+                held.is_some()
             }
             contract::GOER_KEY => match value {
                 Value::Int(g) => {

@@ -407,6 +407,125 @@ pub fn no_ball_value() -> comms::Value {
     comms::Value::Floats(Vec::new())
 }
 
+/// A ball as the layer publishes it ([`TEAM_BALL_KEY`], [`OWN_BALL_KEY`]), as a robot
+/// program reads it back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BallOutput {
+    /// Field place when published, m.
+    pub at: Vec2,
+    /// Field velocity, m/s.
+    pub velocity: Vec2,
+    /// Covariance of the place, m².
+    pub cov: Matrix2<f64>,
+    /// The global ball confidence (0–1): the team ball's only.
+    pub confidence: Option<f64>,
+    /// Age of the newest sighting in it when published, s.
+    pub age_s: f64,
+}
+
+impl BallOutput {
+    /// Where it is `dt_s` after it was published, at its published velocity.
+    pub fn at_after(&self, dt_s: f64) -> Vec2 {
+        self.at + self.velocity * dt_s
+    }
+}
+
+/// Reads [`TEAM_BALL_KEY`] (9 floats, with the confidence) or [`OWN_BALL_KEY`] (8).
+/// `Ok(None)`: `[]`, the layer had a ball and has none now. Any other key is read as the
+/// own ball's form.
+pub fn parse_ball_output(
+    key: &'static str,
+    value: &comms::Value,
+) -> Result<Option<BallOutput>, ContractError> {
+    if matches!(value, comms::Value::Floats(v) if v.is_empty()) {
+        return Ok(None);
+    }
+    let team = key == TEAM_BALL_KEY;
+    let v = if team {
+        floats(key, value, "9 (or none)", &[9])?
+    } else {
+        floats(key, value, "8 (or none)", &[8])?
+    };
+    Ok(Some(BallOutput {
+        at: Vec2::new(v[0], v[1]),
+        velocity: Vec2::new(v[2], v[3]),
+        cov: Matrix2::new(v[4], v[5], v[5], v[6]),
+        confidence: team.then_some(v[7]),
+        age_s: v[v.len() - 1],
+    }))
+}
+
+/// The pose the layer holds ([`POSE_OUT_KEY`]), as a robot program reads it back.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseOutput {
+    /// REP-103 mean.
+    pub pose: Pose,
+    /// Covariance of (x, y, θ).
+    pub cov: Matrix3<f64>,
+}
+
+/// Reads [`POSE_OUT_KEY`]: `[x, y, θ]` and the covariance's upper triangle.
+pub fn parse_pose_output(value: &comms::Value) -> Result<PoseOutput, ContractError> {
+    let v = floats(POSE_OUT_KEY, value, "9", &[9])?;
+    Ok(PoseOutput {
+        pose: Pose {
+            at: Vec2::new(v[0], v[1]),
+            theta_rad: v[2],
+        },
+        cov: Matrix3::new(v[3], v[4], v[5], v[4], v[6], v[7], v[5], v[7], v[8]),
+    })
+}
+
+/// A teammate as [`MATES_KEY`] gives it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MateOutput {
+    /// Its robot id.
+    pub id: u8,
+    /// Its pose from its messages (REP-103).
+    pub pose: Pose,
+    /// How long it has been silent, s.
+    pub silent_s: f64,
+}
+
+/// Reads [`MATES_KEY`]: 5 floats per teammate, `[id, x, y, θ, silent_s]`.
+pub fn parse_mates(value: &comms::Value) -> Result<Vec<MateOutput>, ContractError> {
+    let key = MATES_KEY;
+    let comms::Value::Floats(v) = value else {
+        return Err(ContractError::Type {
+            key,
+            expected: "floats",
+        });
+    };
+    if v.len() % 5 != 0 {
+        return Err(ContractError::Length {
+            key,
+            expected: "5 per teammate",
+            got: v.len(),
+        });
+    }
+    if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        return Err(ContractError::NotFinite { key, index, value });
+    }
+    v.chunks(5)
+        .map(|m| {
+            if !(1.0..=255.0).contains(&m[0]) || m[0].fract() != 0.0 {
+                return Err(ContractError::Range {
+                    key,
+                    what: "a teammate's id is not a robot number 1-255",
+                });
+            }
+            Ok(MateOutput {
+                id: m[0] as u8,
+                pose: Pose {
+                    at: Vec2::new(m[1], m[2]),
+                    theta_rad: m[3],
+                },
+                silent_s: m[4],
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -465,5 +584,44 @@ mod tests {
             );
         }
         assert!(check("local.var.other", &Value::Int(1)).is_none());
+    }
+
+    #[test]
+    fn outputs_read_back_what_the_layer_writes_and_none_as_empty() {
+        let est = BallEstimate {
+            t_s: 1.0,
+            mean: fusion::nalgebra::Vector4::new(1.0, -2.0, 0.5, 0.0),
+            cov: fusion::nalgebra::Matrix4::identity() * 0.01,
+        };
+        let team = parse_ball_output(TEAM_BALL_KEY, &ball_value(&est, Some(0.8), 0.1))
+            .expect("the layer's own form")
+            .expect("a ball");
+        assert_eq!(team.confidence, Some(0.8));
+        assert_eq!((team.at, team.age_s), (Vec2::new(1.0, -2.0), 0.1));
+        let own = parse_ball_output(OWN_BALL_KEY, &ball_value(&est, None, 0.2))
+            .expect("the layer's own form")
+            .expect("a ball");
+        assert_eq!(own.confidence, None);
+        assert_eq!(
+            parse_ball_output(TEAM_BALL_KEY, &no_ball_value()),
+            Ok(None),
+            "[] is no ball"
+        );
+        assert!(
+            parse_ball_output(TEAM_BALL_KEY, &ball_value(&est, None, 0.2)).is_err(),
+            "the team ball carries its confidence"
+        );
+        let mates = parse_mates(&Value::Floats(vec![2.0, 1.0, 1.0, 0.5, 0.1])).expect("one");
+        assert_eq!((mates[0].id, mates[0].silent_s), (2, 0.1));
+        assert!(parse_mates(&Value::Floats(vec![0.0, 1.0, 1.0, 0.5, 0.1])).is_err());
+        assert!(parse_mates(&Value::Floats(vec![2.0, 1.0])).is_err());
+        let pose = PoseEstimate::new(
+            0.0,
+            1.0,
+            0.3,
+            fusion::nalgebra::Vector3::new(0.01, 0.02, 0.001),
+        );
+        let back = parse_pose_output(&pose_value(&pose)).expect("the layer's own form");
+        assert!((back.cov[(1, 1)] - pose.cov[(1, 1)]).abs() < 1e-12);
     }
 }
