@@ -1,7 +1,9 @@
 //! Changed values waiting for a frame.
 
-use std::collections::{BTreeSet, VecDeque};
+use std::collections::{HashSet, VecDeque};
 use std::sync::Arc;
+
+use crate::blackboard::PathHasher;
 
 /// Changed values waiting for a frame, in the order they first changed; a value set again
 /// while it waits keeps its place. The value that has waited longest goes first, so a
@@ -13,7 +15,7 @@ use std::sync::Arc;
 #[derive(Debug, Default)]
 pub(super) struct DirtyQueue {
     order: VecDeque<Arc<str>>,
-    members: BTreeSet<Arc<str>>,
+    members: HashSet<Arc<str>, PathHasher>,
 }
 
 impl DirtyQueue {
