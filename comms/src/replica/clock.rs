@@ -493,7 +493,9 @@ mod tests {
         let mut est = ClockEstimate::default();
         let mut state = 2026u64;
         let mut next = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             state >> 33
         };
         let mut t = 1_000_000u64;
@@ -513,7 +515,10 @@ mod tests {
             let kept: Vec<_> = est.best.iter().map(key_of).collect();
             assert_eq!(kept, best_rebuilt(&est.samples), "step {step}");
         }
-        assert!(est.samples.len() < MAX_SAMPLES, "the quiet stretch emptied old bins");
+        assert!(
+            est.samples.len() < MAX_SAMPLES,
+            "the quiet stretch emptied old bins"
+        );
     }
 
     #[test]

@@ -74,7 +74,8 @@ mod tests {
     #[test]
     fn a_value_set_again_keeps_its_place_and_the_longest_waiting_goes_first() {
         let mut q = DirtyQueue::default();
-        let (world, machine): (Arc<str>, Arc<str>) = ("world.local".into(), "machine.heuristic".into());
+        let (world, machine): (Arc<str>, Arc<str>) =
+            ("world.local".into(), "machine.heuristic".into());
         q.insert(&world);
         q.insert(&machine);
         q.insert(&world);
