@@ -34,7 +34,7 @@ use std::time::Duration;
 
 use thiserror::Error;
 
-use crate::key::{Key, KeyError, Kind, Scope};
+use crate::key::{Key, KeyError, KeyRef, Kind, Scope};
 use crate::pattern::{PathSel, Pattern, ScopeSel};
 use crate::time::Instant;
 use crate::value::Value;
@@ -178,7 +178,7 @@ struct Slot {
 
 impl Slot {
     fn key(&self) -> Key {
-        Key::from_valid_parts(self.scope, Kind::Var, self.path.to_string())
+        Key::from_shared(self.scope, Kind::Var, self.path.clone())
     }
 }
 
@@ -192,11 +192,18 @@ pub(crate) type SlotId = u32;
 /// prefix lookups. Both share one allocation of each path.
 #[derive(Clone, Debug, Default)]
 struct ScopeIndex {
-    by_path: HashMap<Arc<str>, SlotId>,
+    by_path: HashMap<Arc<str>, SlotId, PathHasher>,
     ordered: BTreeMap<Arc<str>, SlotId>,
     /// A robot's scope: the incarnation whose update came last.
     incarnation: Option<u64>,
 }
+
+/// The hasher of path lookups: foldhash, several times faster than std's SipHash on
+/// short paths (a lookup per update received, per write, per value sent). Seeded per
+/// process like std's, so paths a sender chooses cannot be made to collide in advance;
+/// only lookups use it (iteration is by the ordered index), so the seed changes no
+/// outcome.
+pub(crate) type PathHasher = foldhash::fast::RandomState;
 
 /// The set of bindings.
 #[derive(Clone, Debug)]
@@ -386,7 +393,7 @@ impl Blackboard {
     /// propagates; a change event is queued only when the value differs. A new key
     /// beyond its scope's limit is refused ([`SetError::TooManyKeys`]).
     pub fn set(&mut self, now: Instant, key: &Key, value: Value) -> Result<Key, SetError> {
-        let id = self.write(now, key, value)?;
+        let id = self.write(now, key.as_parts(), value)?;
         Ok(self.slot(id).map_or_else(|| key.clone(), |slot| slot.key()))
     }
 
@@ -394,7 +401,7 @@ impl Blackboard {
     pub(crate) fn write(
         &mut self,
         now: Instant,
-        key: &Key,
+        key: KeyRef<'_>,
         value: Value,
     ) -> Result<SlotId, SetError> {
         self.write_checked(now, key, value, true)
@@ -405,7 +412,7 @@ impl Blackboard {
     pub(crate) fn write_unlimited(
         &mut self,
         now: Instant,
-        key: &Key,
+        key: KeyRef<'_>,
         value: Value,
     ) -> Result<SlotId, SetError> {
         self.write_checked(now, key, value, false)
@@ -414,14 +421,14 @@ impl Blackboard {
     fn write_checked(
         &mut self,
         now: Instant,
-        key: &Key,
+        key: KeyRef<'_>,
         value: Value,
         limited: bool,
     ) -> Result<SlotId, SetError> {
         let scope = self.storage_scope(key)?;
         self.advance_clock(now);
         let (robot_id, incarnation) = (self.robot_id, self.incarnation);
-        let Some(id) = self.find(scope, key.path()) else {
+        let Some(id) = self.find(scope, key.path) else {
             let limit = match scope {
                 Scope::Local => self.limits.local,
                 _ => self.limits.per_owner,
@@ -435,7 +442,7 @@ impl Blackboard {
                 stamp: now,
             };
             return match full {
-                false => self.insert(scope, key.path(), entry),
+                false => self.insert(scope, key.path, entry),
                 true => None,
             }
             .ok_or_else(|| SetError::TooManyKeys {
@@ -463,11 +470,11 @@ impl Blackboard {
     }
 
     /// Where a write of `key` goes, or why it may not be written here.
-    pub(crate) fn storage_scope(&self, key: &Key) -> Result<Scope, SetError> {
-        if key.kind() == Kind::Talk {
+    pub(crate) fn storage_scope(&self, key: KeyRef<'_>) -> Result<Scope, SetError> {
+        if key.kind == Kind::Talk {
             return Err(SetError::TalkKey(key.to_string()));
         }
-        match key.scope() {
+        match key.scope {
             Scope::Local => Ok(Scope::Local),
             Scope::Global => Ok(Scope::Robot(self.robot_id)),
             Scope::Robot(n) if n == self.robot_id => Ok(Scope::Robot(n)),
@@ -669,6 +676,12 @@ impl Blackboard {
                 .iter()
                 .filter_map(move |(p, &id)| Some((&**p, &self.slot(id)?.entry)))
         })
+    }
+
+    /// The path of the binding in slot `id`, shared (for the replica's queue of changed
+    /// values: no copy of the path per write).
+    pub(crate) fn shared_path(&self, id: SlotId) -> Option<&Arc<str>> {
+        self.slot(id).map(|slot| &slot.path)
     }
 
     /// One stored binding by scope and path.

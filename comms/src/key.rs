@@ -8,6 +8,7 @@
 
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
 
 use thiserror::Error;
 
@@ -43,7 +44,9 @@ pub enum Kind {
 pub struct Key {
     scope: Scope,
     kind: Kind,
-    path: String,
+    /// Shared, not owned: the blackboard hands out the keys of stored bindings (every
+    /// change event, every notice) as a count increment instead of a copy of the path.
+    path: Arc<str>,
 }
 
 /// Why a string is not a key.
@@ -86,39 +89,25 @@ impl Key {
         let path = path.into();
         validate_scope(scope)?;
         validate_path(&path)?;
-        Ok(Key { scope, kind, path })
+        Ok(Key {
+            scope,
+            kind,
+            path: Arc::from(path),
+        })
     }
 
     /// Parses `scope.kind.path`.
     pub fn parse(s: &str) -> Result<Key, KeyError> {
-        if s.is_empty() {
-            return Err(KeyError::Empty);
+        KeyRef::parse(s).map(|k| k.to_key())
+    }
+
+    /// The key's parts, borrowed.
+    pub(crate) fn as_parts(&self) -> KeyRef<'_> {
+        KeyRef {
+            scope: self.scope,
+            kind: self.kind,
+            path: &self.path,
         }
-        let mut parts = s.splitn(3, '.');
-        let scope = parts.next().unwrap_or_default();
-        let (Some(kind), Some(path)) = (parts.next(), parts.next()) else {
-            return Err(KeyError::TooFewLevels(s.to_owned()));
-        };
-        let scope = parse_scope(scope)?;
-        let kind = match kind {
-            "var" => Kind::Var,
-            "talk" => Kind::Talk,
-            "" => return Err(KeyError::EmptyLevel(s.to_owned())),
-            other => return Err(KeyError::BadKind(other.to_owned())),
-        };
-        validate_path(path).map_err(|e| match e {
-            KeyError::EmptyLevel(_) => KeyError::EmptyLevel(s.to_owned()),
-            KeyError::BadChar { ch, .. } => KeyError::BadChar {
-                ch,
-                key: s.to_owned(),
-            },
-            other => other,
-        })?;
-        Ok(Key {
-            scope,
-            kind,
-            path: path.to_owned(),
-        })
     }
 
     /// The first level.
@@ -147,7 +136,66 @@ impl Key {
 
     /// Unchecked constructor for parts already validated (wire decoding, storage).
     pub(crate) fn from_valid_parts(scope: Scope, kind: Kind, path: String) -> Key {
+        Key::from_shared(scope, kind, Arc::from(path))
+    }
+
+    /// [`Key::from_valid_parts`] sharing a path already stored (no copy).
+    pub(crate) fn from_shared(scope: Scope, kind: Kind, path: Arc<str>) -> Key {
         Key { scope, kind, path }
+    }
+}
+
+/// A key's parts borrowed from the text they were parsed from: what a write needs, with
+/// no copy of the path (a [`Key`] is built only to be kept).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct KeyRef<'a> {
+    pub(crate) scope: Scope,
+    pub(crate) kind: Kind,
+    pub(crate) path: &'a str,
+}
+
+impl<'a> KeyRef<'a> {
+    /// Parses `scope.kind.path` as [`Key::parse`] does (same checks, same errors).
+    pub(crate) fn parse(s: &'a str) -> Result<KeyRef<'a>, KeyError> {
+        if s.is_empty() {
+            return Err(KeyError::Empty);
+        }
+        let mut parts = s.splitn(3, '.');
+        let scope = parts.next().unwrap_or_default();
+        let (Some(kind), Some(path)) = (parts.next(), parts.next()) else {
+            return Err(KeyError::TooFewLevels(s.to_owned()));
+        };
+        let scope = parse_scope(scope)?;
+        let kind = match kind {
+            "var" => Kind::Var,
+            "talk" => Kind::Talk,
+            "" => return Err(KeyError::EmptyLevel(s.to_owned())),
+            other => return Err(KeyError::BadKind(other.to_owned())),
+        };
+        validate_path(path).map_err(|e| match e {
+            KeyError::EmptyLevel(_) => KeyError::EmptyLevel(s.to_owned()),
+            KeyError::BadChar { ch, .. } => KeyError::BadChar {
+                ch,
+                key: s.to_owned(),
+            },
+            other => other,
+        })?;
+        Ok(KeyRef { scope, kind, path })
+    }
+
+    /// An owned key of these parts.
+    pub(crate) fn to_key(self) -> Key {
+        Key {
+            scope: self.scope,
+            kind: self.kind,
+            path: Arc::from(self.path),
+        }
+    }
+}
+
+impl fmt::Display for KeyRef<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}.{}.{}", self.scope, self.kind, self.path)
     }
 }
 

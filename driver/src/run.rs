@@ -302,19 +302,6 @@ impl Driver {
         tokio::pin!(sleep);
         let mut buf = vec![0u8; 65_536];
         loop {
-            let (deadline, backlog) = {
-                let inner = self.inner.borrow();
-                // The socket the oldest waiting frame leaves from.
-                let backlog = inner
-                    .backlog
-                    .front()
-                    .map(|(_, to)| inner.socket_for(*to).clone());
-                (inner.next_deadline(), backlog)
-            };
-            let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
-            if sleep.deadline() != at {
-                sleep.as_mut().reset(at);
-            }
             // One hand-written poll instead of `select!`: nothing is built, registered
             // and dropped again on every pass (the socket keeps one waker per direction,
             // the nudge one waker), which matters at one pass per datagram.
@@ -329,6 +316,23 @@ impl Driver {
                     if let Poll::Ready(ready) = unicast.poll_recv_ready(cx) {
                         return Poll::Ready(ready.map(|()| Cause::Readable));
                     }
+                }
+                // Nothing to read: only now the timers and the backlog are looked at.
+                // A pass that finds a datagram (most passes, under traffic) skips the
+                // walk over peers and inboxes for a deadline that every frame heard
+                // moves anyway.
+                let (deadline, backlog) = {
+                    let inner = self.inner.borrow();
+                    // The socket the oldest waiting frame leaves from.
+                    let backlog = inner
+                        .backlog
+                        .front()
+                        .map(|(_, to)| inner.socket_for(*to).clone());
+                    (inner.next_deadline(), backlog)
+                };
+                let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
+                if sleep.deadline() != at {
+                    sleep.as_mut().reset(at);
                 }
                 if sleep.as_mut().poll(cx).is_ready() {
                     return Poll::Ready(Ok(Cause::Deadline));

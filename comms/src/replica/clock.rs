@@ -125,6 +125,11 @@ struct Sample {
     rtt_us: f64,
 }
 
+/// The [`BIN`] a sample received at `at_us` falls in.
+fn bin_of(at_us: u64) -> u64 {
+    at_us / BIN.as_micros() as u64
+}
+
 /// The fitted line θ(t) = a + b·(t − t_ref).
 #[derive(Clone, Copy, Debug)]
 struct Fit {
@@ -156,6 +161,11 @@ pub(super) enum SampleOutcome {
 pub(super) struct ClockEstimate {
     anchor: Option<u32>,
     samples: VecDeque<Sample>,
+    /// What the fit uses: of each run of consecutive `samples` in one [`BIN`], the
+    /// shortest-round-trip sample (the first of equals), oldest first. Kept up to date as
+    /// samples come and go rather than rebuilt from all of them at every echo, which at
+    /// hundreds of echoes a second per peer (512 samples) was most of a frame's cost.
+    best: VecDeque<Sample>,
     fit: Option<Fit>,
     used: u64,
     outliers_in_row: u32,
@@ -202,9 +212,9 @@ impl ClockEstimate {
         }
         self.outliers_in_row = 0;
         if self.samples.len() == MAX_SAMPLES {
-            self.samples.pop_front();
+            self.pop_oldest();
         }
-        self.samples.push_back(Sample {
+        self.push(Sample {
             at_us: t4_us,
             theta_us,
             rtt_us,
@@ -214,6 +224,51 @@ impl ClockEstimate {
         SampleOutcome::Used
     }
 
+    /// Appends the newest sample (and to `best`: a new run, or the current one's best).
+    fn push(&mut self, s: Sample) {
+        self.samples.push_back(s);
+        match self.best.back_mut() {
+            Some(b) if bin_of(b.at_us) == bin_of(s.at_us) => {
+                if s.rtt_us < b.rtt_us {
+                    *b = s;
+                }
+            }
+            _ => self.best.push_back(s),
+        }
+    }
+
+    /// Forgets the oldest sample; the oldest run's best goes with its last sample, or is
+    /// found again among the run's others if it was this one.
+    fn pop_oldest(&mut self) {
+        let Some(gone) = self.samples.pop_front() else {
+            return;
+        };
+        let bin = bin_of(gone.at_us);
+        let mut run = self
+            .samples
+            .iter()
+            .take_while(|s| bin_of(s.at_us) == bin)
+            .peekable();
+        if run.peek().is_none() {
+            self.best.pop_front();
+            return;
+        }
+        // The run's best is its first sample of the shortest round trip: `gone` (the
+        // run's first) was it exactly if its round trip is that shortest one.
+        let was_best = self.best.front().is_some_and(|b| b.rtt_us == gone.rtt_us);
+        if was_best {
+            let mut best = *run.next().expect("peeked");
+            for s in run {
+                if s.rtt_us < best.rtt_us {
+                    best = *s;
+                }
+            }
+            if let Some(b) = self.best.front_mut() {
+                *b = best;
+            }
+        }
+    }
+
     fn refit(&mut self, now_us: u64) {
         let window_us = WINDOW.as_micros() as u64;
         while self
@@ -221,27 +276,16 @@ impl ClockEstimate {
             .front()
             .is_some_and(|s| s.at_us + window_us < now_us)
         {
-            self.samples.pop_front();
+            self.pop_oldest();
         }
-        // The shortest round trip of each bin.
-        let bin_us = BIN.as_micros() as u64;
-        let mut best: Vec<Sample> = Vec::new();
-        for s in &self.samples {
-            match best.last_mut() {
-                Some(b) if b.at_us / bin_us == s.at_us / bin_us => {
-                    if s.rtt_us < b.rtt_us {
-                        *b = *s;
-                    }
-                }
-                _ => best.push(*s),
-            }
-        }
+        // The shortest round trip of each bin: `best`.
+        let best = &self.best;
         // Weighted least squares of θ on t (seconds from now), ridge on the drift. A
         // sample's error is bounded by half its round trip; what is common to every round
         // trip (the path's minimum) is no error, so the weight counts the excess.
         let shortest = best.iter().map(|s| s.rtt_us).fold(f64::INFINITY, f64::min);
         let (mut s0, mut s1, mut s2, mut t0, mut t1) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for s in &best {
+        for s in best {
             let err = (s.rtt_us - shortest) / 2.0 + SAMPLE_ERROR_FLOOR_US;
             let w = 1.0 / (err * err);
             let x = (s.at_us as f64 - now_us as f64) / 1e6;
@@ -416,6 +460,65 @@ mod tests {
             );
         }
         assert_eq!(outcome, SampleOutcome::Used, "the estimate started over");
+    }
+
+    /// What the fit used to rebuild at every echo: the shortest round trip of each run
+    /// of consecutive samples in one bin, the first of equals.
+    fn best_rebuilt(samples: &VecDeque<Sample>) -> Vec<(u64, u64, u64)> {
+        let mut best: Vec<Sample> = Vec::new();
+        for s in samples {
+            match best.last_mut() {
+                Some(b) if bin_of(b.at_us) == bin_of(s.at_us) => {
+                    if s.rtt_us < b.rtt_us {
+                        *b = *s;
+                    }
+                }
+                _ => best.push(*s),
+            }
+        }
+        best.iter().map(key_of).collect()
+    }
+
+    fn key_of(s: &Sample) -> (u64, u64, u64) {
+        (s.at_us, s.theta_us.to_bits(), s.rtt_us.to_bits())
+    }
+
+    /// A busy link (an echo every 700 µs to 2.3 ms, so the 512-sample cap evicts within a
+    /// bin, round trips from a few values so ties happen, a stretch with the clock going
+    /// back so runs of one bin repeat) and a quiet one (the 64 s window evicts whole
+    /// bins): the kept per-bin bests are at every step what rebuilding them from the
+    /// samples gives, so the fit is the one it always was.
+    #[test]
+    fn the_kept_bin_bests_are_what_rebuilding_them_gives() {
+        let mut est = ClockEstimate::default();
+        let mut state = 2026u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            state >> 33
+        };
+        let mut t = 1_000_000u64;
+        for step in 0..6_000u64 {
+            t = if (3_000..3_050).contains(&step) {
+                t.saturating_sub(40_000) // the clock handed in goes back
+            } else if step >= 5_000 {
+                t + 900_000 + next() % 2_000_000 // quiet: whole bins expire
+            } else {
+                t + 700 + next() % 1_600
+            };
+            let rtt = 100 + 50 * (next() % 4);
+            let t1 = Instant::from_micros(t.saturating_sub(rtt));
+            let t4 = Instant::from_micros(t);
+            let t3 = stamp_of(t4).wrapping_add(5_000 + (next() % 30) as u32);
+            est.add_echo(t1, 0, t3, t4);
+            let kept: Vec<_> = est.best.iter().map(key_of).collect();
+            assert_eq!(kept, best_rebuilt(&est.samples), "step {step}");
+        }
+        assert!(
+            est.samples.len() < MAX_SAMPLES,
+            "the quiet stretch emptied old bins"
+        );
     }
 
     #[test]

@@ -1,24 +1,28 @@
 //! Changed values waiting for a frame.
 
-use std::collections::{BTreeSet, VecDeque};
+use std::collections::{HashSet, VecDeque};
+use std::sync::Arc;
+
+use crate::blackboard::PathHasher;
 
 /// Changed values waiting for a frame, in the order they first changed; a value set again
 /// while it waits keeps its place. The value that has waited longest goes first, so a
 /// large value that did not fit beside others (a world model beside an arbitration cost
 /// in a 128-byte league frame) goes at the head of the next frame instead of being
 /// starved by small values set again at every tick.
+///
+/// Paths are the blackboard's own (shared): marking a value changed copies no string.
 #[derive(Debug, Default)]
 pub(super) struct DirtyQueue {
-    order: VecDeque<String>,
-    members: BTreeSet<String>,
+    order: VecDeque<Arc<str>>,
+    members: HashSet<Arc<str>, PathHasher>,
 }
 
 impl DirtyQueue {
     /// Marks `path` changed (a no-op if it already waits).
-    pub(super) fn insert(&mut self, path: &str) {
-        if !self.members.contains(path) {
-            self.members.insert(path.to_owned());
-            self.order.push_back(path.to_owned());
+    pub(super) fn insert(&mut self, path: &Arc<str>) {
+        if self.members.insert(path.clone()) {
+            self.order.push_back(path.clone());
         }
     }
 
@@ -31,19 +35,19 @@ impl DirtyQueue {
     }
 
     /// The waiting paths, longest-waiting first.
-    pub(super) fn iter(&self) -> impl Iterator<Item = &String> {
+    pub(super) fn iter(&self) -> impl Iterator<Item = &Arc<str>> {
         self.order.iter()
     }
 
     /// The `i`-th waiting path.
-    pub(super) fn get(&self, i: usize) -> Option<&String> {
+    pub(super) fn get(&self, i: usize) -> Option<&Arc<str>> {
         self.order.get(i)
     }
 
     /// Takes the `i`-th waiting path out of the queue.
-    pub(super) fn remove_at(&mut self, i: usize) -> Option<String> {
+    pub(super) fn remove_at(&mut self, i: usize) -> Option<Arc<str>> {
         let path = self.order.remove(i)?;
-        self.members.remove(&path);
+        self.members.remove(&*path);
         Some(path)
     }
 
@@ -52,13 +56,13 @@ impl DirtyQueue {
         if !self.members.remove(path) {
             return false;
         }
-        if let Some(i) = self.order.iter().position(|p| p == path) {
+        if let Some(i) = self.order.iter().position(|p| **p == *path) {
             self.order.remove(i);
         }
         true
     }
 
-    pub(super) fn pop_first(&mut self) -> Option<String> {
+    pub(super) fn pop_first(&mut self) -> Option<Arc<str>> {
         self.remove_at(0)
     }
 }
@@ -70,14 +74,16 @@ mod tests {
     #[test]
     fn a_value_set_again_keeps_its_place_and_the_longest_waiting_goes_first() {
         let mut q = DirtyQueue::default();
-        q.insert("world.local");
-        q.insert("machine.heuristic");
-        q.insert("world.local");
-        let order: Vec<&String> = q.iter().collect();
+        let (world, machine): (Arc<str>, Arc<str>) =
+            ("world.local".into(), "machine.heuristic".into());
+        q.insert(&world);
+        q.insert(&machine);
+        q.insert(&world);
+        let order: Vec<&str> = q.iter().map(|p| &**p).collect();
         assert_eq!(order, ["world.local", "machine.heuristic"]);
         assert!(q.remove("world.local"));
-        q.insert("world.local");
-        let order: Vec<&String> = q.iter().collect();
+        q.insert(&world);
+        let order: Vec<&str> = q.iter().map(|p| &**p).collect();
         assert_eq!(
             order,
             ["machine.heuristic", "world.local"],

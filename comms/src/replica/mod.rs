@@ -19,10 +19,11 @@
 //! - this file: the state itself, writes and reads.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::Arc;
 use std::time::Duration;
 
 use crate::blackboard::{Applied, Blackboard, Entry, SetError};
-use crate::key::{Key, KeyError, Scope};
+use crate::key::{Key, KeyError, KeyRef, Scope};
 use crate::pattern::Pattern;
 use crate::stats::Stats;
 use crate::talk::{Delivery, Outbox};
@@ -81,11 +82,11 @@ pub struct Replica {
     /// The message budget in use, if the configuration has one.
     budget: Option<budget::BudgetState>,
     /// Own global paths set with priority and not sent since.
-    urgent: BTreeSet<String>,
+    urgent: BTreeSet<Arc<str>>,
     /// Under a budget: frames that went with NACKs and re-sends only (at most half).
     repair_frames: u64,
     /// The paths of a frame's news, kept only while it is built (its capacity reused).
-    sent_scratch: Vec<String>,
+    sent_scratch: Vec<Arc<str>>,
 }
 
 impl Replica {
@@ -201,12 +202,16 @@ impl Replica {
     /// Sets `key` (`local.var.x`, `*.var.x` or `<own id>.var.x`) at `now`. Global
     /// values go out with the next [`Replica::poll_transmit`].
     pub fn set(&mut self, now: Instant, key: &str, value: Value) -> Result<(), SetError> {
-        let key = Key::parse(key)?;
-        self.set_key(now, &key, value)
+        // Parsed in place: a write of a key already held copies no string.
+        self.set_parts(now, KeyRef::parse(key)?, value)
     }
 
     /// [`Replica::set`] with a parsed key.
     pub fn set_key(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
+        self.set_parts(now, key.as_parts(), value)
+    }
+
+    fn set_parts(&mut self, now: Instant, key: KeyRef<'_>, value: Value) -> Result<(), SetError> {
         self.advance(now);
         let scope = self.board.storage_scope(key)?;
         let global = scope != Scope::Local;
@@ -214,7 +219,7 @@ impl Replica {
             let (version, age_us) = self.widest_version_and_age();
             let bytes = wire::item_len_coded(
                 ItemRef::Update {
-                    path: key.path(),
+                    path: key.path,
                     value: &value,
                     version,
                     age_us,
@@ -229,9 +234,11 @@ impl Replica {
                 });
             }
         }
-        self.board.write(now, key, value)?;
+        let slot = self.board.write(now, key, value)?;
         if global {
-            self.dirty.insert(key.path());
+            if let Some(path) = self.board.shared_path(slot) {
+                self.dirty.insert(path);
+            }
         }
         Ok(())
     }
@@ -242,7 +249,7 @@ impl Replica {
     pub fn set_priority(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
         self.set_key(now, key, value)?;
         if self.budget.is_some() && key.scope() != Scope::Local {
-            self.urgent.insert(key.path().to_owned());
+            self.urgent.insert(Arc::from(key.path()));
         }
         Ok(())
     }

@@ -214,7 +214,9 @@ impl Replica {
             if !unchanged {
                 // A local key of valid shape, not subject to the local-key limit: this
                 // cannot fail.
-                let _ = self.board.write_unlimited(now, &key, Value::Int(v));
+                let _ = self
+                    .board
+                    .write_unlimited(now, key.as_parts(), Value::Int(v));
             }
         }
     }

@@ -2,6 +2,7 @@
 //! heads, in that order, packed into frames of at most `mtu` bytes.
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 
 use crate::blackboard::{Blackboard, Entry};
 use crate::key::Scope;
@@ -266,7 +267,7 @@ impl Replica {
                 break;
             };
             if let Some(e) = self.board.get_stored(me, path) {
-                let fresh = self.dirty.contains(path) || sent.iter().any(|s| s == path);
+                let fresh = self.dirty.contains(path) || sent.iter().any(|s| **s == **path);
                 if !fresh && !w.push(update_ref(path, e, now, age_cap)) {
                     full = true;
                     break;
@@ -320,11 +321,11 @@ impl Replica {
 fn push_values(
     board: &Blackboard,
     dirty: &mut DirtyQueue,
-    urgent: &mut BTreeSet<String>,
+    urgent: &mut BTreeSet<Arc<str>>,
     me: Scope,
     refreshing: bool,
     w: &mut FrameWriter<'_>,
-    sent: &mut Vec<String>,
+    sent: &mut Vec<Arc<str>>,
     (now, age_cap): (Instant, u64),
 ) -> bool {
     // Priority items first, then the longest waiting. One that does not fit keeps its
