@@ -119,10 +119,31 @@ pub(super) fn encode_cov<const N: usize>(
     Err(EncodeError::OutOfRange { field })
 }
 
+/// The symmetric eigen solver on a fixed-size copy of `$m` (N is 2, 3 or 4 here), then
+/// `$pick` (`min` or `max`) of its eigenvalues. The generic const size lacks the solver's
+/// trait bounds, and a dynamic matrix costs a heap allocation per step of the solver; the
+/// arithmetic is the same either way (`eigenvalues_match_the_dynamic_solver`).
+macro_rules! symmetric_eigenvalues {
+    ($m:expr, $pick:ident) => {{
+        let m = $m;
+        match N {
+            2 => nalgebra::Matrix2::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            3 => nalgebra::Matrix3::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            4 => nalgebra::Matrix4::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            _ => nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+        }
+    }};
+}
 fn min_eigenvalue<const N: usize>(m: &SMatrix<f64, N, N>) -> f64 {
-    nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
-        .symmetric_eigenvalues()
-        .min()
+    symmetric_eigenvalues!(m, min)
 }
 
 pub(super) fn corr_matrix<const N: usize>(rho: &[i8]) -> SMatrix<f64, N, N> {
@@ -163,8 +184,56 @@ fn max_generalised_eigenvalue<const N: usize>(
     };
     let m = linv * a * linv.transpose();
     let m = (m + m.transpose()) * 0.5;
-    // Generic const sizes lack the eigen solver's bounds; N ≤ 4, so go dynamic.
-    nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
-        .symmetric_eigenvalues()
-        .max()
+    symmetric_eigenvalues!(&m, max)
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, SMatrix};
+
+    /// Symmetric matrices from a fixed stream: correlation-like and covariance-like, some
+    /// near singular.
+    fn matrices<const N: usize>(count: usize) -> Vec<SMatrix<f64, N, N>> {
+        let mut x: u64 = 0x5eed_0f_c0_fa_ce;
+        let mut next = move || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        (0..count)
+            .map(|k| {
+                let a =
+                    SMatrix::<f64, N, N>::from_fn(|_, _| next() * 10f64.powi((k % 7) as i32 - 3));
+                let m = a * a.transpose();
+                (m + m.transpose()) * 0.5
+            })
+            .collect()
+    }
+
+    fn check<const N: usize>() {
+        for m in matrices::<N>(2000) {
+            let dynamic = DMatrix::from_iterator(N, N, m.iter().copied()).symmetric_eigenvalues();
+            let (lo, hi) = (dynamic.min(), dynamic.max());
+            let fixed = |m: &SMatrix<f64, N, N>| {
+                (
+                    symmetric_eigenvalues!(m, min),
+                    symmetric_eigenvalues!(m, max),
+                )
+            };
+            let (flo, fhi) = fixed(&m);
+            assert!(
+                flo.to_bits() == lo.to_bits() && fhi.to_bits() == hi.to_bits(),
+                "{N}×{N}: fixed ({flo}, {fhi}) against dynamic ({lo}, {hi}) for {m}"
+            );
+        }
+    }
+
+    #[test]
+    fn eigenvalues_match_the_dynamic_solver_bit_for_bit() {
+        // The encoder's output (bytes on the wire) depends on these to the last bit.
+        check::<2>();
+        check::<3>();
+        check::<4>();
+    }
 }
