@@ -829,19 +829,26 @@ impl GlobalModel {
     fn restart_on_consensus(&mut self, now_s: f64) {
         let model = self.config.ball;
         let window = self.config.dissent_window_s;
+        let dissenting = |r: &RobotRecord| {
+            r.lwm.ball.is_some()
+                && r.last_rejected_t_s.is_some_and(|rej| {
+                    rej >= now_s - window && r.last_accepted_t_s.is_none_or(|acc| acc < rej)
+                })
+        };
+        let unsupported = now_s - self.last_support_t_s > self.config.support_timeout_s;
+        // Counted before any ball is predicted: at every message, there is usually nobody
+        // or one robot dissenting, and one cannot restart a supported ball on its own.
+        match self.robots.values().filter(|r| dissenting(r)).count() {
+            0 => return,
+            1 if !unsupported => return,
+            _ => {}
+        }
         let dissenters: Vec<(u8, BallEstimate)> = self
             .robots
             .iter()
-            .filter(|(_, r)| {
-                r.last_rejected_t_s.is_some_and(|rej| {
-                    rej >= now_s - window && r.last_accepted_t_s.is_none_or(|acc| acc < rej)
-                })
-            })
+            .filter(|(_, r)| dissenting(r))
             .filter_map(|(&id, r)| r.lwm.ball.map(|b| (id, b.predict_to(&model, now_s))))
             .collect();
-        if dissenters.is_empty() {
-            return;
-        }
         let agree = |a: &BallEstimate, b: &BallEstimate| {
             kalman::mahalanobis_sq(
                 &(a.position() - b.position()),
@@ -861,7 +868,6 @@ impl GlobalModel {
                 best = group;
             }
         }
-        let unsupported = now_s - self.last_support_t_s > self.config.support_timeout_s;
         if best.len() < 2 && !unsupported {
             return;
         }

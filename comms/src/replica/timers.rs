@@ -186,9 +186,12 @@ impl Replica {
         ];
         let drops = DropReason::ALL.map(|r| (r.name(), s.drops(r) as i64));
         // Two robots sending with one id: which ids, as of their last frames.
+        // (Not through `peers()`, which works out every peer's clock as well.)
+        let live_within = self.cfg.departed_after;
         let conflicting: Vec<(u8, i64)> = self
-            .peers()
-            .map(|p| (p.robot, i64::from(p.conflicting)))
+            .peers
+            .iter()
+            .map(|(&robot, p)| (robot, i64::from(p.conflicting(live_within))))
             .collect();
         let heard: Vec<(u8, i64)> = s
             .last_heard
