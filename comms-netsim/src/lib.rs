@@ -75,6 +75,9 @@ pub struct Harness {
     unicast: bool,
     /// Every frame sent (robot index, bytes), when asked for (a referee counts them).
     sent_log: Option<Vec<(usize, usize)>>,
+    /// Per robot: its replica's latest deadline and that instant in global time (the
+    /// conversion divides; a deadline usually stays put over many rounds).
+    deadline_cache: Vec<Option<(Instant, Time)>>,
 }
 
 impl Harness {
@@ -109,6 +112,7 @@ impl Harness {
             max_payload: 0,
             unicast: false,
             sent_log: None,
+            deadline_cache: vec![None; n],
         };
         for i in 0..n {
             // Ordered like the driver's: a later start has a larger incarnation.
@@ -159,6 +163,8 @@ impl Harness {
 
     /// The network, for fault verbs (`partition`, `isolate`, `heal`, …) and clocks.
     pub fn net_mut(&mut self) -> &mut Sim {
+        // A clock may change: no deadline's global instant holds any more.
+        self.deadline_cache.fill(None);
         &mut self.net
     }
 
@@ -172,6 +178,7 @@ impl Harness {
     ) -> Result<(), HarnessError> {
         let clock =
             NodeClock::new(offset, drift_ppm).map_err(|e| HarnessError::Clock(e.to_string()))?;
+        self.deadline_cache[i] = None;
         self.net
             .set_clock(self.nodes[i], clock)
             .map_err(|e| HarnessError::Clock(e.to_string()))
@@ -336,21 +343,31 @@ impl Harness {
     }
 
     /// The earliest replica deadline, global time.
-    fn next_timer(&self) -> Option<Time> {
-        (0..self.nodes.len())
-            .filter_map(|i| {
-                let deadline = self.replicas[i].as_ref()?.poll_timeout()?;
-                Some(self.global_of(i, deadline))
-            })
-            .min()
+    fn next_timer(&mut self) -> Option<Time> {
+        let mut next: Option<Time> = None;
+        for i in 0..self.nodes.len() {
+            let Some(deadline) = self.replicas[i].as_ref().and_then(Replica::poll_timeout) else {
+                continue;
+            };
+            let global = match self.deadline_cache[i] {
+                Some((local, global)) if local == deadline => global,
+                _ => {
+                    let global = self.global_of(i, deadline);
+                    self.deadline_cache[i] = Some((deadline, global));
+                    global
+                }
+            };
+            next = Some(next.map_or(global, |n| n.min(global)));
+        }
+        next
     }
 
     /// Run the network and every replica's timers up to global time `until`
     /// (inclusive), delivering datagrams and sending what the replicas produce.
     pub fn run_until(&mut self, until: Time) {
         loop {
-            self.settle();
-            let next = [self.net.next_event_time(), self.next_timer()]
+            let timer = self.settle();
+            let next = [self.net.next_event_time(), timer]
                 .into_iter()
                 .flatten()
                 .min();
@@ -365,7 +382,9 @@ impl Harness {
 
     /// Everything due at the current instant: deliveries, timers, the frames they
     /// produce, and their loopback or zero-latency arrivals, until nothing is left.
-    fn settle(&mut self) {
+    /// Returns the earliest replica deadline after that (nothing changes the replicas
+    /// between this and the caller's next step, so it need not be asked again).
+    fn settle(&mut self) -> Option<Time> {
         let now = self.net.now();
         // Each round hands over what arrived; a replica that kept asking for a timer at
         // the same instant would be a bug: the bound keeps the simulation going anyway.
@@ -376,10 +395,14 @@ impl Harness {
             self.flush();
             self.net.run_until(now);
             let pending = self.nodes.iter().any(|&n| self.net.pending(n) > 0);
-            if !pending && self.next_timer().is_none_or(|t| t > now) {
-                break;
+            if !pending {
+                let next = self.next_timer();
+                if next.is_none_or(|t| t > now) {
+                    return next;
+                }
             }
         }
+        self.next_timer()
     }
 
     /// Hand every waiting datagram to its replica, stamped with the local receive time.

@@ -684,6 +684,24 @@ impl Blackboard {
         self.slot(id).map(|slot| &slot.path)
     }
 
+    /// Every robot's own binding of `path`, in robot order: what [`Blackboard::iter`]
+    /// gives for `+.var.<path>` in the robots' scopes, without building a key per binding
+    /// (the arbitration reads its claims this way several times per control tick).
+    pub(crate) fn robots_at<'a>(
+        &'a self,
+        path: &'a str,
+    ) -> impl Iterator<Item = (u8, &'a Entry)> + 'a {
+        self.scopes
+            .range(Scope::Robot(1)..=Scope::Robot(254))
+            .filter_map(move |(scope, index)| {
+                let Scope::Robot(robot) = *scope else {
+                    return None;
+                };
+                let id = *index.by_path.get(path)?;
+                Some((robot, &self.slot(id)?.entry))
+            })
+    }
+
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
         self.find(scope, path)

@@ -169,8 +169,19 @@ struct RobotRecord {
     last_accepted_t_s: Option<f64>,
     /// Its observations rejected in a row that agree with each other (see `challenge`).
     rejected_run: Vec<FieldObservation>,
+    /// The track those observations make, filtered as each joined the run (`None` while
+    /// the run is empty), so that a challenge does not filter the whole run again.
+    run_track: Option<BallEstimate>,
     /// What has been taken from its messages (sequence numbers, kicks).
     heard: Heard,
+}
+
+impl RobotRecord {
+    /// Ends its run of rejected observations.
+    fn clear_run(&mut self) {
+        self.rejected_run.clear();
+        self.run_track = None;
+    }
 }
 
 /// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
@@ -349,6 +360,7 @@ impl GlobalModel {
             last_rejected_t_s: None,
             last_accepted_t_s: None,
             rejected_run: Vec::new(),
+            run_track: None,
             heard: Heard::default(),
         });
         let first = rec.heard == Heard::default();
@@ -453,7 +465,7 @@ impl GlobalModel {
             return Ingest::Rejected(d2);
         }
         rec.last_accepted_t_s = Some(now_s);
-        rec.rejected_run.clear();
+        rec.clear_run();
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(obs.t_s);
         self.stats.accepted += 1;
@@ -550,28 +562,26 @@ impl GlobalModel {
         let Some(rec) = self.robots.get_mut(&robot) else {
             return;
         };
-        let run = &mut rec.rejected_run;
-        if let Some(last) = run.last() {
-            let track = run
-                .iter()
-                .skip(1)
-                .fold(initial_estimate(&model, &run[0], velocity_var), |est, o| {
-                    update(&model, &est, o, None).map_or(est, |(e, _)| e)
-                });
+        if let (Some(last), Some(track)) = (rec.rejected_run.last(), rec.run_track) {
             let agrees = obs.t_s >= last.t_s
                 && track
                     .position_mahalanobis_sq(&model, obs)
                     .is_some_and(|d2| d2 <= gate);
             if !agrees {
-                run.clear();
+                rec.clear_run();
             }
         }
-        run.push(*obs);
+        rec.run_track = Some(match rec.run_track {
+            None => initial_estimate(&model, obs, velocity_var),
+            Some(est) => update(&model, &est, obs, None).map_or(est, |(e, _)| e),
+        });
+        rec.rejected_run.push(*obs);
+        let run = &rec.rejected_run;
         if run.len() < needed as usize || run[0].t_s <= self.last_accepted_obs_t_s {
             return;
         }
         let first = run[0];
-        run.clear();
+        rec.clear_run();
         rec.last_rejected_t_s = None;
         rec.last_accepted_t_s = Some(now_s);
         self.restart_from(&first, now_s);
@@ -673,7 +683,7 @@ impl GlobalModel {
         self.stats.kicks += 1;
         for rec in self.robots.values_mut() {
             rec.last_rejected_t_s = None;
-            rec.rejected_run.clear();
+            rec.clear_run();
         }
         let kicked = Measured::kick(kick);
         let turned = kicked.apply(&model, &before).unwrap_or(before);
@@ -819,19 +829,26 @@ impl GlobalModel {
     fn restart_on_consensus(&mut self, now_s: f64) {
         let model = self.config.ball;
         let window = self.config.dissent_window_s;
+        let dissenting = |r: &RobotRecord| {
+            r.lwm.ball.is_some()
+                && r.last_rejected_t_s.is_some_and(|rej| {
+                    rej >= now_s - window && r.last_accepted_t_s.is_none_or(|acc| acc < rej)
+                })
+        };
+        let unsupported = now_s - self.last_support_t_s > self.config.support_timeout_s;
+        // Counted before any ball is predicted: at every message, there is usually nobody
+        // or one robot dissenting, and one cannot restart a supported ball on its own.
+        match self.robots.values().filter(|r| dissenting(r)).count() {
+            0 => return,
+            1 if !unsupported => return,
+            _ => {}
+        }
         let dissenters: Vec<(u8, BallEstimate)> = self
             .robots
             .iter()
-            .filter(|(_, r)| {
-                r.last_rejected_t_s.is_some_and(|rej| {
-                    rej >= now_s - window && r.last_accepted_t_s.is_none_or(|acc| acc < rej)
-                })
-            })
+            .filter(|(_, r)| dissenting(r))
             .filter_map(|(&id, r)| r.lwm.ball.map(|b| (id, b.predict_to(&model, now_s))))
             .collect();
-        if dissenters.is_empty() {
-            return;
-        }
         let agree = |a: &BallEstimate, b: &BallEstimate| {
             kalman::mahalanobis_sq(
                 &(a.position() - b.position()),
@@ -851,7 +868,6 @@ impl GlobalModel {
                 best = group;
             }
         }
-        let unsupported = now_s - self.last_support_t_s > self.config.support_timeout_s;
         if best.len() < 2 && !unsupported {
             return;
         }
@@ -887,7 +903,7 @@ impl GlobalModel {
         for rec in self.robots.values_mut() {
             rec.lwm.ball = None;
             rec.last_rejected_t_s = None;
-            rec.rejected_run.clear();
+            rec.clear_run();
         }
     }
 
@@ -931,10 +947,16 @@ impl GlobalModel {
 
     /// Every other robot heard from, with its decayed confidence.
     pub fn teammates(&self, now_s: f64) -> Vec<Teammate> {
+        self.teammates_iter(now_s).collect()
+    }
+
+    /// [`GlobalModel::teammates`] one at a time, in the same order, for a caller that
+    /// only passes over them (a robot does at every tick).
+    pub fn teammates_iter(&self, now_s: f64) -> impl Iterator<Item = Teammate> + '_ {
         self.robots
             .iter()
-            .filter(|(&id, _)| id != self.own_id)
-            .map(|(&id, r)| {
+            .filter(move |(&id, _)| id != self.own_id)
+            .map(move |(&id, r)| {
                 let silent_for_s = (now_s - r.lwm.t_s).max(0.0);
                 Teammate {
                     id,
@@ -945,7 +967,6 @@ impl GlobalModel {
                     lwm: r.lwm,
                 }
             })
-            .collect()
     }
 
     /// Where robot `id` last said the ball was, predicted to `now_s` (for displays).

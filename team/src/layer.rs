@@ -711,8 +711,7 @@ impl TeamLayer {
             told: (cfg.send_policy == SendPolicy::Voi)
                 .then(|| {
                     self.gwm
-                        .teammates(t)
-                        .iter()
+                        .teammates_iter(t)
                         .filter_map(|m| m.lwm.ball)
                         .max_by(|a, b| a.t_s.total_cmp(&b.t_s))
                 })
@@ -815,7 +814,7 @@ impl TeamLayer {
     /// [`TEAMMATE_VELOCITY_BASELINE_S`] apart (over one message interval a pose's noise
     /// would swamp it; what the GWM keeps is the latest pose only).
     fn track_teammates(&mut self, now_s: f64) {
-        for t in self.gwm.teammates(now_s) {
+        for t in self.gwm.teammates_iter(now_s) {
             let Some(slot) = usize::from(t.id)
                 .checked_sub(1)
                 .and_then(|k| self.teammate_motion.get_mut(k))
@@ -935,8 +934,7 @@ impl TeamLayer {
             cal.body.radius_m + cal.ball.radius_m + cal.kick.reach_margin_m + wm.contact_margin_m;
         let v = cal.kick.speed_mps;
         self.gwm
-            .teammates(now_s)
-            .iter()
+            .teammates_iter(now_s)
             .filter(|t| {
                 // At the ball as it saw it (the geometry its foot goes by), else as the
                 // team ball has it.

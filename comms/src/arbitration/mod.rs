@@ -37,7 +37,7 @@ use std::time::Duration;
 
 use thiserror::Error;
 
-use crate::{Blackboard, Instant, Key, Pattern, Scope, Value};
+use crate::{Blackboard, Instant, Key, Value};
 
 /// The blackboard key each robot publishes its cost on (`*` scope: replicated).
 pub const HEURISTIC_KEY: &str = "*.var.machine.heuristic";
@@ -503,13 +503,9 @@ impl Arbiter {
 /// receiver-side stamps. Values of the wrong shape (a client wrote garbage) are skipped:
 /// they must not decide anything.
 pub fn heard(board: &Blackboard, now: Instant) -> Vec<Candidate> {
-    let pattern = heuristic_pattern();
     board
-        .iter(&pattern)
-        .filter_map(|(key, entry)| {
-            let Scope::Robot(robot) = key.scope() else {
-                return None;
-            };
+        .robots_at(HEURISTIC_PATH)
+        .filter_map(|(robot, entry)| {
             let Value::Floats(v) = &entry.value else {
                 return None;
             };
@@ -522,9 +518,9 @@ pub fn heard(board: &Blackboard, now: Instant) -> Vec<Candidate> {
         .collect()
 }
 
-fn heuristic_pattern() -> Pattern {
-    Pattern::parse(HEURISTIC_PATTERN).expect("HEURISTIC_PATTERN is a valid pattern")
-}
+/// The path of [`HEURISTIC_KEY`] (what [`HEURISTIC_PATTERN`] matches in each robot's
+/// scope).
+const HEURISTIC_PATH: &str = "machine.heuristic";
 
 /// The key to write `[h, going]` to (`*.var.machine.heuristic`).
 pub fn heuristic_key() -> Key {

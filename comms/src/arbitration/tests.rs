@@ -487,3 +487,40 @@ fn a_claim_teammates_have_not_heard_earns_no_margin() {
         }
     }
 }
+
+#[test]
+fn claims_are_read_from_each_robots_scope_as_the_pattern_reads_them() {
+    // `heard` looks the path up in each robot's scope instead of walking the pattern: it
+    // must find what the pattern finds, and nothing in the local scope.
+    use crate::{Pattern, Scope};
+    assert_eq!(heuristic_key().path(), HEURISTIC_PATH);
+    let mut board = Blackboard::new(3);
+    let t0 = Instant::from_micros(2_000_000);
+    let claim = Posted {
+        h: 0.7,
+        going: false,
+    };
+    board.set(t0, &heuristic_key(), claim.into()).unwrap();
+    board
+        .set(
+            t0,
+            &Key::parse("local.var.machine.heuristic").unwrap(),
+            claim.into(),
+        )
+        .unwrap();
+    let now = Instant::from_micros(2_100_000);
+    let pattern = Pattern::parse(HEURISTIC_PATTERN).unwrap();
+    let by_pattern: Vec<(u8, Duration)> = board
+        .iter(&pattern)
+        .filter_map(|(key, e)| match key.scope() {
+            Scope::Robot(r) => Some((r, e.age(now))),
+            _ => None,
+        })
+        .collect();
+    let got: Vec<(u8, Duration)> = heard(&board, now)
+        .iter()
+        .map(|c| (c.robot, c.age))
+        .collect();
+    assert_eq!(got, by_pattern, "heard and the pattern disagree");
+    assert_eq!(got, vec![(3, Duration::from_millis(100))]);
+}

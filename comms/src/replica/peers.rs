@@ -135,6 +135,13 @@ pub(super) struct Peer {
 }
 
 impl Peer {
+    /// An older incarnation was heard live beside the current one within `live_within`
+    /// of its last frame: two robots send with one id.
+    pub(super) fn conflicting(&self, live_within: Duration) -> bool {
+        self.conflict_at
+            .is_some_and(|t| self.last_heard.saturating_duration_since(t) < live_within)
+    }
+
     /// Frames this peer has sent as a pooled budget counts them: its current life's
     /// counter, and what was counted of each earlier life while it was current here. A
     /// counter is the sender's word, so it counts for at most twice the frames of that
@@ -224,9 +231,7 @@ impl Replica {
             last_heard: p.last_heard,
             present: p.present,
             frames: p.frames,
-            conflicting: p
-                .conflict_at
-                .is_some_and(|t| p.last_heard.saturating_duration_since(t) < live_within),
+            conflicting: p.conflicting(live_within),
             clock_offset_us: p.clock.estimate.offset_us(self.now),
             clock_drift_ppm: p.clock.estimate.drift_ppm(),
             round_trip: p.clock.estimate.min_round_trip(),

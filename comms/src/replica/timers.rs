@@ -2,6 +2,7 @@
 //! departures, talk NACKs and give-ups, and the stats mirror written at each refresh.
 
 use std::collections::BTreeSet;
+use std::fmt::Write as _;
 
 use crate::key::{Key, Kind, Scope};
 use crate::stats::DropReason;
@@ -146,78 +147,92 @@ impl Replica {
         self.sync_board_counts();
     }
 
-    /// Mirrors the counters into `local.var.huddle.stats.*`.
+    /// Mirrors the counters into `local.var.huddle.stats.*`. It runs at every refresh of
+    /// every replica, so it builds no key for a counter that did not change: the path is
+    /// written into one reused buffer and looked up in place.
     fn mirror_stats(&mut self, now: Instant) {
         let s = &self.stats;
-        let mut values: Vec<(String, i64)> = vec![
-            ("frames_in".into(), s.frames_in as i64),
-            ("frames_out".into(), s.frames_out as i64),
-            ("bytes_in".into(), s.bytes_in as i64),
-            ("bytes_out".into(), s.bytes_out as i64),
-            ("updates_applied".into(), s.updates_applied as i64),
-            ("updates_stale".into(), s.updates_stale as i64),
-            ("items_skipped".into(), s.items_skipped as i64),
-            ("updates_refused".into(), s.updates_refused as i64),
+        let counters: [(&str, u64); 27] = [
+            ("frames_in", s.frames_in),
+            ("frames_out", s.frames_out),
+            ("bytes_in", s.bytes_in),
+            ("bytes_out", s.bytes_out),
+            ("updates_applied", s.updates_applied),
+            ("updates_stale", s.updates_stale),
+            ("items_skipped", s.items_skipped),
+            ("updates_refused", s.updates_refused),
             (
-                "updates_unconfirmed_replaced".into(),
-                s.updates_unconfirmed_replaced as i64,
+                "updates_unconfirmed_replaced",
+                s.updates_unconfirmed_replaced,
             ),
-            ("bindings_superseded".into(), s.bindings_superseded as i64),
-            ("bindings_released".into(), s.bindings_released as i64),
-            ("talk_delivered".into(), s.talk_delivered as i64),
-            ("talk_given_up".into(), s.talk_given_up as i64),
-            ("talk_resent".into(), s.talk_resent as i64),
-            ("talk_refused".into(), s.talk_refused as i64),
-            ("talk_refused_full".into(), s.talk_refused_full as i64),
-            ("talk_repair_limited".into(), s.talk_repair_limited as i64),
-            ("id_conflicts".into(), s.id_conflicts as i64),
-            ("nacks_sent".into(), s.nacks_sent as i64),
-            ("nacks_limited".into(), s.nacks_limited as i64),
-            ("nacks_superseded".into(), s.nacks_superseded as i64),
-            ("clock_samples".into(), s.clock_samples as i64),
-            (
-                "clock_echoes_rejected".into(),
-                s.clock_echoes_rejected as i64,
-            ),
-            ("clock_outliers".into(), s.clock_outliers as i64),
-            (
-                "clock_stamps_implausible".into(),
-                s.clock_stamps_implausible as i64,
-            ),
-            ("transit_defaulted".into(), s.transit_defaulted as i64),
-            ("drops.total".into(), s.drops_total() as i64),
+            ("bindings_superseded", s.bindings_superseded),
+            ("bindings_released", s.bindings_released),
+            ("talk_delivered", s.talk_delivered),
+            ("talk_given_up", s.talk_given_up),
+            ("talk_resent", s.talk_resent),
+            ("talk_refused", s.talk_refused),
+            ("talk_refused_full", s.talk_refused_full),
+            ("talk_repair_limited", s.talk_repair_limited),
+            ("id_conflicts", s.id_conflicts),
+            ("nacks_sent", s.nacks_sent),
+            ("nacks_limited", s.nacks_limited),
+            ("nacks_superseded", s.nacks_superseded),
+            ("clock_samples", s.clock_samples),
+            ("clock_echoes_rejected", s.clock_echoes_rejected),
+            ("clock_outliers", s.clock_outliers),
+            ("clock_stamps_implausible", s.clock_stamps_implausible),
+            ("transit_defaulted", s.transit_defaulted),
+            ("drops.total", s.drops_total()),
         ];
-        values.extend(
-            DropReason::ALL
-                .iter()
-                .map(|r| (format!("drops.{}", r.name()), s.drops(*r) as i64)),
-        );
+        let drops = DropReason::ALL.map(|r| (r.name(), s.drops(r) as i64));
         // Two robots sending with one id: which ids, as of their last frames.
-        values.extend(self.peers().map(|p| {
-            (
-                format!("peer.{}.conflicting", p.robot),
-                i64::from(p.conflicting),
-            )
-        }));
-        values.extend(
-            s.last_heard
-                .iter()
-                .map(|(robot, t)| (format!("peer.{robot}.last_heard_us"), t.as_micros() as i64)),
-        );
-        for (name, v) in values {
-            let key =
-                Key::from_valid_parts(Scope::Local, Kind::Var, format!("huddle.stats.{name}"));
-            let unchanged = self
-                .board
-                .get(&key)
+        // (Not through `peers()`, which works out every peer's clock as well.)
+        let live_within = self.cfg.departed_after;
+        let conflicting: Vec<(u8, i64)> = self
+            .peers
+            .iter()
+            .map(|(&robot, p)| (robot, i64::from(p.conflicting(live_within))))
+            .collect();
+        let heard: Vec<(u8, i64)> = s
+            .last_heard
+            .iter()
+            .map(|(&robot, t)| (robot, t.as_micros() as i64))
+            .collect();
+        let mut path = String::with_capacity(64);
+        let put = |board: &mut crate::blackboard::Blackboard, path: &str, v: i64| {
+            let unchanged = board
+                .get_stored(Scope::Local, path)
                 .is_some_and(|e| e.value == Value::Int(v));
             if !unchanged {
+                let key = Key::from_valid_parts(Scope::Local, Kind::Var, path.to_owned());
                 // A local key of valid shape, not subject to the local-key limit: this
                 // cannot fail.
-                let _ = self
-                    .board
-                    .write_unlimited(now, key.as_parts(), Value::Int(v));
+                let _ = board.write_unlimited(now, key.as_parts(), Value::Int(v));
             }
+        };
+        const PREFIX: &str = "huddle.stats.";
+        for (name, v) in counters {
+            path.clear();
+            path.push_str(PREFIX);
+            path.push_str(name);
+            put(&mut self.board, &path, v as i64);
+        }
+        for (name, v) in drops {
+            path.clear();
+            path.push_str(PREFIX);
+            path.push_str("drops.");
+            path.push_str(name);
+            put(&mut self.board, &path, v);
+        }
+        for (robot, v) in conflicting {
+            path.clear();
+            let _ = write!(path, "{PREFIX}peer.{robot}.conflicting");
+            put(&mut self.board, &path, v);
+        }
+        for (robot, v) in heard {
+            path.clear();
+            let _ = write!(path, "{PREFIX}peer.{robot}.last_heard_us");
+            put(&mut self.board, &path, v);
         }
     }
 

@@ -6,6 +6,7 @@ use super::{
     BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate, FieldObservation, Kick,
 };
 use crate::pose::PoseEstimate;
+use std::collections::VecDeque;
 
 /// The reference a team's fusion is measured against: one ball filter, same model, fed every
 /// robot's raw sightings (each with that robot's pose estimate) at once, with no network.
@@ -66,10 +67,11 @@ impl CentralizedBall {
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetworkLimitedBall {
     settled: BallFilter,
-    /// Events at or after `settled_until_s`, in time order.
-    recent: Vec<Event>,
+    /// Events at or after `settled_until_s`, in time order. (Queues: settling takes
+    /// from the front at every tick, and a vector moved the whole window each time.)
+    recent: VecDeque<Event>,
     /// `after[k]`: `settled` with `recent[..=k]` applied in order.
-    after: Vec<BallFilter>,
+    after: VecDeque<BallFilter>,
     settled_until_s: f64,
     window_s: f64,
     late: u64,
@@ -111,8 +113,8 @@ impl NetworkLimitedBall {
     pub fn new(config: BallFilterConfig, window_s: f64) -> Self {
         NetworkLimitedBall {
             settled: BallFilter::new(config),
-            recent: Vec::new(),
-            after: Vec::new(),
+            recent: VecDeque::new(),
+            after: VecDeque::new(),
             settled_until_s: f64::NEG_INFINITY,
             window_s,
             late: 0,
@@ -133,9 +135,9 @@ impl NetworkLimitedBall {
             0 => self.settled.clone(),
             _ => self.after[at - 1].clone(),
         };
-        for event in &self.recent[at..] {
+        for event in self.recent.range(at..) {
             event.apply(&mut filter);
-            self.after.push(filter.clone());
+            self.after.push_back(filter.clone());
         }
         true
     }
@@ -174,7 +176,7 @@ impl NetworkLimitedBall {
 
     /// The estimate from everything received, predicted to `t_s`.
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
-        self.after.last().unwrap_or(&self.settled).estimate_at(t_s)
+        self.after.back().unwrap_or(&self.settled).estimate_at(t_s)
     }
 
     /// The filter's settings.

@@ -97,7 +97,7 @@ pub(super) fn encode_cov<const N: usize>(
     // Shrink correlations until the decoded correlation matrix is comfortably PD: with
     // λ_min ≥ 0.05 the rounding of ρ (≤ 1/254 per entry) cannot hide a direction in which
     // the original is much wider, so the σ scale-up below stays small.
-    while min_eigenvalue(&corr_matrix::<N>(&rho)) < 0.05 {
+    while min_eigenvalue_below(&corr_matrix::<N>(&rho), 0.05) {
         for r in rho.iter_mut() {
             *r = (*r as f64 * 0.9).trunc() as i8;
         }
@@ -106,10 +106,9 @@ pub(super) fn encode_cov<const N: usize>(
     let mut codes: [u32; N] = std::array::from_fn(|i| q.encode_up(sd[i]));
     for _ in 0..8 {
         let decoded = decode_cov(&codes, &corr, q);
-        let alpha = max_generalised_eigenvalue(&c, &decoded);
-        if alpha <= 1.0 {
+        let Some(alpha) = growth_needed(&c, &decoded) else {
             return Ok((codes, rho));
-        }
+        };
         let scale = alpha.sqrt() * (1.0 + 1e-9);
         for code in codes.iter_mut() {
             *code = q.encode_up(q.decode(*code) * scale);
@@ -119,10 +118,49 @@ pub(super) fn encode_cov<const N: usize>(
     Err(EncodeError::OutOfRange { field })
 }
 
+/// The symmetric eigen solver on a fixed-size copy of `$m` (N is 2, 3 or 4 here), then
+/// `$pick` (`min` or `max`) of its eigenvalues. The generic const size lacks the solver's
+/// trait bounds, and a dynamic matrix costs a heap allocation per step of the solver; the
+/// arithmetic is the same either way (`eigenvalues_match_the_dynamic_solver`).
+macro_rules! symmetric_eigenvalues {
+    ($m:expr, $pick:ident) => {{
+        let m = $m;
+        match N {
+            2 => nalgebra::Matrix2::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            3 => nalgebra::Matrix3::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            4 => nalgebra::Matrix4::from_iterator(m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+            _ => nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
+                .symmetric_eigenvalues()
+                .$pick(),
+        }
+    }};
+}
 fn min_eigenvalue<const N: usize>(m: &SMatrix<f64, N, N>) -> f64 {
-    nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
-        .symmetric_eigenvalues()
-        .min()
+    symmetric_eigenvalues!(m, min)
+}
+
+/// How far past a bound a Cholesky factorisation settles an eigenvalue question without
+/// the eigen solver: far more than either one's rounding (about 1e-15 here), so the answer
+/// is the one the solver would give. Only a matrix within this of the bound goes to the
+/// solver. (Every message encodes three covariances, and the solver was a tenth of the
+/// simulator's time.)
+const SURE_MARGIN: f64 = 1e-6;
+
+/// Whether the smallest eigenvalue of the symmetric `m` is below `bound`, as the eigen
+/// solver finds it.
+fn min_eigenvalue_below<const N: usize>(m: &SMatrix<f64, N, N>, bound: f64) -> bool {
+    let shifted = m - SMatrix::<f64, N, N>::identity() * (bound + SURE_MARGIN);
+    if shifted.cholesky().is_some() {
+        // Positive definite: every eigenvalue is above the bound by the margin.
+        return false;
+    }
+    min_eigenvalue(m) < bound
 }
 
 pub(super) fn corr_matrix<const N: usize>(rho: &[i8]) -> SMatrix<f64, N, N> {
@@ -149,22 +187,146 @@ pub(super) fn decode_cov<const N: usize>(
     d * corr * d
 }
 
-/// λ_max(B⁻¹ A) for symmetric A and PD B: how much B must grow to cover A.
+/// λ_max(B⁻¹ A) for symmetric A and PD B: how much B must grow to cover A (the encoder
+/// asks [`growth_needed`]; this is what that must agree with).
+#[cfg(test)]
 fn max_generalised_eigenvalue<const N: usize>(
     a: &SMatrix<f64, N, N>,
     b: &SMatrix<f64, N, N>,
 ) -> f64 {
-    let Some(chol) = b.cholesky() else {
-        return f64::INFINITY;
-    };
-    let l = chol.l();
-    let Some(linv) = l.try_inverse() else {
-        return f64::INFINITY;
-    };
+    match whitened(a, b) {
+        Some(m) => symmetric_eigenvalues!(&m, max),
+        None => f64::INFINITY,
+    }
+}
+
+/// `L⁻¹ A L⁻ᵀ` (symmetrised) for B = L Lᵀ: its eigenvalues are those of B⁻¹ A. `None`
+/// when B is not positive definite.
+fn whitened<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, N>,
+) -> Option<SMatrix<f64, N, N>> {
+    let l = b.cholesky()?.l();
+    let linv = l.try_inverse()?;
     let m = linv * a * linv.transpose();
-    let m = (m + m.transpose()) * 0.5;
-    // Generic const sizes lack the eigen solver's bounds; N ≤ 4, so go dynamic.
-    nalgebra::DMatrix::from_iterator(N, N, m.iter().copied())
-        .symmetric_eigenvalues()
-        .max()
+    Some((m + m.transpose()) * 0.5)
+}
+
+/// [`max_generalised_eigenvalue`] when B does not cover A (above 1, or not a number),
+/// `None` when it does: the encoder's test, settled by one Cholesky factorisation unless
+/// λ_max is within [`SURE_MARGIN`] of 1.
+fn growth_needed<const N: usize>(a: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, N>) -> Option<f64> {
+    let Some(m) = whitened(a, b) else {
+        return Some(f64::INFINITY);
+    };
+    let room = SMatrix::<f64, N, N>::identity() * (1.0 - SURE_MARGIN) - m;
+    if room.cholesky().is_some() {
+        // Every eigenvalue of B⁻¹ A is below 1 by the margin.
+        return None;
+    }
+    let alpha = symmetric_eigenvalues!(&m, max);
+    // As `alpha <= 1.0` decided: a NaN needs growth.
+    (alpha > 1.0 || alpha.is_nan()).then_some(alpha)
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, SMatrix};
+
+    /// Symmetric matrices from a fixed stream: correlation-like and covariance-like, some
+    /// near singular.
+    fn matrices<const N: usize>(count: usize) -> Vec<SMatrix<f64, N, N>> {
+        let mut x: u64 = 0x5eed_0fc0_face;
+        let mut next = move || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        (0..count)
+            .map(|k| {
+                let a =
+                    SMatrix::<f64, N, N>::from_fn(|_, _| next() * 10f64.powi((k % 7) as i32 - 3));
+                let m = a * a.transpose();
+                (m + m.transpose()) * 0.5
+            })
+            .collect()
+    }
+
+    fn check<const N: usize>() {
+        for m in matrices::<N>(2000) {
+            let dynamic = DMatrix::from_iterator(N, N, m.iter().copied()).symmetric_eigenvalues();
+            let (lo, hi) = (dynamic.min(), dynamic.max());
+            let fixed = |m: &SMatrix<f64, N, N>| {
+                (
+                    symmetric_eigenvalues!(m, min),
+                    symmetric_eigenvalues!(m, max),
+                )
+            };
+            let (flo, fhi) = fixed(&m);
+            assert!(
+                flo.to_bits() == lo.to_bits() && fhi.to_bits() == hi.to_bits(),
+                "{N}×{N}: fixed ({flo}, {fhi}) against dynamic ({lo}, {hi}) for {m}"
+            );
+        }
+    }
+
+    fn check_shortcuts<const N: usize>() {
+        use super::{
+            corr_matrix, growth_needed, max_generalised_eigenvalue, min_eigenvalue,
+            min_eigenvalue_below,
+        };
+        let mut x: u64 = 77;
+        let mut byte = move || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 56) as u8 as i8
+        };
+        for _ in 0..20_000 {
+            let rho: Vec<i8> = (0..N * (N - 1) / 2).map(|_| byte()).collect();
+            let corr = corr_matrix::<N>(&rho);
+            for bound in [0.05, 0.3] {
+                assert_eq!(
+                    min_eigenvalue_below(&corr, bound),
+                    min_eigenvalue(&corr) < bound,
+                    "{N}×{N} correlations {rho:?}, bound {bound}"
+                );
+            }
+        }
+        let ms = matrices::<N>(2000);
+        for pair in ms.windows(2) {
+            let (a, b) = (
+                &pair[0],
+                &(pair[1] + SMatrix::<f64, N, N>::identity() * 1e-3),
+            );
+            // λ_max around 1 (within the margin and just outside it) and well either side.
+            let alpha0 = max_generalised_eigenvalue(a, b);
+            for scale in [0.5, 0.999_998, 0.999_999_9, 1.0, 1.000_000_1, 2.0] {
+                let a = a * (scale / alpha0);
+                let alpha = max_generalised_eigenvalue(&a, b);
+                let want = (alpha > 1.0 || alpha.is_nan()).then_some(alpha);
+                let got = growth_needed(&a, b);
+                assert!(
+                    got.map(f64::to_bits) == want.map(f64::to_bits),
+                    "{N}×{N}: {got:?} against the solver's {want:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_shortcuts_answer_as_the_eigen_solver_does() {
+        check_shortcuts::<2>();
+        check_shortcuts::<3>();
+        check_shortcuts::<4>();
+    }
+
+    #[test]
+    fn eigenvalues_match_the_dynamic_solver_bit_for_bit() {
+        // The encoder's output (bytes on the wire) depends on these to the last bit.
+        check::<2>();
+        check::<3>();
+        check::<4>();
+    }
 }
