@@ -171,11 +171,14 @@ def main():
     ap.add_argument("--seeds", default="301-324")
     ap.add_argument("--table", default="docs/results/honest-sim.md")
     ap.add_argument("--no-run", action="store_true", help="only write the table")
+    ap.add_argument("--presets", default=",".join(n for n, _ in PRESETS),
+                    help="run only these (the table shows every run found in --out)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     seeds = seeds_of(args.seeds)
     if not args.no_run:
-        jobs = [(n, e, w, s) for s in seeds for w in WORLDS for n, e in PRESETS]
+        wanted = args.presets.split(",")
+        jobs = [(n, e, w, s) for s in seeds for w in WORLDS for n, e in PRESETS if n in wanted]
         with ThreadPoolExecutor(args.jobs) as ex:
             list(ex.map(lambda j: run(args, *j), jobs))
     with open(args.table, "w") as f:

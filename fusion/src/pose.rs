@@ -167,6 +167,21 @@ pub fn update_range_bearing(
     ))
 }
 
+/// How a gated pose filter finds itself again once it is lost (kidnapped by a shove its
+/// odometry never saw, or started far from where it believes): after `after_gated`
+/// sightings in a row fail the gate, its covariance grows by the given σ, so the next
+/// true sightings pass and pull it back. A mislabelled landmark fails the gate alone, so
+/// a run of failures says the robot, not the landmark, is wrong.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Relocalise {
+    /// Gated sightings in a row that mean the robot is lost.
+    pub after_gated: u32,
+    /// σ added to x and y, metres.
+    pub sigma_m: f64,
+    /// σ added to the heading, radians.
+    pub sigma_rad: f64,
+}
+
 /// A running pose EKF: an estimate, its noise model and an optional gate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseFilter {
@@ -176,6 +191,12 @@ pub struct PoseFilter {
     pub noise: PoseNoise,
     /// χ² threshold on a sighting's Mahalanobis²; `None` accepts everything.
     pub gate_chi2: Option<f64>,
+    /// What to do after a run of gated sightings (`None`: nothing).
+    pub relocalise: Option<Relocalise>,
+    /// Sightings gated since the last one that passed.
+    gated_in_row: u32,
+    /// Times the filter found itself lost and widened its covariance.
+    relocalisations: u64,
 }
 
 impl PoseFilter {
@@ -185,7 +206,20 @@ impl PoseFilter {
             estimate,
             noise,
             gate_chi2,
+            relocalise: None,
+            gated_in_row: 0,
+            relocalisations: 0,
         }
+    }
+
+    /// The same, widening after a run of gated sightings ([`Relocalise`]).
+    pub fn with_relocalise(self, relocalise: Option<Relocalise>) -> Self {
+        PoseFilter { relocalise, ..self }
+    }
+
+    /// How many times the filter found itself lost.
+    pub fn relocalisations(&self) -> u64 {
+        self.relocalisations
     }
 
     /// Applies one odometry event.
@@ -195,26 +229,52 @@ impl PoseFilter {
 
     /// Applies a landmark sighting in robot coordinates; returns its Mahalanobis².
     pub fn landmark(&mut self, sighting: &LandmarkSighting) -> Result<f64, UpdateError> {
-        let (est, d2) = update_landmark(
+        let r = update_landmark(
             &self.estimate,
             sighting,
             &self.noise.r_landmark,
             self.gate_chi2,
-        )?;
-        self.estimate = est;
-        Ok(d2)
+        );
+        self.settle(r)
     }
 
     /// Applies a range/bearing sighting; returns its Mahalanobis².
     pub fn range_bearing(&mut self, sighting: &RangeBearingSighting) -> Result<f64, UpdateError> {
-        let (est, d2) = update_range_bearing(
+        let r = update_range_bearing(
             &self.estimate,
             sighting,
             &self.noise.r_range_bearing,
             self.gate_chi2,
-        )?;
-        self.estimate = est;
-        Ok(d2)
+        );
+        self.settle(r)
+    }
+
+    /// Takes an update's outcome: keeps the new estimate, or counts the gated sighting
+    /// and widens the covariance once a run of them says the robot is lost.
+    fn settle(&mut self, r: Result<(PoseEstimate, f64), UpdateError>) -> Result<f64, UpdateError> {
+        match r {
+            Ok((est, d2)) => {
+                self.estimate = est;
+                self.gated_in_row = 0;
+                Ok(d2)
+            }
+            Err(e) => {
+                if let (UpdateError::Gated { .. }, Some(rel)) = (&e, self.relocalise) {
+                    self.gated_in_row += 1;
+                    if self.gated_in_row >= rel.after_gated {
+                        self.gated_in_row = 0;
+                        self.relocalisations += 1;
+                        let grow = Vector3::new(
+                            rel.sigma_m.powi(2),
+                            rel.sigma_m.powi(2),
+                            rel.sigma_rad.powi(2),
+                        );
+                        self.estimate.cov += Matrix3::from_diagonal(&grow);
+                    }
+                }
+                Err(e)
+            }
+        }
     }
 }
 
