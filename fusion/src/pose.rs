@@ -374,4 +374,104 @@ mod tests {
         assert!(matches!(f.landmark(&wild), Err(UpdateError::Gated { .. })));
         assert_eq!(f.estimate, before);
     }
+
+    /// A range/bearing sighting of `field` as a robot at `truth` makes it, noiseless.
+    fn seen_from(
+        truth: &Vector3<f64>,
+        field: Vector2<f64>,
+        named: Vector2<f64>,
+    ) -> RangeBearingSighting {
+        let l = field_to_robot(truth, &field);
+        RangeBearingSighting {
+            field: named,
+            range_m: l.norm(),
+            bearing_rad: (-l.x).atan2(l.y),
+        }
+    }
+
+    /// The drawn world's camera names 1 landmark in 100 as its twin through the centre
+    /// spot. A robot that knows where it is refuses such a sighting and keeps its pose;
+    /// ungated, the same sighting throws it metres off (#29: drawn-world robots were
+    /// 1.9–2.1 m off on average before the gate).
+    #[test]
+    fn a_mislabelled_landmark_is_refused_and_the_pose_kept() {
+        let truth = Vector3::new(-1.0, 0.5, 0.3);
+        let start = PoseEstimate::new(
+            -1.0,
+            0.5,
+            0.3,
+            Vector3::new(0.05f64.powi(2), 0.05f64.powi(2), 0.05f64.powi(2)),
+        );
+        let post = Vector2::new(4.5, 0.8);
+        let twin = -post;
+        let wrong = seen_from(&truth, post, twin);
+        let rel = Relocalise {
+            after_gated: 5,
+            sigma_m: 0.5,
+            sigma_rad: 0.3,
+        };
+        let mut gated =
+            PoseFilter::new(start, PoseNoise::default(), Some(30.0)).with_relocalise(Some(rel));
+        assert!(matches!(
+            gated.range_bearing(&wrong),
+            Err(UpdateError::Gated { .. })
+        ));
+        assert_eq!(
+            gated.estimate, start,
+            "a refused sighting leaves the pose alone"
+        );
+        let mut open = PoseFilter::new(start, PoseNoise::default(), None);
+        open.range_bearing(&wrong).expect("ungated, it is taken");
+        let off = (open.estimate.mean - truth).xy().norm();
+        assert!(
+            off > 0.3,
+            "the ungated filter was pulled {off:.2} m off by one sighting"
+        );
+        // A true sighting right after passes: the refused one did not count against it.
+        gated
+            .range_bearing(&seen_from(&truth, post, post))
+            .expect("a true sighting passes");
+        assert_eq!(gated.relocalisations(), 0);
+    }
+
+    /// A robot shoved 1 m by a body its odometry never felt refuses every landmark (each
+    /// is beyond the gate of its confident, wrong pose); after five in a row it takes
+    /// itself for lost, widens, and the next sightings bring it back. Without the
+    /// widening it would refuse them for ever.
+    #[test]
+    fn a_kidnapped_robot_finds_itself_after_a_run_of_refusals() {
+        let truth = Vector3::new(1.0, 0.0, 0.0);
+        let start = PoseEstimate::new(0.0, 0.0, 0.0, Vector3::new(1e-3, 1e-3, 1e-4));
+        let marks = [
+            Vector2::new(4.5, 3.0),
+            Vector2::new(4.5, -3.0),
+            Vector2::new(0.0, 3.0),
+            Vector2::new(-4.5, 3.0),
+        ];
+        let rel = Relocalise {
+            after_gated: 5,
+            sigma_m: 0.5,
+            sigma_rad: 0.3,
+        };
+        let mut lost = PoseFilter::new(start, PoseNoise::default(), Some(30.0));
+        let mut finds = lost.with_relocalise(Some(rel));
+        for k in 0..40 {
+            let s = seen_from(&truth, marks[k % marks.len()], marks[k % marks.len()]);
+            let _ = lost.range_bearing(&s);
+            let _ = finds.range_bearing(&s);
+        }
+        let (lost_off, found_off) = (
+            (lost.estimate.mean - truth).xy().norm(),
+            (finds.estimate.mean - truth).xy().norm(),
+        );
+        assert!(
+            lost_off > 0.9,
+            "without widening it stays lost: {lost_off:.2} m off"
+        );
+        assert!(
+            found_off < 0.05,
+            "with widening it is back: {found_off:.3} m off"
+        );
+        assert!(finds.relocalisations() >= 1);
+    }
 }
