@@ -100,8 +100,9 @@ def table(args, seeds):
     lines.append("")
     summary = ["## Summary per preset and world", "",
                "| preset | world | runs | central med / min | cK med / min | delivery med / min / max | "
-               "delayed med / min | one goer med / min % | conflict > bound | clock err rms med µs |",
-               "|---|---|---|---|---|---|---|---|---|---|"]
+               "delayed med / min | one goer med / min % | conflict > bound | clock err rms med µs | "
+               "pose err med m |",
+               "|---|---|---|---|---|---|---|---|---|---|---|"]
     per_run = ["## Every run", "",
                "| preset | world | seed | ×central | ×cK | ×delivery | ×delayed | team ball m | "
                "one goer % | conflict / bound ms | clock err rms µs | sim× |",
@@ -123,13 +124,15 @@ def table(args, seeds):
             goer = [r["exactly_one_goer_pct"] for _, r in rs]
             over = sum(1 for _, r in rs if r["longest_conflict_ms"] > r["conflict_bound_ms"])
             clk = [r.get("clock_offset_error_rms_us", float("nan")) for _, r in rs]
+            pose = [r.get("pose_rmse_m", float("nan")) for _, r in rs]
             summary.append(
                 f"| {name} | {world} | {len(rs)} | {fmt(med(col['central']))} / "
                 f"{fmt(min(col['central']), 0.98)} | {fmt(med(col['cK']))} / "
                 f"{fmt(min(col['cK']), 0.98)} | {fmt(med(col['delivery']))} / "
                 f"{fmt(min(col['delivery']), 0.98)} / {fmt(max(col['delivery']))} | "
                 f"{fmt(med(col['delayed']))} / {fmt(min(col['delayed']), 0.98)} | "
-                f"{med(goer):.2f} / {min(goer):.2f} | {over}/{len(rs)} | {med(clk):.0f} |")
+                f"{med(goer):.2f} / {min(goer):.2f} | {over}/{len(rs)} | {med(clk):.0f} | "
+                f"{med(pose):.3f} |")
             for s, r in rs:
                 per_run.append(
                     f"| {name} | {world} | {s} | {fmt(r['rmse_ratio'], 0.98)} | "
@@ -171,11 +174,14 @@ def main():
     ap.add_argument("--seeds", default="301-324")
     ap.add_argument("--table", default="docs/results/honest-sim.md")
     ap.add_argument("--no-run", action="store_true", help="only write the table")
+    ap.add_argument("--presets", default=",".join(n for n, _ in PRESETS),
+                    help="run only these (the table shows every run found in --out)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     seeds = seeds_of(args.seeds)
     if not args.no_run:
-        jobs = [(n, e, w, s) for s in seeds for w in WORLDS for n, e in PRESETS]
+        wanted = args.presets.split(",")
+        jobs = [(n, e, w, s) for s in seeds for w in WORLDS for n, e in PRESETS if n in wanted]
         with ThreadPoolExecutor(args.jobs) as ex:
             list(ex.map(lambda j: run(args, *j), jobs))
     with open(args.table, "w") as f:

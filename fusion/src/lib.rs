@@ -227,6 +227,6 @@ pub use local::{Heard, KickReport, LocalConfig, LocalModel, LocalWorldModel, KIC
 pub use nalgebra;
 pub use pose::{
     predict as pose_predict, update_landmark, update_range_bearing, LandmarkSighting, Odometry,
-    PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting,
+    PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting, Relocalise,
 };
 pub use wire::{DecodeError, EncodeError, LWM_COMPACT_LEN, LWM_WIRE_LEN};

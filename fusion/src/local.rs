@@ -9,6 +9,7 @@ use crate::confidence::{pose_confidence, position_confidence};
 use crate::kalman::UpdateError;
 use crate::pose::{
     LandmarkSighting, Odometry, PoseEstimate, PoseFilter, PoseNoise, RangeBearingSighting,
+    Relocalise,
 };
 use nalgebra::{Matrix2, Vector2};
 
@@ -131,6 +132,8 @@ pub struct LocalConfig {
     pub pose_noise: PoseNoise,
     /// Gate on landmark sightings (χ², 2 dof); `None` for no gate.
     pub pose_gate_chi2: Option<f64>,
+    /// How the gated pose filter finds itself again when lost (`None`: never).
+    pub pose_relocalise: Option<Relocalise>,
     /// The ball filter.
     pub ball: BallFilterConfig,
 }
@@ -198,7 +201,8 @@ impl LocalModel {
     /// An LWM starting at `initial_pose`, with no ball.
     pub fn new(config: LocalConfig, initial_pose: PoseEstimate) -> Self {
         LocalModel {
-            pose: PoseFilter::new(initial_pose, config.pose_noise, config.pose_gate_chi2),
+            pose: PoseFilter::new(initial_pose, config.pose_noise, config.pose_gate_chi2)
+                .with_relocalise(config.pose_relocalise),
             ball: BallFilter::new(config.ball),
             pending: Accumulator::EMPTY,
             sent: [None; 2],

@@ -167,6 +167,21 @@ pub fn update_range_bearing(
     ))
 }
 
+/// How a gated pose filter finds itself again once it is lost (kidnapped by a shove its
+/// odometry never saw, or started far from where it believes): after `after_gated`
+/// sightings in a row fail the gate, its covariance grows by the given σ, so the next
+/// true sightings pass and pull it back. A mislabelled landmark fails the gate alone, so
+/// a run of failures says the robot, not the landmark, is wrong.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Relocalise {
+    /// Gated sightings in a row that mean the robot is lost.
+    pub after_gated: u32,
+    /// σ added to x and y, metres.
+    pub sigma_m: f64,
+    /// σ added to the heading, radians.
+    pub sigma_rad: f64,
+}
+
 /// A running pose EKF: an estimate, its noise model and an optional gate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseFilter {
@@ -176,6 +191,12 @@ pub struct PoseFilter {
     pub noise: PoseNoise,
     /// χ² threshold on a sighting's Mahalanobis²; `None` accepts everything.
     pub gate_chi2: Option<f64>,
+    /// What to do after a run of gated sightings (`None`: nothing).
+    pub relocalise: Option<Relocalise>,
+    /// Sightings gated since the last one that passed.
+    gated_in_row: u32,
+    /// Times the filter found itself lost and widened its covariance.
+    relocalisations: u64,
 }
 
 impl PoseFilter {
@@ -185,7 +206,20 @@ impl PoseFilter {
             estimate,
             noise,
             gate_chi2,
+            relocalise: None,
+            gated_in_row: 0,
+            relocalisations: 0,
         }
+    }
+
+    /// The same, widening after a run of gated sightings ([`Relocalise`]).
+    pub fn with_relocalise(self, relocalise: Option<Relocalise>) -> Self {
+        PoseFilter { relocalise, ..self }
+    }
+
+    /// How many times the filter found itself lost.
+    pub fn relocalisations(&self) -> u64 {
+        self.relocalisations
     }
 
     /// Applies one odometry event.
@@ -195,26 +229,52 @@ impl PoseFilter {
 
     /// Applies a landmark sighting in robot coordinates; returns its Mahalanobis².
     pub fn landmark(&mut self, sighting: &LandmarkSighting) -> Result<f64, UpdateError> {
-        let (est, d2) = update_landmark(
+        let r = update_landmark(
             &self.estimate,
             sighting,
             &self.noise.r_landmark,
             self.gate_chi2,
-        )?;
-        self.estimate = est;
-        Ok(d2)
+        );
+        self.settle(r)
     }
 
     /// Applies a range/bearing sighting; returns its Mahalanobis².
     pub fn range_bearing(&mut self, sighting: &RangeBearingSighting) -> Result<f64, UpdateError> {
-        let (est, d2) = update_range_bearing(
+        let r = update_range_bearing(
             &self.estimate,
             sighting,
             &self.noise.r_range_bearing,
             self.gate_chi2,
-        )?;
-        self.estimate = est;
-        Ok(d2)
+        );
+        self.settle(r)
+    }
+
+    /// Takes an update's outcome: keeps the new estimate, or counts the gated sighting
+    /// and widens the covariance once a run of them says the robot is lost.
+    fn settle(&mut self, r: Result<(PoseEstimate, f64), UpdateError>) -> Result<f64, UpdateError> {
+        match r {
+            Ok((est, d2)) => {
+                self.estimate = est;
+                self.gated_in_row = 0;
+                Ok(d2)
+            }
+            Err(e) => {
+                if let (UpdateError::Gated { .. }, Some(rel)) = (&e, self.relocalise) {
+                    self.gated_in_row += 1;
+                    if self.gated_in_row >= rel.after_gated {
+                        self.gated_in_row = 0;
+                        self.relocalisations += 1;
+                        let grow = Vector3::new(
+                            rel.sigma_m.powi(2),
+                            rel.sigma_m.powi(2),
+                            rel.sigma_rad.powi(2),
+                        );
+                        self.estimate.cov += Matrix3::from_diagonal(&grow);
+                    }
+                }
+                Err(e)
+            }
+        }
     }
 }
 
@@ -313,5 +373,105 @@ mod tests {
         };
         assert!(matches!(f.landmark(&wild), Err(UpdateError::Gated { .. })));
         assert_eq!(f.estimate, before);
+    }
+
+    /// A range/bearing sighting of `field` as a robot at `truth` makes it, noiseless.
+    fn seen_from(
+        truth: &Vector3<f64>,
+        field: Vector2<f64>,
+        named: Vector2<f64>,
+    ) -> RangeBearingSighting {
+        let l = field_to_robot(truth, &field);
+        RangeBearingSighting {
+            field: named,
+            range_m: l.norm(),
+            bearing_rad: (-l.x).atan2(l.y),
+        }
+    }
+
+    /// The drawn world's camera names 1 landmark in 100 as its twin through the centre
+    /// spot. A robot that knows where it is refuses such a sighting and keeps its pose;
+    /// ungated, the same sighting throws it metres off (#29: drawn-world robots were
+    /// 1.9–2.1 m off on average before the gate).
+    #[test]
+    fn a_mislabelled_landmark_is_refused_and_the_pose_kept() {
+        let truth = Vector3::new(-1.0, 0.5, 0.3);
+        let start = PoseEstimate::new(
+            -1.0,
+            0.5,
+            0.3,
+            Vector3::new(0.05f64.powi(2), 0.05f64.powi(2), 0.05f64.powi(2)),
+        );
+        let post = Vector2::new(4.5, 0.8);
+        let twin = -post;
+        let wrong = seen_from(&truth, post, twin);
+        let rel = Relocalise {
+            after_gated: 5,
+            sigma_m: 0.5,
+            sigma_rad: 0.3,
+        };
+        let mut gated =
+            PoseFilter::new(start, PoseNoise::default(), Some(30.0)).with_relocalise(Some(rel));
+        assert!(matches!(
+            gated.range_bearing(&wrong),
+            Err(UpdateError::Gated { .. })
+        ));
+        assert_eq!(
+            gated.estimate, start,
+            "a refused sighting leaves the pose alone"
+        );
+        let mut open = PoseFilter::new(start, PoseNoise::default(), None);
+        open.range_bearing(&wrong).expect("ungated, it is taken");
+        let off = (open.estimate.mean - truth).xy().norm();
+        assert!(
+            off > 0.3,
+            "the ungated filter was pulled {off:.2} m off by one sighting"
+        );
+        // A true sighting right after passes: the refused one did not count against it.
+        gated
+            .range_bearing(&seen_from(&truth, post, post))
+            .expect("a true sighting passes");
+        assert_eq!(gated.relocalisations(), 0);
+    }
+
+    /// A robot shoved 1 m by a body its odometry never felt refuses every landmark (each
+    /// is beyond the gate of its confident, wrong pose); after five in a row it takes
+    /// itself for lost, widens, and the next sightings bring it back. Without the
+    /// widening it would refuse them for ever.
+    #[test]
+    fn a_kidnapped_robot_finds_itself_after_a_run_of_refusals() {
+        let truth = Vector3::new(1.0, 0.0, 0.0);
+        let start = PoseEstimate::new(0.0, 0.0, 0.0, Vector3::new(1e-3, 1e-3, 1e-4));
+        let marks = [
+            Vector2::new(4.5, 3.0),
+            Vector2::new(4.5, -3.0),
+            Vector2::new(0.0, 3.0),
+            Vector2::new(-4.5, 3.0),
+        ];
+        let rel = Relocalise {
+            after_gated: 5,
+            sigma_m: 0.5,
+            sigma_rad: 0.3,
+        };
+        let mut lost = PoseFilter::new(start, PoseNoise::default(), Some(30.0));
+        let mut finds = lost.with_relocalise(Some(rel));
+        for k in 0..40 {
+            let s = seen_from(&truth, marks[k % marks.len()], marks[k % marks.len()]);
+            let _ = lost.range_bearing(&s);
+            let _ = finds.range_bearing(&s);
+        }
+        let (lost_off, found_off) = (
+            (lost.estimate.mean - truth).xy().norm(),
+            (finds.estimate.mean - truth).xy().norm(),
+        );
+        assert!(
+            lost_off > 0.9,
+            "without widening it stays lost: {lost_off:.2} m off"
+        );
+        assert!(
+            found_off < 0.05,
+            "with widening it is back: {found_off:.3} m off"
+        );
+        assert!(finds.relocalisations() >= 1);
     }
 }

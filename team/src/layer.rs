@@ -202,6 +202,12 @@ pub struct TeamLayer {
     pub kicked: Option<Kick>,
     /// Its ball sighting of the latest tick, in `fusion`'s robot frame.
     pub ball_sighting: Option<BallSighting>,
+    /// Whether its own ball filter took that sighting (not gated out as an outlier, as a
+    /// false ball is): only such a sighting reaches its teammates, in its batch.
+    pub ball_sighting_taken: bool,
+    /// Ticks in a row at which its own ball track took a sighting (1 on a fresh or
+    /// restarted track): a false ball is one camera frame, a real one is seen again.
+    pub ball_seen_run: u32,
     /// When it last saw the opponent goal, seconds.
     pub goal_seen_at_s: Option<f64>,
     /// When it last saw the ball, seconds.
@@ -285,6 +291,8 @@ impl TeamLayer {
             team_ball_held: None,
             kicked: None,
             ball_sighting: None,
+            ball_sighting_taken: false,
+            ball_seen_run: 0,
             goal_seen_at_s: None,
             ball_seen_at_s: None,
             h: params.no_ball_cost,
@@ -465,11 +473,19 @@ impl TeamLayer {
         self.pose_belief = frames::from_fusion_pose(self.lwm.pose());
 
         self.ball_sighting = senses.ball.last().map(|(s, _)| *s);
+        self.ball_sighting_taken = false;
+        let mut run = 0;
         for (s, age_s) in senses.ball {
             let seen_s = now_s - age_s;
-            self.lwm.ball_sighting(seen_s, s);
+            run = match self.lwm.ball_sighting(seen_s, s) {
+                fusion::BallUpdate::Updated(_) => self.ball_seen_run.max(run) + 1,
+                fusion::BallUpdate::Initialised | fusion::BallUpdate::Restarted => 1,
+                _ => 0,
+            };
+            self.ball_sighting_taken = run > 0;
             self.ball_seen_at_s = Some(self.ball_seen_at_s.map_or(seen_s, |t| t.max(seen_s)));
         }
+        self.ball_seen_run = run;
         if senses.goal_in_view {
             self.goal_seen_at_s = Some(now_s);
         }
@@ -702,6 +718,7 @@ impl TeamLayer {
             t_s: t,
             pose: self.pose_belief,
             ball: self.ball.and(self.lwm.ball_at(t)),
+            ball_confirmed: self.ball_seen_run >= policy::VOI_CONFIRM_TICKS,
             going: self.claims_ball(),
             team_ball_stale: self.team_ball.is_none(),
             kicked,

@@ -839,7 +839,9 @@ impl Simulation {
     fn feed_references(&mut self, i: usize, t_s: f64) {
         let r = &self.robots[i];
         let now_s = robot::seconds(self.harness.local_now(i));
-        if let Some(s) = &r.ball_sighting {
+        // The sightings the robot's own ball filter took: what its batches tell the team
+        // (a false ball its track gated out never reaches a teammate).
+        if let (Some(s), true) = (&r.ball_sighting, r.ball_sighting_taken) {
             self.central.sighting(t_s, r.lwm.pose(), s);
             self.central_kicks.sighting(t_s, r.lwm.pose(), s);
             self.delayed.sighting(t_s, r.lwm.pose(), s);

@@ -72,7 +72,17 @@ impl ReferenceConfig {
     /// gives: friction law, boards, bounce, pose-error sharing), each keeping only its own
     /// acceleration noise; the delivery reference, unless set, is `team` exactly (the
     /// team's tuning too: a fusion measured against its own filter fed what it received).
+    ///
+    /// Each mixes several robots' sightings in one track, so each restarts its track only
+    /// on outliers that agree with each other (`outliers_must_agree`, as the team's GWM
+    /// asks of a challenge): without it one robot's false ball after another's stray
+    /// sighting restarted the track metres off (drawn world, seed 110: three samples 6.7 m
+    /// off for 0.02 s made the centralized RMSE 0.108 m against the team's 0.088 m).
     pub fn on_team(&self, team: BallFilterConfig) -> Self {
+        let team = BallFilterConfig {
+            outliers_must_agree: true,
+            ..team
+        };
         let on = |c: &BallFilterConfig| {
             let (q0, q1) = noise_of(c);
             with_noise(team, q0, q1)

@@ -91,6 +91,12 @@ pub struct BallFilterConfig {
     /// After this many consecutive outliers the track restarts from the latest one (a kick
     /// the motion model could not follow).
     pub reset_after_outliers: u32,
+    /// The consecutive outliers must also agree with each other (each within the gate of
+    /// a fresh track on the one before), as the GWM's challenge asks: one false ball or
+    /// one robot's stray sighting after another's then cannot restart the track on
+    /// itself. Off for a robot's own track (its LWM, one camera); on for a filter that
+    /// mixes several robots' sightings (the simulator's references).
+    pub outliers_must_agree: bool,
     /// k of [`field_observation_shared`]: how many consecutive sightings of one robot share
     /// one pose error (about camera rate × detection rate × the time landmarks take to
     /// renew the pose). 1 treats pose errors as white, which is overconfident.
@@ -104,6 +110,7 @@ impl Default for BallFilterConfig {
             initial_velocity_var: 4.0,
             outlier_chi2: 9.21,
             reset_after_outliers: 2,
+            outliers_must_agree: false,
             pose_error_sharing: 10.0,
         }
     }
@@ -131,6 +138,8 @@ pub struct BallFilter {
     pub config: BallFilterConfig,
     estimate: Option<BallEstimate>,
     outliers_in_a_row: u32,
+    /// The latest outlier of the current run (with `outliers_must_agree`).
+    last_outlier: Option<FieldObservation>,
 }
 
 impl BallFilter {
@@ -140,6 +149,7 @@ impl BallFilter {
             config,
             estimate: None,
             outliers_in_a_row: 0,
+            last_outlier: None,
         }
     }
 
@@ -182,12 +192,26 @@ impl BallFilter {
             Ok((next, d2)) => {
                 self.estimate = Some(next);
                 self.outliers_in_a_row = 0;
+                self.last_outlier = None;
                 BallUpdate::Updated(d2)
             }
             Err(UpdateError::Gated { mahalanobis_sq, .. }) => {
-                self.outliers_in_a_row += 1;
+                let agrees = !self.config.outliers_must_agree
+                    || self.last_outlier.is_none_or(|prev| {
+                        let model = &self.config.model;
+                        initial_estimate(model, &prev, self.config.initial_velocity_var)
+                            .position_mahalanobis_sq(model, obs)
+                            .is_some_and(|d2| d2 <= self.config.outlier_chi2)
+                    });
+                self.outliers_in_a_row = if agrees {
+                    self.outliers_in_a_row + 1
+                } else {
+                    1
+                };
+                self.last_outlier = Some(*obs);
                 if self.outliers_in_a_row >= self.config.reset_after_outliers {
                     self.outliers_in_a_row = 0;
+                    self.last_outlier = None;
                     let mut fresh =
                         initial_estimate(&self.config.model, obs, self.config.initial_velocity_var);
                     fresh.t_s = fresh.t_s.max(est.t_s);
@@ -209,6 +233,7 @@ impl BallFilter {
         if let Some(est) = &self.estimate {
             self.estimate = Some(est.kicked(&self.config.model, kick));
             self.outliers_in_a_row = 0;
+            self.last_outlier = None;
         }
     }
 
@@ -260,6 +285,7 @@ impl BallFilter {
                     cov: (u.cov + u.cov.transpose()) * 0.5,
                 });
                 self.outliers_in_a_row = 0;
+                self.last_outlier = None;
                 BallUpdate::Updated(d2.unwrap_or(0.0))
             }
             Err(e) => BallUpdate::Rejected(e),

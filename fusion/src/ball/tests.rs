@@ -168,6 +168,53 @@ fn a_kick_restarts_the_track_after_two_outliers() {
     assert!((f.estimate().unwrap().position() - Vector2::new(2.5, 1.0)).norm() < 1e-12);
 }
 
+/// A filter that mixes several robots' sightings (the simulator's references): one
+/// robot's stray sighting and then another's false ball, metres apart, are two outliers in
+/// a row; restarting on them put the track on the false ball (#29, drawn world, seed 110:
+/// 6.7 m off). With `outliers_must_agree` the run restarts with each outlier that
+/// disagrees with the one before, and the track moves only on two that agree.
+#[test]
+fn outliers_that_disagree_do_not_restart_a_mixed_track() {
+    let r = Matrix2::identity() * 1e-3;
+    let at = |t: f64, x: f64, y: f64| FieldObservation {
+        t_s: t,
+        position: Vector2::new(x, y),
+        cov: r,
+    };
+    let settled = |agree: bool| {
+        let mut f = BallFilter::new(BallFilterConfig {
+            outliers_must_agree: agree,
+            ..BallFilterConfig::default()
+        });
+        for k in 0..30 {
+            f.observe(&at(k as f64 * 0.03, 1.0, 1.0));
+        }
+        f
+    };
+    let (stray, false_ball) = (at(0.93, 1.5, 1.0), at(0.94, -3.0, -2.0));
+    let mut plain = settled(false);
+    plain.observe(&stray);
+    assert_eq!(
+        plain.observe(&false_ball),
+        BallUpdate::Restarted,
+        "the old rule"
+    );
+    let mut mixed = settled(true);
+    assert!(matches!(mixed.observe(&stray), BallUpdate::Outlier(_)));
+    assert!(matches!(mixed.observe(&false_ball), BallUpdate::Outlier(_)));
+    let p = mixed.estimate().unwrap().position();
+    assert!(
+        (p - Vector2::new(1.0, 1.0)).norm() < 1e-6,
+        "kept the ball: {p}"
+    );
+    // A kick: two sightings that agree with each other restart it where the ball went.
+    assert!(matches!(
+        mixed.observe(&at(0.96, 2.5, 1.0)),
+        BallUpdate::Outlier(_)
+    ));
+    assert_eq!(mixed.observe(&at(0.99, 2.52, 1.0)), BallUpdate::Restarted);
+}
+
 #[test]
 fn the_network_limited_reference_is_the_centralized_filter_fed_out_of_order() {
     // A ball rolling along x, seen by robot A every 40 ms and by robot B every 40 ms

@@ -239,6 +239,7 @@ pub fn run(sc: &Scenario) -> Vec<Record> {
     let local_cfg = LocalConfig {
         pose_noise: noise,
         pose_gate_chi2: None,
+        pose_relocalise: None,
         ball: ball_cfg,
     };
     let gcfg = GlobalConfig {
