@@ -232,6 +232,9 @@ struct Heard {
     errors: u64,
     /// The daemon's `frames_out` (from `GETV local.var.huddle.stats.frames_out`).
     frames_out: Option<u64>,
+    /// Resets told whose marking `GETV` has not come back yet: until it does, every ball
+    /// heard may be from before the reset, so the robot plays on none.
+    resets_pending: u32,
 }
 
 /// A robot's daemon: its process and its relay connection.
@@ -436,6 +439,7 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
                 // before it is of the ball that is gone, every one after it is new.
                 h.view.own_ball = None;
                 h.view.team_ball = None;
+                h.resets_pending = h.resets_pending.saturating_sub(1);
             } else {
                 h.tick_at = Some(now);
             }
@@ -462,6 +466,13 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
 /// published brought up to `now`.
 fn view_at(heard: &Heard, now: Instant) -> TeamView {
     let mut view = heard.view.clone();
+    if heard.resets_pending > 0 {
+        // The program told its layer the ball was put back and has not yet read past
+        // that point: what it holds is of the old ball (a robot program knows when it
+        // reset, as this one does).
+        view.own_ball = None;
+        view.team_ball = None;
+    }
     let since = |at: Option<Instant>, published: f64| {
         published + at.map_or(0.0, |a| now.saturating_duration_since(a).as_secs_f64())
     };
@@ -680,6 +691,7 @@ pub fn run(
             // its layer, as the in-process robots are told.
             central.forget();
             for (d, r) in daemons.iter_mut().zip(&mut robots) {
+                d.heard.lock().unwrap_or_else(|e| e.into_inner()).resets_pending += 1;
                 let (key, value) = r.ball_reset();
                 // The GETV marks the reset's place in the relay's ordered output.
                 d.send(&format!(
