@@ -111,7 +111,11 @@ fn bad_datagrams_are_counted_by_kind_and_change_neither_the_keys_nor_the_budget(
     for (what, bytes) in &bad {
         b.now_ms += 100;
         l.receive(&mut b, gc(), bytes);
-        assert_eq!(b.game_keys(), keys, "a {what} datagram changed the game's keys");
+        assert_eq!(
+            b.game_keys(),
+            keys,
+            "a {what} datagram changed the game's keys"
+        );
         assert_eq!(b.budget.len(), fed, "a {what} datagram fed the budget");
     }
     let stat = |k: &str| b.int(&format!("local.var.huddle.stats.gc.{k}"));
@@ -141,14 +145,22 @@ fn a_stale_packet_number_never_moves_the_game_or_the_budget_back_across_the_wrap
         b.now_ms += 500;
         l.receive(&mut b, gc(), &g.encode());
     }
-    assert_eq!(b.int("local.var.gc.budget"), Some(897), "1 follows 0 follows 255");
+    assert_eq!(
+        b.int("local.var.gc.budget"),
+        Some(897),
+        "1 follows 0 follows 255"
+    );
     let (keys, fed) = (b.game_keys(), b.budget.len());
     let mut late = playing(255);
     late.state = State::Set;
     late.team_mut(12).expect("our team").message_budget = 950;
     b.now_ms += 100;
     l.receive(&mut b, gc(), &late.encode());
-    assert_eq!(b.game_keys(), keys, "a stale packet changed the game's keys");
+    assert_eq!(
+        b.game_keys(),
+        keys,
+        "a stale packet changed the game's keys"
+    );
     assert_eq!(b.budget.len(), fed, "a stale packet fed the budget");
     assert_eq!(b.int("local.var.huddle.stats.gc.stale"), Some(1));
     let (_, cap) = b.budget.last().copied().expect("the budget was fed");

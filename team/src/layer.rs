@@ -336,7 +336,7 @@ impl TeamLayer {
 
     /// Whether the GameController says Set: every robot stands on its kick-off spot, the
     /// ball on the centre spot, and play starts next. The robot then tells its cost once
-    /// (as "not going", with its world model, with priority), and after
+    /// (as "not going", with priority), and after
     /// [`KICK_OFF_SETTLE_S`] the robot whose told cost is the lowest tells that it goes,
     /// so that at the whistle every robot already holds the same fresh claims and the
     /// kick-off has one goer without a message.
@@ -764,11 +764,13 @@ impl TeamLayer {
         }
         if !self.in_play {
             return match self.kick_off_claim(t, posted) {
-                Some(claim) => {
-                    let mut writes = vec![(arbitration::heuristic_key(), Value::from(claim))];
-                    writes.extend(lwm.map(|bytes| (world_local_key(), bytes)));
-                    (writes, true)
-                }
+                // The claim alone: with the world model riding along (the ball on the
+                // centre spot) the team's counted frames went to Set at each of the
+                // game's ~20 kick-offs and one goer fell 1.9 points on seed 1.
+                Some(claim) => (
+                    vec![(arbitration::heuristic_key(), Value::from(claim))],
+                    true,
+                ),
                 None => (Vec::new(), false),
             };
         }
