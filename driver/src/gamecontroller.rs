@@ -514,3 +514,7 @@ impl Written {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "gamecontroller_tests.rs"]
+mod tests;

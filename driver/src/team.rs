@@ -361,11 +361,14 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
     // Out of play (the GC's state is not Playing) the layer tells the team nothing.
+    // In Set it tells its kick-off claim (see `TeamLayer::set_kick_off_next`).
     let state = Key::parse(GC_STATE_KEY).expect("a valid key");
-    layer.set_in_play(match replica.blackboard().get(&state).map(|e| &e.value) {
-        Some(Value::String(s)) => s == "playing",
-        _ => true,
-    });
+    let state = match replica.blackboard().get(&state).map(|e| &e.value) {
+        Some(Value::String(s)) => Some(s.as_str()),
+        _ => None,
+    };
+    layer.set_in_play(state.is_none_or(|s| s == "playing"));
+    layer.set_kick_off_next(state == Some("set"));
     let balls: Vec<_> = inputs
         .balls
         .drain(..)

@@ -246,7 +246,18 @@ pub struct TeamLayer {
     penalty_told: bool,
     /// The ball is in play (the GameController says Playing, or there is none).
     in_play: bool,
+    /// The GameController says Set: a kick-off comes next (see
+    /// [`TeamLayer::set_kick_off_next`]).
+    kick_off_next: bool,
+    /// In this Set: when it told its kick-off cost, and whether it told it goes.
+    kick_off_told_at_s: Option<f64>,
+    kick_off_going_told: bool,
 }
+
+/// In Set, the kick-off's goer tells that it goes no sooner than this after its cost
+/// went, seconds: the teammates' costs, sent when they heard Set (the GC's packets come
+/// every 0.5 s, one may be lost), are in by then.
+const KICK_OFF_SETTLE_S: f64 = 1.5;
 
 /// The robot id at index `k` of a team's per-robot vectors.
 fn robot_id(k: usize) -> u8 {
@@ -315,6 +326,9 @@ impl TeamLayer {
             penalized: vec![false; team.max(usize::from(id))],
             penalty_told: false,
             in_play: true,
+            kick_off_next: false,
+            kick_off_told_at_s: None,
+            kick_off_going_told: false,
         }
     }
 
@@ -322,10 +336,67 @@ impl TeamLayer {
     /// no GameController). Out of play (Initial, Standby, Ready, Set, Finished) nobody
     /// plays the ball, so the layer keeps deciding for itself but tells the team nothing
     /// (a penalty aside): a league counts messages in Standby, Ready and Set, and a claim
-    /// there is spent on nothing. At the kick-off every robot's last claim is old and
-    /// the budget's room for claims is whole, so the team settles its goer at once.
+    /// there is spent on nothing; Set is the exception (see
+    /// [`TeamLayer::set_kick_off_next`]).
     pub fn set_in_play(&mut self, in_play: bool) {
         self.in_play = in_play;
+    }
+
+    /// Whether the GameController says Set: every robot stands on its kick-off spot, the
+    /// ball on the centre spot, and play starts next. The robot then tells its cost once
+    /// (as "not going", with priority), and after
+    /// [`KICK_OFF_SETTLE_S`] the robot whose told cost is the lowest tells that it goes,
+    /// so that at the whistle every robot already holds the same fresh claims and the
+    /// kick-off has one goer without a message.
+    ///
+    /// Why: out of play nothing is told, and Ready lasts up to 45 s, longer than a claim
+    /// is held under a budget (three message intervals, 15 s in the SPL). Without it
+    /// every robot that sees the ball at the whistle goes, and the claims that would
+    /// settle it compete for the budget's room for priority frames at the moment the
+    /// team is on its pacing line (the clock stood through Ready and Set): the first
+    /// kick-off of a simulated SPL game had two or more goers for 5.6–8.6 s. A claim in
+    /// Set costs a counted message per field robot that sees the ball, and one for the
+    /// goer.
+    pub fn set_kick_off_next(&mut self, set: bool) {
+        if set && !self.kick_off_next {
+            self.kick_off_told_at_s = None;
+            self.kick_off_going_told = false;
+        }
+        self.kick_off_next = set;
+    }
+
+    /// In Set, the claim to tell now (see [`TeamLayer::set_kick_off_next`]), if any.
+    fn kick_off_claim(&mut self, t_s: f64, posted: Posted) -> Option<Posted> {
+        let no_ball = self.arbiter.params().no_ball_cost;
+        if !(self.kick_off_next && self.alive && self.is_field_player() && posted.h < no_ball) {
+            return None;
+        }
+        let claim = match self.kick_off_told_at_s {
+            None => {
+                self.kick_off_told_at_s = Some(t_s);
+                Posted {
+                    h: posted.h,
+                    going: false,
+                }
+            }
+            Some(at)
+                if posted.going && !self.kick_off_going_told && t_s - at >= KICK_OFF_SETTLE_S =>
+            {
+                self.kick_off_going_told = true;
+                posted
+            }
+            Some(_) => return None,
+        };
+        let cost = self.arbiter.params().effective_cost(&claim);
+        if self.compact {
+            // Decide on it as its teammates will: every robot weighs the same costs.
+            self.policy.wrote_claim(claim.going, claim.h, cost);
+            self.arbiter.set_told(Some(claim));
+            self.untold_claim = Some(claim);
+        } else {
+            self.policy.sent_going(claim.going, claim.h, cost);
+        }
+        Some(claim)
     }
 
     /// The robots the GameController says are penalised (player numbers, this robot's
@@ -708,7 +779,16 @@ impl TeamLayer {
             return (vec![(arbitration::heuristic_key(), Value::from(out))], true);
         }
         if !self.in_play {
-            return (Vec::new(), false);
+            return match self.kick_off_claim(t, posted) {
+                // The claim alone: with the world model riding along (the ball on the
+                // centre spot) the team's counted frames went to Set at each of the
+                // game's ~20 kick-offs and one goer fell 1.9 points on seed 1.
+                Some(claim) => (
+                    vec![(arbitration::heuristic_key(), Value::from(claim))],
+                    true,
+                ),
+                None => (Vec::new(), false),
+            };
         }
         if let Some(bytes) = lwm {
             writes.push((world_local_key(), bytes));

@@ -291,3 +291,104 @@ fn a_penalised_robot_claims_nothing_and_tells_its_team_once() {
         "the penalised claim counts for nothing: {heard:?}"
     );
 }
+
+#[test]
+fn in_set_a_field_robot_tells_its_kick_off_cost_once_and_the_goer_then_tells_it_goes() {
+    // Scenario: robot 2 stands on its kick-off spot in Set, 1 m from the ball, and its
+    // arbiter would go. It tells "cost 1.0, not going" at once with priority, nothing
+    // more until 1.5 s later, then "going" once; out of Set, nothing.
+    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
+    let mut r = TeamLayer::new(
+        2,
+        false,
+        ArbitrationParams::default(),
+        Pose::default(),
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    r.set_in_play(false);
+    let going = Posted {
+        h: 1.0,
+        going: true,
+    };
+    let at = |s: f64| Instant::from_micros((s * 1e6) as u64);
+    let finish = |r: &mut TeamLayer, s: f64| {
+        r.finish(&cfg, at(s), None, going, 0, false, false, false, Some(5))
+    };
+    assert_eq!(finish(&mut r, 10.0), (Vec::new(), false), "Ready: silent");
+    r.set_kick_off_next(true);
+    let claim = |going| {
+        vec![(
+            arbitration::heuristic_key(),
+            Value::from(Posted { h: 1.0, going }),
+        )]
+    };
+    assert_eq!(
+        finish(&mut r, 10.04),
+        (claim(false), true),
+        "its cost, at once"
+    );
+    assert_eq!(
+        finish(&mut r, 11.0),
+        (Vec::new(), false),
+        "teammates' costs come in"
+    );
+    assert_eq!(finish(&mut r, 11.6), (claim(true), true), "then it goes");
+    assert_eq!(finish(&mut r, 12.0), (Vec::new(), false), "once");
+    // The next Set tells again; a goalkeeper or a robot without the ball never does.
+    r.set_kick_off_next(false);
+    assert_eq!(
+        finish(&mut r, 40.0),
+        (Vec::new(), false),
+        "Ready again: silent"
+    );
+    r.set_kick_off_next(true);
+    assert_eq!(
+        finish(&mut r, 50.0),
+        (claim(false), true),
+        "the next kick-off"
+    );
+    let mut keeper = TeamLayer::new(
+        1,
+        true,
+        ArbitrationParams::default(),
+        Pose::default(),
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    keeper.set_in_play(false);
+    keeper.set_kick_off_next(true);
+    assert_eq!(finish(&mut keeper, 10.0), (Vec::new(), false), "the keeper");
+    let no_ball = Posted {
+        h: ArbitrationParams::default().no_ball_cost,
+        going: false,
+    };
+    let mut blind = TeamLayer::new(
+        3,
+        false,
+        ArbitrationParams::default(),
+        Pose::default(),
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    blind.set_in_play(false);
+    blind.set_kick_off_next(true);
+    assert_eq!(
+        blind.finish(
+            &cfg,
+            at(10.0),
+            None,
+            no_ball,
+            0,
+            false,
+            false,
+            false,
+            Some(5)
+        ),
+        (Vec::new(), false),
+        "no ball, no claim"
+    );
+}

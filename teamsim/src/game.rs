@@ -12,9 +12,10 @@
 //!
 //! The field follows the referee's truth: outside Playing the ball lies on the centre spot
 //! and the opponents on their kick-off spots; a penalised robot's body is carried to the
-//! sideline and comes back, 45 s later, on the touchline in its own half on the side away
-//! from the ball (it is told where, as a team is by the rules). Arbitration and
-//! world-model figures are sampled in Playing only.
+//! sideline and comes back when its penalty timer (45 s of Ready and Playing) has run,
+//! on the touchline in its own half on the side away from the ball (it is told where, as
+//! a team is by the rules). Arbitration and world-model figures are sampled in Playing
+//! only.
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -158,6 +159,12 @@ impl Game {
 }
 
 impl Simulation {
+    /// The simulated GameController's books (its truth, not what a robot heard), when the
+    /// match is played under one (`--game`).
+    pub fn referee(&self) -> Option<&Referee> {
+        self.game.as_ref().map(|g| &g.referee)
+    }
+
     /// Whether arbitration and world-model figures are sampled now: always without a
     /// referee, in Playing with one.
     pub(super) fn in_play(&self) -> bool {
@@ -212,6 +219,7 @@ impl Simulation {
             let penalised = game.trackers[i].penalized() == Some(true)
                 || game.referee.penalised(comms_netsim::robot_id(i));
             self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
+            self.robots[i].set_kick_off_next(heard == Some(State::Set));
             self.robots[i].order = match heard {
                 _ if penalised => Order::Stand,
                 Some(State::Playing) => Order::Play,

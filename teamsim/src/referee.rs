@@ -15,10 +15,22 @@
 //! It broadcasts a [`GameControlData`] every 500 ms ([`Referee::packet`]); the simulator
 //! hands each robot the packet's **encoded bytes**, which the robot decodes through its
 //! own [`gamecontroller::GameTracker`] and feeds to its replica's budget exactly as
-//! `huddle daemon` does (`driver::gamecontroller`). What it simplifies: the state it shows
-//! is the true state (GameController3 can show Playing up to 15 s late; both are counted
-//! states, so the count is the same), a penalty's 45 s run in every state of the half,
-//! and a goal's Ready and Set take fixed times ([`GameScript`]).
+//! `huddle daemon` does (`driver::gamecontroller`).
+//!
+//! Penalties run on GameController3's penalty timer (`actions/penalize.rs`,
+//! `timer.rs`): it counts down in Ready and Playing only (`RunCondition::ReadyOrPlaying`:
+//! not in Set, Initial, Standby or Finished), so a penalty that spans a goal's restart
+//! lasts its 45 s plus the Set; at 0 the robot is put back (the GC clips the timer at 0
+//! and the assistant referee returns the robot then). A half's end stops the timers
+//! (`FinishHalf`) and the robots stay off until the half-time switch, half way through
+//! the break, unpenalises them all (`SwitchHalf`).
+//!
+//! What it simplifies: the state it shows is the true state (GameController3 can show
+//! Playing up to 15 s late; both are counted states, so the count is the same), the game
+//! clock stands in Ready and Set (GameController3's rule for a "long" game, a knock-out
+//! one; in other games it runs on after the half's first kick-off), a goal's Ready and
+//! Set take fixed times ([`GameScript`]), and neither the 15 s delay after a goal nor the
+//! mercy rule (10 goals ahead ends the game) is modelled.
 //!
 //! No clock and no randomness: every call takes the simulated time, seconds.
 
@@ -158,7 +170,8 @@ pub struct Referee {
     state_until_s: f64,
     /// Play left in the half, seconds.
     play_left_s: f64,
-    /// Penalties still to come, and those running: (robot, until seconds).
+    /// Penalties still to come, and those running: (robot, penalty time left, seconds;
+    /// it counts down in Ready and Playing only, as GameController3's penalty timer).
     to_come: Vec<ScriptedPenalty>,
     running: Vec<(u8, f64)>,
     next_packet_s: f64,
@@ -253,18 +266,25 @@ impl Referee {
             self.to_come = later;
             for p in due {
                 if !self.penalised(p.robot) {
-                    self.running.push((p.robot, now_s + self.script.penalty_s));
+                    self.running.push((p.robot, self.script.penalty_s));
                     events.push(RefereeEvent::Penalised(p.robot));
                 }
             }
         }
-        let (over, still): (Vec<_>, Vec<_>) = self
-            .running
-            .iter()
-            .copied()
-            .partition(|&(_, until)| now_s >= until);
-        self.running = still;
-        events.extend(over.into_iter().map(|(r, _)| RefereeEvent::Unpenalised(r)));
+        // GameController3's penalty timer runs in Ready and Playing only; a half's end
+        // stops it (the state is Finished then).
+        if matches!(state, State::Ready | State::Playing) && self.stage == Stage::Half {
+            for (_, left) in &mut self.running {
+                *left -= dt;
+            }
+            let (over, still): (Vec<_>, Vec<_>) = self
+                .running
+                .iter()
+                .copied()
+                .partition(|&(_, left)| left <= 1e-9);
+            self.running = still;
+            events.extend(over.into_iter().map(|(r, _)| RefereeEvent::Unpenalised(r)));
+        }
         match (self.stage, state) {
             (Stage::Start, State::Initial) if now_s >= self.state_until_s => {
                 self.enter(State::Standby, now_s + self.script.standby_s, &mut events);
@@ -281,12 +301,8 @@ impl Referee {
             }
             (Stage::Half, State::Playing) if self.play_left_s <= 0.0 => {
                 self.play_left_s = 0.0;
-                // A half's end ends its penalties.
-                events.extend(
-                    self.running
-                        .drain(..)
-                        .map(|(r, _)| RefereeEvent::Unpenalised(r)),
-                );
+                // A half's end stops the penalty timers; the robots stay off until the
+                // half-time switch (or the game's end).
                 if self.data.first_half {
                     self.stage = Stage::Break;
                     self.enter(State::Finished, now_s + self.script.break_s, &mut events);
@@ -294,6 +310,18 @@ impl Referee {
                     self.stage = Stage::Over;
                     self.enter(State::Finished, now_s + self.script.finished_s, &mut events);
                 }
+            }
+            (Stage::Break, _)
+                if !self.running.is_empty()
+                    && now_s >= self.state_until_s - self.script.break_s / 2.0 =>
+            {
+                // GameController3's `SwitchHalf`, half way through the break: every
+                // penalised robot (substitutes aside) is back.
+                events.extend(
+                    self.running
+                        .drain(..)
+                        .map(|(r, _)| RefereeEvent::Unpenalised(r)),
+                );
             }
             (Stage::Break, _) if now_s >= self.state_until_s => {
                 // The second half: the other team kicks off.
@@ -405,9 +433,9 @@ impl Referee {
             for (k, p) in t.players.iter_mut().enumerate() {
                 let id = u8::try_from(k + 1).unwrap_or(u8::MAX);
                 match running.iter().find(|&&(r, _)| r == id) {
-                    Some(&(_, until)) => {
+                    Some(&(_, left)) => {
                         p.penalty = PENALTY_PUSHING;
-                        p.secs_till_unpenalised = (until - now_s).ceil().clamp(0.0, 255.0) as u8;
+                        p.secs_till_unpenalised = left.ceil().clamp(0.0, 255.0) as u8;
                     }
                     None => *p = gamecontroller::RobotInfo::default(),
                 }
@@ -514,6 +542,79 @@ mod tests {
         let mut r2 = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
         assert!(r2.goal(1.0, false).is_empty());
         assert_eq!(r2.data().team(34).map(|t| t.score), Some(0));
+    }
+
+    #[test]
+    fn a_penalty_counts_in_ready_and_playing_only_as_the_gcs_penalty_timer() {
+        // Robot 3 is penalised after 200 s of the first half's play (play begins at 55 s:
+        // at 255 s). A goal at 260 s: Ready 30 s (the timer runs), Set 5 s (it stands),
+        // then Playing. 5 + 30 + 10 = 45 s of timer: it is back at 305 s, 50 s after it
+        // was picked up.
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        let picked = run_to(&mut r, 0.0, 260.0);
+        let on = picked
+            .iter()
+            .find(|(_, e)| *e == RefereeEvent::Penalised(3))
+            .map(|(t, _)| *t)
+            .expect("robot 3 penalised");
+        // (10 ms steps: each state change lands on the step after it is due.)
+        assert!((on - 255.0).abs() < 0.1, "after 200 s of play: {on}");
+        assert!(r
+            .goal(260.0, false)
+            .contains(&RefereeEvent::State(State::Ready)));
+        let after = run_to(&mut r, 260.0, 400.0);
+        let off = after
+            .iter()
+            .find(|(_, e)| *e == RefereeEvent::Unpenalised(3))
+            .map(|(t, _)| *t)
+            .expect("robot 3 back");
+        assert!(
+            (off - on - 50.0).abs() < 0.1,
+            "45 s of Ready and Playing, and the 5 s of Set on top: back after {:.2} s",
+            off - on
+        );
+        // The packet counts down the timer, not the wall clock: it stands through Set at
+        // the 10 s left (11 as the GC rounds up, the steps landing late).
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        run_to(&mut r, 0.0, 260.0);
+        r.goal(260.0, false);
+        let secs = |r: &Referee| {
+            r.data()
+                .team(12)
+                .map(|t| t.players[2].secs_till_unpenalised)
+        };
+        run_to(&mut r, 260.0, 291.0);
+        assert_eq!(r.state(), State::Set);
+        let early = secs(&r);
+        run_to(&mut r, 291.0, 294.5);
+        assert_eq!(r.state(), State::Set);
+        assert!(
+            early == secs(&r) && early.is_some_and(|s| (10..=11).contains(&s)),
+            "in Set the timer stands at 10 s: {early:?}, then {:?}",
+            secs(&r)
+        );
+    }
+
+    #[test]
+    fn a_penalty_at_the_half_s_end_lasts_until_the_half_time_switch() {
+        // The whole 45 s cannot run: robot 3 is picked up 20 s before the half ends. The
+        // timer stops in Finished and GameController3 unpenalises everyone half way
+        // through the break.
+        let mut script = GameScript::spl_full(5);
+        script.penalties[0].after_play_s = 580.0;
+        let mut r = Referee::new(script, 12, 34, 0.0);
+        let events = run_to(&mut r, 0.0, 1300.0);
+        let at = |e: RefereeEvent| events.iter().find(|(_, x)| *x == e).map(|(t, _)| *t);
+        let (on, off) = (
+            at(RefereeEvent::Penalised(3)).expect("penalised"),
+            at(RefereeEvent::Unpenalised(3)).expect("back"),
+        );
+        let finished = at(RefereeEvent::State(State::Finished)).expect("half time");
+        assert!((on - 635.0).abs() < 0.1, "{on}");
+        assert!(
+            (off - (finished + 300.0)).abs() < 0.1,
+            "back at the switch, 300 s into the break: {off} (half over at {finished})"
+        );
     }
 
     #[test]
