@@ -691,7 +691,10 @@ pub fn run(
             // its layer, as the in-process robots are told.
             central.forget();
             for (d, r) in daemons.iter_mut().zip(&mut robots) {
-                d.heard.lock().unwrap_or_else(|e| e.into_inner()).resets_pending += 1;
+                d.heard
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .resets_pending += 1;
                 let (key, value) = r.ball_reset();
                 // The GETV marks the reset's place in the relay's ordered output.
                 d.send(&format!(
