@@ -95,6 +95,16 @@ struct Shared {
     cfg: TeamLayerConfig,
     /// Ticks so far (`local.var.team.tick`).
     ticks: i64,
+    /// Which balls the layer has published and not yet withdrawn.
+    balls_out: BallsOut,
+}
+
+/// Whether the layer's last word on each ball key was a ball (so losing it is said as
+/// `[]`; a key the layer never wrote is left to whoever wrote it).
+#[derive(Default)]
+struct BallsOut {
+    team: bool,
+    own: bool,
 }
 
 /// Starts robot `handle`'s team layer: guards on the inputs, a watch that collects them,
@@ -209,6 +219,7 @@ impl TeamCore {
                 layer,
                 cfg,
                 ticks: 0,
+                balls_out: BallsOut::default(),
             },
         }
     }
@@ -266,7 +277,7 @@ impl TeamCore {
         let waiting = replica.is_pending(&team::world_local_key());
         let writes = s.layer.redecide(replica.blackboard(), now, waiting);
         apply(replica, now, writes, true);
-        publish(replica, now, &s.layer, &s.cfg);
+        publish(replica, now, &s.layer, &s.cfg, &mut s.balls_out);
     }
 }
 
@@ -350,7 +361,12 @@ fn since(now: Instant, earlier: Instant) -> f64 {
 
 /// One control tick of the layer on what the robot program wrote since the previous one.
 fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs) {
-    let Shared { layer, cfg, ticks } = s;
+    let Shared {
+        layer,
+        cfg,
+        ticks,
+        balls_out,
+    } = s;
     if let Some(gk) = inputs.goalkeeper.take() {
         layer.set_goalkeeper(gk);
     }
@@ -422,7 +438,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
         replica.budget_headroom(),
     );
     apply(replica, now, writes, priority);
-    publish(replica, now, layer, cfg);
+    publish(replica, now, layer, cfg, balls_out);
     // Last, so a program that sees the tick change finds this tick's outputs in place.
     *ticks += 1;
     if let Err(e) = replica.set(now, contract::TICK_KEY, Value::Int(*ticks)) {
@@ -446,16 +462,13 @@ fn apply(replica: &mut Replica, now: Instant, writes: Vec<(Key, Value)>, priorit
 }
 
 /// The layer's decisions on `local.var.team.*` for the robot program.
-/// Whether `key` holds a ball the layer published (not absent, not already `[]`).
-fn holds_a_ball(replica: &Replica, key: &str) -> bool {
-    let key = Key::parse(key).expect("a contract key");
-    matches!(
-        replica.blackboard().get(&key).map(|e| &e.value),
-        Some(Value::Floats(v)) if !v.is_empty()
-    )
-}
-
-fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLayerConfig) {
+fn publish(
+    replica: &mut Replica,
+    now: Instant,
+    layer: &TeamLayer,
+    cfg: &TeamLayerConfig,
+    balls_out: &mut BallsOut,
+) {
     let now_s = team::seconds(now);
     let mut out: Vec<(&str, Value)> = vec![
         (
@@ -489,18 +502,21 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, cfg: &TeamLay
             contract::TEAM_BALL_KEY,
             contract::ball_value(&b.estimate, Some(b.gbc), age_s),
         ));
-    } else if holds_a_ball(replica, contract::TEAM_BALL_KEY) {
+    } else if balls_out.team {
         out.push((contract::TEAM_BALL_KEY, contract::no_ball_value()));
     }
-    if let Some(b) = layer.own_ball(now_s) {
+    balls_out.team = layer.team_ball_held.is_some();
+    let own = layer.own_ball(now_s);
+    if let Some(b) = own {
         let age_s = layer.ball_seen_at_s.map_or(0.0, |t| now_s - t);
         out.push((
             contract::OWN_BALL_KEY,
             contract::ball_value(&b, None, age_s),
         ));
-    } else if holds_a_ball(replica, contract::OWN_BALL_KEY) {
+    } else if balls_out.own {
         out.push((contract::OWN_BALL_KEY, contract::no_ball_value()));
     }
+    balls_out.own = own.is_some();
     let mates: Vec<f64> = layer
         .gwm
         .teammates(now_s)

@@ -395,19 +395,11 @@ pub unsafe extern "C" fn huddle_node_get_team_pose(
         Ok(
             match team_output(node, key, team::contract::parse_pose_output)? {
                 Some(p) => {
-                    let c = p.cov;
                     *out = huddle_pose {
                         x: p.pose.at.x,
                         y: p.pose.at.y,
                         theta: p.pose.theta_rad,
-                        cov: [
-                            c[(0, 0)],
-                            c[(0, 1)],
-                            c[(0, 2)],
-                            c[(1, 1)],
-                            c[(1, 2)],
-                            c[(2, 2)],
-                        ],
+                        cov: team::contract::upper_triangle(&p.cov),
                     };
                     1
                 }

@@ -377,18 +377,22 @@ pub const INPUT_KEYS: [&str; 10] = [
 /// A pose estimate as [`POSE_OUT_KEY`] gives it (REP-103).
 pub fn pose_value(est: &PoseEstimate) -> comms::Value {
     let p = frames::from_fusion_pose(est);
-    let c = &est.cov;
-    comms::Value::Floats(vec![
-        p.at.x,
-        p.at.y,
-        p.theta_rad,
+    let mut out = vec![p.at.x, p.at.y, p.theta_rad];
+    out.extend(upper_triangle(&est.cov));
+    comms::Value::Floats(out)
+}
+
+/// A 3×3 covariance's upper triangle, row by row (`var_x, cov_xy, cov_xθ, var_y, cov_yθ,
+/// var_θ`): the contract's order for poses.
+pub fn upper_triangle(c: &Matrix3<f64>) -> [f64; 6] {
+    [
         c[(0, 0)],
         c[(0, 1)],
         c[(0, 2)],
         c[(1, 1)],
         c[(1, 2)],
         c[(2, 2)],
-    ])
+    ]
 }
 
 /// A ball estimate at `now_s` as [`TEAM_BALL_KEY`] / [`OWN_BALL_KEY`] give it;

@@ -120,6 +120,26 @@ impl Pose {
     }
 }
 
+/// Where an SPL field's fixed landmarks are, for a field of `length_m` × `width_m` with
+/// goals `goal_width_m` wide (centre at the origin, x along the length): the four goal
+/// posts, the four corners and the two ends of the halfway line. The simulated world
+/// calls it with the field's true size, a robot's brain with the size it was told.
+pub fn field_landmarks(length_m: f64, width_m: f64, goal_width_m: f64) -> [Vec2; 10] {
+    let (hx, hy, gy) = (length_m / 2.0, width_m / 2.0, goal_width_m / 2.0);
+    [
+        Vec2::new(hx, gy),
+        Vec2::new(hx, -gy),
+        Vec2::new(-hx, gy),
+        Vec2::new(-hx, -gy),
+        Vec2::new(hx, hy),
+        Vec2::new(hx, -hy),
+        Vec2::new(-hx, hy),
+        Vec2::new(-hx, -hy),
+        Vec2::new(0.0, hy),
+        Vec2::new(0.0, -hy),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -195,23 +195,7 @@ impl FieldConfig {
     /// Fixed landmarks a camera can recognise: the four goal posts, the four corners and
     /// the two ends of the halfway line.
     pub fn landmarks(&self) -> [Vec2; 10] {
-        let (hx, hy, gy) = (
-            self.length_m / 2.0,
-            self.width_m / 2.0,
-            self.goal_width_m / 2.0,
-        );
-        [
-            Vec2::new(hx, gy),
-            Vec2::new(hx, -gy),
-            Vec2::new(-hx, gy),
-            Vec2::new(-hx, -gy),
-            Vec2::new(hx, hy),
-            Vec2::new(hx, -hy),
-            Vec2::new(-hx, hy),
-            Vec2::new(-hx, -hy),
-            Vec2::new(0.0, hy),
-            Vec2::new(0.0, -hy),
-        ]
+        team::geometry::field_landmarks(self.length_m, self.width_m, self.goal_width_m)
     }
 }
 
