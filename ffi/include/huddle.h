@@ -990,8 +990,9 @@ int huddle_node_set_robot_landmarks(huddle_node *node,
 // `goer`, `going` and `err` are NULL or writable.
 int huddle_node_get_team_goer(huddle_node *node, uint8_t *goer, int *going, huddle_error *err);
 
-// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while no robot
-// has seen the ball (or no team layer runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
+// Reads the team ball (`local.var.team.ball`) into `out`. Returns 1, 0 while there is
+// none (no robot has seen the ball, it was forgotten at a kick-off, or no team layer
+// runs), -1 on error (`HUDDLE_E_TYPE`: the key holds
 // something else than the contract's 9 floats).
 //
 // Thread safety: may be called from any thread, concurrently with any node function.
