@@ -77,7 +77,7 @@ pub struct Harness {
     sent_log: Option<Vec<(usize, usize)>>,
     /// Per robot: its replica's latest deadline and that instant in global time (the
     /// conversion divides; a deadline usually stays put over many rounds).
-    deadline_cache: Vec<Option<(Instant, Time)>>,
+    deadline_cache: Vec<Option<(Instant, netsim::NodeClock, Time)>>,
 }
 
 impl Harness {
@@ -349,11 +349,16 @@ impl Harness {
             let Some(deadline) = self.replicas[i].as_ref().and_then(Replica::poll_timeout) else {
                 continue;
             };
+            // Keyed by the node's clock too: netsim can set a clock by a scheduled action
+            // (a step, a new drift), and a conversion made on the old clock would name a
+            // global instant the replica's timer is not due at: the harness would then
+            // wait on it forever.
+            let clock = self.net.node_clock(self.nodes[i]).unwrap_or_default();
             let global = match self.deadline_cache[i] {
-                Some((local, global)) if local == deadline => global,
+                Some((local, at, global)) if local == deadline && at == clock => global,
                 _ => {
-                    let global = self.global_of(i, deadline);
-                    self.deadline_cache[i] = Some((deadline, global));
+                    let global = clock.to_global(Time::from_micros(deadline.as_micros()));
+                    self.deadline_cache[i] = Some((deadline, clock, global));
                     global
                 }
             };
