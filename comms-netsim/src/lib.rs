@@ -195,11 +195,6 @@ impl Harness {
         Instant::from_micros(clock.to_local(global).as_nanos() / 1000)
     }
 
-    fn global_of(&self, i: usize, local: Instant) -> Time {
-        let clock = self.net.node_clock(self.nodes[i]).unwrap_or_default();
-        clock.to_global(Time::from_micros(local.as_micros()))
-    }
-
     /// Robot `i`'s replica (`None` while it is switched off).
     pub fn replica(&self, i: usize) -> Option<&Replica> {
         self.replicas[i].as_ref()
