@@ -277,7 +277,7 @@ impl TeamCore {
         let waiting = replica.is_pending(&team::world_local_key());
         let writes = s.layer.redecide(replica.blackboard(), now, waiting);
         apply(replica, now, writes, true);
-        publish(replica, now, &s.layer, &s.cfg, &mut s.balls_out);
+        publish(replica, now, &s.layer, &mut s.balls_out);
     }
 }
 
@@ -438,7 +438,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
         replica.budget_headroom(),
     );
     apply(replica, now, writes, priority);
-    publish(replica, now, layer, cfg, balls_out);
+    publish(replica, now, layer, balls_out);
     // Last, so a program that sees the tick change finds this tick's outputs in place.
     *ticks += 1;
     if let Err(e) = replica.set(now, contract::TICK_KEY, Value::Int(*ticks)) {
@@ -462,13 +462,7 @@ fn apply(replica: &mut Replica, now: Instant, writes: Vec<(Key, Value)>, priorit
 }
 
 /// The layer's decisions on `local.var.team.*` for the robot program.
-fn publish(
-    replica: &mut Replica,
-    now: Instant,
-    layer: &TeamLayer,
-    cfg: &TeamLayerConfig,
-    balls_out: &mut BallsOut,
-) {
+fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, balls_out: &mut BallsOut) {
     let now_s = team::seconds(now);
     let mut out: Vec<(&str, Value)> = vec![
         (
@@ -531,7 +525,6 @@ fn publish(
     if let Some(h) = replica.budget_headroom() {
         out.push((contract::BUDGET_KEY, Value::Int(h)));
     }
-    let _ = cfg;
     for (key, value) in out {
         if let Err(e) = replica.set(now, key, value) {
             tracing::warn!(key, error = %e, "team layer: an output was refused");
