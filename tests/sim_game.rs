@@ -90,10 +90,6 @@ fn play(seed: u64) -> (Report, Vec<Sample>) {
 }
 
 #[test]
-#[ignore = "hangs on the merged main of 2026-11-27 (passed on h-gc3 alone): the netsim harness \
-            loops in settle/run_until because a replica's timer stays at or before now \
-            (Replica::handle_timeout -> advance, budget pacing with dirty values under the GC's \
-            cap, comms/src/replica/timers.rs poll_timeout); to fix before trusting the game"]
 fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
     let (r, seen) = play(1);
     let g = r.game.as_ref().expect("a game's report");

@@ -441,9 +441,12 @@ impl BudgetState {
     pub(crate) fn next_ordinary(&self, now: Instant) -> Option<Instant> {
         match &self.external {
             None => self.next_paced(now),
-            Some(x) if !x.cap.counted => Some(self.free.1.map_or(now, |t| t + FREE_GAP)),
-            // At the GameController's zero nothing goes, the pool's floor included.
+            // At the GameController's zero nothing goes, the pool's floor included, and
+            // not a free frame either (its state can lag one period behind a counted
+            // one). This arm comes first: `allows` refuses then, and a deadline it
+            // refuses would be due forever (a driver spinning on one instant).
             Some(_) if self.left() == 0 => None,
+            Some(x) if !x.cap.counted => Some(self.free.1.map_or(now, |t| t + FREE_GAP)),
             Some(x) => {
                 let paced = self.next_paced(now)?;
                 Some(paced.max(self.external_line_open(now, x)?))
@@ -668,6 +671,42 @@ mod tests {
         let mut fresh = BudgetState::new(budget, at(0));
         fresh.set_clock(at(0), Duration::from_secs(300));
         assert!(fresh.allows(at(0), Class::Ordinary));
+    }
+
+    /// The deadline `next_ordinary` gives and what `allows` lets go must agree: a
+    /// deadline at or before `now` that `allows` refuses is due forever, and a driver
+    /// (the daemon, the netsim harness) spins on it. Found as a hang of a whole game at
+    /// the GameController's zero in a free state (Set, Finished).
+    #[test]
+    fn a_due_ordinary_deadline_is_always_allowed() {
+        for budget in [BudgetSpec::SPL.share(5), BudgetSpec::SPL.share(5).split()] {
+            for cap in [
+                None,
+                gc(true, 0),
+                gc(true, 1),
+                gc(true, 500),
+                gc(false, 0),
+                gc(false, 1),
+                gc(false, 500),
+            ] {
+                let mut b = BudgetState::new(budget, at(0));
+                b.set_clock(at(0), Duration::from_secs(600));
+                b.set_external(cap);
+                for ms in (0..20_000).step_by(50) {
+                    let now = at(ms);
+                    let due = b.next_ordinary(now).is_some_and(|t| t <= now);
+                    assert_eq!(
+                        due,
+                        b.allows(now, Class::Ordinary),
+                        "{budget:?} {cap:?} at {ms} ms: left {}",
+                        b.left()
+                    );
+                    if due {
+                        b.spend(now, Class::Ordinary);
+                    }
+                }
+            }
+        }
     }
 
     #[test]
