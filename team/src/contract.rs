@@ -149,13 +149,23 @@ fn floats<'a>(
     expected: &'static str,
     lengths: &[usize],
 ) -> Result<&'a [f64], ContractError> {
+    floats_where(key, value, expected, |n| lengths.contains(&n))
+}
+
+/// A finite float list whose length passes `length_ok` (described by `expected`).
+fn floats_where<'a>(
+    key: &'static str,
+    value: &'a comms::Value,
+    expected: &'static str,
+    length_ok: impl Fn(usize) -> bool,
+) -> Result<&'a [f64], ContractError> {
     let comms::Value::Floats(v) = value else {
         return Err(ContractError::Type {
             key,
             expected: "floats",
         });
     };
-    if !lengths.contains(&v.len()) {
+    if !length_ok(v.len()) {
         return Err(ContractError::Length {
             key,
             expected,
@@ -494,22 +504,7 @@ pub struct MateOutput {
 /// Reads [`MATES_KEY`]: 5 floats per teammate, `[id, x, y, θ, silent_s]`.
 pub fn parse_mates(value: &comms::Value) -> Result<Vec<MateOutput>, ContractError> {
     let key = MATES_KEY;
-    let comms::Value::Floats(v) = value else {
-        return Err(ContractError::Type {
-            key,
-            expected: "floats",
-        });
-    };
-    if v.len() % 5 != 0 {
-        return Err(ContractError::Length {
-            key,
-            expected: "5 per teammate",
-            got: v.len(),
-        });
-    }
-    if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-        return Err(ContractError::NotFinite { key, index, value });
-    }
+    let v = floats_where(key, value, "5 per teammate", |n| n % 5 == 0)?;
     v.chunks(5)
         .map(|m| {
             if !(1.0..=255.0).contains(&m[0]) || m[0].fract() != 0.0 {
