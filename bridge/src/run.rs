@@ -458,12 +458,15 @@ impl Bridge {
     /// beside it, which hands over what is still queued before it ends); then closes the
     /// session, which writes out what Zenoh still queues.
     pub fn run(self) -> Result<(), BridgeError> {
+        // The publisher stops when told here, after the field side's last values are in
+        // the outbox, not at the signal (it would leave what is read after it behind).
+        let publisher_stop = Arc::new(AtomicBool::new(false));
         let publisher = Publisher {
             core: self.core.clone(),
             clock: self.clock,
             session: self.session.clone(),
             tokens: HashMap::new(),
-            shutdown: self.shutdown.clone(),
+            shutdown: publisher_stop.clone(),
         };
         let publisher: JoinHandle<()> = std::thread::Builder::new()
             .name("zenoh-publisher".into())
@@ -490,9 +493,25 @@ impl Bridge {
         let mut buf = vec![0u8; 65_536];
         let result = result.and(self.read_what_is_left(&mut buf));
         self.shutdown.store(true, Ordering::Relaxed);
+        publisher_stop.store(true, Ordering::Relaxed);
         self.core.1.notify_all();
         let _ = publisher.join();
-        let values_out = lock(&self.core.0).exporter.stats().values_out;
+        let (values_out, held_until) = {
+            let core = lock(&self.core.0);
+            let e = core.exporter.stats();
+            tracing::info!(
+                "at stop: {} values out, {} anchor-held, {} rate-held, {} unanchored out, {} waiting in the outbox",
+                e.values_out,
+                e.anchor_held,
+                e.rate_held,
+                e.unanchored_out,
+                core.outbox.len()
+            );
+            (e.values_out, core.exporter.poll_timeout())
+        };
+        if let Some(t) = held_until {
+            tracing::warn!("at stop, values still held until {t:?}");
+        }
         flush_barrier(&self.session, &self.keys, self.clock);
         drop(self._queryables);
         if let Err(e) = self.session.close().wait() {

@@ -208,9 +208,19 @@ fn a_bridge_that_stops_flushes_every_final_value() {
         behind, 150,
         "the gated subscriber had no final value when the bridge was stopped"
     );
+    let rounds_seen = {
+        let last = last.lock().unwrap();
+        let mut r: Vec<Option<i64>> = (1..=3u8)
+            .flat_map(|id| (0..KEYS).map(move |k| key(id, k)))
+            .map(|key| last.get(&key).and_then(|p| round_of(p)))
+            .collect();
+        r.sort();
+        r.dedup();
+        r
+    };
     assert!(
         all,
-        "{} final values lost in the shutdown, e.g. {:?}",
+        "{} final values lost in the shutdown, e.g. {:?}; rounds the subscriber holds: {rounds_seen:?}",
         missing().len(),
         missing().first()
     );
