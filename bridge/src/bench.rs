@@ -50,8 +50,8 @@ pub struct BenchArgs {
     /// Length of the load phase, seconds.
     #[arg(long, default_value_t = 10)]
     pub seconds: u64,
-    /// Also run a second bridge with `--fast-path` (the field thread puts when nothing
-    /// waits), to compare the two paths in the same run.
+    /// Also run a second bridge with `--no-fast-path` (every put handed to the publisher
+    /// thread), to compare the two paths in the same run.
     #[arg(long)]
     pub compare_fast_path: bool,
     /// Where the load phase's field traffic comes from: pre-encoded frames replayed by
@@ -82,8 +82,8 @@ pub fn load_average() -> String {
 /// The bench's team.
 pub const TEAM: u8 = 7;
 const VENUE: &str = "bench";
-/// The venue of the `--compare-fast-path` bridge.
-const VENUE_FAST: &str = "bench-fastpath";
+/// The venue of the `--compare-fast-path` bridge (`--no-fast-path`).
+const VENUE_FAST: &str = "bench-handover";
 
 /// What the subscriber saw.
 #[derive(Default)]
@@ -92,7 +92,7 @@ struct Seen {
     samples: u64,
     /// The latency key's arrivals, by value.
     lat: HashMap<i64, StdInstant>,
-    /// The same through the `--compare-fast-path` bridge (`--fast-path`).
+    /// The same through the `--compare-fast-path` bridge (`--no-fast-path`).
     lat_fast: HashMap<i64, StdInstant>,
     /// The hop key's arrivals, by value.
     hop: HashMap<i64, StdInstant>,
@@ -211,7 +211,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 .args(["--team", &TEAM.to_string(), "--venue", VENUE_FAST])
                 .arg("--group")
                 .arg(group.to_string())
-                .args(["--iface", "127.0.0.1", "--fast-path", "--connect"])
+                .args(["--iface", "127.0.0.1", "--no-fast-path", "--connect"])
                 .arg(format!("tcp/127.0.0.1:{port}"))
                 .env("RUST_LOG", "warn")
                 .spawn()
@@ -394,14 +394,14 @@ fn measure(
             .collect();
         added.sort_by(f64::total_cmp);
         println!(
-            "  added by a second bridge with --fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
+            "  added by a second bridge with --no-fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
             added.len(),
             quantile_f(&added, 0.5) * 1e3,
             quantile_f(&added, 0.99) * 1e3,
         );
     }
     let venues: &[(&str, &str)] = if args.compare_fast_path {
-        &[(VENUE, "default"), (VENUE_FAST, "--fast-path")]
+        &[(VENUE, "default"), (VENUE_FAST, "--no-fast-path")]
     } else {
         &[(VENUE, "default")]
     };

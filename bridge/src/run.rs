@@ -9,7 +9,7 @@
 //! never waits for Zenoh. The queryables run on Zenoh's threads and read the same replica
 //! under the same mutex.
 //!
-//! **The fast path** (`--fast-path`). Waking the publisher thread is a scheduler
+//! **The fast path** (the default; `--no-fast-path` turns it off). Waking the publisher thread is a scheduler
 //! hand-over per sample, and a put from any thread then wakes Zenoh's transmit task on
 //! its TX worker: two thread wake-ups before a sample leaves. With the fast path, when
 //! nothing waits, the publisher is idle and no put has been slow in the last second, the
