@@ -74,7 +74,8 @@ pub struct RunArgs {
     /// By default it puts a datagram's few samples itself when nothing waits, from Zenoh's
     /// TX runtime, which removes two thread wake-ups from a sample's path (0.12-0.14 ms
     /// p50 on the loaded test machine, docs/bridge.md); a Zenoh queue that fills at once
-    /// can then hold the field task up to Zenoh's block timeout.
+    /// can then hold the field task up to Zenoh's block timeout. Needs Zenoh's TX runtime
+    /// configured (`ZENOH_RUNTIME`, which the binary sets to two TX workers if unset).
     #[arg(long)]
     pub no_fast_path: bool,
 }

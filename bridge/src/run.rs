@@ -398,7 +398,7 @@ impl Bridge {
             timings: Timings::default(),
             putting: false,
             slow_until: None,
-            fast_path: cfg.fast_path,
+            fast_path: cfg.fast_path && tx_runtime_configured(),
         };
         core.drain(clock.now());
         let core: Shared = Arc::new((Mutex::new(core), Condvar::new()));
@@ -783,6 +783,22 @@ impl Publisher {
             core.slow_until = Some(self.clock.now() + SLOW_HOLD);
         }
     }
+}
+
+/// Whether Zenoh's TX runtime was configured (`ZENOH_RUNTIME` names `tx`, as the binary
+/// sets it: two workers). With Zenoh's default single TX worker a fast-path put that
+/// waits for a free batch would hold the one thread Zenoh's transmit task needs; a
+/// program embedding [`Bridge`] without configuring it gets the hand-over path.
+fn tx_runtime_configured() -> bool {
+    let configured =
+        std::env::var(zenoh_runtime::ZENOH_RUNTIME_ENV).is_ok_and(|v| v.contains("tx"));
+    if !configured {
+        tracing::info!(
+            "ZENOH_RUNTIME does not configure Zenoh's TX runtime: every put goes through the \
+             publisher thread (set it to '(tx: (worker_threads: 2))' for the fast path)"
+        );
+    }
+    configured
 }
 
 /// Waits until the router has routed every put this session made before it: a `get` on
