@@ -50,16 +50,40 @@ pub struct BenchArgs {
     /// Length of the load phase, seconds.
     #[arg(long, default_value_t = 10)]
     pub seconds: u64,
-    /// Also run a second bridge with `--fast-path` (the field thread puts when nothing
-    /// waits), to compare the two paths in the same run.
+    /// Also run a second bridge with `--no-fast-path` (every put handed to the publisher
+    /// thread), to compare the two paths in the same run.
     #[arg(long)]
     pub compare_fast_path: bool,
+    /// Where the load phase's field traffic comes from: pre-encoded frames replayed by
+    /// one sender (the robots' replicas run ahead of time), or live daemons.
+    #[arg(long, value_enum, default_value_t = LoadFrom::Frames)]
+    pub load_from: LoadFrom,
 }
 
-const TEAM: u8 = 7;
+/// `--load-from`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LoadFrom {
+    /// Pre-encoded frames from one sender thread ([`crate::loadgen`]).
+    Frames,
+    /// Daemons in this process (their runtimes compete with the bridge for the CPU).
+    Daemons,
+}
+
+/// The 1-minute load average, as /proc/loadavg says.
+pub fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .unwrap_or_default()
+        .split_whitespace()
+        .next()
+        .unwrap_or("?")
+        .to_owned()
+}
+
+/// The bench's team.
+pub const TEAM: u8 = 7;
 const VENUE: &str = "bench";
-/// The venue of the `--compare-fast-path` bridge.
-const VENUE_FAST: &str = "bench-fastpath";
+/// The venue of the `--compare-fast-path` bridge (`--no-fast-path`).
+const VENUE_FAST: &str = "bench-handover";
 
 /// What the subscriber saw.
 #[derive(Default)]
@@ -68,7 +92,7 @@ struct Seen {
     samples: u64,
     /// The latency key's arrivals, by value.
     lat: HashMap<i64, StdInstant>,
-    /// The same through the `--compare-fast-path` bridge (`--fast-path`).
+    /// The same through the `--compare-fast-path` bridge (`--no-fast-path`).
     lat_fast: HashMap<i64, StdInstant>,
     /// The hop key's arrivals, by value.
     hop: HashMap<i64, StdInstant>,
@@ -187,7 +211,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 .args(["--team", &TEAM.to_string(), "--venue", VENUE_FAST])
                 .arg("--group")
                 .arg(group.to_string())
-                .args(["--iface", "127.0.0.1", "--fast-path", "--connect"])
+                .args(["--iface", "127.0.0.1", "--no-fast-path", "--connect"])
                 .arg(format!("tcp/127.0.0.1:{port}"))
                 .env("RUST_LOG", "warn")
                 .spawn()
@@ -210,7 +234,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let _ = c.kill();
         let _ = c.wait();
     }
-    result
+    let raw_rate = result?;
+    drop(daemons);
+    if args.load_from == LoadFrom::Frames {
+        crate::bench_load::run(args, port, &sub_session, raw_rate)?;
+    }
+    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -223,7 +252,7 @@ fn measure(
     started: StdInstant,
     pid: u32,
     lat_key: &str,
-) -> Result<()> {
+) -> Result<f64> {
     let lock = || seen.lock().unwrap_or_else(|p| p.into_inner());
     let deadline = started + Duration::from_secs(10);
     let first = loop {
@@ -365,19 +394,26 @@ fn measure(
             .collect();
         added.sort_by(f64::total_cmp);
         println!(
-            "  added by a second bridge with --fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
+            "  added by a second bridge with --no-fast-path (same run, n={}): p50 {:.3} ms  p99 {:.3} ms",
             added.len(),
             quantile_f(&added, 0.5) * 1e3,
             quantile_f(&added, 0.99) * 1e3,
         );
     }
-    if let Some(stats) = bridge_stats(sub_session, VENUE) {
-        let t = &stats["timing_us"];
-        println!(
-            "  inside the bridge, p50/p99 us: datagram -> queued {}/{}, queued -> put {}/{}, put {}/{} ({} fast-path batches, {} handed over)",
-            t["field"]["p50"], t["field"]["p99"], t["handoff"]["p50"], t["handoff"]["p99"],
-            t["put"]["p50"], t["put"]["p99"], t["inline_puts"], t["handed_over"]
-        );
+    let venues: &[(&str, &str)] = if args.compare_fast_path {
+        &[(VENUE, "default"), (VENUE_FAST, "--no-fast-path")]
+    } else {
+        &[(VENUE, "default")]
+    };
+    for (venue, name) in venues {
+        if let Some(stats) = bridge_stats(sub_session, venue) {
+            let t = &stats["timing_us"];
+            println!(
+                "  inside the bridge ({name}), p50/p99 us: datagram -> queued {}/{}, queued -> put {}/{}, put {}/{} ({} fast-path batches, {} handed over)",
+                t["field"]["p50"], t["field"]["p99"], t["handoff"]["p50"], t["handoff"]["p99"],
+                t["put"]["p50"], t["put"]["p99"], t["inline_puts"], t["handed_over"]
+            );
+        }
     }
     println!(
         "  load average {}",
@@ -424,6 +460,9 @@ fn measure(
         println!("  this process (router, publisher, subscriber): {cores:.2} cores");
     }
     let raw_rate = raw_got as f64 / raw_secs;
+    if args.load_from == LoadFrom::Frames {
+        return Ok(raw_rate);
+    }
 
     let n = daemons.len().min(args.daemons as usize);
     let per = args.keys.div_ceil(n);
@@ -546,11 +585,11 @@ fn measure(
     if let Some(stats) = bridge_stats(sub_session, VENUE) {
         println!("  @bridge/stats: {stats}");
     }
-    Ok(())
+    Ok(raw_rate)
 }
 
 /// The bridge's `@bridge/stats` of `venue`.
-fn bridge_stats(session: &zenoh::Session, venue: &str) -> Option<serde_json::Value> {
+pub fn bridge_stats(session: &zenoh::Session, venue: &str) -> Option<serde_json::Value> {
     session
         .get(format!("huddle/@v1/{venue}/{TEAM}/@bridge/stats"))
         .wait()
@@ -561,7 +600,7 @@ fn bridge_stats(session: &zenoh::Session, venue: &str) -> Option<serde_json::Val
 }
 
 /// utime + stime of `pid`, in clock ticks (100 per second on Linux).
-fn cpu_ticks(pid: u32) -> Option<u64> {
+pub fn cpu_ticks(pid: u32) -> Option<u64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // The command name may hold spaces: fields start after the last ')'.
     let rest = &stat[stat.rfind(')')? + 2..];

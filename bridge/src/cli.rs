@@ -70,12 +70,14 @@ pub struct RunArgs {
     /// First chunk of the --ros2 keys.
     #[arg(long, default_value = "huddle_ros")]
     pub ros2_prefix: String,
-    /// Let the field thread put a datagram's samples itself when nothing waits (one
-    /// thread hand-over less per sample; a Zenoh queue filling at once can then hold the
-    /// field thread up to Zenoh's block timeout). Off by default: it measured no gain on
-    /// the loaded test machine (docs/bridge.md).
+    /// Hand every sample to the publisher thread: the field task never puts itself.
+    /// By default it puts a datagram's few samples itself when nothing waits, from Zenoh's
+    /// TX runtime, which removes two thread wake-ups from a sample's path (0.12-0.14 ms
+    /// p50 on the loaded test machine, docs/bridge.md); a Zenoh queue that fills at once
+    /// can then hold the field task up to Zenoh's block timeout. Needs Zenoh's TX runtime
+    /// configured (`ZENOH_RUNTIME`, which the binary sets to two TX workers if unset).
     #[arg(long)]
-    pub fast_path: bool,
+    pub no_fast_path: bool,
 }
 
 /// `--transport`.
@@ -172,7 +174,7 @@ impl RunArgs {
                 ros2: self.ros2,
             },
             zenoh: self.zenoh_config()?,
-            fast_path: self.fast_path,
+            fast_path: !self.no_fast_path,
         })
     }
 

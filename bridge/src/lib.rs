@@ -31,11 +31,13 @@
 #![forbid(unsafe_code)]
 
 pub mod bench;
+pub mod bench_load;
 pub mod cdr;
 pub mod cli;
 pub mod export;
 pub mod harness;
 pub mod keys;
+pub mod loadgen;
 pub mod outbox;
 pub mod run;
 pub mod transit;

@@ -30,6 +30,15 @@ enum Command {
 }
 
 fn main() -> Result<()> {
+    // The field task runs on Zenoh's TX runtime and may put there (the fast path): a put
+    // that has to wait for a free batch waits for Zenoh's transmit task, which then needs a
+    // second worker to run on. Zenoh reads this once, at its first use (none yet).
+    if std::env::var_os(zenoh_runtime::ZENOH_RUNTIME_ENV).is_none() {
+        std::env::set_var(
+            zenoh_runtime::ZENOH_RUNTIME_ENV,
+            "(tx: (worker_threads: 2))",
+        );
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()

@@ -1,29 +1,34 @@
 //! The bridge's I/O: the team's socket (listen only), the listening replica, one Zenoh
-//! session. The field side runs on one thread: a blocking receive with the next
-//! deadline as its timeout, each datagram fed to the replica, the replica's transmits
-//! discarded, its events handed to the [`Exporter`], the resulting operations queued in
-//! the latest-value [`Outbox`]. A publisher thread hands what waits there to Zenoh with
-//! blocking congestion control, so Zenoh drops nothing: when it blocks (a slow
-//! subscriber, a busy router) only superseded values are merged away in the outbox and
-//! every key's last value still goes, while the field side never waits for Zenoh. The
-//! queryables run on Zenoh's threads and read the same replica under the same mutex.
+//! session. The field side is one task on Zenoh's TX runtime (the runtime whose worker
+//! writes Zenoh's links): it awaits each datagram (or the next deadline), feeds it to
+//! the replica, discards the replica's transmits, hands its events to the [`Exporter`]
+//! and queues the resulting operations in the latest-value [`Outbox`]. A publisher thread
+//! hands what waits there to Zenoh with blocking congestion control, so Zenoh drops
+//! nothing: when it blocks (a slow subscriber, a busy router) only superseded values are
+//! merged away in the outbox and every key's last value still goes, while the field side
+//! never waits for Zenoh. The queryables run on Zenoh's threads and read the same replica
+//! under the same mutex.
 //!
-//! **The fast path** (`--fast-path`, off by default). Waking the publisher thread is a
-//! scheduler hand-over per sample. With the fast path, when nothing waits, the publisher
-//! is idle and no put has been slow in the last second, the field thread puts the few
-//! samples of the datagram itself (Zenoh's put only copies them into its queue). Its
-//! price: a Zenoh queue that fills at once (a router stalling after a second of fast
-//! puts) holds the field thread up to Zenoh's block timeout, and the frames read late
-//! then look up to a second slower than they were (the transit's cap). On the loaded
-//! two-core test machine it measured no gain (docs/bridge.md), so it is not the default.
-//! One of the two threads puts at a time, so samples keep their order.
+//! **The fast path** (the default; `--no-fast-path` turns it off). Waking the publisher thread is a scheduler
+//! hand-over per sample, and a put from any thread then wakes Zenoh's transmit task on
+//! its TX worker: two thread wake-ups before a sample leaves. With the fast path, when
+//! nothing waits, the publisher is idle and no put has been slow in the last second, the
+//! field task puts the datagram's few samples itself. Being on the TX runtime, the put
+//! schedules Zenoh's transmit task on the same worker, where it runs as soon as the field
+//! task yields (it does, after each put): no thread wake-up at all between the datagram
+//! and the socket write. Its price: a Zenoh queue that fills at once (a router stalling
+//! after a second of fast puts) holds the field task up to Zenoh's block timeout; the
+//! binary gives the TX runtime a second worker so that Zenoh's transmit task can run
+//! meanwhile. One of the two puts at a time, so samples keep their order.
 //!
 //! **Zenoh going away.** The bridge declares a liveliness token
 //! `…/<team>/@bridge/alive`: a subscriber that sees it appear (at start, or again after
 //! its own link or the router came back) gets the team's prefix and recovers every value
-//! it missed. When the bridge's own session comes back, it puts every key's current
-//! value once more. On SIGTERM/SIGINT ([`Bridge::shutdown_flag`]) the outbox is handed
-//! over and the session closed, which writes Zenoh's queue out before the links close.
+//! it missed. When the bridge's own session comes back (checked by the publisher thread),
+//! it puts every key's current value once more. On SIGTERM/SIGINT
+//! ([`Bridge::shutdown_flag`]) the datagrams left in the socket are read, the outbox is
+//! handed over, a flush barrier ([`flush_barrier`]) waits until the router has routed
+//! every put, and the session is closed.
 
 use std::collections::HashMap;
 use std::io;
@@ -40,7 +45,8 @@ use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
-use zenoh::query::Query;
+use zenoh::query::{ConsolidationMode, Query};
+use zenoh::sample::Locality;
 use zenoh::{Session, Wait};
 
 use crate::export::{ExportConfig, Exporter, Op, Sample};
@@ -51,10 +57,16 @@ use crate::transit::Heard;
 /// A put longer than this counts as slow: Zenoh's queue was full (or the machine very
 /// busy), and the field thread leaves puts to the publisher thread for [`SLOW_HOLD`].
 const SLOW_PUT: Duration = Duration::from_millis(2);
+/// The most samples the field task puts in one turn on the fast path: well inside one of
+/// Zenoh's batches (64 kB), so a turn never needs a second free batch (Zenoh's data queue
+/// has two) while the transmit task it woke waits behind it on the same worker.
+const FAST_MAX_OPS: usize = 32;
 /// How long after a slow put the field thread does not put itself.
 const SLOW_HOLD: Duration = Duration::from_secs(1);
 /// How often the session's router or peer is checked.
 const ZENOH_CHECK: Duration = Duration::from_millis(250);
+/// How long the shutdown waits for the flush barrier ([`flush_barrier`]).
+const FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// Everything the bridge needs to start.
 pub struct BridgeConfig {
@@ -386,7 +398,7 @@ impl Bridge {
             timings: Timings::default(),
             putting: false,
             slow_until: None,
-            fast_path: cfg.fast_path,
+            fast_path: cfg.fast_path && tx_runtime_configured(),
         };
         core.drain(clock.now());
         let core: Shared = Arc::new((Mutex::new(core), Condvar::new()));
@@ -446,95 +458,67 @@ impl Bridge {
     /// beside it, which hands over what is still queued before it ends); then closes the
     /// session, which writes out what Zenoh still queues.
     pub fn run(self) -> Result<(), BridgeError> {
+        // The publisher stops when told here, after the field side's last values are in
+        // the outbox, not at the signal (it would leave what is read after it behind).
+        let publisher_stop = Arc::new(AtomicBool::new(false));
         let publisher = Publisher {
             core: self.core.clone(),
             clock: self.clock,
             session: self.session.clone(),
             tokens: HashMap::new(),
-            shutdown: self.shutdown.clone(),
+            shutdown: publisher_stop.clone(),
         };
         let publisher: JoinHandle<()> = std::thread::Builder::new()
             .name("zenoh-publisher".into())
             .spawn(move || publisher.run())?;
-        let result = self.field();
+        let field = Field {
+            socket: self.socket.try_clone()?,
+            core: self.core.clone(),
+            clock: self.clock,
+            session: self.session.clone(),
+            shutdown: self.shutdown.clone(),
+        };
+        // The field loop runs on Zenoh's TX runtime, the one that writes Zenoh's links: a
+        // put there wakes Zenoh's transmit task on the same worker thread (it runs as soon
+        // as the field task yields) instead of waking another thread (docs/bridge.md).
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        zenoh_runtime::ZRuntime::TX.spawn(async move {
+            let _ = done_tx.send(field.run().await);
+        });
+        let result = done_rx
+            .recv()
+            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the field task ended".into())));
+        // What the robots sent before the stop still goes (the publisher thread hands it
+        // over before it ends).
+        let mut buf = vec![0u8; 65_536];
+        let result = result.and(self.read_what_is_left(&mut buf));
         self.shutdown.store(true, Ordering::Relaxed);
+        publisher_stop.store(true, Ordering::Relaxed);
         self.core.1.notify_all();
         let _ = publisher.join();
-        let values_out = lock(&self.core.0).exporter.stats().values_out;
+        let (values_out, held_until) = {
+            let core = lock(&self.core.0);
+            let e = core.exporter.stats();
+            tracing::info!(
+                "at stop: {} values out, {} anchor-held, {} rate-held, {} unanchored out, {} waiting in the outbox",
+                e.values_out,
+                e.anchor_held,
+                e.rate_held,
+                e.unanchored_out,
+                core.outbox.len()
+            );
+            (e.values_out, core.exporter.poll_timeout())
+        };
+        if let Some(t) = held_until {
+            tracing::warn!("at stop, values still held until {t:?}");
+        }
+        flush_barrier(&self.session, &self.keys, self.clock);
         drop(self._queryables);
         if let Err(e) = self.session.close().wait() {
             tracing::warn!("closing the zenoh session: {e}");
         }
         tracing::info!("stopped: {values_out} values out, the outbox and Zenoh's queue flushed");
         result
-    }
-
-    fn field(&self) -> Result<(), BridgeError> {
-        let mut buf = vec![0u8; 65_536];
-        let mut next_check = self.clock.now();
-        let mut connected = true;
-        while !self.shutdown.load(Ordering::Relaxed) {
-            let wait = {
-                let core = lock(&self.core.0);
-                let now = self.clock.now();
-                core.next_deadline()
-                    .map_or(Duration::from_millis(50), |d| {
-                        d.saturating_duration_since(now)
-                    })
-                    .clamp(Duration::from_micros(100), Duration::from_millis(50))
-            };
-            self.socket.set_read_timeout(Some(wait))?;
-            let got = self.socket.recv_from(&mut buf);
-            let now = self.clock.now();
-            let direct = {
-                let mut core = lock(&self.core.0);
-                let datagram = got.is_ok();
-                match got {
-                    Ok((n, from)) => {
-                        core.io.datagrams += 1;
-                        feed(&mut core, now, from, &buf[..n]);
-                    }
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            io::ErrorKind::WouldBlock
-                                | io::ErrorKind::TimedOut
-                                | io::ErrorKind::Interrupted
-                        ) => {}
-                    Err(e) => {
-                        core.io.recv_errors += 1;
-                        tracing::warn!("receive: {e}");
-                    }
-                }
-                core.advance(now);
-                let core = &mut *core;
-                for op in core.exporter.drain_ops() {
-                    core.outbox.push(now, op);
-                }
-                if datagram && !core.outbox.is_empty() {
-                    core.timings
-                        .field
-                        .push(self.clock.now().saturating_duration_since(now));
-                }
-                self.fast_path(core, now)
-            };
-            if let Some((taken, ops)) = direct {
-                let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
-                let mut core = lock(&self.core.0);
-                core.putting = false;
-                if slow {
-                    core.slow_until = Some(self.clock.now() + SLOW_HOLD);
-                }
-                if !core.outbox.is_empty() {
-                    self.core.1.notify_one();
-                }
-            }
-            if now >= next_check {
-                next_check = now + ZENOH_CHECK;
-                connected = self.check_zenoh(connected);
-            }
-        }
-        self.read_what_is_left(&mut buf)
     }
 
     /// On shutdown: what the robots sent before it is still in the socket's buffer;
@@ -562,6 +546,90 @@ impl Bridge {
         }
         Ok(())
     }
+}
+
+/// The field side: the team's socket, read on Zenoh's TX runtime (see [`Bridge::run`]).
+struct Field {
+    socket: std::net::UdpSocket,
+    core: Shared,
+    clock: Clock,
+    session: Session,
+    shutdown: Arc<AtomicBool>,
+}
+
+impl Field {
+    /// Receives until the shutdown flag is set: each datagram fed to the replica, the
+    /// exporter's operations queued in the outbox, and either put here (the fast path)
+    /// or handed to the publisher thread.
+    async fn run(self) -> Result<(), BridgeError> {
+        self.socket.set_nonblocking(true)?;
+        let socket = tokio::net::UdpSocket::from_std(self.socket.try_clone()?)?;
+        let mut buf = vec![0u8; 65_536];
+        while !self.shutdown.load(Ordering::Relaxed) {
+            let wait = {
+                let core = lock(&self.core.0);
+                let now = self.clock.now();
+                core.next_deadline()
+                    .map_or(Duration::from_millis(50), |d| {
+                        d.saturating_duration_since(now)
+                    })
+                    .clamp(Duration::from_micros(100), Duration::from_millis(50))
+            };
+            let got = tokio::time::timeout(wait, socket.recv_from(&mut buf)).await;
+            let now = self.clock.now();
+            let direct = {
+                let mut core = lock(&self.core.0);
+                let datagram = matches!(got, Ok(Ok(_)));
+                match got {
+                    Ok(Ok((n, from))) => {
+                        core.io.datagrams += 1;
+                        feed(&mut core, now, from, &buf[..n]);
+                    }
+                    // The next deadline came first.
+                    Err(_) => {}
+                    Ok(Err(e))
+                        if matches!(
+                            e.kind(),
+                            io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                        ) => {}
+                    Ok(Err(e)) => {
+                        core.io.recv_errors += 1;
+                        tracing::warn!("receive: {e}");
+                    }
+                }
+                core.advance(now);
+                let core = &mut *core;
+                for op in core.exporter.drain_ops() {
+                    core.outbox.push(now, op);
+                }
+                if datagram && !core.outbox.is_empty() {
+                    core.timings
+                        .field
+                        .push(self.clock.now().saturating_duration_since(now));
+                }
+                self.fast_path(core, now)
+            };
+            if let Some((taken, ops)) = direct {
+                let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
+                {
+                    let mut core = lock(&self.core.0);
+                    core.putting = false;
+                    if slow {
+                        core.slow_until = Some(self.clock.now() + SLOW_HOLD);
+                    }
+                    if !core.outbox.is_empty() {
+                        self.core.1.notify_one();
+                    }
+                }
+                // The put woke Zenoh's transmit task onto this worker: let it write the
+                // batch now, before the next datagram (and before a second batch could
+                // be needed: a put waiting for a free batch here would wait for a task
+                // queued behind it).
+                tokio::task::yield_now().await;
+            }
+        }
+        Ok(())
+    }
 
     /// What the field thread puts itself (see the module docs); otherwise wakes the
     /// publisher thread if something waits.
@@ -571,6 +639,7 @@ impl Bridge {
         }
         let fast = core.fast_path
             && !core.putting
+            && core.outbox.len() <= FAST_MAX_OPS
             && core.slow_until.is_none_or(|t| now >= t)
             && core.outbox.only_samples();
         if !fast {
@@ -583,7 +652,9 @@ impl Bridge {
         let taken = self.clock.now();
         Some((taken, core.outbox.take(taken)))
     }
+}
 
+impl Publisher {
     /// Whether the session has a router or peer; logs and counts a loss, and puts every
     /// key's value once more when one is back.
     fn check_zenoh(&self, was: bool) -> bool {
@@ -613,16 +684,22 @@ impl Bridge {
         }
         now
     }
-}
 
-impl Publisher {
     /// Hands the outbox's operations to Zenoh until the bridge stops, then what is left.
     fn run(mut self) {
+        let mut next_check = self.clock.now();
+        let mut connected = true;
         loop {
+            let now = self.clock.now();
+            if now >= next_check && !self.shutdown.load(Ordering::Relaxed) {
+                next_check = now + ZENOH_CHECK;
+                connected = self.check_zenoh(connected);
+            }
             let ops = {
                 let mut core = lock(&self.core.0);
                 while (core.outbox.is_empty() || core.putting)
                     && !self.shutdown.load(Ordering::Relaxed)
+                    && self.clock.now() < next_check
                 {
                     core = self
                         .core
@@ -630,6 +707,11 @@ impl Publisher {
                         .wait_timeout(core, Duration::from_millis(50))
                         .map(|(g, _)| g)
                         .unwrap_or_else(|p| p.into_inner().0);
+                }
+                if core.putting
+                    || (core.outbox.is_empty() && !self.shutdown.load(Ordering::Relaxed))
+                {
+                    continue; // time to check the session
                 }
                 if core.outbox.is_empty() {
                     return; // stopping, nothing left
@@ -701,6 +783,74 @@ impl Publisher {
             core.slow_until = Some(self.clock.now() + SLOW_HOLD);
         }
     }
+}
+
+/// Whether Zenoh's TX runtime was configured (`ZENOH_RUNTIME` names `tx`, as the binary
+/// sets it: two workers). With Zenoh's default single TX worker a fast-path put that
+/// waits for a free batch would hold the one thread Zenoh's transmit task needs; a
+/// program embedding [`Bridge`] without configuring it gets the hand-over path.
+fn tx_runtime_configured() -> bool {
+    let configured =
+        std::env::var(zenoh_runtime::ZENOH_RUNTIME_ENV).is_ok_and(|v| v.contains("tx"));
+    if !configured {
+        tracing::info!(
+            "ZENOH_RUNTIME does not configure Zenoh's TX runtime: every put goes through the \
+             publisher thread (set it to '(tx: (worker_threads: 2))' for the fast path)"
+        );
+    }
+    configured
+}
+
+/// Waits until the router has routed every put this session made before it: a `get` on
+/// `…/@bridge/flush` that only the router can answer (no local queryable; the router never
+/// routes a query back to its source, and nobody else serves that key). It travels on
+/// the puts' priority queue and link, behind them; the router handles a link's messages
+/// in order, pushing each put into its subscribers' queues (blocking as the puts asked)
+/// before it sees the query and sends the final reply. So when the reply arrives the
+/// bridge's own queue is empty and every put is past the router: closing the session then
+/// loses nothing. Without the barrier the close wrote out Zenoh's queue with a per-batch
+/// timeout, which a router blocked on a slow subscriber let run out (values lost in 4 of
+/// 6 loaded runs). A router whose ACL denies the query (allow the bridge's subject
+/// `query` ingress on `…/@bridge/flush`, docs/bridge.md) or that is gone makes the
+/// barrier wait [`FLUSH_TIMEOUT`]; then the bridge closes anyway, and says so.
+fn flush_barrier(session: &Session, keys: &TeamKeys, clock: Clock) -> bool {
+    let t0 = clock.now();
+    let replies = match session
+        .get(keys.bridge("flush"))
+        .allowed_destination(Locality::Remote)
+        .consolidation(ConsolidationMode::None)
+        .congestion_control(CongestionControl::Block)
+        .timeout(FLUSH_TIMEOUT)
+        .wait()
+    {
+        Ok(replies) => replies,
+        Err(e) => {
+            tracing::warn!("flush barrier not sent ({e}): closing without it");
+            return false;
+        }
+    };
+    let mut timed_out = false;
+    // The channel closes at the router's final reply (or at the timeout, after an error
+    // reply saying so).
+    while let Ok(reply) = replies.recv() {
+        if let Err(e) = reply.result() {
+            timed_out |= e.payload().try_to_string().is_ok_and(|p| p == "Timeout");
+        }
+    }
+    let took = clock.now().saturating_duration_since(t0);
+    if timed_out {
+        tracing::warn!(
+            "flush barrier: no answer from the router within {FLUSH_TIMEOUT:?} (gone, or its ACL \
+             denies this bridge a query on {}); closing: what Zenoh still queues may be lost",
+            keys.bridge("flush")
+        );
+    } else {
+        tracing::info!(
+            "flush barrier: the router routed every put ({:.1} ms)",
+            took.as_secs_f64() * 1e3
+        );
+    }
+    !timed_out
 }
 
 /// Puts `ops` (values and talk messages, taken from the outbox at `taken`) in order,

@@ -2,7 +2,8 @@
 //! authentication and the access control of docs/bridge.md (default deny; a team writes
 //! only under its own prefix; the log server reads everything). Team 8's client gets 0
 //! samples and 0 replies of team 7, and its put under team 7's prefix reaches nobody,
-//! while the log server sees both teams.
+//! while the log server sees both teams. Each team may query its own `@bridge/flush` (the
+//! bridge's flush barrier at shutdown), and team 7's barrier passes under the policy.
 
 #![allow(clippy::disallowed_methods)] // real sockets, real time
 
@@ -24,6 +25,8 @@ fn acl() -> String {
                  messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
                  key_exprs: ["huddle/@v1/{VENUE}/{n}/**", "huddle/@v1/{VENUE}/{n}/@bridge/*",
                              "huddle/@v1/{VENUE}/{n}/*/@alive/*"] }},
+               {{ id: "team{n}_flush", permission: "allow", flows: ["ingress"],
+                 messages: ["query"], key_exprs: ["huddle/@v1/{VENUE}/{n}/@bridge/flush"] }},
                {{ id: "team{n}_serve", permission: "allow", flows: ["egress"],
                  messages: ["query"],
                  key_exprs: ["huddle/@v1/{VENUE}/{n}/**", "huddle/@v1/{VENUE}/{n}/@bridge/*"] }}"#
@@ -47,8 +50,8 @@ fn acl() -> String {
             {{ id: "readers", usernames: ["logserver"] }},
           ],
           policies: [
-            {{ rules: ["team7_publish", "team7_serve"], subjects: ["team7"] }},
-            {{ rules: ["team8_publish", "team8_serve"], subjects: ["team8"] }},
+            {{ rules: ["team7_publish", "team7_flush", "team7_serve"], subjects: ["team7"] }},
+            {{ rules: ["team8_publish", "team8_flush", "team8_serve"], subjects: ["team8"] }},
             {{ rules: ["read_all"], subjects: ["readers"] }},
           ],
         }}"#,
@@ -105,12 +108,13 @@ fn team_8_reads_nothing_of_team_7_and_cannot_write_there() {
         let d = Daemon::start(DaemonSpec::new(1, team, group)).unwrap();
         d.set("*.var.ball.dist", Value::Float(f64::from(team)));
         daemons.push(d);
-        bridges.push(BridgeProcess::start(
+        bridges.push(BridgeProcess::start_logged(
             group,
             team,
             VENUE,
             port,
             &["--zenoh-config", cfg.to_str().unwrap()],
+            &dir.path().join(format!("bridge{team}.log")),
         ));
     }
 
@@ -160,4 +164,16 @@ fn team_8_reads_nothing_of_team_7_and_cannot_write_there() {
     for b in &mut bridges {
         assert!(b.running(), "both bridges run");
     }
+    // Under this policy the bridge's flush barrier at shutdown (a query on its own
+    // `@bridge/flush`, answered by the router) passes: it is not left to time out.
+    bridges[0].terminate();
+    assert!(
+        wait_until(Duration::from_secs(30), || !bridges[0].running()),
+        "team 7's bridge exits after SIGTERM"
+    );
+    let log = std::fs::read_to_string(dir.path().join("bridge7.log")).unwrap();
+    assert!(
+        log.contains("flush barrier: the router routed every put"),
+        "the router answered team 7's flush barrier under the ACL; the bridge's log:\n{log}"
+    );
 }

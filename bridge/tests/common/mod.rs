@@ -31,6 +31,39 @@ impl BridgeProcess {
         BridgeProcess(child)
     }
 
+    /// As [`BridgeProcess::start`], its log (stderr) written to `log`.
+    pub fn start_logged(
+        group: SocketAddrV4,
+        team: u8,
+        venue: &str,
+        port: u16,
+        extra: &[&str],
+        log: &std::path::Path,
+    ) -> Self {
+        let file = std::fs::File::create(log).expect("the bridge's log file");
+        let child = Command::new(env!("CARGO_BIN_EXE_huddle-bridge"))
+            .args(["--group", &group.to_string(), "--iface", "127.0.0.1"])
+            .args(["--team", &team.to_string(), "--venue", venue])
+            .args(["--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args(extra)
+            .env("RUST_LOG", "info,zenoh=warn")
+            .env("NO_COLOR", "1")
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()
+            .expect("the bridge starts");
+        BridgeProcess(child)
+    }
+
+    /// Sends SIGTERM.
+    pub fn terminate(&self) {
+        let status = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(status.success(), "kill -TERM");
+    }
+
     /// Whether it is still running.
     pub fn running(&mut self) -> bool {
         matches!(self.0.try_wait(), Ok(None))
