@@ -1,9 +1,10 @@
 //! A driver whose clock is skewed on purpose (`DriverConfig::clock_skew`, the daemon's
 //! `--clock-offset` / `--clock-drift-ppm`): two robots on a scratch group on loopback,
-//! robot 1's clock reading 20 s at its start and gaining 0.5%, robot 2's the machine's.
+//! robot 1's clock reading 20 s at its start and gaining 300 ppm (ten times the drawn
+//! world's σ), robot 2's the machine's.
 //! Values still replicate both ways, each robot ages its teammate's values on its own
 //! clock as truly as it ages its own, and robot 2's estimate of robot 1's clock finds the
-//! offset and the drift. This is what `huddle sim --daemons` relies on to give each daemon
+//! offset. (How the estimate fits a drift over its 64 s window is comms' own test.) This is what `huddle sim --daemons` relies on to give each daemon
 //! the clock its robot draws in process.
 
 use std::time::Duration;
@@ -12,7 +13,7 @@ use comms::{Instant, ReplicaConfig};
 use driver::{ClockSkew, Driver, DriverConfig, Handle, Notice};
 
 const OFFSET: Duration = Duration::from_secs(20);
-const DRIFT_PPM: f64 = 5_000.0;
+const DRIFT_PPM: f64 = 300.0;
 
 fn config(id: u8, group: std::net::SocketAddrV4, skew: ClockSkew) -> DriverConfig {
     let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
@@ -89,7 +90,7 @@ fn a_skewed_robot_replicates_and_its_teammates_age_its_values_right() {
             "robot 2 ages robot 1's value {on_two:?}, written {real:?} ago: a skewed sender's \
              age must not carry its clock's offset"
         );
-        // Robot 1's clock runs 0.5% fast: 2.5 s is 2.5125 s on it.
+        // Robot 1's clock runs fast: 2.5 s is 2.50075 s on it.
         let real_on_one = real.mul_f64(1.0 + DRIFT_PPM * 1e-6);
         assert!(
             on_one.abs_diff(real_on_one) < tolerance,
@@ -103,8 +104,8 @@ fn a_skewed_robot_replicates_and_its_teammates_age_its_values_right() {
             "robot 1 ages its own value {own_one:?}"
         );
 
-        // Robot 2's estimate of robot 1's clock: its offset (read back to back on this one
-        // thread) and its drift.
+        // Robot 2's estimate of robot 1's clock against the truth (both read back to back
+        // on this one thread).
         let truth_us = us(one.now()) - us(two.now());
         let peer = two
             .stats()
@@ -115,17 +116,14 @@ fn a_skewed_robot_replicates_and_its_teammates_age_its_values_right() {
         let estimate = peer
             .clock_offset_us
             .expect("an offset estimated from echoes");
+        // Echo samples come about once a second: from two or three the estimate cannot
+        // follow the drift yet, which has added 300 µs a second since.
+        let drifted_us = (real.as_secs_f64() * DRIFT_PPM) as i64;
         assert!(
-            (estimate - truth_us).abs() < 10_000,
+            (estimate - truth_us).abs() < 5_000 + drifted_us,
             "robot 2 estimates robot 1's clock {estimate} µs ahead; it is {truth_us} µs \
              ({} samples)",
             peer.clock_samples
         );
-        if let Some(drift) = peer.clock_drift_ppm {
-            assert!(
-                (drift - DRIFT_PPM).abs() < 2_000.0,
-                "robot 2 fits robot 1's drift at {drift} ppm, it is {DRIFT_PPM} ppm"
-            );
-        }
     });
 }
