@@ -598,10 +598,11 @@ mod pacer_tests {
 
     #[test]
     fn a_late_cycle_does_not_lock_the_timer_ahead_of_the_cycles_that_follow() {
-        // Cycles every 40 ms from 10 ms; the one due at 130 ms closes at 165 ms (the
+        // Cycles every 40 ms from 10 ms. The one due at 130 ms closes at 165 ms (the
         // machine was busy), so the timer stood in for it at 150 ms and goes on every
-        // 40 ms from there. The cycles after it close 1 ms earlier than before (the
-        // scheduling jitter of a loaded machine), 19 ms after each timer tick: they must
+        // 40 ms from there; the next closes at 169 ms, and every later one 1 ms earlier
+        // than its slot (the scheduling jitter of a loaded machine), 19 ms after a timer
+        // tick. The one at 169 ms waits (4 ms after the late one); the later ones must
         // tick as they close, not wait for the timer a cycle later.
         let mut cycles: Vec<u64> = (0..30).map(|k| 10 + 40 * k).collect();
         cycles[3] = 165;
@@ -609,11 +610,13 @@ mod pacer_tests {
             *c -= 1;
         }
         let ticked = play(&cycles);
-        let prompt = ticked[4..].iter().filter(|&&t| t).count();
+        assert!(ticked[3], "the late cycle ticks: {ticked:?}");
+        assert!(!ticked[4], "a cycle 4 ms after a tick waits: {ticked:?}");
+        let prompt = ticked[5..].iter().filter(|&&t| t).count();
         assert_eq!(
             prompt,
-            ticked.len() - 4,
-            "every cycle after the late one ticks at once: {ticked:?}"
+            ticked.len() - 5,
+            "every later cycle ticks at once: {ticked:?}"
         );
     }
 
