@@ -631,3 +631,63 @@ mod pacer_tests {
         );
     }
 }
+
+#[cfg(test)]
+mod core_tests {
+    use super::{TeamCore, TeamLayerConfig};
+    use comms::{Instant, Replica, ReplicaConfig, Value};
+    use std::time::Duration;
+    use team::contract;
+
+    fn floats(v: &[f64]) -> Value {
+        Value::Floats(v.to_vec())
+    }
+
+    fn team_ball(replica: &Replica) -> Option<Value> {
+        replica
+            .get(contract::TEAM_BALL_KEY)
+            .expect("a valid key")
+            .map(|e| e.value.clone())
+    }
+
+    #[test]
+    fn a_teammate_s_claim_after_a_ball_reset_does_not_bring_the_old_ball_back() {
+        // Robot 2 sees the ball 1.5 m ahead for half a second; then the referee puts it
+        // back (the program writes the reset) and, before the layer's next tick, a
+        // teammate's claim changes (as every claim does at a kick-off), so the layer
+        // decides and publishes again. It must say "no ball", not the ball before the
+        // goal (`huddle sim --daemons`: one robot in ten matches played on it 40 ms after
+        // a goal, 4.9 m off).
+        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+        let mut now = Instant::from_micros(1_000_000);
+        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
+        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+        core.input(contract::POSE_KEY, &pose, now)
+            .expect("a valid pose");
+        for _ in 0..12 {
+            let ball = floats(&[1.5, 0.0, 0.01, 0.0, 0.01]);
+            core.input(contract::BALL_KEY, &ball, now)
+                .expect("a valid sighting");
+            let still = floats(&[0.0, 0.0, 0.0]);
+            core.input(contract::ODOMETRY_KEY, &still, now)
+                .expect("valid odometry");
+            core.tick(&mut replica, now);
+            now = now + Duration::from_millis(40);
+        }
+        let held = team_ball(&replica);
+        assert!(
+            matches!(&held, Some(Value::Floats(f)) if !f.is_empty()),
+            "the layer holds the ball it saw: {held:?}"
+        );
+        core.input(contract::BALL_RESET_KEY, &Value::Bool(true), now)
+            .expect("a valid reset");
+        now = now + Duration::from_millis(5);
+        core.react(&mut replica, now);
+        assert_eq!(
+            team_ball(&replica),
+            Some(Value::Floats(Vec::new())),
+            "after the reset the layer says it has no team ball"
+        );
+    }
+}
