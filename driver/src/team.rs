@@ -673,7 +673,7 @@ mod core_tests {
             core.input(contract::ODOMETRY_KEY, &still, now)
                 .expect("valid odometry");
             core.tick(&mut replica, now);
-            now = now + Duration::from_millis(40);
+            now += Duration::from_millis(40);
         }
         let held = team_ball(&replica);
         assert!(
@@ -682,7 +682,7 @@ mod core_tests {
         );
         core.input(contract::BALL_RESET_KEY, &Value::Bool(true), now)
             .expect("a valid reset");
-        now = now + Duration::from_millis(5);
+        now += Duration::from_millis(5);
         core.react(&mut replica, now);
         assert_eq!(
             team_ball(&replica),

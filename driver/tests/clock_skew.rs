@@ -7,6 +7,8 @@
 //! offset. (How the estimate fits a drift over its 64 s window is comms' own test.) This is what `huddle sim --daemons` relies on to give each daemon
 //! the clock its robot draws in process.
 
+#![allow(clippy::disallowed_methods)] // real drivers over loopback, real time
+
 use std::time::Duration;
 
 use comms::{Instant, ReplicaConfig};
