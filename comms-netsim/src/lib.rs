@@ -169,7 +169,11 @@ impl Harness {
     }
 
     /// Give robot `i` a clock with `offset` and `drift_ppm` (its replica's times follow).
-    /// Do it before the run starts: a clock set later may jump backwards.
+    /// Do it before the run starts (at global time zero, before anything is set): the
+    /// robot's replica then starts at its clock's reading, as a robot's does. (Started at
+    /// zero and then set, a replica would read the offset as time already played: its
+    /// budget paced as if that much of the game had gone.) A clock set later may jump
+    /// backwards.
     pub fn set_clock(
         &mut self,
         i: usize,
@@ -181,7 +185,16 @@ impl Harness {
         self.deadline_cache[i] = None;
         self.net
             .set_clock(self.nodes[i], clock)
-            .map_err(|e| HarnessError::Clock(e.to_string()))
+            .map_err(|e| HarnessError::Clock(e.to_string()))?;
+        if self.net.now() == Time::ZERO {
+            // Not yet run: the robot started with this clock.
+            if let Some(r) = &self.replicas[i] {
+                let incarnation = r.incarnation();
+                let start = self.local_now(i);
+                self.replicas[i] = Some(Replica::new(self.config_for(i), incarnation, start)?);
+            }
+        }
+        Ok(())
     }
 
     /// Robot `i`'s clock reading now, as its replica sees time.
@@ -456,6 +469,32 @@ mod tests {
         };
         let replica = ReplicaConfig::new(1, 3);
         Harness::new(3, Sim::builder().link(link), replica, seed).expect("valid")
+    }
+
+    #[test]
+    fn a_clock_set_before_the_run_starts_the_replica_at_its_reading() {
+        // An SPL-budgeted team of three; robot 1's clock reads 20 s when the match starts.
+        // Its budget is paced from its own start, as robot 2's is: the 20 s are not game
+        // time already played (which would be 4 more messages to spend).
+        let replica = ReplicaConfig::new(1, 3).with_budget(&comms::BudgetSpec::SPL, 3);
+        let mut h = Harness::new(3, Sim::builder(), replica, 5).expect("valid");
+        h.set_clock(0, Duration::from_secs(20), 30.0)
+            .expect("valid clock");
+        h.run_until(Time::from_millis(100));
+        let skewed = h
+            .replica(0)
+            .expect("on")
+            .budget_headroom()
+            .expect("a budget");
+        let ideal = h
+            .replica(1)
+            .expect("on")
+            .budget_headroom()
+            .expect("a budget");
+        assert!(
+            (skewed - ideal).abs() <= 1,
+            "robot 1's headroom {skewed} against robot 2's {ideal}"
+        );
     }
 
     fn key() -> Key {

@@ -4,7 +4,8 @@
 //! subscribers, and it reads what the core may not: configuration files
 //! ([`load_config_files`], [`read_key_file`]: regular files only, size-limited), network
 //! interfaces ([`resolve_iface`]), the OS's random source
-//! for a replica's incarnation and the monotonic clock.
+//! for a replica's incarnation and the monotonic clock (which a test or `huddle sim
+//! --daemons` may skew on purpose: [`ClockSkew`]).
 //!
 //! Frames reach the team by one of three [`Transport`]s, as leagues require: multicast
 //! to a group (the default, the seed's), UDP broadcast to the interface's broadcast
@@ -99,4 +100,4 @@ pub use socket::{
     broadcast_destination, open, open_broadcast, open_multicast, open_unicast, scratch_group,
     Opened, SocketConfig, SocketError, Transport,
 };
-pub use state::{Clock, IoStats};
+pub use state::{Clock, ClockSkew, ClockSkewError, IoStats};

@@ -21,7 +21,7 @@ use crate::incarnation::new_incarnation;
 use crate::rate_limit::RateLimit;
 use crate::socket::{open, open_unicast, SocketConfig, SocketError, Transport};
 use crate::state::{
-    run_reactions, Clock, Inner, IoStats, Nudge, KEY_WARNING_PERIOD, SEND_WARNING_PERIOD,
+    run_reactions, Clock, ClockSkew, Inner, IoStats, Nudge, KEY_WARNING_PERIOD, SEND_WARNING_PERIOD,
 };
 
 /// Datagrams handled per wake-up before the loop looks at timers and wake-ups again.
@@ -55,6 +55,9 @@ pub struct DriverConfig {
     pub session_limits: SessionLimits,
     /// The incarnation; `None`: a random one (it must differ between starts).
     pub incarnation: Option<u64>,
+    /// A deliberate error of this robot's clock, for rehearsing a team whose clocks
+    /// disagree on one machine ([`ClockSkew`]); none by default.
+    pub clock_skew: ClockSkew,
 }
 
 impl DriverConfig {
@@ -76,6 +79,7 @@ impl DriverConfig {
             subscriber_backlog: 4096,
             session_limits: SessionLimits::default(),
             incarnation: None,
+            clock_skew: ClockSkew::NONE,
         }
     }
 }
@@ -204,7 +208,7 @@ impl Driver {
         } = open_sockets(&config)?;
         let socket = Rc::new(team);
         let unicast = unicast.map(Rc::new);
-        let clock = Clock::new();
+        let clock = Clock::skewed(config.clock_skew);
         let replica = start_replica(
             config.replica,
             config.incarnation,

@@ -402,7 +402,7 @@ impl Session {
         } = open_sockets(&config)?;
         let team = Arc::new(team);
         let unicast = unicast.map(Arc::new);
-        let clock = Clock::new();
+        let clock = Clock::skewed(config.clock_skew);
         let replica = start_replica(
             config.replica,
             config.incarnation,

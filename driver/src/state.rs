@@ -33,10 +33,13 @@ pub(crate) const KEY_WARNING_PERIOD: std::time::Duration = std::time::Duration::
 /// At most one warning per this period about sends the OS refused.
 pub(crate) const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// The monotonic clock an I/O shell hands to the replica: microseconds since it started.
+/// The monotonic clock an I/O shell hands to the replica: microseconds since it started,
+/// read through a [`ClockSkew`] when one is asked for (none by default).
 #[derive(Clone, Copy, Debug)]
 pub struct Clock {
     origin: std::time::Instant,
+    offset_us: u64,
+    drift_ppb: i64,
 }
 
 impl Default for Clock {
@@ -51,21 +54,124 @@ impl Clock {
     // replica.
     #[allow(clippy::disallowed_methods)]
     pub fn new() -> Clock {
+        Clock::skewed(ClockSkew::NONE)
+    }
+
+    /// A clock that reads `skew`'s offset now and gains its drift from then on.
+    #[allow(clippy::disallowed_methods)]
+    pub fn skewed(skew: ClockSkew) -> Clock {
         Clock {
             origin: std::time::Instant::now(),
+            offset_us: skew.offset_us,
+            drift_ppb: skew.drift_ppb,
         }
     }
 
-    /// Microseconds since [`Clock::new`], as the replica's time.
+    /// Microseconds since [`Clock::new`] (plus the skew), as the replica's time.
     #[must_use]
     pub fn now(&self) -> Instant {
-        let us = self.origin.elapsed().as_micros();
-        Instant::from_micros(u64::try_from(us).unwrap_or(u64::MAX))
+        let us = u64::try_from(self.origin.elapsed().as_micros()).unwrap_or(u64::MAX);
+        Instant::from_micros(self.local_us(us))
+    }
+
+    /// What the clock reads `real_us` after its start.
+    fn local_us(&self, real_us: u64) -> u64 {
+        if self.drift_ppb == 0 {
+            return real_us.saturating_add(self.offset_us);
+        }
+        let real = i128::from(real_us);
+        let gained = (real * i128::from(self.drift_ppb)).div_euclid(NS_PER_S);
+        let local = i128::from(self.offset_us) + real + gained;
+        u64::try_from(local.max(0)).unwrap_or(u64::MAX)
+    }
+
+    /// The real time after its start at which the clock reads `local_us`, rounded up (a
+    /// timer set there finds its deadline due), 0 for a reading before the start.
+    fn real_us(&self, local_us: u64) -> u64 {
+        let since = local_us.saturating_sub(self.offset_us);
+        if self.drift_ppb == 0 {
+            return since;
+        }
+        let rate = NS_PER_S + i128::from(self.drift_ppb);
+        let real = (i128::from(since) * NS_PER_S + rate - 1) / rate;
+        u64::try_from(real.max(0)).unwrap_or(u64::MAX)
     }
 
     pub(crate) fn to_tokio(self, t: Instant) -> tokio::time::Instant {
-        let at = self.origin + std::time::Duration::from_micros(t.as_micros());
+        let at = self.origin + std::time::Duration::from_micros(self.real_us(t.as_micros()));
         tokio::time::Instant::from_std(at)
+    }
+}
+
+const NS_PER_S: i128 = 1_000_000_000;
+
+/// A deliberate error of a driver's clock, as netsim gives each simulated robot: the
+/// clock reads `offset` at the driver's start and gains `drift_ppm` microseconds per
+/// second (loses, if negative). For rehearsing on one machine a team whose clocks
+/// disagree, as real robots' do: `huddle daemon --clock-offset --clock-drift-ppm`, which
+/// `huddle sim --daemons` gives each daemon from its robot's drawn clock. The replica,
+/// the team layer and every age a relay client reads are on this clock; teammates
+/// estimate it from echoes as they would a real robot's. A robot on the field runs with
+/// none.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ClockSkew {
+    offset_us: u64,
+    drift_ppb: i64,
+}
+
+/// Why a [`ClockSkew`] cannot be used.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ClockSkewError {
+    /// The drift is not a number within ±[`ClockSkew::MAX_DRIFT_PPM`].
+    #[error(
+        "clock drift {drift_ppm} ppm is not a number within ±{} ppm",
+        ClockSkew::MAX_DRIFT_PPM
+    )]
+    Drift {
+        /// The drift asked for.
+        drift_ppm: f64,
+    },
+    /// The offset is beyond [`ClockSkew::MAX_OFFSET`].
+    #[error("clock offset {offset:?} is beyond {:?}", ClockSkew::MAX_OFFSET)]
+    Offset {
+        /// The offset asked for.
+        offset: std::time::Duration,
+    },
+}
+
+impl ClockSkew {
+    /// No skew: the machine's clock.
+    pub const NONE: ClockSkew = ClockSkew {
+        offset_us: 0,
+        drift_ppb: 0,
+    };
+    /// The largest drift taken (netsim's limit: 10%).
+    pub const MAX_DRIFT_PPM: f64 = 100_000.0;
+    /// The largest offset taken (a day).
+    pub const MAX_OFFSET: std::time::Duration = std::time::Duration::from_secs(86_400);
+
+    /// A clock reading `offset` at start and gaining `drift_ppm` µs per second.
+    pub fn new(offset: std::time::Duration, drift_ppm: f64) -> Result<ClockSkew, ClockSkewError> {
+        if !drift_ppm.is_finite() || drift_ppm.abs() > Self::MAX_DRIFT_PPM {
+            return Err(ClockSkewError::Drift { drift_ppm });
+        }
+        if offset > Self::MAX_OFFSET {
+            return Err(ClockSkewError::Offset { offset });
+        }
+        Ok(ClockSkew {
+            offset_us: u64::try_from(offset.as_micros()).unwrap_or(u64::MAX),
+            drift_ppb: (drift_ppm * 1000.0).round() as i64,
+        })
+    }
+
+    /// The clock's reading at start.
+    pub fn offset(&self) -> std::time::Duration {
+        std::time::Duration::from_micros(self.offset_us)
+    }
+
+    /// Its drift, ppm.
+    pub fn drift_ppm(&self) -> f64 {
+        self.drift_ppb as f64 / 1000.0
     }
 }
 
@@ -632,4 +738,83 @@ pub(crate) fn run_reactions(inner: &Rc<RefCell<Inner>>) {
         }
     }
     inner.borrow_mut().reacting = false;
+}
+
+#[cfg(test)]
+mod clock_tests {
+    use super::{Clock, ClockSkew, ClockSkewError};
+    use std::time::Duration;
+
+    #[test]
+    fn a_skewed_clock_reads_its_offset_and_gains_its_drift() {
+        // A robot whose clock read 20 s when its daemon started and gains 250 µs a second.
+        let clock = Clock::skewed(ClockSkew::new(Duration::from_secs(20), 250.0).unwrap());
+        assert_eq!(clock.local_us(0), 20_000_000);
+        assert_eq!(
+            clock.local_us(100_000_000),
+            20_000_000 + 100_000_000 + 25_000,
+            "100 s later it has gained 25 ms"
+        );
+        let losing = Clock::skewed(ClockSkew::new(Duration::ZERO, -30.0).unwrap());
+        assert_eq!(losing.local_us(1_000_000_000), 1_000_000_000 - 30_000);
+        let read = clock.now().as_micros();
+        assert!(
+            (20_000_000..21_000_000).contains(&read),
+            "a skewed clock reads its offset at start, read {read} µs"
+        );
+    }
+
+    #[test]
+    fn a_deadline_on_a_skewed_clock_is_due_when_the_timer_for_it_fires() {
+        // The driver arms its timer at `to_tokio(deadline)`: there the replica must find
+        // the deadline due, or the loop would wake and sleep again on one instant.
+        for skew in [
+            ClockSkew::NONE,
+            ClockSkew::new(Duration::from_micros(7_654_321), 31.7).unwrap(),
+            ClockSkew::new(Duration::from_secs(3), -29.3).unwrap(),
+            ClockSkew::new(Duration::from_millis(1), 99_999.0).unwrap(),
+        ] {
+            let clock = Clock::skewed(skew);
+            for local in (0..2_000_000_000u64)
+                .step_by(7_777_777)
+                .chain([u64::MAX / 4])
+            {
+                let real = clock.real_us(local);
+                if local >= skew.offset_us {
+                    assert!(
+                        clock.local_us(real) >= local,
+                        "{skew:?}: the timer for {local} µs fires at {real} µs real, which reads {}",
+                        clock.local_us(real)
+                    );
+                    assert!(
+                        real == 0 || clock.local_us(real - 1) < local,
+                        "{skew:?}: the timer for {local} µs fires late, at {real} µs real"
+                    );
+                } else {
+                    assert_eq!(real, 0, "a reading before the start is due at once");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_skew_out_of_range_is_refused() {
+        assert!(matches!(
+            ClockSkew::new(Duration::ZERO, f64::NAN),
+            Err(ClockSkewError::Drift { .. })
+        ));
+        assert!(matches!(
+            ClockSkew::new(Duration::ZERO, -100_001.0),
+            Err(ClockSkewError::Drift { .. })
+        ));
+        assert!(matches!(
+            ClockSkew::new(Duration::from_secs(2 * 86_400), 0.0),
+            Err(ClockSkewError::Offset { .. })
+        ));
+        let ok = ClockSkew::new(Duration::from_millis(1500), -12.5).unwrap();
+        assert_eq!(
+            (ok.offset(), ok.drift_ppm()),
+            (Duration::from_millis(1500), -12.5)
+        );
+    }
 }

@@ -162,15 +162,13 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
     let task = tokio::task::spawn_local(async move {
         let mut every = tokio::time::interval(period);
         every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        // A cycle closing sooner than half a period after the last tick waits for the
-        // timer: a program writing odometry faster than the control period does not make
-        // the layer tick (and send) faster.
-        let mut last = tokio::time::Instant::now() - period;
+        let started = tokio::time::Instant::now();
+        let mut pacer = Pacer::new(period);
         loop {
             tokio::select! {
-                _ = every.tick() => {}
+                _ = every.tick() => pacer.timer(started.elapsed()),
                 () = cycle.notified() => {
-                    if last.elapsed() < period / 2 {
+                    if !pacer.cycle(started.elapsed()) {
                         continue;
                     }
                     // While the program drives, the timer only stands in for a missed
@@ -178,7 +176,6 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                     every.reset_at(tokio::time::Instant::now() + period * 3 / 2);
                 }
             }
-            last = tokio::time::Instant::now();
             let mut core = core.borrow_mut();
             ticker.with_replica(|replica, now| core.tick(replica, now));
         }
@@ -187,6 +184,44 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
         _guards: guards,
         _watches: vec![react],
         task,
+    }
+}
+
+/// When the layer ticks: on each cycle the robot program closes, and on a timer standing
+/// in for cycles that do not come. A cycle closing sooner than half a period after the
+/// last cycle's tick waits for the timer, so a program writing odometry faster than the
+/// control period does not make the layer tick (and send) faster. A cycle closing soon
+/// after a *timer* tick ticks at once: that tick stood in for a late cycle, and making the
+/// cycle wait for the next one would lock the timer just ahead of every later cycle (each
+/// tick then a cycle old, the program's wait for it always in vain), as a late cycle on a
+/// loaded machine did.
+#[derive(Debug, Clone, Copy)]
+struct Pacer {
+    period: Duration,
+    /// The last tick: when (time since the layer started), and whether the timer made it.
+    last: Option<(Duration, bool)>,
+}
+
+impl Pacer {
+    fn new(period: Duration) -> Pacer {
+        Pacer { period, last: None }
+    }
+
+    /// A cycle closed at `now`: whether the layer ticks on it.
+    fn cycle(&mut self, now: Duration) -> bool {
+        let ticks = match self.last {
+            Some((at, false)) => now.saturating_sub(at) >= self.period / 2,
+            Some((_, true)) | None => true,
+        };
+        if ticks {
+            self.last = Some((now, false));
+        }
+        ticks
+    }
+
+    /// The timer ticked the layer at `now`.
+    fn timer(&mut self, now: Duration) {
+        self.last = Some((now, true));
     }
 }
 
@@ -529,5 +564,130 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, balls_out: &m
         if let Err(e) = replica.set(now, key, value) {
             tracing::warn!(key, error = %e, "team layer: an output was refused");
         }
+    }
+}
+
+#[cfg(test)]
+mod pacer_tests {
+    use super::Pacer;
+    use std::time::Duration;
+
+    const PERIOD: Duration = Duration::from_millis(40);
+
+    /// Drives a pacer as the daemon's loop does: a program closing a cycle every period
+    /// at `cycles` (ms), the timer a period after its last tick and reset to 1.5 periods
+    /// after each cycle tick. Returns, per cycle, whether it ticked at once.
+    fn play(cycles: &[u64]) -> Vec<bool> {
+        let mut pacer = Pacer::new(PERIOD);
+        let mut timer = Duration::ZERO;
+        let mut ticked = Vec::new();
+        for &c in cycles {
+            let c = Duration::from_millis(c);
+            while timer <= c {
+                pacer.timer(timer);
+                timer += PERIOD;
+            }
+            let now = pacer.cycle(c);
+            if now {
+                timer = c + PERIOD * 3 / 2;
+            }
+            ticked.push(now);
+        }
+        ticked
+    }
+
+    #[test]
+    fn a_late_cycle_does_not_lock_the_timer_ahead_of_the_cycles_that_follow() {
+        // Cycles every 40 ms from 10 ms. The one due at 130 ms closes at 165 ms (the
+        // machine was busy), so the timer stood in for it at 150 ms and goes on every
+        // 40 ms from there; the next closes at 169 ms, and every later one 1 ms earlier
+        // than its slot (the scheduling jitter of a loaded machine), 19 ms after a timer
+        // tick. The one at 169 ms waits (4 ms after the late one); the later ones must
+        // tick as they close, not wait for the timer a cycle later.
+        let mut cycles: Vec<u64> = (0..30).map(|k| 10 + 40 * k).collect();
+        cycles[3] = 165;
+        for c in &mut cycles[4..] {
+            *c -= 1;
+        }
+        let ticked = play(&cycles);
+        assert!(ticked[3], "the late cycle ticks: {ticked:?}");
+        assert!(!ticked[4], "a cycle 4 ms after a tick waits: {ticked:?}");
+        let prompt = ticked[5..].iter().filter(|&&t| t).count();
+        assert_eq!(
+            prompt,
+            ticked.len() - 5,
+            "every later cycle ticks at once: {ticked:?}"
+        );
+    }
+
+    #[test]
+    fn a_program_writing_faster_than_the_period_does_not_tick_faster() {
+        // Odometry every 10 ms for a second: at most one cycle tick per half period.
+        let cycles: Vec<u64> = (1..=100).map(|k| 10 * k).collect();
+        let ticks = play(&cycles).iter().filter(|&&t| t).count();
+        assert!(
+            (24..=51).contains(&ticks),
+            "{ticks} cycle ticks in a second at a 40 ms period"
+        );
+    }
+}
+
+#[cfg(test)]
+mod core_tests {
+    use super::{TeamCore, TeamLayerConfig};
+    use comms::{Instant, Replica, ReplicaConfig, Value};
+    use std::time::Duration;
+    use team::contract;
+
+    fn floats(v: &[f64]) -> Value {
+        Value::Floats(v.to_vec())
+    }
+
+    fn team_ball(replica: &Replica) -> Option<Value> {
+        replica
+            .get(contract::TEAM_BALL_KEY)
+            .expect("a valid key")
+            .map(|e| e.value.clone())
+    }
+
+    #[test]
+    fn a_teammate_s_claim_after_a_ball_reset_does_not_bring_the_old_ball_back() {
+        // Robot 2 sees the ball 1.5 m ahead for half a second; then the referee puts it
+        // back (the program writes the reset) and, before the layer's next tick, a
+        // teammate's claim changes (as every claim does at a kick-off), so the layer
+        // decides and publishes again. It must say "no ball", not the ball before the
+        // goal (`huddle sim --daemons`: one robot in ten matches played on it 40 ms after
+        // a goal, 4.9 m off).
+        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+        let mut now = Instant::from_micros(1_000_000);
+        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
+        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+        core.input(contract::POSE_KEY, &pose, now)
+            .expect("a valid pose");
+        for _ in 0..12 {
+            let ball = floats(&[1.5, 0.0, 0.01, 0.0, 0.01]);
+            core.input(contract::BALL_KEY, &ball, now)
+                .expect("a valid sighting");
+            let still = floats(&[0.0, 0.0, 0.0]);
+            core.input(contract::ODOMETRY_KEY, &still, now)
+                .expect("valid odometry");
+            core.tick(&mut replica, now);
+            now += Duration::from_millis(40);
+        }
+        let held = team_ball(&replica);
+        assert!(
+            matches!(&held, Some(Value::Floats(f)) if !f.is_empty()),
+            "the layer holds the ball it saw: {held:?}"
+        );
+        core.input(contract::BALL_RESET_KEY, &Value::Bool(true), now)
+            .expect("a valid reset");
+        now += Duration::from_millis(5);
+        core.react(&mut replica, now);
+        assert_eq!(
+            team_ball(&replica),
+            Some(Value::Floats(Vec::new())),
+            "after the reset the layer says it has no team ball"
+        );
     }
 }

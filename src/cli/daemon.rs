@@ -117,6 +117,22 @@ pub struct DaemonArgs {
     /// of one team lose different frames and a rerun draws the same fates).
     #[arg(long, value_name = "N")]
     pub impair_seed: Option<u64>,
+    /// For tests and `huddle sim --daemons`: this daemon's clock reads DURATION when it
+    /// starts, as if its robot's clock had been set apart from its teammates'. The
+    /// replica, the team layer and every age on the relay run on that clock, and the
+    /// teammates estimate it from echoes as they do a real robot's. A robot on the field
+    /// needs neither this nor --clock-drift-ppm.
+    #[arg(long, value_name = "DURATION", value_parser = duration::parse, help_heading = "Testing")]
+    pub clock_offset: Option<Duration>,
+    /// For tests and `huddle sim --daemons`: this daemon's clock gains PPM microseconds a
+    /// second (loses, if negative), as a robot's crystal does; within ±100000.
+    #[arg(
+        long,
+        value_name = "PPM",
+        allow_negative_numbers = true,
+        help_heading = "Testing"
+    )]
+    pub clock_drift_ppm: Option<f64>,
     #[command(flatten)]
     pub audio: AudioFlags,
 }
@@ -312,6 +328,17 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     if config.socket.transport == driver::Transport::Unicast && config.peers.is_empty() {
         bail!("--transport unicast sends to each --peer only: give at least one --peer ADDR:PORT");
     }
+    if args.clock_offset.is_some() || args.clock_drift_ppm.is_some() {
+        let offset = args.clock_offset.unwrap_or_default();
+        let drift_ppm = args.clock_drift_ppm.unwrap_or(0.0);
+        config.clock_skew = driver::ClockSkew::new(offset, drift_ppm)
+            .context("--clock-offset / --clock-drift-ppm")?;
+        tracing::warn!(
+            ?offset,
+            drift_ppm,
+            "the daemon's clock is skewed on purpose (--clock-offset/--clock-drift-ppm)"
+        );
+    }
     Ok(config)
 }
 
@@ -471,6 +498,30 @@ mod tests {
     fn gc(args: &[&str]) -> Option<driver::GameControllerConfig> {
         let cli = Cli::try_parse_from(["huddle"].iter().chain(args)).expect("parses");
         gamecontroller_config(&cli.daemon, 3)
+    }
+
+    #[test]
+    fn the_clock_flags_skew_the_daemon_s_clock_and_out_of_range_ones_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let dir = dir.path().to_str().unwrap().to_owned();
+        let config = |args: &[&str]| {
+            let head = ["huddle", "--id", "2", "--config-dir", dir.as_str()];
+            let cli = Cli::try_parse_from(head.iter().chain(args)).expect("parses");
+            driver_config(&cli.daemon)
+        };
+        let skewed = config(&["--clock-offset", "12500ms", "--clock-drift-ppm", "-30"])
+            .expect("a skew within range");
+        assert_eq!(
+            skewed.clock_skew,
+            driver::ClockSkew::new(Duration::from_millis(12_500), -30.0).unwrap()
+        );
+        assert_eq!(
+            config(&[]).unwrap().clock_skew,
+            driver::ClockSkew::NONE,
+            "the machine's clock unless asked"
+        );
+        let err = config(&["--clock-drift-ppm", "200000"]).expect_err("out of range");
+        assert!(format!("{err:#}").contains("--clock-drift-ppm"), "{err:#}");
     }
 
     #[test]

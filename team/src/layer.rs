@@ -1134,6 +1134,9 @@ impl TeamLayer {
         self.ball = None;
         self.ball_seen_at_s = None;
         self.team_ball = None;
+        // Held too: a daemon publishes it between ticks (a teammate's claim changing
+        // makes it decide and publish again), and the old ball must not come back then.
+        self.team_ball_held = None;
     }
 
     /// The pose estimate the layer holds (`fusion`'s convention).

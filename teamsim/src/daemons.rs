@@ -15,8 +15,14 @@
 //! poses the daemons held, messages sent. What it cannot have: the references that need a
 //! replica's inside (delivery, delayed-centralized) and the world-model NEES bands.
 //!
-//! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed)
-//! and each goal to stderr, for finding where an error comes from.
+//! In the drawn world each daemon also gets its robot's clock as the match draws it in
+//! process (`huddle daemon --clock-offset --clock-drift-ppm`): an offset of up to 20 s and
+//! a drift of some tens of ppm, so the replicas' clock estimates and the receiver-side
+//! times are exercised as they are in process.
+//!
+//! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed,
+//! how far the world ran behind the wall clock) and each goal to stderr, for finding where
+//! an error comes from.
 //!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
@@ -29,7 +35,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::net::{Ipv4Addr, SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use comms::relay::Binding;
@@ -152,8 +158,57 @@ pub struct DaemonsReport {
     /// Robot ticks that played on the layer's previous outputs (its tick on the new
     /// senses did not come within the wait).
     pub stale_views: u64,
+    /// The other robot ticks: from writing the cycle's senses to playing on the layer's
+    /// tick on them (relay in, layer tick, relay out), ms.
+    pub view_lag_ms: Spread,
+    /// How far behind the wall clock each physics step started, ms (the machine's
+    /// load: the world the robots sense is this much older than their clocks say).
+    pub behind_ms: Spread,
+    /// Each daemon's clock: `[offset at start, s; drift, ppm]` (`--clock-offset`,
+    /// `--clock-drift-ppm`), as the match drew the robot's clock in process; zeros
+    /// outside the drawn world.
+    pub clocks: Vec<[f64; 2]>,
     /// The same match in process (same seed and configuration), for the ratio.
     pub in_process: Option<InProcess>,
+}
+
+/// A distribution in brief, ms.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Spread {
+    /// Median.
+    pub p50: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Spread {
+    fn of_us(mut us: Vec<u64>) -> Spread {
+        if us.is_empty() {
+            return Spread::default();
+        }
+        us.sort_unstable();
+        let at = |q: f64| {
+            let i = ((us.len() - 1) as f64 * q).round() as usize;
+            us[i] as f64 / 1e3
+        };
+        Spread {
+            p50: at(0.5),
+            p95: at(0.95),
+            max: at(1.0),
+        }
+    }
+}
+
+impl std::fmt::Display for Spread {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "p50 {:.2} / p95 {:.2} / max {:.1} ms",
+            self.p50, self.p95, self.max
+        )
+    }
 }
 
 /// The in-process figures `--daemons` is judged against.
@@ -210,11 +265,13 @@ impl std::fmt::Display for DaemonsReport {
             self.kick_attempts,
             self.pose_rmse_m
         )?;
-        write!(
+        writeln!(
             f,
             "relay errors          {}; late physics steps {}; stale views {}",
             self.relay_errors, self.late_steps, self.stale_views
-        )
+        )?;
+        writeln!(f, "view lag              {}", self.view_lag_ms)?;
+        write!(f, "world behind clock    {}", self.behind_ms)
     }
 }
 
@@ -244,6 +301,9 @@ struct Daemon {
     log: PathBuf,
     writer: TcpStream,
     heard: Arc<Mutex<Heard>>,
+    /// Signalled by the relay reader when a tick arrives (the program blocks on it, as a
+    /// robot program blocks on its socket, instead of polling).
+    ticked: Arc<Condvar>,
 }
 
 impl Drop for Daemon {
@@ -315,6 +375,7 @@ fn start_daemon(
     opts: &DaemonsOptions,
     group: std::net::SocketAddrV4,
     spec: &str,
+    clock: netsim::NodeClock,
     dir: &Path,
 ) -> Result<Daemon, DaemonsError> {
     let relay: SocketAddr = (Ipv4Addr::LOCALHOST, free_tcp_port()?).into();
@@ -347,6 +408,15 @@ fn start_daemon(
         .map(|v| v.get_name().to_owned())
         .unwrap_or_else(|| "every".into());
     cmd.args(["--policy", &policy]);
+    if clock != netsim::NodeClock::IDEAL {
+        // The robot's clock as the match drew it in process (`--world drawn`): the
+        // replica's times, the layer's and the teammates' estimates of it run on it.
+        cmd.args([
+            "--clock-offset",
+            &format!("{}us", clock.offset().as_micros()),
+        ])
+        .args(["--clock-drift-ppm", &clock.drift_ppm().to_string()]);
+    }
     if cfg.compensate_latency {
         // As the in-process team sets it: the network's expected delay.
         let l = cfg.arbitration.latency_compensation;
@@ -394,10 +464,11 @@ fn start_daemon(
     let _ = stream.set_nodelay(true);
     let reader = stream.try_clone().map_err(io("cloning a relay socket"))?;
     let heard = Arc::new(Mutex::new(Heard::default()));
-    let sink = Arc::clone(&heard);
+    let ticked = Arc::new(Condvar::new());
+    let (sink, signal) = (Arc::clone(&heard), Arc::clone(&ticked));
     std::thread::Builder::new()
         .name(format!("relay-{id}"))
-        .spawn(move || read_relay(id, reader, &sink))
+        .spawn(move || read_relay(id, reader, &sink, &signal))
         .map_err(io("starting a relay reader"))?;
     Ok(Daemon {
         id,
@@ -405,11 +476,12 @@ fn start_daemon(
         log,
         writer: stream,
         heard,
+        ticked,
     })
 }
 
 /// Reads robot `id`'s relay until it closes: outputs into the view, errors counted.
-fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
+fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar) {
     let mut lines = BufReader::new(stream).lines();
     while let Some(Ok(line)) = lines.next() {
         let mut h = heard.lock().unwrap_or_else(|e| e.into_inner());
@@ -442,6 +514,7 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>) {
                 h.resets_pending = h.resets_pending.saturating_sub(1);
             } else {
                 h.tick_at = Some(now);
+                ticked.notify_all();
             }
             continue;
         }
@@ -520,6 +593,13 @@ pub fn run(
         .map(|r| RemoteRobot::new(r.id, r.tactics.position, calibration))
         .collect();
     let starts: Vec<_> = setup.robots.iter().map(|r| r.pose_belief).collect();
+    // Each robot's clock as drawn for the match (the ideal clock outside the drawn world).
+    let clocks: Vec<netsim::NodeClock> = (0..robots.len())
+        .map(|i| {
+            let net = setup.harness.net();
+            net.node_clock(setup.harness.node(i)).unwrap_or_default()
+        })
+        .collect();
     drop(setup);
 
     let spec = opts.impair.clone().unwrap_or_else(|| impair_spec(cfg));
@@ -534,8 +614,8 @@ pub fn run(
     };
     std::fs::create_dir_all(&dir).map_err(io(format!("creating {}", dir.display())))?;
     let mut daemons = Vec::with_capacity(robots.len());
-    for r in &robots {
-        daemons.push(start_daemon(r.id, cfg, opts, group, &spec, &dir)?);
+    for (r, &clock) in robots.iter().zip(&clocks) {
+        daemons.push(start_daemon(r.id, cfg, opts, group, &spec, clock, &dir)?);
     }
     // Each program says who it is and where it was put, then watches its layer.
     for ((d, r), start) in daemons.iter_mut().zip(&robots).zip(&starts) {
@@ -569,6 +649,10 @@ pub fn run(
     let mut kick_attempts = 0u64;
     let mut late_steps = 0u64;
     let mut stale_views = 0u64;
+    // Per fresh view: from writing the cycle's senses to playing on its tick, µs.
+    let mut view_lags_us: Vec<u64> = Vec::new();
+    // Per step: how far behind the wall clock the world ran, µs.
+    let mut behind_us: Vec<u64> = Vec::new();
     let steps = (cfg.duration_s / dt).round() as u64;
     let started = Instant::now();
     for step in 0..steps {
@@ -580,6 +664,7 @@ pub fn run(
         } else if now - due > Duration::from_secs_f64(dt) {
             late_steps += 1;
         }
+        behind_us.push(Instant::now().saturating_duration_since(due).as_micros() as u64);
         if step % 100 == 0 {
             for d in &mut daemons {
                 d.check_alive()?;
@@ -605,18 +690,25 @@ pub fn run(
             let sent = Instant::now();
             daemons[i].send(&setv_lines(&senses))?;
             let fresh = sent + FRESH_WAIT;
+            let d = &daemons[i];
+            let mut heard = d.heard.lock().unwrap_or_else(|e| e.into_inner());
             let (view, now) = loop {
-                let heard = daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner());
                 let now = Instant::now();
-                if heard.tick_at.is_some_and(|a| a > sent) || now > fresh {
-                    if heard.tick_at.is_none_or(|a| a <= sent) {
-                        stale_views += 1;
-                    }
+                if heard.tick_at.is_some_and(|a| a > sent) {
+                    view_lags_us.push(now.duration_since(sent).as_micros() as u64);
                     break (view_at(&heard, now), now);
                 }
-                drop(heard);
-                std::thread::sleep(Duration::from_micros(200));
+                if now >= fresh {
+                    stale_views += 1;
+                    break (view_at(&heard, now), now);
+                }
+                heard = d
+                    .ticked
+                    .wait_timeout(heard, fresh - now)
+                    .unwrap_or_else(|e| e.into_inner())
+                    .0;
             };
+            drop(heard);
             robots[i].view = view;
             let out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
             if !out.writes.is_empty() {
@@ -663,11 +755,12 @@ pub fn run(
                     .norm_squared();
                 if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
                     eprintln!(
-                        "trace t={t:.2} robot={} err={:.3} speed={:.2} team={team:?} truth={truth:?} sees={}",
+                        "trace t={t:.2} robot={} err={:.3} speed={:.2} team={team:?} truth={truth:?} sees={} behind_ms={:.1}",
                         r.id,
                         e2.sqrt(),
                         world.ball.velocity.norm(),
-                        r.sees_ball()
+                        r.sees_ball(),
+                        behind_us.last().copied().unwrap_or(0) as f64 / 1e3
                     );
                 }
                 team_sq += e2;
@@ -779,6 +872,12 @@ pub fn run(
         relay_errors,
         late_steps,
         stale_views,
+        view_lag_ms: Spread::of_us(view_lags_us),
+        behind_ms: Spread::of_us(behind_us),
+        clocks: clocks
+            .iter()
+            .map(|c| [c.offset().as_secs_f64(), c.drift_ppm()])
+            .collect(),
         in_process: None,
     })
 }
