@@ -516,6 +516,14 @@ mod tests {
             est.add_echo(t1, 0, t3, t4);
             let kept: Vec<_> = est.best.iter().map(key_of).collect();
             assert_eq!(kept, best_rebuilt(&est.samples), "step {step}");
+            // The shortest round trip, read off the bests, is the samples' shortest.
+            let of_samples = est
+                .samples
+                .iter()
+                .map(|s| s.rtt_us)
+                .min_by(f64::total_cmp)
+                .map(|us| Duration::from_micros(us as u64));
+            assert_eq!(est.min_round_trip(), of_samples, "step {step}");
         }
         assert!(
             est.samples.len() < MAX_SAMPLES,
