@@ -601,16 +601,19 @@ impl Simulation {
         self.referee_step(t);
         self.acoustic_step(t);
         let mut ticked = Vec::new();
+        // Built once a step, not per robot and write (each build parses and allocates).
+        let lwm_key = robot::world_local_key();
+        let claim_key = comms::arbitration::heuristic_key();
         for i in 0..self.robots.len() {
             if self.next_tick_s[i] > t + 1e-9 {
                 let Some(replica) = self.harness.replica(i) else {
                     continue;
                 };
                 let now = self.harness.local_now(i);
-                let waiting = replica.is_pending(&robot::world_local_key());
+                let waiting = replica.is_pending(&lwm_key);
                 let writes = self.robots[i].redecide(replica.blackboard(), now, waiting);
                 for (key, value) in writes {
-                    let lwm = key == robot::world_local_key();
+                    let lwm = key == lwm_key;
                     if lwm {
                         // Its latest tick's world model, riding along.
                         self.harness.set(i, &key, value)
@@ -643,8 +646,8 @@ impl Simulation {
                 local_now,
                 percepts,
                 board: replica.blackboard(),
-                world_model_waiting: replica.is_pending(&robot::world_local_key()),
-                claim_waiting: replica.is_pending(&comms::arbitration::heuristic_key()),
+                world_model_waiting: replica.is_pending(&lwm_key),
+                claim_waiting: replica.is_pending(&claim_key),
                 budget_headroom: replica.budget_headroom(),
                 homes: &self.homes,
                 holders: &self.holders,
@@ -654,7 +657,7 @@ impl Simulation {
                 self.world.command_believed(i, cmd, &out.believed);
             }
             for (key, value) in out.writes {
-                let lwm = key == robot::world_local_key();
+                let lwm = key == lwm_key;
                 // Our own keys of valid shape: a refusal would be a bug worth seeing.
                 if out.priority {
                     self.harness.set_priority(i, &key, value)

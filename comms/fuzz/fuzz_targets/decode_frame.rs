@@ -5,7 +5,9 @@
 
 use std::net::SocketAddr;
 
-use comms::wire::{decode_frame, decode_frame_with, encode_frame, KnownPaths, TeamKey};
+use comms::wire::{
+    decode_frame, decode_frame_into, decode_frame_with, encode_frame, KnownPaths, TeamKey,
+};
 use comms::{Instant, Replica, ReplicaConfig};
 use libfuzzer_sys::fuzz_target;
 
@@ -17,11 +19,22 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(encode_frame(&again, None), canonical, "encoding is stable");
     }
     // With a table of known paths (format 3 and 4 item 4): the borrowed view, walked
-    // twice (validation, then the items) must agree with itself.
+    // twice (validation, then the items) must agree with itself and with the one-pass
+    // read the replica uses.
     let known = KnownPaths::new(["machine.heuristic", "world.local"]).expect("valid");
-    if let Ok(frame) = decode_frame_with(data, team, None, &known) {
-        let owned = frame.to_frame();
-        assert_eq!(owned.items.len(), frame.items().count(), "items are stable");
+    let mut items = Vec::new();
+    let one_pass = decode_frame_into(data, team, None, &known, &mut items);
+    match decode_frame_with(data, team, None, &known) {
+        Ok(frame) => {
+            let owned = frame.to_frame();
+            assert_eq!(owned.items.len(), frame.items().count(), "items are stable");
+            assert!(one_pass.is_ok(), "one pass accepts what two passes accept");
+            assert!(frame.items().eq(items.iter().copied()), "the same items");
+        }
+        Err(e) => {
+            assert_eq!(one_pass.err(), Some(e), "the same error");
+            assert!(items.is_empty(), "nothing handed out of a malformed frame");
+        }
     }
     let key = TeamKey::new(b"fuzz");
     let _ = decode_frame(data, team, Some(&key));

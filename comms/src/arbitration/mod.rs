@@ -524,7 +524,11 @@ const HEURISTIC_PATH: &str = "machine.heuristic";
 
 /// The key to write `[h, going]` to (`*.var.machine.heuristic`).
 pub fn heuristic_key() -> Key {
-    Key::parse(HEURISTIC_KEY).expect("HEURISTIC_KEY is a valid key")
+    // Parsed once: every robot asks for it several times a control tick, and a clone
+    // shares the path (a reference count) where a parse allocates it.
+    static KEY: std::sync::OnceLock<Key> = std::sync::OnceLock::new();
+    KEY.get_or_init(|| Key::parse(HEURISTIC_KEY).expect("HEURISTIC_KEY is a valid key"))
+        .clone()
 }
 
 impl From<Posted> for Value {

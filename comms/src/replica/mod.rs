@@ -87,6 +87,9 @@ pub struct Replica {
     repair_frames: u64,
     /// The paths of a frame's news, kept only while it is built (its capacity reused).
     sent_scratch: Vec<Arc<str>>,
+    /// A received frame's items, kept only while it is applied (its capacity reused:
+    /// see `receive::recycle`).
+    item_scratch: Vec<wire::ItemView<'static>>,
 }
 
 impl Replica {
@@ -130,6 +133,7 @@ impl Replica {
             urgent: BTreeSet::new(),
             repair_frames: 0,
             sent_scratch: Vec::new(),
+            item_scratch: Vec::new(),
         })
     }
 
@@ -141,6 +145,18 @@ impl Replica {
     /// This start's incarnation.
     pub fn incarnation(&self) -> u64 {
         self.incarnation
+    }
+
+    /// The latest `now` any input has brought.
+    pub fn now(&self) -> Instant {
+        self.now
+    }
+
+    /// Whether `bytes` carry this replica's own plain header (team, id and incarnation):
+    /// a frame of its own looped back, which [`Replica::handle_datagram`] counts and skips
+    /// unread. A driver need not read its clock for one (`now()` serves).
+    pub fn is_own_frame(&self, bytes: &[u8]) -> bool {
+        wire::peek_origin(bytes, self.cfg.team_id) == Some((self.cfg.robot_id, self.incarnation))
     }
 
     /// The configuration.

@@ -23,6 +23,22 @@ impl Replica {
     /// Feeds one received datagram. Never panics; anything wrong with it is a counted
     /// drop and an [`Event::FrameDropped`], and nothing stored is lost.
     pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) {
+        // The table is shared (a reference count, no copy): the items borrow it (and the
+        // datagram) while they are applied to `self`.
+        let known = self.cfg.known_paths.clone();
+        let mut items = recycle(std::mem::take(&mut self.item_scratch));
+        self.receive(now, from, bytes, &known, &mut items);
+        self.item_scratch = recycle(items);
+    }
+
+    fn receive<'a>(
+        &mut self,
+        now: Instant,
+        from: SocketAddr,
+        bytes: &'a [u8],
+        known: &'a wire::KnownPaths,
+        items: &mut Vec<ItemView<'a>>,
+    ) {
         self.advance(now);
         self.stats.frames_in += 1;
         self.stats.bytes_in += bytes.len() as u64;
@@ -33,16 +49,14 @@ impl Replica {
         // plain header names its sender, so it is skipped before the body is decoded or
         // the tag checked. A forged copy of our own header is ignored the same way, which
         // is all a checked one would get.
-        if wire::peek_origin(bytes, self.cfg.team_id) == Some((self.cfg.robot_id, self.incarnation))
-        {
+        if self.is_own_frame(bytes) {
             self.stats.own_frames += 1;
             return;
         }
-        // The table is shared (a reference count, no copy): the frame borrows it while
-        // its items are applied to `self`.
-        let known = self.cfg.known_paths.clone();
+        // One pass: the items come out validated (none if the frame is malformed).
         let frame =
-            match wire::decode_frame_with(bytes, self.cfg.team_id, self.key.as_ref(), &known) {
+            match wire::decode_frame_into(bytes, self.cfg.team_id, self.key.as_ref(), known, items)
+            {
                 Ok(frame) => frame,
                 Err(e) => return self.drop_frame(from, DropReason::from(&e)),
             };
@@ -79,7 +93,7 @@ impl Replica {
             peer.repair_credit = (peer.repair_credit + earned).min(CREDIT_MAX_BYTES);
         }
         let transit = self.on_frame_clock(now, sender, frame.seq, &frame.clock);
-        for item in frame.items() {
+        for item in items.drain(..) {
             match item {
                 ItemView::Update {
                     path,
@@ -122,6 +136,17 @@ impl Replica {
             }
         }
     }
+}
+
+/// An empty list of items of another lifetime on the same allocation: the receive path
+/// keeps one list across datagrams that each borrow their own bytes. (std collects a
+/// `Vec`'s own `IntoIter` in place when the element layout is the same, as here; were it
+/// ever not to, this would allocate, nothing worse.)
+// `filter` would keep the lifetime: the `filter_map` is what changes it.
+#[allow(clippy::unnecessary_filter_map)]
+fn recycle<'b>(mut items: Vec<ItemView<'_>>) -> Vec<ItemView<'b>> {
+    items.clear();
+    items.into_iter().filter_map(|_| None).collect()
 }
 
 impl Replica {
@@ -168,5 +193,29 @@ impl Replica {
             return self.cfg.default_transit;
         }
         Duration::from_micros(transit_us.max(0.0).round() as u64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The receive path allocates no list per frame: the one it keeps survives the
+    /// change of lifetime with its capacity (and its allocation).
+    #[test]
+    fn the_item_list_keeps_its_allocation_across_frames() {
+        let mut items: Vec<ItemView<'static>> = Vec::with_capacity(32);
+        let at = items.as_ptr();
+        let bytes = String::from("a.b");
+        let mut borrowed: Vec<ItemView<'_>> = recycle(std::mem::take(&mut items));
+        borrowed.push(ItemView::TalkHead {
+            queue: &bytes,
+            first: 1,
+            last: 0,
+        });
+        let back: Vec<ItemView<'static>> = recycle(borrowed);
+        assert!(back.is_empty(), "no item outlives its frame");
+        assert_eq!(back.capacity(), 32, "the capacity is kept");
+        assert_eq!(back.as_ptr(), at, "the allocation is the same");
     }
 }

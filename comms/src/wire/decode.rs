@@ -186,13 +186,44 @@ pub fn decode_frame(bytes: &[u8], team: u8, key: Option<&TeamKey>) -> Result<Fra
 
 /// Decodes and validates a frame addressed to `team`; with `key`, it must carry a valid
 /// tag, and without one it must carry none; updates by index are read with `known`.
-/// Every item is validated before this returns. Safe on untrusted input; allocates
-/// nothing unless the frame is malformed.
+/// Every item is validated before this returns; [`FrameRef::items`] walks them again.
+/// Safe on untrusted input; allocates nothing unless the frame is malformed. A receiver
+/// that applies every item reads the frame once with [`decode_frame_into`].
 pub fn decode_frame_with<'a>(
     bytes: &'a [u8],
     team: u8,
     key: Option<&TeamKey>,
     known: &'a KnownPaths,
+) -> Result<FrameRef<'a>, DecodeError> {
+    decode(bytes, team, key, known, |_| {})
+}
+
+/// [`decode_frame_with`] in one pass: the readable items, validated, are also put in
+/// `items` (cleared first, and left empty if the frame is malformed, so a malformed frame
+/// hands out nothing), in frame order. A receiver that keeps one `items` allocates nothing
+/// per frame, and each item is read once instead of validated and then read again.
+pub fn decode_frame_into<'a>(
+    bytes: &'a [u8],
+    team: u8,
+    key: Option<&TeamKey>,
+    known: &'a KnownPaths,
+    items: &mut Vec<ItemView<'a>>,
+) -> Result<FrameRef<'a>, DecodeError> {
+    items.clear();
+    let frame = decode(bytes, team, key, known, |item| items.push(item));
+    if frame.is_err() {
+        items.clear();
+    }
+    frame
+}
+
+/// The header, then every item read, validated and handed to `each` in one walk.
+fn decode<'a>(
+    bytes: &'a [u8],
+    team: u8,
+    key: Option<&TeamKey>,
+    known: &'a KnownPaths,
+    mut each: impl FnMut(ItemView<'a>),
 ) -> Result<FrameRef<'a>, DecodeError> {
     if bytes.len() > MAX_FRAME_LEN {
         return Err(DecodeError::Oversized);
@@ -267,7 +298,8 @@ pub fn decode_frame_with<'a>(
     };
     let items_bytes = body.get(body.len() - r.remaining()..).unwrap_or_default();
     let mut items = Items { r, legacy, known };
-    // Every item is checked before any is handed out: a malformed frame applies nothing.
+    // Every item is checked before the frame is returned: a malformed frame applies
+    // nothing (what `each` was given is the caller's to discard).
     let (mut read, mut skipped) = (0u64, 0usize);
     loop {
         if count.is_some_and(|c| read == c) {
@@ -283,7 +315,10 @@ pub fn decode_frame_with<'a>(
             None => break,
             Some(Err(e)) => return Err(e),
             Some(Ok(None)) => skipped += 1,
-            Some(Ok(Some(item))) => validate_item(&item)?,
+            Some(Ok(Some(item))) => {
+                validate_item(&item)?;
+                each(item);
+            }
         }
         read += 1;
     }

@@ -108,8 +108,10 @@
 //! anything is handed out. [`decode_frame_with`] gives a [`FrameRef`] borrowing the
 //! datagram: its items are [`ItemView`]s whose paths are `&str` into the bytes and whose
 //! values stay encoded until [`RawValue::to_value`], so the receive path allocates only
-//! for the values it stores. [`decode_frame`] gives an owned [`Frame`]. Both are safe on
-//! any input: a [`DecodeError`], never a panic.
+//! for the values it stores. [`decode_frame_into`] is the same walk that also hands each
+//! validated item out into a list the caller keeps: the replica reads each item once
+//! (a `FrameRef`'s [`FrameRef::items`] reads them a second time). [`decode_frame`] gives
+//! an owned [`Frame`]. All are safe on any input: a [`DecodeError`], never a panic.
 //!
 //! # Writing frames
 //!
@@ -141,10 +143,14 @@ mod auth;
 mod codec;
 mod decode;
 mod known;
+#[cfg(test)]
+mod two_pass;
 mod writer;
 
 pub use auth::TeamKey;
-pub use decode::{decode_frame, decode_frame_with, peek_origin, DecodeError, FrameRef, Items};
+pub use decode::{
+    decode_frame, decode_frame_into, decode_frame_with, peek_origin, DecodeError, FrameRef, Items,
+};
 pub use known::{KnownPaths, KnownPathsError, MAX_KNOWN_PATHS};
 pub use writer::{encode_frame, item_len, item_len_coded, value_len, varint_len, FrameWriter};
 
