@@ -195,20 +195,24 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
 /// cycle wait for the next one would lock the timer just ahead of every later cycle (each
 /// tick then a cycle old, the program's wait for it always in vain), as a late cycle on a
 /// loaded machine did.
+///
+/// The daemon's loop and the C node's engine both pace their layer with it; times are
+/// since any fixed start.
 #[derive(Debug, Clone, Copy)]
-struct Pacer {
+pub struct Pacer {
     period: Duration,
     /// The last tick: when (time since the layer started), and whether the timer made it.
     last: Option<(Duration, bool)>,
 }
 
 impl Pacer {
-    fn new(period: Duration) -> Pacer {
+    /// A pacer for a layer ticking every `period`.
+    pub fn new(period: Duration) -> Pacer {
         Pacer { period, last: None }
     }
 
     /// A cycle closed at `now`: whether the layer ticks on it.
-    fn cycle(&mut self, now: Duration) -> bool {
+    pub fn cycle(&mut self, now: Duration) -> bool {
         let ticks = match self.last {
             Some((at, false)) => now.saturating_sub(at) >= self.period / 2,
             Some((_, true)) | None => true,
@@ -220,7 +224,7 @@ impl Pacer {
     }
 
     /// The timer ticked the layer at `now`.
-    fn timer(&mut self, now: Duration) {
+    pub fn timer(&mut self, now: Duration) {
         self.last = Some((now, true));
     }
 }

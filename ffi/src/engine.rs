@@ -33,7 +33,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use comms::{Event, Instant, Pattern, Replica, Scope, Value};
-use driver::team::{TeamCore, TeamLayerConfig};
+use driver::team::{Pacer, TeamCore, TeamLayerConfig};
 use driver::{new_incarnation, Clock, DriverConfig, Transport};
 
 use crate::error::*;
@@ -118,26 +118,33 @@ struct TeamRun {
     period: Duration,
     /// The next timer tick; `None` while the layer is dormant (no pose or odometry yet).
     next: Option<Instant>,
-    /// The latest tick.
-    last: Option<Instant>,
+    /// Whether a closing cycle ticks (the daemon's rule).
+    pacer: Pacer,
 }
 
 impl TeamRun {
     fn new(robot: u8, cfg: TeamLayerConfig) -> TeamRun {
         let core = TeamCore::new(robot, cfg);
+        let period = core.period();
         TeamRun {
-            period: core.period(),
+            period,
             core,
             next: None,
-            last: None,
+            pacer: Pacer::new(period),
         }
     }
 
+    /// The timer's tick.
     fn tick(&mut self, replica: &mut Replica, now: Instant) {
+        self.pacer.timer(since_start(now));
         self.core.tick(replica, now);
-        self.last = Some(now);
         self.next = Some(now + self.period);
     }
+}
+
+/// The pacer's time: since the node's clock started.
+fn since_start(now: Instant) -> Duration {
+    now.saturating_duration_since(Instant::ZERO)
 }
 
 /// The node's sockets: the transport's, and the `--peer` one when peers are listed and
@@ -161,8 +168,9 @@ impl State {
     /// Writes `value` to `key` for the robot program with `write` (a set, or a set on the
     /// priority path). A team-layer input is checked by its contract first
     /// (`HUDDLE_E_VALUE`, nothing written), then taken; a pose or odometry closes the
-    /// program's cycle and the layer ticks at once, unless it ticked less than half a
-    /// period ago (the timer then takes it), as in the daemon. An input `write` then
+    /// program's cycle and the layer ticks at once by the daemon's rule
+    /// ([`driver::team::Pacer`]: not within half a period of the last cycle's tick, but
+    /// at once after a tick of the timer standing in for a late cycle). An input `write` then
     /// refuses was still taken, as at the daemon's guard: that cannot happen, the input
     /// keys being valid `local` keys.
     pub(crate) fn set(
@@ -181,9 +189,8 @@ impl State {
         };
         write(&mut self.replica, value)?;
         if let Some(team) = self.team.as_mut().filter(|_| closes_cycle) {
-            let since = team.last.map(|t| now.saturating_duration_since(t));
-            if since.is_none_or(|s| s >= team.period / 2) {
-                team.tick(&mut self.replica, now);
+            if team.pacer.cycle(since_start(now)) {
+                team.core.tick(&mut self.replica, now);
                 // While the program drives, the timer only stands in for a missed cycle:
                 // it must not tick just before the next cycle closes.
                 team.next = Some(now + team.period * 3 / 2);
