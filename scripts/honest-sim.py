@@ -2,7 +2,7 @@
 """The honest-simulator table (#29): every report seed, each preset, both worlds.
 
     scripts/honest-sim.py [--bin target/release/huddle] [--out /tmp/honest-sim] \
-        [--jobs 1] [--duration 300s] [--seeds 301-324] [--table docs/results/honest-sim.md]
+        [--jobs 1] [--duration 300s] [--seeds 501-524] [--table docs/results/honest-sim.md]
 
 Runs (skipping a run whose JSON is already in --out):
   huddle sim --preset P --seed S --duration D --world W --json
@@ -11,8 +11,8 @@ for P in competition, competition-ps, wlan, and, under the SPL budget on competi
 table: per run team / reference for every reference (centralized, told every kick,
 delivery, delayed), the delivery ratio, one goer, the conflict against its bound, the
 shared-time error; per preset and world the medians and worst; and, under SPL, the blind
-robots' error and one goer of VOI against the baseline. Report seeds 301-324 are run once
-for the note and never used to choose a parameter (docs/seeds.md).
+robots' error and one goer of VOI against the baseline. Report seeds (this round
+501-524) are run once for the note and never used to choose a parameter (docs/seeds.md).
 """
 import argparse
 import json
@@ -171,7 +171,7 @@ def main():
     ap.add_argument("--out", default="/tmp/honest-sim")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--duration", default="300s")
-    ap.add_argument("--seeds", default="301-324")
+    ap.add_argument("--seeds", default="501-524")
     ap.add_argument("--table", default="docs/results/honest-sim.md")
     ap.add_argument("--no-run", action="store_true", help="only write the table")
     ap.add_argument("--presets", default=",".join(n for n, _ in PRESETS),

@@ -473,6 +473,8 @@ fn tune_team_ball(wm: &mut huddle::sim::WorldModelConfig, spec: &str) {
             ("mate_restart", _) => wm.global.teammate_restart_after = v as u32,
             ("gate", _) => wm.global.gate_chi2 = v,
             ("push_sigma", _) => wm.push_sigma_m = v,
+            // The pose filter's landmark gate (χ², 2 dof; 0: ungated), for tuning it.
+            ("pose_gate", _) => wm.local.pose_gate_chi2 = (v > 0.0).then_some(v),
             _ => tracing::warn!("--team-ball: {item:?} not applied"),
         }
     }

@@ -503,7 +503,7 @@ impl Simulation {
             .map(|_| {
                 let c = references.delivery_filter();
                 let g = &world_model.global;
-                DeliveryReference::new(c, n, g.stale_after_s, g.track_after_s)
+                DeliveryReference::new(c, n, g.stale_after_s, g.track_after_s, g.forget_margin_s)
             })
             .collect();
         let cfg = SimConfig { references, ..cfg };

@@ -191,6 +191,11 @@ pub struct DeliveryReference {
     /// As the GWM's `track_after_s`: a teammate's message this long after its previous
     /// one (a league's budget: the compact form, no batches) is read as its track's gain.
     track_after_s: Option<f64>,
+    /// As the GWM's `forget_margin_s`: after the ball is put back by hand at `t`, a
+    /// teammate's ball information stamped before `t` + this is void too.
+    forget_margin_s: f64,
+    /// Teammates' ball information stamped before this is of a ball put back by hand.
+    forgotten_before_s: f64,
 }
 
 impl DeliveryReference {
@@ -202,6 +207,7 @@ impl DeliveryReference {
         n: usize,
         stale_after_s: f64,
         track_after_s: Option<f64>,
+        forget_margin_s: f64,
     ) -> Self {
         // Sparse messages can sit in a budget's queue: keep the track gains re-orderable
         // for as long as the team holds a teammate's word.
@@ -216,6 +222,8 @@ impl DeliveryReference {
             previous: vec![None; n],
             stale_after_s,
             track_after_s,
+            forget_margin_s,
+            forgotten_before_s: f64::NEG_INFINITY,
         }
     }
 
@@ -274,15 +282,21 @@ impl DeliveryReference {
                 if let Some(gain) =
                     fusion::track_gain(&model, before.and_then(|p| p.ball).as_ref(), &lwm)
                 {
-                    self.filter.track(&gain);
+                    if gain.t_s >= self.forgotten_before_s {
+                        self.filter.track(&gain);
+                    }
                 }
             } else {
                 for obs in missed.into_iter().flatten().chain(lwm.observation) {
-                    self.filter.observe(&obs);
+                    if obs.t_s >= self.forgotten_before_s {
+                        self.filter.observe(&obs);
+                    }
                 }
             }
             if let Some(kick) = heard.kick(&lwm) {
-                self.filter.kick(&kick);
+                if kick.t_s >= self.forgotten_before_s {
+                    self.filter.kick(&kick);
+                }
             }
         }
         self.filter.settle(now_s);
@@ -296,6 +310,8 @@ impl DeliveryReference {
     /// The ball was put back by hand at `now_s`.
     pub fn forget(&mut self, now_s: f64) {
         self.filter.forget(now_s);
+        // A teammate's stamp carries the shared clock's placement error (as the GWM's).
+        self.forgotten_before_s = now_s + self.forget_margin_s;
     }
 }
 
@@ -417,3 +433,62 @@ const CENTRAL_KICKS_Q: f64 = 2.5;
 /// review measured its error lower with the team's model than with its 0.85.)
 /// See [`CENTRAL_Q`].
 const DELAYED_Q: f64 = 0.85;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use comms::Instant;
+    use fusion::nalgebra::{Matrix2, Vector2, Vector3};
+
+    fn seen(t_s: f64, x: f64, y: f64) -> FieldObservation {
+        FieldObservation {
+            t_s,
+            position: Vector2::new(x, y),
+            cov: Matrix2::identity() * 0.01,
+        }
+    }
+
+    /// A goal at 10 s: the referee puts the ball on the centre spot. Robot 2's message
+    /// carries a sighting of the old ball (by the goal, 4 m off) stamped 10 ms after the
+    /// moment robot 1 was told, within the shared clock's placement error. The team's GWM
+    /// voids it (`forget_margin_s`); the delivery reference must too, or its track starts
+    /// on the old ball and robot 1's own sightings of the centre spot are outliers
+    /// (seed 317, drawn world: 0.9 m off for a second, 88% of the run's excess error).
+    #[test]
+    fn after_the_ball_is_put_back_a_teammates_stamp_within_the_margin_is_void() {
+        let mut reference = DeliveryReference::new(BallFilterConfig::default(), 2, 1.0, None, 0.03);
+        reference.own_sighting(&seen(9.9, 4.0, 0.5));
+        reference.forget(10.0);
+        reference.own_sighting(&seen(10.05, 0.0, 0.0));
+        let mut board = Blackboard::new(2);
+        let lwm = LocalWorldModel {
+            t_s: 10.02,
+            seq: 7,
+            pose: PoseEstimate::new(3.0, 0.0, 0.0, Vector3::new(0.01, 0.01, 0.01)),
+            ball: None,
+            ball_seen_age_s: 0.01,
+            slc: 1.0,
+            lbc: 1.0,
+            observation: Some(seen(10.01, 4.0, 0.5)),
+            earlier: [None, None],
+            kick: None,
+        };
+        let bytes = lwm.to_bytes().expect("encodes").to_vec();
+        board
+            .set(
+                Instant::from_micros(10_020_000),
+                &world_local_of(2),
+                Value::Bytes(bytes),
+            )
+            .expect("robot 2 writes its own world model");
+        reference.receive(0, &board, 10.06, |j, _| (j == 1).then_some(10.02));
+        let at = reference
+            .estimate_at(10.06)
+            .expect("the own sighting started a track")
+            .position();
+        assert!(
+            at.norm() < 0.2,
+            "the reference follows the ball on the centre spot, not the old one: at {at:?}"
+        );
+    }
+}
