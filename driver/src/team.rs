@@ -416,7 +416,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
     // Out of play (the GC's state is not Playing) the layer tells the team nothing.
-    // In Set it tells its kick-off claim (see `TeamLayer::set_kick_off_next`).
+    // Set starts the kick-off hold (see `TeamLayer::set_kick_off_next`).
     let state = Key::parse(GC_STATE_KEY).expect("a valid key");
     let state = match replica.blackboard().get(&state).map(|e| &e.value) {
         Some(Value::String(s)) => Some(s.as_str()),

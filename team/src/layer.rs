@@ -249,15 +249,22 @@ pub struct TeamLayer {
     /// The GameController says Set: a kick-off comes next (see
     /// [`TeamLayer::set_kick_off_next`]).
     kick_off_next: bool,
-    /// In this Set: when it told its kick-off cost, and whether it told it goes.
-    kick_off_told_at_s: Option<f64>,
-    kick_off_going_told: bool,
+    /// The kick-off hold (see [`TeamLayer::set_kick_off_next`]): until when, robot
+    /// seconds; infinite from Set until it hears play.
+    kick_off_hold_until_s: Option<f64>,
+    /// In the hold, and not the kick-off taker: it leaves the ball to the taker.
+    kick_off_yield: bool,
 }
 
-/// In Set, the kick-off's goer tells that it goes no sooner than this after its cost
-/// went, seconds: the teammates' costs, sent when they heard Set (the GC's packets come
-/// every 0.5 s, one may be lost), are in by then.
-const KICK_OFF_SETTLE_S: f64 = 1.5;
+/// The kick-off hold lasts this long after the robot hears play, seconds. Tuned on
+/// seeds 4–11 (`huddle sim --budget spl --game full`, drawn and ideal worlds): see
+/// docs/results/gamecontroller-game.md.
+pub const KICK_OFF_HOLD_S: f64 = 3.0;
+
+/// In the kick-off hold, a robot whose cost is below this takes the kick-off (eq. (19),
+/// about metres to the ball: the kicker stands at the centre spot, the rest of the team
+/// outside the centre circle, 0.75 m in the SPL, and further).
+pub const KICK_OFF_TAKER_COST: f64 = 1.0;
 
 /// The robot id at index `k` of a team's per-robot vectors.
 fn robot_id(k: usize) -> u8 {
@@ -327,8 +334,8 @@ impl TeamLayer {
             penalty_told: false,
             in_play: true,
             kick_off_next: false,
-            kick_off_told_at_s: None,
-            kick_off_going_told: false,
+            kick_off_hold_until_s: None,
+            kick_off_yield: false,
         }
     }
 
@@ -336,67 +343,47 @@ impl TeamLayer {
     /// no GameController). Out of play (Initial, Standby, Ready, Set, Finished) nobody
     /// plays the ball, so the layer keeps deciding for itself but tells the team nothing
     /// (a penalty aside): a league counts messages in Standby, Ready and Set, and a claim
-    /// there is spent on nothing; Set is the exception (see
-    /// [`TeamLayer::set_kick_off_next`]).
+    /// there is spent on nothing.
     pub fn set_in_play(&mut self, in_play: bool) {
         self.in_play = in_play;
     }
 
     /// Whether the GameController says Set: every robot stands on its kick-off spot, the
-    /// ball on the centre spot, and play starts next. The robot then tells its cost once
-    /// (as "not going", with priority), and after
-    /// [`KICK_OFF_SETTLE_S`] the robot whose told cost is the lowest tells that it goes,
-    /// so that at the whistle every robot already holds the same fresh claims and the
-    /// kick-off has one goer without a message.
+    /// ball on the centre spot, and play starts next with a kick-off. From Set until
+    /// [`KICK_OFF_HOLD_S`] after the robot hears play, the **kick-off hold**: only a
+    /// robot whose own cost is below [`KICK_OFF_TAKER_COST`] (the kicker the rules put
+    /// at the centre spot) may claim the ball; every other robot decides as if it had no
+    /// ball, on its own cost, not on a claim it told before the restart. No message is
+    /// needed: each robot knows where it stands.
     ///
-    /// Why: out of play nothing is told, and Ready lasts up to 45 s, longer than a claim
-    /// is held under a budget (three message intervals, 15 s in the SPL). Without it
-    /// every robot that sees the ball at the whistle goes, and the claims that would
-    /// settle it compete for the budget's room for priority frames at the moment the
-    /// team is on its pacing line (the clock stood through Ready and Set): the first
-    /// kick-off of a simulated SPL game had two or more goers for 5.6–8.6 s. A claim in
-    /// Set costs a counted message per field robot that sees the ball, and one for the
-    /// goer.
+    /// Why: out of play nothing is told, and a goal's Ready and Set last longer than a
+    /// claim is held under a budget (15 s in the SPL), so at the whistle no robot holds a
+    /// fresh claim; and the team comes to a kick-off with no room for priority frames
+    /// (under the knock-out clock it stands through Ready and Set, and the attack before
+    /// the goal spent the room). Every robot that saw the ball went, and the claims that
+    /// would settle it waited seconds for the budget. In a simulated SPL game (seeds
+    /// 4–11) 78–86% of all conflict time fell in the first 10 s after a kick-off. The
+    /// earlier remedy, every robot telling its cost in Set, spent a counted message per
+    /// robot per kick-off, and under a budget with no room those claims did not go out
+    /// at all.
     pub fn set_kick_off_next(&mut self, set: bool) {
         if set && !self.kick_off_next {
-            self.kick_off_told_at_s = None;
-            self.kick_off_going_told = false;
+            self.kick_off_hold_until_s = Some(f64::INFINITY);
         }
         self.kick_off_next = set;
     }
 
-    /// In Set, the claim to tell now (see [`TeamLayer::set_kick_off_next`]), if any.
-    fn kick_off_claim(&mut self, t_s: f64, posted: Posted) -> Option<Posted> {
-        let no_ball = self.arbiter.params().no_ball_cost;
-        if !(self.kick_off_next && self.alive && self.is_field_player() && posted.h < no_ball) {
-            return None;
-        }
-        let claim = match self.kick_off_told_at_s {
-            None => {
-                self.kick_off_told_at_s = Some(t_s);
-                Posted {
-                    h: posted.h,
-                    going: false,
-                }
+    /// The kick-off hold at `t_s` (see [`TeamLayer::set_kick_off_next`]): whether it
+    /// runs, started once the robot hears play.
+    fn kick_off_hold(&mut self, t_s: f64) -> bool {
+        match self.kick_off_hold_until_s {
+            Some(until) if until.is_infinite() && self.in_play && !self.kick_off_next => {
+                self.kick_off_hold_until_s = Some(t_s + KICK_OFF_HOLD_S);
             }
-            Some(at)
-                if posted.going && !self.kick_off_going_told && t_s - at >= KICK_OFF_SETTLE_S =>
-            {
-                self.kick_off_going_told = true;
-                posted
-            }
-            Some(_) => return None,
-        };
-        let cost = self.arbiter.params().effective_cost(&claim);
-        if self.compact {
-            // Decide on it as its teammates will: every robot weighs the same costs.
-            self.policy.wrote_claim(claim.going, claim.h, cost);
-            self.arbiter.set_told(Some(claim));
-            self.untold_claim = Some(claim);
-        } else {
-            self.policy.sent_going(claim.going, claim.h, cost);
+            Some(until) if t_s >= until => self.kick_off_hold_until_s = None,
+            _ => {}
         }
-        Some(claim)
+        self.kick_off_hold_until_s.is_some()
     }
 
     /// The robots the GameController says are penalised (player numbers, this robot's
@@ -495,9 +482,14 @@ impl TeamLayer {
     }
 
     /// Whether it plays the ball: it claims it, or it stopped claiming while no teammate
-    /// claims and its teammates have not heard the stop yet.
+    /// claims and its teammates have not heard the stop yet (not in the kick-off hold,
+    /// where a robot other than the taker leaves the ball to it: see
+    /// [`TeamLayer::set_kick_off_next`]).
     pub fn acts_as_goer(&self) -> bool {
-        self.claims_ball() || (!self.rival_going && self.untold_claim.is_some_and(|c| !c.going))
+        self.claims_ball()
+            || (!self.kick_off_yield
+                && !self.rival_going
+                && self.untold_claim.is_some_and(|c| !c.going))
     }
 
     /// Step 1 of a tick at `local_now` (the robot's clock): what it sensed into its world
@@ -657,10 +649,21 @@ impl TeamLayer {
                 .radio(self.id, &heard, stale_after)
                 .then(|| sound.candidates(self.id, t_s, &heard))
         });
+        let holding = self.kick_off_hold(t_s);
+        self.kick_off_yield = holding && self.h >= KICK_OFF_TAKER_COST;
+        if holding && self.compact {
+            // What it told before the restart is long stale at its teammates.
+            self.arbiter.set_told(None);
+        }
+        let cost = if self.kick_off_yield {
+            self.h.max(self.arbiter.params().no_ball_cost)
+        } else {
+            self.h
+        };
         let (decision, posted) = match fallback {
             None => {
                 self.sound_going = None;
-                let (decision, posted) = self.arbiter.tick(dt, self.h, &heard);
+                let (decision, posted) = self.arbiter.tick(dt, cost, &heard);
                 if let Some(sound) = &mut self.sound {
                     sound.posted(t_s, posted);
                 }
@@ -779,16 +782,7 @@ impl TeamLayer {
             return (vec![(arbitration::heuristic_key(), Value::from(out))], true);
         }
         if !self.in_play {
-            return match self.kick_off_claim(t, posted) {
-                // The claim alone: with the world model riding along (the ball on the
-                // centre spot) the team's counted frames went to Set at each of the
-                // game's ~20 kick-offs and one goer fell 1.9 points on seed 1.
-                Some(claim) => (
-                    vec![(arbitration::heuristic_key(), Value::from(claim))],
-                    true,
-                ),
-                None => (Vec::new(), false),
-            };
+            return (Vec::new(), false);
         }
         if let Some(bytes) = lwm {
             writes.push((world_local_key(), bytes));

@@ -293,102 +293,62 @@ fn a_penalised_robot_claims_nothing_and_tells_its_team_once() {
 }
 
 #[test]
-fn in_set_a_field_robot_tells_its_kick_off_cost_once_and_the_goer_then_tells_it_goes() {
-    // Scenario: robot 2 stands on its kick-off spot in Set, 1 m from the ball, and its
-    // arbiter would go. It tells "cost 1.0, not going" at once with priority, nothing
-    // more until 1.5 s later, then "going" once; out of Set, nothing.
-    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
-    let mut r = TeamLayer::new(
-        2,
-        false,
-        ArbitrationParams::default(),
-        Pose::default(),
-        &cal,
-        &cfg.world_model,
-        5,
-    );
-    r.set_in_play(false);
-    let going = Posted {
-        h: 1.0,
-        going: true,
-    };
+fn in_the_kick_off_hold_only_the_taker_claims_and_nothing_is_told_before_play() {
+    // Scenario: after a goal, robot 3 stands at the ball on the centre spot (cost 0.1),
+    // robot 2 on its kick-off spot 2 m away; neither holds a fresh claim of the other
+    // (the restart's Ready and Set outlast every claim under a budget). Before the hold,
+    // both went at the whistle until their claims got through the budget. In Set and
+    // for `KICK_OFF_HOLD_S` after a robot hears play, only the taker claims; Set tells
+    // nothing (it is counted, and a claim there settles nothing the hold does not).
+    let (mut far, _cal, cfg) = robot_at_a_still_ball(2.0, 0.0);
+    let (mut taker, _, _) = robot_at_a_still_ball(0.1, 0.0);
+    let board = Blackboard::new(2);
     let at = |s: f64| Instant::from_micros((s * 1e6) as u64);
-    let finish = |r: &mut TeamLayer, s: f64| {
-        r.finish(&cfg, at(s), None, going, 0, false, false, false, Some(5))
-    };
-    assert_eq!(finish(&mut r, 10.0), (Vec::new(), false), "Ready: silent");
-    r.set_kick_off_next(true);
-    let claim = |going| {
-        vec![(
-            arbitration::heuristic_key(),
-            Value::from(Posted { h: 1.0, going }),
-        )]
-    };
-    assert_eq!(
-        finish(&mut r, 10.04),
-        (claim(false), true),
-        "its cost, at once"
+    for r in [&mut far, &mut taker] {
+        r.set_in_play(false);
+        r.set_kick_off_next(true);
+    }
+    far.h = 2.0;
+    taker.h = 0.1;
+    let (_, posted) = far.decide(&board, at(10.0));
+    assert!(
+        !far.going(),
+        "Set: robot 2 leaves the kick-off to the taker"
     );
-    assert_eq!(
-        finish(&mut r, 11.0),
-        (Vec::new(), false),
-        "teammates' costs come in"
+    let (writes, _) = far.finish(
+        &cfg,
+        at(10.0),
+        None,
+        posted,
+        0,
+        false,
+        false,
+        false,
+        Some(5),
     );
-    assert_eq!(finish(&mut r, 11.6), (claim(true), true), "then it goes");
-    assert_eq!(finish(&mut r, 12.0), (Vec::new(), false), "once");
-    // The next Set tells again; a goalkeeper or a robot without the ball never does.
-    r.set_kick_off_next(false);
-    assert_eq!(
-        finish(&mut r, 40.0),
-        (Vec::new(), false),
-        "Ready again: silent"
-    );
-    r.set_kick_off_next(true);
-    assert_eq!(
-        finish(&mut r, 50.0),
-        (claim(false), true),
-        "the next kick-off"
-    );
-    let mut keeper = TeamLayer::new(
-        1,
-        true,
-        ArbitrationParams::default(),
-        Pose::default(),
-        &cal,
-        &cfg.world_model,
-        5,
-    );
+    assert!(writes.is_empty(), "Set: nothing told: {writes:?}");
+    taker.decide(&board, at(10.0));
+    assert!(taker.going(), "the taker goes on its own word");
+    // Play, heard at 15 s: the hold runs 3 s more.
+    for r in [&mut far, &mut taker] {
+        r.set_in_play(true);
+        r.set_kick_off_next(false);
+    }
+    for s in [15.0, 15.0 + KICK_OFF_HOLD_S - 0.1] {
+        far.decide(&board, at(s));
+        taker.decide(&board, at(s));
+        assert!(!far.going(), "{s} s: robot 2 holds back");
+        assert!(taker.going(), "{s} s: the taker plays the kick-off");
+    }
+    // After the hold robot 2 decides as ever: no claim beats its cost, so it goes.
+    let (decision, _) = far.decide(&board, at(15.0 + KICK_OFF_HOLD_S + 0.1));
+    assert!(far.going(), "after the hold: {decision:?}");
+    // A goalkeeper never takes the kick-off, whatever its cost.
+    let (mut keeper, _, _) = robot_at_a_still_ball(0.1, 0.0);
+    keeper.set_goalkeeper(true);
     keeper.set_in_play(false);
     keeper.set_kick_off_next(true);
-    assert_eq!(finish(&mut keeper, 10.0), (Vec::new(), false), "the keeper");
-    let no_ball = Posted {
-        h: ArbitrationParams::default().no_ball_cost,
-        going: false,
-    };
-    let mut blind = TeamLayer::new(
-        3,
-        false,
-        ArbitrationParams::default(),
-        Pose::default(),
-        &cal,
-        &cfg.world_model,
-        5,
-    );
-    blind.set_in_play(false);
-    blind.set_kick_off_next(true);
-    assert_eq!(
-        blind.finish(
-            &cfg,
-            at(10.0),
-            None,
-            no_ball,
-            0,
-            false,
-            false,
-            false,
-            Some(5)
-        ),
-        (Vec::new(), false),
-        "no ball, no claim"
-    );
+    keeper.h = 0.1;
+    keeper.decide(&board, at(10.0));
+    assert!(!keeper.going(), "the keeper");
 }

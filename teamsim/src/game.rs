@@ -33,6 +33,45 @@ use crate::field::geometry::{Pose, Vec2};
 /// Our team's number in the simulated game (any; the opponents are `OUR_TEAM + 1`).
 pub const OUR_TEAM: u8 = 12;
 
+/// The report's kick-off window: the first this many seconds of each stretch of Playing
+/// (a kick-off from the formation, the ball on the centre spot), seconds.
+pub const KICK_OFF_WINDOW_S: f64 = 10.0;
+
+/// Where the arbitration's ball-visible time went, by the part of the game it fell in
+/// (kick-off windows, time with one of our robots penalised), in Playing only.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct PlayBreakdown {
+    /// Ball-visible seconds.
+    pub visible_s: f64,
+    /// Of them, with two or more goers.
+    pub conflict_s: f64,
+    /// Of them, with no goer.
+    pub no_goer_s: f64,
+}
+
+impl PlayBreakdown {
+    fn add(&mut self, dt_s: f64, visible: bool, goers: usize) {
+        if !visible {
+            return;
+        }
+        self.visible_s += dt_s;
+        match goers {
+            0 => self.no_goer_s += dt_s,
+            1 => {}
+            _ => self.conflict_s += dt_s,
+        }
+    }
+
+    fn rounded(self) -> Self {
+        let r = |x: f64| (x * 100.0).round() / 100.0;
+        Self {
+            visible_s: r(self.visible_s),
+            conflict_s: r(self.conflict_s),
+            no_goer_s: r(self.no_goer_s),
+        }
+    }
+}
+
 /// What the referee's books say at the end (flattened into the report; absent without
 /// `--game`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -63,6 +102,14 @@ pub struct GameReport {
     pub game_packets: u64,
     /// Packet receptions lost on the way to the robots.
     pub game_packets_lost: u64,
+    /// Stretches of Playing (each begins with a kick-off).
+    pub game_kick_offs: u32,
+    /// Arbitration in the first [`KICK_OFF_WINDOW_S`] of each stretch of Playing.
+    pub game_kick_off: PlayBreakdown,
+    /// Arbitration while one of our robots is penalised (outside kick-off windows).
+    pub game_penalised: PlayBreakdown,
+    /// Arbitration in the rest of Playing.
+    pub game_open_play: PlayBreakdown,
 }
 
 impl std::fmt::Display for GameReport {
@@ -84,6 +131,29 @@ impl std::fmt::Display for GameReport {
                 Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
                 None => "never".to_string(),
             }
+        )?;
+        let share = |b: &PlayBreakdown| {
+            let pct = |x: f64| {
+                if b.visible_s > 0.0 {
+                    100.0 * x / b.visible_s
+                } else {
+                    0.0
+                }
+            };
+            format!(
+                "{:.0} s, conflict {:.1}%, no goer {:.1}%",
+                b.visible_s,
+                pct(b.conflict_s),
+                pct(b.no_goer_s)
+            )
+        };
+        write!(
+            f,
+            "\nball visible in play   {} kick-offs (first {KICK_OFF_WINDOW_S:.0} s): {}; penalised: {}; open play: {}",
+            self.game_kick_offs,
+            share(&self.game_kick_off),
+            share(&self.game_penalised),
+            share(&self.game_open_play)
         )
     }
 }
@@ -102,6 +172,12 @@ pub(crate) struct Game {
     packets_lost: u64,
     penalties: u32,
     opponent_spots: Vec<Pose>,
+    /// When the current stretch of Playing began, if play runs.
+    playing_since_s: Option<f64>,
+    kick_offs: u32,
+    kick_off: PlayBreakdown,
+    penalised: PlayBreakdown,
+    open_play: PlayBreakdown,
 }
 
 impl Game {
@@ -129,7 +205,37 @@ impl Game {
             packets_lost: 0,
             penalties: 0,
             opponent_spots,
+            playing_since_s: None,
+            kick_offs: 0,
+            kick_off: PlayBreakdown::default(),
+            penalised: PlayBreakdown::default(),
+            open_play: PlayBreakdown::default(),
         }
+    }
+
+    /// The arbitration's sample of `dt_s` ending at `t_s` (see [`Metrics::sample`]), put
+    /// in its part of the game.
+    ///
+    /// [`Metrics::sample`]: crate::metrics::Metrics::sample
+    pub(crate) fn sample_play(&mut self, t_s: f64, dt_s: f64, visible: bool, goers: usize) {
+        if !self.referee.playing() {
+            self.playing_since_s = None;
+            return;
+        }
+        let since = *self.playing_since_s.get_or_insert_with(|| {
+            self.kick_offs += 1;
+            t_s - dt_s
+        });
+        let penalised =
+            (0..self.trackers.len()).any(|i| self.referee.penalised(comms_netsim::robot_id(i)));
+        let part = if t_s - since <= KICK_OFF_WINDOW_S {
+            &mut self.kick_off
+        } else if penalised {
+            &mut self.penalised
+        } else {
+            &mut self.open_play
+        };
+        part.add(dt_s, visible, goers);
     }
 
     /// The referee's books as the report shows them.
@@ -154,6 +260,10 @@ impl Game {
             game_playing_s: (self.referee.playing_s() * 1000.0).round() / 1000.0,
             game_packets: self.packets,
             game_packets_lost: self.packets_lost,
+            game_kick_offs: self.kick_offs,
+            game_kick_off: self.kick_off.rounded(),
+            game_penalised: self.penalised.rounded(),
+            game_open_play: self.open_play.rounded(),
         }
     }
 }

@@ -723,6 +723,9 @@ impl Simulation {
             .filter(|r| r.is_field_player() && r.going())
             .map(|r| r.id)
             .collect();
+        if let Some(game) = &mut self.game {
+            game.sample_play(t_end, dt, visible, goers.len());
+        }
         if in_play {
             self.metrics.sample(t_end, dt, visible, &goers);
             self.sample_outage(t_end, visible, &goers);

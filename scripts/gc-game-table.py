@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""The full game against the 600 s run of the same build (#34), as a table.
+
+usage: scripts/gc-game-table.py HUDDLE_BIN OUT_DIR [--seeds 1,2,3,601,...] [--worlds drawn,ideal]
+       [--jobs 2] [--only game|600] [--tag NAME]
+
+Runs `huddle sim --budget spl --game full --seed S --json` and `huddle sim --duration 600s
+--budget spl --seed S --json` for each seed and world (a run whose JSON is already in
+OUT_DIR is not run again), then prints one row per run: illegal messages, budget used %,
+one goer %, blind-robot error, team-ball RMSE, longest conflict. Standard library only.
+"""
+import argparse, json, os, subprocess, sys
+from concurrent.futures import ThreadPoolExecutor
+
+
+def run(binary, out_dir, tag, mode, world, seed):
+    path = os.path.join(out_dir, f"{tag}-{mode}-{world}-{seed}.json")
+    if os.path.exists(path) and os.path.getsize(path) > 0:
+        return path
+    cmd = [binary, "sim", "--budget", "spl", "--seed", str(seed), "--json"]
+    cmd += ["--game", "full"] if mode == "game" else ["--duration", "600s"]
+    if world != "drawn":
+        cmd += ["--world", world]
+    out = subprocess.run(cmd, capture_output=True, text=True)
+    if out.returncode != 0:
+        sys.stderr.write(f"{' '.join(cmd)} failed: {out.stderr[-2000:]}\n")
+        return None
+    with open(path + ".tmp", "w") as f:
+        f.write(out.stdout)
+    os.replace(path + ".tmp", path)
+    return path
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("binary")
+    ap.add_argument("out_dir")
+    ap.add_argument("--seeds", default="1,2,3,601,602,603,604,605,606")
+    ap.add_argument("--worlds", default="drawn,ideal")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", choices=["game", "600"], default=None)
+    ap.add_argument("--tag", default="main")
+    ap.add_argument("--no-run", action="store_true")
+    a = ap.parse_args()
+    os.makedirs(a.out_dir, exist_ok=True)
+    seeds = [int(s) for s in a.seeds.split(",")]
+    worlds = a.worlds.split(",")
+    modes = [a.only] if a.only else ["600", "game"]
+    jobs = [(m, w, s) for w in worlds for s in seeds for m in modes]
+    if not a.no_run:
+        with ThreadPoolExecutor(max_workers=a.jobs) as ex:
+            list(ex.map(lambda j: run(a.binary, a.out_dir, a.tag, *j), jobs))
+    cols = "world | seed | run | illegal | budget used % | one goer % | conflict % | blind RMSE m | team ball RMSE m | longest conflict ms (at s) | GC counted | left | score"
+    print(cols)
+    for w in worlds:
+        for s in seeds:
+            for m in modes:
+                path = os.path.join(a.out_dir, f"{a.tag}-{m}-{w}-{s}.json")
+                try:
+                    r = json.load(open(path))
+                except (OSError, ValueError):
+                    print(f"{w} | {s} | {m} | (no result)")
+                    continue
+                game = m == "game"
+                used = r.get("game_budget_used_pct") if game else round(100.0 * r["team_messages_sent"] / 600, 1)
+                print(" | ".join(str(x) for x in [
+                    w, s, "full game" if game else "600 s",
+                    r.get("game_illegal_messages", "–") if game else "–",
+                    used,
+                    r["exactly_one_goer_pct"], r["conflict_pct"],
+                    r["blind_team_ball_rmse_m"], r["team_ball_rmse_m"],
+                    f'{r["longest_conflict_ms"]:.0f} ({r["longest_conflict_at_s"]:.1f})',
+                    r.get("game_messages_counted", "–") if game else r.get("team_messages_sent"),
+                    r.get("game_budget_left", "–") if game else r.get("budget_left"),
+                    f'{r["game_score"][0]}–{r["game_score"][1]}' if game else f'{r["goals_for"]}–{r["goals_against"]}',
+                ]))
+
+
+if __name__ == "__main__":
+    main()
