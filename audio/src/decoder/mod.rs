@@ -315,6 +315,18 @@ pub struct Decoder {
     /// The end test's short window.
     short_window: ShortWindow,
     eof: bool,
+    /// Diagnosis: what the decoder decided and why, when asked for (see
+    /// [`Decoder::enable_trace`]); `None` costs nothing.
+    trace: std::cell::RefCell<Option<Vec<TraceEvent>>>,
+}
+
+/// One step of the decoder's reasoning, for diagnosis (see [`Decoder::enable_trace`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TraceEvent {
+    /// Where in the stream it concerns, s (a frame's onset or a slot's end).
+    pub at_s: f64,
+    /// What happened.
+    pub what: String,
 }
 
 impl std::fmt::Debug for Decoder {
@@ -374,7 +386,34 @@ impl Decoder {
             pending_replay: None,
             output: VecDeque::new(),
             eof: false,
+            trace: std::cell::RefCell::new(None),
         })
+    }
+
+    /// Starts recording the decoder's decisions (frames found, slots refused and by
+    /// which check, end-test verdicts) for diagnosis; drain them with
+    /// [`Decoder::take_trace`]. Off by default: it does not change any decision.
+    pub fn enable_trace(&mut self) {
+        *self.trace.borrow_mut() = Some(Vec::new());
+    }
+
+    /// The decisions recorded since the last call (empty when tracing is off).
+    pub fn take_trace(&mut self) -> Vec<TraceEvent> {
+        self.trace
+            .borrow_mut()
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    /// Records `what` at sample `at` when tracing is on.
+    fn note(&self, at: f64, what: impl FnOnce() -> String) {
+        if let Some(trace) = self.trace.borrow_mut().as_mut() {
+            trace.push(TraceEvent {
+                at_s: at / self.rate(),
+                what: what(),
+            });
+        }
     }
 
     /// The configuration.

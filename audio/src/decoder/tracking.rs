@@ -68,6 +68,7 @@ impl Decoder {
         let Some(onset) = self.estimate_onset(frame, scale) else {
             return;
         };
+        self.note(onset, || format!("found {frame:?} at scale {scale}"));
         self.tracking = Some(Tracking {
             sender: frame.sender,
             data: [frame.data, frame.data],
@@ -112,9 +113,15 @@ impl Decoder {
             self.refine_onset(t);
             return Step::Again;
         }
-        let decision = self
-            .confirm_slot(t, a, b)
-            .filter(|_| first || self.second_frame_holds_its_level(t, a, b));
+        let decision = self.confirm_slot(t, a, b).filter(|_| {
+            first || {
+                let holds = self.second_frame_holds_its_level(t, a, b);
+                if !holds {
+                    self.note(a, || "second slot: sender does not hold its level".to_string());
+                }
+                holds
+            }
+        });
         let Some(slot) = decision else {
             // A first slot of the sender just decided, starting within half a tone of that
             // transmission's end, is its reverberant tail (plus babble), not a long
@@ -172,6 +179,7 @@ impl Decoder {
         next.present = slot.present;
         next.noise = slot.noise;
         if first && self.continues_earlier_frame(&next, a) {
+            self.note(a, || "first slot continues an earlier frame: dropped".to_string());
             self.end_transmission(b, false);
             return Step::Wait;
         }
@@ -191,7 +199,9 @@ impl Decoder {
         if self.latest_window_end() < end + slot_len + quarter && !self.eof {
             return Step::Wait;
         }
-        if self.sender_stopped_late(t, end) {
+        let stopped = self.sender_stopped_late(t, end);
+        self.note(end, || format!("late check: stopped {stopped}"));
+        if stopped {
             self.report_late_short(t, end);
         } else {
             self.end_transmission(end, false);
@@ -240,6 +250,9 @@ impl Decoder {
         };
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
+        self.note(slot_end, || {
+            format!("end test after slot {}: {continues:?}", test.slot)
+        });
         match (test.slot, continues) {
             (1, EndVerdict::Unclear) => {
                 if let Some(tr) = self.tracking.as_mut() {
@@ -288,6 +301,7 @@ impl Decoder {
                 .map(|k| t.level[k])
                 .collect(),
         );
+        self.note(end, || format!("report {message} (plan allows: {})", self.config.team.decode(&message).is_some()));
         if self.config.team.decode(&message).is_none() {
             // Not a message of the team's plan (e.g. data 20, or a long message across
             // two banks of the six-robot plan): someone else's, or a wrong decision.
