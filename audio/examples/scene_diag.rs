@@ -46,7 +46,11 @@ fn main() {
     // to a little after its end (a long message is two tones).
     let mut causes = std::collections::BTreeMap::<String, usize>::new();
     for (m, t) in &out.missed {
-        let len = if matches!(m, audio::Message::Long { .. }) { 2.0 } else { 1.0 };
+        let len = if matches!(m, audio::Message::Long { .. }) {
+            2.0
+        } else {
+            1.0
+        };
         let near: Vec<_> = trace
             .iter()
             .filter(|e| e.at_s > t - 0.6 && e.at_s < t + len + 0.8)

@@ -158,7 +158,12 @@ impl Decoder {
             return None;
         };
         if frame.sender != t.sender {
-            self.note(a, || format!("slot refused: sender {:?} not the tracked one", frame.sender));
+            self.note(a, || {
+                format!(
+                    "slot refused: sender {:?} not the tracked one",
+                    frame.sender
+                )
+            });
             return None;
         }
         let energy: f64 = frame.tones().iter().map(|&k| sums[k]).sum();
@@ -175,11 +180,15 @@ impl Decoder {
             Some("a vote not above its neighbours")
         } else if !self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b) {
             Some("a vote not steady")
-        } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear)
-        {
+        } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear) {
             self.note(a, || {
                 let own = frame.tones();
-                let med = median(own.iter().filter(|&&k| present[k]).map(|&k| level[k]).collect());
+                let med = median(
+                    own.iter()
+                        .filter(|&&k| present[k])
+                        .map(|&k| level[k])
+                        .collect(),
+                );
                 let steady = self.steadiness(frame, &sums, count, t.scale, a, b);
                 let n = count.max(1) as f64;
                 let strays: Vec<String> = (0..TONE_COUNT)
@@ -653,9 +662,10 @@ impl Decoder {
         // through the slot: a foreign signal steady enough to hold our six tones for a
         // slot holds its own too, while in a babble hall a talker's harmonic smeared
         // over the slot reaches the level of a frame tone in a notch now and then.
-        let steady = clear
-            .then(|| self.steadiness(frame, sums, count, scale, a, b))
-            .flatten();
+        // The same holds below the hall level: a stray judged by the test a frame's own
+        // votes must pass (a burst of babble is a tone neither for us nor for a rival).
+        let _ = clear;
+        let steady = self.steadiness(frame, sums, count, scale, a, b);
         (0..TONE_COUNT).any(|k| {
             present[k]
                 && !own.contains(&k)
