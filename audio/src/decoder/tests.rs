@@ -433,7 +433,10 @@ fn a_long_message_whose_tones_ring_on_briefly_is_still_a_long_message() {
     let enc = Encoder::new(EncoderConfig::default()).unwrap();
     let msg = Message::long(Sender::RightAttacker, 21 * 4 + 17).unwrap();
     let sent = enc.encode_f32(&msg);
-    let rms = (sent.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>()
+    let rms = (sent
+        .iter()
+        .map(|&v| f64::from(v) * f64::from(v))
+        .sum::<f64>()
         / sent.len() as f64)
         .sqrt();
     let amplitude = rms / 3f64.sqrt(); // six tones of equal amplitude
