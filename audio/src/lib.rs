@@ -67,7 +67,9 @@ mod team;
 mod tones;
 mod wav;
 
-pub use decoder::{Decoder, DecoderConfig, DecoderConfigError, Detection, MIN_TONE_DURATION_S};
+pub use decoder::{
+    Decoder, DecoderConfig, DecoderConfigError, Detection, TraceEvent, MIN_TONE_DURATION_S,
+};
 pub use encoder::{Encoder, EncoderConfig, EncoderConfigError};
 pub use pcm::{f32_to_i16, i16_to_f32, i16_to_s16le, S16leDecoder};
 pub use team::{TeamError, TeamMessage, TeamPlan};

@@ -72,6 +72,13 @@ const STEADY_EDGE: f64 = 0.1;
 const MEDIAN_PRESENT: f64 = 1.3;
 /// Least probability, under a steady tone, of as many dropouts as a vote tone shows.
 const P_DROPOUTS: f64 = 1e-3;
+/// Least mean excess per window (noise mean 1, 6 dB) of a tone whose median window is
+/// held to its mean (see [`Decoder::votes_sound_steadily`]): a steady tone of excess 4
+/// has a median window of about 4.5, with a spread of about 1 over a dozen windows.
+const BURST_MIN: f64 = 4.0;
+/// Least share of its mean excess a steady tone's median window keeps (−6 dB): about
+/// 3 spreads below the median of a steady tone at [`BURST_MIN`], and more above it.
+const BURST_SHARE: f64 = 0.25;
 
 /// Least typical tone level (per-window excess over the noise, 15 dB) of a frame the hall
 /// allowances apply to (see [`stands_clear`]). Nearly all the messages they recover in
@@ -141,16 +148,119 @@ impl Decoder {
                 }
                 decided => decided,
             };
-        let frame = frame.filter(|f| f.sender == t.sender).filter(|f| {
-            let energy: f64 = f.tones().iter().map(|&k| sums[k]).sum();
-            energy >= self.frame_threshold(count, P_FRAME_CONFIRM)
-        })?;
+        let Some(frame) = frame else {
+            self.note(a, || {
+                let votes: Vec<usize> = (0..crate::tones::BASIC_COUNT)
+                    .map(|b| basic_tones(b).iter().filter(|&&k| present[k]).count())
+                    .collect();
+                format!("slot refused by the rules: votes per basic {votes:?}")
+            });
+            return None;
+        };
+        if frame.sender != t.sender {
+            self.note(a, || {
+                format!(
+                    "slot refused: sender {:?} not the tracked one",
+                    frame.sender
+                )
+            });
+            return None;
+        }
+        let energy: f64 = frame.tones().iter().map(|&k| sums[k]).sum();
+        if energy < self.frame_threshold(count, P_FRAME_CONFIRM) {
+            self.note(a, || "slot refused: frame energy".to_string());
+            return None;
+        }
         let clear = stands_clear(frame, &present, &level);
-        let ours = self.sounds_through_slot(frame, &present, t.scale, a, b)
-            && self.sounds_like_tones(frame, &present, &sums, count, t.scale, a, b)
-            && !self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear)
-            && !self.has_off_grid_tone(frame, &present, t.scale, a, b, clear);
-        ours.then_some(SlotDecision {
+        let refused = if !self.sounds_through_slot(frame, &present, t.scale, a, b) {
+            Some("does not sound through")
+        } else if !self.votes_hold_in_each_half(frame, &present, t.scale, a, b) {
+            Some("a vote misses a half")
+        } else if !Self::votes_stand_above_their_neighbours(frame, &present, &sums, count) {
+            Some("a vote not above its neighbours")
+        } else if !self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b) {
+            Some("a vote not steady")
+        } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear) {
+            self.note(a, || {
+                let own = frame.tones();
+                let med = median(
+                    own.iter()
+                        .filter(|&&k| present[k])
+                        .map(|&k| level[k])
+                        .collect(),
+                );
+                let steady = self.steadiness(frame, &sums, count, t.scale, a, b);
+                let n = count.max(1) as f64;
+                let strays: Vec<String> = (0..TONE_COUNT)
+                    .filter(|&k| present[k] && !own.contains(&k) && level[k] >= 0.3 * med)
+                    .map(|k| {
+                        let around = neighbourhood(&own, k, &sums);
+                        format!(
+                            "k{k} {:.2}x med, local {:.1}, steady {:?}",
+                            level[k] / med,
+                            median(around) / n,
+                            steady.as_ref().map(|s| s(k))
+                        )
+                    })
+                    .collect();
+                format!("strays (clear {clear}): {}", strays.join("; "))
+            });
+            Some("stray tone")
+        } else if self.has_off_grid_tone(frame, &present, t.scale, a, b, clear) {
+            Some("off grid")
+        } else {
+            None
+        };
+        self.note(a, || {
+            let typical = median(
+                frame
+                    .tones()
+                    .into_iter()
+                    .filter(|&k| present[k])
+                    .map(|k| level[k])
+                    .collect(),
+            );
+            let n = count.max(1) as f64;
+            let own = frame.tones();
+            let tones: Vec<String> = (0..TONE_COUNT)
+                .filter(|&k| present[k] || own.contains(&k))
+                .map(|k| {
+                    let around = neighbourhood(&own, k, &sums);
+                    format!(
+                        "{}k{k}{} {:.1}/{:.1}",
+                        if own.contains(&k) { "*" } else { "" },
+                        if present[k] { "" } else { "(absent)" },
+                        level[k],
+                        median(around) / n
+                    )
+                })
+                .collect();
+            format!(
+                "slot {frame:?} level {:.1} dB: {} [{}]",
+                10.0 * typical.max(1e-12).log10(),
+                refused.unwrap_or("passes"),
+                tones.join(" ")
+            )
+        });
+        if refused.is_none() {
+            self.note(a, || {
+                let rows: Vec<String> = self
+                    .history
+                    .iter()
+                    .filter(|w| (w.start as f64) > a - 0.5 * (b - a))
+                    .map(|w| {
+                        let v: Vec<String> = frame
+                            .tones()
+                            .iter()
+                            .map(|&k| format!("{:.0}", w.r[t.scale * TONE_COUNT + k]))
+                            .collect();
+                        format!("{:.2}:{}", w.start as f64 / self.rate(), v.join(","))
+                    })
+                    .collect();
+                format!("timeline {}", rows.join(" "))
+            });
+        }
+        refused.is_none().then_some(SlotDecision {
             frame,
             present,
             level,
@@ -494,14 +604,23 @@ impl Decoder {
                 .iter()
                 .map(|w| f64::from(w.r[scale * TONE_COUNT + k]) / local)
                 .collect();
-            let lambda = (median(r.clone()) - 1.0).max(0.0);
+            let middle = median(r.clone());
+            let lambda = (middle - 1.0).max(0.0);
             let dropouts = r.iter().filter(|&&x| x < 1.0).count();
             let tail = binomial_upper_tail(r.len(), dropouts, probability_below_noise_mean(lambda));
             // Where the neighbourhood stands above the floor (speech around), the median
             // window must also show the tone: a tone made of a few bursts has a median at
             // the floor, and at that level of λ its dropouts are no surprise.
-            let median_shows = raised <= 1.0 || median(r.clone()) >= MEDIAN_PRESENT;
-            tail >= P_DROPOUTS && median_shows
+            let median_shows = raised <= 1.0 || middle >= MEDIAN_PRESENT;
+            // A tone whose slot level is clear of the noise must show most of that level
+            // in its median window too: a steady tone's median window sits at its mean
+            // (within a few of its spread), while a "tone" whose level came from two or
+            // three bursts (a note of music, a syllable, over a hall) has its mean far
+            // above its median. Below BURST_MIN the windows' own spread is too large to
+            // tell, and the tests above judge alone.
+            let mean = r.iter().sum::<f64>() / r.len() as f64 - 1.0;
+            let not_bursts = mean < BURST_MIN || middle - 1.0 >= BURST_SHARE * mean;
+            tail >= P_DROPOUTS && median_shows && not_bursts
         })
     }
 
@@ -543,9 +662,10 @@ impl Decoder {
         // through the slot: a foreign signal steady enough to hold our six tones for a
         // slot holds its own too, while in a babble hall a talker's harmonic smeared
         // over the slot reaches the level of a frame tone in a notch now and then.
-        let steady = clear
-            .then(|| self.steadiness(frame, sums, count, scale, a, b))
-            .flatten();
+        // The same holds below the hall level: a stray judged by the test a frame's own
+        // votes must pass (a burst of babble is a tone neither for us nor for a rival).
+        let _ = clear;
+        let steady = self.steadiness(frame, sums, count, scale, a, b);
         (0..TONE_COUNT).any(|k| {
             present[k]
                 && !own.contains(&k)

@@ -70,7 +70,9 @@
 //!    tone level measured in the slot: sender stops → a short message; sender continues →
 //!    a second slot is decided the same way and the sender must then stop → a long
 //!    message. A frame that keeps sounding past two slots is not a message (and is
-//!    ignored until it stops).
+//!    ignored until it stops), unless, half a slot later, the sender is plainly silent
+//!    (the same late test as after an unclear first slot): then what went on was the
+//!    second frame's own tail in a hall, and the two slots are a long message.
 //!    The test runs on short Hann windows (half an analysis window, 64 ms at 1 s tones)
 //!    from the estimated end on, every quarter of their length, at the frame's exact
 //!    frequencies, each judged as soon as its samples arrive. Overlapping windows do not
@@ -161,7 +163,10 @@
 //! they are *steady* (a tone at level λ reads below the noise mean in a window with
 //! probability p(λ), and a vote tone with more such dropouts than a binomial at p(λ)
 //! allows at 1e-3 was bursts; where speech lifts the neighbourhood, the median window
-//! must show the tone too). Under Gaussian noise these cost little (the neighbourhood
+//! must show the tone too; and a tone 6 dB or more above the noise over the slot must
+//! hold a quarter of that level in its median window: a "tone" of two or three bursts
+//! has its mean far above its median). A tone outside the frame counts as a stray (a
+//! foreign transmitter's) only if it passes the same steadiness test. Under Gaussian noise these cost little (the neighbourhood
 //! and the rank read the floor), so the argument above stands; under babble they are
 //! what holds, and that is measured, not derived: `huddle audio eval --noise-time
 //! 600min` counts false messages in 10 h of dry and of reverberant babble (the crate's
@@ -315,6 +320,18 @@ pub struct Decoder {
     /// The end test's short window.
     short_window: ShortWindow,
     eof: bool,
+    /// Diagnosis: what the decoder decided and why, when asked for (see
+    /// [`Decoder::enable_trace`]); `None` costs nothing.
+    trace: std::cell::RefCell<Option<Vec<TraceEvent>>>,
+}
+
+/// One step of the decoder's reasoning, for diagnosis (see [`Decoder::enable_trace`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TraceEvent {
+    /// Where in the stream it concerns, s (a frame's onset or a slot's end).
+    pub at_s: f64,
+    /// What happened.
+    pub what: String,
 }
 
 impl std::fmt::Debug for Decoder {
@@ -374,7 +391,34 @@ impl Decoder {
             pending_replay: None,
             output: VecDeque::new(),
             eof: false,
+            trace: std::cell::RefCell::new(None),
         })
+    }
+
+    /// Starts recording the decoder's decisions (frames found, slots refused and by
+    /// which check, end-test verdicts) for diagnosis; drain them with
+    /// [`Decoder::take_trace`]. Off by default: it does not change any decision.
+    pub fn enable_trace(&mut self) {
+        *self.trace.borrow_mut() = Some(Vec::new());
+    }
+
+    /// The decisions recorded since the last call (empty when tracing is off).
+    pub fn take_trace(&mut self) -> Vec<TraceEvent> {
+        self.trace
+            .borrow_mut()
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    /// Records `what` at sample `at` when tracing is on.
+    fn note(&self, at: f64, what: impl FnOnce() -> String) {
+        if let Some(trace) = self.trace.borrow_mut().as_mut() {
+            trace.push(TraceEvent {
+                at_s: at / self.rate(),
+                what: what(),
+            });
+        }
     }
 
     /// The configuration.

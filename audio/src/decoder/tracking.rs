@@ -54,6 +54,10 @@ pub(super) enum Stage {
     /// for the second half of a would-be second slot (see
     /// [`Decoder::sender_stopped_late`]).
     LateCheck(f64),
+    /// The end test after the second slot (ending at this sample) found the sender going
+    /// on (`true`) or could not tell: waiting for the second half of a would-be third
+    /// slot.
+    LateCheckLong(f64, bool),
 }
 
 /// Whether tracking can go on with what has been heard, or must wait for more.
@@ -68,6 +72,7 @@ impl Decoder {
         let Some(onset) = self.estimate_onset(frame, scale) else {
             return;
         };
+        self.note(onset, || format!("found {frame:?} at scale {scale}"));
         self.tracking = Some(Tracking {
             sender: frame.sender,
             data: [frame.data, frame.data],
@@ -90,6 +95,7 @@ impl Decoder {
                 Stage::Slot1 | Stage::Slot2 => self.decide_slot(&t),
                 Stage::EndTest(test) => self.end_test(&t, test),
                 Stage::LateCheck(end) => self.late_check(&t, end),
+                Stage::LateCheckLong(end, went_on) => self.late_check_long(&t, end, went_on),
             };
             if let Step::Wait = step {
                 return;
@@ -112,9 +118,17 @@ impl Decoder {
             self.refine_onset(t);
             return Step::Again;
         }
-        let decision = self
-            .confirm_slot(t, a, b)
-            .filter(|_| first || self.second_frame_holds_its_level(t, a, b));
+        let decision = self.confirm_slot(t, a, b).filter(|_| {
+            first || {
+                let holds = self.second_frame_holds_its_level(t, a, b);
+                if !holds {
+                    self.note(a, || {
+                        "second slot: sender does not hold its level".to_string()
+                    });
+                }
+                holds
+            }
+        });
         let Some(slot) = decision else {
             // A first slot of the sender just decided, starting within half a tone of that
             // transmission's end, is its reverberant tail (plus babble), not a long
@@ -172,6 +186,9 @@ impl Decoder {
         next.present = slot.present;
         next.noise = slot.noise;
         if first && self.continues_earlier_frame(&next, a) {
+            self.note(a, || {
+                "first slot continues an earlier frame: dropped".to_string()
+            });
             self.end_transmission(b, false);
             return Step::Wait;
         }
@@ -191,11 +208,50 @@ impl Decoder {
         if self.latest_window_end() < end + slot_len + quarter && !self.eof {
             return Step::Wait;
         }
-        if self.sender_stopped_late(t, end) {
+        let stopped = self.sender_stopped_late(t, end);
+        self.note(end, || format!("late check: stopped {stopped}"));
+        if stopped {
             self.report_late_short(t, end);
         } else {
             self.end_transmission(end, false);
             self.pending_replay = Some(end.max(0.0).floor() as u64);
+        }
+        Step::Wait
+    }
+
+    /// After the end test on the second slot (ending at `end`) found the sender going on,
+    /// or could not tell: once the second half of a would-be third slot is heard, a
+    /// sender plainly silent there makes the two slots a long message; otherwise the
+    /// frame sounded too long and is not a message.
+    ///
+    /// In a hall the second frame's own tail, with babble on its tones, passes for a
+    /// continuation now and then (T60 1.2 s at 0 dB in-band: about one long message in
+    /// 30 was lost so). Both slots have passed every check by then, and no message of the
+    /// protocol has a third frame; what the wait rules out is the sender's next message
+    /// (at least half a tone later, so still sounding at the start of the judged span).
+    fn late_check_long(&mut self, t: &Tracking, end: f64, went_on: bool) -> Step {
+        let slot_len = self.geometry.slot_samples;
+        let quarter = 0.25 * self.geometry.window_len as f64;
+        if self.latest_window_end() < end + slot_len + quarter && !self.eof {
+            return Step::Wait;
+        }
+        let stopped = self.sender_stopped_late(t, end);
+        self.note(end, || {
+            format!("late check after slot 2: stopped {stopped}")
+        });
+        if stopped {
+            let value = 21 * u16::from(t.data[0]) + u16::from(t.data[1]);
+            let message = Message::Long {
+                sender: t.sender,
+                value,
+            };
+            let decided_at = self.latest_window_end();
+            self.report(t, message, end, decided_at);
+            self.end_transmission(end, false);
+            self.pending_replay = Some(end.max(0.0).floor() as u64);
+        } else {
+            // As before the wait: a frame that went on is blocked until it stops.
+            self.end_transmission(end, went_on);
         }
         Step::Wait
     }
@@ -240,16 +296,14 @@ impl Decoder {
         };
         let decided_at = decided_at.unwrap_or_else(|| self.latest_window_end());
         let slot_end = test.slot_end;
+        self.note(slot_end, || {
+            format!("end test after slot {}: {continues:?}", test.slot)
+        });
         match (test.slot, continues) {
             (1, EndVerdict::Unclear) => {
                 if let Some(tr) = self.tracking.as_mut() {
                     tr.stage = Stage::LateCheck(slot_end);
                 }
-            }
-            (_, EndVerdict::Unclear) => {
-                // Stopped or not cannot be told: a short would possibly be a long message
-                // cut short, and a second slot is not worth deciding on such evidence.
-                self.end_transmission(slot_end, false);
             }
             (1, EndVerdict::Stopped) => {
                 let message = Message::Short {
@@ -264,6 +318,13 @@ impl Decoder {
                     tr.stage = Stage::Slot2;
                 }
             }
+            (_, verdict @ (EndVerdict::Unclear | EndVerdict::Continues)) => {
+                // A long message has two frames: a sender going on past them is the
+                // second frame's tail, or not a message (see `late_check_long`).
+                if let Some(tr) = self.tracking.as_mut() {
+                    tr.stage = Stage::LateCheckLong(slot_end, verdict == EndVerdict::Continues);
+                }
+            }
             (_, EndVerdict::Stopped) => {
                 let value = 21 * u16::from(t.data[0]) + u16::from(t.data[1]);
                 let message = Message::Long {
@@ -272,9 +333,6 @@ impl Decoder {
                 };
                 self.report(t, message, slot_end, decided_at);
                 self.end_transmission(slot_end, false);
-            }
-            (_, EndVerdict::Continues) => {
-                self.end_transmission(slot_end, true);
             }
         }
         Step::Again
@@ -288,6 +346,12 @@ impl Decoder {
                 .map(|k| t.level[k])
                 .collect(),
         );
+        self.note(end, || {
+            format!(
+                "report {message} (plan allows: {})",
+                self.config.team.decode(&message).is_some()
+            )
+        });
         if self.config.team.decode(&message).is_none() {
             // Not a message of the team's plan (e.g. data 20, or a long message across
             // two banks of the six-robot plan): someone else's, or a wrong decision.

@@ -4,7 +4,7 @@
 //! Nothing is sent: every report is a false message.
 
 use crate::channel::{Babble, Convolver, Door, Gated, Melody, RoomSpec, Source, Whistle};
-use crate::decoder::{Decoder, DecoderConfig};
+use crate::decoder::{Decoder, DecoderConfig, TraceEvent};
 
 use super::FalseAlarmOutcome;
 
@@ -100,8 +100,32 @@ pub fn run_background_false_alarm_trial(
     t60_s: f64,
     seed: u64,
 ) -> FalseAlarmOutcome {
+    background_trial(kind, seconds, t60_s, seed, false).0
+}
+
+/// [`run_background_false_alarm_trial`] with the decoder's trace (see
+/// [`Decoder::enable_trace`]), for diagnosing a false message.
+pub fn run_background_false_alarm_trial_traced(
+    kind: Background,
+    seconds: f64,
+    t60_s: f64,
+    seed: u64,
+) -> (FalseAlarmOutcome, Vec<TraceEvent>) {
+    background_trial(kind, seconds, t60_s, seed, true)
+}
+
+fn background_trial(
+    kind: Background,
+    seconds: f64,
+    t60_s: f64,
+    seed: u64,
+    trace: bool,
+) -> (FalseAlarmOutcome, Vec<TraceEvent>) {
     let rate = 16_000u32;
     let mut decoder = Decoder::new(DecoderConfig::default()).expect("the default config is valid");
+    if trace {
+        decoder.enable_trace();
+    }
     let mut sources = kind.sources(seed, rate);
     let mut hall = (t60_s > 0.0)
         .then(|| Convolver::new(&RoomSpec::hall(seed ^ 0x4a11, t60_s, rate).impulse_response()));
@@ -125,10 +149,11 @@ pub fn run_background_false_alarm_trial(
     }
     decoder.finish();
     detections.extend(std::iter::from_fn(|| decoder.poll_message()));
-    FalseAlarmOutcome {
+    let outcome = FalseAlarmOutcome {
         hours: seconds / 3600.0,
         false_messages: detections.len(),
         detections,
         samples: done,
-    }
+    };
+    (outcome, decoder.take_trace())
 }

@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{random_message, shifted, TrialError, SIGNAL_POWER};
 use crate::channel::{in_band_power, Convolver};
-use crate::decoder::{Decoder, DecoderConfig, Detection};
+use crate::decoder::{Decoder, DecoderConfig, Detection, TraceEvent};
 use crate::encoder::{Encoder, EncoderConfig};
 use crate::team::TeamPlan;
 use crate::tones::{Message, Sender, HIGHEST_TONE_HZ, LOWEST_TONE_HZ};
@@ -335,12 +335,34 @@ pub fn run_scene_trial(
     babble: &[Vec<f32>],
     trial: &SceneTrial,
 ) -> Result<SceneOutcome, TrialError> {
+    Ok(scene_trial(room, babble, trial, false)?.0)
+}
+
+/// [`run_scene_trial`] with the decoder's trace (see [`Decoder::enable_trace`]), for
+/// diagnosing what lost a message.
+pub fn run_scene_trial_traced(
+    room: &ExternalRoom,
+    babble: &[Vec<f32>],
+    trial: &SceneTrial,
+) -> Result<(SceneOutcome, Vec<TraceEvent>), TrialError> {
+    scene_trial(room, babble, trial, true)
+}
+
+fn scene_trial(
+    room: &ExternalRoom,
+    babble: &[Vec<f32>],
+    trial: &SceneTrial,
+    trace: bool,
+) -> Result<(SceneOutcome, Vec<TraceEvent>), TrialError> {
     let rate = ROOM_SET_RATE_HZ;
     let rate_f = f64::from(rate);
     let config = DecoderConfig::default();
     let tone_s = config.tone_duration_s;
     let encoder = Encoder::new(EncoderConfig::default())?;
     let mut decoder = Decoder::new(config)?;
+    if trace {
+        decoder.enable_trace();
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(trial.seed);
 
     // Where each robot position's sound arrives: the convolver's latency plus the direct
@@ -518,7 +540,7 @@ pub fn run_scene_trial(
             out.overlapped_correct += usize::from(s.matched);
         }
     }
-    Ok(out)
+    Ok((out, decoder.take_trace()))
 }
 
 /// False messages in `seconds` of `talkers` talkers in `room` with no message.
