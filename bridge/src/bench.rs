@@ -196,25 +196,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // 1. First sample after the bridge starts.
     let exe = std::env::current_exe()?;
     let started = StdInstant::now();
-    let mut child = std::process::Command::new(exe)
-        .args(["--team", &TEAM.to_string(), "--venue", VENUE, "--group"])
-        .arg(group.to_string())
-        .args(["--iface", "127.0.0.1", "--connect"])
-        .arg(format!("tcp/127.0.0.1:{port}"))
-        .env("RUST_LOG", "warn")
-        .spawn()
-        .context("starting the bridge")?;
+    let mut child = spawn_bridge(&exe, VENUE, group, port, &[]).context("starting the bridge")?;
     let pid = child.id();
     let mut handover = if args.compare_fast_path {
         Some(
-            std::process::Command::new(std::env::current_exe()?)
-                .args(["--team", &TEAM.to_string(), "--venue", VENUE_FAST])
-                .arg("--group")
-                .arg(group.to_string())
-                .args(["--iface", "127.0.0.1", "--no-fast-path", "--connect"])
-                .arg(format!("tcp/127.0.0.1:{port}"))
-                .env("RUST_LOG", "warn")
-                .spawn()
+            spawn_bridge(&exe, VENUE_FAST, group, port, &["--no-fast-path"])
                 .context("starting the second bridge")?,
         )
     } else {
@@ -644,4 +630,24 @@ fn print_row(name: &str, v: &[Duration]) {
         ms(quantile(&s, 0.99)),
         s.len()
     );
+}
+
+/// Starts this binary as a bridge for the bench's team in `venue`, on the scratch `group`
+/// over loopback, connected to the bench's router on `port`; `extra` flags added.
+pub(crate) fn spawn_bridge(
+    exe: &std::path::Path,
+    venue: &str,
+    group: impl std::fmt::Display,
+    port: u16,
+    extra: &[&str],
+) -> std::io::Result<std::process::Child> {
+    std::process::Command::new(exe)
+        .args(["--team", &TEAM.to_string(), "--venue", venue, "--group"])
+        .arg(group.to_string())
+        .args(["--iface", "127.0.0.1"])
+        .args(extra)
+        .arg("--connect")
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .env("RUST_LOG", "warn")
+        .spawn()
 }

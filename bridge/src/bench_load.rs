@@ -83,13 +83,7 @@ pub fn run(args: &BenchArgs, port: u16, session: &zenoh::Session, raw_rate: f64)
             .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
     };
     let group = driver::scratch_group()?;
-    let mut bridge = std::process::Command::new(std::env::current_exe()?)
-        .args(["--team", &TEAM.to_string(), "--venue", VENUE, "--group"])
-        .arg(group.to_string())
-        .args(["--iface", "127.0.0.1", "--connect"])
-        .arg(format!("tcp/127.0.0.1:{port}"))
-        .env("RUST_LOG", "warn")
-        .spawn()
+    let mut bridge = crate::bench::spawn_bridge(&std::env::current_exe()?, VENUE, group, port, &[])
         .context("starting the load bridge")?;
     let result = replay(args, session, &traffic, &lean, group, bridge.id(), raw_rate);
     let _ = bridge.kill();

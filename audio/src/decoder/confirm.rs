@@ -212,14 +212,7 @@ impl Decoder {
             None
         };
         self.note(a, || {
-            let typical = median(
-                frame
-                    .tones()
-                    .into_iter()
-                    .filter(|&k| present[k])
-                    .map(|k| level[k])
-                    .collect(),
-            );
+            let typical = typical_level(frame, &present, &level);
             let n = count.max(1) as f64;
             let own = frame.tones();
             let tones: Vec<String> = (0..TONE_COUNT)
@@ -695,15 +688,19 @@ pub(super) fn stands_clear(
     present: &[bool; TONE_COUNT],
     level: &[f64; TONE_COUNT],
 ) -> bool {
-    let typical = median(
+    typical_level(frame, present, level) >= HALL_CLEAR_LEVEL
+}
+
+/// The median level of the frame's own tones that are present.
+fn typical_level(frame: Frame, present: &[bool; TONE_COUNT], level: &[f64; TONE_COUNT]) -> f64 {
+    median(
         frame
             .tones()
             .into_iter()
             .filter(|&k| present[k])
             .map(|k| level[k])
             .collect(),
-    );
-    typical >= HALL_CLEAR_LEVEL
+    )
 }
 
 /// The two basics a frame's 2-of-3 votes are taken on: its sender's and its data's.
