@@ -871,6 +871,17 @@ impl GlobalModel {
         if best.len() < 2 && !unsupported {
             return;
         }
+        // Nor can fewer robots than see the ball where the team has it: two robots that
+        // each hold a false ball (wide enough to agree with each other) must not move a
+        // ball three teammates are tracking.
+        let supporting = |r: &RobotRecord| {
+            r.last_accepted_t_s.is_some_and(|acc| {
+                acc >= now_s - window && r.last_rejected_t_s.is_none_or(|rej| rej < acc)
+            })
+        };
+        if !unsupported && best.len() < self.robots.values().filter(|r| supporting(r)).count() {
+            return;
+        }
         let mut fused = dissenters[best[0]].1;
         for &j in &best[1..] {
             fused = fuse_independent(&fused, &dissenters[j].1);
