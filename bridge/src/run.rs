@@ -734,18 +734,13 @@ impl Publisher {
     fn apply(&mut self, taken: Instant, ops: Vec<Op>) {
         let mut token_errors = 0;
         let mut samples = Vec::with_capacity(ops.len());
+        let put = |samples| put_samples(&self.session, &self.clock, taken, samples, &self.core.0);
         for op in ops {
             match op {
                 sample @ (Op::Put(_) | Op::Talk(_)) => samples.push(sample),
                 Op::Alive { robot, key, .. } => {
                     // Samples before a liveliness change go before it.
-                    put_samples(
-                        &self.session,
-                        &self.clock,
-                        taken,
-                        std::mem::take(&mut samples),
-                        &self.core.0,
-                    );
+                    put(std::mem::take(&mut samples));
                     match self.session.liveliness().declare_token(key).wait() {
                         Ok(token) => {
                             if let Some(old) = self.tokens.insert(robot, token) {
@@ -759,13 +754,7 @@ impl Publisher {
                     }
                 }
                 Op::Gone { robot } => {
-                    put_samples(
-                        &self.session,
-                        &self.clock,
-                        taken,
-                        std::mem::take(&mut samples),
-                        &self.core.0,
-                    );
+                    put(std::mem::take(&mut samples));
                     if let Some(token) = self.tokens.remove(&robot) {
                         if let Err(e) = token.undeclare().wait() {
                             token_errors += 1;
@@ -775,7 +764,7 @@ impl Publisher {
                 }
             }
         }
-        let slow = put_samples(&self.session, &self.clock, taken, samples, &self.core.0);
+        let slow = put(samples);
         let mut core = lock(&self.core.0);
         core.putting = false;
         core.io.token_errors += token_errors;

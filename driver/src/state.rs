@@ -38,8 +38,7 @@ pub(crate) const SEND_WARNING_PERIOD: std::time::Duration = std::time::Duration:
 #[derive(Clone, Copy, Debug)]
 pub struct Clock {
     origin: std::time::Instant,
-    offset_us: u64,
-    drift_ppb: i64,
+    skew: ClockSkew,
 }
 
 impl Default for Clock {
@@ -62,8 +61,7 @@ impl Clock {
     pub fn skewed(skew: ClockSkew) -> Clock {
         Clock {
             origin: std::time::Instant::now(),
-            offset_us: skew.offset_us,
-            drift_ppb: skew.drift_ppb,
+            skew,
         }
     }
 
@@ -76,23 +74,27 @@ impl Clock {
 
     /// What the clock reads `real_us` after its start.
     fn local_us(&self, real_us: u64) -> u64 {
-        if self.drift_ppb == 0 {
-            return real_us.saturating_add(self.offset_us);
+        let ClockSkew {
+            offset_us,
+            drift_ppb,
+        } = self.skew;
+        if drift_ppb == 0 {
+            return real_us.saturating_add(offset_us);
         }
         let real = i128::from(real_us);
-        let gained = (real * i128::from(self.drift_ppb)).div_euclid(NS_PER_S);
-        let local = i128::from(self.offset_us) + real + gained;
+        let gained = (real * i128::from(drift_ppb)).div_euclid(NS_PER_S);
+        let local = i128::from(offset_us) + real + gained;
         u64::try_from(local.max(0)).unwrap_or(u64::MAX)
     }
 
     /// The real time after its start at which the clock reads `local_us`, rounded up (a
     /// timer set there finds its deadline due), 0 for a reading before the start.
     fn real_us(&self, local_us: u64) -> u64 {
-        let since = local_us.saturating_sub(self.offset_us);
-        if self.drift_ppb == 0 {
+        let since = local_us.saturating_sub(self.skew.offset_us);
+        if self.skew.drift_ppb == 0 {
             return since;
         }
-        let rate = NS_PER_S + i128::from(self.drift_ppb);
+        let rate = NS_PER_S + i128::from(self.skew.drift_ppb);
         let real = (i128::from(since) * NS_PER_S + rate - 1) / rate;
         u64::try_from(real.max(0)).unwrap_or(u64::MAX)
     }
