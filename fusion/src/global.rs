@@ -167,6 +167,8 @@ struct RobotRecord {
     received_t_s: f64,
     last_rejected_t_s: Option<f64>,
     last_accepted_t_s: Option<f64>,
+    /// Its newest accepted observation (see `restart_on_consensus`).
+    accepted_obs: Option<FieldObservation>,
     /// Its observations rejected in a row that agree with each other (see `challenge`).
     rejected_run: Vec<FieldObservation>,
     /// The track those observations make, filtered as each joined the run (`None` while
@@ -359,6 +361,7 @@ impl GlobalModel {
             received_t_s: now_s,
             last_rejected_t_s: None,
             last_accepted_t_s: None,
+            accepted_obs: None,
             rejected_run: Vec::new(),
             run_track: None,
             heard: Heard::default(),
@@ -436,6 +439,7 @@ impl GlobalModel {
             self.last_accepted_obs_t_s = obs.t_s;
             if let Some(rec) = self.robots.get_mut(&robot) {
                 rec.last_accepted_t_s = Some(now_s);
+                rec.accepted_obs = Some(*obs);
                 if lwm.ball.is_some() {
                     // The robot's own ball already turned with its kick: not twice.
                     if let Some(report) = lwm.kick {
@@ -465,6 +469,7 @@ impl GlobalModel {
             return Ingest::Rejected(d2);
         }
         rec.last_accepted_t_s = Some(now_s);
+        rec.accepted_obs = Some(*obs);
         rec.clear_run();
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = self.last_accepted_obs_t_s.max(obs.t_s);
@@ -581,6 +586,7 @@ impl GlobalModel {
             return;
         }
         let first = run[0];
+        rec.accepted_obs = run.last().copied();
         rec.clear_run();
         rec.last_rejected_t_s = None;
         rec.last_accepted_t_s = Some(now_s);
@@ -875,6 +881,40 @@ impl GlobalModel {
         for &j in &best[1..] {
             fused = fuse_independent(&fused, &dissenters[j].1);
         }
+        // Nor can fewer robots than see the ball where the team has it: two robots that
+        // each hold a false ball (wide enough to agree with each other) must not move a
+        // ball three teammates are tracking (seed 517 of the drawn simulator). A robot
+        // supports the team ball against the group if its last observation, accepted
+        // within the dissent window and not dissented from since, fits the team ball
+        // better than the group's (Mahalanobis). After a kick nobody reported, what the
+        // old track still takes (far robots' wide sightings of the rolling ball) fits the
+        // kicked ball as well, so it does not hold the kick back.
+        if !unsupported {
+            let supporting = |r: &RobotRecord| {
+                r.last_accepted_t_s.is_some_and(|acc| {
+                    acc >= now_s - window && r.last_rejected_t_s.is_none_or(|rej| rej < acc)
+                }) && r.accepted_obs.is_some_and(|obs| {
+                    let team = self
+                        .state_at(obs.t_s)
+                        .and_then(|b| b.position_mahalanobis_sq(&model, &obs));
+                    let group = fused.position_mahalanobis_sq(&model, &obs);
+                    match (team, group) {
+                        (Some(team), Some(group)) => team < group,
+                        _ => false,
+                    }
+                })
+            };
+            // Dissenters outside the group whose ball does not fit the group's oppose it too.
+            let elsewhere = dissenters
+                .iter()
+                .enumerate()
+                .filter(|(j, (_, b))| !best.contains(j) && !agree(&fused, b))
+                .count();
+            let supporters = self.robots.values().filter(|r| supporting(r)).count() + elsewhere;
+            if best.len() < supporters {
+                return;
+            }
+        }
         self.keep_for_rewind(fused.t_s);
         self.committed = Some(fused);
         self.head = Some(fused);
@@ -886,6 +926,7 @@ impl GlobalModel {
             if let Some(rec) = self.robots.get_mut(&dissenters[j].0) {
                 rec.last_rejected_t_s = None;
                 rec.last_accepted_t_s = Some(now_s);
+                rec.accepted_obs = rec.rejected_run.last().copied();
             }
         }
     }
@@ -903,6 +944,7 @@ impl GlobalModel {
         for rec in self.robots.values_mut() {
             rec.lwm.ball = None;
             rec.last_rejected_t_s = None;
+            rec.accepted_obs = None;
             rec.clear_run();
         }
     }

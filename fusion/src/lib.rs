@@ -84,7 +84,10 @@
 //! never moves the team ball. A real kick makes every robot that sees the ball dissent at
 //! once; when two or more dissenters' own ball tracks agree with each other, the team ball
 //! restarts from their fusion (their own tracks are built from their own sightings only, so
-//! this one-off product is not double counting). A lone robot restarts it when enough of its
+//! this one-off product is not double counting), unless more robots oppose them: robots
+//! whose last sighting, accepted within the window, fits the team ball better than the
+//! group's, and dissenters elsewhere. Two robots holding false balls that happen to agree
+//! do not move a ball three teammates see; a kick's far, wide sightings oppose nothing. A lone robot restarts it when enough of its
 //! observations in a row (`own_restart_after` of the own camera's, `teammate_restart_after`
 //! of a teammate's) fail the gate, agree with each other, and no observation made since
 //! the first of them supported the old ball; every observation since, rejected or not, is

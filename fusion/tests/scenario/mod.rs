@@ -58,6 +58,8 @@ pub struct Scenario {
     pub sight_prob: f64,
     pub model: BallModel,
     pub liar: Option<Liar>,
+    /// A second robot that lies at the same time (two phantoms that may agree).
+    pub second_liar: Option<Liar>,
     /// (time, new velocity) of kicks.
     pub kicks: Vec<(f64, Vector2<f64>)>,
     /// From this time on no message reaches anyone.
@@ -84,6 +86,7 @@ impl Scenario {
                 accel_noise_m2_per_s3: 0.02,
             },
             liar: None,
+            second_liar: None,
             kicks: Vec::new(),
             silent_from_s: None,
             ball_start: None,
@@ -322,9 +325,10 @@ pub fn run(sc: &Scenario) -> Vec<Record> {
                     let _ = lwm.landmark(&s);
                 }
             }
-            let lying = sc
-                .liar
-                .filter(|l| l.robot == i && (l.from_s..l.to_s).contains(&t));
+            let lying = [sc.liar, sc.second_liar]
+                .into_iter()
+                .flatten()
+                .find(|l| l.robot == i && (l.from_s..l.to_s).contains(&t));
             let seen_at =
                 Vector2::new(ball.x, ball.y) + lying.map_or(Vector2::zeros(), |l| l.offset_m);
             let exact = field_to_robot(&truths[i], &seen_at);
