@@ -67,8 +67,9 @@ impl Boards {
         (0..2).find(|&a| x[a].abs() >= self.half(a) && x[a] * x[a + 2] > 0.0)
     }
 
-    /// Along its path, how far the mean rolls before its centre meets a board, and which.
-    fn distance_to_board(&self, x: &Vector4<f64>) -> Option<(usize, f64)> {
+    /// Along its path, how far the mean rolls before its centre meets a board, and which;
+    /// with the mean's speed `|v|` (hypot), which the caller needs too.
+    fn distance_to_board(&self, x: &Vector4<f64>) -> Option<(usize, f64, f64)> {
         let s = x.z.hypot(x.w);
         if !(s > 0.0 && s.is_finite()) {
             return None;
@@ -80,7 +81,7 @@ impl Boards {
                     return None;
                 }
                 let d = (self.half(a).copysign(u) - x[a]) / u;
-                (d >= 0.0).then_some((a, d))
+                (d >= 0.0).then_some((a, d, s))
             })
             .min_by(|p, q| p.1.total_cmp(&q.1))
     }
@@ -187,10 +188,9 @@ impl FieldBall {
                 bounced = true;
                 continue;
             }
-            let Some((axis, to_board)) = boards.distance_to_board(&mean) else {
+            let Some((axis, to_board, s)) = boards.distance_to_board(&mean) else {
                 break;
             };
-            let s = mean.z.hypot(mean.w);
             // The speed only falls, so the ball rolls at most s·left; the computed roll
             // keeps that bound too (its ∫e^{−ct} is below τ ≤ left by far more than its
             // rounding, and the rolling term only subtracts), so a board further off is

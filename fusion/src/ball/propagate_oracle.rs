@@ -1,6 +1,6 @@
 //! The ball prediction as it was before it was made cheaper (e3f2b1c: every roll worked
 //! out, e^{−c·dt} − 1 up to three times, the board check's roll always computed, the 4×4
-//! products with I and 0 always done), kept verbatim as an oracle: the cheaper code must
+//! products with I and 0 always done, the speed's hypot taken twice), kept verbatim as an oracle: the cheaper code must
 //! give the same doubles, bit for bit, or the simulator's figures move.
 
 #![allow(non_snake_case)]
@@ -114,6 +114,23 @@ fn old_friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64, f64, f
     (d, s_next, g, if stopped { 0.0 } else { a }, t_stop)
 }
 
+fn old_distance_to_board(boards: &Boards, x: &Vector4<f64>) -> Option<(usize, f64)> {
+    let s = x.z.hypot(x.w);
+    if !(s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    (0..2)
+        .filter_map(|a| {
+            let u = x[a + 2] / s;
+            if u == 0.0 {
+                return None;
+            }
+            let d = (boards.half(a).copysign(u) - x[a]) / u;
+            (d >= 0.0).then_some((a, d))
+        })
+        .min_by(|p, q| p.1.total_cmp(&q.1))
+}
+
 fn old_field_propagate(
     ball: &FieldBall,
     x: &Vector4<f64>,
@@ -134,7 +151,7 @@ fn old_field_propagate(
             boards.reflect(axis, false, mu, &mut mean, &mut F, &mut Q);
             continue;
         }
-        let Some((axis, to_board)) = boards.distance_to_board(&mean) else {
+        let Some((axis, to_board)) = old_distance_to_board(&boards, &mean) else {
             break;
         };
         let s = mean.z.hypot(mean.w);
