@@ -24,7 +24,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use comms::{Blackboard, Value};
+use comms::{Blackboard, Key, Value};
 use fusion::{
     BallEstimate, BallFilterConfig, BallSighting, CentralizedBall, FieldObservation, Heard, Kick,
     LocalWorldModel, NetworkLimitedBall, PoseEstimate,
@@ -187,6 +187,9 @@ pub struct DeliveryReference {
     taken: Vec<Option<(u64, u64)>>,
     /// Per teammate index: its LWM taken last (for a sparse message's track gain).
     previous: Vec<Option<LocalWorldModel>>,
+    /// Per teammate index: the key its LWM is held under (built once: a key is parsed
+    /// and allocated, and every robot looks up every teammate's at every tick).
+    keys: Vec<Key>,
     stale_after_s: f64,
     /// As the GWM's `track_after_s`: a teammate's message this long after its previous
     /// one (a league's budget: the compact form, no batches) is read as its track's gain.
@@ -220,6 +223,9 @@ impl DeliveryReference {
             heard: BTreeMap::new(),
             taken: vec![None; n],
             previous: vec![None; n],
+            keys: (0..n)
+                .map(|j| world_local_of(comms_netsim::robot_id(j)))
+                .collect(),
             stale_after_s,
             track_after_s,
             forget_margin_s,
@@ -252,7 +258,7 @@ impl DeliveryReference {
                 continue;
             }
             let id = comms_netsim::robot_id(j);
-            let Some(e) = board.get(&world_local_of(id)) else {
+            let Some(e) = board.get(&self.keys[j]) else {
                 continue;
             };
             if self.taken[j] == Some((e.incarnation, e.version)) {

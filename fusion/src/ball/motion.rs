@@ -131,41 +131,7 @@ impl BallModel {
             BallModel::Rolling {
                 friction_per_s: c,
                 accel_noise_m2_per_s3: q,
-            } => {
-                let u = c * dt;
-                let (a, g, qpp, qpv, qvv) = if u < 1e-3 {
-                    (
-                        1.0 - u + u * u / 2.0,
-                        dt * (1.0 - u / 2.0 + u * u / 6.0),
-                        q * dt.powi(3) * (1.0 / 3.0 - u / 4.0 + 7.0 * u * u / 60.0),
-                        q * dt * dt * (0.5 - u / 2.0 + 7.0 * u * u / 24.0),
-                        q * dt * (1.0 - u + 2.0 * u * u / 3.0),
-                    )
-                } else {
-                    let e1 = -(-u).exp_m1(); // 1 − a
-                    let e2 = -(-2.0 * u).exp_m1(); // 1 − a²
-                    (
-                        1.0 - e1,
-                        e1 / c,
-                        q / c.powi(3) * (u - 2.0 * e1 + e2 / 2.0),
-                        q / (c * c) * (e1 - e2 / 2.0),
-                        q / (2.0 * c) * e2,
-                    )
-                };
-                let F = Matrix4::new(
-                    1.0, 0.0, g, 0.0, //
-                    0.0, 1.0, 0.0, g, //
-                    0.0, 0.0, a, 0.0, //
-                    0.0, 0.0, 0.0, a,
-                );
-                let Q = Matrix4::new(
-                    qpp, 0.0, qpv, 0.0, //
-                    0.0, qpp, 0.0, qpv, //
-                    qpv, 0.0, qvv, 0.0, //
-                    0.0, qpv, 0.0, qvv,
-                );
-                (F, Q)
-            }
+            } => rolling_transition(c, q, dt, &mut Decay::new(c, dt)),
             BallModel::Static { drift_m2_per_s } => {
                 let mut F = Matrix4::zeros();
                 F[(0, 0)] = 1.0;
@@ -189,6 +155,71 @@ impl BallModel {
     }
 }
 
+/// e^{−c·dt} − 1 for one prediction's `c` and `dt`, worked out at most once: a friction
+/// prediction needs it up to three times (Q's discretisation, the mean's roll, and the roll
+/// at the linearisation speed when neither stops within `dt`), each time the same call on
+/// the same argument, so sharing it changes no bit of the result.
+struct Decay {
+    c: f64,
+    dt: f64,
+    em1: Option<f64>,
+}
+
+impl Decay {
+    fn new(c: f64, dt: f64) -> Self {
+        Decay { c, dt, em1: None }
+    }
+
+    /// `(−c·τ).exp_m1()`, from the one worked out for `dt` when `τ` is `dt`. (`−(c·dt)`
+    /// and `(−c)·dt` are the same double: the product's sign and magnitude are separate.)
+    fn exp_m1(&mut self, c: f64, tau: f64) -> f64 {
+        if c.to_bits() == self.c.to_bits() && tau.to_bits() == self.dt.to_bits() {
+            let (c, dt) = (self.c, self.dt);
+            *self.em1.get_or_insert_with(|| (-c * dt).exp_m1())
+        } else {
+            (-c * tau).exp_m1()
+        }
+    }
+}
+
+/// [`BallModel::Rolling`]'s F and Q over `dt` (see [`BallModel::transition`]).
+#[allow(non_snake_case)]
+fn rolling_transition(c: f64, q: f64, dt: f64, decay: &mut Decay) -> (Matrix4<f64>, Matrix4<f64>) {
+    let u = c * dt;
+    let (a, g, qpp, qpv, qvv) = if u < 1e-3 {
+        (
+            1.0 - u + u * u / 2.0,
+            dt * (1.0 - u / 2.0 + u * u / 6.0),
+            q * dt.powi(3) * (1.0 / 3.0 - u / 4.0 + 7.0 * u * u / 60.0),
+            q * dt * dt * (0.5 - u / 2.0 + 7.0 * u * u / 24.0),
+            q * dt * (1.0 - u + 2.0 * u * u / 3.0),
+        )
+    } else {
+        let e1 = -decay.exp_m1(c, dt); // 1 − a
+        let e2 = -(-2.0 * u).exp_m1(); // 1 − a²
+        (
+            1.0 - e1,
+            e1 / c,
+            q / c.powi(3) * (u - 2.0 * e1 + e2 / 2.0),
+            q / (c * c) * (e1 - e2 / 2.0),
+            q / (2.0 * c) * e2,
+        )
+    };
+    let F = Matrix4::new(
+        1.0, 0.0, g, 0.0, //
+        0.0, 1.0, 0.0, g, //
+        0.0, 0.0, a, 0.0, //
+        0.0, 0.0, 0.0, a,
+    );
+    let Q = Matrix4::new(
+        qpp, 0.0, qpv, 0.0, //
+        0.0, qpp, 0.0, qpv, //
+        qpv, 0.0, qvv, 0.0, //
+        0.0, qpv, 0.0, qvv,
+    );
+    (F, Q)
+}
+
 /// [`BallModel::Friction`]'s prediction over `dt` (see [`BallModel::propagate`]), with the
 /// acceleration noise `q_of(s)` a function of the mean's speed.
 #[allow(non_snake_case)]
@@ -207,14 +238,12 @@ pub(super) fn friction_propagate(
     // uncertainty spans, √(s² + tr P_vv): at the mean itself a ball believed at rest
     // would have F_vv = 0, and a fresh track (v = 0, wide P_vv) would lose its velocity
     // variance in one step, which a ball that may have just been kicked does not.
-    let (d, s_next, _, _, _) = friction_roll(c, mu, s, dt);
+    let mut decay = Decay::new(c, dt);
+    let (d, s_next, _, _, _) = friction_roll_with(c, mu, s, dt, &mut decay);
     let s_lin = (s * s + velocity_var_m2ps2.max(0.0)).sqrt();
-    let (_, Q) = BallModel::Rolling {
-        friction_per_s: c,
-        accel_noise_m2_per_s3: q_of(s),
-    }
-    .transition(dt);
-    let (d_lin, s_next_lin, g, a, _) = friction_roll(c, mu, s_lin, dt);
+    // `BallModel::Rolling { c, q_of(s) }.transition(dt)`, sharing e^{−c·dt} − 1.
+    let (_, Q) = rolling_transition(c, q_of(s), dt.max(0.0), &mut decay);
+    let (d_lin, s_next_lin, g, a, _) = friction_roll_with(c, mu, s_lin, dt, &mut decay);
     let mut F = Matrix4::identity();
     let (across_p, across_v) = if s_lin > 0.0 {
         (d_lin / s_lin, s_next_lin / s_lin)
@@ -247,6 +276,17 @@ pub(super) fn friction_propagate(
 /// hold through the stop too: the speed is 0 there, so the stop time's own dependence on s
 /// adds nothing.
 pub(super) fn friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64, f64, f64) {
+    friction_roll_with(c, mu, s, dt, &mut Decay::new(c, dt))
+}
+
+/// [`friction_roll`] with e^{−c·dt} − 1 shared with the other rolls of one prediction.
+fn friction_roll_with(
+    c: f64,
+    mu: f64,
+    s: f64,
+    dt: f64,
+    decay: &mut Decay,
+) -> (f64, f64, f64, f64, f64) {
     let t_stop = if mu <= 0.0 {
         f64::INFINITY
     } else if c * s / mu < 1e-9 {
@@ -260,7 +300,7 @@ pub(super) fn friction_roll(c: f64, mu: f64, s: f64, dt: f64) -> (f64, f64, f64,
     let (g, gg) = if c * tau < 1e-6 {
         (tau, tau * tau / 2.0)
     } else {
-        let g = -(-c * tau).exp_m1() / c;
+        let g = -decay.exp_m1(c, tau) / c;
         (g, (tau - g) / c)
     };
     let a = 1.0 - c * g; // e^{−cτ}

@@ -62,15 +62,19 @@ impl CentralizedBall {
 /// Observations are kept for `window_s` so that a late one slots in at its own time. The
 /// filter after each kept event is kept too, so a late event replays only the events
 /// after it, and an estimate is the last state predicted (before, every estimate
-/// replayed the whole window: a fifth of `huddle sim`'s time). The states are the same
-/// operations in the same order either way, so the figures are identical.
+/// replayed the whole window: a fifth of `huddle sim`'s time). The replay waits until a
+/// state is asked for (settling, an estimate): the several events one message brings, and
+/// the robot's own sighting that a teammate's earlier one then slots in front of, are
+/// replayed once, not once per event. The states are the same operations in the same
+/// order either way, so the figures are identical.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetworkLimitedBall {
     settled: BallFilter,
     /// Events at or after `settled_until_s`, in time order. (Queues: settling takes
     /// from the front at every tick, and a vector moved the whole window each time.)
     recent: VecDeque<Event>,
-    /// `after[k]`: `settled` with `recent[..=k]` applied in order.
+    /// `after[k]`: `settled` with `recent[..=k]` applied in order, for the first
+    /// `after.len()` events; the rest are still to be replayed (see `catch_up`).
     after: VecDeque<BallFilter>,
     settled_until_s: f64,
     window_s: f64,
@@ -129,17 +133,30 @@ impl NetworkLimitedBall {
         }
         let at = self.recent.partition_point(|p| p.t_s() <= t_s);
         self.recent.insert(at, event);
-        // Replay from the new event on.
+        // The states from the new event on are to be replayed.
         self.after.truncate(at);
-        let mut filter = match at {
+        true
+    }
+
+    /// The filter before `recent[from]` (`from` ≤ `after.len()`).
+    fn before(&self, from: usize) -> BallFilter {
+        match from {
             0 => self.settled.clone(),
-            _ => self.after[at - 1].clone(),
-        };
-        for event in self.recent.range(at..) {
+            _ => self.after[from - 1].clone(),
+        }
+    }
+
+    /// Replays the events whose states are not kept yet.
+    fn catch_up(&mut self) {
+        let from = self.after.len();
+        if from == self.recent.len() {
+            return;
+        }
+        let mut filter = self.before(from);
+        for event in self.recent.range(from..) {
             event.apply(&mut filter);
             self.after.push_back(filter.clone());
         }
-        true
     }
 
     /// One observation, whenever it arrives; `false` (and counted) if it is older than
@@ -159,8 +176,10 @@ impl NetworkLimitedBall {
         self.insert(Event::Track(*gain))
     }
 
-    /// Settles every event older than `now_s − window_s` into the filter for good.
+    /// Settles every event older than `now_s − window_s` into the filter for good (and
+    /// replays what came since the last call).
     pub fn settle(&mut self, now_s: f64) {
+        self.catch_up();
         let until = now_s - self.window_s;
         if until <= self.settled_until_s {
             return;
@@ -176,7 +195,16 @@ impl NetworkLimitedBall {
 
     /// The estimate from everything received, predicted to `t_s`.
     pub fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
-        self.after.back().unwrap_or(&self.settled).estimate_at(t_s)
+        let from = self.after.len();
+        if from == self.recent.len() {
+            return self.after.back().unwrap_or(&self.settled).estimate_at(t_s);
+        }
+        // Events not replayed yet (no settle since they came): replayed here, not kept.
+        let mut filter = self.before(from);
+        for event in self.recent.range(from..) {
+            event.apply(&mut filter);
+        }
+        filter.estimate_at(t_s)
     }
 
     /// The filter's settings.

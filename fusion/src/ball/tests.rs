@@ -526,3 +526,169 @@ fn a_still_ball_is_predicted_tighter_than_a_fast_one() {
         fast.cov
     );
 }
+
+/// What [`NetworkLimitedBall`] is defined to be, computed the slow way: the settled filter
+/// with every kept event applied in time order, from scratch at every question.
+struct ReplayEverything {
+    settled: BallFilter,
+    recent: Vec<(f64, ReplayEvent)>,
+    settled_until_s: f64,
+    window_s: f64,
+}
+
+#[derive(Clone, Copy)]
+enum ReplayEvent {
+    Seen(FieldObservation),
+    Kicked(Kick),
+    Track(crate::TrackGain),
+}
+
+impl ReplayEvent {
+    fn apply(&self, filter: &mut BallFilter) {
+        match self {
+            ReplayEvent::Seen(o) => {
+                filter.observe(o);
+            }
+            ReplayEvent::Kicked(k) => filter.kick(k),
+            ReplayEvent::Track(g) => {
+                filter.measure_state(g.t_s, &g.mean, &g.cov);
+            }
+        }
+    }
+}
+
+impl ReplayEverything {
+    fn insert(&mut self, t_s: f64, event: ReplayEvent) -> bool {
+        if t_s < self.settled_until_s {
+            return false;
+        }
+        let at = self.recent.partition_point(|(t, _)| *t <= t_s);
+        self.recent.insert(at, (t_s, event));
+        true
+    }
+
+    fn settle(&mut self, now_s: f64) {
+        let until = now_s - self.window_s;
+        if until <= self.settled_until_s {
+            return;
+        }
+        self.settled_until_s = until;
+        let n = self.recent.partition_point(|(t, _)| *t < until);
+        for (_, e) in self.recent.drain(..n) {
+            e.apply(&mut self.settled);
+        }
+    }
+
+    fn estimate_at(&self, t_s: f64) -> Option<BallEstimate> {
+        let mut filter = self.settled.clone();
+        for (_, e) in &self.recent {
+            e.apply(&mut filter);
+        }
+        filter.estimate_at(t_s)
+    }
+}
+
+fn estimate_bits(e: Option<BallEstimate>) -> Option<Vec<u64>> {
+    e.map(|e| {
+        std::iter::once(e.t_s)
+            .chain(e.mean.iter().copied())
+            .chain(e.cov.iter().copied())
+            .map(f64::to_bits)
+            .collect()
+    })
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2_000))]
+
+    /// A robot's delivery reference: its own sightings at once, two teammates' sightings,
+    /// kicks and tracks up to 0.6 s late (so some arrive after their time settled), and
+    /// questions (estimates, settling) in between, on the field model with boards. The
+    /// reference that replays late events only when asked, from its kept states, answers
+    /// every question with the same doubles as replaying everything kept from scratch.
+    #[test]
+    fn the_delivery_reference_is_the_filter_replayed_from_scratch(
+        steps in proptest::collection::vec(
+            (
+                0.005..0.04f64,
+                proptest::collection::vec(
+                    (0u8..4, 0.0..0.6f64, -4.0..4.0f64, -3.0..3.0f64, 0.0..3.0f64),
+                    0..4,
+                ),
+                0u8..3,
+            ),
+            1..60,
+        ),
+    ) {
+        let cfg = BallFilterConfig {
+            outliers_must_agree: true,
+            model: field_model(Some(Boards::around(9.0, 6.0, 0.7, 0.05, 0.5, 0.1))),
+            ..BallFilterConfig::default()
+        };
+        let mut lazy = NetworkLimitedBall::new(cfg, 0.3);
+        let mut slow = ReplayEverything {
+            settled: BallFilter::new(cfg),
+            recent: Vec::new(),
+            settled_until_s: f64::NEG_INFINITY,
+            window_s: 0.3,
+        };
+        let mut now = 0.0;
+        for (dt, arrivals, question) in steps {
+            now += dt;
+            for (kind, late, x, y, speed) in arrivals {
+                let t_s = now - late;
+                let (taken, kept) = match kind {
+                    0 | 1 => {
+                        let obs = FieldObservation {
+                            t_s,
+                            position: Vector2::new(x, y),
+                            cov: Matrix2::identity() * (0.002 + 0.01 * speed),
+                        };
+                        (lazy.observe(&obs), slow.insert(t_s, ReplayEvent::Seen(obs)))
+                    }
+                    2 => {
+                        let kick = Kick {
+                            t_s,
+                            speed_mps: speed,
+                            direction_rad: x,
+                            speed_sigma_mps: 0.3,
+                            direction_sigma_rad: 0.2,
+                            contact_prob: 0.9,
+                        };
+                        (lazy.kick(&kick), slow.insert(t_s, ReplayEvent::Kicked(kick)))
+                    }
+                    _ => {
+                        let gain = crate::TrackGain {
+                            t_s,
+                            mean: Vector4::new(x, y, speed, -0.5 * speed),
+                            cov: Matrix4::from_diagonal(&Vector4::new(0.01, 0.01, 0.2, 0.2)),
+                        };
+                        (lazy.track(&gain), slow.insert(t_s, ReplayEvent::Track(gain)))
+                    }
+                };
+                proptest::prop_assert_eq!(taken, kept, "taken or refused alike at {}", t_s);
+            }
+            match question {
+                0 => {
+                    lazy.settle(now);
+                    slow.settle(now);
+                }
+                1 => {}
+                _ => {
+                    lazy.settle(now);
+                    slow.settle(now);
+                    proptest::prop_assert_eq!(
+                        estimate_bits(lazy.estimate_at(now + 0.02)),
+                        estimate_bits(slow.estimate_at(now + 0.02)),
+                        "after settling at {}", now
+                    );
+                }
+            }
+            proptest::prop_assert_eq!(
+                estimate_bits(lazy.estimate_at(now)),
+                estimate_bits(slow.estimate_at(now)),
+                "at {}", now
+            );
+        }
+    }
+}
