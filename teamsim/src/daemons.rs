@@ -20,9 +20,15 @@
 //! a drift of some tens of ppm, so the replicas' clock estimates and the receiver-side
 //! times are exercised as they are in process.
 //!
+//! The in-process run it is judged against is one draw: the same seed in process swings
+//! by chance as much as the daemons' match does (a 1 ms change of the network's latency
+//! moves its team-ball RMSE by up to a third), so [`in_process`] plays it again with the
+//! latency moved by each of [`SPREAD_LATENCY_US`] and reports that spread and its median.
+//!
 //! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed,
-//! how far the world ran behind the wall clock) and each goal to stderr, for finding where
-//! an error comes from.
+//! how far the world ran behind the wall clock), each goal, and each robot's pose error
+//! per tick (and in the in-process run per step) to stderr, for finding where an error
+//! comes from (`scripts/daemons-trace.py`).
 //!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
