@@ -434,6 +434,23 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
             )
         })
         .collect();
+    // Kicks first: the program writes a kick after the tick it decided on, so each one
+    // is older than this cycle's sightings. Taken after them (as before), the tick's
+    // world model went out without the kick and the team ball held the ball before it
+    // for one more tick (40 ms: 16 cm at a kick's 4 m/s), and the kick turned a track
+    // that had already taken a later sighting. In process the kick is in the next tick's
+    // world model; so it is here.
+    let now_s = team::seconds(now);
+    let kicked = !inputs.kicks.is_empty();
+    for (k, stamp) in inputs.kicks.drain(..) {
+        layer.report_kick(
+            &cfg.team,
+            now_s - since(now, stamp),
+            k.direction_rad,
+            k.speed_mps,
+            k.contact_prob,
+        );
+    }
     let odometry = std::mem::take(&mut inputs.odometry);
     let landmarks = std::mem::take(&mut inputs.landmarks);
     let senses = Senses {
@@ -454,17 +471,6 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
         replica.is_pending(&claim_key),
     );
     let (_, posted) = layer.decide(replica.blackboard(), now);
-    let now_s = team::seconds(now);
-    let kicked = !inputs.kicks.is_empty();
-    for (k, stamp) in inputs.kicks.drain(..) {
-        layer.report_kick(
-            &cfg.team,
-            now_s - since(now, stamp),
-            k.direction_rad,
-            k.speed_mps,
-            k.contact_prob,
-        );
-    }
     let (writes, priority) = layer.finish(
         &cfg.team,
         now,
@@ -692,6 +698,56 @@ mod core_tests {
             team_ball(&replica),
             Some(Value::Floats(Vec::new())),
             "after the reset the layer says it has no team ball"
+        );
+    }
+
+    #[test]
+    fn a_kick_is_in_the_team_ball_of_the_tick_after_it() {
+        // Robot 2 stands still with the ball 0.3 m ahead for half a second. After a tick
+        // it kicks the ball straight ahead at 4 m/s (the program writes the kick once it
+        // has played on that tick's outputs, as every program does); its next cycle sees
+        // the ball 16 cm on. The tick on that cycle must publish a team ball that moves
+        // with the kick, as the in-process robot's does. Before, the kick was taken after
+        // the tick had built its world model: the team ball stood still for one more
+        // tick and the kick turned a track that had already taken the later sighting
+        // (`huddle sim --daemons`: every kick 40 ms late, 16 cm at a kick's speed).
+        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+        let mut now = Instant::from_micros(1_000_000);
+        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
+        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+        core.input(contract::POSE_KEY, &pose, now)
+            .expect("a valid pose");
+        let still = floats(&[0.0, 0.0, 0.0]);
+        let cycle = |core: &mut TeamCore, replica: &mut Replica, now: Instant, x: f64| {
+            let ball = floats(&[x, 0.0, 0.0004, 0.0, 0.0004]);
+            core.input(contract::BALL_KEY, &ball, now)
+                .expect("a valid sighting");
+            core.input(contract::ODOMETRY_KEY, &still, now)
+                .expect("valid odometry");
+            core.tick(replica, now);
+        };
+        for _ in 0..12 {
+            cycle(&mut core, &mut replica, now, 0.3);
+            now += Duration::from_millis(40);
+        }
+        let kick_at = Instant::from_micros(now.as_micros() - 39_000);
+        core.input(contract::KICK_KEY, &floats(&[0.0, 4.0, 1.0]), kick_at)
+            .expect("a valid kick");
+        cycle(&mut core, &mut replica, now, 0.3 + 4.0 * 0.039);
+        let Some(Value::Floats(ball)) = team_ball(&replica) else {
+            panic!("the layer publishes a team ball");
+        };
+        let ball = contract::parse_ball_output(contract::TEAM_BALL_KEY, &Value::Floats(ball))
+            .expect("the layer's own output parses")
+            .expect("a ball, not `[]`");
+        assert!(
+            ball.velocity.x > 3.0 && ball.velocity.y.abs() < 0.5,
+            "the team ball moves off with the kick at the tick after it: {ball:?}"
+        );
+        assert!(
+            (ball.at.x - 0.456).abs() < 0.05,
+            "the team ball is where the kicked ball is: {ball:?}"
         );
     }
 }

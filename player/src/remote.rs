@@ -340,7 +340,13 @@ impl RemoteRobot {
         self.tactics
             .set_mode(self.id, self.view.going, &decision, self.view.pass_to);
         let own_ball = self.own_ball(cfg.team.ball_memory_s, dt_s);
-        let team_ball = self.view.team_ball_now(dt_s);
+        // The team ball only while the team is sure enough of it, as the in-process
+        // robot plays ([`team::TeamConfig::team_ball_min_gbc`]); below, its own ball.
+        let team_ball = self
+            .view
+            .team_ball
+            .filter(|(b, _)| b.confidence.is_none_or(|c| c >= cfg.team.team_ball_min_gbc))
+            .map(|(b, since)| b.at_after(since + dt_s));
         let belief = Belief {
             cal: &self.cal,
             pose,
@@ -452,6 +458,41 @@ mod tests {
         assert!(
             contract::parse_pose(&start).is_ok(),
             "the start pose is taken"
+        );
+    }
+
+    #[test]
+    fn a_team_ball_the_team_is_unsure_of_is_not_played() {
+        // Robot 2 goes; it has no ball of its own, and the team ball 2 m ahead has a
+        // confidence of 0.1, under the 0.25 the in-process robot needs before it plays on
+        // the team ball: it has no ball to play, so it gives no new command, as the
+        // in-process robot does (`huddle sim --daemons` played on it and walked to balls
+        // the team had lost). With a confidence of 0.9 it heads for that ball.
+        let cfg = BrainConfig::default();
+        let homes = [Vec2::new(-2.0, 0.0)];
+        let play = |confidence: f64| {
+            let mut r = RemoteRobot::new(2, Position::Field(0), Calibration::default());
+            let pose = vec![0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001];
+            assert!(r
+                .view
+                .take(contract::POSE_OUT_KEY, &Value::Floats(pose), 0.0));
+            let ball = vec![2.0, 0.0, 0.0, 0.0, 0.3, 0.0, 0.3, confidence, 0.5];
+            assert!(r
+                .view
+                .take(contract::TEAM_BALL_KEY, &Value::Floats(ball), 0.0));
+            assert!(r.view.take(contract::GOER_KEY, &Value::Int(2), 0.0));
+            assert!(r.view.take(contract::GOING_KEY, &Value::Bool(true), 0.0));
+            r.tick(&cfg, 1.0, Percepts::default(), 0.02, &homes, &[2])
+                .command
+        };
+        assert!(
+            play(0.1).is_none(),
+            "no command toward a team ball of confidence 0.1"
+        );
+        let sure = play(0.9).expect("a command toward a team ball of confidence 0.9");
+        assert!(
+            sure.velocity.x > 0.0,
+            "it heads for the ball it is sure of: {sure:?}"
         );
     }
 

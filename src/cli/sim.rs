@@ -322,15 +322,10 @@ fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
         huddle::sim::daemons::run(&cfg, &opts, |t_s| bar.set_position((t_s * 1e3) as u64))
             .context("playing the match with daemons")?;
     bar.finish_and_clear();
-    let mut sim = Simulation::new(cfg).context("setting up the in-process match")?;
-    sim.run(|_| {});
-    let inproc = sim.report(0.0);
-    report.in_process = Some(huddle::sim::daemons::InProcess {
-        team_ball_rmse_m: inproc.team_ball_rmse_m,
-        exactly_one_goer_pct: inproc.exactly_one_goer_pct,
-        rmse_vs_in_process: (report.team_ball_rmse_m / inproc.team_ball_rmse_m * 1000.0).round()
-            / 1000.0,
-    });
+    report.in_process = Some(
+        huddle::sim::daemons::in_process(&cfg, report.team_ball_rmse_m)
+            .context("playing the match in process")?,
+    );
     if args.json {
         outln!("{}", serde_json::to_string(&report)?);
     } else {

@@ -20,9 +20,15 @@
 //! a drift of some tens of ppm, so the replicas' clock estimates and the receiver-side
 //! times are exercised as they are in process.
 //!
+//! The in-process run it is judged against is one draw: the same seed in process swings
+//! by chance as much as the daemons' match does (a 1 ms change of the network's latency
+//! moves its team-ball RMSE by up to a third), so [`in_process`] plays it again with the
+//! latency moved by each of [`SPREAD_LATENCY_US`] and reports that spread and its median.
+//!
 //! `HUDDLE_DAEMONS_TRACE=1` prints each team-ball sample (time, robot, error, ball speed,
-//! how far the world ran behind the wall clock) and each goal to stderr, for finding where
-//! an error comes from.
+//! how far the world ran behind the wall clock), each goal, and each robot's pose error
+//! per tick (and in the in-process run per step) to stderr, for finding where an error
+//! comes from (`scripts/daemons-trace.py`).
 //!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
@@ -212,14 +218,85 @@ impl std::fmt::Display for Spread {
 }
 
 /// The in-process figures `--daemons` is judged against.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct InProcess {
     /// Its team-ball RMSE, m.
     pub team_ball_rmse_m: f64,
+    /// Its pose RMSE, m.
+    pub pose_rmse_m: f64,
     /// Its exactly-one-goer, %.
     pub exactly_one_goer_pct: f64,
     /// Daemons' team-ball RMSE over it.
     pub rmse_vs_in_process: f64,
+    /// The same match in process with the link's latency moved by each of
+    /// [`SPREAD_LATENCY_US`] (nothing else changed): how far one seed's match swings by
+    /// chance alone. The daemons' match diverges from the in-process one within seconds
+    /// (real time, real scheduling), so it is one more draw from this spread, not a
+    /// replay of the in-process run.
+    pub spread: Vec<SpreadRun>,
+    /// The median team-ball RMSE of the in-process run and the spread's runs, m.
+    pub team_ball_rmse_median_m: f64,
+    /// Daemons' team-ball RMSE over that median.
+    pub rmse_vs_in_process_median: f64,
+}
+
+/// One in-process run of the spread.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SpreadRun {
+    /// The link latency it ran with, ms.
+    pub latency_ms: f64,
+    /// Its team-ball RMSE, m.
+    pub team_ball_rmse_m: f64,
+    /// Its pose RMSE, m.
+    pub pose_rmse_m: f64,
+}
+
+/// How the spread's in-process runs move the link's one-way latency, µs (the competition
+/// preset's is 20 ms with 10 ms of jitter: these stay well inside it).
+pub const SPREAD_LATENCY_US: [i64; 6] = [-2000, -1000, -500, 500, 1000, 2000];
+
+/// The in-process match `cfg` and its spread (see [`InProcess::spread`]), judged against
+/// the daemons' team-ball RMSE `daemons_rmse_m`.
+pub fn in_process(cfg: &SimConfig, daemons_rmse_m: f64) -> Result<InProcess, DaemonsError> {
+    let mut sim = Simulation::new(cfg.clone())?;
+    run_in_process(&mut sim);
+    let own = sim.report(0.0);
+    let base_us = cfg
+        .network
+        .latency
+        .unwrap_or_else(|| cfg.network.preset.link().latency)
+        .as_micros() as i64;
+    let mut spread = Vec::with_capacity(SPREAD_LATENCY_US.len());
+    for d in SPREAD_LATENCY_US {
+        let mut c = cfg.clone();
+        let us = u64::try_from((base_us + d).max(0)).unwrap_or(0);
+        c.network.latency = Some(std::time::Duration::from_micros(us));
+        let mut sim = Simulation::new(c)?;
+        sim.run(|_| {});
+        let r = sim.report(0.0);
+        spread.push(SpreadRun {
+            latency_ms: us as f64 / 1e3,
+            team_ball_rmse_m: r.team_ball_rmse_m,
+            pose_rmse_m: r.pose_rmse_m,
+        });
+    }
+    let mut all: Vec<f64> = spread
+        .iter()
+        .map(|s| s.team_ball_rmse_m)
+        .chain([own.team_ball_rmse_m])
+        .collect();
+    all.sort_by(f64::total_cmp);
+    let median = all[all.len() / 2];
+    let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+    Ok(InProcess {
+        team_ball_rmse_m: own.team_ball_rmse_m,
+        pose_rmse_m: own.pose_rmse_m,
+        exactly_one_goer_pct: own.exactly_one_goer_pct,
+        rmse_vs_in_process: r3(daemons_rmse_m / own.team_ball_rmse_m),
+        spread,
+        team_ball_rmse_median_m: median,
+        rmse_vs_in_process_median: r3(daemons_rmse_m / median),
+    })
 }
 
 impl std::fmt::Display for DaemonsReport {
@@ -251,8 +328,21 @@ impl std::fmt::Display for DaemonsReport {
         if let Some(p) = &self.in_process {
             writeln!(
                 f,
-                "in process            team ball RMSE {:.3} m, one goer {:.2}%: daemons / in-process RMSE {:.3}",
-                p.team_ball_rmse_m, p.exactly_one_goer_pct, p.rmse_vs_in_process
+                "in process            team ball RMSE {:.3} m, one goer {:.2}%, pose RMSE {:.3} m: daemons / in-process RMSE {:.3}",
+                p.team_ball_rmse_m, p.exactly_one_goer_pct, p.pose_rmse_m, p.rmse_vs_in_process
+            )?;
+            let runs: Vec<String> = p
+                .spread
+                .iter()
+                .map(|s| format!("{:.3}", s.team_ball_rmse_m))
+                .collect();
+            writeln!(
+                f,
+                "in-process spread     team ball RMSE {} m (latency {:+?} µs): median {:.3} m, daemons / median {:.3}",
+                runs.join(" "),
+                SPREAD_LATENCY_US,
+                p.team_ball_rmse_median_m,
+                p.rmse_vs_in_process_median
             )?;
         }
         writeln!(
@@ -681,6 +771,7 @@ pub fn run(
                 odometry: world.read_odometry(i),
             };
             let seen = percepts.frame.ball;
+            let marks_seen = percepts.frame.landmarks.len();
             // Write the cycle's senses (odometry last: the layer ticks on it), then wait
             // for the layer's pose from that tick, as a robot program reading its
             // team's decisions each cycle does; a layer slower than a few ms leaves the
@@ -692,15 +783,15 @@ pub fn run(
             let fresh = sent + FRESH_WAIT;
             let d = &daemons[i];
             let mut heard = d.heard.lock().unwrap_or_else(|e| e.into_inner());
-            let (view, now) = loop {
+            let (view, now, fresh_view) = loop {
                 let now = Instant::now();
                 if heard.tick_at.is_some_and(|a| a > sent) {
                     view_lags_us.push(now.duration_since(sent).as_micros() as u64);
-                    break (view_at(&heard, now), now);
+                    break (view_at(&heard, now), now, true);
                 }
                 if now >= fresh {
                     stale_views += 1;
-                    break (view_at(&heard, now), now);
+                    break (view_at(&heard, now), now, false);
                 }
                 heard = d
                     .ticked
@@ -730,6 +821,25 @@ pub fn run(
                 let truth = world.robots[i].pose.at;
                 pose_sq += truth.distance(pose.at).powi(2);
                 pose_n += 1;
+                if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
+                    let layer = robots[i]
+                        .view
+                        .pose
+                        .map_or(f64::NAN, |p| truth.distance(p.0.at));
+                    let heading =
+                        fusion::wrap_angle(world.robots[i].pose.theta_rad - pose.theta_rad);
+                    eprintln!(
+                        "pose t={t:.2} robot={} err={:.4} layer_err={:.4} heading={heading:.4} since_ms={:.1} fresh={} marks={marks_seen} at={:.2},{:.2} gaps={:.2?}",
+                        robots[i].id,
+                        truth.distance(pose.at),
+                        layer,
+                        robots[i].view.pose_since_s * 1e3,
+                        fresh_view,
+                        truth.x,
+                        truth.y,
+                        gaps(&world, i)
+                    );
+                }
                 if let Some(s) = &seen {
                     let est = team::frames::to_fusion_pose(&pose, cov);
                     central.sighting(
@@ -880,4 +990,54 @@ pub fn run(
             .collect(),
         in_process: None,
     })
+}
+
+/// How far robot `i` is from the nearest teammate's and the nearest opponent's body
+/// centre, m (two bodies touch at 0.4 m), for the trace: in the drawn world odometry sees
+/// only part of a shove, so bodies pressing on each other make pose errors.
+fn gaps(world: &World, i: usize) -> (f64, f64) {
+    let me = world.robots[i].pose.at;
+    let mate = world
+        .robots
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j != i)
+        .map(|(_, b)| b.pose.at.distance(me))
+        .fold(f64::INFINITY, f64::min);
+    let opp = world
+        .opponents
+        .iter()
+        .map(|b| b.pose.at.distance(me))
+        .fold(f64::INFINITY, f64::min);
+    (mate, opp)
+}
+
+/// Plays `sim` (the in-process match `--daemons` is judged against) to its end; with
+/// `HUDDLE_DAEMONS_TRACE=1`, prints each robot's pose error every physics step
+/// (`inproc pose t=… robot=… err=… heading=…`), for comparing the two matches robot by
+/// robot (`scripts/daemons-trace.py --pose`).
+pub fn run_in_process(sim: &mut Simulation) {
+    let trace = std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some();
+    while !sim.finished() {
+        let t = sim.time_s();
+        sim.step();
+        if !trace {
+            continue;
+        }
+        for (i, (r, body)) in sim.robots.iter().zip(&sim.world.robots).enumerate() {
+            let est = r.lwm.pose().mean;
+            let err = (body.pose.at.x - est.x).hypot(body.pose.at.y - est.y);
+            let heading = fusion::wrap_angle(body.pose.theta_rad - est.z);
+            eprintln!(
+                "inproc pose t={t:.2} robot={} err={err:.4} heading={heading:.4} marks={} at={:.2},{:.2} gaps={:.2?}",
+                r.id,
+                r.frame.landmarks.len(),
+                body.pose.at.x,
+                body.pose.at.y,
+                gaps(&sim.world, i)
+            );
+        }
+    }
+    let end = sim.time_s();
+    sim.timeline.finish(end);
 }
