@@ -390,12 +390,25 @@ fn penalized(board: &comms::Blackboard) -> Vec<u8> {
 /// Where the GameController listener writes the game's state.
 pub const GC_STATE_KEY: &str = "local.var.gc.state";
 
+/// Where the GameController listener writes the set play (`penalty_kick`: the ball on a
+/// penalty mark, not the centre spot).
+pub const GC_SET_PLAY_KEY: &str = "local.var.gc.set_play";
+
 /// Where the GameController listener writes this team's penalised player numbers.
 pub const PENALIZED_KEY: &str = "local.var.gc.penalized";
 
 /// Seconds from `earlier` to `now` on the driver's clock.
 fn since(now: Instant, earlier: Instant) -> f64 {
     now.saturating_duration_since(earlier).as_secs_f64()
+}
+
+/// A text the GameController listener wrote under `key`, if any.
+fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
+    let key = Key::parse(key).expect("a valid key");
+    match board.get(&key).map(|e| &e.value) {
+        Some(Value::String(s)) => Some(s.as_str()),
+        _ => None,
+    }
 }
 
 /// One control tick of the layer on what the robot program wrote since the previous one.
@@ -416,14 +429,14 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
     // Out of play (the GC's state is not Playing) the layer tells the team nothing.
-    // Set starts the kick-off hold (see `TeamLayer::set_kick_off_next`).
-    let state = Key::parse(GC_STATE_KEY).expect("a valid key");
-    let state = match replica.blackboard().get(&state).map(|e| &e.value) {
-        Some(Value::String(s)) => Some(s.as_str()),
-        _ => None,
-    };
+    // Set starts the kick-off hold and puts the ball on the centre spot (see
+    // `TeamLayer::set_kick_off_next`); a penalty kick's Set has the ball elsewhere.
+    let board = replica.blackboard();
+    let state = gc_text(board, GC_STATE_KEY);
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
-    layer.set_kick_off_next(state == Some("set"));
+    layer.set_kick_off_next(
+        state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick"),
+    );
     let balls: Vec<_> = inputs
         .balls
         .drain(..)
