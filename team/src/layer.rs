@@ -1168,13 +1168,19 @@ impl TeamLayer {
     /// came, seconds under a league's budget (about one message a second for the team).
     pub fn forget_ball(&mut self, now_s: f64) {
         self.lwm.forget_ball();
-        self.gwm.place_ball(self.kick_off_ball(now_s));
+        let placed = self.kick_off_ball(now_s);
+        self.gwm.place_ball(placed);
         self.ball = None;
         self.ball_seen_at_s = None;
         self.team_ball = None;
         // Held too: a daemon publishes it between ticks (a teammate's claim changing
-        // makes it decide and publish again), and the old ball must not come back then.
-        self.team_ball_held = None;
+        // makes it decide and publish again), and the old ball must not come back then:
+        // what it publishes is the kick-off spot.
+        self.team_ball_held = Some(TeamBall {
+            estimate: placed,
+            gbc: fusion::position_confidence(&placed.position_cov()),
+            source: fusion::TeamBallSource::Fused,
+        });
     }
 
     /// The ball on the kick-off spot at `t_s`, as the robot knows the field: at rest, give
