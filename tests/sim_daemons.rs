@@ -126,7 +126,7 @@ fn a_ball_reset_makes_the_layer_let_go_of_the_ball() {
     let after = c.ask("GETV local.var.team.ball");
     let at: Vec<f64> = after
         .trim_start_matches("VAL local.var.team.ball floats [")
-        .split(|ch: char| ch == ',' || ch == ']')
+        .split([',', ']'])
         .take(2)
         .filter_map(|x| x.trim().parse().ok())
         .collect();
