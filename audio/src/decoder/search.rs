@@ -73,22 +73,40 @@ impl Decoder {
         }
         let threshold = self.frame_threshold(count, P_FRAME);
         if best.0 < threshold {
+            self.note_search(|| format!("gate {:.0} of {threshold:.0}", best.0));
             self.run = None;
             return;
         }
         let j = best.1;
-        let (frame, _) = Self::apply_rules(
+        let (frame, present) = Self::apply_rules(
             &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
             count,
             P_TONE,
             P_TONE,
             |_, _| true,
         );
-        let Some(frame) = frame else {
+        let sums = &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT];
+        let Some(frame) = frame.or_else(|| strongest_voted(sums, &present)) else {
+            self.note_search(|| {
+                let voted = |r: std::ops::Range<usize>| -> Vec<usize> {
+                    r.filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
+                        .collect()
+                };
+                format!(
+                    "rules: senders {:?} data {:?} ({} tones present)",
+                    voted(0..SENDER_COUNT),
+                    voted(SENDER_COUNT..BASIC_COUNT)
+                        .iter()
+                        .map(|b| b - SENDER_COUNT)
+                        .collect::<Vec<_>>(),
+                    present.iter().filter(|&&p| p).count()
+                )
+            });
             self.run = None;
             return;
         };
         if matches!(self.blocked, Some(b) if b.frame == frame) {
+            self.note_search(|| format!("blocked {frame:?}"));
             self.run = None;
             return;
         }
@@ -102,6 +120,18 @@ impl Decoder {
         self.run = Some(run);
         if run.count >= 2 && !self.decaying(frame, j, count) {
             self.start_tracking(frame, j);
+        } else if run.count >= 2 {
+            self.note_search(|| format!("decaying {frame:?}"));
+        } else {
+            self.note_search(|| format!("seen {frame:?}"));
+        }
+    }
+
+    /// Records a search step at the window the search stands at (diagnosis only).
+    fn note_search(&self, what: impl FnOnce() -> String) {
+        if let Some(w) = self.search_newest() {
+            let at = w.start as f64;
+            self.note(at, || format!("search: {}", what()));
         }
     }
 
@@ -210,6 +240,32 @@ impl Decoder {
             Some(Blocked { quiet, ..b })
         };
     }
+}
+
+/// The frame of the strongest sender basic and the strongest data basic among those with
+/// 2 of their 3 tones `present` (sums `sums`), when each group has one.
+///
+/// The search's rules want exactly one of each, but under talkers in a small reverberant
+/// room several data basics get two tones from the talkers' harmonics while a message
+/// sounds (lab T60 0.5 s at 0 dB: "data [4, 5, 9, 19]" with the message's sender alone),
+/// and the message was never tracked. The search only starts the slot decision, which
+/// decides the frame again on the aligned slot and judges a rival basic by whether it
+/// sounds like a transmitter's; so here the strongest of each group is the candidate,
+/// and it must still be the same in two windows in a row.
+fn strongest_voted(sums: &[f64], present: &[bool; TONE_COUNT]) -> Option<Frame> {
+    let strongest = |range: std::ops::Range<usize>| {
+        range
+            .filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
+            .map(|b| (b, basic_tones(b).iter().map(|&k| sums[k]).sum::<f64>()))
+            .max_by(|x, y| x.1.total_cmp(&y.1))
+            .map(|(b, _)| b)
+    };
+    let sender = strongest(0..SENDER_COUNT)?;
+    let data = strongest(SENDER_COUNT..BASIC_COUNT)?;
+    Some(Frame {
+        sender: crate::tones::Sender::from_index(sender as u8)?,
+        data: (data - SENDER_COUNT) as u8,
+    })
 }
 
 /// A frame the search skips (see [`Decoder::update_blocked`]).
