@@ -85,8 +85,7 @@ impl Decoder {
             P_TONE,
             |_, _| true,
         );
-        let sums = &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT];
-        let Some(frame) = frame.or_else(|| strongest_voted(sums, &present)) else {
+        let Some(frame) = frame else {
             self.note_search(|| {
                 let voted = |r: std::ops::Range<usize>| -> Vec<usize> {
                     r.filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
@@ -240,32 +239,6 @@ impl Decoder {
             Some(Blocked { quiet, ..b })
         };
     }
-}
-
-/// The frame of the strongest sender basic and the strongest data basic among those with
-/// 2 of their 3 tones `present` (sums `sums`), when each group has one.
-///
-/// The search's rules want exactly one of each, but under talkers in a small reverberant
-/// room several data basics get two tones from the talkers' harmonics while a message
-/// sounds (lab T60 0.5 s at 0 dB: "data [4, 5, 9, 19]" with the message's sender alone),
-/// and the message was never tracked. The search only starts the slot decision, which
-/// decides the frame again on the aligned slot and judges a rival basic by whether it
-/// sounds like a transmitter's; so here the strongest of each group is the candidate,
-/// and it must still be the same in two windows in a row.
-fn strongest_voted(sums: &[f64], present: &[bool; TONE_COUNT]) -> Option<Frame> {
-    let strongest = |range: std::ops::Range<usize>| {
-        range
-            .filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
-            .map(|b| (b, basic_tones(b).iter().map(|&k| sums[k]).sum::<f64>()))
-            .max_by(|x, y| x.1.total_cmp(&y.1))
-            .map(|(b, _)| b)
-    };
-    let sender = strongest(0..SENDER_COUNT)?;
-    let data = strongest(SENDER_COUNT..BASIC_COUNT)?;
-    Some(Frame {
-        sender: crate::tones::Sender::from_index(sender as u8)?,
-        data: (data - SENDER_COUNT) as u8,
-    })
 }
 
 /// A frame the search skips (see [`Decoder::update_blocked`]).
