@@ -56,11 +56,29 @@ fn main() {
             .filter(|e| e.at_s > t - 0.6 && e.at_s < t + len + 0.8)
             .collect();
         let cause = if !near.iter().any(|e| e.what.starts_with("found")) {
-            "never found".to_string()
+            // What the search said while the message sounded (nothing: it was idle, a
+            // frame was being tracked).
+            let mut kinds = std::collections::BTreeMap::<&str, usize>::new();
+            for e in near
+                .iter()
+                .filter(|e| e.at_s >= *t && e.at_s < t + len + 0.3)
+            {
+                if let Some(w) = e.what.strip_prefix("search: ") {
+                    *kinds.entry(w.split(' ').next().unwrap_or("")).or_default() += 1;
+                }
+            }
+            match kinds.iter().max_by_key(|(_, &n)| n) {
+                Some((k, _)) => format!("never found: search {k}"),
+                None => "never found: search idle".to_string(),
+            }
         } else {
             near.iter()
                 .rev()
-                .find(|e| !e.what.starts_with("found") && !e.what.starts_with("timeline"))
+                .find(|e| {
+                    !e.what.starts_with("found")
+                        && !e.what.starts_with("timeline")
+                        && !e.what.starts_with("search")
+                })
                 .map(|e| {
                     let w = &e.what;
                     let w = w.split(" level ").next().unwrap_or(w).to_string();

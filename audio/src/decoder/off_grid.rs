@@ -79,6 +79,7 @@ impl Decoder {
             let edge: f64 = sums[scale].iter().sum();
             let next: f64 = sums[inner].iter().sum();
             if edge - next > OFF_GRID_Z * edge.sqrt() {
+                self.note(a, || "off grid: rising at the comb's edge".to_string());
                 return true;
             }
         }
@@ -111,7 +112,19 @@ impl Decoder {
                 .collect(),
             _ => vec![1.0; tones.len()],
         };
-        !on_grid || self.peaks_disagree(&tones, &sums, &margins, n, &locals)
+        if !on_grid {
+            self.note(a, || {
+                let lost: Vec<String> = (0..tones.len())
+                    .map(|i| format!("k{} {:.0}/{:.0}", tones[i], sums[scale][i] - n, best[i] - n))
+                    .collect();
+                format!(
+                    "off grid: no common scale (at the frame's / best) {}",
+                    lost.join(" ")
+                )
+            });
+            return true;
+        }
+        self.peaks_disagree(&tones, &sums, &margins, n, &locals)
     }
 
     /// Whether the loud tones among `tones` (slot sums `sums[j][i]` at every scale `j` over
@@ -169,6 +182,9 @@ impl Decoder {
                 continue;
             }
             if p == 0 || p + 1 >= by_bin.len() {
+                self.note(self.latest_window_end(), || {
+                    format!("off grid: k{k} peaks beyond the comb")
+                });
                 return true;
             }
             if by_bin[p - 1].0 + 1 != by_bin[p].0 || by_bin[p].0 + 1 != by_bin[p + 1].0 {
@@ -192,6 +208,15 @@ impl Decoder {
             .iter()
             .map(|(f, g)| (g - f * (1.0 + s)).abs())
             .fold(0.0, f64::max);
+        if worst > PEAK_TOLERANCE_HZ {
+            self.note(self.latest_window_end(), || {
+                let r: Vec<String> = peaks
+                    .iter()
+                    .map(|(f, g)| format!("{f:.0}:{:+.2}", g - f * (1.0 + s)))
+                    .collect();
+                format!("off grid: peaks disagree (Hz off the fit) {}", r.join(" "))
+            });
+        }
         worst > PEAK_TOLERANCE_HZ
     }
 }

@@ -73,11 +73,12 @@ impl Decoder {
         }
         let threshold = self.frame_threshold(count, P_FRAME);
         if best.0 < threshold {
+            self.note_search(|| format!("gate {:.0} of {threshold:.0}", best.0));
             self.run = None;
             return;
         }
         let j = best.1;
-        let (frame, _) = Self::apply_rules(
+        let (frame, present) = Self::apply_rules(
             &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
             count,
             P_TONE,
@@ -85,10 +86,26 @@ impl Decoder {
             |_, _| true,
         );
         let Some(frame) = frame else {
+            self.note_search(|| {
+                let voted = |r: std::ops::Range<usize>| -> Vec<usize> {
+                    r.filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
+                        .collect()
+                };
+                format!(
+                    "rules: senders {:?} data {:?} ({} tones present)",
+                    voted(0..SENDER_COUNT),
+                    voted(SENDER_COUNT..BASIC_COUNT)
+                        .iter()
+                        .map(|b| b - SENDER_COUNT)
+                        .collect::<Vec<_>>(),
+                    present.iter().filter(|&&p| p).count()
+                )
+            });
             self.run = None;
             return;
         };
         if matches!(self.blocked, Some(b) if b.frame == frame) {
+            self.note_search(|| format!("blocked {frame:?}"));
             self.run = None;
             return;
         }
@@ -102,6 +119,18 @@ impl Decoder {
         self.run = Some(run);
         if run.count >= 2 && !self.decaying(frame, j, count) {
             self.start_tracking(frame, j);
+        } else if run.count >= 2 {
+            self.note_search(|| format!("decaying {frame:?}"));
+        } else {
+            self.note_search(|| format!("seen {frame:?}"));
+        }
+    }
+
+    /// Records a search step at the window the search stands at (diagnosis only).
+    fn note_search(&self, what: impl FnOnce() -> String) {
+        if let Some(w) = self.search_newest() {
+            let at = w.start as f64;
+            self.note(at, || format!("search: {}", what()));
         }
     }
 
