@@ -42,7 +42,10 @@
 //! its own round trip allows (plus [`OUTLIER_MARGIN`]) is refused as an outlier. All
 //! three are counted. [`OUTLIERS_TO_RESET`] outliers in a row mean the estimate is the
 //! wrong one (the peer's clock really jumped, or the first samples were bad): it starts
-//! again from the newest sample. A send stamp alone changes no estimate: a frame whose
+//! again from the newest sample; so does the first outlier after a silence longer than
+//! [`WINDOW`] (under a league's budget echoes are sparse and games have long silences,
+//! and a line extrapolated across one refused the samples after it for minutes). A
+//! send stamp alone changes no estimate: a frame whose
 //! stamp gives a transit outside −[`IMPLAUSIBLE_MARGIN`]..=[`MAX_TRANSIT`] is stamped with
 //! the configured default transit instead, and counted.
 
@@ -199,7 +202,16 @@ impl ClockEstimate {
             let bound = rtt_us / 2.0 + OUTLIER_MARGIN.as_micros() as f64;
             if (theta_us - fit.at(t4_us)).abs() > bound {
                 self.outliers_in_row += 1;
-                if self.outliers_in_row < OUTLIERS_TO_RESET {
+                // A line whose newest sample has left the window is an extrapolation
+                // across a silence (Ready, Set and the break under a league's budget,
+                // where echoes are sparse): it does not get to refuse the first samples
+                // after it, which under a budget could take minutes to outvote it.
+                let window_us = WINDOW.as_micros() as u64;
+                let stale = self
+                    .samples
+                    .back()
+                    .is_none_or(|s| s.at_us + window_us < t4_us);
+                if self.outliers_in_row < OUTLIERS_TO_RESET && !stale {
                     return SampleOutcome::Outlier;
                 }
                 // Consistently elsewhere: the estimate is what is wrong. Start over.
@@ -462,6 +474,49 @@ mod tests {
             );
         }
         assert_eq!(outcome, SampleOutcome::Used, "the estimate started over");
+    }
+
+    #[test]
+    fn after_a_silence_longer_than_the_window_the_first_sample_starts_over() {
+        // Ten seconds of echoes, then 100 s of silence (a break under the SPL budget)
+        // across which the peer's clock was stepped by 300 ms.
+        let (mut est, t) = exchange(-7_000_000, -80.0, 10_000, 10);
+        let t = t + 100_000_000;
+        let stepped = peer_stamp(t + 10_000, -7_000_000 + 300_000, -80.0);
+        assert_eq!(
+            est.add_echo(
+                Instant::from_micros(t),
+                0,
+                stepped,
+                Instant::from_micros(t + 20_000)
+            ),
+            SampleOutcome::Used,
+            "a stale line does not refuse the first sample after the silence"
+        );
+        let transit = est
+            .transit_us(
+                peer_stamp(t + 30_000, -7_000_000 + 300_000, -80.0),
+                Instant::from_micros(t + 40_000),
+            )
+            .expect("an estimate");
+        assert!(
+            (transit - 10_000.0).abs() < 1_000.0,
+            "the estimate follows the stepped clock at once: transit {transit} µs, not 10 ms"
+        );
+        // Within the window the same step is still an outlier (the forged-stamp rule).
+        let (mut est, t) = exchange(-7_000_000, -80.0, 10_000, 10);
+        let t = t + 30_000_000;
+        let stepped = peer_stamp(t + 10_000, -7_000_000 + 300_000, -80.0);
+        assert_eq!(
+            est.add_echo(
+                Instant::from_micros(t),
+                0,
+                stepped,
+                Instant::from_micros(t + 20_000)
+            ),
+            SampleOutcome::Outlier,
+            "30 s after the last sample the line is still trusted"
+        );
     }
 
     /// What the fit used to rebuild at every echo: the shortest round trip of each run
