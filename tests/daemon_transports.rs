@@ -109,22 +109,22 @@ fn three_broadcast_daemons_on_loopback_replicate_and_a_recorder_hears_them() {
         .wait_for("2.var.last", Duration::from_secs(5), |a| {
             a.starts_with("VAL 2.var.last int 42 ")
         });
+    // The recorder is another process: under load it may write the frame that carries
+    // the write a little after daemon 1 took it. Stop it once the file has it (or after
+    // 10 s, and the assertion below says what it heard).
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let heard = |file: &Path| {
+        let out = huddle().arg("replay").arg(file).arg("--json").output();
+        out.is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("\"key\":\"2.var.last\""))
+    };
+    while !heard(&file) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let _ = recorder.kill();
     let _ = recorder.wait();
 
     // The recording holds every robot's broadcast, sent to 127.255.255.255:<port>.
-    let out = huddle()
-        .arg("replay")
-        .arg(&file)
-        .arg("--json")
-        .output()
-        .expect("run huddle replay");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let lines = String::from_utf8(out.stdout).unwrap();
+    let lines = replay_json(&file);
     for key in ["1.var.pos", "2.var.pos", "3.var.pos", "2.var.last"] {
         assert!(
             lines.contains(&format!("\"key\":\"{key}\"")),
@@ -225,6 +225,22 @@ fn a_live_monitor_hears_a_broadcast_team() {
 }
 
 /// Waits until the recorder has written its headers and a frame.
+/// `huddle replay FILE --json`: what a recording holds, one binding per line.
+fn replay_json(file: &Path) -> String {
+    let out = huddle()
+        .arg("replay")
+        .arg(file)
+        .arg("--json")
+        .output()
+        .expect("run huddle replay");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
 fn wait_until_recorded(file: &Path) {
     let deadline = Instant::now() + Duration::from_secs(20);
     while !(file.exists() && std::fs::metadata(file).unwrap().len() > 100) {
