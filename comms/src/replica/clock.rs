@@ -478,20 +478,25 @@ mod tests {
 
     #[test]
     fn after_a_silence_longer_than_the_window_the_first_sample_starts_over() {
-        // Ten seconds of echoes, then 100 s of silence (a break under the SPL budget)
-        // across which the peer's clock was stepped by 300 ms.
-        let (mut est, t) = exchange(-7_000_000, -80.0, 10_000, 10);
-        let t = t + 100_000_000;
-        let stepped = peer_stamp(t + 10_000, -7_000_000 + 300_000, -80.0);
-        assert_eq!(
-            est.add_echo(
+        // Ten seconds of echoes, then a silence (a break under the SPL budget) across
+        // which the peer's clock was stepped by 300 ms; then one echo.
+        let stepped_after = |silence_us: u64| {
+            let (mut est, t) = exchange(-7_000_000, -80.0, 10_000, 10);
+            let t = t + silence_us;
+            let stepped = peer_stamp(t + 10_000, -7_000_000 + 300_000, -80.0);
+            let outcome = est.add_echo(
                 Instant::from_micros(t),
                 0,
                 stepped,
-                Instant::from_micros(t + 20_000)
-            ),
+                Instant::from_micros(t + 20_000),
+            );
+            (est, t, outcome)
+        };
+        let (est, t, outcome) = stepped_after(100_000_000);
+        assert_eq!(
+            outcome,
             SampleOutcome::Used,
-            "a stale line does not refuse the first sample after the silence"
+            "after 100 s a stale line does not refuse the first sample"
         );
         let transit = est
             .transit_us(
@@ -504,16 +509,9 @@ mod tests {
             "the estimate follows the stepped clock at once: transit {transit} µs, not 10 ms"
         );
         // Within the window the same step is still an outlier (the forged-stamp rule).
-        let (mut est, t) = exchange(-7_000_000, -80.0, 10_000, 10);
-        let t = t + 30_000_000;
-        let stepped = peer_stamp(t + 10_000, -7_000_000 + 300_000, -80.0);
+        let (_, _, outcome) = stepped_after(30_000_000);
         assert_eq!(
-            est.add_echo(
-                Instant::from_micros(t),
-                0,
-                stepped,
-                Instant::from_micros(t + 20_000)
-            ),
+            outcome,
             SampleOutcome::Outlier,
             "30 s after the last sample the line is still trusted"
         );
