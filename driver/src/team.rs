@@ -660,6 +660,26 @@ mod core_tests {
             .map(|e| e.value.clone())
     }
 
+    /// Robot 2's layer and replica, the robot standing at the field's origin facing +x.
+    fn robot_2_at_the_origin(now: Instant) -> (TeamCore, Replica) {
+        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+        let replica = Replica::new(config, 7, now).expect("a valid replica");
+        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+        core.input(contract::POSE_KEY, &pose, now)
+            .expect("a valid pose");
+        (core, replica)
+    }
+
+    /// One program cycle of a robot standing still: a ball sighting, odometry, a tick.
+    fn cycle(core: &mut TeamCore, replica: &mut Replica, now: Instant, ball: &[f64]) {
+        core.input(contract::BALL_KEY, &floats(ball), now)
+            .expect("a valid sighting");
+        core.input(contract::ODOMETRY_KEY, &floats(&[0.0, 0.0, 0.0]), now)
+            .expect("valid odometry");
+        core.tick(replica, now);
+    }
+
     #[test]
     fn a_teammate_s_claim_after_a_ball_reset_does_not_bring_the_old_ball_back() {
         // Robot 2 sees the ball 1.5 m ahead for half a second; then the referee puts it
@@ -668,21 +688,10 @@ mod core_tests {
         // decides and publishes again. It must say "no ball", not the ball before the
         // goal (`huddle sim --daemons`: one robot in ten matches played on it 40 ms after
         // a goal, 4.9 m off).
-        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
-        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
         let mut now = Instant::from_micros(1_000_000);
-        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
-        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
-        core.input(contract::POSE_KEY, &pose, now)
-            .expect("a valid pose");
+        let (mut core, mut replica) = robot_2_at_the_origin(now);
         for _ in 0..12 {
-            let ball = floats(&[1.5, 0.0, 0.01, 0.0, 0.01]);
-            core.input(contract::BALL_KEY, &ball, now)
-                .expect("a valid sighting");
-            let still = floats(&[0.0, 0.0, 0.0]);
-            core.input(contract::ODOMETRY_KEY, &still, now)
-                .expect("valid odometry");
-            core.tick(&mut replica, now);
+            cycle(&mut core, &mut replica, now, &[1.5, 0.0, 0.01, 0.0, 0.01]);
             now += Duration::from_millis(40);
         }
         let held = team_ball(&replica);
@@ -711,30 +720,17 @@ mod core_tests {
         // the tick had built its world model: the team ball stood still for one more
         // tick and the kick turned a track that had already taken the later sighting
         // (`huddle sim --daemons`: every kick 40 ms late, 16 cm at a kick's speed).
-        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
-        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
         let mut now = Instant::from_micros(1_000_000);
-        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
-        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
-        core.input(contract::POSE_KEY, &pose, now)
-            .expect("a valid pose");
-        let still = floats(&[0.0, 0.0, 0.0]);
-        let cycle = |core: &mut TeamCore, replica: &mut Replica, now: Instant, x: f64| {
-            let ball = floats(&[x, 0.0, 0.0004, 0.0, 0.0004]);
-            core.input(contract::BALL_KEY, &ball, now)
-                .expect("a valid sighting");
-            core.input(contract::ODOMETRY_KEY, &still, now)
-                .expect("valid odometry");
-            core.tick(replica, now);
-        };
+        let (mut core, mut replica) = robot_2_at_the_origin(now);
+        let sighting = |x: f64| [x, 0.0, 0.0004, 0.0, 0.0004];
         for _ in 0..12 {
-            cycle(&mut core, &mut replica, now, 0.3);
+            cycle(&mut core, &mut replica, now, &sighting(0.3));
             now += Duration::from_millis(40);
         }
         let kick_at = Instant::from_micros(now.as_micros() - 39_000);
         core.input(contract::KICK_KEY, &floats(&[0.0, 4.0, 1.0]), kick_at)
             .expect("a valid kick");
-        cycle(&mut core, &mut replica, now, 0.3 + 4.0 * 0.039);
+        cycle(&mut core, &mut replica, now, &sighting(0.3 + 4.0 * 0.039));
         let Some(Value::Floats(ball)) = team_ball(&replica) else {
             panic!("the layer publishes a team ball");
         };
