@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use comms::relay::Binding;
 use daemon_support::netns::{NetnsPair, ADDRESSES, BROADCAST};
-use daemon_support::{free_tcp_port, Daemon};
+use daemon_support::{free_tcp_port, replay_json, Daemon};
 
 fn huddle() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_huddle"));
@@ -225,22 +225,6 @@ fn a_live_monitor_hears_a_broadcast_team() {
 }
 
 /// Waits until the recorder has written its headers and a frame.
-/// `huddle replay FILE --json`: what a recording holds, one binding per line.
-fn replay_json(file: &Path) -> String {
-    let out = huddle()
-        .arg("replay")
-        .arg(file)
-        .arg("--json")
-        .output()
-        .expect("run huddle replay");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
-
 fn wait_until_recorded(file: &Path) {
     let deadline = Instant::now() + Duration::from_secs(20);
     while !(file.exists() && std::fs::metadata(file).unwrap().len() > 100) {

@@ -18,19 +18,7 @@ fn huddle() -> Command {
 
 /// `huddle replay FILE --json`, parsed.
 fn replay_json(file: &std::path::Path) -> Vec<serde_json::Value> {
-    let out = huddle()
-        .arg("replay")
-        .arg(file)
-        .arg("--json")
-        .output()
-        .expect("run huddle replay");
-    assert!(
-        out.status.success(),
-        "replay failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout)
-        .unwrap()
+    daemon_support::replay_json(file)
         .lines()
         .map(|l| serde_json::from_str(l).expect("each line is JSON"))
         .collect()

@@ -221,3 +221,21 @@ impl Client {
         (total, false)
     }
 }
+
+/// `huddle replay FILE --json`: what a recording holds, one binding per line. Panics
+/// (with replay's own error) if replay fails.
+pub fn replay_json(file: &Path) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_huddle"))
+        .env("RUST_LOG", "warn")
+        .arg("replay")
+        .arg(file)
+        .arg("--json")
+        .output()
+        .expect("run huddle replay");
+    assert!(
+        out.status.success(),
+        "replay failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("replay prints UTF-8")
+}
