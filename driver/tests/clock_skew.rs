@@ -12,7 +12,10 @@
 use std::time::Duration;
 
 use comms::{Instant, ReplicaConfig};
-use driver::{ClockSkew, Driver, DriverConfig, Handle, Notice};
+use driver::{ClockSkew, Driver, DriverConfig, Handle};
+
+mod support;
+use support::{run_local, wait_for};
 
 const OFFSET: Duration = Duration::from_secs(20);
 const DRIFT_PPM: f64 = 300.0;
@@ -22,28 +25,6 @@ fn config(id: u8, group: std::net::SocketAddrV4, skew: ClockSkew) -> DriverConfi
     cfg.socket.group = group;
     cfg.clock_skew = skew;
     cfg
-}
-
-fn run_local(test: impl std::future::Future<Output = ()>) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    tokio::task::LocalSet::new().block_on(&rt, test);
-}
-
-/// Waits (at most 10 s) until `key` appears on the subscription.
-async fn wait_for(sub: &mut driver::Subscription, key: &str) {
-    let wait = tokio::time::timeout(Duration::from_secs(10), async {
-        loop {
-            match sub.next().await {
-                Some(Notice::Changed { key: k, .. }) if k.to_string() == key => return,
-                Some(_) => {}
-                None => panic!("the driver stopped"),
-            }
-        }
-    });
-    wait.await.unwrap_or_else(|_| panic!("{key} never arrived"));
 }
 
 /// The age `handle` gives `key` now, on its own clock.

@@ -8,8 +8,8 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::Duration;
 
 use comms::{ReplicaConfig, Value};
-use driver::{open_multicast, scratch_group, Driver, DriverConfig, Notice, SocketConfig};
-use support::frame_from;
+use driver::{open_multicast, scratch_group, Driver, DriverConfig, SocketConfig};
+use support::{frame_from, run_local, wait_for};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 
 fn config(id: u8, group: SocketAddrV4) -> DriverConfig {
@@ -21,28 +21,6 @@ fn config(id: u8, group: SocketAddrV4) -> DriverConfig {
 /// A plain socket on a loopback address of its own choosing.
 fn udp_on(ip: [u8; 4]) -> UdpSocket {
     UdpSocket::bind((Ipv4Addr::from(ip), 0)).expect("bind a loopback address")
-}
-
-/// Waits (with a generous cap) until `key` appears on the subscription.
-async fn wait_for(sub: &mut driver::Subscription, key: &str) {
-    let wait = tokio::time::timeout(Duration::from_secs(10), async {
-        loop {
-            match sub.next().await {
-                Some(Notice::Changed { key: k, .. }) if k.to_string() == key => return,
-                Some(_) => {}
-                None => panic!("the driver stopped"),
-            }
-        }
-    });
-    wait.await.unwrap_or_else(|_| panic!("{key} never arrived"));
-}
-
-fn run_local(test: impl std::future::Future<Output = ()>) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    tokio::task::LocalSet::new().block_on(&rt, test);
 }
 
 // Loopback delivery happens inside `send_to`, in order, and the driver handles datagrams

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use comms::{ReplicaConfig, Value};
 use driver::{scratch_group, Driver, DriverConfig, DriverError, Handle, Notice, Transport};
-use support::frame_from;
+use support::{frame_from, run_local};
 
 fn config(id: u8, transport: Transport, port: u16, iface: [u8; 4]) -> DriverConfig {
     let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0));
@@ -43,14 +43,6 @@ async fn wait_for(sub: &mut driver::Subscription, key: &str, value: &Value) {
     });
     wait.await
         .unwrap_or_else(|_| panic!("{key} = {value:?} never arrived"));
-}
-
-fn run_local(test: impl std::future::Future<Output = ()>) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    tokio::task::LocalSet::new().block_on(&rt, test);
 }
 
 /// Starts a driver; its handle and a subscription to every robot's `var.#`.
