@@ -10,7 +10,8 @@
 //! written up in docs/results/sim-daemons.md.
 //!
 //! Scenario 2: a robot program tells its daemon the referee put the ball back
-//! (`local.var.robot.ball_reset`): the layer stops publishing the ball it tracked.
+//! (`local.var.robot.ball_reset`): the layer stops publishing the ball it tracked, and
+//! its team ball is the kick-off spot.
 
 #![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
 
@@ -112,13 +113,25 @@ fn a_ball_reset_makes_the_layer_let_go_of_the_ball() {
         assert_eq!(c.ask("SETV local.var.robot.odometry [0, 0, 0]"), "OK");
         std::thread::sleep(Duration::from_millis(40));
     }
-    // The layer says it has no ball now (`[]`, written once at the first tick after the
-    // reset): a program reading the key does not walk to where the ball was before.
-    for key in ["local.var.team.own_ball", "local.var.team.ball"] {
-        let after = c.ask(&format!("GETV {key}"));
-        assert!(
-            after.starts_with(&format!("VAL {key} floats []")),
-            "after the reset {key} reads as no ball: {after}"
-        );
-    }
+    // The layer says it has no ball of its own now (`[]`, written once at the first tick
+    // after the reset), and its team ball is the kick-off spot (the centre of the field,
+    // where the rules put the ball), not the ball 1.5 m ahead: a program reading the keys
+    // does not walk to where the ball was before.
+    let key = "local.var.team.own_ball";
+    let after = c.ask(&format!("GETV {key}"));
+    assert!(
+        after.starts_with(&format!("VAL {key} floats []")),
+        "after the reset {key} reads as no ball: {after}"
+    );
+    let after = c.ask("GETV local.var.team.ball");
+    let at: Vec<f64> = after
+        .trim_start_matches("VAL local.var.team.ball floats [")
+        .split([',', ']'])
+        .take(2)
+        .filter_map(|x| x.trim().parse().ok())
+        .collect();
+    assert!(
+        at.len() == 2 && at[0].abs() < 0.01 && at[1].abs() < 0.01,
+        "after the reset the team ball is the centre spot: {after}"
+    );
 }

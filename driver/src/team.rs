@@ -390,12 +390,25 @@ fn penalized(board: &comms::Blackboard) -> Vec<u8> {
 /// Where the GameController listener writes the game's state.
 pub const GC_STATE_KEY: &str = "local.var.gc.state";
 
+/// Where the GameController listener writes the set play (`penalty_kick`: the ball on a
+/// penalty mark, not the centre spot).
+pub const GC_SET_PLAY_KEY: &str = "local.var.gc.set_play";
+
 /// Where the GameController listener writes this team's penalised player numbers.
 pub const PENALIZED_KEY: &str = "local.var.gc.penalized";
 
 /// Seconds from `earlier` to `now` on the driver's clock.
 fn since(now: Instant, earlier: Instant) -> f64 {
     now.saturating_duration_since(earlier).as_secs_f64()
+}
+
+/// A text the GameController listener wrote under `key`, if any.
+fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
+    let key = Key::parse(key).expect("a valid key");
+    match board.get(&key).map(|e| &e.value) {
+        Some(Value::String(s)) => Some(s.as_str()),
+        _ => None,
+    }
 }
 
 /// One control tick of the layer on what the robot program wrote since the previous one.
@@ -416,14 +429,14 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
     // Out of play (the GC's state is not Playing) the layer tells the team nothing.
-    // Set starts the kick-off hold (see `TeamLayer::set_kick_off_next`).
-    let state = Key::parse(GC_STATE_KEY).expect("a valid key");
-    let state = match replica.blackboard().get(&state).map(|e| &e.value) {
-        Some(Value::String(s)) => Some(s.as_str()),
-        _ => None,
-    };
+    // Set starts the kick-off hold and puts the ball on the centre spot (see
+    // `TeamLayer::set_kick_off_next`); a penalty kick's Set has the ball elsewhere.
+    let board = replica.blackboard();
+    let state = gc_text(board, GC_STATE_KEY);
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
-    layer.set_kick_off_next(state == Some("set"));
+    layer.set_kick_off_next(
+        state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick"),
+    );
     let balls: Vec<_> = inputs
         .balls
         .drain(..)
@@ -685,9 +698,9 @@ mod core_tests {
         // Robot 2 sees the ball 1.5 m ahead for half a second; then the referee puts it
         // back (the program writes the reset) and, before the layer's next tick, a
         // teammate's claim changes (as every claim does at a kick-off), so the layer
-        // decides and publishes again. It must say "no ball", not the ball before the
-        // goal (`huddle sim --daemons`: one robot in ten matches played on it 40 ms after
-        // a goal, 4.9 m off).
+        // decides and publishes again. It must not say the ball before the goal (`huddle
+        // sim --daemons`: one robot in ten matches played on it 40 ms after a goal, 4.9 m
+        // off), but the kick-off spot, the centre of the field, where the rules put it.
         let mut now = Instant::from_micros(1_000_000);
         let (mut core, mut replica) = robot_2_at_the_origin(now);
         for _ in 0..12 {
@@ -703,10 +716,10 @@ mod core_tests {
             .expect("a valid reset");
         now += Duration::from_millis(5);
         core.react(&mut replica, now);
-        assert_eq!(
-            team_ball(&replica),
-            Some(Value::Floats(Vec::new())),
-            "after the reset the layer says it has no team ball"
+        let spot = team_ball(&replica);
+        assert!(
+            matches!(&spot, Some(Value::Floats(f)) if f.len() >= 2 && f[0].abs() < 1e-6 && f[1].abs() < 1e-6),
+            "after the reset the layer's team ball is the centre spot: {spot:?}"
         );
     }
 

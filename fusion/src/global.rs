@@ -210,6 +210,9 @@ pub struct GlobalModel {
     /// The track as it was before the latest restart, so that a kick whose report arrives
     /// after the cameras already restarted the ball can rewind to it (see `kicked`).
     rewind: Option<Rewind>,
+    /// The team ball is still the one [`GlobalModel::place_ball`] put down: no camera has
+    /// restarted it and no kick has moved it since.
+    placed: bool,
     stats: GlobalStats,
 }
 
@@ -314,6 +317,7 @@ impl GlobalModel {
             last_accepted_obs_t_s: f64::NEG_INFINITY,
             rejected: Vec::new(),
             rewind: None,
+            placed: false,
             stats: GlobalStats::default(),
         }
     }
@@ -687,6 +691,7 @@ impl GlobalModel {
         };
         self.rejected.clear();
         self.stats.kicks += 1;
+        self.placed = false;
         for rec in self.robots.values_mut() {
             rec.last_rejected_t_s = None;
             rec.clear_run();
@@ -746,6 +751,7 @@ impl GlobalModel {
             return;
         };
         self.stats.kicks += 1;
+        self.placed = false;
         self.committed = Some(BallEstimate {
             t_s: committed.t_s,
             mean: u.mean,
@@ -788,6 +794,7 @@ impl GlobalModel {
             .collect();
         self.committed = Some(fresh);
         self.head = Some(fresh);
+        self.placed = false;
         self.clear_pending();
         self.rejected.clear();
         self.last_support_t_s = now_s;
@@ -918,6 +925,7 @@ impl GlobalModel {
         self.keep_for_rewind(fused.t_s);
         self.committed = Some(fused);
         self.head = Some(fused);
+        self.placed = false;
         self.clear_pending();
         self.rejected.clear();
         self.last_support_t_s = now_s;
@@ -938,6 +946,7 @@ impl GlobalModel {
         self.rewind = None;
         self.committed = None;
         self.head = None;
+        self.placed = false;
         self.clear_pending();
         self.forgotten_before_t_s = t_s;
         self.rejected.clear();
@@ -947,6 +956,30 @@ impl GlobalModel {
             rec.accepted_obs = None;
             rec.clear_run();
         }
+    }
+
+    /// The ball was put down by hand at `placed.t_s` where `placed` says (a referee's
+    /// kick-off: the centre spot, its covariance the placement's error): everything
+    /// [`GlobalModel::forget_ball`] drops goes, and the team ball starts as `placed`
+    /// instead of with the next sighting. Sightings after it are gated against it and
+    /// fused as any; a wrong placement does not stick: the robot's own camera restarts it
+    /// after [`GlobalConfig::own_restart_after`] agreeing sightings, a teammate's after
+    /// [`GlobalConfig::teammate_restart_after`], and once nothing has supported it for
+    /// [`GlobalConfig::support_timeout_s`] a single dissenting robot does. Until a
+    /// teammate is heard the team ball is the placement (see [`GlobalModel::team_ball`]).
+    pub fn place_ball(&mut self, placed: BallEstimate) {
+        self.forget_ball(placed.t_s);
+        self.committed = Some(placed);
+        self.head = Some(placed);
+        self.last_support_t_s = placed.t_s;
+        self.last_accepted_obs_t_s = placed.t_s;
+        self.placed = true;
+    }
+
+    /// Whether the team ball is still the one [`GlobalModel::place_ball`] put down (fused
+    /// with sightings that agreed with it, but not restarted or kicked since).
+    pub fn is_placed(&self) -> bool {
+        self.placed
     }
 
     /// Ball information from `robot` stamped before this is void (see
@@ -975,10 +1008,15 @@ impl GlobalModel {
             (self.state_at(now_s)?, TeamBallSource::Fused)
         } else {
             let own = match own_ball {
-                Some(b) => *b,
-                None => self.robots.get(&self.own_id)?.lwm.ball?,
+                Some(b) => Some(*b),
+                None => self.robots.get(&self.own_id).and_then(|r| r.lwm.ball),
             };
-            (own.predict_to(&model, now_s), TeamBallSource::OwnFallback)
+            match own {
+                Some(own) => (own.predict_to(&model, now_s), TeamBallSource::OwnFallback),
+                // A ball put down by hand is known without anyone's sighting.
+                None if self.placed => (self.state_at(now_s)?, TeamBallSource::Fused),
+                None => return None,
+            }
         };
         Some(TeamBall {
             gbc: position_confidence(&estimate.position_cov()),

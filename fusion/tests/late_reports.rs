@@ -192,3 +192,64 @@ fn a_teammate_told_of_the_reset_after_us_does_not_start_the_new_team_ball_on_its
          1's stale track started it"
     );
 }
+
+#[test]
+fn a_ball_put_on_the_centre_spot_is_the_team_ball_until_a_teammate_sees_it_elsewhere() {
+    // The referee puts the ball on the centre spot at 1 s and robot 3 is told so
+    // (`place_ball`, σ 0.1 m). Nobody has reported a sighting yet: its team ball is the
+    // placement (before, it had none until a teammate's message came). Robot 1, 1 m from
+    // the ball's line, then sees it at (0.02, 0): the placement takes it and stays. Then
+    // the placement was wrong: from 2 s robot 1 sees the ball at (2, 0), and within the
+    // support timeout and a message or two the team ball is there.
+    let mut g = gwm(GlobalConfig::default());
+    let placed = fusion::BallEstimate {
+        t_s: 1.0,
+        mean: fusion::nalgebra::Vector4::zeros(),
+        cov: fusion::nalgebra::Matrix4::from_diagonal(&fusion::nalgebra::Vector4::new(
+            0.01, 0.01, 0.0025, 0.0025,
+        )),
+    };
+    assert!(g.team_ball(1.0, None).is_none(), "nothing known before");
+    g.place_ball(placed);
+    let blind = g
+        .team_ball(1.2, None)
+        .expect("the placement is the team ball");
+    assert!(blind.estimate.position().norm() < 1e-9 && g.is_placed());
+
+    let mut watcher = local_model(1.0);
+    let mut t_s = 1.04;
+    while t_s < 1.5 {
+        watcher.ball_sighting(t_s, &sighting(0.02, 1.0));
+        let bytes = watcher.publish(t_s).to_bytes().expect("encodes");
+        g.receive(1, &bytes, t_s, 0.0).expect("valid");
+        t_s += PERIOD_S;
+    }
+    let agreed = g.team_ball(t_s, None).expect("a team ball");
+    assert!(
+        g.is_placed() && agreed.estimate.position().x < 0.03,
+        "sightings that agree are fused into the placement: {:?}",
+        agreed.estimate.position()
+    );
+
+    watcher.forget_ball();
+    t_s = 2.0;
+    let mut moved_at = None;
+    while t_s < 3.0 {
+        watcher.ball_sighting(t_s, &sighting(2.0, 1.0));
+        let bytes = watcher.publish(t_s).to_bytes().expect("encodes");
+        g.receive(1, &bytes, t_s, 0.0).expect("valid");
+        let at = g
+            .team_ball(t_s, None)
+            .expect("a team ball")
+            .estimate
+            .position();
+        if moved_at.is_none() && (at - Vector2::new(2.0, 0.0)).norm() < 0.1 {
+            moved_at = Some(t_s);
+        }
+        t_s += PERIOD_S;
+    }
+    assert!(
+        moved_at.is_some_and(|t| t < 2.2) && !g.is_placed(),
+        "a teammate's camera overrules a wrong placement: at (2, 0) from {moved_at:?} s"
+    );
+}

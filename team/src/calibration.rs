@@ -26,6 +26,12 @@ impl FieldGeometry {
         crate::geometry::Vec2::new(self.length_m / 2.0, 0.0)
     }
 
+    /// The centre spot, where the referee puts the ball for a kick-off (the field
+    /// frame's origin).
+    pub fn centre_spot(&self) -> crate::geometry::Vec2 {
+        crate::geometry::Vec2::new(0.0, 0.0)
+    }
+
     /// Centre of our own goal mouth.
     pub fn own_goal(&self) -> crate::geometry::Vec2 {
         crate::geometry::Vec2::new(-self.length_m / 2.0, 0.0)

@@ -254,6 +254,11 @@ pub struct TeamLayer {
     kick_off_hold_until_s: Option<f64>,
     /// In the hold, and not the kick-off taker: it leaves the ball to the taker.
     kick_off_yield: bool,
+    /// The GameController has just said Set: at the next tick the ball is put back on the
+    /// kick-off spot (see [`TeamLayer::forget_ball`]).
+    kick_off_place: bool,
+    /// The ball was in play at the latest tick.
+    was_in_play: bool,
 }
 
 /// The kick-off hold lasts this long after the robot hears play, seconds. Tuned on
@@ -265,6 +270,13 @@ pub const KICK_OFF_HOLD_S: f64 = 3.0;
 /// about metres to the ball: the kicker stands at the centre spot, the rest of the team
 /// outside the centre circle, 0.75 m in the SPL, and further).
 pub const KICK_OFF_TAKER_COST: f64 = 1.0;
+
+/// σ of where the referee puts the ball for a kick-off, per axis, m: on the centre
+/// mark, give or take a ball's width.
+pub const KICK_OFF_SPOT_SIGMA_M: f64 = 0.1;
+
+/// σ of the velocity of a ball put down for a kick-off, per axis, m/s: it lies still.
+pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
 
 /// The robot id at index `k` of a team's per-robot vectors.
 fn robot_id(k: usize) -> u8 {
@@ -336,6 +348,8 @@ impl TeamLayer {
             kick_off_next: false,
             kick_off_hold_until_s: None,
             kick_off_yield: false,
+            kick_off_place: false,
+            was_in_play: true,
         }
     }
 
@@ -366,9 +380,15 @@ impl TeamLayer {
     /// earlier remedy, every robot telling its cost in Set, spent a counted message per
     /// robot per kick-off, and under a budget with no room those claims did not go out
     /// at all.
+    ///
+    /// Set also says where the ball is: on the centre spot, so at the next tick every
+    /// ball belief goes and the team ball is put there (see [`TeamLayer::forget_ball`]);
+    /// a caller whose Set is for a penalty kick (the ball on a penalty mark) must not
+    /// call this.
     pub fn set_kick_off_next(&mut self, set: bool) {
         if set && !self.kick_off_next {
             self.kick_off_hold_until_s = Some(f64::INFINITY);
+            self.kick_off_place = true;
         }
         self.kick_off_next = set;
     }
@@ -507,6 +527,11 @@ impl TeamLayer {
         let wm = &cfg.world_model;
         let now_s = seconds(local_now);
         self.kicked = None;
+        if std::mem::take(&mut self.kick_off_place) {
+            // Set: the ball lies on the kick-off spot, whatever the robot tracked before
+            // (a half's kick-off has no goal, so nothing was reset).
+            self.forget_ball(now_s);
+        }
         if !claim_waiting {
             self.untold_claim = None;
         }
@@ -589,6 +614,16 @@ impl TeamLayer {
             self.lwm.kick(&push);
             self.kicked = Some(push);
             self.push_reported_at_s = now_s;
+        }
+        // Put back for a kick-off, the ball stays on the spot until play: the referee
+        // holds it there. If the team ball is still that placement when the robot hears
+        // play (no camera and no kick said otherwise), it is put down again then, so at
+        // the whistle it is as sure as the placement, not a Ready and a Set's worth of
+        // prediction old.
+        let play_heard = self.in_play && !self.was_in_play;
+        self.was_in_play = self.in_play;
+        if play_heard && self.gwm.is_placed() {
+            self.gwm.place_ball(self.kick_off_ball(now_s));
         }
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
@@ -1121,16 +1156,46 @@ impl TeamLayer {
     }
 
     /// The game controller says the ball was put back for a kick-off (`now_s` on the
-    /// robot's clock): every ball belief goes.
+    /// robot's clock): every ball belief goes, and the team ball starts on the kick-off
+    /// spot the rules name (the centre spot of the field the robot is calibrated for,
+    /// [`KICK_OFF_SPOT_SIGMA_M`] for the referee's placement), not with the first message
+    /// a teammate can afford to send. Sightings are gated against it and fused with it;
+    /// cameras that see the ball elsewhere restart it (see
+    /// [`fusion::GlobalModel::place_ball`]).
+    ///
+    /// Why: every robot forgot the ball at each of a game's ~20 kick-offs, so a robot
+    /// that did not see the ball itself held no team ball until a teammate's message
+    /// came, seconds under a league's budget (about one message a second for the team).
     pub fn forget_ball(&mut self, now_s: f64) {
         self.lwm.forget_ball();
-        self.gwm.forget_ball(now_s);
+        let placed = self.kick_off_ball(now_s);
+        self.gwm.place_ball(placed);
         self.ball = None;
         self.ball_seen_at_s = None;
         self.team_ball = None;
         // Held too: a daemon publishes it between ticks (a teammate's claim changing
-        // makes it decide and publish again), and the old ball must not come back then.
-        self.team_ball_held = None;
+        // makes it decide and publish again), and the old ball must not come back then:
+        // what it publishes is the kick-off spot.
+        self.team_ball_held = Some(TeamBall {
+            estimate: placed,
+            gbc: fusion::position_confidence(&placed.position_cov()),
+            source: fusion::TeamBallSource::Fused,
+        });
+    }
+
+    /// The ball on the kick-off spot at `t_s`, as the robot knows the field: at rest, give
+    /// or take the referee's placement.
+    pub fn kick_off_ball(&self, t_s: f64) -> BallEstimate {
+        let at = frames::to_fusion_point(self.cal.field.centre_spot());
+        let p = KICK_OFF_SPOT_SIGMA_M.powi(2);
+        let v = KICK_OFF_SPEED_SIGMA_MPS.powi(2);
+        BallEstimate {
+            t_s,
+            mean: fusion::nalgebra::Vector4::new(at.x, at.y, 0.0, 0.0),
+            cov: fusion::nalgebra::Matrix4::from_diagonal(&fusion::nalgebra::Vector4::new(
+                p, p, v, v,
+            )),
+        }
     }
 
     /// The pose estimate the layer holds (`fusion`'s convention).

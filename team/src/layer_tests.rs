@@ -352,3 +352,145 @@ fn in_the_kick_off_hold_only_the_taker_claims_and_nothing_is_told_before_play() 
     keeper.decide(&board, at(10.0));
     assert!(!keeper.going(), "the keeper");
 }
+
+#[test]
+fn after_a_kick_off_a_blind_robot_holds_the_ball_on_the_centre_spot_until_a_camera_disagrees() {
+    // Scenario: robot 2 stands at (−2, 1) facing the opponent goal and tracks the ball at
+    // (3, 2). A goal at 10 s: the referee puts the ball on the centre spot and the
+    // GameController says so (Ready, then Set, play heard at 40 s). Robot 2 does not see
+    // the ball and hears nobody (a budget sends nothing out of play). Before, it held no
+    // team ball at all until a teammate's message came; now it holds the centre spot
+    // through the restart, and at the whistle as sure as the referee's placement.
+    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
+    let home = Pose {
+        at: Vec2::new(-2.0, 1.0),
+        theta_rad: 0.0,
+    };
+    let mut r = TeamLayer::new(
+        2,
+        false,
+        ArbitrationParams::default(),
+        home,
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    let board = Blackboard::new(2);
+    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let pose = Some((home, fusion::nalgebra::Matrix3::identity() * 1e-4));
+    // A ball `rel` ahead of the robot (REP-103: x forward, y left), σ 5 cm.
+    let sighting = |rel: Vector2<f64>| {
+        let s = crate::frames::ball_sighting_from_rep103(rel, Matrix2::identity() * 0.0025);
+        [(s, 0.0)]
+    };
+    let blind = Senses {
+        pose,
+        ..Senses::default()
+    };
+    let old_ball = sighting(Vector2::new(5.0, 1.0));
+    let seeing_old = Senses {
+        pose,
+        ball: &old_ball,
+        ..Senses::default()
+    };
+    let mut t = 0.0;
+    while t < 9.99 {
+        r.sense(&cfg, at(t), &seeing_old, &board, false);
+        t += 0.04;
+    }
+    let before = r
+        .team_ball_held
+        .expect("it tracks the ball it sees")
+        .estimate;
+    assert!(
+        (before.position() - Vector2::new(3.0, 2.0)).norm() < 0.1,
+        "before the goal: {:?}",
+        before.position()
+    );
+
+    r.forget_ball(10.0);
+    r.set_in_play(false);
+    let spot_error = |r: &TeamLayer| {
+        let b = r.team_ball_held.expect("a team ball on the spot").estimate;
+        (b.position().norm(), b.position_cov()[(0, 0)].sqrt())
+    };
+    t = 10.04;
+    while t < 40.0 {
+        if t > 35.0 {
+            r.set_kick_off_next(true);
+        }
+        r.sense(&cfg, at(t), &blind, &board, false);
+        let (off, _) = spot_error(&r);
+        assert!(off < 1e-6, "{t:.2} s, out of play: {off} m off the spot");
+        t += 0.04;
+    }
+    // Play heard: the hold runs, the ball rolls off only when someone says so.
+    r.set_in_play(true);
+    r.set_kick_off_next(false);
+    r.sense(&cfg, at(40.0), &blind, &board, false);
+    let (off, sigma) = spot_error(&r);
+    assert!(
+        off < 1e-6 && sigma <= KICK_OFF_SPOT_SIGMA_M * 1.01,
+        "at the whistle, as sure as the placement: {off} m off, σ {sigma} m"
+    );
+    assert!(
+        r.team_ball.is_some(),
+        "confident enough for the robot to use it (GBC ≥ {})",
+        cfg.team_ball_min_gbc
+    );
+    assert!(r.gwm.is_placed());
+
+    // Its camera sees the ball where the spot is: fused, still the placement.
+    let on_spot = sighting(Vector2::new(2.05, -1.0));
+    let seeing_spot = Senses {
+        pose,
+        ball: &on_spot,
+        ..Senses::default()
+    };
+    r.sense(&cfg, at(40.04), &seeing_spot, &board, false);
+    assert!(r.gwm.is_placed(), "a sighting that agrees is fused");
+    // … and then somewhere else (the placement was wrong, or the ball was kicked and
+    // nobody said so): within a few frames the camera wins.
+    let elsewhere = sighting(Vector2::new(3.5, -0.5));
+    let seeing_elsewhere = Senses {
+        pose,
+        ball: &elsewhere,
+        ..Senses::default()
+    };
+    t = 40.08;
+    for _ in 0..4 {
+        r.sense(&cfg, at(t), &seeing_elsewhere, &board, false);
+        t += 0.04;
+    }
+    let b = r.team_ball_held.expect("a team ball").estimate;
+    assert!(
+        (b.position() - Vector2::new(1.5, 0.5)).norm() < 0.2 && !r.gwm.is_placed(),
+        "the camera's ball wins: {:?}",
+        b.position()
+    );
+}
+
+#[test]
+fn a_set_puts_the_team_ball_on_the_centre_spot_without_a_goal() {
+    // A half's kick-off: no goal (no ball reset), but Set says the ball lies on the
+    // centre spot. A robot that last tracked the ball at (3, 2) and sees nothing now
+    // holds the spot from Set on.
+    let (mut r, _cal, cfg) = robot_at_a_still_ball(1.0, 0.0);
+    let board = Blackboard::new(2);
+    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    r.set_in_play(false);
+    r.sense(&cfg, at(2.0), &Senses::default(), &board, false);
+    let held = r.team_ball_held.map(|b| b.estimate.position());
+    assert!(
+        held.is_some_and(|p| p.norm() > 0.5),
+        "before Set: the old ball {held:?}"
+    );
+    r.set_kick_off_next(true);
+    r.sense(&cfg, at(2.04), &Senses::default(), &board, false);
+    let b = r.team_ball_held.expect("the spot").estimate;
+    assert!(
+        b.position().norm() < 1e-6,
+        "Set: the centre spot, {:?}",
+        b.position()
+    );
+}

@@ -47,6 +47,13 @@ pub struct PlayBreakdown {
     pub conflict_s: f64,
     /// Of them, with no goer.
     pub no_goer_s: f64,
+    /// Team-ball samples of blind robots in this part (see [`crate::metrics`]: a robot
+    /// that has not seen the ball itself within its ball memory).
+    pub blind_samples: u64,
+    /// Their team-ball RMSE, m.
+    pub blind_rmse_m: f64,
+    #[serde(skip)]
+    blind_sq_sum_m2: f64,
 }
 
 impl PlayBreakdown {
@@ -64,10 +71,18 @@ impl PlayBreakdown {
 
     fn rounded(self) -> Self {
         let r = |x: f64| (x * 100.0).round() / 100.0;
+        let rmse = if self.blind_samples > 0 {
+            (self.blind_sq_sum_m2 / self.blind_samples as f64).sqrt()
+        } else {
+            0.0
+        };
         Self {
             visible_s: r(self.visible_s),
             conflict_s: r(self.conflict_s),
             no_goer_s: r(self.no_goer_s),
+            blind_samples: self.blind_samples,
+            blind_rmse_m: (rmse * 1e4).round() / 1e4,
+            blind_sq_sum_m2: self.blind_sq_sum_m2,
         }
     }
 }
@@ -141,10 +156,11 @@ impl std::fmt::Display for GameReport {
                 }
             };
             format!(
-                "{:.0} s, conflict {:.1}%, no goer {:.1}%",
+                "{:.0} s, conflict {:.1}%, no goer {:.1}%, blind {:.3} m",
                 b.visible_s,
                 pct(b.conflict_s),
-                pct(b.no_goer_s)
+                pct(b.no_goer_s),
+                b.blind_rmse_m
             )
         };
         write!(
@@ -236,6 +252,29 @@ impl Game {
             &mut self.open_play
         };
         part.add(dt_s, visible, goers);
+    }
+
+    /// A blind robot's team-ball sample at `t_s` (its squared error), put in its part of
+    /// the game as [`Game::sample_play`] puts the arbitration's.
+    pub(crate) fn sample_blind(&mut self, t_s: f64, sq_m2: f64) {
+        if !self.referee.playing() {
+            return;
+        }
+        let penalised =
+            (0..self.trackers.len()).any(|i| self.referee.penalised(comms_netsim::robot_id(i)));
+        let part = match self.playing_since_s {
+            Some(since) if t_s - since > KICK_OFF_WINDOW_S => {
+                if penalised {
+                    &mut self.penalised
+                } else {
+                    &mut self.open_play
+                }
+            }
+            // The stretch's first sample comes before its arbitration sample starts it.
+            _ => &mut self.kick_off,
+        };
+        part.blind_samples += 1;
+        part.blind_sq_sum_m2 += sq_m2;
     }
 
     /// The referee's books as the report shows them.

@@ -952,6 +952,11 @@ impl Simulation {
                 .estimate
                 .predict_to(&self.cfg.brain.team.world_model.global.ball, now_s);
             let te = (team.estimate.position() - truth).norm_squared();
+            if r.ball.is_none() {
+                if let Some(game) = &mut self.game {
+                    game.sample_blind(t_s, te);
+                }
+            }
             let ce = (c.position() - truth).norm_squared();
             self.fusion.ball(&BallSample {
                 team_sq_m2: te,
