@@ -54,7 +54,6 @@ use std::time::Duration;
 
 use comms::arbitration::ArbitrationParams;
 use comms::ReplicaConfig;
-use fusion::CentralizedBall;
 use netsim::{LinkConfig, Preset, Sim as Net, Time, UplinkConfig};
 use serde::Serialize;
 
@@ -64,7 +63,9 @@ use crate::field::{FieldConfig, World};
 use comms_netsim::{Harness, HarnessError};
 pub use game::GameReport;
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
-pub use references::{DelayedCentral, DeliveryReference, Publications, ReferenceConfig};
+pub use references::{
+    CentralFusion, DelayedCentral, DeliveryReference, KickTruth, Publications, ReferenceConfig,
+};
 pub use report::{NeesBand, NeesCause, Report, SweepRow};
 pub use robot::{BrainConfig, Percepts, Robot, TickInput, TickOutput, WorldModelConfig};
 
@@ -341,15 +342,17 @@ pub struct Simulation {
     pub metrics: Metrics,
     /// World-model figures so far.
     pub fusion: FusionMetrics,
-    /// The reference: one ball filter fed every robot's sightings, kick reports and push
-    /// reports at once, no network.
-    pub central: CentralizedBall,
-    /// The same told every kick that met the ball, as it happens, for sure (cK): the
-    /// ceiling for a team that reports its kicks.
-    pub central_kicks: CentralizedBall,
-    /// Per robot: the centralized filter fed what that robot received, at true times.
+    /// The reference: the team's fusion fed every robot's LWM at every tick at once, no
+    /// network (see [`references`]).
+    pub central: CentralFusion,
+    /// The same told every kick that met the ball for sure, and no swing that missed
+    /// (cK): the ceiling for a team that reports its kicks.
+    pub central_kicks: CentralFusion,
+    /// Which kick attempts met the ball, for cK.
+    pub kick_truth: KickTruth,
+    /// Per robot: its fusion fed what that robot received, at true times.
     pub delivery: Vec<DeliveryReference>,
-    /// The delayed-centralized bound's record.
+    /// The delayed-centralized reference's record.
     pub delayed: DelayedCentral,
     /// When each robot published each LWM version (global seconds).
     pub publications: Publications,
@@ -497,14 +500,14 @@ impl Simulation {
             model: world_model.global.ball,
             ..world_model.local.ball
         });
-        let central = CentralizedBall::new(references.central);
-        let central_kicks = CentralizedBall::new(references.central_kicks);
+        // Each reference runs the team's own fusion (its GWM and its settings).
+        let central_config = references.central_fusion(world_model.global);
+        let central = CentralFusion::new(central_config);
+        let central_kicks = CentralFusion::new(central_config);
+        let delayed = DelayedCentral::new(references.delayed_fusion(world_model.global), n);
+        let delivery_config = references.delivery_fusion(world_model.global);
         let delivery = (0..n)
-            .map(|_| {
-                let c = references.delivery_filter();
-                let g = &world_model.global;
-                DeliveryReference::new(c, n, g.stale_after_s, g.track_after_s, g.forget_margin_s)
-            })
+            .map(|i| DeliveryReference::new(comms_netsim::robot_id(i), delivery_config, n))
             .collect();
         let cfg = SimConfig { references, ..cfg };
         let arbitration_run = params;
@@ -550,8 +553,9 @@ impl Simulation {
             fusion: FusionMetrics::default(),
             central,
             central_kicks,
+            kick_truth: KickTruth::new(n),
             delivery,
-            delayed: DelayedCentral::default(),
+            delayed,
             publications: Publications::new(n),
             kick_attempts: 0,
             kick_contacts: 0,
@@ -669,15 +673,7 @@ impl Simulation {
                     self.record_publication(i, t);
                 }
             }
-            self.judge_kick(i, t, out.kick.as_ref());
-            if let (None, Some(push)) = (&out.kick, &self.robots[i].kicked) {
-                // A push the robot reported: the team knows it as it knows a kick, and so
-                // does every reference.
-                let push = fusion::Kick { t_s: t, ..*push };
-                self.delayed.kick(&push);
-                self.central.kick(&push);
-                self.central_kicks.kick(&push);
-            }
+            self.judge_kick(i, out.kick.as_ref());
             self.feed_references(i, t);
             ticked.push(i);
         }
@@ -699,14 +695,18 @@ impl Simulation {
             // The referee puts the ball back on the centre spot and the game controller
             // tells every robot: the ball they tracked is gone.
             // It happened during this step, after every sighting made at its start.
+            // Every reference puts it there too, as the team layer does.
             for i in 0..self.robots.len() {
                 let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6 + dt;
                 self.robots[i].forget_ball(now_s);
-                self.delivery[i].forget(now_s);
+                self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
             }
-            self.central.forget();
-            self.central_kicks.forget();
-            self.delayed.forget(t + dt);
+            if let Some(r) = self.robots.first() {
+                let placed = r.kick_off_ball(t + dt);
+                self.central.place(placed);
+                self.central_kicks.place(placed);
+                self.delayed.place(placed);
+            }
         }
         self.step += 1;
         if self.step.is_multiple_of(CLOCK_SAMPLE_STEPS) {
@@ -812,7 +812,7 @@ impl Simulation {
 
     /// The world carries out robot `i`'s kick attempt, turned by the robot's heading error
     /// as its motion is; the references that are told kicks hear of it.
-    fn judge_kick(&mut self, i: usize, t_s: f64, attempt: Option<&robot::KickAttempt>) {
+    fn judge_kick(&mut self, i: usize, attempt: Option<&robot::KickAttempt>) {
         let Some(a) = attempt else {
             return;
         };
@@ -820,9 +820,9 @@ impl Simulation {
         let truth = self.world.robots[i].pose.theta_rad;
         let off = fusion::wrap_angle(truth - self.robots[i].pose_belief.theta_rad);
         let met = self.world.kick(i, a.direction_rad + off);
-        // The team knows the attempt (the kicker's report, its contact odds included).
-        self.delayed.kick(&fusion::Kick { t_s, ..a.report });
-        self.central.kick(&fusion::Kick { t_s, ..a.report });
+        // The team knows the attempt (the kicker's report, its contact odds included); cK
+        // is told whether it met the ball.
+        self.kick_truth.record(i, a.report.t_s, met);
         if met {
             self.kick_met = Some(i);
             self.kick_contacts += 1;
@@ -831,42 +831,36 @@ impl Simulation {
             } else {
                 self.contacts.shots += 1;
             }
-            // cK is told every kick that met the ball, as it happens, for sure.
-            self.central_kicks.kick(&fusion::Kick {
-                t_s,
-                contact_prob: 1.0,
-                ..a.report
-            });
         }
     }
 
-    /// Robot `i`'s sighting and kick into the references, and what its replica received
-    /// into its delivery reference.
+    /// Robot `i`'s LWM of its tick at global `t_s` into the references, and what its
+    /// replica received into its delivery reference.
     fn feed_references(&mut self, i: usize, t_s: f64) {
         let r = &self.robots[i];
         let now_s = robot::seconds(self.harness.local_now(i));
         // The sightings the robot's own ball filter took: what its batches tell the team
         // (a false ball its track gated out never reaches a teammate).
-        if let (Some(s), true) = (&r.ball_sighting, r.ball_sighting_taken) {
-            self.central.sighting(t_s, r.lwm.pose(), s);
-            self.central_kicks.sighting(t_s, r.lwm.pose(), s);
-            self.delayed.sighting(t_s, r.lwm.pose(), s);
-            self.delivery[i].own_sighting(&r.lwm.field_observation(now_s, s));
+        let taken = r.ball_sighting.as_ref().filter(|_| r.ball_sighting_taken);
+        let lwm = references::tick_lwm(&r.lwm, now_s, taken);
+        let id = r.id;
+        let global = references::shifted(&lwm, t_s - now_s);
+        self.central.lwm(id, &global, t_s);
+        let told = references::shifted(&self.kick_truth.told(i, &lwm), t_s - now_s);
+        self.central_kicks.lwm(id, &told, t_s);
+        self.delayed.lwm(t_s, i, &global);
+        if let Some(replica) = self.harness.replica(i) {
+            let harness = &self.harness;
+            let publications = &self.publications;
+            self.delivery[i].receive(i, replica.blackboard(), now_s, |j, version| {
+                let sent = publications.sent_at(j, version)?;
+                Some(robot::seconds(
+                    harness.local_at(i, Time::from_secs_f64(sent)),
+                ))
+            });
         }
-        if let Some(kick) = &r.kicked {
-            self.delivery[i].own_kick(kick);
-        }
-        let Some(replica) = self.harness.replica(i) else {
-            return;
-        };
-        let harness = &self.harness;
-        let publications = &self.publications;
-        self.delivery[i].receive(i, replica.blackboard(), now_s, |j, version| {
-            let sent = publications.sent_at(j, version)?;
-            Some(robot::seconds(
-                harness.local_at(i, Time::from_secs_f64(sent)),
-            ))
-        });
+        // Its own after its teammates', as its team layer takes them.
+        self.delivery[i].own(id, &lwm, now_s);
     }
 
     /// Each live robot's estimate of each teammate's clock offset against the truth.
@@ -975,7 +969,7 @@ impl Simulation {
                 cause_age_s: t_s - self.ball_event.0,
                 at_actor: self.ball_event_by == Some(i),
             });
-            self.fusion.instants.push(((t_s, truth.x, truth.y), te));
+            self.fusion.instants.push((i, (t_s, truth.x, truth.y), te));
         }
     }
 
@@ -1027,17 +1021,16 @@ impl Simulation {
         };
         let simulated_s = self.time_s();
         let delayed = self.delayed.squared_errors(
-            self.cfg.references.delayed,
             delay_p50.as_secs_f64(),
             &self
                 .fusion
                 .instants
                 .iter()
-                .map(|&(at, _)| at)
+                .map(|&(i, at, _)| (i, at))
                 .collect::<Vec<_>>(),
         );
         let (mut team_sq, mut delayed_sq, mut delayed_n) = (0.0, 0.0, 0u64);
-        for (&(_, te), d) in self.fusion.instants.iter().zip(&delayed) {
+        for (&(_, _, te), d) in self.fusion.instants.iter().zip(&delayed) {
             if let Some(d) = d {
                 team_sq += te;
                 delayed_sq += d;

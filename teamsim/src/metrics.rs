@@ -22,18 +22,21 @@
 //!   ball.
 //! - **team-ball RMSE** / **centralized RMSE**: root mean square of the position error over
 //!   all team-ball samples; **ratio** = team / centralized.
-//! - **centralized with kicks** (cK): the centralized filter also told every kick of ours
-//!   that met the ball, as it happens (speed, direction and their σ as the kicker
-//!   reports them, contact certain). The ceiling for a team that reports its kicks.
-//! - **delivery reference**: at each robot, the centralized filter fed exactly the ball
-//!   information that reached that robot (its own sightings and kick attempts at once,
-//!   teammates' batches and kick reports when their messages arrive), each placed at its
-//!   true sender time (`super::references`). Team / it measures the fusion;
-//!   it / cK measures the network.
-//! - **delayed-centralized bound**: every sighting and kick report of the team, no loss,
-//!   each exactly the run's measured median one-way delay late. Team / it compares the
-//!   fusion with the best any fusion could do over that delay.
-//! - Every reference's filter is tuned for its own RMSE (`super::ReferenceConfig`).
+//! - **centralized**: the team's own fusion (`fusion::GlobalModel`, the team's settings
+//!   and rules) fed every robot's LWM of every tick at once, on the global clock: no
+//!   network (`super::references`).
+//! - **centralized with kicks** (cK): the same, also told for sure every kick of ours
+//!   that met the ball, and none of the swings that missed. The ceiling for a team that
+//!   reports its kicks.
+//! - **delivery reference**: at each robot, the team's own fusion fed exactly the
+//!   messages that reached that robot (its own LWM at once, teammates' when their
+//!   messages arrive), each placed at its true sender time (`super::references`). Team /
+//!   it measures what the team's clock estimate and commit lag cost; it / cK measures
+//!   the network.
+//! - **delayed-centralized**: at each robot, the team's own fusion fed its own LWMs at
+//!   once and every teammate's LWM of every tick, none lost, each exactly the run's
+//!   measured median one-way delay late.
+//! - Every reference places the ball on the centre spot at a kick-off, as the team does.
 //! - **blind**: the samples of robots that have not seen the ball themselves within their
 //!   ball memory (`BrainConfig::ball_memory_s`), whose team ball is what the network
 //!   brought.
@@ -283,9 +286,10 @@ pub struct FusionMetrics {
     pub nees_bands: [NeesSeries; 3],
     /// … per cause ([`BallEvent::ALL`]'s order).
     pub by_cause: [CauseSums; 5],
-    /// The instants of the samples and the true ball there, global `(t, x, y)`, with the
-    /// team ball's squared error: for the delayed-centralized bound.
-    pub instants: Vec<((f64, f64, f64), f64)>,
+    /// The samples: the robot (index), the instant and the true ball there, global
+    /// `(t, x, y)`, with the team ball's squared error: for the delayed-centralized
+    /// reference.
+    pub instants: Vec<(usize, (f64, f64, f64), f64)>,
     /// Σ position NEES of the centralized filter.
     pub central_nees: f64,
     /// Ball-visible seconds (for the NEES bounds).

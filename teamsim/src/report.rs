@@ -107,31 +107,31 @@ pub struct Report {
     /// Team-ball RMSE against the true ball, m: every live robot's GWM team ball at each of
     /// its control ticks while the ball is visible (see [`metrics`](super::metrics)).
     pub team_ball_rmse_m: f64,
-    /// The same for the centralized filter (every robot's sightings, no network) at the
-    /// same instants, m.
+    /// The same for the centralized reference (the team's fusion fed every robot's LWM at
+    /// every tick at once: no network) at the same instants, m.
     pub centralized_rmse_m: f64,
     /// team_ball_rmse_m / centralized_rmse_m.
     pub rmse_ratio: f64,
-    /// The centralized filter that also knows every kick that met the ball as it happens
-    /// (cK), m: the ceiling for a team that reports its kicks.
+    /// The centralized reference also told every kick that met the ball for sure, and no
+    /// swing that missed (cK), m: the ceiling for a team that reports its kicks.
     pub centralized_kicks_rmse_m: f64,
     /// team_ball_rmse_m / centralized_kicks_rmse_m.
     pub rmse_ratio_kicks: f64,
-    /// The delivery reference at the same instants, m: at each robot, the centralized
-    /// filter fed exactly the ball information that reached it, each piece at its true
-    /// sender time (see [`metrics`](super::metrics)).
+    /// The delivery reference at the same instants, m: at each robot, the team's fusion
+    /// fed exactly the messages that reached it, each at its true sender time (see
+    /// [`metrics`](super::metrics)).
     pub delivery_rmse_m: f64,
-    /// team_ball_rmse_m / delivery_rmse_m: what the fusion itself costs.
+    /// team_ball_rmse_m / delivery_rmse_m: what the team's clock estimate and commit lag
+    /// cost.
     pub delivery_ratio: f64,
     /// delivery_rmse_m / centralized_kicks_rmse_m: what the network costs.
     pub network_ratio: f64,
-    /// The delayed-centralized reference (not a bound: a robot hears its own sightings at
-    /// once and some frames sooner than the median), m: every sighting, kick and push
-    /// report, no loss, each
-    /// exactly the median delay (`delay_p50_ms`) late.
+    /// The delayed-centralized reference, m: at each robot, the team's fusion fed its own
+    /// LWMs at once and every teammate's LWM of every tick, none lost, exactly the median
+    /// delay (`delay_p50_ms`) late.
     pub delayed_centralized_rmse_m: f64,
-    /// team_ball_rmse_m / delayed_centralized_rmse_m (over the samples where the bound has
-    /// a ball).
+    /// team_ball_rmse_m / delayed_centralized_rmse_m (over the samples where the reference
+    /// has a ball).
     pub delayed_centralized_ratio: f64,
     /// Samples of robots that had not seen the ball themselves within their ball memory.
     pub blind_samples: u64,
