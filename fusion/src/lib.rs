@@ -137,15 +137,15 @@
 //! the kick's velocity, rolled forward by the model, into the current track (gated).
 //!
 //! # What limits the team ball
-//! `huddle sim` measures the team ball against references, each tuned for its own RMSE
-//! (its figures are in `huddle sim --json`): [`CentralizedBall`], one filter that sees every
-//! robot's sightings at once with no network (and told every kick that met the ball, cK);
-//! at every robot, a *delivery reference* built on [`NetworkLimitedBall`]: the centralized
-//! filter fed exactly the ball information that reached that robot (its own sightings and
-//! kick reports at once, each teammate's batches and kick reports when they arrive), each
-//! piece at its true sender time; and a *delayed-centralized bound* (every sighting the
-//! median delay late, no loss). The team ball over the delivery reference measures the
-//! fusion; the delivery reference over cK measures the network.
+//! `huddle sim` measures the team ball against references that run this crate's own
+//! [`GlobalModel`] with the team's settings (its figures are in `huddle sim --json`): one
+//! fed every robot's LWM at once with no network (central; and told every kick that met
+//! the ball, cK); at every robot, a *delivery reference* fed exactly the messages that
+//! reached that robot, each at its true sender time; and a *delayed-centralized
+//! reference* (each teammate's LWM the median delay late, none lost). The team ball over
+//! the delivery reference measures the clock estimate and commit lag; the delivery
+//! reference over cK measures the network. [`CentralizedBall`] and [`NetworkLimitedBall`]
+//! are the plain filters without the GWM's rules (`huddle sim --daemons` keeps the first).
 //! [`consistency::nees_bounds`] gives the χ² bounds that NEES is held to. What sets the gap:
 //! - *bias from delay*: placing teammates' messages at reception − age (without transit)
 //!   lags a rolling ball, and a kick-off that teleports the ball leaves every filter on the

@@ -1,6 +1,9 @@
-//! The references a team's fusion is measured against: the centralized filter, which sees
-//! every robot's sightings at once, and the same filter under a network's information
-//! pattern.
+//! Plain references for a team's fusion: the centralized filter, which sees every robot's
+//! sightings at once, and the same filter under a network's information pattern. They
+//! have none of the GWM's rules (consensus, dissent, per-robot restarts, kick reach), so
+//! a GWM can beat them by those rules alone: `huddle sim`'s own references run the
+//! [`crate::GlobalModel`] instead (`teamsim::references`); `huddle sim --daemons` keeps
+//! [`CentralizedBall`].
 
 use super::{
     BallEstimate, BallFilter, BallFilterConfig, BallSighting, BallUpdate, FieldObservation, Kick,
