@@ -361,11 +361,7 @@ mod tests {
             for (k, cov) in covs.iter().enumerate() {
                 // Batch k goes out in messages k, k + 1 and k + 2.
                 let repeats = [1, 2].map(|back| k.checked_sub(back).map(|j| &covs[j]));
-                for c in std::iter::once(Some(cov))
-                    .chain(repeats)
-                    .into_iter()
-                    .flatten()
-                {
+                for c in std::iter::once(Some(cov)).chain(repeats).flatten() {
                     let fresh = encode_cov(c, &[MM_VAR; 2], SigmaCode::U16(), "observation")
                         .map(|(codes, rho)| (codes, rho[0]));
                     assert_eq!(
