@@ -8,7 +8,7 @@ use crate::local::{Heard, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::ops::Deref;
 
 /// Settings of a [`GlobalModel`].
@@ -196,8 +196,9 @@ pub struct GlobalModel {
     committed: Option<BallEstimate>,
     /// Observations not yet committed, in time order, and the state after each
     /// (checkpoints, so that a late arrival replays only what follows it).
-    pending: Vec<Measured>,
-    after: Vec<BallEstimate>,
+    /// Queues: `commit` takes from the front at every message.
+    pending: VecDeque<Measured>,
+    after: VecDeque<BallEstimate>,
     head: Option<BallEstimate>,
     last_support_t_s: f64,
     /// Ball information from before this time is void (see [`GlobalModel::forget_ball`]).
@@ -206,7 +207,7 @@ pub struct GlobalModel {
     last_accepted_obs_t_s: f64,
     /// Every robot's rejected observations not yet older than the committed ball: after
     /// a restart, those that agree with the new track are fused at their own times.
-    rejected: Vec<Measured>,
+    rejected: VecDeque<Measured>,
     /// The track as it was before the latest restart, so that a kick whose report arrives
     /// after the cameras already restarted the ball can rewind to it (see `kicked`).
     rewind: Option<Rewind>,
@@ -222,10 +223,10 @@ struct Rewind {
     /// The restarted track begins here.
     restart_t_s: f64,
     committed: BallEstimate,
-    pending: Vec<Measured>,
-    after: Vec<BallEstimate>,
+    pending: VecDeque<Measured>,
+    after: VecDeque<BallEstimate>,
     head: Option<BallEstimate>,
-    rejected: Vec<Measured>,
+    rejected: VecDeque<Measured>,
 }
 
 /// One piece of ball information for the team track: a position batch (what a camera
@@ -309,13 +310,13 @@ impl GlobalModel {
             config,
             robots: BTreeMap::new(),
             committed: None,
-            pending: Vec::new(),
-            after: Vec::new(),
+            pending: VecDeque::new(),
+            after: VecDeque::new(),
             head: None,
             last_support_t_s: f64::NEG_INFINITY,
             forgotten_before_t_s: f64::NEG_INFINITY,
             last_accepted_obs_t_s: f64::NEG_INFINITY,
-            rejected: Vec::new(),
+            rejected: VecDeque::new(),
             rewind: None,
             placed: false,
             stats: GlobalStats::default(),
@@ -668,7 +669,7 @@ impl GlobalModel {
                     .pending
                     .iter()
                     .chain(&self.rejected)
-                    .chain(&rw.pending[keep..])
+                    .chain(rw.pending.range(keep..))
                     .chain(&rw.rejected)
                     .filter(|o| o.t_s > kick.t_s)
                     .copied()
@@ -698,8 +699,8 @@ impl GlobalModel {
         }
         let kicked = Measured::kick(kick);
         let turned = kicked.apply(&model, &before).unwrap_or(before);
-        self.pending.push(kicked);
-        self.after.push(turned);
+        self.pending.push_back(kicked);
+        self.after.push_back(turned);
         self.head = Some(turned);
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = kick.t_s;

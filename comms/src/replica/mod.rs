@@ -19,6 +19,7 @@
 //! - this file: the state itself, writes and reads.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::atomic::AtomicU64;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -90,6 +91,12 @@ pub struct Replica {
     /// A received frame's items, kept only while it is applied (its capacity reused:
     /// see `receive::recycle`).
     item_scratch: Vec<wire::ItemView<'static>>,
+    /// [`Replica::poll_timeout`]'s last answer in microseconds, or `timers::STALE` once
+    /// an input may have changed what it reads (see `timers_may_change`). A driver asks
+    /// it far more often than anything changes: the simulator's harness asks every
+    /// replica twice per delivery to any one of them. An atomic, not a `Cell`, so that a
+    /// `Replica` stays `Sync`; only `&mut self` paths clear it.
+    timeout_cache: AtomicU64,
 }
 
 impl Replica {
@@ -134,6 +141,7 @@ impl Replica {
             repair_frames: 0,
             sent_scratch: Vec::new(),
             item_scratch: Vec::new(),
+            timeout_cache: AtomicU64::new(timers::STALE),
         })
     }
 
@@ -170,6 +178,7 @@ impl Replica {
     }
 
     fn advance(&mut self, now: Instant) {
+        self.timers_may_change();
         self.now = self.now.max(now);
         self.board.advance_clock(now);
         self.note_team_frames();
@@ -228,6 +237,7 @@ impl Replica {
     }
 
     fn set_parts(&mut self, now: Instant, key: KeyRef<'_>, value: Value) -> Result<(), SetError> {
+        self.timers_may_change();
         self.advance(now);
         let scope = self.board.storage_scope(key)?;
         let global = scope != Scope::Local;
@@ -273,6 +283,7 @@ impl Replica {
     /// The game clock: at `now`, `remaining` of play are left (the GameController's
     /// remaining time). The budget paces over it; without a budget it is ignored.
     pub fn set_game_clock(&mut self, now: Instant, remaining: Duration) {
+        self.timers_may_change();
         if let Some(b) = &mut self.budget {
             b.set_clock(now, remaining);
         }
@@ -282,6 +293,7 @@ impl Replica {
     /// this replica's own accounting (see [`ExternalCap`]); `None` goes back to the
     /// replica's own. Without a budget it is ignored.
     pub fn set_external_budget(&mut self, cap: Option<ExternalCap>) {
+        self.timers_may_change();
         // The teammates' frames heard so far are in the figure's "before".
         let heard = self.peers.values().map(Peer::frames_sent).sum();
         if let Some(b) = &mut self.budget {
@@ -374,3 +386,5 @@ mod clock_tests;
 mod nack_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod timer_cache_tests;

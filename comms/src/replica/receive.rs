@@ -23,6 +23,7 @@ impl Replica {
     /// Feeds one received datagram. Never panics; anything wrong with it is a counted
     /// drop and an [`Event::FrameDropped`], and nothing stored is lost.
     pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) {
+        self.timers_may_change();
         // The table is shared (a reference count, no copy): the items borrow it (and the
         // datagram) while they are applied to `self`.
         let known = self.cfg.known_paths.clone();

@@ -62,6 +62,7 @@ impl Replica {
     /// it once, in order, as [`Event::TalkDelivered`] (this robot does not). Returns its
     /// sequence number.
     pub fn post(&mut self, now: Instant, key: &str, value: Value) -> Result<u64, PostError> {
+        self.timers_may_change();
         self.advance(now);
         let key = Key::parse(key)?;
         let own =

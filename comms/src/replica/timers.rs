@@ -3,6 +3,7 @@
 
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
+use std::sync::atomic::Ordering::Relaxed;
 
 use crate::key::{Key, Kind, Scope};
 use crate::stats::DropReason;
@@ -44,6 +45,7 @@ impl Replica {
     /// and talk give-ups. Call it when [`Replica::poll_timeout`] is reached (calling it
     /// earlier is harmless).
     pub fn handle_timeout(&mut self, now: Instant) {
+        self.timers_may_change();
         self.advance(now);
         if now >= self.next_refresh {
             self.next_refresh += self.cfg.refresh_period;
@@ -236,8 +238,33 @@ impl Replica {
         }
     }
 
+    /// Something `poll_timeout` reads may change: every `&mut self` entry point that can
+    /// touch the refresh time, the peers (presence, talk inboxes), the board's owners,
+    /// the budget, the dirty queue or `now` calls this first.
+    pub(super) fn timers_may_change(&mut self) {
+        *self.timeout_cache.get_mut() = STALE;
+    }
+
     /// When [`Replica::handle_timeout`] should next be called.
     pub fn poll_timeout(&self) -> Option<Instant> {
+        let cached = self.timeout_cache.load(Relaxed);
+        if cached != STALE {
+            // Tests run with debug assertions: an entry point that forgets to clear the
+            // cache shows up here as a disagreement, not as a missed timer.
+            debug_assert_eq!(
+                self.next_deadline().as_micros(),
+                cached,
+                "poll_timeout's cached answer is stale"
+            );
+            return Some(Instant::from_micros(cached));
+        }
+        let next = self.next_deadline();
+        // The end of time is the sentinel: it is worked out again (it never occurs).
+        self.timeout_cache.store(next.as_micros(), Relaxed);
+        Some(next)
+    }
+
+    pub(super) fn next_deadline(&self) -> Instant {
         let limits = &self.cfg.talk;
         let mut next = self.next_refresh;
         for (&robot, peer) in &self.peers {
@@ -260,6 +287,9 @@ impl Replica {
                 }
             }
         }
-        Some(next)
+        next
     }
 }
+
+/// `timeout_cache` holds no answer.
+pub(super) const STALE: u64 = u64::MAX;

@@ -140,8 +140,10 @@ impl Replica {
             && self.refresh_queue.is_empty()
             && self.heads_out.is_empty());
         if !pending && !self.heartbeat_due {
+            // Nothing changed: a driver polls every replica after every input.
             return None;
         }
+        self.timers_may_change();
         self.note_team_frames();
         let class = match &self.budget {
             None => None,

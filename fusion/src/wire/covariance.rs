@@ -7,8 +7,9 @@
 //! if α > 1, scales the σ's up by √α. So the decoded P' satisfies P' ⪰ P: a receiver is
 //! never more confident than the sender.
 
-use super::EncodeError;
-use nalgebra::SMatrix;
+use super::{EncodeError, MM_VAR};
+use nalgebra::{Matrix2, SMatrix};
+use std::cell::RefCell;
 
 const SIGMA8_MIN: f64 = 1e-4;
 const SIGMA16_MIN: f64 = 1e-5;
@@ -116,6 +117,38 @@ pub(super) fn encode_cov<const N: usize>(
     }
     // Only reachable when σ saturates at the top of the scale.
     Err(EncodeError::OutOfRange { field })
+}
+
+/// [`encode_cov`] of a ball observation's covariance (the u16 scale), remembered: each
+/// observation batch goes out three times (in its own message and as the repeat in the
+/// next two), and the answer depends on nothing but the covariance's bits. A small
+/// direct-mapped table per thread (one robot's three batches, or a simulated team's
+/// fifteen), checked on the whole key; errors are not kept.
+pub(super) fn encode_observation_cov(cov: &Matrix2<f64>) -> Result<([u32; 2], i8), EncodeError> {
+    type Kept = Option<([u64; 4], [u32; 2], i8)>;
+    thread_local! {
+        static KEPT: RefCell<[Kept; OBSERVATION_SLOTS]> =
+            const { RefCell::new([None; OBSERVATION_SLOTS]) };
+    }
+    let bits: [u64; 4] = std::array::from_fn(|i| cov.as_slice()[i].to_bits());
+    let slot = observation_slot(&bits);
+    if let Some((codes, rho)) = KEPT.with_borrow(|kept| {
+        kept[slot].and_then(|(key, codes, rho)| (key == bits).then_some((codes, rho)))
+    }) {
+        return Ok((codes, rho));
+    }
+    let (codes, rho) = encode_cov(cov, &[MM_VAR; 2], SigmaCode::U16(), "observation")?;
+    KEPT.with_borrow_mut(|kept| kept[slot] = Some((bits, codes, rho[0])));
+    Ok((codes, rho[0]))
+}
+
+const OBSERVATION_SLOTS: usize = 64;
+
+fn observation_slot(bits: &[u64; 4]) -> usize {
+    let h = bits
+        .iter()
+        .fold(0u64, |h, b| (h ^ b).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    (h >> 58) as usize % OBSERVATION_SLOTS
 }
 
 /// The symmetric eigen solver on a fixed-size copy of `$m` (N is 2, 3 or 4 here), then
@@ -313,6 +346,34 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A simulated team's observation batches, each encoded three times in turn, with
+    /// more live batches than the table has slots (so kept answers are overwritten and
+    /// slots collide): every answer is the one worked out afresh.
+    #[test]
+    fn a_kept_observation_code_is_the_one_worked_out_afresh() {
+        use super::{encode_cov, encode_observation_cov, SigmaCode, MM_VAR};
+        use nalgebra::Matrix2;
+        let covs: Vec<Matrix2<f64>> = matrices::<2>(400).into_iter().map(|m| m * 1e-3).collect();
+        let mut asked = 0;
+        for round in 0..3 {
+            for (k, cov) in covs.iter().enumerate() {
+                // Batch k goes out in messages k, k + 1 and k + 2.
+                let repeats = [1, 2].map(|back| k.checked_sub(back).map(|j| &covs[j]));
+                for c in std::iter::once(Some(cov)).chain(repeats).flatten() {
+                    let fresh = encode_cov(c, &[MM_VAR; 2], SigmaCode::U16(), "observation")
+                        .map(|(codes, rho)| (codes, rho[0]));
+                    assert_eq!(
+                        encode_observation_cov(c),
+                        fresh,
+                        "round {round}, batch {k}: {c:?}"
+                    );
+                    asked += 1;
+                }
+            }
+        }
+        assert_eq!(asked, 3 * (3 * 400 - 3));
     }
 
     #[test]

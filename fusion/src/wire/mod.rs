@@ -61,7 +61,7 @@ mod covariance;
 use crate::ball::{BallEstimate, FieldObservation, Kick};
 use crate::local::{KickReport, LocalWorldModel};
 use crate::pose::PoseEstimate;
-use covariance::{corr_matrix, decode_cov, encode_cov, SigmaCode};
+use covariance::{corr_matrix, decode_cov, encode_cov, encode_observation_cov, SigmaCode};
 use nalgebra::{Vector2, Vector3, Vector4};
 use std::f64::consts::PI;
 use thiserror::Error;
@@ -179,10 +179,10 @@ fn put_observation(
 ) -> Result<(), EncodeError> {
     put_i16(b, at, mm(obs.position.x, "observation x")?);
     put_i16(b, at + 2, mm(obs.position.y, "observation y")?);
-    let (codes, rho) = encode_cov(&obs.cov, &[MM_VAR; 2], SigmaCode::U16(), "observation")?;
+    let (codes, rho) = encode_observation_cov(&obs.cov)?;
     put_u16(b, at + 4, codes[0] as u16);
     put_u16(b, at + 6, codes[1] as u16);
-    b[at + 8] = rho[0] as u8;
+    b[at + 8] = rho as u8;
     let age = t_s - obs.t_s;
     if !age.is_finite() || !(-1e-9..=4.095).contains(&age) {
         return Err(EncodeError::OutOfRange {
