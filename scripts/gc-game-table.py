@@ -7,7 +7,8 @@ usage: scripts/gc-game-table.py HUDDLE_BIN OUT_DIR [--seeds 1,2,3,601,...] [--wo
 Runs `huddle sim --budget spl --game full --seed S --json` and `huddle sim --duration 600s
 --budget spl --seed S --json` for each seed and world (a run whose JSON is already in
 OUT_DIR is not run again), then prints one row per run: illegal messages, budget used %,
-one goer %, blind-robot error, team-ball RMSE, longest conflict. Standard library only.
+one goer %, blind-robot error, team-ball RMSE, longest conflict; then the means over
+seeds 1-3, 601-606 and all seeds given. Standard library only.
 """
 import argparse, json, os, subprocess, sys
 from concurrent.futures import ThreadPoolExecutor
@@ -73,6 +74,40 @@ def main():
                     r.get("game_messages_counted", "–") if game else r.get("team_messages_sent"),
                     r.get("game_budget_left", "–") if game else r.get("budget_left"),
                     f'{r["game_score"][0]}–{r["game_score"][1]}' if game else f'{r["goals_for"]}–{r["goals_against"]}',
+                ]))
+
+    # Means over seed groups (the issue's 1-3, #34's report seeds 601-606, all given):
+    # one game against one 600 s run per seed does not decide a target (see
+    # docs/results/gamecontroller-game.md, fifth session); means over seeds come closer.
+    groups = [("1-3", [s for s in seeds if s <= 3]), ("601-606", [s for s in seeds if 601 <= s <= 606]), ("all", seeds)]
+    print()
+    print("world | seeds | run | one goer % (mean) | blind RMSE m (mean) | seeds at least as good as 600 s: one goer, blind")
+    for w in worlds:
+        for name, group in groups:
+            if not group:
+                continue
+            res = {}
+            for m in modes:
+                rows = []
+                for s in group:
+                    try:
+                        rows.append(json.load(open(os.path.join(a.out_dir, f"{a.tag}-{m}-{w}-{s}.json"))))
+                    except (OSError, ValueError):
+                        pass
+                if len(rows) == len(group):
+                    res[m] = rows
+            for m, rows in res.items():
+                n = len(rows)
+                better = "–"
+                if m == "game" and "600" in res:
+                    g1 = sum(1 for g, r in zip(rows, res["600"]) if g["exactly_one_goer_pct"] >= r["exactly_one_goer_pct"])
+                    gb = sum(1 for g, r in zip(rows, res["600"]) if g["blind_team_ball_rmse_m"] <= r["blind_team_ball_rmse_m"])
+                    better = f"{g1}/{n}, {gb}/{n}"
+                print(" | ".join(str(x) for x in [
+                    w, name, "full game" if m == "game" else "600 s",
+                    round(sum(r["exactly_one_goer_pct"] for r in rows) / n, 2),
+                    round(sum(r["blind_team_ball_rmse_m"] for r in rows) / n, 3),
+                    better,
                 ]))
 
 

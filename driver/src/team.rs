@@ -434,9 +434,11 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     let board = replica.blackboard();
     let state = gc_text(board, GC_STATE_KEY);
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
-    layer.set_kick_off_next(
-        state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick"),
-    );
+    let kick_off = state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick");
+    if layer.set_kick_off_next(kick_off) {
+        // Every claim changes at the whistle: the team's priority frames get their room.
+        replica.restart_priority_room(now);
+    }
     let balls: Vec<_> = inputs
         .balls
         .drain(..)

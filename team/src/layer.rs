@@ -385,12 +385,18 @@ impl TeamLayer {
     /// ball belief goes and the team ball is put there (see [`TeamLayer::forget_ball`]);
     /// a caller whose Set is for a penalty kick (the ball on a penalty mark) must not
     /// call this.
-    pub fn set_kick_off_next(&mut self, set: bool) {
-        if set && !self.kick_off_next {
+    ///
+    /// Returns whether a kick-off begins (the first Set heard): the caller then tells
+    /// its replica (`comms::Replica::restart_priority_room`), so that the claims that
+    /// change at the whistle find room for priority frames in the team's budget.
+    pub fn set_kick_off_next(&mut self, set: bool) -> bool {
+        let begins = set && !self.kick_off_next;
+        if begins {
             self.kick_off_hold_until_s = Some(f64::INFINITY);
             self.kick_off_place = true;
         }
         self.kick_off_next = set;
+        begins
     }
 
     /// The kick-off hold at `t_s` (see [`TeamLayer::set_kick_off_next`]): whether it

@@ -2,6 +2,7 @@
 
 use super::*;
 use comms::wire::{FrameWriter, ItemRef, TeamKey};
+use comms::{Replica, ReplicaConfig};
 use fusion::nalgebra::Vector3;
 
 /// A robot at the origin facing +x that has watched the ball lie still at `range_m`
@@ -492,5 +493,100 @@ fn a_set_puts_the_team_ball_on_the_centre_spot_without_a_goal() {
         b.position().norm() < 1e-6,
         "Set: the centre spot, {:?}",
         b.position()
+    );
+}
+
+/// The kick-off taker (robot 3) through its own replica, under the SPL budget pooled
+/// by five robots: the attack before the goal took the team 5 frames beyond its pacing
+/// line (the whole room for priority frames) and the clock stood through Ready and Set.
+/// At the whistle the taker claims the ball, with priority. With the room restarted at
+/// Set (`set_kick_off_next` says a kick-off begins; the daemon and the simulator tell
+/// the replica) the claim goes at once; without, it waits for the line to move a frame
+/// (about a second of play) while the hold runs out and a second robot goes too.
+#[test]
+fn at_a_kick_off_the_takers_claim_finds_room_in_a_spent_budget() {
+    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
+    let mut params = ArbitrationParams::default();
+    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
+    cfg.send_policy = SendPolicy::Voi;
+    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let half_time_left = Duration::from_secs(600);
+    let filler = Key::parse("*.var.x").unwrap();
+    let frames = |r: &mut Replica| std::iter::from_fn(|| r.poll_transmit()).count();
+    let mut went_at_the_whistle = Vec::new();
+    for restart in [true, false] {
+        let mut replica = Replica::new(
+            ReplicaConfig {
+                budget: Some(comms::BudgetSpec::SPL.share(5)),
+                mtu: 128,
+                ..ReplicaConfig::new(3, 1)
+            },
+            3,
+            at(0.0),
+        )
+        .unwrap();
+        let mut taker =
+            TeamLayer::new(3, false, params, Pose::default(), &cal, &cfg.world_model, 5);
+        let tick = |taker: &mut TeamLayer, replica: &mut Replica, board: &Blackboard, s| {
+            replica.set_game_clock(at(s), half_time_left);
+            replica.handle_timeout(at(s));
+            let (_, posted) = taker.decide(board, at(s));
+            let (writes, priority) = taker.finish(
+                &cfg,
+                at(s),
+                None,
+                posted,
+                0,
+                false,
+                replica.is_pending(&world_local_key()),
+                replica.is_pending(&arbitration::heuristic_key()),
+                replica.budget_headroom(),
+            );
+            for (key, value) in writes {
+                if priority {
+                    replica.set_priority(at(s), &key, value).unwrap();
+                } else {
+                    replica.set_key(at(s), &key, value).unwrap();
+                }
+            }
+            frames(replica)
+        };
+        // In play before the goal: robot 4 goes, robot 3 (2 m off) tells "not going".
+        let mut board = Blackboard::new(3);
+        hear_claim(&mut board, 4, 0.1, true, 1, at(1.0));
+        taker.h = 2.0;
+        assert_eq!(
+            tick(&mut taker, &mut replica, &board, 1.0),
+            1,
+            "its first message"
+        );
+        // The attack: priority frames until the team has no room left.
+        for k in 0..2_000 {
+            let s = 1.01 + 0.01 * k as f64;
+            replica.set_game_clock(at(s), half_time_left);
+            replica.set_priority(at(s), &filler, Value::Int(k)).unwrap();
+            frames(&mut replica);
+        }
+        let spent = replica.budget_headroom().unwrap();
+        assert!(spent <= -5, "the room is spent: headroom {spent}");
+        // The goal; Ready and Set (the clock stands); the whistle at 60 s.
+        taker.set_in_play(false);
+        if taker.set_kick_off_next(true) && restart {
+            replica.restart_priority_room(at(55.0));
+        }
+        assert!(!taker.set_kick_off_next(true), "a kick-off begins once");
+        taker.set_in_play(true);
+        taker.set_kick_off_next(false);
+        taker.h = 0.1;
+        let board = Blackboard::new(3);
+        let sent = tick(&mut taker, &mut replica, &board, 60.0)
+            + tick(&mut taker, &mut replica, &board, 60.04);
+        assert!(taker.going(), "the taker plays the kick-off");
+        went_at_the_whistle.push(sent);
+    }
+    assert_eq!(
+        went_at_the_whistle,
+        vec![1, 0],
+        "frames in the whistle's first two ticks, with and without the restart"
     );
 }

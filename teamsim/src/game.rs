@@ -368,7 +368,13 @@ impl Simulation {
             let penalised = game.trackers[i].penalized() == Some(true)
                 || game.referee.penalised(comms_netsim::robot_id(i));
             self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
-            self.robots[i].set_kick_off_next(heard == Some(State::Set));
+            if self.robots[i].set_kick_off_next(heard == Some(State::Set)) {
+                // What the daemon does at Set (driver::team).
+                let local = self.harness.local_now(i);
+                if let Some(replica) = self.harness.replica_mut(i) {
+                    replica.restart_priority_room(local);
+                }
+            }
             self.robots[i].order = match heard {
                 _ if penalised => Order::Stand,
                 Some(State::Playing) => Order::Play,

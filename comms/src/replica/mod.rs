@@ -280,6 +280,18 @@ impl Replica {
         Ok(())
     }
 
+    /// Play restarts from a set piece at which every robot's claim changes at once (a
+    /// kick-off: call it when the GameController's Set is heard): a pooled budget gives
+    /// the team's priority frames their room afresh from the team's count at `now`,
+    /// wherever its pacing line is (see [`Budget`]). Without a pooled budget it is
+    /// ignored.
+    pub fn restart_priority_room(&mut self, now: Instant) {
+        self.advance(now);
+        if let Some(b) = &mut self.budget {
+            b.restart();
+        }
+    }
+
     /// The game clock: at `now`, `remaining` of play are left (the GameController's
     /// remaining time). The budget paces over it; without a budget it is ignored.
     pub fn set_game_clock(&mut self, now: Instant, remaining: Duration) {
