@@ -66,6 +66,10 @@ pub struct BenchArgs {
     /// transport/unicast/qos/enabled=false` runs them all on the lowlatency transport.
     #[arg(long, value_name = "PATH=JSON", value_parser = parse_setting)]
     pub zenoh_set: Vec<(String, String)>,
+    /// With `--zenoh-set`: the subscriber session keeps Zenoh's defaults (a router that
+    /// offers the lowlatency transport to the bridge, to readers that do not ask).
+    #[arg(long)]
+    pub zenoh_subscriber_default: bool,
     /// The bridges' `--zenoh-config` file, written from `--zenoh-set`.
     #[arg(skip)]
     pub zenoh_file: Option<std::path::PathBuf>,
@@ -160,7 +164,12 @@ fn run_with(args: &BenchArgs, settings: &[(&str, &str)]) -> Result<()> {
     let _router = router(port, settings).map_err(|e| anyhow::anyhow!("router: {e}"))?;
     let group = driver::scratch_group()?;
     let seen = Arc::new(Mutex::new(Seen::default()));
-    let sub_session = client(port, settings).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
+    let sub_settings = if args.zenoh_subscriber_default {
+        &[][..]
+    } else {
+        settings
+    };
+    let sub_session = client(port, sub_settings).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
     let lat_key = format!("huddle/@v1/{VENUE}/{TEAM}/1/var/lat");
     let _sub = {
         let seen = seen.clone();

@@ -51,6 +51,10 @@ struct Variant {
     topology: Topology,
     /// Further flags of the bridge.
     bridge_args: &'static [&'static str],
+    /// The subscriber keeps Zenoh's defaults (the settings are the router's, the
+    /// bridge's and the hop publisher's): a venue router that offers the lowlatency
+    /// transport to the bridges that ask, while readers do not.
+    subscriber_default: bool,
 }
 
 const LOWLATENCY: &[(&str, &str)] = &[
@@ -72,6 +76,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::Router,
             bridge_args: &[],
+            subscriber_default: false,
         },
         Variant {
             name: "  the same, --field-loop thread",
@@ -79,6 +84,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::Router,
             bridge_args: &["--field-loop", "thread"],
+            subscriber_default: false,
         },
         Variant {
             name: "tcp, router, tx batching off",
@@ -86,6 +92,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::Router,
             bridge_args: &[],
+            subscriber_default: false,
         },
         Variant {
             name: "tcp, router, lowlatency + qos off",
@@ -93,6 +100,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::Router,
             bridge_args: &[],
+            subscriber_default: false,
         },
         Variant {
             name: "  the same, --field-loop tx-runtime",
@@ -100,6 +108,15 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::Router,
             bridge_args: &["--field-loop", "tx-runtime"],
+            subscriber_default: false,
+        },
+        Variant {
+            name: "  the same, subscriber on zenoh defaults",
+            zenoh: LOWLATENCY,
+            link: "tcp",
+            topology: Topology::Router,
+            bridge_args: &[],
+            subscriber_default: true,
         },
         Variant {
             name: "tcp, peer direct (no router)",
@@ -107,6 +124,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::PeerDirect,
             bridge_args: &[],
+            subscriber_default: false,
         },
         Variant {
             name: "tcp, peer direct, lowlatency + qos off",
@@ -114,6 +132,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "tcp",
             topology: Topology::PeerDirect,
             bridge_args: &[],
+            subscriber_default: false,
         },
     ];
     if args.compare_fast_path {
@@ -125,6 +144,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
                 link: "tcp",
                 topology: Topology::Router,
                 bridge_args: &["--no-fast-path"],
+                subscriber_default: false,
             },
         );
     }
@@ -135,6 +155,7 @@ fn variants(args: &BenchArgs) -> Vec<Variant> {
             link: "udp",
             topology: Topology::Router,
             bridge_args: &[],
+            subscriber_default: false,
         });
     }
     v
@@ -239,7 +260,13 @@ impl Rig {
                 let client =
                     session_config("client", &[("connect/endpoints", endpoint.clone())], s)
                         .map_err(zerr("client config"))?;
-                (Some(router), client.clone(), client, "client")
+                let sub = if variant.subscriber_default {
+                    session_config("client", &[("connect/endpoints", endpoint.clone())], &[])
+                        .map_err(zerr("subscriber config"))?
+                } else {
+                    client.clone()
+                };
+                (Some(router), sub, client, "client")
             }
             Topology::PeerDirect => {
                 let sub = session_config("peer", &[("listen/endpoints", endpoint.clone())], s)
@@ -390,6 +417,76 @@ impl Rig {
     }
 }
 
+/// The unit of every floor: a datagram on loopback to a thread blocked in `recv` (the
+/// kernel wakes it; no runtime, no Zenoh). A hop through a router is about four of these
+/// (publisher's transmit task, router's receive and transmit, subscriber's receive) plus
+/// two TCP segments; the bridge's path adds its own wake-up on the datagram.
+struct Wake {
+    socket: std::net::UdpSocket,
+    to: std::net::SocketAddr,
+    sent: Vec<StdInstant>,
+    got: Arc<Mutex<Vec<(usize, StdInstant)>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Wake {
+    fn start() -> Result<Wake> {
+        let receiver = std::net::UdpSocket::bind("127.0.0.1:0")?;
+        let to = receiver.local_addr()?;
+        let got: Arc<Mutex<Vec<(usize, StdInstant)>>> = Arc::default();
+        let thread = {
+            let got = got.clone();
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 16];
+                // Ends at the empty datagram (or an error).
+                while let Ok(n) = receiver.recv(&mut buf) {
+                    let t = StdInstant::now();
+                    if n != 8 {
+                        break;
+                    }
+                    let i = u64::from_le_bytes(buf[..8].try_into().unwrap_or([0; 8]));
+                    lock(&got).push((i as usize, t));
+                }
+            })
+        };
+        Ok(Wake {
+            socket: std::net::UdpSocket::bind("127.0.0.1:0")?,
+            to,
+            sent: Vec::new(),
+            got,
+            thread: Some(thread),
+        })
+    }
+
+    fn block(&mut self, n: usize) {
+        for _ in 0..n {
+            let i = self.sent.len() as u64;
+            self.sent.push(StdInstant::now());
+            let _ = self.socket.send_to(&i.to_le_bytes(), self.to);
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// p50 and p99 (ms) and the count.
+    fn finish(mut self) -> (f64, f64, usize) {
+        let _ = self.socket.send_to(&[], self.to);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        let got = lock(&self.got);
+        p50_p99(
+            got.iter()
+                .filter_map(|(i, t)| {
+                    Some(
+                        t.saturating_duration_since(*self.sent.get(*i)?)
+                            .as_secs_f64(),
+                    )
+                })
+                .collect(),
+        )
+    }
+}
+
 fn quantile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
@@ -425,12 +522,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     std::thread::sleep(Duration::from_millis(200));
     let rounds = args.samples.div_ceil(BLOCK).max(1);
     let mut next = 0i64;
+    let mut wake = Wake::start()?;
     for _ in 0..rounds {
+        wake.block(BLOCK);
         for rig in &mut rigs {
             rig.block(&mut next, BLOCK);
         }
     }
     std::thread::sleep(Duration::from_millis(300));
+    let wakes = wake.finish();
+    println!(
+        "  one wake-up: a loopback datagram to a thread blocked in recv, p50 {:.3} ms  p99 {:.3} ms  (n={})",
+        wakes.0, wakes.1, wakes.2
+    );
     println!(
         "  {:<42} {:>15} {:>15} {:>15} {:>14} {:>9} {:>7}",
         "variant (p50 / p99 ms)",
