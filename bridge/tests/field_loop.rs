@@ -1,7 +1,7 @@
 //! The field side on a thread of its own (`--field-loop thread`, and what `auto` picks
 //! with Zenoh's lowlatency transport): three daemons change 100 keys 20 times, and a
-//! subscriber gets every key's final value and the liveliness token of every robot, with
-//! the datagrams' samples put by the field thread itself (the fast path's counter).
+//! subscriber gets every key's final value and the liveliness token of every robot; then
+//! lone changes are put by the field thread itself (the fast path's counter).
 //! The lowlatency case runs a router, a subscriber and the bridge all with
 //! `transport/unicast/lowlatency` and QoS off, as docs/bridge.md's venue config has it.
 
@@ -89,6 +89,14 @@ fn mirror(venue: &str, settings: &[(&str, &str)], flags: &[&str]) {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    // Lone changes (one key per datagram) go on the fast path: the field thread puts
+    // them itself (a 100-key datagram is more than one turn's share and is handed over;
+    // a put slowed by the burst sends every put through the publisher for a second).
+    std::thread::sleep(Duration::from_millis(1500));
+    for i in 1..=5 {
+        daemons[0].set("*.var.lone", Value::Int(i));
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let missing = || {
         let samples = recorder.samples();
         let mut missing = 0;
@@ -100,6 +108,16 @@ fn mirror(venue: &str, settings: &[(&str, &str)], flags: &[&str]) {
                     missing += 1;
                 }
             }
+        }
+        let lone = format!("huddle/@v1/{venue}/{TEAM}/1/var/lone");
+        if samples
+            .iter()
+            .rev()
+            .find(|s| s.key == lone)
+            .map(|s| s.payload.as_str())
+            != Some("5")
+        {
+            missing += 1;
         }
         missing
     };
