@@ -54,6 +54,25 @@ pub struct BenchArgs {
     /// thread), to compare the two paths in the same run.
     #[arg(long)]
     pub compare_fast_path: bool,
+    /// Also compare Zenoh configurations a venue could choose (tx batching off, the
+    /// lowlatency transport, a direct peer link, UDP when built with `--features udp`)
+    /// and the bridge's field loop, each beside one hop under the same configuration,
+    /// interleaved ([`crate::bench_variants`]).
+    #[arg(long)]
+    pub compare_zenoh: bool,
+    /// A Zenoh setting `PATH=JSON` (repeatable) for the main router, subscriber,
+    /// publisher and every bridge of the first-sample, latency and load phases:
+    /// `--zenoh-set transport/unicast/lowlatency=true --zenoh-set
+    /// transport/unicast/qos/enabled=false` runs them all on the lowlatency transport.
+    #[arg(long, value_name = "PATH=JSON", value_parser = parse_setting)]
+    pub zenoh_set: Vec<(String, String)>,
+    /// With `--zenoh-set`: the subscriber session keeps Zenoh's defaults (a router that
+    /// offers the lowlatency transport to the bridge, to readers that do not ask).
+    #[arg(long)]
+    pub zenoh_subscriber_default: bool,
+    /// The bridges' `--zenoh-config` file, written from `--zenoh-set`.
+    #[arg(skip)]
+    pub zenoh_file: Option<std::path::PathBuf>,
     /// Where the load phase's field traffic comes from: pre-encoded frames replayed by
     /// one sender (the robots' replicas run ahead of time), or live daemons.
     #[arg(long, value_enum, default_value_t = LoadFrom::Frames)]
@@ -67,6 +86,15 @@ pub enum LoadFrom {
     Frames,
     /// Daemons in this process (their runtimes compete with the bridge for the CPU).
     Daemons,
+}
+
+fn parse_setting(s: &str) -> Result<(String, String), String> {
+    let (path, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?}: expected PATH=JSON"))?;
+    serde_json::from_str::<serde_json::Value>(value)
+        .map_err(|e| format!("{s:?}: the value is not JSON: {e}"))?;
+    Ok((path.to_owned(), value.to_owned()))
 }
 
 /// The 1-minute load average, as /proc/loadavg says.
@@ -109,11 +137,39 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if args.daemons == 0 || args.keys == 0 || args.rate == 0 {
         bail!("--daemons, --keys and --rate must be positive");
     }
+    let mut args = args.clone();
+    let args = &mut args;
+    let settings: Vec<(&str, &str)> = args
+        .zenoh_set
+        .iter()
+        .map(|(k, v)| (k.as_str(), v.as_str()))
+        .collect();
+    let settings = &settings[..];
+    if !settings.is_empty() {
+        let path =
+            std::env::temp_dir().join(format!("huddle-bridge-bench-{}.json5", std::process::id()));
+        crate::bench_variants::write_config(&path, settings)?;
+        println!("zenoh settings of every session and bridge: {settings:?}");
+        args.zenoh_file = Some(path);
+    }
+    let result = run_with(args, settings);
+    if let Some(path) = &args.zenoh_file {
+        let _ = std::fs::remove_file(path);
+    }
+    result
+}
+
+fn run_with(args: &BenchArgs, settings: &[(&str, &str)]) -> Result<()> {
     let port = free_port()?;
-    let _router = router(port, &[]).map_err(|e| anyhow::anyhow!("router: {e}"))?;
+    let _router = router(port, settings).map_err(|e| anyhow::anyhow!("router: {e}"))?;
     let group = driver::scratch_group()?;
     let seen = Arc::new(Mutex::new(Seen::default()));
-    let sub_session = client(port, &[]).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
+    let sub_settings = if args.zenoh_subscriber_default {
+        &[][..]
+    } else {
+        settings
+    };
+    let sub_session = client(port, sub_settings).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
     let lat_key = format!("huddle/@v1/{VENUE}/{TEAM}/1/var/lat");
     let _sub = {
         let seen = seen.clone();
@@ -196,11 +252,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // 1. First sample after the bridge starts.
     let exe = std::env::current_exe()?;
     let started = StdInstant::now();
-    let mut child = spawn_bridge(&exe, VENUE, group, port, &[]).context("starting the bridge")?;
+    let mut child =
+        spawn_bridge(args, &exe, VENUE, group, port, &[]).context("starting the bridge")?;
     let pid = child.id();
     let mut handover = if args.compare_fast_path {
         Some(
-            spawn_bridge(&exe, VENUE_FAST, group, port, &["--no-fast-path"])
+            spawn_bridge(args, &exe, VENUE_FAST, group, port, &["--no-fast-path"])
                 .context("starting the second bridge")?,
         )
     } else {
@@ -208,6 +265,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     };
     let result = measure(
         args,
+        settings,
         &daemons,
         &seen,
         &sub_session,
@@ -222,6 +280,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     let raw_rate = result?;
     drop(daemons);
+    if args.compare_zenoh {
+        crate::bench_variants::run(args)?;
+    }
     if args.load_from == LoadFrom::Frames {
         crate::bench_load::run(args, port, &sub_session, raw_rate)?;
     }
@@ -231,6 +292,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 #[allow(clippy::too_many_arguments)]
 fn measure(
     args: &BenchArgs,
+    settings: &[(&str, &str)],
     daemons: &[Daemon],
     seen: &Arc<Mutex<Seen>>,
     sub_session: &zenoh::Session,
@@ -257,7 +319,7 @@ fn measure(
     );
 
     // 2. Baselines and latency.
-    let publisher = client(port, &[]).map_err(|e| anyhow::anyhow!("publisher: {e}"))?;
+    let publisher = client(port, settings).map_err(|e| anyhow::anyhow!("publisher: {e}"))?;
     let mut hop_sent = HashMap::new();
     for i in 0..args.samples as i64 {
         hop_sent.insert(i, StdInstant::now());
@@ -633,8 +695,10 @@ fn print_row(name: &str, v: &[Duration]) {
 }
 
 /// Starts this binary as a bridge for the bench's team in `venue`, on the scratch `group`
-/// over loopback, connected to the bench's router on `port`; `extra` flags added.
+/// over loopback, connected to the bench's router on `port`; `extra` flags added, and
+/// `--zenoh-set`'s settings.
 pub(crate) fn spawn_bridge(
+    args: &BenchArgs,
     exe: &std::path::Path,
     venue: &str,
     group: impl std::fmt::Display,
@@ -646,6 +710,11 @@ pub(crate) fn spawn_bridge(
         .arg(group.to_string())
         .args(["--iface", "127.0.0.1"])
         .args(extra)
+        .args(
+            args.zenoh_file
+                .iter()
+                .flat_map(|f| [std::ffi::OsStr::new("--zenoh-config"), f.as_os_str()]),
+        )
         .arg("--connect")
         .arg(format!("tcp/127.0.0.1:{port}"))
         .env("RUST_LOG", "warn")

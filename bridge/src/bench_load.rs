@@ -83,8 +83,9 @@ pub fn run(args: &BenchArgs, port: u16, session: &zenoh::Session, raw_rate: f64)
             .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
     };
     let group = driver::scratch_group()?;
-    let mut bridge = crate::bench::spawn_bridge(&std::env::current_exe()?, VENUE, group, port, &[])
-        .context("starting the load bridge")?;
+    let mut bridge =
+        crate::bench::spawn_bridge(args, &std::env::current_exe()?, VENUE, group, port, &[])
+            .context("starting the load bridge")?;
     let result = replay(args, session, &traffic, &lean, group, bridge.id(), raw_rate);
     let _ = bridge.kill();
     let _ = bridge.wait();

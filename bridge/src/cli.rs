@@ -11,7 +11,7 @@ use driver::{SocketConfig, Transport};
 
 use crate::export::ExportConfig;
 use crate::keys::TeamKeys;
-use crate::run::BridgeConfig;
+use crate::run::{BridgeConfig, FieldLoop};
 
 /// The flags of a running bridge.
 #[derive(Args, Debug, Clone)]
@@ -78,6 +78,23 @@ pub struct RunArgs {
     /// configured (`ZENOH_RUNTIME`, which the binary sets to two TX workers if unset).
     #[arg(long)]
     pub no_fast_path: bool,
+    /// Where the field side runs: `auto` (a task on Zenoh's TX runtime, or its own thread
+    /// when the Zenoh configuration turns on the lowlatency transport), `tx-runtime`, or
+    /// `thread` (a dedicated thread with a blocking receive that puts itself).
+    #[arg(long, value_enum, default_value_t = FieldLoopArg::Auto)]
+    pub field_loop: FieldLoopArg,
+}
+
+/// `--field-loop`.
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FieldLoopArg {
+    /// `thread` with Zenoh's lowlatency transport, otherwise `tx-runtime`.
+    #[default]
+    Auto,
+    /// A task on Zenoh's TX runtime.
+    TxRuntime,
+    /// A thread of its own, blocking on the socket.
+    Thread,
 }
 
 /// `--transport`.
@@ -175,6 +192,11 @@ impl RunArgs {
             },
             zenoh: self.zenoh_config()?,
             fast_path: !self.no_fast_path,
+            field_loop: match self.field_loop {
+                FieldLoopArg::Auto => FieldLoop::Auto,
+                FieldLoopArg::TxRuntime => FieldLoop::TxRuntime,
+                FieldLoopArg::Thread => FieldLoop::Thread,
+            },
         })
     }
 

@@ -32,6 +32,7 @@
 
 pub mod bench;
 pub mod bench_load;
+pub mod bench_variants;
 pub mod cdr;
 pub mod cli;
 pub mod export;

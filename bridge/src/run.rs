@@ -21,6 +21,13 @@
 //! binary gives the TX runtime a second worker so that Zenoh's transmit task can run
 //! meanwhile. One of the two puts at a time, so samples keep their order.
 //!
+//! **The field loop** ([`FieldLoop`], `--field-loop`). With Zenoh's lowlatency transport
+//! (`transport/unicast/lowlatency`, docs/bridge.md) there is no transmit task: a put
+//! writes the link from the calling thread, through `block_in_place`, which on a runtime
+//! worker first hands the worker's queue to another thread. So with it the field side
+//! runs on a thread of its own instead, blocking on the socket: the kernel wakes that
+//! thread with the datagram and the same thread writes the sample to the router.
+//!
 //! **Zenoh going away.** The bridge declares a liveliness token
 //! `…/<team>/@bridge/alive`: a subscriber that sees it appear (at start, or again after
 //! its own link or the router came back) gets the team's prefix and recovers every value
@@ -86,6 +93,43 @@ pub struct BridgeConfig {
     pub zenoh: zenoh::Config,
     /// Whether the field thread may put samples itself (see the module docs).
     pub fast_path: bool,
+    /// Where the field side runs.
+    pub field_loop: FieldLoop,
+}
+
+/// Where the field side (receive, replica, exporter, fast-path puts) runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FieldLoop {
+    /// [`FieldLoop::TxRuntime`], unless the Zenoh configuration asks for the lowlatency
+    /// transport (`transport/unicast/lowlatency: true`): then [`FieldLoop::Thread`].
+    #[default]
+    Auto,
+    /// A task on Zenoh's TX runtime: a put wakes Zenoh's transmit task on the same worker.
+    TxRuntime,
+    /// A thread of its own with a blocking receive. With the lowlatency transport a put
+    /// writes the link from the calling thread (zenoh-transport's
+    /// `TransportUnicastLowlatency::send`, via `block_in_place`): from here that is one
+    /// `write` and no thread wake-up at all, where on a runtime worker `block_in_place`
+    /// would first hand the worker's queue to another thread.
+    Thread,
+}
+
+impl FieldLoop {
+    /// `Auto` decided by the session's configuration.
+    fn resolve(self, zenoh: &zenoh::Config) -> FieldLoop {
+        match self {
+            FieldLoop::Auto if lowlatency(zenoh) => FieldLoop::Thread,
+            FieldLoop::Auto => FieldLoop::TxRuntime,
+            chosen => chosen,
+        }
+    }
+}
+
+/// Whether `cfg` asks for Zenoh's lowlatency unicast transport (used only if the other
+/// end asks too).
+pub fn lowlatency(cfg: &zenoh::Config) -> bool {
+    cfg.get_json("transport/unicast/lowlatency")
+        .is_ok_and(|v| v.trim() == "true")
 }
 
 /// Why the bridge could not start.
@@ -347,6 +391,7 @@ pub struct Bridge {
     _alive: LivelinessToken,
     keys: TeamKeys,
     shutdown: Arc<AtomicBool>,
+    field_loop: FieldLoop,
 }
 
 /// The publisher thread's side: the session and the liveliness tokens it declared.
@@ -387,6 +432,8 @@ impl Bridge {
             rcfg = rcfg.with_team_key(key.clone());
         }
         let replica = Replica::new(rcfg, 1, clock.now())?;
+        let field_loop = cfg.field_loop.resolve(&cfg.zenoh);
+        tracing::info!("field side: {field_loop:?}");
         let mut core = Core {
             team_key: cfg.team_key.as_deref().map(comms::wire::TeamKey::new),
             team: cfg.team,
@@ -398,7 +445,8 @@ impl Bridge {
             timings: Timings::default(),
             putting: false,
             slow_until: None,
-            fast_path: cfg.fast_path && tx_runtime_configured(),
+            fast_path: cfg.fast_path
+                && (field_loop == FieldLoop::Thread || tx_runtime_configured()),
         };
         core.drain(clock.now());
         let core: Shared = Arc::new((Mutex::new(core), Condvar::new()));
@@ -441,6 +489,7 @@ impl Bridge {
             _alive: alive,
             keys: cfg.keys,
             shutdown: Arc::new(AtomicBool::new(false)),
+            field_loop,
         })
     }
 
@@ -478,16 +527,21 @@ impl Bridge {
             session: self.session.clone(),
             shutdown: self.shutdown.clone(),
         };
-        // The field loop runs on Zenoh's TX runtime, the one that writes Zenoh's links: a
-        // put there wakes Zenoh's transmit task on the same worker thread (it runs as soon
-        // as the field task yields) instead of waking another thread (docs/bridge.md).
-        let (done_tx, done_rx) = std::sync::mpsc::channel();
-        zenoh_runtime::ZRuntime::TX.spawn(async move {
-            let _ = done_tx.send(field.run().await);
-        });
-        let result = done_rx
-            .recv()
-            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the field task ended".into())));
+        let result = if self.field_loop == FieldLoop::Thread {
+            // This thread is the field side's own.
+            field.run_thread()
+        } else {
+            // On Zenoh's TX runtime, the one that writes Zenoh's links: a put there wakes
+            // Zenoh's transmit task on the same worker thread (it runs as soon as the
+            // field task yields) instead of waking another thread (docs/bridge.md).
+            let (done_tx, done_rx) = std::sync::mpsc::channel();
+            zenoh_runtime::ZRuntime::TX.spawn(async move {
+                let _ = done_tx.send(field.run().await);
+            });
+            done_rx
+                .recv()
+                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the field task ended".into())))
+        };
         // What the robots sent before the stop still goes (the publisher thread hands it
         // over before it ends).
         let mut buf = vec![0u8; 65_536];
@@ -558,74 +612,124 @@ struct Field {
 }
 
 impl Field {
-    /// Receives until the shutdown flag is set: each datagram fed to the replica, the
-    /// exporter's operations queued in the outbox, and either put here (the fast path)
-    /// or handed to the publisher thread.
+    /// How long to wait for the next datagram: until the replica's or the exporter's next
+    /// deadline, within [100 µs, 50 ms].
+    fn wait(&self) -> Duration {
+        let core = lock(&self.core.0);
+        let now = self.clock.now();
+        core.next_deadline()
+            .map_or(Duration::from_millis(50), |d| {
+                d.saturating_duration_since(now)
+            })
+            .clamp(Duration::from_micros(100), Duration::from_millis(50))
+    }
+
+    /// After a wake-up (`got`: a datagram in `buf`, or `None` at a deadline): feeds the
+    /// replica, queues the exporter's operations in the outbox, and returns what the field
+    /// side puts itself (the fast path); otherwise the publisher thread was woken.
+    fn on_wake(
+        &self,
+        got: Option<io::Result<(usize, SocketAddr)>>,
+        buf: &[u8],
+    ) -> Option<(Instant, Vec<Op>)> {
+        let now = self.clock.now();
+        let mut core = lock(&self.core.0);
+        let datagram = matches!(got, Some(Ok(_)));
+        match got {
+            Some(Ok((n, from))) => {
+                core.io.datagrams += 1;
+                feed(&mut core, now, from, &buf[..n]);
+            }
+            // The next deadline came first.
+            None => {}
+            Some(Err(e))
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock
+                        | io::ErrorKind::TimedOut
+                        | io::ErrorKind::Interrupted
+                ) => {}
+            Some(Err(e)) => {
+                core.io.recv_errors += 1;
+                tracing::warn!("receive: {e}");
+            }
+        }
+        core.advance(now);
+        let core = &mut *core;
+        for op in core.exporter.drain_ops() {
+            core.outbox.push(now, op);
+        }
+        if datagram && !core.outbox.is_empty() {
+            core.timings
+                .field
+                .push(self.clock.now().saturating_duration_since(now));
+        }
+        self.fast_path(core, now)
+    }
+
+    /// Puts what [`Field::on_wake`] returned, then lets the publisher thread go on.
+    fn put_here(&self, taken: Instant, ops: Vec<Op>) {
+        let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
+        let mut core = lock(&self.core.0);
+        core.putting = false;
+        if slow {
+            core.slow_until = Some(self.clock.now() + SLOW_HOLD);
+        }
+        if !core.outbox.is_empty() {
+            self.core.1.notify_one();
+        }
+    }
+
+    /// The field side as a task on Zenoh's TX runtime ([`FieldLoop::TxRuntime`]).
     async fn run(self) -> Result<(), BridgeError> {
         self.socket.set_nonblocking(true)?;
         let socket = tokio::net::UdpSocket::from_std(self.socket.try_clone()?)?;
         let mut buf = vec![0u8; 65_536];
         while !self.shutdown.load(Ordering::Relaxed) {
-            let wait = {
-                let core = lock(&self.core.0);
-                let now = self.clock.now();
-                core.next_deadline()
-                    .map_or(Duration::from_millis(50), |d| {
-                        d.saturating_duration_since(now)
-                    })
-                    .clamp(Duration::from_micros(100), Duration::from_millis(50))
-            };
-            let got = tokio::time::timeout(wait, socket.recv_from(&mut buf)).await;
-            let now = self.clock.now();
-            let direct = {
-                let mut core = lock(&self.core.0);
-                let datagram = matches!(got, Ok(Ok(_)));
-                match got {
-                    Ok(Ok((n, from))) => {
-                        core.io.datagrams += 1;
-                        feed(&mut core, now, from, &buf[..n]);
-                    }
-                    // The next deadline came first.
-                    Err(_) => {}
-                    Ok(Err(e))
-                        if matches!(
-                            e.kind(),
-                            io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
-                        ) => {}
-                    Ok(Err(e)) => {
-                        core.io.recv_errors += 1;
-                        tracing::warn!("receive: {e}");
-                    }
-                }
-                core.advance(now);
-                let core = &mut *core;
-                for op in core.exporter.drain_ops() {
-                    core.outbox.push(now, op);
-                }
-                if datagram && !core.outbox.is_empty() {
-                    core.timings
-                        .field
-                        .push(self.clock.now().saturating_duration_since(now));
-                }
-                self.fast_path(core, now)
-            };
-            if let Some((taken, ops)) = direct {
-                let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
-                {
-                    let mut core = lock(&self.core.0);
-                    core.putting = false;
-                    if slow {
-                        core.slow_until = Some(self.clock.now() + SLOW_HOLD);
-                    }
-                    if !core.outbox.is_empty() {
-                        self.core.1.notify_one();
-                    }
-                }
+            let wait = self.wait();
+            let got = tokio::time::timeout(wait, socket.recv_from(&mut buf))
+                .await
+                .ok();
+            if let Some((taken, ops)) = self.on_wake(got, &buf) {
+                self.put_here(taken, ops);
                 // The put woke Zenoh's transmit task onto this worker: let it write the
                 // batch now, before the next datagram (and before a second batch could
                 // be needed: a put waiting for a free batch here would wait for a task
                 // queued behind it).
                 tokio::task::yield_now().await;
+            }
+        }
+        Ok(())
+    }
+
+    /// The field side on a thread of its own ([`FieldLoop::Thread`]): a blocking receive
+    /// (the kernel wakes this thread, no runtime in between), puts from here. A put that
+    /// waits for a free batch waits for Zenoh's transmit task on Zenoh's own threads, so
+    /// nothing here needs a second worker or a yield.
+    fn run_thread(self) -> Result<(), BridgeError> {
+        self.socket.set_nonblocking(false)?;
+        let mut buf = vec![0u8; 65_536];
+        let mut timeout = Duration::ZERO;
+        while !self.shutdown.load(Ordering::Relaxed) {
+            let wait = self.wait();
+            // A socket option per change only: at a steady deadline it is set once.
+            if wait != timeout {
+                self.socket.set_read_timeout(Some(wait))?;
+                timeout = wait;
+            }
+            let got = match self.socket.recv_from(&mut buf) {
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                    ) =>
+                {
+                    None
+                }
+                r => Some(r),
+            };
+            if let Some((taken, ops)) = self.on_wake(got, &buf) {
+                self.put_here(taken, ops);
             }
         }
         Ok(())
@@ -1006,5 +1110,28 @@ fn answer_bridge(core: &Mutex<Core>, clock: &Clock, keys: &TeamKeys, query: &Que
             .reply(key, json)
             .encoding(Encoding::APPLICATION_JSON)
             .wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `auto` follows the session's configuration: the lowlatency transport (no transmit
+    /// task; a put writes the link from the caller) gets the field side its own thread.
+    #[test]
+    fn the_lowlatency_transport_gets_the_field_side_its_own_thread() {
+        let mut cfg = zenoh::Config::default();
+        assert_eq!(FieldLoop::Auto.resolve(&cfg), FieldLoop::TxRuntime);
+        cfg.insert_json5("transport/unicast/lowlatency", "true")
+            .unwrap();
+        cfg.insert_json5("transport/unicast/qos/enabled", "false")
+            .unwrap();
+        assert_eq!(FieldLoop::Auto.resolve(&cfg), FieldLoop::Thread);
+        assert_eq!(
+            FieldLoop::TxRuntime.resolve(&cfg),
+            FieldLoop::TxRuntime,
+            "an explicit --field-loop wins"
+        );
     }
 }
