@@ -42,6 +42,13 @@ fn main() {
         out.overlapped_correct,
         out.overlapped_sent
     );
+    if let Ok(path) = std::env::var("SCENE_DUMP_TRACE") {
+        let text: String = trace
+            .iter()
+            .map(|e| format!("{:.2} {}\n", e.at_s, e.what))
+            .collect();
+        std::fs::write(path, text).expect("trace dump");
+    }
     // What lost each missed message: the decoder's decisions from just before its start
     // to a little after its end (a long message is two tones).
     let mut causes = std::collections::BTreeMap::<String, usize>::new();

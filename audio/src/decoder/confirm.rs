@@ -206,7 +206,15 @@ impl Decoder {
                 format!("strays (clear {clear}): {}", strays.join("; "))
             });
             Some("stray tone")
-        } else if self.has_off_grid_tone(frame, &present, t.scale, a, b, clear) {
+        } else if self.has_off_grid_tone(
+            frame,
+            &present,
+            t.scale,
+            a,
+            b,
+            clear,
+            t.stage == super::tracking::Stage::Slot2,
+        ) {
             Some("off grid")
         } else {
             None
