@@ -339,24 +339,7 @@ fn measure(
         std::thread::sleep(Duration::from_millis(2));
     }
     let set_at: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
-    let watched: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
-    {
-        let watched = watched.clone();
-        daemons[1].run(move |h| {
-            h.watch("1.var.lat", move |_, notice| {
-                let t = StdInstant::now();
-                if let Notice::Changed { entry, .. } = notice {
-                    if let Value::Int(i) = entry.value {
-                        watched
-                            .lock()
-                            .unwrap_or_else(|p| p.into_inner())
-                            .insert(i, t);
-                    }
-                }
-            })
-            .ok()
-        });
-    }
+    let watched = watch_arrivals(&daemons[1], "1.var.lat");
     std::thread::sleep(Duration::from_millis(50));
     for i in 0..args.samples as i64 {
         let set_at = set_at.clone();
@@ -719,4 +702,29 @@ pub(crate) fn spawn_bridge(
         .arg(format!("tcp/127.0.0.1:{port}"))
         .env("RUST_LOG", "warn")
         .spawn()
+}
+
+/// When each value of the integer key `key` (a sample's number) reached `daemon`'s program:
+/// the teammate's side of a latency figure.
+pub(crate) fn watch_arrivals(
+    daemon: &Daemon,
+    key: &'static str,
+) -> Arc<Mutex<HashMap<i64, StdInstant>>> {
+    let watched: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
+    let arrivals = watched.clone();
+    daemon.run(move |h| {
+        h.watch(key, move |_, notice| {
+            let t = StdInstant::now();
+            if let Notice::Changed { entry, .. } = notice {
+                if let Value::Int(i) = entry.value {
+                    arrivals
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .insert(i, t);
+                }
+            }
+        })
+        .ok()
+    });
+    watched
 }

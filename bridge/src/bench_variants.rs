@@ -21,11 +21,10 @@ use std::time::{Duration, Instant as StdInstant};
 
 use anyhow::{anyhow, Result};
 use comms::Value;
-use driver::Notice;
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
-use crate::bench::{bridge_stats, load_average, BenchArgs, TEAM};
+use crate::bench::{bridge_stats, load_average, watch_arrivals, BenchArgs, TEAM};
 use crate::harness::{free_port, Daemon, DaemonSpec};
 
 /// Sets (and hops) per variant per round.
@@ -343,21 +342,7 @@ impl Rig {
             .args(variant.bridge_args)
             .env("RUST_LOG", "warn")
             .spawn()?;
-        let watched: Arc<Mutex<HashMap<i64, StdInstant>>> = Arc::default();
-        {
-            let watched = watched.clone();
-            daemons[1].run(move |h| {
-                h.watch("1.var.lat", move |_, notice| {
-                    let t = StdInstant::now();
-                    if let Notice::Changed { entry, .. } = notice {
-                        if let Value::Int(i) = entry.value {
-                            lock(&watched).insert(i, t);
-                        }
-                    }
-                })
-                .ok()
-            });
-        }
+        let watched = watch_arrivals(&daemons[1], "1.var.lat");
         Ok(Rig {
             variant,
             venue,

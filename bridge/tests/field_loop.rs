@@ -11,7 +11,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::{wait_until, BridgeProcess, Recorder};
+use common::{set_round, wait_until, BridgeProcess, Recorder};
 use comms::Value;
 use huddle_bridge::harness::{client, free_port, router, Daemon, DaemonSpec};
 use zenoh::Wait;
@@ -77,16 +77,7 @@ fn mirror(venue: &str, settings: &[(&str, &str)], flags: &[&str]) {
         std::fs::read_to_string(&log).unwrap_or_default()
     );
     for round in 1..=ROUNDS {
-        for d in &daemons {
-            d.run(move |h| {
-                h.batch(|b| {
-                    for k in 0..KEYS {
-                        let _ = b.set(&format!("*.var.k{k}"), Value::Int(round));
-                    }
-                });
-                None
-            });
-        }
+        set_round(&daemons, KEYS, round);
         std::thread::sleep(Duration::from_millis(20));
     }
     // Lone changes (one key per datagram) go on the fast path: the field thread puts

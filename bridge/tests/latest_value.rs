@@ -13,8 +13,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use common::{wait_until, BridgeProcess};
-use comms::Value;
+use common::{set_round, wait_until, BridgeProcess};
 use huddle_bridge::harness::{client, free_port, router, Daemon, DaemonSpec};
 use zenoh::Wait;
 
@@ -74,16 +73,7 @@ fn slow_subscriber(rounds: i64, spacing: Duration, wait: Duration) {
     let _bridge = BridgeProcess::start(group, TEAM, VENUE, port, &[]);
     std::thread::sleep(Duration::from_millis(500));
     for round in 1..=rounds {
-        for d in &daemons {
-            d.run(move |h| {
-                h.batch(|b| {
-                    for k in 0..KEYS {
-                        let _ = b.set(&format!("*.var.k{k}"), Value::Int(round));
-                    }
-                });
-                None
-            });
-        }
+        set_round(&daemons, KEYS, round);
         std::thread::sleep(spacing);
     }
     let final_value = rounds.to_string();

@@ -8,7 +8,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use comms::Value;
 use huddle_bridge::export::parse_attachment;
+use huddle_bridge::harness::Daemon;
 use zenoh::sample::SampleKind;
 use zenoh::Wait;
 
@@ -264,4 +266,19 @@ pub fn python_with(module: &str) -> bool {
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success())
+}
+
+/// Every daemon sets its keys `k0 .. k{keys}` to `value`, in one batch (one datagram) each:
+/// a round of a load test.
+pub fn set_round(daemons: &[Daemon], keys: usize, value: i64) {
+    for d in daemons {
+        d.run(move |h| {
+            h.batch(|b| {
+                for k in 0..keys {
+                    let _ = b.set(&format!("*.var.k{k}"), Value::Int(value));
+                }
+            });
+            None
+        });
+    }
 }
