@@ -397,11 +397,9 @@ impl Arbiter {
                 _ => self.going,
             },
         };
-        let mut all: Vec<Candidate> = heard
-            .iter()
-            .filter(|c| c.robot != self.me)
-            .copied()
-            .collect();
+        // Sized once: the filter's size hint would let the vector grow as it fills.
+        let mut all: Vec<Candidate> = Vec::with_capacity(heard.len() + 1);
+        all.extend(heard.iter().filter(|c| c.robot != self.me).copied());
         all.push(Candidate {
             robot: self.me,
             posted: own,
@@ -503,19 +501,24 @@ impl Arbiter {
 /// receiver-side stamps. Values of the wrong shape (a client wrote garbage) are skipped:
 /// they must not decide anything.
 pub fn heard(board: &Blackboard, now: Instant) -> Vec<Candidate> {
-    board
-        .robots_at(HEURISTIC_PATH)
-        .filter_map(|(robot, entry)| {
-            let Value::Floats(v) = &entry.value else {
-                return None;
-            };
-            Some(Candidate {
-                robot,
-                posted: Posted::from_floats(v)?,
-                age: entry.age(now),
-            })
-        })
-        .collect()
+    // Room for a team of up to 8 at once: collected from the scope walk (no size hint),
+    // the vector started at 4 and regrew for a fifth robot, every robot every tick.
+    let mut out = Vec::with_capacity(8);
+    out.extend(
+        board
+            .robots_at(HEURISTIC_PATH)
+            .filter_map(|(robot, entry)| {
+                let Value::Floats(v) = &entry.value else {
+                    return None;
+                };
+                Some(Candidate {
+                    robot,
+                    posted: Posted::from_floats(v)?,
+                    age: entry.age(now),
+                })
+            }),
+    );
+    out
 }
 
 /// The path of [`HEURISTIC_KEY`] (what [`HEURISTIC_PATTERN`] matches in each robot's

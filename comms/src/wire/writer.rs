@@ -59,6 +59,11 @@ impl<'k> FrameWriter<'k> {
         key: Option<&'k TeamKey>,
     ) -> FrameWriter<'k> {
         buf.clear();
+        // A fresh buffer (`Replica::poll_transmit` passes an empty one per frame) would
+        // otherwise grow 8 → 16 → … bytes, item by item, reallocating and copying each time.
+        if buf.capacity() == 0 {
+            buf.reserve(budget.min(2048));
+        }
         buf.extend_from_slice(&MAGIC);
         buf.push(VERSION);
         buf.push(if key.is_some() { FLAG_TAGGED } else { 0 });
