@@ -119,35 +119,61 @@ pub struct BudgetParseError(pub String);
 impl FromStr for BudgetSpec {
     type Err = BudgetParseError;
 
-    /// `spl`, `humanoid`, or `N/DURATION` (`600/10min`, `100/60s`).
+    /// `spl`, `humanoid`, or `N/DURATION` (`600/10min`, `100/60s`), optionally with a
+    /// payload limit as [`Display`](fmt::Display) writes it (`1200/1200s (≤ 128 B)`,
+    /// also `<=`), so a budget printed in a report or a log reads back as the same one.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let err = || BudgetParseError(s.to_string());
-        let t = s.trim();
+        let mut t = s.trim();
+        let mut payload_limit = None;
+        if let Some((rule, limit)) = t.split_once('(') {
+            let limit = limit.strip_suffix(')').ok_or_else(err)?.trim();
+            let limit = limit
+                .strip_prefix('≤')
+                .or_else(|| limit.strip_prefix("<="))
+                .ok_or_else(err)?;
+            let bytes = limit.trim().strip_suffix('B').ok_or_else(err)?.trim();
+            let bytes: usize = bytes.parse().map_err(|_| err())?;
+            if bytes == 0 {
+                return Err(err());
+            }
+            payload_limit = Some(bytes);
+            t = rule.trim();
+        }
+        let mut spec = Self::rule(t).ok_or_else(err)?;
+        if payload_limit.is_some() {
+            spec.payload_limit = payload_limit;
+        }
+        Ok(spec)
+    }
+}
+
+impl BudgetSpec {
+    /// The rule part of [`BudgetSpec::from_str`]: a league's name or `N/DURATION`.
+    fn rule(t: &str) -> Option<BudgetSpec> {
         if t.eq_ignore_ascii_case("spl") {
-            return Ok(BudgetSpec::SPL);
+            return Some(BudgetSpec::SPL);
         }
         if t.eq_ignore_ascii_case("humanoid") {
-            return Ok(BudgetSpec::HUMANOID);
+            return Some(BudgetSpec::HUMANOID);
         }
-        let (n, d) = t.split_once('/').ok_or_else(err)?;
-        let team_messages: u64 = n.trim().parse().map_err(|_| err())?;
+        let (n, d) = t.split_once('/')?;
+        let team_messages: u64 = n.trim().parse().ok()?;
         let d = d.trim();
-        let split = d
-            .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .ok_or_else(err)?;
+        let split = d.find(|c: char| !(c.is_ascii_digit() || c == '.'))?;
         let (num, unit) = d.split_at(split);
-        let num: f64 = num.parse().map_err(|_| err())?;
+        let num: f64 = num.parse().ok()?;
         let secs = match unit {
             "ms" => num / 1000.0,
             "s" => num,
             "min" => num * 60.0,
             "h" => num * 3600.0,
-            _ => return Err(err()),
+            _ => return None,
         };
         if team_messages == 0 || !(secs.is_finite() && secs > 0.0 && secs < 1e9) {
-            return Err(err());
+            return None;
         }
-        Ok(BudgetSpec {
+        Some(BudgetSpec {
             team_messages,
             game: Duration::from_secs_f64(secs),
             payload_limit: None,
@@ -802,8 +828,42 @@ mod tests {
             (custom.team_messages, custom.game, custom.payload_limit),
             (600, Duration::from_secs(600), None)
         );
+        // What Display writes reads back as the same budget, the payload limit included
+        // (`huddle sim --daemons --budget spl` hands its budget to each daemon so).
+        for spec in [
+            BudgetSpec::SPL,
+            BudgetSpec::HUMANOID,
+            custom,
+            BudgetSpec {
+                payload_limit: Some(96),
+                ..custom
+            },
+        ] {
+            let printed = spec.to_string();
+            assert_eq!(printed.parse::<BudgetSpec>(), Ok(spec), "{printed:?}");
+        }
+        assert_eq!(
+            "600/10min (<= 64 B)"
+                .parse::<BudgetSpec>()
+                .map(|b| b.payload_limit),
+            Ok(Some(64))
+        );
         for bad in [
-            "", "spl2", "600", "600/", "0/10min", "600/10", "x/10s", "600/-1s",
+            "",
+            "spl2",
+            "600",
+            "600/",
+            "0/10min",
+            "600/10",
+            "x/10s",
+            "600/-1s",
+            "spl (≤ 0 B)",
+            "spl (128 B)",
+            "spl (≤ 128)",
+            "spl (≤ x B)",
+            "(≤ 128 B)",
+            "spl (≤ 128 B",
+            "600/10min (≤ 128 B) x",
         ] {
             assert!(bad.parse::<BudgetSpec>().is_err(), "{bad:?} must not parse");
         }
