@@ -4,7 +4,9 @@
 //! Scenario 1: three robots play 8 s of seed 5 in real time, in the ideal world (the
 //! plumbing is under test here; the drawn world's own errors are #29's). Every write the robot
 //! programs make through the relay is one the contract takes (0 relay errors), the
-//! robots play on the team ball their daemons publish, and they mostly agree on one goer.
+//! robots play on the team ball their daemons publish, they mostly agree on one goer, and
+//! the central reference (the team's fusion hearing every layer's message at once) takes
+//! every message the layers write.
 //! The bounds are loose on purpose: the match runs at real time on a shared machine; the
 //! issue's targets (60 s, seeds 1–3) are measured by `huddle sim --daemons` itself and
 //! written up in docs/results/sim-daemons.md.
@@ -69,6 +71,19 @@ fn three_robot_programs_play_through_their_daemons() {
     assert!(
         rmse < 0.5,
         "a team ball near the true ball, got {rmse} m: {r}"
+    );
+    // The central reference hears every layer's own world-model message: 3 robots at the
+    // 40 ms control period over 8 s is about 600, and a layer writes nothing it cannot decode.
+    let taken = r["central_messages"].as_u64().expect("a count");
+    assert!(
+        taken > 400,
+        "the central reference heard each layer's messages, got {taken}: {r}"
+    );
+    assert_eq!(r["central_refused"], 0, "every message decodes: {r}");
+    let central = r["centralized_rmse_m"].as_f64().expect("a figure");
+    assert!(
+        central.is_finite() && central < 0.5,
+        "the central reference follows the true ball, got {central} m: {r}"
     );
     let ratio = r["in_process"]["rmse_vs_in_process"]
         .as_f64()

@@ -105,6 +105,9 @@ struct Shared {
 struct BallsOut {
     team: bool,
     own: bool,
+    /// The sequence number of the own message last written to
+    /// [`contract::WORLD_OUT_KEY`].
+    world_seq: Option<u16>,
 }
 
 /// Starts robot `handle`'s team layer: guards on the inputs, a watch that collects them,
@@ -585,6 +588,15 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, balls_out: &m
     if let Some(h) = replica.budget_headroom() {
         out.push((contract::BUDGET_KEY, Value::Int(h)));
     }
+    // The tick's own message in full, once (a reaction between ticks has none new).
+    if let Some(own) = layer.gwm.latest(layer.id) {
+        if balls_out.world_seq != Some(own.seq) {
+            if let Ok(bytes) = own.to_bytes() {
+                out.push((contract::WORLD_OUT_KEY, Value::Bytes(bytes.to_vec())));
+                balls_out.world_seq = Some(own.seq);
+            }
+        }
+    }
     for (key, value) in out {
         if let Err(e) = replica.set(now, key, value) {
             tracing::warn!(key, error = %e, "team layer: an output was refused");
@@ -722,6 +734,48 @@ mod core_tests {
         assert!(
             matches!(&spot, Some(Value::Floats(f)) if f.len() >= 2 && f[0].abs() < 1e-6 && f[1].abs() < 1e-6),
             "after the reset the layer's team ball is the centre spot: {spot:?}"
+        );
+    }
+
+    #[test]
+    fn every_tick_writes_the_robots_own_message_in_full_even_under_a_budget() {
+        // Robot 2 of an SPL-budgeted team (a message every 3 s at best: the team hears
+        // the compact form, rarely) sees the ball 1.5 m ahead every cycle. A log, or the
+        // central reference of `huddle sim --daemons`, wants every tick's message in full:
+        // `local.var.team.world` holds it, 75 bytes, one new sequence number per tick,
+        // with that tick's sighting batch.
+        let mut now = Instant::from_micros(1_000_000);
+        let mut core = TeamCore::new(2, TeamLayerConfig::new(3, Some(Duration::from_secs(3))));
+        let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+        let mut replica = Replica::new(config, 7, now).expect("a valid replica");
+        let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+        core.input(contract::POSE_KEY, &pose, now)
+            .expect("a valid pose");
+        let mut seqs = Vec::new();
+        for tick in 0..10 {
+            cycle(&mut core, &mut replica, now, &[1.5, 0.0, 0.01, 0.0, 0.01]);
+            let Some(Value::Bytes(bytes)) = replica
+                .get(contract::WORLD_OUT_KEY)
+                .expect("a valid key")
+                .map(|e| e.value.clone())
+            else {
+                panic!("tick {tick}: the layer writes its own message");
+            };
+            assert_eq!(bytes.len(), 75, "tick {tick}: the full form");
+            let lwm = fusion::LocalWorldModel::from_bytes(&bytes, 0.0)
+                .expect("the layer's own message decodes");
+            if tick > 0 {
+                assert!(
+                    lwm.observation.is_some(),
+                    "tick {tick}: the tick's sighting is in its batch"
+                );
+            }
+            seqs.push(lwm.seq);
+            now += Duration::from_millis(40);
+        }
+        assert!(
+            seqs.windows(2).all(|w| w[1] == w[0].wrapping_add(1)),
+            "one message per tick, none skipped: {seqs:?}"
         );
     }
 

@@ -1059,6 +1059,12 @@ impl GlobalModel {
             })
     }
 
+    /// The latest LWM taken from robot `id` (this robot's own included), on this robot's
+    /// clock: for logs and references that want what the team's fusion holds.
+    pub fn latest(&self, id: u8) -> Option<&LocalWorldModel> {
+        self.robots.get(&id).map(|r| &r.lwm)
+    }
+
     /// Where robot `id` last said the ball was, predicted to `now_s` (for displays).
     pub fn robot_ball(&self, id: u8, now_s: f64) -> Option<Vector2<f64>> {
         let b = self.robots.get(&id)?.lwm.ball?;

@@ -48,6 +48,11 @@ pub const OWN_BALL_KEY: &str = "local.var.team.own_ball";
 pub const POSE_OUT_KEY: &str = "local.var.team.pose";
 /// Messages this robot may still send now under its budget (int).
 pub const BUDGET_KEY: &str = "local.var.team.budget";
+/// The layer's own world-model message of its latest tick, in full wire form (bytes:
+/// fusion's 75-byte LWM, read with `fusion::LocalWorldModel::from_bytes`), written every
+/// tick whatever the league's budget lets it send: what a log, or a reference fed every
+/// robot's messages at once (`huddle sim --daemons`), wants.
+pub const WORLD_OUT_KEY: &str = "local.var.team.world";
 /// The layer's ticks so far (int): it changes every tick, so a program that wrote a
 /// cycle's senses can wait for the tick that took them.
 pub const TICK_KEY: &str = "local.var.team.tick";

@@ -11,9 +11,13 @@
 //! The report carries the figures the in-process report has where they mean the same
 //! thing here: exactly one goer over ball-visible time, the team ball's error against the
 //! truth (each robot's `local.var.team.ball` carried forward by its published velocity to
-//! the instant it is judged), the centralized reference fed the same sightings at the
-//! poses the daemons held, messages sent. What it cannot have: the references that need a
-//! replica's inside (delivery, delayed-centralized) and the world-model NEES bands.
+//! the instant it is judged), the central reference, messages sent. The central reference
+//! is the in-process one: the team's own fusion (a `fusion::GlobalModel` with the team's
+//! settings) hearing every robot's world-model message of every tick at once, in full
+//! whatever the budget lets the robot send (each layer's `local.var.team.world`, watched
+//! on its relay), and put on the centre spot at a kick-off. What it cannot have: the
+//! references that need a replica's inside (delivery, delayed-centralized) and the
+//! world-model NEES bands.
 //!
 //! In the drawn world each daemon also gets its robot's clock as the match draws it in
 //! process (`huddle daemon --clock-offset --clock-drift-ppm`): an offset of up to 20 s and
@@ -46,12 +50,13 @@ use std::time::{Duration, Instant};
 
 use comms::relay::Binding;
 use comms::Value;
-use fusion::CentralizedBall;
+use fusion::{BallEstimate, LocalWorldModel};
 use player::remote::{start_pose_value, RemoteRobot, TeamView};
 use player::Percepts;
 use serde::Serialize;
 use team::contract;
 
+use super::references::CentralFusion;
 use super::{Metrics, SimConfig, Simulation, Transport};
 use crate::field::World;
 
@@ -145,8 +150,13 @@ pub struct DaemonsReport {
     pub messages_per_robot: Vec<u64>,
     /// RMSE of the team ball the robots read from their daemons, ball visible, m.
     pub team_ball_rmse_m: f64,
-    /// The centralized filter fed every sighting at the poses the daemons held, m.
+    /// The central reference (the team's fusion hearing every robot's message at once,
+    /// see the module's doc), m.
     pub centralized_rmse_m: f64,
+    /// World-model messages the central reference took (and refused: undecodable).
+    pub central_messages: u64,
+    /// … refused.
+    pub central_refused: u64,
     /// `team_ball_rmse_m / centralized_rmse_m`.
     pub rmse_ratio: f64,
     /// Samples of the team ball error.
@@ -317,12 +327,14 @@ impl std::fmt::Display for DaemonsReport {
         )?;
         writeln!(
             f,
-            "team ball RMSE        {:.3} m ({} samples; blind {:.3} m over {}); centralized {:.3} m, ratio {:.3}",
+            "team ball RMSE        {:.3} m ({} samples; blind {:.3} m over {}); central reference {:.3} m ({} messages, {} refused), ratio {:.3}",
             self.team_ball_rmse_m,
             self.team_ball_samples,
             self.blind_team_ball_rmse_m,
             self.blind_samples,
             self.centralized_rmse_m,
+            self.central_messages,
+            self.central_refused,
             self.rmse_ratio
         )?;
         if let Some(p) = &self.in_process {
@@ -382,6 +394,9 @@ struct Heard {
     /// Resets told whose marking `GETV` has not come back yet: until it does, every ball
     /// heard may be from before the reset, so the robot plays on none.
     resets_pending: u32,
+    /// The layer's own world-model messages (`local.var.team.world`) since the central
+    /// reference last took them, in order.
+    lwms: Vec<Vec<u8>>,
 }
 
 /// A robot's daemon: its process and its relay connection.
@@ -608,6 +623,12 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
             }
             continue;
         }
+        if b.key == contract::WORLD_OUT_KEY {
+            if let Value::Bytes(bytes) = value {
+                h.lwms.push(bytes);
+            }
+            continue;
+        }
         if let Some(owner) = b.key.strip_suffix(".var.machine.pass_to") {
             if let (Ok(owner), Value::Int(to)) = (owner.parse::<u8>(), &value) {
                 h.pass_to.insert(owner, u8::try_from(*to).unwrap_or(0));
@@ -690,6 +711,10 @@ pub fn run(
             net.node_clock(setup.harness.node(i)).unwrap_or_default()
         })
         .collect();
+    // The central reference as the in-process match builds it (the team's fusion, its
+    // settings), and the ball the robots put on the centre spot at a kick-off.
+    let mut central: CentralFusion = setup.central.clone();
+    let kick_off: BallEstimate = setup.robots[0].kick_off_ball(0.0);
     drop(setup);
 
     let spec = opts.impair.clone().unwrap_or_else(|| impair_spec(cfg));
@@ -732,7 +757,7 @@ pub fn run(
         .map(|i| period * (1.0 + i as f64 / n as f64))
         .collect();
     let mut metrics = Metrics::default();
-    let mut central = CentralizedBall::new(cfg.references.central);
+    let (mut central_messages, mut central_refused) = (0u64, 0u64);
     let (mut team_sq, mut team_n, mut central_sq) = (0.0, 0u64, 0.0);
     let (mut blind_sq, mut blind_n) = (0.0, 0u64);
     let (mut pose_sq, mut pose_n) = (0.0, 0u64);
@@ -770,7 +795,6 @@ pub fn run(
                 frame: world.look(i),
                 odometry: world.read_odometry(i),
             };
-            let seen = percepts.frame.ball;
             let marks_seen = percepts.frame.landmarks.len();
             // Write the cycle's senses (odometry last: the layer ticks on it), then wait
             // for the layer's pose from that tick, as a robot program reading its
@@ -817,7 +841,6 @@ pub fn run(
             if robots[i].view.pose.is_some() {
                 // The pose it played on: the layer's, brought up to now by its odometry.
                 let pose = out.believed;
-                let cov = robots[i].view.pose.map(|p| p.1).unwrap_or_default();
                 let truth = world.robots[i].pose.at;
                 pose_sq += truth.distance(pose.at).powi(2);
                 pose_n += 1;
@@ -840,13 +863,25 @@ pub fn run(
                         gaps(&world, i)
                     );
                 }
-                if let Some(s) = &seen {
-                    let est = team::frames::to_fusion_pose(&pose, cov);
-                    central.sighting(
-                        t,
-                        &est,
-                        &player::perception::ball_sighting(&calibration.sensors, s),
-                    );
+            }
+            // The messages its layer wrote, this tick's among them when the view is
+            // fresh (the layer writes its world model before its tick count), into the
+            // central reference on the world's clock: each holds at the tick its senses
+            // were taken.
+            let lwms = std::mem::take(
+                &mut daemons[i]
+                    .heard
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .lwms,
+            );
+            for bytes in lwms {
+                match LocalWorldModel::from_bytes(&bytes, t) {
+                    Ok(lwm) => {
+                        central.lwm(robots[i].id, &lwm, t);
+                        central_messages += 1;
+                    }
+                    Err(_) => central_refused += 1,
                 }
             }
             ticked.push(i);
@@ -892,7 +927,10 @@ pub fn run(
             }
             // The referee puts the ball back on the centre spot; each robot program tells
             // its layer, as the in-process robots are told.
-            central.forget();
+            central.place(BallEstimate {
+                t_s: t + dt,
+                ..kick_off
+            });
             for (d, r) in daemons.iter_mut().zip(&mut robots) {
                 d.heard
                     .lock()
@@ -974,6 +1012,8 @@ pub fn run(
         messages_per_robot: per_robot,
         team_ball_rmse_m: r4(team_rmse),
         centralized_rmse_m: r4(central_rmse),
+        central_messages,
+        central_refused,
         rmse_ratio: r3(team_rmse / central_rmse),
         team_ball_samples: team_n,
         blind_samples: blind_n,
