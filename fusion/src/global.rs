@@ -11,6 +11,9 @@ use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use std::collections::{BTreeMap, VecDeque};
 use std::ops::Deref;
 
+mod search;
+use search::{partition_near_back, partition_near_front};
+
 /// Settings of a [`GlobalModel`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GlobalConfig {
@@ -477,7 +480,7 @@ impl GlobalModel {
         if d2 > self.config.gate_chi2 {
             rec.last_rejected_t_s = Some(now_s);
             self.stats.rejected += 1;
-            let at = self.rejected.partition_point(|p| p.t_s <= obs.t_s);
+            let at = partition_near_back(&self.rejected, |p| p.t_s <= obs.t_s);
             self.rejected.insert(at, *measured);
             self.challenge(robot, obs, now_s);
             return Ingest::Rejected(d2);
@@ -496,7 +499,7 @@ impl GlobalModel {
     /// pending observations and replays the ones after it.
     fn insert_pending(&mut self, obs: &Measured, prior: &BallEstimate) {
         let model = self.config.ball;
-        let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
+        let at = partition_near_back(&self.pending, |p| p.t_s <= obs.t_s);
         self.pending.insert(at, *obs);
         // `prior` is the state just before this observation: update it, then carry the
         // observations after it (arrived earlier, made later) forward from there.
@@ -521,7 +524,7 @@ impl GlobalModel {
     /// The state after the committed ball and every pending observation up to `t_s`,
     /// predicted to `t_s` (the checkpoints make this a lookup and one prediction).
     fn replay(&self, t_s: f64) -> Option<BallEstimate> {
-        let n = self.pending.partition_point(|p| p.t_s <= t_s);
+        let n = partition_near_back(&self.pending, |p| p.t_s <= t_s);
         let state = if n == 0 {
             self.committed?
         } else {
@@ -545,9 +548,9 @@ impl GlobalModel {
     }
 
     fn commit(&mut self, before_t_s: f64) {
-        let r = self.rejected.partition_point(|p| p.t_s < before_t_s);
+        let r = partition_near_front(&self.rejected, |p| p.t_s < before_t_s);
         self.rejected.drain(..r);
-        let n = self.pending.partition_point(|p| p.t_s < before_t_s);
+        let n = partition_near_front(&self.pending, |p| p.t_s < before_t_s);
         if n == 0 || self.committed.is_none() {
             return;
         }
@@ -839,7 +842,7 @@ impl GlobalModel {
                     self.insert_pending(o, &prior);
                 }
                 _ => {
-                    let at = self.rejected.partition_point(|p| p.t_s <= o.t_s);
+                    let at = partition_near_back(&self.rejected, |p| p.t_s <= o.t_s);
                     self.rejected.insert(at, *o);
                 }
             }
