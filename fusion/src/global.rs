@@ -8,10 +8,12 @@ use crate::local::{Heard, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::ops::Deref;
 
+mod records;
 mod search;
+use records::Records;
 use search::{partition_near_back, partition_near_front};
 
 /// Settings of a [`GlobalModel`].
@@ -195,7 +197,7 @@ impl RobotRecord {
 pub struct GlobalModel {
     own_id: u8,
     config: GlobalConfig,
-    robots: BTreeMap<u8, RobotRecord>,
+    robots: Records<RobotRecord>,
     committed: Option<BallEstimate>,
     /// Observations not yet committed, in time order, and the state after each
     /// (checkpoints, so that a late arrival replays only what follows it).
@@ -311,7 +313,7 @@ impl GlobalModel {
         GlobalModel {
             own_id,
             config,
-            robots: BTreeMap::new(),
+            robots: Records::default(),
             committed: None,
             pending: VecDeque::new(),
             after: VecDeque::new(),
@@ -365,7 +367,7 @@ impl GlobalModel {
     /// time it publishes, and [`GlobalModel::receive`] for teammates.
     pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
         // `or_insert_with`: the record (an LWM, ~0.6 kB) is built only for a new robot.
-        let rec = self.robots.entry(robot).or_insert_with(|| RobotRecord {
+        let rec = self.robots.get_or_insert_with(robot, || RobotRecord {
             lwm: *lwm,
             received_t_s: now_s,
             last_rejected_t_s: None,
