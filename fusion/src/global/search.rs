@@ -29,8 +29,8 @@ pub(super) fn partition_near_back<T>(q: &VecDeque<T>, pred: impl Fn(&T) -> bool)
 /// lets go at each message.
 pub(super) fn partition_near_front<T>(q: &VecDeque<T>, pred: impl Fn(&T) -> bool) -> usize {
     let n = q.len();
-    for k in 0..n.min(WALK) {
-        if !pred(&q[k]) {
+    for (k, e) in q.iter().take(WALK).enumerate() {
+        if !pred(e) {
             return k;
         }
     }
