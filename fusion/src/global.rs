@@ -8,8 +8,13 @@ use crate::local::{Heard, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::ops::Deref;
+
+mod records;
+mod search;
+use records::Records;
+use search::{partition_near_back, partition_near_front};
 
 /// Settings of a [`GlobalModel`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -192,7 +197,7 @@ impl RobotRecord {
 pub struct GlobalModel {
     own_id: u8,
     config: GlobalConfig,
-    robots: BTreeMap<u8, RobotRecord>,
+    robots: Records<RobotRecord>,
     committed: Option<BallEstimate>,
     /// Observations not yet committed, in time order, and the state after each
     /// (checkpoints, so that a late arrival replays only what follows it).
@@ -308,7 +313,7 @@ impl GlobalModel {
         GlobalModel {
             own_id,
             config,
-            robots: BTreeMap::new(),
+            robots: Records::default(),
             committed: None,
             pending: VecDeque::new(),
             after: VecDeque::new(),
@@ -362,7 +367,7 @@ impl GlobalModel {
     /// time it publishes, and [`GlobalModel::receive`] for teammates.
     pub fn ingest(&mut self, robot: u8, lwm: &LocalWorldModel, now_s: f64) -> Ingest {
         // `or_insert_with`: the record (an LWM, ~0.6 kB) is built only for a new robot.
-        let rec = self.robots.entry(robot).or_insert_with(|| RobotRecord {
+        let rec = self.robots.get_or_insert_with(robot, || RobotRecord {
             lwm: *lwm,
             received_t_s: now_s,
             last_rejected_t_s: None,
@@ -477,7 +482,7 @@ impl GlobalModel {
         if d2 > self.config.gate_chi2 {
             rec.last_rejected_t_s = Some(now_s);
             self.stats.rejected += 1;
-            let at = self.rejected.partition_point(|p| p.t_s <= obs.t_s);
+            let at = partition_near_back(&self.rejected, |p| p.t_s <= obs.t_s);
             self.rejected.insert(at, *measured);
             self.challenge(robot, obs, now_s);
             return Ingest::Rejected(d2);
@@ -496,7 +501,7 @@ impl GlobalModel {
     /// pending observations and replays the ones after it.
     fn insert_pending(&mut self, obs: &Measured, prior: &BallEstimate) {
         let model = self.config.ball;
-        let at = self.pending.partition_point(|p| p.t_s <= obs.t_s);
+        let at = partition_near_back(&self.pending, |p| p.t_s <= obs.t_s);
         self.pending.insert(at, *obs);
         // `prior` is the state just before this observation: update it, then carry the
         // observations after it (arrived earlier, made later) forward from there.
@@ -521,7 +526,7 @@ impl GlobalModel {
     /// The state after the committed ball and every pending observation up to `t_s`,
     /// predicted to `t_s` (the checkpoints make this a lookup and one prediction).
     fn replay(&self, t_s: f64) -> Option<BallEstimate> {
-        let n = self.pending.partition_point(|p| p.t_s <= t_s);
+        let n = partition_near_back(&self.pending, |p| p.t_s <= t_s);
         let state = if n == 0 {
             self.committed?
         } else {
@@ -545,9 +550,9 @@ impl GlobalModel {
     }
 
     fn commit(&mut self, before_t_s: f64) {
-        let r = self.rejected.partition_point(|p| p.t_s < before_t_s);
+        let r = partition_near_front(&self.rejected, |p| p.t_s < before_t_s);
         self.rejected.drain(..r);
-        let n = self.pending.partition_point(|p| p.t_s < before_t_s);
+        let n = partition_near_front(&self.pending, |p| p.t_s < before_t_s);
         if n == 0 || self.committed.is_none() {
             return;
         }
@@ -839,7 +844,7 @@ impl GlobalModel {
                     self.insert_pending(o, &prior);
                 }
                 _ => {
-                    let at = self.rejected.partition_point(|p| p.t_s <= o.t_s);
+                    let at = partition_near_back(&self.rejected, |p| p.t_s <= o.t_s);
                     self.rejected.insert(at, *o);
                 }
             }

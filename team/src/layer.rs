@@ -21,8 +21,8 @@ use comms::arbitration::{self, heuristic, Arbiter, ArbitrationParams, BallView, 
 use comms::{Blackboard, Instant, Key, Scope, Value};
 use fusion::nalgebra::{Matrix2, Vector2};
 use fusion::{
-    BallEstimate, BallSighting, GlobalModel, Kick, LocalModel, PoseEstimate, RangeBearingSighting,
-    TeamBall,
+    BallEstimate, BallSighting, GlobalModel, Kick, LocalModel, LocalWorldModel, PoseEstimate,
+    RangeBearingSighting, TeamBall,
 };
 use serde::Serialize;
 
@@ -232,6 +232,12 @@ pub struct TeamLayer {
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
     heard: Vec<Option<(u64, u64)>>,
+    /// Per teammate (index = id − 1): its LWM decoded last, with the (incarnation,
+    /// version) it came from, on this robot's clock (see [`TeamLayer::decoded_lwm`]).
+    decoded: Vec<Option<((u64, u64), LocalWorldModel)>>,
+    /// The keys it reads and writes at every tick, built once (a key's path is parsed
+    /// and allocated; a clone shares it).
+    keys: LayerKeys,
     /// Per teammate (index = id − 1): the time and place of the message its velocity was
     /// last measured to, and that velocity (field frame).
     teammate_motion: Vec<Option<TeammateMotion>>,
@@ -280,6 +286,49 @@ pub const KICK_OFF_SPOT_SIGMA_M: f64 = 0.1;
 
 /// σ of the velocity of a ball put down for a kick-off, per axis, m/s: it lies still.
 pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
+
+/// The keys a [`TeamLayer`] uses at every tick, built once.
+#[derive(Debug, Clone)]
+struct LayerKeys {
+    /// [`WORLD_LOCAL_KEY`], its own.
+    world_local: Key,
+    /// [`PASS_TO_KEY`], its own.
+    pass_to: Key,
+    /// Per robot (index = id − 1): where its LWM is held.
+    world_local_of: Vec<Key>,
+    /// Per robot (index = id − 1): where its pass receiver is held.
+    pass_to_of: Vec<Key>,
+}
+
+impl LayerKeys {
+    fn new(team: usize) -> Self {
+        let pass_to = pass_to_key();
+        LayerKeys {
+            world_local: world_local_key(),
+            world_local_of: (0..team).map(|k| world_local_of(robot_id(k))).collect(),
+            pass_to_of: (0..team)
+                .map(|k| pass_to_of(robot_id(k), &pass_to).expect("a valid key"))
+                .collect(),
+            pass_to,
+        }
+    }
+
+    /// Where robot `id`'s pass receiver is held (`None`: not a valid robot id).
+    fn pass_to_of(&self, id: u8) -> Option<Key> {
+        match usize::from(id)
+            .checked_sub(1)
+            .and_then(|k| self.pass_to_of.get(k))
+        {
+            Some(key) => Some(key.clone()),
+            None => pass_to_of(id, &self.pass_to).ok(),
+        }
+    }
+}
+
+/// Robot `id`'s binding of the pass receiver key `pass_to`.
+fn pass_to_of(id: u8, pass_to: &Key) -> Result<Key, comms::KeyError> {
+    Key::new(Scope::Robot(id), comms::Kind::Var, pass_to.path())
+}
 
 /// The robot id at index `k` of a team's per-robot vectors.
 fn robot_id(k: usize) -> u8 {
@@ -341,6 +390,8 @@ impl TeamLayer {
             push_reported_at_s: f64::NEG_INFINITY,
             decided_at_s: 0.0,
             heard: vec![None; team],
+            decoded: vec![None; team],
+            keys: LayerKeys::new(team),
             teammate_motion: vec![None; team],
             policy: PolicyState::default(),
             sound: None,
@@ -602,18 +653,20 @@ impl TeamLayer {
             if id == self.id {
                 continue;
             }
-            let Some(e) = board.get(&world_local_of(id)) else {
+            let Some(e) = board.get(&self.keys.world_local_of[j]) else {
                 continue;
             };
-            if self.heard[j] == Some((e.incarnation, e.version)) {
+            let at = (e.incarnation, e.version);
+            if self.heard[j] == Some(at) {
                 continue;
             }
-            self.heard[j] = Some((e.incarnation, e.version));
+            self.heard[j] = Some(at);
             if let Value::Bytes(bytes) = &e.value {
                 let age_s = e.age(local_now).as_secs_f64();
                 // A malformed message is the sender's bug; the GWM just does not take it.
                 if let Ok(lwm) = self.gwm.decode(bytes, now_s, age_s) {
                     self.gwm.ingest(id, &lwm, now_s);
+                    self.decoded[j] = Some((at, lwm));
                 }
             }
         }
@@ -754,7 +807,7 @@ impl TeamLayer {
     pub fn goer_pass_to(&self, board: &Blackboard, local_now: Instant) -> Option<u8> {
         let params = self.arbiter.params();
         self.decision.goer.filter(|&g| g != self.id).and_then(|g| {
-            let key = Key::new(Scope::Robot(g), comms::Kind::Var, pass_to_key().path()).ok()?;
+            let key = self.keys.pass_to_of(g)?;
             match board
                 .get_fresher_than(local_now, &key, params.stale_after)?
                 .value
@@ -829,7 +882,7 @@ impl TeamLayer {
             return (Vec::new(), false);
         }
         if let Some(bytes) = lwm {
-            writes.push((world_local_key(), bytes));
+            writes.push((self.keys.world_local.clone(), bytes));
         }
         let receiver_changed = receiver != self.pass_to_posted;
         let now = policy::Now {
@@ -877,7 +930,7 @@ impl TeamLayer {
         }
         if receiver_changed {
             self.pass_to_posted = receiver;
-            writes.push((pass_to_key(), Value::Int(receiver)));
+            writes.push((self.keys.pass_to.clone(), Value::Int(receiver)));
         }
         (writes, priority)
     }
@@ -915,7 +968,7 @@ impl TeamLayer {
             self.untold_claim = Some(posted);
             if let Some(lwm) = self.latest_lwm.clone() {
                 if !world_model_waiting && self.policy.world_model_rides() {
-                    writes.push((world_local_key(), lwm));
+                    writes.push((self.keys.world_local.clone(), lwm));
                 }
             }
         } else {
@@ -1038,6 +1091,19 @@ impl TeamLayer {
     /// Its own ball estimate now, if it saw the ball within its ball memory.
     pub fn own_ball(&self, now_s: f64) -> Option<BallEstimate> {
         self.ball.and(self.lwm.ball_at(now_s))
+    }
+
+    /// Teammate `id`'s LWM as [`TeamLayer::sense`] decoded it from the blackboard entry
+    /// of `incarnation` and `version` (on this robot's clock, placed by the entry's age),
+    /// if that entry is the one it decoded last: a second reader of the same message (the
+    /// simulator's delivery reference) retimes it
+    /// ([`fusion::LocalWorldModel::retimed`]) instead of decoding it again.
+    pub fn decoded_lwm(&self, id: u8, incarnation: u64, version: u64) -> Option<&LocalWorldModel> {
+        let k = usize::from(id).checked_sub(1)?;
+        match self.decoded.get(k)? {
+            Some((at, lwm)) if *at == (incarnation, version) => Some(lwm),
+            _ => None,
+        }
     }
 }
 

@@ -640,9 +640,11 @@ impl Simulation {
             let Some(replica) = self.harness.replica(i) else {
                 continue;
             };
-            // The robot's senses: all it gets of the world.
+            // The robot's senses: all it gets of the world. Its previous frame (replaced
+            // first thing in its tick) lends its vectors.
+            let spare = std::mem::take(&mut self.robots[i].frame);
             let percepts = Percepts {
-                frame: self.world.look(i),
+                frame: self.world.look_reusing(i, spare),
                 odometry: self.world.read_odometry(i),
             };
             let local_now = self.harness.local_now(i);
@@ -852,12 +854,21 @@ impl Simulation {
         if let Some(replica) = self.harness.replica(i) {
             let harness = &self.harness;
             let publications = &self.publications;
-            self.delivery[i].receive(i, replica.blackboard(), now_s, |j, version| {
-                let sent = publications.sent_at(j, version)?;
-                Some(robot::seconds(
-                    harness.local_at(i, Time::from_secs_f64(sent)),
-                ))
-            });
+            let layer = &self.robots[i];
+            self.delivery[i].receive(
+                i,
+                replica.blackboard(),
+                now_s,
+                |j, version| {
+                    let sent = publications.sent_at(j, version)?;
+                    Some(robot::seconds(
+                        harness.local_at(i, Time::from_secs_f64(sent)),
+                    ))
+                },
+                |j, incarnation, version| {
+                    layer.decoded_lwm(comms_netsim::robot_id(j), incarnation, version)
+                },
+            );
         }
         // Its own after its teammates', as its team layer takes them.
         self.delivery[i].own(id, &lwm, now_s);

@@ -358,13 +358,16 @@ impl DeliveryReference {
 
     /// Take every teammate's LWM newly on robot `me`'s blackboard, each placed at the
     /// instant it was really published (`sent_at(j, version)`, already on `me`'s clock,
-    /// seconds).
-    pub fn receive(
+    /// seconds). `decoded(j, incarnation, version)`: teammate `j`'s LWM of that entry as
+    /// the robot's own team layer decoded it, if it did (then only retimed here, not
+    /// decoded again: the same LWM bit for bit).
+    pub fn receive<'a>(
         &mut self,
         me: usize,
         board: &Blackboard,
         now_s: f64,
         sent_at: impl Fn(usize, u64) -> Option<f64>,
+        decoded: impl Fn(usize, u64, u64) -> Option<&'a LocalWorldModel>,
     ) {
         for j in 0..self.taken.len() {
             if j == me {
@@ -380,7 +383,11 @@ impl DeliveryReference {
             let (Value::Bytes(bytes), Some(t_sent)) = (&e.value, sent_at(j, e.version)) else {
                 continue;
             };
-            if let Ok(lwm) = LocalWorldModel::from_bytes(bytes, t_sent) {
+            let lwm = match decoded(j, e.incarnation, e.version) {
+                Some(lwm) => lwm.retimed(bytes, t_sent).ok_or(()),
+                None => LocalWorldModel::from_bytes(bytes, t_sent).map_err(|_| ()),
+            };
+            if let Ok(lwm) = lwm {
                 self.gwm.ingest(comms_netsim::robot_id(j), &lwm, now_s);
             }
         }
@@ -622,7 +629,13 @@ mod tests {
                 Value::Bytes(bytes),
             )
             .expect("robot 2 writes its own world model");
-        reference.receive(0, &board, 10.06, |j, _| (j == 1).then_some(9.99));
+        reference.receive(
+            0,
+            &board,
+            10.06,
+            |j, _| (j == 1).then_some(9.99),
+            |_, _, _| None,
+        );
         let at = reference
             .estimate_at(10.06)
             .expect("the placement is a ball")

@@ -194,6 +194,11 @@ fn put_observation(
     Ok(())
 }
 
+/// When the observation at `at` was made, for a message whose snapshot holds at `t_s`.
+fn observation_time(b: &[u8], at: usize, t_s: f64) -> f64 {
+    t_s - (get_u16(b, at + 9) & 0x0fff) as f64 / 1000.0
+}
+
 fn get_observation(b: &[u8], at: usize, t_s: f64) -> Result<FieldObservation, DecodeError> {
     let corr = corr_matrix::<2>(&[b[at + 8] as i8]);
     if corr.cholesky().is_none() {
@@ -202,7 +207,7 @@ fn get_observation(b: &[u8], at: usize, t_s: f64) -> Result<FieldObservation, De
         });
     }
     Ok(FieldObservation {
-        t_s: t_s - (get_u16(b, at + 9) & 0x0fff) as f64 / 1000.0,
+        t_s: observation_time(b, at, t_s),
         position: Vector2::new(
             get_i16(b, at) as f64 / 1000.0,
             get_i16(b, at + 2) as f64 / 1000.0,
@@ -256,6 +261,12 @@ fn put_kick(b: &mut [u8], report: &KickReport, t_s: f64) -> Result<(), EncodeErr
     Ok(())
 }
 
+/// When the kick whose head byte is `head` was swung, for a message whose snapshot holds
+/// at `t_s`.
+fn kick_time(head: u8, t_s: f64) -> f64 {
+    t_s - (head & 0x1f) as f64 * KICK_AGE_STEP_S
+}
+
 fn get_kick(b: &[u8], t_s: f64) -> Option<KickReport> {
     let head = b[KICK_AT];
     if head & KICK_PRESENT == 0 {
@@ -265,7 +276,7 @@ fn get_kick(b: &[u8], t_s: f64) -> Option<KickReport> {
     Some(KickReport {
         number: (head >> 5) & 3,
         kick: Kick {
-            t_s: t_s - (head & 0x1f) as f64 * KICK_AGE_STEP_S,
+            t_s: kick_time(head, t_s),
             speed_mps: b[KICK_AT + 1] as f64 * KICK_SPEED_STEP_MPS,
             direction_rad: crate::geometry::wrap_angle(
                 b[KICK_AT + 2] as f64 * KICK_DIRECTION_STEP_RAD,
@@ -462,6 +473,38 @@ impl LocalWorldModel {
             earlier,
             kick: get_kick(b, t_s),
         })
+    }
+
+    /// This LWM, decoded from `bytes` by [`Self::from_bytes`] at some time, as decoding
+    /// the same bytes at `t_s` gives it, bit for bit, without decoding them again: a
+    /// second reader of one message (the simulator's delivery reference, beside the
+    /// robot's own GWM) places it at another time. Only the times change, and they are
+    /// read from the bytes again rather than shifted (`t + (b − a)` is not `b − age` in
+    /// floating point). `None` if `bytes` are not an LWM or do not carry the batches
+    /// this one holds; if this LWM was not decoded from `bytes`, the answer is not theirs
+    /// either.
+    pub fn retimed(&self, bytes: &[u8], t_s: f64) -> Option<LocalWorldModel> {
+        let (kick_head, batches) = match bytes.len() {
+            LWM_WIRE_LEN => (bytes[KICK_AT], Some(bytes)),
+            // The compact form carries no batches.
+            LWM_COMPACT_LEN => (bytes[COMPACT_KICK_AT], None),
+            _ => return None,
+        };
+        let mut l = *self;
+        l.t_s = t_s;
+        if let Some(ball) = &mut l.ball {
+            ball.t_s = t_s;
+        }
+        let slots = std::iter::once(&mut l.observation).chain(l.earlier.iter_mut());
+        for (slot, at) in slots.zip(OBSERVATION_AT) {
+            if let Some(obs) = slot {
+                obs.t_s = observation_time(batches?, at, t_s);
+            }
+        }
+        if let Some(report) = &mut l.kick {
+            report.kick.t_s = kick_time(kick_head, t_s);
+        }
+        Some(l)
     }
 }
 

@@ -338,3 +338,75 @@ proptest! {
         }
     }
 }
+
+/// Every float of an LWM, bit for bit (`Debug` prints the shortest form that reads back
+/// as the same bits, and tells −0 from 0).
+fn bits(lwm: &LocalWorldModel) -> String {
+    format!("{lwm:?}")
+}
+
+#[test]
+fn a_retimed_lwm_is_its_bytes_decoded_at_the_other_time_bit_for_bit() {
+    // The simulator's delivery reference places a teammate's message at its true send
+    // time, which the robot's GWM (decoding it first) does not know: it takes the GWM's
+    // decoded LWM retimed, and must hold what decoding again would give. Shifting every
+    // time by the difference would not do: 12345.678 − 0.987 + (0.1 − 12345.678) is not
+    // 0.1 − 0.987 in floating point.
+    let full = sample().to_bytes().expect("the fixture encodes");
+    let compact = sample().to_compact_bytes().expect("the fixture encodes");
+    for bytes in [&full[..], &compact[..]] {
+        let first = LocalWorldModel::from_bytes(bytes, 12345.678).expect("decodes");
+        for t_s in [0.1, -3.3, 12345.678, 1e6 / 3.0] {
+            let again = LocalWorldModel::from_bytes(bytes, t_s).expect("decodes");
+            let retimed = first.retimed(bytes, t_s).expect("the same bytes");
+            assert_eq!(
+                bits(&retimed),
+                bits(&again),
+                "{} bytes at {t_s} s",
+                bytes.len()
+            );
+        }
+    }
+    let decoded = LocalWorldModel::from_bytes(&full, 1.0).expect("decodes");
+    assert!(
+        decoded.earlier[1].is_some() && decoded.kick.is_some(),
+        "the fixture exercises the batches and the kick"
+    );
+    assert_eq!(
+        decoded.retimed(&full[..40], 2.0),
+        None,
+        "not an LWM's length"
+    );
+    assert_eq!(
+        decoded.retimed(&compact, 2.0),
+        None,
+        "a compact message has no batches for this one's"
+    );
+}
+
+proptest! {
+    #[test]
+    fn any_lwm_retimed_is_what_decoding_at_that_time_gives(mut bytes in proptest::array::uniform32(any::<u8>()), tail in proptest::array::uniform32(any::<u8>()), end in proptest::array::uniform16(any::<u8>()), flags in 0u8..16, compact in any::<bool>(), t1 in -1e5f64..1e5, t2 in -1e5f64..1e5) {
+        let mut all = [0u8; LWM_WIRE_LEN];
+        bytes[0] = 0x40 | flags;
+        all[..32].copy_from_slice(&bytes);
+        all[32..64].copy_from_slice(&tail);
+        all[64..].copy_from_slice(&end[..11]);
+        // Correlations of zero, so that most draws decode (random ones rarely do).
+        for at in [12, 13, 14, 27, 28, 29, 30, 31, 32, 45, 56, 67] {
+            all[at] = 0;
+        }
+        let message: Vec<u8> = if compact {
+            let Ok(lwm) = LocalWorldModel::from_bytes(&all, 0.0) else { return Ok(()) };
+            let Ok(c) = lwm.to_compact_bytes() else { return Ok(()) };
+            c.to_vec()
+        } else {
+            all.to_vec()
+        };
+        if let Ok(first) = LocalWorldModel::from_bytes(&message, t1) {
+            let again = LocalWorldModel::from_bytes(&message, t2).expect("errors do not depend on the time");
+            let retimed = first.retimed(&message, t2).expect("the same bytes");
+            prop_assert_eq!(bits(&retimed), bits(&again));
+        }
+    }
+}

@@ -318,6 +318,19 @@ impl World {
 
     /// One camera frame of robot `i` (uses robot `i`'s noise stream only).
     pub fn look(&mut self, i: usize) -> Frame {
+        self.look_reusing(i, Frame::default())
+    }
+
+    /// [`World::look`], its sightings written into `spare`'s vectors (an earlier frame's:
+    /// what they held is dropped), so that a frame per robot per tick allocates nothing.
+    pub fn look_reusing(&mut self, i: usize, spare: Frame) -> Frame {
+        let Frame {
+            mut landmarks,
+            mut opponents,
+            ..
+        } = spare;
+        landmarks.clear();
+        opponents.clear();
         let cam = self.cfg.camera;
         let pose = self.robots[i].pose;
         let rng = &mut self.robot_rngs[i];
@@ -336,28 +349,24 @@ impl World {
             && rng.random::<f64>() < cam.detect_prob;
         let marks = self.cfg.landmarks();
         let confusion = self.cfg.landmark_confusion;
-        let landmarks = marks
-            .iter()
-            .enumerate()
-            .filter_map(|(k, &p)| {
-                let s = sight(&cam, &pose, p, cam.landmark_range_m, rng)?;
-                // Only a world with confusion draws for it: the ideal stream is unchanged.
-                if confusion > 0.0 && rng.random::<f64>() < confusion {
-                    let twin = Vec2::default() - p;
-                    let k = marks
-                        .iter()
-                        .position(|&m| m.distance(twin) < 1e-9)
-                        .unwrap_or(k);
-                    return Some((k, s));
-                }
-                Some((k, s))
-            })
-            .collect();
-        let opponents = self
-            .opponents
-            .iter()
-            .filter_map(|o| sight(&cam, &pose, o.pose.at, cam.landmark_range_m, rng))
-            .collect();
+        landmarks.extend(marks.iter().enumerate().filter_map(|(k, &p)| {
+            let s = sight(&cam, &pose, p, cam.landmark_range_m, rng)?;
+            // Only a world with confusion draws for it: the ideal stream is unchanged.
+            if confusion > 0.0 && rng.random::<f64>() < confusion {
+                let twin = Vec2::default() - p;
+                let k = marks
+                    .iter()
+                    .position(|&m| m.distance(twin) < 1e-9)
+                    .unwrap_or(k);
+                return Some((k, s));
+            }
+            Some((k, s))
+        }));
+        opponents.extend(
+            self.opponents
+                .iter()
+                .filter_map(|o| sight(&cam, &pose, o.pose.at, cam.landmark_range_m, rng)),
+        );
         Frame {
             ball,
             opponent_goal_in_view,
