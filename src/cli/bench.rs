@@ -363,6 +363,10 @@ fn tokio_ping_pong(
 
 /// Runs `f` with a driver for robot `id` on its own thread and current-thread runtime;
 /// the driver stops when `f` returns.
+///
+/// The driver is the thread's main future, as in `huddle daemon` (and as the bare-tokio
+/// ping-pong's loop is): a datagram wakes it directly. The robot's software (`f`) is a
+/// task beside it.
 fn on_driver_thread<T: Send + 'static, F, Fut>(
     id: u8,
     (g, transport): (SocketAddrV4, Transport),
@@ -372,7 +376,8 @@ fn on_driver_thread<T: Send + 'static, F, Fut>(
 ) -> std::thread::JoinHandle<Result<T>>
 where
     F: FnOnce(Handle) -> Fut + Send + 'static,
-    Fut: std::future::Future<Output = Result<T>>,
+    Fut: std::future::Future<Output = Result<T>> + 'static,
+    T: 'static,
 {
     std::thread::spawn(move || {
         pin.apply(usize::from(id) - 1);
@@ -389,13 +394,19 @@ where
             let driver = Driver::bind(cfg)?;
             let handle = driver.handle();
             let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-            let run = tokio::task::spawn_local(driver.run(async move {
-                let _ = stop_rx.await;
-            }));
-            let out = f(handle).await;
-            let _ = stop_tx.send(());
-            run.await??;
-            out
+            let robot = tokio::task::spawn_local(async move {
+                let out = f(handle).await;
+                let _ = stop_tx.send(());
+                out
+            });
+            // Ends when the robot's software does (or fails, or panics: the sender is
+            // dropped).
+            driver
+                .run(async move {
+                    let _ = stop_rx.await;
+                })
+                .await?;
+            robot.await.context("the robot's task panicked")?
         })
     })
 }
