@@ -304,6 +304,10 @@ impl Driver {
         let far = || tokio::time::Instant::now() + std::time::Duration::from_secs(3600);
         let sleep = tokio::time::sleep_until(far());
         tokio::pin!(sleep);
+        // The sleep was polled (and found pending) at its current deadline: the timer
+        // holds this task's waker and wakes it when due, so until then a pass need not
+        // poll it again (one idle pass per datagram).
+        let mut sleep_armed = false;
         let mut buf = vec![0u8; 65_536];
         loop {
             // One hand-written poll instead of `select!`: nothing is built, registered
@@ -337,9 +341,14 @@ impl Driver {
                 let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
                 if sleep.deadline() != at {
                     sleep.as_mut().reset(at);
+                    sleep_armed = false;
                 }
-                if sleep.as_mut().poll(cx).is_ready() {
-                    return Poll::Ready(Ok(Cause::Deadline));
+                if !sleep_armed || sleep.is_elapsed() {
+                    if sleep.as_mut().poll(cx).is_ready() {
+                        sleep_armed = false;
+                        return Poll::Ready(Ok(Cause::Deadline));
+                    }
+                    sleep_armed = true;
                 }
                 if let Some(socket) = &backlog {
                     if let Poll::Ready(ready) = socket.poll_send_ready(cx) {
