@@ -331,7 +331,7 @@ impl Driver {
             // the nudge one waker), which matters at one pass per datagram.
             let cause = std::future::poll_fn(|cx| {
                 pass = pass.wrapping_add(1);
-                if pass % SHUTDOWN_EVERY == 0 && shutdown.as_mut().poll(cx).is_ready() {
+                if pass.is_multiple_of(SHUTDOWN_EVERY) && shutdown.as_mut().poll(cx).is_ready() {
                     return Poll::Ready(Ok(Cause::Shutdown));
                 }
                 if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {

@@ -377,7 +377,6 @@ fn on_driver_thread<T: Send + 'static, F, Fut>(
 where
     F: FnOnce(Handle) -> Fut + Send + 'static,
     Fut: std::future::Future<Output = Result<T>> + 'static,
-    T: 'static,
 {
     std::thread::spawn(move || {
         pin.apply(usize::from(id) - 1);
