@@ -742,8 +742,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
         }
     };
     // The three ping-pongs in interleaved blocks, so that load from other processes on
-    // this shared machine falls on all three alike.
-    const BLOCKS: usize = 5;
+    // this shared machine falls on all three alike. Short blocks (a quarter of a second
+    // or less each) share it out more evenly: with five, one busy second could land on
+    // one measurement's block and move its median by a tenth.
+    const BLOCKS: usize = 20;
     let per_block = args.rounds.div_ceil(BLOCKS);
     let transport = Transport::from(args.transport);
     let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());
