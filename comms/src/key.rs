@@ -160,11 +160,18 @@ impl<'a> KeyRef<'a> {
         if s.is_empty() {
             return Err(KeyError::Empty);
         }
-        let mut parts = s.splitn(3, '.');
-        let scope = parts.next().unwrap_or_default();
-        let (Some(kind), Some(path)) = (parts.next(), parts.next()) else {
+        // `splitn(3, '.')` by hand: every `Handle::set` parses its key, and the
+        // searcher's set-up cost more than the two short scans.
+        let dot = |from: usize| {
+            s.as_bytes()[from..]
+                .iter()
+                .position(|&b| b == b'.')
+                .map(|i| from + i)
+        };
+        let Some((first, second)) = dot(0).and_then(|a| Some((a, dot(a + 1)?))) else {
             return Err(KeyError::TooFewLevels(s.to_owned()));
         };
+        let (scope, kind, path) = (&s[..first], &s[first + 1..second], &s[second + 1..]);
         let scope = parse_scope(scope)?;
         let kind = match kind {
             "var" => Kind::Var,
@@ -304,6 +311,39 @@ impl FromStr for Key {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The hand-written split gives the levels `splitn(3, '.')` gave (and the same
+        /// error when there are fewer than three), for any string of dots and letters.
+        #[test]
+        fn a_key_splits_at_its_first_two_dots_as_splitn_did(s in "[a.*0-9]{0,8}") {
+            let mut parts = s.splitn(3, '.');
+            let scope = parts.next().unwrap_or_default();
+            let expected = match (parts.next(), parts.next()) {
+                _ if s.is_empty() => Err(KeyError::Empty),
+                (Some(kind), Some(path)) => Ok((scope, kind, path)),
+                _ => Err(KeyError::TooFewLevels(s.clone())),
+            };
+            match (KeyRef::parse(&s), expected) {
+                (Ok(k), Ok((scope, kind, path))) => {
+                    prop_assert_eq!(k.scope, parse_scope(scope).unwrap());
+                    prop_assert_eq!(k.kind.to_string(), kind);
+                    prop_assert_eq!(k.path, path);
+                }
+                (Err(e), Err(expected)) => prop_assert_eq!(e, expected),
+                // A split that worked may still fail a level's check: the scope's, the
+                // kind's or the path's, each with its own error.
+                (Err(e), Ok(_)) => prop_assert!(
+                    !matches!(e, KeyError::Empty | KeyError::TooFewLevels(_)),
+                    "{s:?} has three levels but was refused as {e:?}"
+                ),
+                (Ok(_), Err(expected)) => {
+                    prop_assert!(false, "{s:?} parsed, expected {expected:?}")
+                }
+            }
+        }
+    }
 
     #[test]
     fn the_seeds_example_key_parses_into_its_levels() {

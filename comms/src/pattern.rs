@@ -16,6 +16,27 @@ use crate::key::{Kind, Scope};
 pub struct Pattern {
     text: String,
     levels: Vec<Level>,
+    /// What the first level accepts, decided once at parse time: every notice a driver
+    /// dispatches is matched against every watch and subscriber, so the robot id in
+    /// `2.var.x` is not parsed again per match.
+    first: FirstLevel,
+}
+
+/// The scopes a pattern's first level accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FirstLevel {
+    /// `#`: every key.
+    Rest,
+    /// `+`: every scope.
+    One,
+    /// `*`: the global scope and every robot's.
+    Robots,
+    /// `local`.
+    Local,
+    /// A robot id written without sign or leading zero.
+    Robot(u8),
+    /// Anything else: no key.
+    Never,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -63,9 +84,22 @@ impl Pattern {
             };
             levels.push(parsed);
         }
+        let first = match &levels[0] {
+            Level::Rest => FirstLevel::Rest,
+            Level::One => FirstLevel::One,
+            Level::Exact(l) => match l.as_str() {
+                "*" => FirstLevel::Robots,
+                "local" => FirstLevel::Local,
+                l => match l.parse::<u8>() {
+                    Ok(n) if !l.starts_with('0') => FirstLevel::Robot(n),
+                    _ => FirstLevel::Never,
+                },
+            },
+        };
         Ok(Pattern {
             text: s.to_owned(),
             levels,
+            first,
         })
     }
 
@@ -76,17 +110,13 @@ impl Pattern {
 
     /// Whether `key` (given as parts, so callers need not build a `Key`) matches.
     pub fn matches_parts(&self, scope: Scope, kind: Kind, path: &str) -> bool {
-        let mut levels = self.levels.iter();
-        let scope_ok = match levels.next() {
-            Some(Level::One) => true,
-            Some(Level::Rest) => return true,
-            Some(Level::Exact(l)) => match (l.as_str(), scope) {
-                ("*", Scope::Global | Scope::Robot(_)) => true,
-                ("local", Scope::Local) => true,
-                (l, Scope::Robot(n)) => l.parse::<u8>().ok() == Some(n) && !l.starts_with('0'),
-                _ => false,
-            },
-            None => false,
+        let scope_ok = match self.first {
+            FirstLevel::Rest => return true,
+            FirstLevel::One => true,
+            FirstLevel::Robots => matches!(scope, Scope::Global | Scope::Robot(_)),
+            FirstLevel::Local => scope == Scope::Local,
+            FirstLevel::Robot(n) => scope == Scope::Robot(n),
+            FirstLevel::Never => false,
         };
         if !scope_ok {
             return false;
@@ -95,8 +125,12 @@ impl Pattern {
             Kind::Var => "var",
             Kind::Talk => "talk",
         };
-        let rest = std::iter::once(kind_str).chain(path.split('.'));
-        match_levels(levels.as_slice(), rest)
+        match self.levels[1..].split_first() {
+            None => false,
+            Some((Level::Rest, _)) => true,
+            Some((Level::Exact(l), _)) if l != kind_str => false,
+            Some((_, path_levels)) => match_path(path_levels, path.as_bytes()),
+        }
     }
 
     /// Whether a parsed key matches.
@@ -202,19 +236,36 @@ pub(crate) enum PathSel {
     Prefix { literal: String, with_self: bool },
 }
 
-fn match_levels<'a>(mut pattern: &[Level], key: impl Iterator<Item = &'a str>) -> bool {
-    for part in key {
-        match pattern.first() {
+/// Whether the key levels in `path` (split at its dots) match `pattern`, walking the
+/// bytes once: a literal level is a prefix compare, not a split and a string compare.
+fn match_path(mut pattern: &[Level], mut path: &[u8]) -> bool {
+    // `path` holds at least one (maybe empty) level here.
+    loop {
+        let (level_len, tail) = match pattern.split_first() {
             None => return false,
-            Some(Level::Rest) => return true,
-            Some(Level::One) => {}
-            Some(Level::Exact(l)) if l == part => {}
-            Some(Level::Exact(_)) => return false,
+            Some((Level::Rest, _)) => return true,
+            Some((Level::One, tail)) => {
+                let len = path.iter().position(|&b| b == b'.').unwrap_or(path.len());
+                (len, tail)
+            }
+            Some((Level::Exact(l), tail)) => {
+                // A literal holds no dot: equal to the key's level if it is a prefix
+                // followed by a dot or the end.
+                let l = l.as_bytes();
+                if !path.starts_with(l) || path.get(l.len()).is_some_and(|&b| b != b'.') {
+                    return false;
+                }
+                (l.len(), tail)
+            }
+        };
+        if level_len == path.len() {
+            // That was the key's last level. `#` also matches zero remaining levels,
+            // as in MQTT.
+            return matches!(tail, [] | [Level::Rest]);
         }
-        pattern = &pattern[1..];
+        path = &path[level_len + 1..];
+        pattern = tail;
     }
-    // `#` also matches zero remaining levels, as in MQTT.
-    matches!(pattern, [] | [Level::Rest])
 }
 
 impl fmt::Display for Pattern {
@@ -234,6 +285,89 @@ impl FromStr for Pattern {
 mod tests {
     use super::*;
     use crate::Key;
+    use proptest::prelude::*;
+
+    /// The matcher as it was before `match_path` and the parsed first level (a split
+    /// and a string compare per level, the robot id parsed per match): the reference
+    /// the fast one must agree with.
+    fn reference_matches(p: &Pattern, scope: Scope, kind: Kind, path: &str) -> bool {
+        let mut levels = p.levels.iter();
+        let scope_ok = match levels.next() {
+            Some(Level::One) => true,
+            Some(Level::Rest) => return true,
+            Some(Level::Exact(l)) => match (l.as_str(), scope) {
+                ("*", Scope::Global | Scope::Robot(_)) => true,
+                ("local", Scope::Local) => true,
+                (l, Scope::Robot(n)) => l.parse::<u8>().ok() == Some(n) && !l.starts_with('0'),
+                _ => false,
+            },
+            None => false,
+        };
+        if !scope_ok {
+            return false;
+        }
+        let kind_str = match kind {
+            Kind::Var => "var",
+            Kind::Talk => "talk",
+        };
+        let mut pattern = levels.as_slice();
+        for part in std::iter::once(kind_str).chain(path.split('.')) {
+            match pattern.first() {
+                None => return false,
+                Some(Level::Rest) => return true,
+                Some(Level::One) => {}
+                Some(Level::Exact(l)) if l == part => {}
+                Some(Level::Exact(_)) => return false,
+            }
+            pattern = &pattern[1..];
+        }
+        matches!(pattern, [] | [Level::Rest])
+    }
+
+    /// Levels drawn from a small alphabet, so that patterns and keys often agree.
+    fn level() -> impl Strategy<Value = String> {
+        prop_oneof![
+            Just("a".to_owned()),
+            Just("ab".to_owned()),
+            Just("b".to_owned()),
+            Just("var".to_owned()),
+            Just("talk".to_owned()),
+            Just("2".to_owned()),
+            Just("*".to_owned()),
+            Just("local".to_owned()),
+            Just("+".to_owned()),
+            Just("#".to_owned()),
+            Just(String::new()),
+            "[a-c0-9]{1,3}",
+        ]
+    }
+
+    proptest! {
+        /// The byte-walking matcher gives exactly the old split-and-compare answer, for
+        /// every pattern that parses and any path (empty levels and trailing dots too).
+        #[test]
+        fn the_fast_matcher_agrees_with_the_reference(
+            pattern in proptest::collection::vec(level(), 1..6),
+            scope in prop_oneof![
+                Just(Scope::Local),
+                Just(Scope::Global),
+                (0u8..=12).prop_map(Scope::Robot),
+            ],
+            talk in any::<bool>(),
+            path in proptest::collection::vec(level(), 1..6),
+        ) {
+            let Ok(p) = Pattern::parse(&pattern.join(".")) else {
+                return Ok(());
+            };
+            let kind = if talk { Kind::Talk } else { Kind::Var };
+            let path = path.join(".");
+            prop_assert_eq!(
+                p.matches_parts(scope, kind, &path),
+                reference_matches(&p, scope, kind, &path),
+                "pattern {} against {:?} {:?} {:?}", p, scope, kind, path
+            );
+        }
+    }
 
     fn m(pattern: &str, key: &str) -> bool {
         Pattern::parse(pattern)

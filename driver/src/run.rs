@@ -26,6 +26,13 @@ use crate::state::{
 
 /// Datagrams handled per wake-up before the loop looks at timers and wake-ups again.
 const RECV_BATCH: usize = 256;
+/// Rounds of reading and reacting per wake-up (each ends at a datagram that gave a
+/// watch, subscriber or relay session something to do) before the loop looks at timers,
+/// the backlog and shutdown again.
+const READ_ROUNDS: usize = 16;
+/// Shutdown is looked at on every pass that finds nothing to read, and first on every
+/// this many passes, so that a flood of datagrams cannot hold it off.
+const SHUTDOWN_EVERY: u32 = 16;
 
 /// Everything the driver needs to start.
 #[derive(Clone, Debug)]
@@ -110,6 +117,14 @@ pub enum DriverError {
     /// Receiving or waiting on the socket failed for good.
     #[error("socket error: {0}")]
     Io(io::Error),
+}
+
+/// What a call of [`Driver::receive_batch`] left behind.
+struct Batch {
+    /// A watch has reactions queued, or a subscriber or relay session got a notice.
+    woke: bool,
+    /// Every socket said "would block": nothing more to read until the next wake-up.
+    drained: bool,
 }
 
 /// What ended a wait of the run loop.
@@ -304,13 +319,19 @@ impl Driver {
         let far = || tokio::time::Instant::now() + std::time::Duration::from_secs(3600);
         let sleep = tokio::time::sleep_until(far());
         tokio::pin!(sleep);
+        // The sleep was polled (and found pending) at its current deadline: the timer
+        // holds this task's waker and wakes it when due, so until then a pass need not
+        // poll it again (one idle pass per datagram).
+        let mut sleep_armed = false;
+        let mut pass: u32 = 0;
         let mut buf = vec![0u8; 65_536];
         loop {
             // One hand-written poll instead of `select!`: nothing is built, registered
             // and dropped again on every pass (the socket keeps one waker per direction,
             // the nudge one waker), which matters at one pass per datagram.
             let cause = std::future::poll_fn(|cx| {
-                if shutdown.as_mut().poll(cx).is_ready() {
+                pass = pass.wrapping_add(1);
+                if pass.is_multiple_of(SHUTDOWN_EVERY) && shutdown.as_mut().poll(cx).is_ready() {
                     return Poll::Ready(Ok(Cause::Shutdown));
                 }
                 if let Poll::Ready(ready) = self.socket.poll_recv_ready(cx) {
@@ -321,7 +342,11 @@ impl Driver {
                         return Poll::Ready(ready.map(|()| Cause::Readable));
                     }
                 }
-                // Nothing to read: only now the timers and the backlog are looked at.
+                // Nothing to read: only now shutdown, the timers and the backlog are
+                // looked at.
+                if shutdown.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(Cause::Shutdown));
+                }
                 // A pass that finds a datagram (most passes, under traffic) skips the
                 // walk over peers and inboxes for a deadline that every frame heard
                 // moves anyway.
@@ -337,9 +362,14 @@ impl Driver {
                 let at = deadline.map(|t| clock.to_tokio(t)).unwrap_or_else(far);
                 if sleep.deadline() != at {
                     sleep.as_mut().reset(at);
+                    sleep_armed = false;
                 }
-                if sleep.as_mut().poll(cx).is_ready() {
-                    return Poll::Ready(Ok(Cause::Deadline));
+                if !sleep_armed || sleep.is_elapsed() {
+                    if sleep.as_mut().poll(cx).is_ready() {
+                        sleep_armed = false;
+                        return Poll::Ready(Ok(Cause::Deadline));
+                    }
+                    sleep_armed = true;
                 }
                 if let Some(socket) = &backlog {
                     if let Poll::Ready(ready) = socket.poll_send_ready(cx) {
@@ -353,16 +383,25 @@ impl Driver {
             match cause {
                 Cause::Shutdown => return Ok(()),
                 Cause::Readable => {
-                    let handed_before = self.inner.borrow().handed_up;
-                    if self.receive_batch(&mut buf)? {
-                        // Watches react (and answer) right here, in this turn.
-                        run_reactions(&self.inner);
-                        if self.inner.borrow().handed_up != handed_before {
-                            // A subscriber or relay session has a notice: let it run
-                            // (and answer) before this task reads on, so the read that
-                            // finds the socket empty is not on the critical path of a
-                            // reply.
-                            tokio::task::yield_now().await;
+                    for _ in 0..READ_ROUNDS {
+                        let handed_before = self.inner.borrow().handed_up;
+                        let batch = self.receive_batch(&mut buf)?;
+                        if batch.woke {
+                            // Watches react (and answer) right here, in this turn.
+                            run_reactions(&self.inner);
+                            if self.inner.borrow().handed_up != handed_before {
+                                // A subscriber or relay session has a notice: let it
+                                // run (and answer) before this task reads on, so the
+                                // read that finds the socket empty is not on the
+                                // critical path of a reply.
+                                tokio::task::yield_now().await;
+                            }
+                        }
+                        // A batch that stopped at a datagram with work for others left
+                        // the socket readable: read on at once, without a pass through
+                        // the wait (its readiness check, the shutdown future).
+                        if batch.drained || !batch.woke {
+                            break;
                         }
                     }
                 }
@@ -377,13 +416,13 @@ impl Driver {
     }
 
     /// Reads and handles datagrams until the socket is empty, [`RECV_BATCH`] were read,
-    /// or one of them gave a waiting task or a watch something to do; returns whether
-    /// that happened.
+    /// or one of them gave a waiting task or a watch something to do; says whether that
+    /// happened and whether the sockets are empty.
     ///
     /// With peers, the team's and the unicast socket take turns, so neither starves the
     /// other; unicast from anyone but a configured peer is dropped and counted (with the
     /// unicast transport, on its one socket).
-    fn receive_batch(&self, buf: &mut [u8]) -> Result<bool, DriverError> {
+    fn receive_batch(&self, buf: &mut [u8]) -> Result<Batch, DriverError> {
         let mut inner = self.inner.borrow_mut();
         let handed_before = inner.handed_up;
         let sockets = [Some(&self.socket), self.unicast.as_ref()];
@@ -417,15 +456,22 @@ impl Driver {
                     // the clock is not read for it (a read per datagram was a sixth of
                     // the clock reads of a round trip).
                     let bytes = &buf[..n];
-                    let now = if inner.replica.is_own_frame(bytes) {
-                        inner.replica.now()
-                    } else {
-                        inner.clock.now()
-                    };
+                    if inner.replica.is_own_frame(bytes) {
+                        // Counted and skipped: it moves no clock, changes no value and
+                        // gives nothing to send or tell (the pump after the batch runs
+                        // anyway).
+                        let now = inner.replica.now();
+                        inner.replica.handle_datagram(now, from, bytes);
+                        continue;
+                    }
+                    let now = inner.clock.now();
                     inner.replica.handle_datagram(now, from, bytes);
                     inner.pump();
                     if inner.handed_up != handed_before || !inner.reactions.is_empty() {
-                        return Ok(true);
+                        return Ok(Batch {
+                            woke: true,
+                            drained: false,
+                        });
                     }
                 }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => continue,
@@ -446,6 +492,9 @@ impl Driver {
             }
         }
         inner.pump();
-        Ok(inner.handed_up != handed_before || !inner.reactions.is_empty())
+        Ok(Batch {
+            woke: inner.handed_up != handed_before || !inner.reactions.is_empty(),
+            drained: drained.iter().all(|&d| d),
+        })
     }
 }

@@ -398,21 +398,22 @@ impl Inner {
                             self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
                     }
-                    // Most changes (this robot's own writes among them) have no
-                    // listener: skip the lookup and the copy for those.
+                    // One match per watch and subscriber; the binding is looked up
+                    // (once) and cloned only for a listener whose pattern matches, so
+                    // most changes (this robot's own writes among them) cost a match
+                    // each and nothing more.
                     let matches = |p: &comms::Pattern| p.matches(&key);
-                    if !listened(&self.watches, &self.subscribers, matches) {
-                        continue;
-                    }
-                    let entry = self.replica.blackboard().get(&key);
-                    if let Some(entry) = entry {
-                        let notice = || Notice::Changed {
+                    let board = self.replica.blackboard();
+                    let mut entry = None;
+                    let mut notice = || {
+                        let entry = *entry.get_or_insert_with(|| board.get(&key));
+                        entry.map(|entry| Notice::Changed {
                             key: key.clone(),
                             entry: entry.clone(),
-                        };
-                        queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
-                        self.handed_up += deliver(&mut self.subscribers, matches, notice);
-                    }
+                        })
+                    };
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, &mut notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, &mut notice);
                 }
                 Event::TalkDelivered {
                     queue,
@@ -425,17 +426,19 @@ impl Inner {
                         slot.session.handle_talk(from, &queue, &value);
                         self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
-                    let notice = || Notice::Talk {
-                        from,
-                        queue: queue.clone(),
-                        seq,
-                        value: value.clone(),
+                    let mut notice = || {
+                        Some(Notice::Talk {
+                            from,
+                            queue: queue.clone(),
+                            seq,
+                            value: value.clone(),
+                        })
                     };
                     let matches = |p: &comms::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
-                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, &mut notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, &mut notice);
                 }
                 Event::TalkGivenUp {
                     queue,
@@ -458,17 +461,19 @@ impl Inner {
                             slot.session.lost_suppressed() - suppressed;
                         self.handed_up += u64::from(wake_if_changed(slot, before));
                     }
-                    let notice = || Notice::TalkLost {
-                        from,
-                        queue: queue.clone(),
-                        first,
-                        last,
+                    let mut notice = || {
+                        Some(Notice::TalkLost {
+                            from,
+                            queue: queue.clone(),
+                            first,
+                            last,
+                        })
                     };
                     let matches = |p: &comms::Pattern| {
                         p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
                     };
-                    queue_reactions(&mut self.watches, &mut self.reactions, matches, notice);
-                    self.handed_up += deliver(&mut self.subscribers, matches, notice);
+                    queue_reactions(&mut self.watches, &mut self.reactions, matches, &mut notice);
+                    self.handed_up += deliver(&mut self.subscribers, matches, &mut notice);
                 }
                 Event::PeerJoined { robot, incarnation } => {
                     tracing::info!(
@@ -625,46 +630,33 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
     wake
 }
 
-/// Whether a live watch or subscriber has a pattern that matches.
-fn listened(
-    watches: &[Weak<WatchSlot>],
-    subscribers: &[Weak<RefCell<SubQueue>>],
-    matches: impl Fn(&comms::Pattern) -> bool,
-) -> bool {
-    watches
-        .iter()
-        .filter_map(Weak::upgrade)
-        .any(|w| matches(&w.pattern))
-        || subscribers
-            .iter()
-            .filter_map(Weak::upgrade)
-            .any(|s| matches(&s.borrow().pattern))
-}
-
-/// Queues a notice for every live watch whose pattern matches; forgets dropped ones.
+/// Queues a notice for every live watch whose pattern matches (`notice` gives none when
+/// there is nothing to tell); forgets dropped ones.
 fn queue_reactions(
     watches: &mut Vec<Weak<WatchSlot>>,
     reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
     matches: impl Fn(&comms::Pattern) -> bool,
-    notice: impl Fn() -> Notice,
+    notice: &mut impl FnMut() -> Option<Notice>,
 ) {
     watches.retain(|weak| {
         let Some(watch) = weak.upgrade() else {
             return false;
         };
         if matches(&watch.pattern) {
-            reactions.push_back((weak.clone(), notice()));
+            if let Some(notice) = notice() {
+                reactions.push_back((weak.clone(), notice));
+            }
         }
         true
     });
 }
 
-/// Hands a notice to every live subscriber whose pattern matches; forgets dropped ones.
-/// Returns how many got it.
+/// Hands a notice to every live subscriber whose pattern matches (`notice` gives none
+/// when there is nothing to tell); forgets dropped ones. Returns how many got it.
 fn deliver(
     subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
     matches: impl Fn(&comms::Pattern) -> bool,
-    notice: impl Fn() -> Notice,
+    notice: &mut impl FnMut() -> Option<Notice>,
 ) -> u64 {
     let mut handed = 0;
     subscribers.retain(|weak| {
@@ -673,8 +665,10 @@ fn deliver(
         };
         let mut sub = sub.borrow_mut();
         if matches(&sub.pattern) {
-            sub.push(notice());
-            handed += 1;
+            if let Some(notice) = notice() {
+                sub.push(notice);
+                handed += 1;
+            }
         }
         true
     });

@@ -363,6 +363,10 @@ fn tokio_ping_pong(
 
 /// Runs `f` with a driver for robot `id` on its own thread and current-thread runtime;
 /// the driver stops when `f` returns.
+///
+/// The driver is the thread's main future, as in `huddle daemon` (and as the bare-tokio
+/// ping-pong's loop is): a datagram wakes it directly. The robot's software (`f`) is a
+/// task beside it.
 fn on_driver_thread<T: Send + 'static, F, Fut>(
     id: u8,
     (g, transport): (SocketAddrV4, Transport),
@@ -372,7 +376,7 @@ fn on_driver_thread<T: Send + 'static, F, Fut>(
 ) -> std::thread::JoinHandle<Result<T>>
 where
     F: FnOnce(Handle) -> Fut + Send + 'static,
-    Fut: std::future::Future<Output = Result<T>>,
+    Fut: std::future::Future<Output = Result<T>> + 'static,
 {
     std::thread::spawn(move || {
         pin.apply(usize::from(id) - 1);
@@ -389,13 +393,19 @@ where
             let driver = Driver::bind(cfg)?;
             let handle = driver.handle();
             let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-            let run = tokio::task::spawn_local(driver.run(async move {
-                let _ = stop_rx.await;
-            }));
-            let out = f(handle).await;
-            let _ = stop_tx.send(());
-            run.await??;
-            out
+            let robot = tokio::task::spawn_local(async move {
+                let out = f(handle).await;
+                let _ = stop_tx.send(());
+                out
+            });
+            // Ends when the robot's software does (or fails, or panics: the sender is
+            // dropped).
+            driver
+                .run(async move {
+                    let _ = stop_rx.await;
+                })
+                .await?;
+            robot.await.context("the robot's task panicked")?
         })
     })
 }
@@ -732,8 +742,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
         }
     };
     // The three ping-pongs in interleaved blocks, so that load from other processes on
-    // this shared machine falls on all three alike.
-    const BLOCKS: usize = 5;
+    // this shared machine falls on all three alike. Short blocks (a quarter of a second
+    // or less each) share it out more evenly: with five, one busy second could land on
+    // one measurement's block and move its median by a tenth.
+    const BLOCKS: usize = 20;
     let per_block = args.rounds.div_ceil(BLOCKS);
     let transport = Transport::from(args.transport);
     let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());

@@ -12,15 +12,43 @@ use crate::blackboard::PathHasher;
 /// starved by small values set again at every tick.
 ///
 /// Paths are the blackboard's own (shared): marking a value changed copies no string.
+///
+/// A short queue (the usual case: a robot sets a few values per tick, and a frame takes
+/// them all) is searched by a scan of its few paths; the hash set of members is built
+/// only once the queue holds [`INDEXED_FROM`] paths, and emptied with it. Hashing a path
+/// on every write and every send cost more than the scan.
 #[derive(Debug, Default)]
 pub(super) struct DirtyQueue {
     order: VecDeque<Arc<str>>,
+    /// The paths in `order`, while the queue is indexed; empty otherwise.
     members: HashSet<Arc<str>, PathHasher>,
 }
 
+/// The length from which membership is looked up by hash.
+const INDEXED_FROM: usize = 8;
+
 impl DirtyQueue {
+    /// Whether membership is kept in `members` (else a scan of `order` answers).
+    fn indexed(&self) -> bool {
+        !self.members.is_empty()
+    }
+
+    fn position(&self, path: &str) -> Option<usize> {
+        self.order.iter().position(|p| **p == *path)
+    }
+
     /// Marks `path` changed (a no-op if it already waits).
     pub(super) fn insert(&mut self, path: &Arc<str>) {
+        if !self.indexed() {
+            if self.position(path).is_some() {
+                return;
+            }
+            if self.order.len() + 1 < INDEXED_FROM {
+                self.order.push_back(path.clone());
+                return;
+            }
+            self.members.extend(self.order.iter().cloned());
+        }
         if self.members.insert(path.clone()) {
             self.order.push_back(path.clone());
         }
@@ -31,7 +59,11 @@ impl DirtyQueue {
     }
 
     pub(super) fn contains(&self, path: &str) -> bool {
-        self.members.contains(path)
+        if self.indexed() {
+            self.members.contains(path)
+        } else {
+            self.position(path).is_some()
+        }
     }
 
     /// The waiting paths, longest-waiting first.
@@ -47,19 +79,24 @@ impl DirtyQueue {
     /// Takes the `i`-th waiting path out of the queue.
     pub(super) fn remove_at(&mut self, i: usize) -> Option<Arc<str>> {
         let path = self.order.remove(i)?;
-        self.members.remove(&*path);
+        if self.indexed() {
+            self.members.remove(&*path);
+        }
         Some(path)
     }
 
     /// Takes `path` out of the queue, wherever it waits.
     pub(super) fn remove(&mut self, path: &str) -> bool {
-        if !self.members.remove(path) {
+        if self.indexed() && !self.members.remove(path) {
             return false;
         }
-        if let Some(i) = self.order.iter().position(|p| **p == *path) {
-            self.order.remove(i);
+        match self.position(path) {
+            Some(i) => {
+                self.order.remove(i);
+                true
+            }
+            None => false,
         }
-        true
     }
 
     pub(super) fn pop_first(&mut self) -> Option<Arc<str>> {
@@ -70,6 +107,74 @@ impl DirtyQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    #[derive(Clone, Debug)]
+    enum Op {
+        Insert(u8),
+        Remove(u8),
+        RemoveAt(u8),
+        PopFirst,
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        // 24 paths: the queue crosses `INDEXED_FROM` both ways.
+        prop_oneof![
+            3 => (0u8..24).prop_map(Op::Insert),
+            1 => (0u8..24).prop_map(Op::Remove),
+            1 => (0u8..12).prop_map(Op::RemoveAt),
+            1 => Just(Op::PopFirst),
+        ]
+    }
+
+    proptest! {
+        /// Scanned while short, hashed while long: the queue answers as a plain
+        /// first-changed-first list with a membership set would, after every step.
+        #[test]
+        fn the_queue_behaves_as_a_list_in_first_changed_order(
+            ops in proptest::collection::vec(op(), 0..200)
+        ) {
+            let paths: Vec<Arc<str>> = (0..24).map(|i| Arc::from(format!("p.{i}"))).collect();
+            let mut q = DirtyQueue::default();
+            let mut model: Vec<Arc<str>> = Vec::new();
+            for op in ops {
+                match op {
+                    Op::Insert(i) => {
+                        let p = &paths[usize::from(i)];
+                        q.insert(p);
+                        if !model.contains(p) {
+                            model.push(p.clone());
+                        }
+                    }
+                    Op::Remove(i) => {
+                        let p = &paths[usize::from(i)];
+                        let was = model.iter().position(|m| m == p);
+                        if let Some(at) = was {
+                            model.remove(at);
+                        }
+                        prop_assert_eq!(q.remove(p), was.is_some());
+                    }
+                    Op::RemoveAt(i) => {
+                        let i = usize::from(i);
+                        let expected = (i < model.len()).then(|| model.remove(i));
+                        prop_assert_eq!(q.remove_at(i), expected);
+                    }
+                    Op::PopFirst => {
+                        let expected = (!model.is_empty()).then(|| model.remove(0));
+                        prop_assert_eq!(q.pop_first(), expected);
+                    }
+                }
+                let order: Vec<Arc<str>> = q.iter().cloned().collect();
+                prop_assert_eq!(&order, &model);
+                prop_assert_eq!(q.is_empty(), model.is_empty());
+                for p in &paths {
+                    prop_assert_eq!(q.contains(p), model.contains(p), "{}", p);
+                }
+                // The index, when kept, holds exactly the queue's paths.
+                prop_assert!(q.members.is_empty() || q.members.len() == q.order.len());
+            }
+        }
+    }
 
     #[test]
     fn a_value_set_again_keeps_its_place_and_the_longest_waiting_goes_first() {

@@ -23,6 +23,17 @@ impl Replica {
     /// Feeds one received datagram. Never panics; anything wrong with it is a counted
     /// drop and an [`Event::FrameDropped`], and nothing stored is lost.
     pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) {
+        if bytes.len() <= self.cfg.mtu && self.is_own_frame(bytes) {
+            // Our own frame, looped back by the kernel (every frame we send comes back:
+            // half of what a busy replica reads): the plain header names its sender, so
+            // it is counted and skipped before the body is decoded or the tag checked,
+            // and before anything is set up to apply a frame. A forged copy of our own
+            // header is ignored the same way, which is all a checked one would get.
+            self.advance(now);
+            self.count_frame_in(bytes);
+            self.stats.own_frames += 1;
+            return;
+        }
         self.timers_may_change();
         // The table is shared (a reference count, no copy): the items borrow it (and the
         // datagram) while they are applied to `self`.
@@ -30,6 +41,11 @@ impl Replica {
         let mut items = recycle(std::mem::take(&mut self.item_scratch));
         self.receive(now, from, bytes, &known, &mut items);
         self.item_scratch = recycle(items);
+    }
+
+    fn count_frame_in(&mut self, bytes: &[u8]) {
+        self.stats.frames_in += 1;
+        self.stats.bytes_in += bytes.len() as u64;
     }
 
     fn receive<'a>(
@@ -41,19 +57,12 @@ impl Replica {
         items: &mut Vec<ItemView<'a>>,
     ) {
         self.advance(now);
-        self.stats.frames_in += 1;
-        self.stats.bytes_in += bytes.len() as u64;
+        self.count_frame_in(bytes);
         if bytes.len() > self.cfg.mtu {
             return self.drop_frame(from, DropReason::Oversized);
         }
-        // Our own frame, looped back by the kernel (every frame we send comes back): the
-        // plain header names its sender, so it is skipped before the body is decoded or
-        // the tag checked. A forged copy of our own header is ignored the same way, which
-        // is all a checked one would get.
-        if self.is_own_frame(bytes) {
-            self.stats.own_frames += 1;
-            return;
-        }
+        // Our own frames (looped back by the kernel) were skipped in `handle_datagram`
+        // before getting here.
         // One pass: the items come out validated (none if the frame is malformed).
         let frame =
             match wire::decode_frame_into(bytes, self.cfg.team_id, self.key.as_ref(), known, items)

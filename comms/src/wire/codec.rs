@@ -23,10 +23,22 @@ pub(super) const ITEM_TALK_HEAD: u64 = 2;
 pub(super) const ITEM_NACK: u64 = 3;
 pub(super) const ITEM_KNOWN_UPDATE: u64 = 4;
 
+/// bincode's output straight into the frame's buffer: no `std::io::Write` adapter (and
+/// its error plumbing) per primitive written, on every item of every frame.
+struct VecWriter<'a>(&'a mut Vec<u8>);
+
+impl bincode::enc::write::Writer for VecWriter<'_> {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) -> Result<(), EncodeError> {
+        self.0.extend_from_slice(bytes);
+        Ok(())
+    }
+}
+
 /// Appends `v` as a varint to `out`.
 pub(super) fn put_varint(v: u64, out: &mut Vec<u8>) {
     // Writing into a Vec cannot fail.
-    let _ = bincode::encode_into_std_write(v, out, config());
+    let _ = bincode::encode_into_writer(v, VecWriter(out), config());
 }
 
 /// The type an item goes out as, and its known-path index if it is item 4.
@@ -102,7 +114,7 @@ pub(super) fn put_item(
     if let Some(len) = fields_len {
         put_varint(len as u64, out);
     }
-    let _ = bincode::encode_into_std_write(Fields { item, index }, out, config());
+    let _ = bincode::encode_into_writer(Fields { item, index }, VecWriter(out), config());
 }
 
 /// Why bytes being read are not what they should be.

@@ -114,7 +114,13 @@ impl<'k> FrameWriter<'k> {
                 if had {
                     self.buf[HEADER_LEN..HEADER_LEN + ECHO_LEN].copy_from_slice(&b);
                 } else {
-                    self.buf.splice(HEADER_LEN..HEADER_LEN, b);
+                    // Room after the header: the few bytes behind it (the seq, any items)
+                    // move up in one copy (a `splice` cost more than the rest of this
+                    // call, on every frame).
+                    let len = self.buf.len();
+                    self.buf.resize(len + ECHO_LEN, 0);
+                    self.buf.copy_within(HEADER_LEN..len, HEADER_LEN + ECHO_LEN);
+                    self.buf[HEADER_LEN..HEADER_LEN + ECHO_LEN].copy_from_slice(&b);
                     self.items_at += ECHO_LEN;
                     self.buf[3] |= FLAG_ECHO;
                 }
