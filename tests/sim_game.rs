@@ -169,3 +169,49 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
         "robot 3 claims nothing while penalised"
     );
 }
+
+/// Scenario: robot 3 waits out its penalty beyond the touchline, and a teammate playing
+/// the ball along the line runs into it (here robot 2 is put 0.25 m from it before every
+/// physics step, overlapping the two bodies, for 2 s). In the ideal world of seed 9 this
+/// happened at 445 s: the contact shoved robot 3 every step, the referee put it back
+/// after each, and its odometry read the shoves (every motion seen, as here) but not the
+/// put-backs, so its pose belief walked metres off while it stood. A penalised robot off
+/// the field is no body on it: nothing shoves it, it stands where the referee put it, and
+/// it believes so.
+#[test]
+fn a_penalised_robot_off_the_field_is_not_shoved_and_knows_where_it_stands() {
+    let mut cfg = SimConfig {
+        duration_s: 600.0,
+        seed: 9,
+        budget: Some(comms::BudgetSpec::SPL),
+        game: Some(short_game()),
+        ..SimConfig::default()
+    };
+    cfg.field.shove_seen_frac = 1.0;
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    while !sim.referee().expect("a game").penalised(3) {
+        sim.step();
+        assert!(!sim.finished(), "robot 3 is penalised in the first half");
+    }
+    // Let the pick-up settle (the robot is placed and told where it stands).
+    for _ in 0..50 {
+        sim.step();
+    }
+    let spot = sim.world.robots[2].pose.at;
+    let mut drift_m: f64 = 0.0;
+    for _ in 0..200 {
+        sim.world.robots[1].pose.at = spot + huddle::sim::field::geometry::Vec2::new(0.25, 0.0);
+        sim.step();
+        assert!(sim.referee().expect("a game").penalised(3));
+        let body = sim.world.robots[2].pose.at;
+        assert!(
+            body.distance(spot) < 1e-9,
+            "robot 3 stands where the referee put it: {body:?} against {spot:?}"
+        );
+        drift_m = drift_m.max(sim.robots[2].pose_belief.at.distance(spot));
+    }
+    assert!(
+        drift_m < 0.2,
+        "robot 3's belief stays on its spot while a teammate runs into it: {drift_m:.2} m off"
+    );
+}
