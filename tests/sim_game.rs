@@ -6,9 +6,9 @@
 //!
 //! Claims: the team is never illegal (no message at the GC's 0, none over 128 B); it uses
 //! most of its budget (what the margin, the reserve and the priority room leave: at
-//! least 75% of so small a budget); out of play it tells the team nothing (the
-//! kick-off is settled by the hold, without messages: `TeamLayer::set_kick_off_next`),
-//! so hardly a frame goes in the states the GC does not count;
+//! least 75% of so small a budget); out of play it tells the team nothing but the
+//! kick-off taker's claim in Set (`TeamLayer::set_kick_off_next`), so hardly a frame
+//! goes in the states the GC does not count;
 //! robot 3 is off the field for 15 s of its penalty timer (which runs in Ready and
 //! Playing, as GameController3's), claims nothing meanwhile, and from the GC's next
 //! packet no teammate counts its claim.
