@@ -6,9 +6,9 @@
 //!
 //! Claims: the team is never illegal (no message at the GC's 0, none over 128 B); it uses
 //! most of its budget (what the margin, the reserve and the priority room leave: at
-//! least 75% of so small a budget); out of play it tells the team nothing (the
-//! kick-off is settled by the hold, without messages: `TeamLayer::set_kick_off_next`),
-//! so hardly a frame goes in the states the GC does not count;
+//! least 75% of so small a budget); out of play it tells the team nothing but the
+//! kick-off taker's claim in Set (`TeamLayer::set_kick_off_next`), so hardly a frame
+//! goes in the states the GC does not count;
 //! robot 3 is off the field for 15 s of its penalty timer (which runs in Ready and
 //! Playing, as GameController3's), claims nothing meanwhile, and from the GC's next
 //! packet no teammate counts its claim.
@@ -167,5 +167,51 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
     assert!(
         told.iter().all(|s| s.h >= team::PENALIZED_COST),
         "robot 3 claims nothing while penalised"
+    );
+}
+
+/// Scenario: robot 3 waits out its penalty beyond the touchline, and a teammate playing
+/// the ball along the line runs into it (here robot 2 is put 0.25 m from it before every
+/// physics step, overlapping the two bodies, for 2 s). In the ideal world of seed 9 this
+/// happened at 445 s: the contact shoved robot 3 every step, the referee put it back
+/// after each, and its odometry read the shoves (every motion seen, as here) but not the
+/// put-backs, so its pose belief walked metres off while it stood. A penalised robot off
+/// the field is no body on it: nothing shoves it, it stands where the referee put it, and
+/// it believes so.
+#[test]
+fn a_penalised_robot_off_the_field_is_not_shoved_and_knows_where_it_stands() {
+    let mut cfg = SimConfig {
+        duration_s: 600.0,
+        seed: 9,
+        budget: Some(comms::BudgetSpec::SPL),
+        game: Some(short_game()),
+        ..SimConfig::default()
+    };
+    cfg.field.shove_seen_frac = 1.0;
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    while !sim.referee().expect("a game").penalised(3) {
+        sim.step();
+        assert!(!sim.finished(), "robot 3 is penalised in the first half");
+    }
+    // Let the pick-up settle (the robot is placed and told where it stands).
+    for _ in 0..50 {
+        sim.step();
+    }
+    let spot = sim.world.robots[2].pose.at;
+    let mut drift_m: f64 = 0.0;
+    for _ in 0..200 {
+        sim.world.robots[1].pose.at = spot + huddle::sim::field::geometry::Vec2::new(0.25, 0.0);
+        sim.step();
+        assert!(sim.referee().expect("a game").penalised(3));
+        let body = sim.world.robots[2].pose.at;
+        assert!(
+            body.distance(spot) < 1e-9,
+            "robot 3 stands where the referee put it: {body:?} against {spot:?}"
+        );
+        drift_m = drift_m.max(sim.robots[2].pose_belief.at.distance(spot));
+    }
+    assert!(
+        drift_m < 0.2,
+        "robot 3's belief stays on its spot while a teammate runs into it: {drift_m:.2} m off"
     );
 }

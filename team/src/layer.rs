@@ -263,6 +263,9 @@ pub struct TeamLayer {
     kick_off_hold_until_s: Option<f64>,
     /// In the hold, and not the kick-off taker: it leaves the ball to the taker.
     kick_off_yield: bool,
+    /// In Set, as the taker: how often it told the team its claim, and when last (see
+    /// [`TeamLayer::set_kick_off_next`]).
+    kick_off_claims: (u32, f64),
     /// The GameController has just said Set: at the next tick the ball is put back on the
     /// kick-off spot (see [`TeamLayer::forget_ball`]).
     kick_off_place: bool,
@@ -279,6 +282,16 @@ pub const KICK_OFF_HOLD_S: f64 = 3.0;
 /// about metres to the ball: the kicker stands at the centre spot, the rest of the team
 /// outside the centre circle, 0.75 m in the SPL, and further).
 pub const KICK_OFF_TAKER_COST: f64 = 1.0;
+
+/// In Set the kick-off taker tells its claim this often (see
+/// [`TeamLayer::set_kick_off_next`]). Tuned on seeds 4–11 (`huddle sim --budget spl
+/// --game full`, both worlds; docs/results/gamecontroller-game.md, "Sixth session"): 1,
+/// 2 and 3 were within the games' noise of each other, and one frame a kick-off is the
+/// cheapest.
+pub const KICK_OFF_SET_CLAIMS: u32 = 1;
+
+/// … at least this far apart, seconds.
+pub const KICK_OFF_SET_CLAIM_GAP_S: f64 = 1.5;
 
 /// σ of where the referee puts the ball for a kick-off, per axis, m: on the centre
 /// mark, give or take a ball's width.
@@ -402,6 +415,7 @@ impl TeamLayer {
             kick_off_next: false,
             kick_off_hold_until_s: None,
             kick_off_yield: false,
+            kick_off_claims: (0, f64::NEG_INFINITY),
             kick_off_place: false,
             was_in_play: true,
         }
@@ -421,8 +435,9 @@ impl TeamLayer {
     /// [`KICK_OFF_HOLD_S`] after the robot hears play, the **kick-off hold**: only a
     /// robot whose own cost is below [`KICK_OFF_TAKER_COST`] (the kicker the rules put
     /// at the centre spot) may claim the ball; every other robot decides as if it had no
-    /// ball, on its own cost, not on a claim it told before the restart. No message is
-    /// needed: each robot knows where it stands.
+    /// ball, on its own cost, not on a claim it told before the restart. The taker tells
+    /// its claim in Set, with priority, [`KICK_OFF_SET_CLAIMS`] times: so at the end of
+    /// the hold its teammates hold it and leave it the ball; the others tell nothing.
     ///
     /// Why: out of play nothing is told, and a goal's Ready and Set last longer than a
     /// claim is held under a budget (15 s in the SPL), so at the whistle no robot holds a
@@ -434,6 +449,15 @@ impl TeamLayer {
     /// earlier remedy, every robot telling its cost in Set, spent a counted message per
     /// robot per kick-off, and under a budget with no room those claims did not go out
     /// at all.
+    ///
+    /// Why the taker's claim in Set (one counted message a kick-off, from the priority
+    /// room the replica restarts at Set): at the whistle its claim was otherwise news
+    /// only if it changed what the taker told last (35 s and more ago, dropped by every
+    /// teammate) and so went as an ordinary frame, if at all; at the game's first
+    /// kick-off it was the team's first message, and the pacing line opens no ordinary
+    /// frame in the game's first seconds. At the end of the hold a teammate that had not
+    /// heard it went too: seeds 4–43 (both worlds), 2.3–2.5 s of conflict at the first
+    /// kick-off on average, 0.1–0.2 s with the claim in Set.
     ///
     /// Set also says where the ball is: on the centre spot, so at the next tick every
     /// ball belief goes and the team ball is put there (see [`TeamLayer::forget_ball`]);
@@ -448,6 +472,7 @@ impl TeamLayer {
         if begins {
             self.kick_off_hold_until_s = Some(f64::INFINITY);
             self.kick_off_place = true;
+            self.kick_off_claims = (0, f64::NEG_INFINITY);
         }
         self.kick_off_next = set;
         begins
@@ -878,7 +903,16 @@ impl TeamLayer {
             };
             return (vec![(arbitration::heuristic_key(), Value::from(out))], true);
         }
-        if !self.in_play {
+        // In Set the taker tells its claim (see `set_kick_off_next`).
+        let set_claim = !self.in_play
+            && self.kick_off_next
+            && self.kick_off_claims.0 < KICK_OFF_SET_CLAIMS
+            && t - self.kick_off_claims.1 >= KICK_OFF_SET_CLAIM_GAP_S
+            && self.alive
+            && self.is_field_player()
+            && !self.kick_off_yield
+            && posted.going;
+        if !self.in_play && !set_claim {
             return (Vec::new(), false);
         }
         if let Some(bytes) = lwm {
@@ -915,9 +949,13 @@ impl TeamLayer {
                 .then(|| self.arbiter.params().stale_after.as_secs_f64() / 2.0),
             frame_anyway: receiver_changed,
         };
-        let action = self
-            .policy
-            .decide(cfg.send_policy, &now, world_model_waiting, claim_waiting);
+        let mut action =
+            self.policy
+                .decide(cfg.send_policy, &now, world_model_waiting, claim_waiting);
+        if set_claim {
+            self.kick_off_claims = (self.kick_off_claims.0 + 1, t);
+            action = self.policy.insist();
+        }
         if self.compact {
             // Sparse messages: decide on the claim teammates hold (see `set_told`).
             self.arbiter.set_told(self.policy.told());

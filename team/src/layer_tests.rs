@@ -590,3 +590,80 @@ fn at_a_kick_off_the_takers_claim_finds_room_in_a_spent_budget() {
         "frames in the whistle's first two ticks, with and without the restart"
     );
 }
+
+/// Scenario: the game's first kick-off under the SPL budget (pooled, VOI). Robot 3
+/// stands at the ball on the centre spot (cost 0.1), robot 4 on its kick-off spot 2 m
+/// off; nobody has told the team anything yet. Before, the taker's claim at the whistle
+/// was its first message, an ordinary frame, and the pacing line opens none in the
+/// game's first seconds: at hold's end robot 4 had heard nobody and went too
+/// (`huddle sim --budget spl --game full`, seeds 4–43: a 2.3–2.5 s conflict at the first
+/// kick-off on average). Now in Set the taker tells its claim, with priority (the
+/// team's priority room starts afresh at Set), [`KICK_OFF_SET_CLAIMS`] times and no more;
+/// robot 4 tells nothing, and at the end of the hold it leaves the ball to the claim it
+/// holds.
+#[test]
+fn in_set_the_kick_off_taker_tells_its_claim_and_teammates_leave_it_the_ball() {
+    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
+    let mut params = ArbitrationParams::default();
+    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
+    cfg.send_policy = SendPolicy::Voi;
+    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let mut taker = TeamLayer::new(3, false, params, Pose::default(), &cal, &cfg.world_model, 5);
+    let mut far = TeamLayer::new(4, false, params, Pose::default(), &cal, &cfg.world_model, 5);
+    for r in [&mut taker, &mut far] {
+        r.set_in_play(false);
+        assert!(r.set_kick_off_next(true), "Set: a kick-off begins");
+    }
+    let quiet = Blackboard::new(3);
+    let mut claims = Vec::new();
+    for k in 0..50 {
+        let s = 50.0 + 0.1 * f64::from(k);
+        taker.h = 0.1;
+        let (_, posted) = taker.decide(&quiet, at(s));
+        let (writes, priority) =
+            taker.finish(&cfg, at(s), None, posted, 0, false, false, false, Some(-5));
+        if let Some((_, value)) = writes
+            .iter()
+            .find(|(key, _)| *key == arbitration::heuristic_key())
+        {
+            assert!(priority, "{s} s: the taker's claim goes with priority");
+            assert_eq!(
+                value,
+                &Value::from(Posted {
+                    h: 0.1,
+                    going: true
+                }),
+                "{s} s: the taker claims the ball"
+            );
+            claims.push(s);
+        }
+        far.h = 2.0;
+        let (_, posted) = far.decide(&quiet, at(s));
+        let (writes, _) = far.finish(&cfg, at(s), None, posted, 0, false, false, false, Some(-5));
+        assert!(
+            writes.is_empty(),
+            "{s} s: robot 4 tells nothing in Set: {writes:?}"
+        );
+    }
+    assert_eq!(
+        claims.len(),
+        KICK_OFF_SET_CLAIMS as usize,
+        "told in Set this often and no more: at {claims:?} s"
+    );
+    assert!(
+        claims
+            .windows(2)
+            .all(|w| w[1] - w[0] >= KICK_OFF_SET_CLAIM_GAP_S - 1e-9),
+        "spaced: {claims:?}"
+    );
+    // Robot 4 heard it; play at 55 s, the hold runs out at 58 s.
+    let mut board = Blackboard::new(4);
+    hear_claim(&mut board, 3, 0.1, true, 1, at(50.05));
+    far.set_in_play(true);
+    far.set_kick_off_next(false);
+    for s in [55.0, 55.0 + KICK_OFF_HOLD_S + 0.1, 60.0] {
+        let (decision, _) = far.decide(&board, at(s));
+        assert!(!far.going(), "{s} s: robot 4 leaves the ball to the taker");
+        assert_eq!(decision.goer, Some(3), "{s} s");
+    }
+}

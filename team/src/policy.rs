@@ -31,7 +31,10 @@
 //!   priority.
 //! - Under both: a kick and a goer change go with priority (the replica may spend its
 //!   reserve on them at once), and under a budget a goer's claim goes again before
-//!   teammates would drop it (`keepalive_s`).
+//!   teammates would drop it (`keepalive_s`). Under VOI with a budget a robot's first
+//!   message goes with priority when it claims the ball: teammates hold nothing of it,
+//!   so the claim is a goer change for them (before, it waited for the pacing line,
+//!   which opens no ordinary frame in a game's first seconds).
 
 use fusion::{BallEstimate, BallModel};
 use serde::Serialize;
@@ -287,6 +290,17 @@ impl PolicyState {
         }
     }
 
+    /// Whatever [`PolicyState::decide`] said at this tick, its newest state goes, with
+    /// priority: the robot must tell the team now (the kick-off taker's claim in Set,
+    /// see `TeamLayer::set_kick_off_next`). Call it after `decide`.
+    pub fn insist(&mut self) -> Action {
+        if let Some(latest) = self.latest {
+            self.pending = Some(latest);
+        }
+        self.claim_pending = None;
+        Action::Send { priority: true }
+    }
+
     /// The world model of the latest tick rides in a frame that goes anyway (with a claim
     /// written between ticks), unless that tick's already went or waits: teammates hold
     /// it once that frame went. Whether it rides.
@@ -405,7 +419,8 @@ impl PolicyState {
             return self.voi_unbudgeted(now);
         }
         let Some(last) = self.last else {
-            return Some(false);
+            // Teammates hold nothing of it: a goer's claim is a goer change for them.
+            return Some(now.going);
         };
         if self.urgent(now) {
             return Some(true);
@@ -550,6 +565,29 @@ mod tests {
             gate_chi2: 13.82,
             headroom: Some(10),
             frame_anyway: false,
+        }
+    }
+
+    /// Scenario: a game's first kick-off; robot 3 claims the ball at the whistle and has
+    /// never sent a message. Teammates hold nothing of it, so its claim is a goer change
+    /// for them and goes with priority; before, a first message always went as an
+    /// ordinary frame, which the pacing line does not open in a game's first seconds
+    /// (ideal seed 602: the claim waited 5 s and a second robot went). A robot that
+    /// does not go has no such news: its first message is ordinary.
+    #[test]
+    fn a_goer_s_first_message_goes_with_priority() {
+        let model = BallModel::default();
+        for (going, priority) in [(true, true), (false, false)] {
+            let mut p = PolicyState::default();
+            let first = Now {
+                headroom: Some(-3),
+                ..now(&model, 55.0, going, 0.1)
+            };
+            assert_eq!(
+                p.decide(SendPolicy::Voi, &first, false, false),
+                Action::Send { priority },
+                "going: {going}"
+            );
         }
     }
 

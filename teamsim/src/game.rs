@@ -12,7 +12,9 @@
 //!
 //! The field follows the referee's truth: outside Playing the ball lies on the centre spot
 //! and the opponents on their kick-off spots; a penalised robot's body is carried to the
-//! sideline and comes back when its penalty timer (45 s of Ready and Playing) has run,
+//! sideline, off the field (no body on it: nothing there shoves it, see
+//! [`crate::field::World::set_off_field`]), and comes back when its penalty timer (45 s
+//! of Ready and Playing) has run,
 //! on the touchline in its own half on the side away from the ball (it is told where, as
 //! a team is by the rules). Arbitration and world-model figures are sampled in Playing
 //! only.
@@ -429,6 +431,8 @@ impl Simulation {
                 // Picked up and put on the sideline: it looks around and knows it.
                 let spot = sideline_spot(&self.cfg, i);
                 self.world.robots[i].pose = spot;
+                self.world.robots[i].velocity = Vec2::default();
+                self.world.set_off_field(i, true);
                 let wm = self.cfg.brain.team.world_model;
                 self.robots[i].place(spot, &wm);
             }
@@ -453,6 +457,7 @@ impl Simulation {
                 };
                 self.world.robots[i].pose = spot;
                 self.world.robots[i].velocity = Vec2::default();
+                self.world.set_off_field(i, false);
                 let wm = self.cfg.brain.team.world_model;
                 self.robots[i].place(spot, &wm);
             }

@@ -224,6 +224,9 @@ pub struct World {
     pub goals_against: u32,
     commands: Vec<MotionCommand>,
     odometry: Vec<Odometry>,
+    /// Per robot: carried off the field (a penalty), so no body on it: see
+    /// [`World::set_off_field`].
+    off_field: Vec<bool>,
     /// One random stream per robot (camera, odometry) and one for the world, so that
     /// adding a robot does not change what the others see.
     robot_rngs: Vec<ChaCha8Rng>,
@@ -267,6 +270,7 @@ impl World {
             goals_against: 0,
             commands: vec![MotionCommand::default(); n],
             odometry: vec![Odometry::default(); n],
+            off_field: vec![false; n],
             robot_rngs,
             world_rng,
         }
@@ -275,6 +279,26 @@ impl World {
     /// The configuration.
     pub fn config(&self) -> &FieldConfig {
         &self.cfg
+    }
+
+    /// Robot `i` was carried off the field (`true`: a referee's penalty) or put back on
+    /// it. Off the field its body takes part in no contact: the ball and every other body
+    /// pass it by, so nothing shoves it and its odometry reads only its own motion.
+    ///
+    /// Why: a penalised robot waits beyond the touchline, where play along the line ran
+    /// into it. A teammate chasing the ball there pushed it every physics step, the
+    /// referee put it back after each (`teamsim::game`), and its odometry read the shoves
+    /// but not the put-backs: about 2 m/s of motion while it stood, its pose belief
+    /// walked metres off (ideal world, seed 9: robot 3 at 445 s).
+    pub fn set_off_field(&mut self, i: usize, off: bool) {
+        if let Some(o) = self.off_field.get_mut(i) {
+            *o = off;
+        }
+    }
+
+    /// Whether robot `i` is off the field (see [`World::set_off_field`]).
+    pub fn off_field(&self, i: usize) -> bool {
+        self.off_field.get(i).copied().unwrap_or(false)
     }
 
     /// Set robot `i`'s motion command (kept until the next one).
@@ -477,6 +501,9 @@ impl World {
         );
         let n = self.robots.len();
         for k in 0..n + self.opponents.len() {
+            if k < n && self.off_field[k] {
+                continue;
+            }
             let (body, r) = if k < n {
                 (&self.robots[k], kr)
             } else {
@@ -495,7 +522,10 @@ impl World {
                 }
             }
         }
-        let mut bodies: Vec<(bool, usize)> = (0..n).map(|i| (true, i)).collect();
+        let mut bodies: Vec<(bool, usize)> = (0..n)
+            .filter(|&i| !self.off_field[i])
+            .map(|i| (true, i))
+            .collect();
         bodies.extend((0..self.opponents.len()).map(|i| (false, i)));
         for a in 0..bodies.len() {
             for b in a + 1..bodies.len() {
