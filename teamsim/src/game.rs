@@ -362,6 +362,8 @@ impl Simulation {
             }
         }
         let Some(game) = &self.game else { return };
+        // The robots that hear Set now: the references place the ball as they do.
+        let mut set_heard = Vec::new();
         // Each robot's order from what it heard; a body off the field stands.
         for i in 0..self.robots.len() {
             let heard = game.trackers[i].state();
@@ -374,6 +376,7 @@ impl Simulation {
                 if let Some(replica) = self.harness.replica_mut(i) {
                     replica.restart_priority_room(local);
                 }
+                set_heard.push(i);
             }
             self.robots[i].order = match heard {
                 _ if penalised => Order::Stand,
@@ -382,6 +385,7 @@ impl Simulation {
                 _ => Order::Stand,
             };
         }
+        self.place_references(&set_heard, t_s);
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their
