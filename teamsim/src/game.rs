@@ -385,7 +385,7 @@ impl Simulation {
                 _ => Order::Stand,
             };
         }
-        self.place_references(&set_heard, t_s);
+        self.place_references(&set_heard, 0.0);
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their

@@ -701,7 +701,7 @@ impl Simulation {
                 self.robots[i].forget_ball(now_s);
             }
             let everyone: Vec<usize> = (0..self.robots.len()).collect();
-            self.place_references(&everyone, t + dt);
+            self.place_references(&everyone, dt);
         }
         self.step += 1;
         if self.step.is_multiple_of(CLOCK_SAMPLE_STEPS) {

@@ -502,20 +502,19 @@ impl DelayedCentral {
 
 impl super::Simulation {
     /// The ball was put on the centre spot for a kick-off, and robots `heard` learnt it
-    /// at global `t_s` (at a goal every robot, at once; at the GameController's Set each
-    /// robot as its packet arrives): each one's delivery reference places it there on
+    /// `after_s` after the step's start (at a goal every robot, at once, at the step's
+    /// end; at the GameController's Set each robot as its packet arrives, at its start): each one's delivery reference places it there on
     /// the robot's clock, as its team layer does, and the references that see the whole
     /// team place it on the global clock. Why Set too: a half's kick-off has no goal, and
     /// a blind robot's delivery reference, told nothing out of play, kept the ball of the
     /// half before while its team layer had placed it (`TeamLayer::set_kick_off_next`).
-    pub(crate) fn place_references(&mut self, heard: &[usize], t_s: f64) {
-        let shift = t_s - self.time_s();
+    pub(crate) fn place_references(&mut self, heard: &[usize], after_s: f64) {
         for &i in heard {
-            let now_s = super::robot::seconds(self.harness.local_now(i)) + shift;
+            let now_s = super::robot::seconds(self.harness.local_now(i)) + after_s;
             self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
         }
         if let (Some(r), false) = (self.robots.first(), heard.is_empty()) {
-            let placed = r.kick_off_ball(t_s);
+            let placed = r.kick_off_ball(self.time_s() + after_s);
             self.central.place(placed);
             self.central_kicks.place(placed);
             self.delayed.place(placed);
