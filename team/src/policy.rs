@@ -28,7 +28,8 @@
 //!   [`VOI_SPARE`] frames in hand (the tolerance grows, pose and heartbeat wait), so a
 //!   ball that moves unforeseen goes out at once.
 //!   A ball more than [`VOI_URGENT_BALL_M`] off what teammates believe goes with
-//!   priority.
+//!   priority while the team is not beyond its pacing line
+//!   ([`VOI_URGENT_BALL_MIN_HEADROOM`]): the rest of the priority room is for claims.
 //! - Under both: a kick and a goer change go with priority (the replica may spend its
 //!   reserve on them at once), and under a budget a goer's claim goes again before
 //!   teammates would drop it (`keepalive_s`). Under VOI with a budget a robot's first
@@ -79,6 +80,27 @@ pub const VOI_BALL_TOLERANCE_M: f64 = 1.0;
 /// 2.5 m 1.027 m 97.94%, 3.0 m 1.022 m 97.90% (the baseline: 1.452 m 96.88%). Below
 /// 1.25 m the priority frames crowd out claims; above it the tail waits.
 pub const VOI_URGENT_BALL_M: f64 = 1.25;
+/// Urgent ball news ([`VOI_URGENT_BALL_M`]) goes with priority only while the budget's
+/// headroom is at least this (0: the team is not beyond its pacing line); beyond it, it
+/// waits for an ordinary frame. The team's priority room (one frame per robot beyond
+/// the line, `comms` budget) is then left to claims and kicks. Why: traced on tuning
+/// seeds 103–107 (SPL, 300 s), VOI's conflicts were nearly all a goer's claim (its
+/// keepalive or its goer change) waiting for a frame while the team stood beyond the
+/// room; urgent ball news asked for the room 120–270 times in 300 s (a team's budget
+/// is 1 frame/s) and got it in 0.1 s, goer changes waited 0.2–0.9 s, keepalives
+/// 0.7–3.7 s. Tuned on seeds 101–110 and 4–19 (`huddle sim --budget spl`, 300 s), one
+/// goer VOI − baseline in points, drawn / ideal world (blind robots' team-ball RMSE
+/// VOI / baseline, drawn / ideal):
+///
+/// | minimum headroom | 101–110 | 4–19 | blind, 101–110 | blind, 4–19 |
+/// |---|---|---|---|---|
+/// | none (−4: the whole room) | +0.28 / −0.80 | −1.68 / +0.90 | 0.69 / 0.61 | 0.68 / 0.59 |
+/// | −3 | +0.00 / +2.74 | | 0.69 / 0.66 | |
+/// | −2 | +1.52 / +1.76 | | 0.68 / 0.63 | |
+/// | −1 | +1.42 / +1.82 | +1.02 / +0.36 | 0.79 / 0.63 | 0.68 / 0.61 |
+/// | **0** | +2.42 / +1.36 | +1.40 / +2.18 | 0.70 / 0.65 | 0.67 / 0.64 |
+/// | 1 (never beyond the line) | +2.72 / +1.47 | +1.62 / +1.05 | 0.75 / 0.69 | 0.71 / 0.63 |
+pub const VOI_URGENT_BALL_MIN_HEADROOM: i64 = 0;
 /// … with plenty of budget in hand (a Humanoid budget), metres.
 pub const VOI_ABUNDANT_BALL_TOLERANCE_M: f64 = 0.25;
 /// Ball news goes out under a budget only once the robot's own track took a sighting at
@@ -518,7 +540,12 @@ impl PolicyState {
                     e.norm() * theirs / total
                 };
                 if significant && shift > VOI_URGENT_BALL_M {
-                    return Some(true);
+                    // With priority only while the team is not beyond its line: the
+                    // rest of the room beyond it is for claims and kicks.
+                    return Some(
+                        now.headroom
+                            .is_none_or(|h| h >= VOI_URGENT_BALL_MIN_HEADROOM),
+                    );
                 }
                 (significant && shift > tolerance).then_some(false)
             }
@@ -698,20 +725,27 @@ mod tests {
         }
     }
 
-    /// A ball far off what teammates believe goes at once, with priority, however dry
-    /// the budget; a smaller error waits for spare frames.
+    /// A ball far off what teammates believe goes at once, with priority, on a dry
+    /// budget; a smaller error waits for spare frames. Once the team is beyond its line
+    /// the far ball waits for an ordinary frame: the priority room left is for claims
+    /// (seed 105, drawn: a goer's keepalive waited 8 s behind ball news and a second
+    /// robot went for 5 s).
     #[test]
     fn a_ball_far_off_what_teammates_believe_goes_with_priority() {
         let model = BallModel::default();
-        for (off_m, expected) in [
-            (1.1, Action::Quiet),
-            (VOI_URGENT_BALL_M + 0.2, Action::Send { priority: true }),
+        let far = VOI_URGENT_BALL_M + 0.2;
+        for (off_m, headroom, expected) in [
+            (1.1, 0, Action::Quiet),
+            (far, 0, Action::Send { priority: true }),
+            (far, -1, Action::Send { priority: false }),
+            (far, -4, Action::Send { priority: false }),
         ] {
-            // Told at x = 0 (still); the robot sees it at `off_m`, with no frame in hand.
+            // Told at x = 0 (still); the robot sees it at `off_m`, with `headroom` frames
+            // in hand.
             let at = |t_s: f64, x: f64| Now {
                 ball: Some(still_ball(t_s, x)),
                 told: Some(still_ball(0.0, 0.0)),
-                headroom: Some(0),
+                headroom: Some(headroom),
                 ..now(&model, t_s, false, 2.0)
             };
             let mut p = PolicyState::default();
@@ -720,7 +754,7 @@ mod tests {
             assert_eq!(
                 p.decide(SendPolicy::Voi, &at(1.0, off_m), false, false),
                 expected,
-                "the ball {off_m} m off what teammates believe, on a dry budget"
+                "the ball {off_m} m off what teammates believe, headroom {headroom}"
             );
         }
     }

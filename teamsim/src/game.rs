@@ -364,6 +364,8 @@ impl Simulation {
             }
         }
         let Some(game) = &self.game else { return };
+        // The robots that hear Set now: the references place the ball as they do.
+        let mut set_heard = Vec::new();
         // Each robot's order from what it heard; a body off the field stands.
         for i in 0..self.robots.len() {
             let heard = game.trackers[i].state();
@@ -376,6 +378,7 @@ impl Simulation {
                 if let Some(replica) = self.harness.replica_mut(i) {
                     replica.restart_priority_room(local);
                 }
+                set_heard.push(i);
             }
             self.robots[i].order = match heard {
                 _ if penalised => Order::Stand,
@@ -384,6 +387,7 @@ impl Simulation {
                 _ => Order::Stand,
             };
         }
+        self.place_references(&set_heard, 0.0);
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their

@@ -701,14 +701,9 @@ impl Simulation {
             for i in 0..self.robots.len() {
                 let now_s = self.harness.local_now(i).as_micros() as f64 * 1e-6 + dt;
                 self.robots[i].forget_ball(now_s);
-                self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
             }
-            if let Some(r) = self.robots.first() {
-                let placed = r.kick_off_ball(t + dt);
-                self.central.place(placed);
-                self.central_kicks.place(placed);
-                self.delayed.place(placed);
-            }
+            let everyone: Vec<usize> = (0..self.robots.len()).collect();
+            self.place_references(&everyone, dt);
         }
         self.step += 1;
         if self.step.is_multiple_of(CLOCK_SAMPLE_STEPS) {

@@ -22,7 +22,8 @@
 //!   median one-way delay late.
 //!
 //! A ball put back by hand for a kick-off is placed on the centre spot in every reference,
-//! as the team layer places it (`TeamLayer::forget_ball`). Before this (#29's fifth
+//! as the team layer places it (`TeamLayer::forget_ball`): at a goal, and in a game at
+//! the GameController's Set as each robot hears it. Before this (#29's fifth
 //! session) the references were a plain gated filter without the GWM's rules, and the
 //! team beat them by those rules alone.
 
@@ -506,6 +507,28 @@ impl DelayedCentral {
     }
 }
 
+impl super::Simulation {
+    /// The ball was put on the centre spot for a kick-off, and robots `heard` learnt it
+    /// `after_s` after the step's start (at a goal every robot, at once, at the step's
+    /// end; at the GameController's Set each robot as its packet arrives, at its start): each one's delivery reference places it there on
+    /// the robot's clock, as its team layer does, and the references that see the whole
+    /// team place it on the global clock. Why Set too: a half's kick-off has no goal, and
+    /// a blind robot's delivery reference, told nothing out of play, kept the ball of the
+    /// half before while its team layer had placed it (`TeamLayer::set_kick_off_next`).
+    pub(crate) fn place_references(&mut self, heard: &[usize], after_s: f64) {
+        for &i in heard {
+            let now_s = super::robot::seconds(self.harness.local_now(i)) + after_s;
+            self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
+        }
+        if let (Some(r), false) = (self.robots.first(), heard.is_empty()) {
+            let placed = r.kick_off_ball(self.time_s() + after_s);
+            self.central.place(placed);
+            self.central_kicks.place(placed);
+            self.delayed.place(placed);
+        }
+    }
+}
+
 impl Default for ReferenceConfig {
     fn default() -> Self {
         let base = super::WorldModelConfig::default().local.ball;
@@ -561,6 +584,64 @@ mod tests {
 
     fn team() -> GlobalConfig {
         super::super::WorldModelConfig::default().global
+    }
+
+    /// A short game (30 s halves, a 20 s break), seed 3, under the SPL budget: a half's
+    /// kick-off has no goal, but at the GameController's Set every robot's team layer
+    /// puts its ball on the centre spot (`TeamLayer::set_kick_off_next`). So must its
+    /// delivery reference: 1 s into every Set, each holds the centre spot. Before this
+    /// the references were placed at goals only, and a robot that saw no ball out of
+    /// play, told nothing by its teammates there, held no ball or the half before's
+    /// (this test's short-sighted cameras make every robot such a robot).
+    #[test]
+    fn at_every_set_each_delivery_reference_holds_the_centre_spot() {
+        let script = crate::referee::GameScript {
+            half_s: 30.0,
+            break_s: 20.0,
+            initial_s: 3.0,
+            standby_s: 3.0,
+            ready_s: 10.0,
+            set_s: 3.0,
+            finished_s: 2.0,
+            penalty_s: 15.0,
+            messages_per_game: 120,
+            penalties: Vec::new(),
+        };
+        let mut cfg = crate::SimConfig {
+            duration_s: script.length_s() + 600.0,
+            seed: 3,
+            budget: Some(comms::BudgetSpec::SPL),
+            game: Some(script),
+            ..crate::SimConfig::default()
+        };
+        // Short-sighted cameras: from the kick-off spots nobody sees the centre spot, so
+        // a reference holds it only if it was placed there.
+        cfg.field.camera.ball_range_m = 0.5;
+        let mut sim = crate::Simulation::new(cfg).expect("a valid configuration");
+        let (mut set_since, mut checked) = (None, 0);
+        while !sim.finished() {
+            sim.step();
+            let t = sim.time_s();
+            let set = sim.referee().expect("a game").state() == gamecontroller::State::Set;
+            set_since = if set { set_since.or(Some(t)) } else { None };
+            if set_since.is_none_or(|since| t - since < 1.0 || t - since >= 1.0 + 1e-6) {
+                continue;
+            }
+            checked += 1;
+            for i in 0..sim.robots.len() {
+                let now_s = crate::robot::seconds(sim.harness.local_now(i));
+                let held = sim.delivery[i].estimate_at(now_s).map(|b| b.position());
+                assert!(
+                    held.is_some_and(|p| p.norm() < 0.3),
+                    "Set {checked} (t = {t:.2} s): robot {}'s delivery reference holds {held:?}",
+                    i + 1
+                );
+            }
+        }
+        assert!(
+            checked >= 2,
+            "both halves' kick-offs were checked: {checked}"
+        );
     }
 
     /// A goal at 10 s: the referee puts the ball on the centre spot, and the team layer
