@@ -4,12 +4,56 @@
 use super::windows::WindowRecord;
 use super::{median, Decoder};
 use crate::significance::hann_share_inside;
-use crate::tones::Frame;
+use crate::tones::{basic_tones, Frame, SENDER_COUNT};
+
+/// How much later than the six-tone onset a frame's data basic must begin, slots, for
+/// the data basic's onset to be taken (see [`Decoder::estimate_onset`]): well beyond
+/// the spread of an onset estimated on three tones.
+const DATA_LATER_SLOTS: f64 = 0.25;
 
 impl Decoder {
     /// Locates the onset of `frame` at `scale` in the windows since the floor.
+    ///
+    /// A frame of the sender whose first slot just failed, with its onset inside that
+    /// slot, is located on its data basic alone when that begins clearly later. The
+    /// sender's tones sounded through the failed slot, so they do not mark where this
+    /// frame began: when the failed slot was a long message's first frame (refused for
+    /// a tone in a notch of the room, say), the replay after it finds the second frame,
+    /// and on six tones its onset lies wherever the shared sender tones and the new data
+    /// tones balance, inside the first frame. A slot there reads the second frame's data
+    /// with the first frame's sender, and with a talker's harmonic on the data tones it
+    /// passed and became a wrong long message (lab T60 2 s, 0 dB, row 959027 at 960.76
+    /// s: sender 2 value 264 over 306). Located on its data basic, the frame starts
+    /// where the failed slot ends, and the checks for the second half of a long message
+    /// (the sender sounding before it) drop it. A message that merely began inside a
+    /// slot babble assembled with its sender's basic starts its data tones with its
+    /// sender's, so its onset stays.
     pub(super) fn estimate_onset(&self, frame: Frame, scale: usize) -> Option<f64> {
-        let tones = frame.tones();
+        let onset = self.estimate_onset_of(&frame.tones(), scale)?;
+        let inside_failed = matches!(
+            self.failed_slot,
+            Some((sender, end)) if sender == frame.sender && onset < end
+        );
+        if !inside_failed {
+            return Some(onset);
+        }
+        let data = basic_tones(SENDER_COUNT + usize::from(frame.data));
+        let data_onset = self.estimate_onset_of(&data, scale)?;
+        if data_onset > onset + DATA_LATER_SLOTS * self.geometry.slot_samples {
+            self.note(onset, || {
+                format!(
+                    "onset inside a failed slot of the sender: the data basic begins at {:.2} s",
+                    data_onset / self.rate()
+                )
+            });
+            return Some(data_onset);
+        }
+        Some(onset)
+    }
+
+    /// Locates the onset of the tones `tones` sounding together at `scale` in the windows
+    /// since the floor.
+    fn estimate_onset_of(&self, tones: &[usize], scale: usize) -> Option<f64> {
         let window_len = self.geometry.window_len as f64;
         let lookback = 3 * self.geometry.slot_windows + 4;
         // During a replay the search stands at an earlier window: what follows it is not
@@ -40,7 +84,7 @@ impl Decoder {
                 (
                     w.index,
                     w.start,
-                    (Self::excess(w, scale, &tones) + tones.len() as f64) * w.level / common
+                    (Self::excess(w, scale, tones) + tones.len() as f64) * w.level / common
                         - tones.len() as f64,
                 )
             })
@@ -62,7 +106,7 @@ impl Decoder {
         let plateau = candidates[w0..plateau_end]
             .iter()
             .filter_map(|c| self.record(c.0))
-            .map(|w| Self::excess(w, scale, &tones) * w.level)
+            .map(|w| Self::excess(w, scale, tones) * w.level)
             .sum::<f64>()
             / (plateau_end - w0) as f64;
         let mut onset = candidates[w0].1 as f64;
@@ -78,7 +122,7 @@ impl Decoder {
                 .map(|rec| {
                     (
                         rec.start as f64,
-                        Self::excess(rec, scale, &tones) * rec.level / plateau,
+                        Self::excess(rec, scale, tones) * rec.level / plateau,
                     )
                 })
                 .collect();
