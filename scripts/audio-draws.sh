@@ -7,7 +7,8 @@ D=/tmp/roomsets/seed2
 X=${SCENE_DIAG:-target/release/examples/scene_diag}
 for spec in "$@"; do
   set -- $spec
-  room=$1; long=$2; row=$3
+  # Rows may be written as `huddle audio rooms` prints them (009): sh reads 009 as octal.
+  room=$1; long=$2; row=$(echo "$3" | sed 's/^0*//')
   seed=$((S*1000+row))
   $X $D $room 0 4 $long 1000 $seed one checked > ${OUT:-/tmp}/draw-$seed-$room.txt 2>&1
   echo "seed $seed $(head -1 ${OUT:-/tmp}/draw-$seed-$room.txt)"

@@ -4,17 +4,61 @@
 use super::windows::WindowRecord;
 use super::{median, Decoder};
 use crate::significance::hann_share_inside;
-use crate::tones::Frame;
+use crate::tones::{basic_tones, Frame, SENDER_COUNT};
+
+/// How much later than a first slot's onset its decided data basic may begin, slots,
+/// inside a failed slot of the same sender (see [`Decoder::data_begins_later`]): well
+/// beyond the spread of an onset estimated on three tones.
+pub(super) const DATA_LATER_SLOTS: f64 = 0.25;
 
 impl Decoder {
     /// Locates the onset of `frame` at `scale` in the windows since the floor.
     pub(super) fn estimate_onset(&self, frame: Frame, scale: usize) -> Option<f64> {
-        let tones = frame.tones();
+        let newest = self.replaying.unwrap_or(u64::MAX);
+        self.estimate_onset_of(&frame.tones(), scale, newest)
+    }
+
+    /// Where the data basic of `frame` began, when that is clearly (more than
+    /// [`DATA_LATER_SLOTS`]) after `a`, the onset of the slot `[a, b)` it was decided on
+    /// as a first slot; `None` when it began about there.
+    ///
+    /// Only asked of a frame of the sender whose first slot just failed, with its onset
+    /// inside that slot (see `Decoder::decide_slot`). The sender's tones sounded through
+    /// the failed slot, so a six-tone onset does not mark where this frame began: when
+    /// the failed slot was a long message's first frame (refused for a tone in a notch of
+    /// the room, say), the replay after it finds the second frame at the balance of the
+    /// shared sender tones and the new data tones, inside the first frame, and moves on
+    /// a hop at each slot that fails there. With a talker's harmonics on the second
+    /// frame's data tones such a slot passed, and the next one too: a wrong long message
+    /// (lab T60 2 s, 0 dB, row 959027 at 960.76 s: sender 2 value 264 over 306). The
+    /// first frame itself, found a little late by the same replay, decides its own data,
+    /// which began with the slot (same row, 28.72 s), and stays a message.
+    pub(super) fn data_begins_later(
+        &self,
+        frame: Frame,
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> Option<f64> {
+        let window_len = self.geometry.window_len as f64;
+        // The windows up to the slot's end (during a replay the history holds more).
+        let newest = self
+            .history
+            .iter()
+            .filter(|w| w.start as f64 + window_len <= b + 0.25 * window_len)
+            .map(|w| w.index)
+            .next_back()?;
+        let data = basic_tones(SENDER_COUNT + usize::from(frame.data));
+        let onset = self.estimate_onset_of(&data, scale, newest)?;
+        (onset > a + DATA_LATER_SLOTS * self.geometry.slot_samples).then_some(onset)
+    }
+
+    /// Locates the onset of the tones `tones` sounding together at `scale` in the windows
+    /// since the floor up to window `newest` (during a replay the search stands at an
+    /// earlier window than the newest heard: what follows it is not part of the onset).
+    fn estimate_onset_of(&self, tones: &[usize], scale: usize, newest: u64) -> Option<f64> {
         let window_len = self.geometry.window_len as f64;
         let lookback = 3 * self.geometry.slot_windows + 4;
-        // During a replay the search stands at an earlier window: what follows it is not
-        // part of the frame's onset.
-        let newest = self.replaying.unwrap_or(u64::MAX);
         let recent: Vec<&WindowRecord> = self
             .history
             .iter()
@@ -40,7 +84,7 @@ impl Decoder {
                 (
                     w.index,
                     w.start,
-                    (Self::excess(w, scale, &tones) + tones.len() as f64) * w.level / common
+                    (Self::excess(w, scale, tones) + tones.len() as f64) * w.level / common
                         - tones.len() as f64,
                 )
             })
@@ -62,7 +106,7 @@ impl Decoder {
         let plateau = candidates[w0..plateau_end]
             .iter()
             .filter_map(|c| self.record(c.0))
-            .map(|w| Self::excess(w, scale, &tones) * w.level)
+            .map(|w| Self::excess(w, scale, tones) * w.level)
             .sum::<f64>()
             / (plateau_end - w0) as f64;
         let mut onset = candidates[w0].1 as f64;
@@ -78,7 +122,7 @@ impl Decoder {
                 .map(|rec| {
                     (
                         rec.start as f64,
-                        Self::excess(rec, scale, &tones) * rec.level / plateau,
+                        Self::excess(rec, scale, tones) * rec.level / plateau,
                     )
                 })
                 .collect();

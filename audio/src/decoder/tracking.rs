@@ -129,6 +129,26 @@ impl Decoder {
                 holds
             }
         });
+        // A first slot inside the failed slot of its sender must decide a frame whose data
+        // began with it (see `Decoder::data_begins_later`); otherwise it fails like any
+        // first slot, and the replay after it moves on.
+        let decision = decision.filter(|slot| {
+            let inside_failed = first
+                && matches!(self.failed_slot, Some((sender, end)) if sender == t.sender && a < end);
+            let later = inside_failed
+                .then(|| self.data_begins_later(slot.frame, t.scale, a, b))
+                .flatten();
+            if let Some(data_onset) = later {
+                self.note(a, || {
+                    format!(
+                        "first slot inside the sender's failed slot: data {} begins at {:.2} s",
+                        slot.frame.data,
+                        data_onset / self.rate()
+                    )
+                });
+            }
+            later.is_none()
+        });
         let Some(slot) = decision else {
             // A first slot of the sender just decided, starting within half a tone of that
             // transmission's end, is its reverberant tail (plus babble), not a long
