@@ -3,7 +3,9 @@
 
 use serde::Serialize;
 
-use super::{acoustic, policy, Transport};
+use std::time::Duration;
+
+use super::{acoustic, game, policy, BallEvent, Transport};
 
 /// What `huddle sim` reports (also its `--json` object). Percentages are of ball-visible
 /// time; per-minute rates are per minute of ball-visible time. See [`metrics`](super::metrics) for the
@@ -405,4 +407,196 @@ impl std::fmt::Display for Report {
             self.sim_speed_x
         )
     }
+}
+
+impl super::Simulation {
+    /// The report so far; `wall_s` is the wall time the run took (for `sim_speed_x`).
+    pub fn report(&self, wall_s: f64) -> Report {
+        let m = &self.metrics;
+        let f = &self.fusion;
+        let (nees_lo, nees_hi) = f.nees_bounds();
+        let net = self.harness.net().network_stats();
+        // The conflict bound uses the delay the network actually gave (a beacon hold and
+        // queues included), not the nominal latency; before anything was delivered, the
+        // configured expectation.
+        let (delay_p50, delay_p99) = match net.delay_percentiles(&[0.5, 0.99])[..] {
+            [p50, p99] => (p50, p99),
+            _ => {
+                let d = self.cfg.expected_delay();
+                (d, d)
+            }
+        };
+        let simulated_s = self.time_s();
+        let delayed = self.delayed.squared_errors(
+            delay_p50.as_secs_f64(),
+            &self
+                .fusion
+                .instants
+                .iter()
+                .map(|&(i, at, _)| (i, at))
+                .collect::<Vec<_>>(),
+        );
+        let (mut team_sq, mut delayed_sq, mut delayed_n) = (0.0, 0.0, 0u64);
+        for (&(_, _, te), d) in self.fusion.instants.iter().zip(&delayed) {
+            if let Some(d) = d {
+                team_sq += te;
+                delayed_sq += d;
+                delayed_n += 1;
+            }
+        }
+        let delayed_rmse = (delayed_sq / delayed_n as f64).sqrt();
+        let team_rmse_on_delayed = (team_sq / delayed_n as f64).sqrt();
+        let band = |k: usize| {
+            let n = f.band_independent_samples(k);
+            let (lo, hi) = fusion::consistency::nees_bounds(2, n);
+            NeesBand {
+                nees: round3(f.nees_bands[k].mean()),
+                bounds: [round3(lo), round3(hi)],
+                samples: f.nees_bands[k].samples() as u64,
+                independent_samples: n,
+                above_999_pct: round3(f.nees_bands[k].above_999_pct()),
+                median: round3(f.nees_bands[k].median()),
+                above_999_pct_at_mean_2: round3(f.nees_bands[k].above_999_pct_at_mean_2()),
+            }
+        };
+        let all_samples = f.nees.samples().max(1) as f64;
+        let by_cause = BallEvent::ALL
+            .iter()
+            .zip(&f.by_cause)
+            .map(|(&cause, c)| NeesCause {
+                cause,
+                samples: c.samples,
+                nees: round3(c.nees_sum / c.samples.max(1) as f64),
+                above_999_pct_of_all: round3(100.0 * c.above_999 as f64 / all_samples),
+                above_999_pct_after: c
+                    .above_999_after
+                    .map(|n| round3(100.0 * n as f64 / all_samples)),
+                above_999_pct_at_actor: round3(100.0 * c.above_999_at_actor as f64 / all_samples),
+            })
+            .collect();
+        let per_robot: Vec<u64> = (0..self.robots.len())
+            .map(|i| self.harness.replica(i).map_or(0, |r| r.stats().frames_out))
+            .collect();
+        // The league counts the team's frames: what is left of the team's messages.
+        let team_sent: u64 = per_robot.iter().sum();
+        let budget_left = self
+            .cfg
+            .budget
+            .map(|spec| spec.team_messages.saturating_sub(team_sent));
+        Report {
+            budget: self.cfg.budget.map(|b| b.to_string()),
+            policy: self.cfg.brain.team.send_policy,
+            world: if self.cfg.drawn_world {
+                "drawn"
+            } else {
+                "ideal"
+            },
+            transport: self.cfg.transport,
+            team_messages_sent: per_robot.iter().sum(),
+            messages_per_robot: per_robot,
+            max_payload_bytes: self.harness.max_payload(),
+            budget_left,
+            robots: self.cfg.robots,
+            duration_s: simulated_s,
+            preset: self.cfg.network.preset.name().to_string(),
+            loss_pct: round3(100.0 * self.cfg.network.mean_loss()),
+            latency_ms: self.cfg.network.latency().as_secs_f64() * 1e3,
+            jitter_ms: self.cfg.network.links().0.jitter.as_secs_f64() * 1e3,
+            seed: self.cfg.seed,
+            ball_visible_s: round3(m.visible_s),
+            ball_visible_pct: round3(100.0 * m.visible_s / simulated_s.max(1e-9)),
+            exactly_one_goer_pct: round3(m.exactly_one_pct()),
+            conflict_pct: round3(m.conflict_pct()),
+            no_goer_pct: round3(m.no_goer_pct()),
+            longest_conflict_ms: round3(m.longest_conflict_s * 1e3),
+            longest_conflict_at_s: round3(m.longest_conflict_at_s),
+            conflict_bound_ms: round3(
+                match self.cfg.budget {
+                    Some(_) => self
+                        .cfg
+                        .conflict_bound_budgeted(&self.arbitration_run, delay_p99),
+                    None => self
+                        .cfg
+                        .conflict_bound(Duration::from_secs_f64(m.longest_claim_gap_s), delay_p99),
+                }
+                .as_secs_f64()
+                    * 1e3,
+            ),
+            longest_claim_gap_ms: round3(m.longest_claim_gap_s * 1e3),
+            delay_p50_ms: round3(delay_p50.as_secs_f64() * 1e3),
+            delay_p99_ms: round3(delay_p99.as_secs_f64() * 1e3),
+            handovers: m.handovers,
+            handovers_per_min: round3(m.handovers_per_min()),
+            flaps: m.flaps,
+            flaps_per_min: round3(m.flaps_per_min()),
+            goals_for: self.world.goals_for,
+            goals_against: self.world.goals_against,
+            shots: self.contacts.shots,
+            passes: self.contacts.passes,
+            kick_attempts: self.kick_attempts,
+            kick_contact_pct: round3(
+                100.0 * self.kick_contacts as f64 / self.kick_attempts.max(1) as f64,
+            ),
+            frames_sent: net.sent,
+            frames_delivered: net.delivered,
+            frames_lost: net.lost_total(),
+            team_ball_rmse_m: round4(f.all.team_rmse_m()),
+            centralized_rmse_m: round4(f.all.central_rmse_m()),
+            rmse_ratio: round3(f.all.team_rmse_m() / f.all.central_rmse_m()),
+            delivery_rmse_m: round4(f.all.delivery_rmse_m()),
+            delivery_ratio: round3(f.all.team_rmse_m() / f.all.delivery_rmse_m()),
+            network_ratio: round3(f.all.delivery_rmse_m() / f.all.central_kicks_rmse_m()),
+            delayed_centralized_rmse_m: round4(delayed_rmse),
+            delayed_centralized_ratio: round3(team_rmse_on_delayed / delayed_rmse),
+            centralized_kicks_rmse_m: round4(f.all.central_kicks_rmse_m()),
+            rmse_ratio_kicks: round3(f.all.team_rmse_m() / f.all.central_kicks_rmse_m()),
+            blind_samples: f.blind.samples,
+            blind_team_ball_rmse_m: round4(f.blind.team_rmse_m()),
+            blind_centralized_rmse_m: round4(f.blind.central_rmse_m()),
+            blind_delivery_rmse_m: round4(f.blind.delivery_rmse_m()),
+            team_ball_nees: round3(f.team_nees()),
+            team_ball_nees_bounds: [round3(nees_lo), round3(nees_hi)],
+            team_ball_nees_samples: f.nees_independent_samples(),
+            team_ball_nees_above_999_pct: round3(f.nees.above_999_pct()),
+            team_ball_nees_above_999_pct_at_mean_2: round3(f.nees.above_999_pct_at_mean_2()),
+            team_ball_nees_still: band(0),
+            team_ball_nees_rolling: band(1),
+            team_ball_nees_fast: band(2),
+            team_ball_nees_by_cause: by_cause,
+            centralized_nees: round3(f.central_nees()),
+            team_ball_samples: f.samples(),
+            pose_rmse_m: round4(f.pose_rmse_m()),
+            heading_rmse_rad: round4(f.heading_rmse_rad()),
+            pose_nees: round3(f.pose_nees()),
+            clock_offset_error_rms_us: round3(
+                (self.clock_errors_us.iter().map(|e| e * e).sum::<f64>()
+                    / self.clock_errors_us.len().max(1) as f64)
+                    .sqrt(),
+            ),
+            clock_offset_error_p95_us: {
+                let mut e = self.clock_errors_us.clone();
+                e.sort_by(f64::total_cmp);
+                e.get((e.len() * 95 / 100).min(e.len().saturating_sub(1)))
+                    .copied()
+                    .unwrap_or(0.0)
+            },
+            clock_offset_error_max_us: self.clock_errors_us.iter().copied().fold(0.0, f64::max),
+            clock_offset_samples: self.clock_errors_us.len() as u64,
+            sim_speed_x: if wall_s > 0.0 {
+                round3(simulated_s / wall_s)
+            } else {
+                0.0
+            },
+            outage: self.outage_report(),
+            game: self.game.as_ref().map(game::Game::report),
+        }
+    }
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+fn round4(x: f64) -> f64 {
+    (x * 10_000.0).round() / 10_000.0
 }
