@@ -431,9 +431,10 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     }
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
-    // Out of play (the GC's state is not Playing) the layer tells the team nothing.
-    // Set starts the kick-off hold and puts the ball on the centre spot (see
-    // `TeamLayer::set_kick_off_next`); a penalty kick's Set has the ball elsewhere.
+    // Out of play (the GC's state is not Playing) the layer tells the team nothing but,
+    // in Set, the kick-off taker's claim. Set starts the kick-off hold and puts the ball
+    // on the centre spot (both in `TeamLayer::set_kick_off_next`'s doc); a penalty
+    // kick's Set has the ball elsewhere.
     let board = replica.blackboard();
     let state = gc_text(board, GC_STATE_KEY);
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
