@@ -105,9 +105,6 @@ struct Shared {
 struct BallsOut {
     team: bool,
     own: bool,
-    /// The sequence number of the own message last written to
-    /// [`contract::WORLD_OUT_KEY`].
-    world_seq: Option<u16>,
 }
 
 /// Starts robot `handle`'s team layer: guards on the inputs, a watch that collects them,
@@ -503,6 +500,16 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     );
     apply(replica, now, writes, priority);
     publish(replica, now, layer, balls_out);
+    // The tick's own message in full (`sense` made it; a reaction between ticks makes
+    // none, so this is the tick's and not `publish`'s).
+    if let Some(own) = layer.gwm.latest(layer.id) {
+        if let Ok(bytes) = own.to_bytes() {
+            let world = Value::Bytes(bytes.to_vec());
+            if let Err(e) = replica.set(now, contract::WORLD_OUT_KEY, world) {
+                tracing::warn!(error = %e, "team layer: its own message was refused");
+            }
+        }
+    }
     // Last, so a program that sees the tick change finds this tick's outputs in place.
     *ticks += 1;
     if let Err(e) = replica.set(now, contract::TICK_KEY, Value::Int(*ticks)) {
@@ -588,15 +595,6 @@ fn publish(replica: &mut Replica, now: Instant, layer: &TeamLayer, balls_out: &m
     out.push((contract::MATES_KEY, Value::Floats(mates)));
     if let Some(h) = replica.budget_headroom() {
         out.push((contract::BUDGET_KEY, Value::Int(h)));
-    }
-    // The tick's own message in full, once (a reaction between ticks has none new).
-    if let Some(own) = layer.gwm.latest(layer.id) {
-        if balls_out.world_seq != Some(own.seq) {
-            if let Ok(bytes) = own.to_bytes() {
-                out.push((contract::WORLD_OUT_KEY, Value::Bytes(bytes.to_vec())));
-                balls_out.world_seq = Some(own.seq);
-            }
-        }
     }
     for (key, value) in out {
         if let Err(e) = replica.set(now, key, value) {
