@@ -184,33 +184,59 @@ pub fn model_with_noise(model: BallModel, q0: f64, q1: f64) -> BallModel {
     }
 }
 
+/// Per robot, its `KEPT` latest records, oldest first: the truth a reference looks up,
+/// bounded so a long match does not grow it.
+#[derive(Debug, Clone, Default)]
+struct PerRobot<T, const KEPT: usize> {
+    by_robot: Vec<VecDeque<T>>,
+}
+
+impl<T: Clone, const KEPT: usize> PerRobot<T, KEPT> {
+    /// For a team of `n`.
+    fn new(n: usize) -> Self {
+        PerRobot {
+            by_robot: vec![VecDeque::new(); n],
+        }
+    }
+
+    /// Robot `i`'s newest record; its oldest goes if `KEPT` are held.
+    fn record(&mut self, i: usize, item: T) {
+        let q = &mut self.by_robot[i];
+        if q.len() == KEPT {
+            q.pop_front();
+        }
+        q.push_back(item);
+    }
+
+    /// Robot `i`'s records, oldest first.
+    fn of(&self, i: usize) -> &VecDeque<T> {
+        &self.by_robot[i]
+    }
+}
+
 /// When each robot published each version of its LWM, in global seconds: the truth the
 /// delivery reference places messages by.
 #[derive(Debug, Clone, Default)]
 pub struct Publications {
-    by_robot: Vec<VecDeque<(u64, f64)>>,
+    sent: PerRobot<(u64, f64), PUBLISHED_KEPT>,
 }
 
 impl Publications {
     /// For a team of `n`.
     pub fn new(n: usize) -> Self {
         Publications {
-            by_robot: vec![VecDeque::new(); n],
+            sent: PerRobot::new(n),
         }
     }
 
     /// Robot `i` published `version` at global time `t_s`.
     pub fn record(&mut self, i: usize, version: u64, t_s: f64) {
-        let q = &mut self.by_robot[i];
-        if q.len() == PUBLISHED_KEPT {
-            q.pop_front();
-        }
-        q.push_back((version, t_s));
+        self.sent.record(i, (version, t_s));
     }
 
     /// When robot `i` published `version`, global seconds.
     pub fn sent_at(&self, i: usize, version: u64) -> Option<f64> {
-        let q = &self.by_robot[i];
+        let q = self.sent.of(i);
         let k = q.partition_point(|&(v, _)| v < version);
         q.get(k).filter(|&&(v, _)| v == version).map(|&(_, t)| t)
     }
@@ -284,7 +310,7 @@ impl CentralFusion {
 #[derive(Debug, Clone, Default)]
 pub struct KickTruth {
     /// Per robot: its recent attempts, (report time on its clock, met).
-    by_robot: Vec<VecDeque<(f64, bool)>>,
+    attempts: PerRobot<(f64, bool), ATTEMPTS_KEPT>,
 }
 
 /// Attempts remembered per robot: a report lasts `KICK_REPORTED_FOR_S`, far fewer kicks.
@@ -294,17 +320,13 @@ impl KickTruth {
     /// For a team of `n`.
     pub fn new(n: usize) -> Self {
         KickTruth {
-            by_robot: vec![VecDeque::new(); n],
+            attempts: PerRobot::new(n),
         }
     }
 
     /// Robot `i` swung the kick it reported at `t_s` (its clock); `met`: it met the ball.
     pub fn record(&mut self, i: usize, t_s: f64, met: bool) {
-        let q = &mut self.by_robot[i];
-        if q.len() == ATTEMPTS_KEPT {
-            q.pop_front();
-        }
-        q.push_back((t_s, met));
+        self.attempts.record(i, (t_s, met));
     }
 
     /// Robot `i`'s `lwm` (its clock) as cK hears it: a kick that met the ball for sure, a
@@ -312,7 +334,9 @@ impl KickTruth {
     pub fn told(&self, i: usize, lwm: &LocalWorldModel) -> LocalWorldModel {
         let mut l = *lwm;
         if let Some(report) = &mut l.kick {
-            match self.by_robot[i]
+            match self
+                .attempts
+                .of(i)
                 .iter()
                 .find(|&&(t, _)| t == report.kick.t_s)
             {
