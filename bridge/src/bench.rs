@@ -77,6 +77,14 @@ pub struct BenchArgs {
     /// one sender (the robots' replicas run ahead of time), or live daemons.
     #[arg(long, value_enum, default_value_t = LoadFrom::Frames)]
     pub load_from: LoadFrom,
+    /// Only the load phase with pre-encoded frames (no first sample, latency or
+    /// baseline): for tracing the load phase quickly.
+    #[arg(long)]
+    pub load_only: bool,
+    /// An extra argument for the load phase's bridge (repeatable), e.g.
+    /// `--load-bridge-arg=--put-via=string`.
+    #[arg(long, allow_hyphen_values = true)]
+    pub load_bridge_arg: Vec<String>,
 }
 
 /// `--load-from`.
@@ -170,6 +178,9 @@ fn run_with(args: &BenchArgs, settings: &[(&str, &str)]) -> Result<()> {
         settings
     };
     let sub_session = client(port, sub_settings).map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
+    if args.load_only {
+        return crate::bench_load::run(args, port, &sub_session, f64::NAN);
+    }
     let lat_key = format!("huddle/@v1/{VENUE}/{TEAM}/1/var/lat");
     let _sub = {
         let seen = seen.clone();

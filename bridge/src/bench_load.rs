@@ -52,6 +52,117 @@ impl Lean {
     }
 }
 
+/// One second of the load phase, stage by stage: the bridge's counters (`@bridge/stats`,
+/// fetched by a monitor thread once a second), the subscriber's count and the CPU.
+#[derive(Clone, Debug, Default)]
+struct Stage {
+    datagrams: u64,
+    applied: u64,
+    values_out: u64,
+    coalesced: u64,
+    puts: u64,
+    put_us: u64,
+    batches: u64,
+    received: u64,
+    bridge_ticks: u64,
+    own_ticks: u64,
+}
+
+impl Stage {
+    fn now(session: &zenoh::Session, lean: &Lean, pid: u32) -> Option<Stage> {
+        let s = bridge_stats(session, VENUE)?;
+        let n = |v: &serde_json::Value| v.as_u64().unwrap_or(0);
+        Some(Stage {
+            datagrams: n(&s["field"]["datagrams"]),
+            applied: n(&s["field"]["updates_applied"]),
+            values_out: n(&s["export"]["values_out"]),
+            coalesced: n(&s["export"]["coalesced"]),
+            puts: n(&s["zenoh"]["puts"]),
+            put_us: n(&s["zenoh"]["put_us"]),
+            batches: n(&s["timing_us"]["inline_puts"]) + n(&s["timing_us"]["handed_over"]),
+            received: lean.samples.load(Ordering::Relaxed),
+            bridge_ticks: cpu_ticks(pid).unwrap_or(0),
+            own_ticks: cpu_ticks(std::process::id()).unwrap_or(0),
+        })
+    }
+
+    fn minus(&self, o: &Stage) -> Stage {
+        Stage {
+            datagrams: self.datagrams - o.datagrams,
+            applied: self.applied - o.applied,
+            values_out: self.values_out - o.values_out,
+            coalesced: self.coalesced - o.coalesced,
+            puts: self.puts - o.puts,
+            put_us: self.put_us - o.put_us,
+            batches: self.batches - o.batches,
+            received: self.received - o.received,
+            bridge_ticks: self.bridge_ticks.saturating_sub(o.bridge_ticks),
+            own_ticks: self.own_ticks.saturating_sub(o.own_ticks),
+        }
+    }
+}
+
+/// Samples [`Stage`] once a second until `stop`; returns the samples with their times.
+fn monitor(
+    session: zenoh::Session,
+    lean: Arc<Lean>,
+    pid: u32,
+    stop: Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<Vec<(StdInstant, Stage)>> {
+    std::thread::spawn(move || {
+        let mut out = Vec::new();
+        let mut next = StdInstant::now();
+        while !stop.load(Ordering::Relaxed) {
+            if let Some(s) = Stage::now(&session, &lean, pid) {
+                out.push((StdInstant::now(), s));
+            }
+            next += Duration::from_secs(1);
+            std::thread::sleep(next.saturating_duration_since(StdInstant::now()));
+        }
+        out
+    })
+}
+
+/// Prints the per-second stages between consecutive samples.
+fn print_stages(samples: &[(StdInstant, Stage)]) {
+    println!(
+        "  per second, stage by stage (bridge: datagrams in, updates applied, values out of the exporter, merged in the outbox, puts Zenoh accepted, time inside puts, put batches; subscriber: samples received; CPU cores):"
+    );
+    println!(
+        "    {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>9} {:>6} {:>6}",
+        "s",
+        "datagrams",
+        "applied",
+        "out",
+        "merged",
+        "puts",
+        "put ms",
+        "batches",
+        "received",
+        "bridge",
+        "bench"
+    );
+    for w in samples.windows(2) {
+        let dt = (w[1].0 - w[0].0).as_secs_f64().max(1e-3);
+        let d = w[1].1.minus(&w[0].1);
+        let r = |x: u64| (x as f64 / dt).round() as u64;
+        println!(
+            "    {:>5.1} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8.0} {:>8} {:>9} {:>6.2} {:>6.2}",
+            (w[1].0 - samples[0].0).as_secs_f64(),
+            r(d.datagrams),
+            r(d.applied),
+            r(d.values_out),
+            r(d.coalesced),
+            r(d.puts),
+            d.put_us as f64 / 1e3 / dt,
+            r(d.batches),
+            r(d.received),
+            d.bridge_ticks as f64 / 100.0 / dt,
+            d.own_ticks as f64 / 100.0 / dt,
+        );
+    }
+}
+
 /// Runs the load phase; `raw_rate` is the same run's plain-Zenoh baseline (samples/s).
 pub fn run(args: &BenchArgs, port: u16, session: &zenoh::Session, raw_rate: f64) -> Result<()> {
     let t = StdInstant::now();
@@ -83,8 +194,9 @@ pub fn run(args: &BenchArgs, port: u16, session: &zenoh::Session, raw_rate: f64)
             .map_err(|e| anyhow::anyhow!("subscribe: {e}"))?
     };
     let group = driver::scratch_group()?;
+    let extra: Vec<&str> = args.load_bridge_arg.iter().map(String::as_str).collect();
     let mut bridge =
-        crate::bench::spawn_bridge(args, &std::env::current_exe()?, VENUE, group, port, &[])
+        crate::bench::spawn_bridge(args, &std::env::current_exe()?, VENUE, group, port, &extra)
             .context("starting the load bridge")?;
     let result = replay(args, session, &traffic, &lean, group, bridge.id(), raw_rate);
     let _ = bridge.kill();
@@ -96,7 +208,7 @@ fn replay(
     args: &BenchArgs,
     session: &zenoh::Session,
     traffic: &loadgen::Traffic,
-    lean: &Lean,
+    lean: &Arc<Lean>,
     group: std::net::SocketAddrV4,
     pid: u32,
     raw_rate: f64,
@@ -126,6 +238,8 @@ fn replay(
     };
     let socket = driver::open(&cfg)?.socket;
     socket.set_nonblocking(false)?;
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let stages = monitor(session.clone(), lean.clone(), pid, stop.clone());
     let warm_up = Duration::from_secs(1);
     let t0 = StdInstant::now();
     let mut window: Option<(StdInstant, u64, Option<u64>, Option<u64>)> = None;
@@ -184,6 +298,8 @@ fn replay(
     while missing() > 0 && wait.elapsed() < Duration::from_secs(10) {
         std::thread::sleep(Duration::from_millis(10));
     }
+    stop.store(true, Ordering::Relaxed);
+    let stages = stages.join().unwrap_or_default();
     let n1 = lean.samples.load(Ordering::Relaxed);
     let received_in_window = n1 - n0;
     let offered = traffic.updates as f64 / (args.seconds as f64);
@@ -191,10 +307,17 @@ fn replay(
         "  sender: offered {offered:.0} updates/s over {secs:.1} s (late by up to {:.1} ms; {send_errors} send errors)",
         late_max.as_secs_f64() * 1e3
     );
+    let baseline = if raw_rate.is_finite() {
+        format!(
+            " ({:.2}x the baseline's {raw_rate:.0}/s)",
+            received_in_window as f64 / secs / raw_rate.max(1.0)
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "  received {:.0} samples/s ({:.2}x the baseline's {raw_rate:.0}/s); per second: {per_second:?}",
+        "  received {:.0} samples/s{baseline}; per second: {per_second:?}",
         received_in_window as f64 / secs,
-        received_in_window as f64 / secs / raw_rate.max(1.0),
     );
     println!(
         "  keys whose final value did not arrive: {} of {} (waited {:.1} s after the last frame)",
@@ -202,6 +325,7 @@ fn replay(
         args.keys,
         wait.elapsed().as_secs_f64()
     );
+    print_stages(&stages);
     let stats = bridge_stats(session, VENUE);
     let bridge_cores = bridge0
         .zip(bridge1)
@@ -224,11 +348,13 @@ fn replay(
     }
     if let Some(s) = stats {
         println!(
-            "  @bridge/stats: datagrams {}, updates applied {}, values out {}, coalesced {}, outbox high water {}, timing_us {}",
+            "  @bridge/stats: datagrams {}, updates applied {}, values out {}, coalesced {}, puts {} ({} ms inside), outbox high water {}, timing_us {}",
             s["field"]["datagrams"],
             s["field"]["updates_applied"],
             s["export"]["values_out"],
             s["export"]["coalesced"],
+            s["zenoh"]["puts"],
+            s["zenoh"]["put_us"].as_u64().unwrap_or(0) / 1000,
             s["export"]["outbox_high_water"],
             s["timing_us"]
         );

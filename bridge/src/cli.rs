@@ -11,7 +11,7 @@ use driver::{SocketConfig, Transport};
 
 use crate::export::ExportConfig;
 use crate::keys::TeamKeys;
-use crate::run::{BridgeConfig, FieldLoop};
+use crate::run::{BridgeConfig, FieldLoop, PutVia};
 
 /// The flags of a running bridge.
 #[derive(Args, Debug, Clone)]
@@ -83,6 +83,20 @@ pub struct RunArgs {
     /// `thread` (a dedicated thread with a blocking receive that puts itself).
     #[arg(long, value_enum, default_value_t = FieldLoopArg::Auto)]
     pub field_loop: FieldLoopArg,
+    /// How a sample's key reaches Zenoh: `declared` (each key declared once, puts carry
+    /// its numeric id) or `string` (the key's text in every put), for comparison.
+    #[arg(long, value_enum, default_value_t = PutViaArg::Declared)]
+    pub put_via: PutViaArg,
+}
+
+/// `--put-via`.
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PutViaArg {
+    /// Each key declared once.
+    #[default]
+    Declared,
+    /// The key's text in every put.
+    String,
 }
 
 /// `--field-loop`.
@@ -196,6 +210,10 @@ impl RunArgs {
                 FieldLoopArg::Auto => FieldLoop::Auto,
                 FieldLoopArg::TxRuntime => FieldLoop::TxRuntime,
                 FieldLoopArg::Thread => FieldLoop::Thread,
+            },
+            put_via: match self.put_via {
+                PutViaArg::Declared => PutVia::Declared,
+                PutViaArg::String => PutVia::String,
             },
         })
     }

@@ -95,6 +95,62 @@ pub struct BridgeConfig {
     pub fast_path: bool,
     /// Where the field side runs.
     pub field_loop: FieldLoop,
+    /// How a sample's key reaches Zenoh ([`PutVia`]).
+    pub put_via: PutVia,
+}
+
+/// How the bridge names a sample's key to Zenoh.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PutVia {
+    /// Each key declared once (`Session::declare_keyexpr`, up to [`MAX_DECLARED`] keys):
+    /// a put then carries a numeric id the session's routing tables resolve directly,
+    /// with the routes cached on the key's resource, instead of a string to validate
+    /// and match against every subscription per put (docs/bridge.md, seventh session).
+    #[default]
+    Declared,
+    /// A string key per put (what the bridge did until the seventh session).
+    String,
+}
+
+/// The most keys declared to Zenoh ([`PutVia::Declared`]); further keys are put by
+/// string. A venue's team has about 11 robots × 20 keys; this bounds a misbehaving team.
+pub const MAX_DECLARED: usize = 16_384;
+
+/// The declared key expressions of the puts ([`PutVia::Declared`]).
+struct PutKeys {
+    via: PutVia,
+    declared: Mutex<HashMap<String, KeyExpr<'static>>>,
+}
+
+impl PutKeys {
+    fn new(via: PutVia) -> PutKeys {
+        PutKeys {
+            via,
+            declared: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// The key expression to put `key` on: declared once, then reused.
+    fn get(&self, session: &Session, key: String) -> zenoh::Result<KeyExpr<'static>> {
+        if self.via == PutVia::String {
+            return KeyExpr::try_from(key);
+        }
+        let mut declared = self.declared.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(k) = declared.get(&key) {
+            return Ok(k.clone());
+        }
+        if declared.len() >= MAX_DECLARED {
+            if declared.len() == MAX_DECLARED {
+                tracing::warn!(
+                    "{MAX_DECLARED} keys declared to zenoh: further keys are put by string"
+                );
+            }
+            return KeyExpr::try_from(key);
+        }
+        let k = session.declare_keyexpr(key.clone()).wait()?;
+        declared.insert(key, k.clone());
+        Ok(k)
+    }
 }
 
 /// Where the field side (receive, replica, exporter, fast-path puts) runs.
@@ -165,6 +221,12 @@ pub struct IoCounters {
     pub transmits_discarded: u64,
     /// Puts Zenoh refused.
     pub put_errors: u64,
+    /// Samples Zenoh accepted (each put of a value or talk message; a `--ros2` copy not
+    /// counted): what left the bridge, to compare with what a subscriber received.
+    pub puts: u64,
+    /// Time spent inside those puts, µs: Zenoh's pushback (a put that blocks on a full
+    /// queue) shows here.
+    pub put_us: u64,
     /// Liveliness declarations Zenoh refused.
     pub token_errors: u64,
     /// Queries answered.
@@ -348,6 +410,8 @@ impl Core {
             },
             "zenoh": {
                 "put_errors": io.put_errors,
+                "puts": io.puts,
+                "put_us": io.put_us,
                 "token_errors": io.token_errors,
                 "queries": io.queries,
                 "replies": io.replies,
@@ -392,6 +456,7 @@ pub struct Bridge {
     keys: TeamKeys,
     shutdown: Arc<AtomicBool>,
     field_loop: FieldLoop,
+    put_keys: Arc<PutKeys>,
 }
 
 /// The publisher thread's side: the session and the liveliness tokens it declared.
@@ -399,6 +464,7 @@ struct Publisher {
     core: Shared,
     clock: Clock,
     session: Session,
+    put_keys: Arc<PutKeys>,
     tokens: HashMap<u8, LivelinessToken>,
     shutdown: Arc<AtomicBool>,
 }
@@ -490,6 +556,7 @@ impl Bridge {
             keys: cfg.keys,
             shutdown: Arc::new(AtomicBool::new(false)),
             field_loop,
+            put_keys: Arc::new(PutKeys::new(cfg.put_via)),
         })
     }
 
@@ -514,6 +581,7 @@ impl Bridge {
             core: self.core.clone(),
             clock: self.clock,
             session: self.session.clone(),
+            put_keys: self.put_keys.clone(),
             tokens: HashMap::new(),
             shutdown: publisher_stop.clone(),
         };
@@ -525,6 +593,7 @@ impl Bridge {
             core: self.core.clone(),
             clock: self.clock,
             session: self.session.clone(),
+            put_keys: self.put_keys.clone(),
             shutdown: self.shutdown.clone(),
         };
         let result = if self.field_loop == FieldLoop::Thread {
@@ -608,6 +677,7 @@ struct Field {
     core: Shared,
     clock: Clock,
     session: Session,
+    put_keys: Arc<PutKeys>,
     shutdown: Arc<AtomicBool>,
 }
 
@@ -669,7 +739,14 @@ impl Field {
 
     /// Puts what [`Field::on_wake`] returned, then lets the publisher thread go on.
     fn put_here(&self, taken: Instant, ops: Vec<Op>) {
-        let slow = put_samples(&self.session, &self.clock, taken, ops, &self.core.0);
+        let slow = put_samples(
+            &self.session,
+            &self.put_keys,
+            &self.clock,
+            taken,
+            ops,
+            &self.core.0,
+        );
         let mut core = lock(&self.core.0);
         core.putting = false;
         if slow {
@@ -838,7 +915,16 @@ impl Publisher {
     fn apply(&mut self, taken: Instant, ops: Vec<Op>) {
         let mut token_errors = 0;
         let mut samples = Vec::with_capacity(ops.len());
-        let put = |samples| put_samples(&self.session, &self.clock, taken, samples, &self.core.0);
+        let put = |samples| {
+            put_samples(
+                &self.session,
+                &self.put_keys,
+                &self.clock,
+                taken,
+                samples,
+                &self.core.0,
+            )
+        };
         for op in ops {
             match op {
                 sample @ (Op::Put(_) | Op::Talk(_)) => samples.push(sample),
@@ -953,6 +1039,7 @@ fn flush_barrier(session: &Session, keys: &TeamKeys, clock: Clock) -> bool {
 /// whether a put was slow.
 fn put_samples(
     session: &Session,
+    keys: &PutKeys,
     clock: &Clock,
     taken: Instant,
     ops: Vec<Op>,
@@ -963,6 +1050,7 @@ fn put_samples(
     }
     let express = ops.len() == 1;
     let mut put_errors = 0;
+    let mut puts = 0;
     let mut times = Vec::with_capacity(ops.len());
     for op in ops {
         let (Op::Put(sample) | Op::Talk(sample)) = op else {
@@ -974,9 +1062,12 @@ fn put_samples(
         // time since `taken` (earlier puts of the batch) is added.
         let timestamp = session.new_timestamp();
         let sample = sample.aged(clock.now().saturating_duration_since(taken));
-        if let Err(e) = put(session, sample, timestamp, express) {
-            put_errors += 1;
-            tracing::debug!("put: {e}");
+        match put(session, keys, sample, timestamp, express) {
+            Ok(()) => puts += 1,
+            Err(e) => {
+                put_errors += 1;
+                tracing::debug!("put: {e}");
+            }
         }
         times.push(clock.now().saturating_duration_since(t0));
     }
@@ -985,9 +1076,11 @@ fn put_samples(
         tracing::warn!("zenoh refused a put (counted in @bridge/stats put_errors)");
     }
     core.io.put_errors += put_errors;
+    core.io.puts += puts;
     let mut slow = false;
     for t in times {
         slow |= t > SLOW_PUT;
+        core.io.put_us += t.as_micros() as u64;
         core.timings.put.push(t);
     }
     slow
@@ -995,6 +1088,7 @@ fn put_samples(
 
 fn put(
     session: &Session,
+    keys: &PutKeys,
     sample: Sample,
     timestamp: zenoh::time::Timestamp,
     express: bool,
@@ -1002,14 +1096,14 @@ fn put(
     let attachment = sample.attachment();
     if let Some((key, cdr)) = sample.ros2 {
         session
-            .put(key, cdr)
+            .put(keys.get(session, key)?, cdr)
             .encoding(Encoding::APPLICATION_CDR)
             .congestion_control(CongestionControl::Block)
             .express(express)
             .wait()?;
     }
     session
-        .put(sample.key, sample.payload)
+        .put(keys.get(session, sample.key)?, sample.payload)
         .encoding(Encoding::TEXT_PLAIN)
         .attachment(attachment)
         .timestamp(timestamp)
