@@ -2,10 +2,11 @@
 //! session. The field side is one task on Zenoh's TX runtime (the runtime whose worker
 //! writes Zenoh's links): it awaits each datagram (or the next deadline), feeds it to
 //! the replica, discards the replica's transmits, hands its events to the [`Exporter`]
-//! and queues the resulting operations in the latest-value [`Outbox`]. A publisher thread
+//! and queues the resulting operations in the [`Outbox`]. A publisher thread
 //! hands what waits there to Zenoh with blocking congestion control, so Zenoh drops
-//! nothing: when it blocks (a slow subscriber, a busy router) only superseded values are
-//! merged away in the outbox and every key's last value still goes, while the field side
+//! nothing. Every version waits in order in the outbox up to its capacity; only when Zenoh
+//! blocks longer (a slow subscriber, a busy router) are superseded values merged away
+//! there, and every key's last value still goes, while the field side
 //! never waits for Zenoh. The queryables run on Zenoh's threads and read the same replica
 //! under the same mutex.
 //!
@@ -1034,7 +1035,7 @@ fn flush_barrier(session: &Session, keys: &TeamKeys, clock: Clock) -> bool {
 
 /// Puts `ops` (values and talk messages, taken from the outbox at `taken`) in order,
 /// with blocking congestion control (Zenoh drops nothing the outbox handed it; the outbox
-/// merged what was superseded while Zenoh blocked). A lone sample goes express (not held
+/// merged what was superseded if Zenoh blocked it full). A lone sample goes express (not held
 /// for a batch); under load Zenoh batches. Counts errors and the put times; returns
 /// whether a put was slow.
 fn put_samples(
