@@ -87,6 +87,11 @@ pub struct RunArgs {
     /// its numeric id) or `string` (the key's text in every put), for comparison.
     #[arg(long, value_enum, default_value_t = PutViaArg::Declared)]
     pub put_via: PutViaArg,
+    /// Operations the outbox holds in order (every version of a key) before it falls back
+    /// to the latest value per key; it also falls back when the oldest waited 0.5 s.
+    /// 0 merges every superseded value at once (the bridge before the seventh session).
+    #[arg(long, default_value_t = crate::outbox::CAPACITY)]
+    pub outbox_capacity: usize,
 }
 
 /// `--put-via`.
@@ -211,6 +216,7 @@ impl RunArgs {
                 FieldLoopArg::TxRuntime => FieldLoop::TxRuntime,
                 FieldLoopArg::Thread => FieldLoop::Thread,
             },
+            outbox_capacity: self.outbox_capacity,
             put_via: match self.put_via {
                 PutViaArg::Declared => PutVia::Declared,
                 PutViaArg::String => PutVia::String,

@@ -98,6 +98,9 @@ pub struct BridgeConfig {
     pub field_loop: FieldLoop,
     /// How a sample's key reaches Zenoh ([`PutVia`]).
     pub put_via: PutVia,
+    /// Operations the outbox holds in order before it merges ([`crate::outbox`]); 0
+    /// merges every superseded value at once (the bridge before the seventh session).
+    pub outbox_capacity: usize,
 }
 
 /// How the bridge names a sample's key to Zenoh.
@@ -506,7 +509,7 @@ impl Bridge {
             team: cfg.team,
             replica,
             exporter: Exporter::new(cfg.keys.clone(), cfg.export),
-            outbox: Outbox::new(),
+            outbox: Outbox::with_limits(cfg.outbox_capacity, crate::outbox::MAX_WAIT),
             io: IoCounters::default(),
             reported_drops: Vec::new(),
             timings: Timings::default(),
