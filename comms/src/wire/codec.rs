@@ -37,18 +37,29 @@ impl bincode::enc::write::Writer for VecWriter<'_> {
 
 /// The largest varint bincode writes as its own single byte.
 const SINGLE_BYTE_MAX: u64 = 250;
+/// The marker bytes of bincode's wider varints.
+const U16_BYTE: u8 = 251;
+const U32_BYTE: u8 = 252;
+const U64_BYTE: u8 = 253;
 
 /// Appends `v` as a varint to `out`.
 #[inline]
 pub(super) fn put_varint(v: u64, out: &mut Vec<u8>) {
-    // Most varints on the wire (types, lengths, versions, small ages) are one byte:
-    // bincode's encoder (its limit check, its writer) is only worth it for the rest.
+    // bincode's standard varint, written directly (its encoder's limit check and
+    // writer cost more than the bytes): one byte up to 250, else a marker byte and the
+    // value in 2, 4 or 8 little-endian bytes.
     if v <= SINGLE_BYTE_MAX {
         out.push(v as u8);
-        return;
+    } else if let Ok(v) = u16::try_from(v) {
+        out.push(U16_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
+    } else if let Ok(v) = u32::try_from(v) {
+        out.push(U32_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
+    } else {
+        out.push(U64_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
     }
-    // Writing into a Vec cannot fail.
-    let _ = bincode::encode_into_writer(v, VecWriter(out), config());
 }
 
 /// bincode's zigzag mapping of a signed integer onto the varint's unsigned one.
@@ -239,12 +250,26 @@ impl<'a> Reader<'a> {
 
     #[inline]
     pub(super) fn varint(&mut self) -> Result<u64, Fault> {
-        // A one-byte varint (most of them) read directly; wider ones (and what is not a
-        // varint) through bincode, which decides what is valid.
+        // bincode's varint read directly (a proptest holds it to bincode's reading);
+        // anything else (a u128 marker, too few bytes) through bincode, which decides
+        // what is an error.
         if let Some((&b, rest)) = self.bytes.split_first() {
-            if u64::from(b) <= SINGLE_BYTE_MAX {
+            let wide = |n: usize| rest.get(..n).map(|w| (w, &rest[n..]));
+            let read = match b {
+                0..=250 => Some((u64::from(b), rest)),
+                U16_BYTE => wide(2).map(|(w, r)| (u64::from(u16::from_le_bytes([w[0], w[1]])), r)),
+                U32_BYTE => wide(4)
+                    .map(|(w, r)| (u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])), r)),
+                U64_BYTE => wide(8).map(|(w, r)| {
+                    let mut b8 = [0u8; 8];
+                    b8.copy_from_slice(w);
+                    (u64::from_le_bytes(b8), r)
+                }),
+                _ => None,
+            };
+            if let Some((v, rest)) = read {
                 self.bytes = rest;
-                return Ok(u64::from(b));
+                return Ok(v);
             }
         }
         let (v, used): (u64, usize) = bincode::decode_from_slice(self.bytes, config())
@@ -354,11 +379,13 @@ impl<'a> Reader<'a> {
 
 /// The value a checked [`RawValue`] holds.
 pub(super) fn decode_value(raw: &[u8]) -> Option<Value> {
-    // A small integer (tag 0, a one-byte zigzag varint) by hand; the rest by bincode.
-    if let [0, b] = *raw {
-        if u64::from(b) <= SINGLE_BYTE_MAX {
-            let z = i64::from(b);
-            return Some(Value::Int((z >> 1) ^ -(z & 1)));
+    // An integer (tag 0, a zigzag varint) by hand; the rest by bincode.
+    if let Some((0, rest)) = raw.split_first() {
+        let mut r = Reader::new(rest);
+        if let Ok(z) = r.varint() {
+            if r.is_empty() {
+                return Some(Value::Int(((z >> 1) as i64) ^ -((z & 1) as i64)));
+            }
         }
     }
     bincode::decode_from_slice::<Value, _>(raw, config())
@@ -491,11 +518,34 @@ mod hand_tests {
         /// Any bytes read as a varint by hand read as bincode reads them (the fast path
         /// takes one byte below 251 only; the rest is bincode's).
         #[test]
-        fn varints_read_by_hand_are_bincodes(bytes in proptest::collection::vec(any::<u8>(), 0..12)) {
+        fn varints_read_by_hand_are_bincodes(bytes in marked_bytes()) {
             let by_bincode: Option<(u64, usize)> = bincode::decode_from_slice(&bytes, config()).ok();
             let mut r = Reader::new(&bytes);
             let by_hand = r.varint().ok().map(|v| (v, bytes.len() - r.remaining()));
             prop_assert_eq!(by_hand, by_bincode);
         }
+
+        /// Any bytes read as a value read as bincode reads them.
+        #[test]
+        fn values_read_by_hand_are_bincodes(tail in marked_bytes(), tag in 0..8u8) {
+            let mut bytes = vec![tag];
+            bytes.extend(tail);
+            let by_bincode: Option<Value> =
+                bincode::decode_from_slice(&bytes, config()).ok().map(|(v, _)| v);
+            // Debug text: a NaN read both ways is the same NaN.
+            prop_assert_eq!(format!("{:?}", decode_value(&bytes)), format!("{by_bincode:?}"));
+        }
+    }
+
+    /// Bytes that start with each of bincode's varint markers often (and anything).
+    fn marked_bytes() -> impl Strategy<Value = Vec<u8>> {
+        let first = prop_oneof![
+            proptest::sample::select(vec![250u8, 251, 252, 253, 254, 255]),
+            any::<u8>()
+        ];
+        (first, proptest::collection::vec(any::<u8>(), 0..12)).prop_map(|(b, mut rest)| {
+            rest.insert(0, b);
+            rest
+        })
     }
 }
