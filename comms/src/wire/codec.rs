@@ -46,11 +46,18 @@ const U64_BYTE: u8 = 253;
 #[inline]
 pub(super) fn put_varint(v: u64, out: &mut Vec<u8>) {
     // bincode's standard varint, written directly (its encoder's limit check and
-    // writer cost more than the bytes): one byte up to 250, else a marker byte and the
-    // value in 2, 4 or 8 little-endian bytes.
+    // writer cost more than the bytes): one byte up to 250 (inlined: most varints on
+    // the wire), else a marker byte and the value in 2, 4 or 8 little-endian bytes.
     if v <= SINGLE_BYTE_MAX {
         out.push(v as u8);
-    } else if let Ok(v) = u16::try_from(v) {
+    } else {
+        put_wide_varint(v, out);
+    }
+}
+
+#[inline(never)]
+fn put_wide_varint(v: u64, out: &mut Vec<u8>) {
+    if let Ok(v) = u16::try_from(v) {
         out.push(U16_BYTE);
         out.extend_from_slice(&v.to_le_bytes());
     } else if let Ok(v) = u32::try_from(v) {
@@ -250,13 +257,24 @@ impl<'a> Reader<'a> {
 
     #[inline]
     pub(super) fn varint(&mut self) -> Result<u64, Fault> {
-        // bincode's varint read directly (a proptest holds it to bincode's reading);
-        // anything else (a u128 marker, too few bytes) through bincode, which decides
-        // what is an error.
+        // bincode's varint read directly (a proptest holds it to bincode's reading):
+        // one byte inline, the wider ones out of line.
+        match self.bytes.split_first() {
+            Some((&b, rest)) if u64::from(b) <= SINGLE_BYTE_MAX => {
+                self.bytes = rest;
+                Ok(u64::from(b))
+            }
+            _ => self.wide_varint(),
+        }
+    }
+
+    /// A varint of a marker byte and 2, 4 or 8 bytes; anything else (a u128 marker, too
+    /// few bytes, nothing) through bincode, which decides what is an error.
+    #[inline(never)]
+    fn wide_varint(&mut self) -> Result<u64, Fault> {
         if let Some((&b, rest)) = self.bytes.split_first() {
             let wide = |n: usize| rest.get(..n).map(|w| (w, &rest[n..]));
             let read = match b {
-                0..=250 => Some((u64::from(b), rest)),
                 U16_BYTE => wide(2).map(|(w, r)| (u64::from(u16::from_le_bytes([w[0], w[1]])), r)),
                 U32_BYTE => wide(4)
                     .map(|(w, r)| (u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])), r)),
