@@ -73,6 +73,11 @@ pub struct CommsArgs {
     /// 127.0.0.2).
     #[arg(long, value_enum, default_value_t = TransportKind::Multicast)]
     pub transport: TransportKind,
+    /// Also write every ping-pong round trip to this file as CSV (`what,block,index,
+    /// start_us,rtt_us`; `start_us` from the start of the run), to see what the slow
+    /// ones have in common.
+    #[arg(long, value_name = "FILE")]
+    pub dump_rtts: Option<std::path::PathBuf>,
 }
 
 /// A count of at least one (no measurement is made of nothing).
@@ -749,20 +754,45 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let per_block = args.rounds.div_ceil(BLOCKS);
     let transport = Transport::from(args.transport);
     let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());
+    let start = Instant::now();
+    let mut dump = String::new();
+    // A block's round trips run back to back after its warm-up: their starts are
+    // the block's measured end minus the round trips after them.
+    let mut dump_block = |what: &str, block: usize, rtts: &[f64]| {
+        if args.dump_rtts.is_some() {
+            let end = start.elapsed().as_secs_f64() * 1e6;
+            let mut at = end - rtts.iter().sum::<f64>();
+            for (i, rtt) in rtts.iter().enumerate() {
+                dump += &format!("{what},{block},{i},{at:.1},{rtt:.3}\n");
+                at += rtt;
+            }
+        }
+    };
     for block in 0..BLOCKS {
         say(&format!(
             "ping-pong block {} of {BLOCKS}: raw, tokio, huddle...",
             block + 1
         ));
         let g = group(args.port, 1);
-        raw.extend(raw_ping_pong(g, per_block, args.pin, transport)?);
-        bare.extend(tokio_ping_pong(g, per_block, args.pin, transport)?);
-        hud.extend(huddle_ping_pong(
+        let r = raw_ping_pong(g, per_block, args.pin, transport)?;
+        dump_block("raw", block, &r);
+        raw.extend(r);
+        let t = tokio_ping_pong(g, per_block, args.pin, transport)?;
+        dump_block("tokio", block, &t);
+        bare.extend(t);
+        let h = huddle_ping_pong(
             (group(args.port + 1, 2), transport),
             per_block,
             args.pin,
             args.reply,
-        )?);
+        )?;
+        dump_block("huddle", block, &h);
+        hud.extend(h);
+    }
+    if let Some(path) = &args.dump_rtts {
+        let header = "what,block,index,start_us,rtt_us\n";
+        std::fs::write(path, format!("{header}{dump}"))
+            .with_context(|| format!("cannot write {}", path.display()))?;
     }
     let (raw_p50, raw_p99) = summarize(raw);
     let (tokio_p50, tokio_p99) = summarize(bare);

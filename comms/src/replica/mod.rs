@@ -243,16 +243,20 @@ impl Replica {
         let global = scope != Scope::Local;
         if global {
             let (version, age_us) = self.widest_version_and_age();
-            let bytes = wire::item_len_coded(
-                ItemRef::Update {
-                    path: key.path,
-                    value: &value,
-                    version,
-                    age_us,
-                },
-                self.known_paths(),
-            );
-            if bytes + self.frame_overhead() > self.cfg.mtu {
+            let item = ItemRef::Update {
+                path: key.path,
+                value: &value,
+                version,
+                age_us,
+            };
+            let room = self.cfg.mtu.saturating_sub(self.frame_overhead());
+            // With its path spelled out the item is at least as long as with an index:
+            // if that fits, the known-path table need not be searched.
+            let bytes = match wire::item_len(item) {
+                n if n <= room => n,
+                _ => wire::item_len_coded(item, self.known_paths()),
+            };
+            if bytes > room {
                 return Err(SetError::TooLarge {
                     key: key.to_string(),
                     bytes,

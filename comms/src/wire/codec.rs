@@ -35,10 +35,70 @@ impl bincode::enc::write::Writer for VecWriter<'_> {
     }
 }
 
+/// The largest varint bincode writes as its own single byte.
+const SINGLE_BYTE_MAX: u64 = 250;
+/// The marker bytes of bincode's wider varints.
+const U16_BYTE: u8 = 251;
+const U32_BYTE: u8 = 252;
+const U64_BYTE: u8 = 253;
+
 /// Appends `v` as a varint to `out`.
+#[inline]
 pub(super) fn put_varint(v: u64, out: &mut Vec<u8>) {
-    // Writing into a Vec cannot fail.
-    let _ = bincode::encode_into_writer(v, VecWriter(out), config());
+    // bincode's standard varint, written directly (its encoder's limit check and
+    // writer cost more than the bytes): one byte up to 250 (inlined: most varints on
+    // the wire), else a marker byte and the value in 2, 4 or 8 little-endian bytes.
+    if v <= SINGLE_BYTE_MAX {
+        out.push(v as u8);
+    } else {
+        put_wide_varint(v, out);
+    }
+}
+
+#[inline(never)]
+fn put_wide_varint(v: u64, out: &mut Vec<u8>) {
+    if let Ok(v) = u16::try_from(v) {
+        out.push(U16_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
+    } else if let Ok(v) = u32::try_from(v) {
+        out.push(U32_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
+    } else {
+        out.push(U64_BYTE);
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// bincode's zigzag mapping of a signed integer onto the varint's unsigned one.
+#[inline]
+fn zigzag(v: i64) -> u64 {
+    if v < 0 {
+        !(v as u64) * 2 + 1
+    } else {
+        (v as u64) * 2
+    }
+}
+
+/// A string or byte string: its length, then its bytes (as bincode writes `&str`).
+#[inline]
+fn put_bytes(bytes: &[u8], out: &mut Vec<u8>) {
+    put_varint(bytes.len() as u64, out);
+    out.extend_from_slice(bytes);
+}
+
+/// Appends a value: an integer by hand (the common case on the hot path), the others
+/// through bincode. The bytes are bincode's either way (`Value`'s `Encode`).
+#[inline]
+fn put_value(value: &Value, out: &mut Vec<u8>) {
+    match value {
+        Value::Int(v) => {
+            out.push(0);
+            put_varint(zigzag(*v), out);
+        }
+        other => {
+            let _ = bincode::encode_into_writer(other, VecWriter(out), config());
+        }
+    }
 }
 
 /// The type an item goes out as, and its known-path index if it is item 4.
@@ -54,12 +114,15 @@ pub(super) fn item_type(item: &ItemRef<'_>, known: &KnownPaths) -> (u64, Option<
     }
 }
 
-/// An item's fields (everything after its type and length).
-struct Fields<'a> {
-    item: ItemRef<'a>,
-    index: Option<u8>,
+/// An item's fields (everything after its type and length), through bincode: what
+/// [`put_fields`] writes by hand, kept as its reference in the tests.
+#[cfg(test)]
+pub(super) struct Fields<'a> {
+    pub(super) item: ItemRef<'a>,
+    pub(super) index: Option<u8>,
 }
 
+#[cfg(test)]
 impl Encode for Fields<'_> {
     fn encode<E: Encoder>(&self, e: &mut E) -> Result<(), EncodeError> {
         match self.item {
@@ -114,7 +177,50 @@ pub(super) fn put_item(
     if let Some(len) = fields_len {
         put_varint(len as u64, out);
     }
-    let _ = bincode::encode_into_writer(Fields { item, index }, VecWriter(out), config());
+    put_fields(item, index, out);
+}
+
+/// An item's fields, as bincode writes [`Fields`] (a proptest holds them equal): one
+/// call per field instead of bincode's encoder around every primitive.
+pub(super) fn put_fields(item: ItemRef<'_>, index: Option<u8>, out: &mut Vec<u8>) {
+    match item {
+        ItemRef::Update {
+            path,
+            value,
+            version,
+            age_us,
+        } => {
+            match index {
+                Some(i) => put_varint(u64::from(i), out),
+                None => put_bytes(path.as_bytes(), out),
+            }
+            put_value(value, out);
+            put_varint(version, out);
+            put_varint(age_us, out);
+        }
+        ItemRef::Talk { queue, seq, value } => {
+            put_bytes(queue.as_bytes(), out);
+            put_varint(seq, out);
+            put_value(value, out);
+        }
+        ItemRef::TalkHead { queue, first, last } => {
+            put_bytes(queue.as_bytes(), out);
+            put_varint(first, out);
+            put_varint(last, out);
+        }
+        ItemRef::Nack {
+            target,
+            queue,
+            first,
+            last,
+        } => {
+            // bincode writes a `u8` as its byte.
+            out.push(target);
+            put_bytes(queue.as_bytes(), out);
+            put_varint(first, out);
+            put_varint(last, out);
+        }
+    }
 }
 
 /// Why bytes being read are not what they should be.
@@ -149,7 +255,41 @@ impl<'a> Reader<'a> {
         self.bytes.len()
     }
 
+    #[inline]
     pub(super) fn varint(&mut self) -> Result<u64, Fault> {
+        // bincode's varint read directly (a proptest holds it to bincode's reading):
+        // one byte inline, the wider ones out of line.
+        match self.bytes.split_first() {
+            Some((&b, rest)) if u64::from(b) <= SINGLE_BYTE_MAX => {
+                self.bytes = rest;
+                Ok(u64::from(b))
+            }
+            _ => self.wide_varint(),
+        }
+    }
+
+    /// A varint of a marker byte and 2, 4 or 8 bytes; anything else (a u128 marker, too
+    /// few bytes, nothing) through bincode, which decides what is an error.
+    #[inline(never)]
+    fn wide_varint(&mut self) -> Result<u64, Fault> {
+        if let Some((&b, rest)) = self.bytes.split_first() {
+            let wide = |n: usize| rest.get(..n).map(|w| (w, &rest[n..]));
+            let read = match b {
+                U16_BYTE => wide(2).map(|(w, r)| (u64::from(u16::from_le_bytes([w[0], w[1]])), r)),
+                U32_BYTE => wide(4)
+                    .map(|(w, r)| (u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])), r)),
+                U64_BYTE => wide(8).map(|(w, r)| {
+                    let mut b8 = [0u8; 8];
+                    b8.copy_from_slice(w);
+                    (u64::from_le_bytes(b8), r)
+                }),
+                _ => None,
+            };
+            if let Some((v, rest)) = read {
+                self.bytes = rest;
+                return Ok(v);
+            }
+        }
         let (v, used): (u64, usize) = bincode::decode_from_slice(self.bytes, config())
             .map_err(|_| Fault::Malformed("bad varint"))?;
         self.bytes = &self.bytes[used..];
@@ -257,6 +397,15 @@ impl<'a> Reader<'a> {
 
 /// The value a checked [`RawValue`] holds.
 pub(super) fn decode_value(raw: &[u8]) -> Option<Value> {
+    // An integer (tag 0, a zigzag varint) by hand; the rest by bincode.
+    if let Some((0, rest)) = raw.split_first() {
+        let mut r = Reader::new(rest);
+        if let Ok(z) = r.varint() {
+            if r.is_empty() {
+                return Some(Value::Int(((z >> 1) as i64) ^ -((z & 1) as i64)));
+            }
+        }
+    }
     bincode::decode_from_slice::<Value, _>(raw, config())
         .ok()
         .map(|(v, _)| v)
@@ -309,6 +458,112 @@ impl<Ctx> Decode<Ctx> for Value {
                     found,
                 })
             }
+        })
+    }
+}
+
+#[cfg(test)]
+mod hand_tests {
+    use super::*;
+    use crate::wire::tests::any_item;
+    use proptest::prelude::*;
+
+    /// Integers around every width bincode's varint switches at, and small ones.
+    fn edgy_u64() -> impl Strategy<Value = u64> {
+        prop_oneof![
+            0..=300u64,
+            proptest::sample::select(vec![
+                250,
+                251,
+                252,
+                0xFFFF,
+                0x1_0000,
+                0xFFFF_FFFF,
+                0x1_0000_0000,
+                u64::MAX
+            ]),
+            any::<u64>(),
+        ]
+    }
+
+    fn edgy_i64() -> impl Strategy<Value = i64> {
+        prop_oneof![
+            -300..=300i64,
+            proptest::sample::select(vec![-126, -125, 125, 126, i64::MIN, i64::MAX]),
+            any::<i64>(),
+        ]
+    }
+
+    fn bincode_bytes(item: ItemRef<'_>, index: Option<u8>) -> Vec<u8> {
+        let mut out = Vec::new();
+        bincode::encode_into_writer(Fields { item, index }, VecWriter(&mut out), config())
+            .expect("a Vec takes anything");
+        out
+    }
+
+    proptest! {
+        /// The hand-written writer gives bincode's bytes for every item: the wire
+        /// format did not change with it.
+        #[test]
+        fn fields_by_hand_are_bincodes(item in any_item(), index in proptest::option::of(0..=250u8)) {
+            let mut hand = Vec::new();
+            put_fields(item.as_ref(), index, &mut hand);
+            prop_assert_eq!(hand, bincode_bytes(item.as_ref(), index));
+        }
+
+        /// The same for updates of small integers, versions and ages at every varint
+        /// width, which the item strategy above rarely draws.
+        #[test]
+        fn small_integers_by_hand_are_bincodes(v in edgy_i64(), version in edgy_u64(), age_us in edgy_u64()) {
+            let value = Value::Int(v);
+            let item = ItemRef::Update { path: "a.b", value: &value, version, age_us };
+            let mut hand = Vec::new();
+            put_fields(item, None, &mut hand);
+            prop_assert_eq!(&hand, &bincode_bytes(item, None));
+            // And reading them back by hand gives what bincode reads.
+            let mut raw = Vec::new();
+            put_value(&value, &mut raw);
+            prop_assert_eq!(decode_value(&raw), Some(value));
+            let via_bincode: Value = bincode::decode_from_slice(&raw, config()).unwrap().0;
+            prop_assert_eq!(via_bincode, Value::Int(v));
+            let mut varint = Vec::new();
+            put_varint(version, &mut varint);
+            let mut r = Reader::new(&varint);
+            prop_assert_eq!(r.varint().ok(), Some(version));
+            prop_assert!(r.is_empty());
+        }
+
+        /// Any bytes read as a varint by hand read as bincode reads them (the fast path
+        /// takes one byte below 251 only; the rest is bincode's).
+        #[test]
+        fn varints_read_by_hand_are_bincodes(bytes in marked_bytes()) {
+            let by_bincode: Option<(u64, usize)> = bincode::decode_from_slice(&bytes, config()).ok();
+            let mut r = Reader::new(&bytes);
+            let by_hand = r.varint().ok().map(|v| (v, bytes.len() - r.remaining()));
+            prop_assert_eq!(by_hand, by_bincode);
+        }
+
+        /// Any bytes read as a value read as bincode reads them.
+        #[test]
+        fn values_read_by_hand_are_bincodes(tail in marked_bytes(), tag in 0..8u8) {
+            let mut bytes = vec![tag];
+            bytes.extend(tail);
+            let by_bincode: Option<Value> =
+                bincode::decode_from_slice(&bytes, config()).ok().map(|(v, _)| v);
+            // Debug text: a NaN read both ways is the same NaN.
+            prop_assert_eq!(format!("{:?}", decode_value(&bytes)), format!("{by_bincode:?}"));
+        }
+    }
+
+    /// Bytes that start with each of bincode's varint markers often (and anything).
+    fn marked_bytes() -> impl Strategy<Value = Vec<u8>> {
+        let first = prop_oneof![
+            proptest::sample::select(vec![250u8, 251, 252, 253, 254, 255]),
+            any::<u8>()
+        ];
+        (first, proptest::collection::vec(any::<u8>(), 0..12)).prop_map(|(b, mut rest)| {
+            rest.insert(0, b);
+            rest
         })
     }
 }
