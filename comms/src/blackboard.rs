@@ -216,6 +216,11 @@ pub struct Blackboard {
     /// Bindings of other robots.
     remote_len: usize,
     scopes: BTreeMap<Scope, ScopeIndex>,
+    /// Per path held in robots' scopes: (robot, slot) of each, in robot order, so that
+    /// [`Blackboard::robots_at`] reads every robot's binding of a path after one lookup
+    /// instead of one per scope (the arbitration asks several times per control tick;
+    /// the walk missed the cache in every scope's table and path).
+    robots_by_path: HashMap<Arc<str>, Vec<(u8, SlotId)>, PathHasher>,
     changes: VecDeque<SlotId>,
     limits: BoardLimits,
     /// The latest instant this blackboard was told about (writes, stamps, the replica's
@@ -241,6 +246,7 @@ impl Blackboard {
             len: 0,
             remote_len: 0,
             scopes: BTreeMap::new(),
+            robots_by_path: HashMap::default(),
             changes: VecDeque::new(),
             limits,
             clock: Instant::ZERO,
@@ -311,6 +317,11 @@ impl Blackboard {
             Some(free) => *free = Some(slot),
             None => self.slots.push(Some(slot)),
         }
+        if let Scope::Robot(robot) = scope {
+            let held = self.robots_by_path.entry(path.clone()).or_default();
+            let k = held.partition_point(|&(other, _)| other < robot);
+            held.insert(k, (robot, id));
+        }
         let index = self.scopes.entry(scope).or_default();
         index.by_path.insert(path.clone(), id);
         index.ordered.insert(path, id);
@@ -333,6 +344,8 @@ impl Blackboard {
             return 0;
         };
         let slots = &mut self.slots;
+        let robots_by_path = &mut self.robots_by_path;
+        let robot_scope = matches!(scope, Scope::Robot(_));
         let mut removed = Vec::new();
         let mut queued = false;
         index.ordered.retain(|path, &mut id| {
@@ -343,6 +356,15 @@ impl Blackboard {
                 return true;
             }
             queued |= slot.change_queued;
+            if let Some(held) = robot_scope
+                .then(|| robots_by_path.get_mut(&**path))
+                .flatten()
+            {
+                held.retain(|&(_, other)| other != id);
+                if held.is_empty() {
+                    robots_by_path.remove(&**path);
+                }
+            }
             slots[id as usize] = None;
             removed.push(id);
             false
@@ -691,15 +713,11 @@ impl Blackboard {
         &'a self,
         path: &'a str,
     ) -> impl Iterator<Item = (u8, &'a Entry)> + 'a {
-        self.scopes
-            .range(Scope::Robot(1)..=Scope::Robot(254))
-            .filter_map(move |(scope, index)| {
-                let Scope::Robot(robot) = *scope else {
-                    return None;
-                };
-                let id = *index.by_path.get(path)?;
-                Some((robot, &self.slot(id)?.entry))
-            })
+        self.robots_by_path
+            .get(path)
+            .map_or(&[][..], Vec::as_slice)
+            .iter()
+            .filter_map(move |&(robot, id)| Some((robot, &self.slot(id)?.entry)))
     }
 
     /// One stored binding by scope and path.
@@ -1016,5 +1034,83 @@ mod tests {
         let p = Pattern::parse("+.var.+.x").unwrap();
         assert_eq!(bb.iter(&p).count(), 20_001);
         assert_eq!(bb.visited(&p), bb.len());
+    }
+
+    mod robots_at {
+        use super::*;
+        use crate::Pattern;
+        use proptest::prelude::*;
+
+        const PATHS: [&str; 3] = ["machine", "machine.heuristic", "machine.heuristic.x"];
+
+        #[derive(Clone, Debug)]
+        enum Op {
+            /// Robot, incarnation, path, version.
+            Remote(u8, u64, usize, u64),
+            Release(u8),
+            Own(usize),
+            Local(usize),
+        }
+
+        fn op() -> impl Strategy<Value = Op> {
+            prop_oneof![
+                4 => (1u8..=6, 1u64..=3, 0..PATHS.len(), 1u64..=4)
+                    .prop_map(|(r, inc, p, v)| Op::Remote(r, inc, p, v)),
+                1 => (1u8..=6).prop_map(Op::Release),
+                1 => (0..PATHS.len()).prop_map(Op::Own),
+                1 => (0..PATHS.len()).prop_map(Op::Local),
+            ]
+        }
+
+        proptest! {
+            /// Robots join, restart under new incarnations (their old bindings go), are
+            /// released, and fill their scope to its limit; all the while every robot's
+            /// binding of a path is what the pattern `+.var.<path>` finds in the robots'
+            /// scopes, in robot order (`+` also matches `local`, which `robots_at` skips).
+            #[test]
+            fn robots_at_finds_what_the_pattern_finds(
+                ops in proptest::collection::vec(op(), 0..60),
+            ) {
+                let limits = BoardLimits { per_owner: 2, ..BoardLimits::default() };
+                let mut bb = Blackboard::with_limits(3, limits);
+                for (k, op) in ops.iter().enumerate() {
+                    let at = t(10 * k as u64);
+                    match *op {
+                        Op::Remote(r, inc, p, v) => {
+                            let value = Value::Int(k as i64);
+                            bb.apply_remote(r, inc, PATHS[p].into(), value, v, at);
+                        }
+                        Op::Release(r) => {
+                            bb.release_owner(r);
+                        }
+                        Op::Own(p) => {
+                            let _ = bb.set(at, &k_of("*", p), Value::Int(k as i64));
+                        }
+                        Op::Local(p) => {
+                            let _ = bb.set(at, &k_of("local", p), Value::Int(k as i64));
+                        }
+                    }
+                    for path in PATHS {
+                        let pattern = Pattern::parse(&format!("+.var.{path}")).unwrap();
+                        let want: Vec<(u8, *const Entry)> = bb
+                            .iter(&pattern)
+                            .filter_map(|(key, e)| match key.scope() {
+                                Scope::Robot(r) => Some((r, e as *const Entry)),
+                                _ => None,
+                            })
+                            .collect();
+                        let got: Vec<(u8, *const Entry)> = bb
+                            .robots_at(path)
+                            .map(|(r, e)| (r, e as *const Entry))
+                            .collect();
+                        prop_assert_eq!(got, want, "{} after {:?}", path, &ops[..=k]);
+                    }
+                }
+            }
+        }
+
+        fn k_of(scope: &str, p: usize) -> Key {
+            k(&format!("{scope}.var.{}", PATHS[p]))
+        }
     }
 }

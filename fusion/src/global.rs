@@ -170,6 +170,9 @@ pub struct Teammate {
 #[derive(Debug, Clone, PartialEq)]
 struct RobotRecord {
     lwm: LocalWorldModel,
+    /// `lwm` is still the message exactly as [`GlobalModel::ingest`] took it (a
+    /// [`GlobalModel::forget_ball`] since drops its ball): see [`GlobalModel::received`].
+    as_taken: bool,
     received_t_s: f64,
     last_rejected_t_s: Option<f64>,
     last_accepted_t_s: Option<f64>,
@@ -297,6 +300,7 @@ impl GlobalModel {
         // `or_insert_with`: the record (an LWM, ~0.6 kB) is built only for a new robot.
         let rec = self.robots.get_or_insert_with(robot, || RobotRecord {
             lwm: *lwm,
+            as_taken: true,
             received_t_s: now_s,
             last_rejected_t_s: None,
             last_accepted_t_s: None,
@@ -330,6 +334,7 @@ impl GlobalModel {
             None
         };
         rec.lwm = *lwm;
+        rec.as_taken = true;
         rec.received_t_s = now_s;
 
         let result = if sparse {
@@ -894,7 +899,9 @@ impl GlobalModel {
         self.forgotten_before_t_s = t_s;
         self.rejected.clear();
         for rec in self.robots.values_mut() {
-            rec.lwm.ball = None;
+            if rec.lwm.ball.take().is_some() {
+                rec.as_taken = false;
+            }
             rec.last_rejected_t_s = None;
             rec.accepted_obs = None;
             rec.clear_run();
@@ -996,6 +1003,15 @@ impl GlobalModel {
     /// clock: for logs and references that want what the team's fusion holds.
     pub fn latest(&self, id: u8) -> Option<&LocalWorldModel> {
         self.robots.get(&id).map(|r| &r.lwm)
+    }
+
+    /// [`Self::latest`] only while it is still the LWM exactly as [`Self::ingest`] took it
+    /// (its last call for `id` that was not a [`Ingest::Duplicate`]): `None` once a
+    /// [`Self::forget_ball`] or [`Self::place_ball`] dropped its ball. A second reader of
+    /// the same message (the simulator's delivery reference, through the team layer) takes
+    /// it from here instead of a copy of its own.
+    pub fn received(&self, id: u8) -> Option<&LocalWorldModel> {
+        self.robots.get(&id).filter(|r| r.as_taken).map(|r| &r.lwm)
     }
 
     /// Where robot `id` last said the ball was, predicted to `now_s` (for displays).

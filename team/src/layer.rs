@@ -232,9 +232,10 @@ pub struct TeamLayer {
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
     heard: Vec<Option<(u64, u64)>>,
-    /// Per teammate (index = id − 1): its LWM decoded last, with the (incarnation,
-    /// version) it came from, on this robot's clock (see [`TeamLayer::decoded_lwm`]).
-    decoded: Vec<Option<((u64, u64), LocalWorldModel)>>,
+    /// Per teammate (index = id − 1): the (incarnation, version) of the entry whose LWM
+    /// its GWM's record holds as taken (see [`TeamLayer::decoded_lwm`]; the LWM itself is
+    /// not copied again here).
+    decoded: Vec<Option<(u64, u64)>>,
     /// The keys it reads and writes at every tick, built once (a key's path is parsed
     /// and allocated; a clone shares it).
     keys: LayerKeys,
@@ -686,12 +687,15 @@ impl TeamLayer {
                 continue;
             }
             self.heard[j] = Some(at);
+            self.decoded[j] = None;
             if let Value::Bytes(bytes) = &e.value {
                 let age_s = e.age(local_now).as_secs_f64();
                 // A malformed message is the sender's bug; the GWM just does not take it.
                 if let Ok(lwm) = self.gwm.decode(bytes, now_s, age_s) {
-                    self.gwm.ingest(id, &lwm, now_s);
-                    self.decoded[j] = Some((at, lwm));
+                    // A duplicate leaves the record on the message it took before.
+                    if self.gwm.ingest(id, &lwm, now_s) != fusion::Ingest::Duplicate {
+                        self.decoded[j] = Some(at);
+                    }
                 }
             }
         }
@@ -1138,10 +1142,11 @@ impl TeamLayer {
     /// ([`fusion::LocalWorldModel::retimed`]) instead of decoding it again.
     pub fn decoded_lwm(&self, id: u8, incarnation: u64, version: u64) -> Option<&LocalWorldModel> {
         let k = usize::from(id).checked_sub(1)?;
-        match self.decoded.get(k)? {
-            Some((at, lwm)) if *at == (incarnation, version) => Some(lwm),
-            _ => None,
+        if *self.decoded.get(k)? != Some((incarnation, version)) {
+            return None;
         }
+        // The GWM's record, unless a kick-off's placement has dropped its ball since.
+        self.gwm.received(id)
     }
 }
 

@@ -667,3 +667,52 @@ fn in_set_the_kick_off_taker_tells_its_claim_and_teammates_leave_it_the_ball() {
         assert_eq!(decision.goer, Some(3), "{s} s");
     }
 }
+
+#[test]
+fn a_teammates_message_is_lent_from_the_gwm_only_as_it_was_taken() {
+    // Robot 2 hears teammate 3's message (it sees the ball 1 m ahead) in entry (1, 1).
+    // The simulator's delivery reference asks the team layer for the LWM it decoded from
+    // that entry instead of decoding it again; the team layer lends its GWM's record,
+    // which must be the decoded message bit for bit. A kick-off placement drops the
+    // record's ball, and a repeat of the message leaves the record on the first copy:
+    // then it lends nothing (the reference decodes for itself), never the record.
+    let (mut r, _cal, cfg) = robot_at_a_still_ball(1.0, 0.0);
+    let (mut mate, ..) = robot_at_a_still_ball(1.0, 0.0);
+    let msg = mate.lwm.publish(0.96);
+    let bytes = msg.to_bytes().expect("a valid message").to_vec();
+    let path = world_local_of(3).path().to_string();
+    let mut board = Blackboard::new(2);
+    let now = Instant::from_micros(1_000_000);
+    board.apply_remote(3, 1, path.clone(), Value::Bytes(bytes.clone()), 1, now);
+    r.sense(&cfg, now, &Senses::default(), &board, false);
+    let fresh = r.gwm.decode(&bytes, 1.0, 0.0).expect("valid bytes");
+    assert!(
+        fresh.ball.is_some(),
+        "the teammate's message holds its ball"
+    );
+    assert_eq!(
+        r.decoded_lwm(3, 1, 1),
+        Some(&fresh),
+        "the entry it decoded last is lent, as decoded"
+    );
+    assert_eq!(r.decoded_lwm(3, 1, 2), None, "not another version");
+    assert_eq!(r.decoded_lwm(4, 1, 1), None, "not another teammate");
+
+    // The referee puts the ball on the centre spot: the GWM drops every robot's ball.
+    r.forget_ball(1.0);
+    assert!(r.gwm.latest(3).is_some_and(|l| l.ball.is_none()));
+    assert!(
+        r.decoded_lwm(3, 1, 1).is_none_or(|l| *l == fresh),
+        "never the record with its ball dropped"
+    );
+
+    // The same message again under a new version: the GWM takes it as a duplicate.
+    let later = Instant::from_micros(1_040_000);
+    board.apply_remote(3, 1, path, Value::Bytes(bytes.clone()), 2, later);
+    r.sense(&cfg, later, &Senses::default(), &board, false);
+    let again = r.gwm.decode(&bytes, 1.04, 0.0).expect("valid bytes");
+    assert!(
+        r.decoded_lwm(3, 1, 2).is_none_or(|l| *l == again),
+        "never the record of the first copy for the second"
+    );
+}
