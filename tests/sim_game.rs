@@ -215,3 +215,61 @@ fn a_penalised_robot_off_the_field_is_not_shoved_and_knows_where_it_stands() {
         "robot 3's belief stays on its spot while a teammate runs into it: {drift_m:.2} m off"
     );
 }
+
+/// Scenario: the short game of seed 1, robot 3 penalised for 15 s; while it waits off the
+/// field its pose belief is put 5 m off where it stands (the worst a robot with no
+/// field in view could believe). A penalised robot is not playing, its camera sees no
+/// field, and the 600 s runs the game is compared with have none: the game's pose,
+/// team-ball and blind-robot figures leave its samples out (before the seventh
+/// session they counted them, and this belief would have put the team's pose RMSE near
+/// 0.8 m). The report still gives the figures with them counted, so nothing is hidden.
+#[test]
+fn a_penalised_robot_s_samples_leave_the_game_s_world_model_figures_but_are_reported() {
+    let script = short_game();
+    let cfg = SimConfig {
+        duration_s: script.length_s() + 600.0,
+        seed: 1,
+        budget: Some(comms::BudgetSpec::SPL),
+        game: Some(script),
+        ..SimConfig::default()
+    };
+    let world_model = huddle::sim::WorldModelConfig::default();
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    let mut corrupted = 0;
+    while !sim.finished() {
+        sim.step();
+        if sim.referee().expect("a game").penalised(3) {
+            let mut wrong = sim.world.robots[2].pose;
+            wrong.at.x += 5.0;
+            sim.robots[2].place(wrong, &world_model);
+            corrupted += 1;
+        }
+    }
+    assert!(
+        corrupted > 1000,
+        "robot 3 penalised for 15 s: {corrupted} steps"
+    );
+    let r = sim.report(0.0);
+    let g = r.game.as_ref().expect("a game's report");
+    let w = &g.game_with_penalised;
+    eprintln!("{g}");
+    assert!(
+        w.penalised_pose_samples > 50 && w.penalised_ball_samples > 0,
+        "robot 3's samples while penalised are counted apart: {w:?}"
+    );
+    assert!(
+        r.pose_rmse_m < 0.5,
+        "the game's pose RMSE leaves the penalised robot out: {} m",
+        r.pose_rmse_m
+    );
+    assert!(
+        w.pose_rmse_m > 2.0 * r.pose_rmse_m && w.pose_rmse_m > 0.5,
+        "with it counted, its 5 m show: {} m against {} m",
+        w.pose_rmse_m,
+        r.pose_rmse_m
+    );
+    assert!(
+        w.blind_team_ball_rmse_m > 0.0 && w.team_ball_rmse_m > 0.0,
+        "the team-ball figures with the penalised are reported: {w:?}"
+    );
+}

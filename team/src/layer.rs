@@ -264,6 +264,10 @@ pub struct TeamLayer {
     kick_off_hold_until_s: Option<f64>,
     /// In the hold, and not the kick-off taker: it leaves the ball to the taker.
     kick_off_yield: bool,
+    /// This kick-off's taker: the cost at which it first claimed the ball in Set or the
+    /// hold. It keeps the claim at that cost until the hold ends (see
+    /// [`TeamLayer::set_kick_off_next`]).
+    kick_off_taker_h: Option<f64>,
     /// In Set, as the taker: how often it told the team its claim, and when last (see
     /// [`TeamLayer::set_kick_off_next`]).
     kick_off_claims: (u32, f64),
@@ -416,6 +420,7 @@ impl TeamLayer {
             kick_off_next: false,
             kick_off_hold_until_s: None,
             kick_off_yield: false,
+            kick_off_taker_h: None,
             kick_off_claims: (0, f64::NEG_INFINITY),
             kick_off_place: false,
             was_in_play: true,
@@ -474,6 +479,7 @@ impl TeamLayer {
             self.kick_off_hold_until_s = Some(f64::INFINITY);
             self.kick_off_place = true;
             self.kick_off_claims = (0, f64::NEG_INFINITY);
+            self.kick_off_taker_h = None;
         }
         self.kick_off_next = set;
         begins
@@ -776,13 +782,22 @@ impl TeamLayer {
                 .then(|| sound.candidates(self.id, t_s, &heard))
         });
         let holding = self.kick_off_hold(t_s);
-        self.kick_off_yield = holding && self.h >= KICK_OFF_TAKER_COST;
+        if !holding || self.penalized() {
+            self.kick_off_taker_h = None;
+        }
+        let taker_h = self.kick_off_taker_h;
+        self.kick_off_yield = holding && taker_h.is_none() && self.h >= KICK_OFF_TAKER_COST;
         if holding && self.compact {
             // What it told before the restart is long stale at its teammates.
             self.arbiter.set_told(None);
         }
         let cost = if self.kick_off_yield {
             self.h.max(self.arbiter.params().no_ball_cost)
+        } else if let Some(taker_h) = taker_h {
+            // The taker keeps the kick-off through its kick until the hold ends: its
+            // teammates leave the ball to it until then whatever it sees after the kick,
+            // and it lets go only when they may take it.
+            self.h.min(taker_h)
         } else {
             self.h
         };
@@ -809,6 +824,9 @@ impl TeamLayer {
             }
         };
         self.decision = decision;
+        if holding && !self.kick_off_yield && posted.going && self.kick_off_taker_h.is_none() {
+            self.kick_off_taker_h = Some(cost);
+        }
         let params = *self.arbiter.params();
         let rivals = || {
             heard

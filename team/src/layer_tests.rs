@@ -716,3 +716,59 @@ fn a_teammates_message_is_lent_from_the_gwm_only_as_it_was_taken() {
         "never the record of the first copy for the second"
     );
 }
+
+/// Scenario: the kick-off taker (robot 3, 0.1 m from the ball) claimed it in Set; play
+/// starts at 55 s and the hold runs to 58 s. At 56.5 s it kicks, the ball rolls out of
+/// its sight, and its cost becomes the no-ball cost. Before, it let go at once, and at
+/// the hold's end every teammate that saw the ball held no claim and went (ideal seed
+/// 602 at 1890 s: three goers for 3.5 s, their claims waiting for a spent room). Now it
+/// keeps the kick-off, its claim as it told it in Set, until the hold ends, so its
+/// teammates hold a going claim through the hold's end; then its cost is its own again.
+#[test]
+fn the_kick_off_taker_keeps_its_claim_through_its_kick_until_the_hold_ends() {
+    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
+    let mut params = ArbitrationParams::default();
+    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
+    cfg.send_policy = SendPolicy::Voi;
+    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let mut taker = TeamLayer::new(3, false, params, Pose::default(), &cal, &cfg.world_model, 5);
+    taker.set_in_play(false);
+    assert!(taker.set_kick_off_next(true));
+    let quiet = Blackboard::new(3);
+    for k in 0..10 {
+        let s = 50.0 + 0.5 * f64::from(k);
+        taker.h = 0.1;
+        let (_, posted) = taker.decide(&quiet, at(s));
+        taker.finish(&cfg, at(s), None, posted, 0, false, false, false, Some(0));
+        assert!(
+            taker.claims_ball(),
+            "{s} s: in Set the taker claims the ball"
+        );
+    }
+    taker.set_in_play(true);
+    taker.set_kick_off_next(false);
+    for k in 0..60 {
+        let s = 55.0 + 0.1 * f64::from(k);
+        // It kicked at 56.5 s and lost the ball.
+        taker.h = if s < 56.5 { 0.1 } else { params.no_ball_cost };
+        let (_, posted) = taker.decide(&quiet, at(s));
+        taker.finish(&cfg, at(s), None, posted, 0, false, false, false, Some(0));
+        let in_hold = s < 55.0 + KICK_OFF_HOLD_S - 1e-9;
+        if in_hold {
+            assert!(
+                taker.claims_ball(),
+                "{s} s: the taker keeps the kick-off until the hold ends"
+            );
+        } else {
+            // After the hold its cost is its own again (it decides on the claim it told
+            // until its news goes out, as any goer under a budget).
+            assert_eq!(posted.h, params.no_ball_cost, "{s} s: after the hold");
+        }
+        if in_hold {
+            assert!(
+                posted.going && posted.h <= 0.1 + 1e-9,
+                "{s} s: its claim is the one it told in Set: {posted:?}"
+            );
+        }
+    }
+}

@@ -61,7 +61,7 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use comms_netsim::{Harness, HarnessError};
-pub use game::GameReport;
+pub use game::{GameReport, WithPenalised};
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{
     CentralFusion, DelayedCentral, DeliveryReference, KickTruth, Publications, ReferenceConfig,
@@ -926,7 +926,15 @@ impl Simulation {
             let mut e = true_pose.mean - est.mean;
             e.z = fusion::wrap_angle(e.z);
             let nees = est.cov.cholesky().map_or(f64::NAN, |c| e.dot(&c.solve(&e)));
-            self.fusion.pose(e.x * e.x + e.y * e.y, e.z * e.z, nees);
+            // A penalised robot carried off the field is not playing: its samples count
+            // only in the game's figures with the penalised (see `game`).
+            let off = self.world.off_field(i);
+            if let Some(game) = &mut self.game {
+                game.sample_pose(e.x * e.x + e.y * e.y, off);
+            }
+            if !off {
+                self.fusion.pose(e.x * e.x + e.y * e.y, e.z * e.z, nees);
+            }
             if !visible {
                 continue;
             }
@@ -952,10 +960,14 @@ impl Simulation {
                 .estimate
                 .predict_to(&self.cfg.brain.team.world_model.global.ball, now_s);
             let te = (team.estimate.position() - truth).norm_squared();
-            if r.ball.is_none() {
-                if let Some(game) = &mut self.game {
+            if let Some(game) = &mut self.game {
+                game.sample_team_ball(te, r.ball.is_none(), off);
+                if r.ball.is_none() && !off {
                     game.sample_blind(t_s, te);
                 }
+            }
+            if off {
+                continue;
             }
             let ce = (c.position() - truth).norm_squared();
             self.fusion.ball(&BallSample {
