@@ -209,8 +209,10 @@ impl Replica {
         };
         let plausible = -(IMPLAUSIBLE_MARGIN.as_micros() as f64)..=MAX_TRANSIT.as_micros() as f64;
         if !plausible.contains(&transit_us) {
+            // A stamp that cannot be right (forged, or a broken clock): as documented,
+            // the default (`clock_tests`).
             self.stats.clock_stamps_implausible += 1;
-            return fallback;
+            return self.cfg.default_transit;
         }
         let transit_us = transit_us.max(0.0);
         self.transit_seen_us = Some(match self.transit_seen_us {
