@@ -798,7 +798,7 @@ mod tests {
         let mut late_ms = Vec::new();
         while !sim.finished() {
             sim.step();
-            for i in 0..n {
+            for (i, seen) in seen.iter_mut().enumerate() {
                 let Some(replica) = sim.harness.replica(i) else {
                     continue;
                 };
@@ -807,10 +807,10 @@ mod tests {
                     let Some(e) = replica.blackboard().get(&key) else {
                         continue;
                     };
-                    if seen[i][j] == Some(e.version) {
+                    if seen[j] == Some(e.version) {
                         continue;
                     }
-                    seen[i][j] = Some(e.version);
+                    seen[j] = Some(e.version);
                     let Some(sent) = sim.publications.sent_at(j, e.version) else {
                         continue;
                     };
