@@ -429,6 +429,14 @@ impl Blackboard {
         self.write_checked(now, key, value, true)
     }
 
+    /// The binding at `path` in `scope` was set at `stamp` (earlier than its write: see
+    /// `Replica::set_key_built`); nothing if it is not stored.
+    pub(crate) fn restamp(&mut self, scope: Scope, path: &str, stamp: Instant) {
+        if let Some(slot) = self.find(scope, path).and_then(|id| self.slot_mut(id)) {
+            slot.entry.stamp = stamp;
+        }
+    }
+
     /// A write of the replica's own bookkeeping (`local.var.huddle.stats.*`), which a
     /// client's keys filling the local limit must not stop.
     pub(crate) fn write_unlimited(

@@ -315,7 +315,17 @@ impl TeamCore {
         let s = &mut self.shared;
         let waiting = replica.is_pending(&team::world_local_key());
         let writes = s.layer.redecide(replica.blackboard(), now, waiting);
-        apply(replica, now, writes, true);
+        // Its latest tick's world model, if it rides along, is stamped at that tick, so
+        // teammates place it where it holds (not at this later write).
+        let built = s.layer.world_model_built();
+        let world = team::world_local_key();
+        let (ride, claims): (Vec<_>, Vec<_>) = writes.into_iter().partition(|(k, _)| *k == world);
+        apply(replica, now, claims, true);
+        for (key, value) in ride {
+            if let Err(e) = replica.set_key_built(now, &key, value, built) {
+                tracing::warn!(%key, error = %e, "team layer: a write was refused");
+            }
+        }
         publish(replica, now, &s.layer, &mut s.balls_out);
     }
 }

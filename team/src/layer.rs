@@ -228,6 +228,11 @@ pub struct TeamLayer {
     pass_to_posted: i64,
     /// The world model of the latest tick, as published (written or not).
     latest_lwm: Option<Value>,
+    /// The latest tick's time: when `latest_lwm` was built (this robot's clock).
+    latest_lwm_built: Instant,
+    /// What the latest tick did to the team ball for a kick-off (see
+    /// [`TeamLayer::kick_off_placement`]).
+    tick_placement: Option<KickOffPlacement>,
     push_reported_at_s: f64,
     decided_at_s: f64,
     /// Per teammate (index = id − 1): the (incarnation, version) of its LWM fed last.
@@ -304,6 +309,16 @@ pub const KICK_OFF_SPOT_SIGMA_M: f64 = 0.1;
 
 /// σ of the velocity of a ball put down for a kick-off, per axis, m/s: it lies still.
 pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
+
+/// A kick-off placement a tick made (see [`TeamLayer::kick_off_placement`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KickOffPlacement {
+    /// The GameController said Set: the team ball was put on the centre spot.
+    Set,
+    /// The robot heard play: the team ball, if still the Set's placement (no camera and
+    /// no kick said otherwise), was put down again at this instant.
+    PlayHeard,
+}
 
 /// The keys a [`TeamLayer`] uses at every tick, built once.
 #[derive(Debug, Clone)]
@@ -405,6 +420,8 @@ impl TeamLayer {
             goalkeeper,
             pass_to_posted: 0,
             latest_lwm: None,
+            latest_lwm_built: Instant::ZERO,
+            tick_placement: None,
             push_reported_at_s: f64::NEG_INFINITY,
             decided_at_s: 0.0,
             heard: vec![None; team],
@@ -619,10 +636,12 @@ impl TeamLayer {
         let wm = &cfg.world_model;
         let now_s = seconds(local_now);
         self.kicked = None;
+        self.tick_placement = None;
         if std::mem::take(&mut self.kick_off_place) {
             // Set: the ball lies on the kick-off spot, whatever the robot tracked before
             // (a half's kick-off has no goal, so nothing was reset).
             self.forget_ball(now_s);
+            self.tick_placement = Some(KickOffPlacement::Set);
         }
         if !claim_waiting {
             self.untold_claim = None;
@@ -719,8 +738,11 @@ impl TeamLayer {
         // prediction old.
         let play_heard = self.in_play && !self.was_in_play;
         self.was_in_play = self.in_play;
-        if play_heard && self.gwm.is_placed() {
-            self.gwm.place_ball(self.kick_off_ball(now_s));
+        if play_heard {
+            self.tick_placement = Some(KickOffPlacement::PlayHeard);
+            if self.gwm.is_placed() {
+                self.gwm.place_ball(self.kick_off_ball(now_s));
+            }
         }
         let msg = self.lwm.publish(now_s);
         self.gwm.ingest(self.id, &msg, now_s);
@@ -759,6 +781,7 @@ impl TeamLayer {
         if self.compact {
             // Only a budget's ride-along reads it (see `redecide`).
             self.latest_lwm.clone_from(&bytes);
+            self.latest_lwm_built = local_now;
         }
         bytes
     }
@@ -1141,6 +1164,23 @@ impl TeamLayer {
                 p, p, v, v,
             )),
         }
+    }
+
+    /// When the world model [`TeamLayer::redecide`] lets ride along was built: its tick
+    /// (this robot's clock). The caller writes it stamped so
+    /// (`comms::Replica::set_key_built`): a teammate then places the snapshot at the
+    /// instant it holds, not up to a control period later (#29's seventh session: under
+    /// the SPL budget teammates placed messages 16 ms late on average, up to 50 ms).
+    pub fn world_model_built(&self) -> Instant {
+        self.latest_lwm_built
+    }
+
+    /// What the latest tick ([`TeamLayer::sense`]) did for a kick-off: put the team ball
+    /// on the centre spot for Set, or heard play (and put it down again if it was still
+    /// that placement). A reference of the team ball makes the same placement at the
+    /// same instant, by its own rule.
+    pub fn kick_off_placement(&self) -> Option<KickOffPlacement> {
+        self.tick_placement
     }
 
     /// The pose estimate the layer holds (`fusion`'s convention).

@@ -468,7 +468,11 @@ impl Simulation {
                 _ => Order::Stand,
             };
         }
-        self.place_references(&set_heard, 0.0);
+        // The delivery references are placed at each robot's next tick, where its team
+        // layer places the ball (see `feed_references`).
+        if !set_heard.is_empty() {
+            self.place_whole_team_references(self.time_s(), false);
+        }
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their

@@ -619,8 +619,13 @@ impl Simulation {
                 for (key, value) in writes {
                     let lwm = key == lwm_key;
                     if lwm {
-                        // Its latest tick's world model, riding along.
-                        self.harness.set(i, &key, value)
+                        // Its latest tick's world model, riding along: stamped at its
+                        // tick, so teammates place it where it holds.
+                        let (now, built) = (now, self.robots[i].world_model_built());
+                        match self.harness.replica_mut(i) {
+                            Some(r) => r.set_key_built(now, &key, value, built),
+                            None => Ok(()),
+                        }
                     } else {
                         // A goer change: priority under a budget.
                         self.harness.set_priority(i, &key, value)
@@ -834,8 +839,18 @@ impl Simulation {
     /// Robot `i`'s LWM of its tick at global `t_s` into the references, and what its
     /// replica received into its delivery reference.
     fn feed_references(&mut self, i: usize, t_s: f64) {
-        let r = &self.robots[i];
         let now_s = robot::seconds(self.harness.local_now(i));
+        // The kick-off placements the tick made, by every reference at the same instant
+        // and in the same order as by the team layer: Set's before it heard its
+        // teammates; play heard's after, before its own message.
+        let placement = self.robots[i].kick_off_placement();
+        if placement == Some(team::KickOffPlacement::Set) {
+            self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
+        }
+        if placement == Some(team::KickOffPlacement::PlayHeard) {
+            self.place_whole_team_references(t_s, true);
+        }
+        let r = &self.robots[i];
         // The sightings the robot's own ball filter took: what its batches tell the team
         // (a false ball its track gated out never reaches a teammate).
         let taken = r.ball_sighting.as_ref().filter(|_| r.ball_sighting_taken);
@@ -864,6 +879,9 @@ impl Simulation {
                     layer.decoded_lwm(comms_netsim::robot_id(j), incarnation, version)
                 },
             );
+        }
+        if placement == Some(team::KickOffPlacement::PlayHeard) {
+            self.delivery[i].place_again(self.robots[i].kick_off_ball(now_s));
         }
         // Its own after its teammates', as its team layer takes them.
         self.delivery[i].own(id, &lwm, now_s);

@@ -498,3 +498,64 @@ fn a_pooled_budget_smaller_than_its_margin_sends_nothing_and_does_not_panic() {
         "never beyond the team's budget: {sent:?}"
     );
 }
+
+/// Scenario: under the SPL budget robot 1 builds its world model at 1.000 s (a control
+/// tick that sent nothing), writes it at 1.030 s riding along a claim decided between
+/// ticks (with priority), and the frame leaves at 1.040 s; robot 2 hears it at 1.045 s (the
+/// two clocks agree). Written with `set_key_built`, robot 2 stamps it at its build time:
+/// the age on the wire counts from the build, not from the late write (before, the
+/// teammate placed the snapshot 30 ms after the instant it holds).
+#[test]
+fn a_value_written_late_is_stamped_at_its_build_time_by_a_teammate() {
+    let cfg = ReplicaConfig {
+        budget: Some(crate::BudgetSpec::SPL.share(5)),
+        mtu: 128,
+        ..ReplicaConfig::new(1, 1)
+    };
+    let mut r1 = Replica::new(cfg.clone(), 1, at(0)).unwrap();
+    let mut r2 = Replica::new(ReplicaConfig::new(2, 1), 2, at(0)).unwrap();
+    let from: std::net::SocketAddr = "127.0.0.1:2000".parse().unwrap();
+    let world = Key::parse("*.var.world").unwrap();
+    let claim = Key::parse("*.var.goer").unwrap();
+    let mut stamps = Vec::new();
+    for built in [false, true] {
+        let value = Value::Bytes(vec![u8::from(built); 43]);
+        r1.handle_timeout(at(1030));
+        // The claim that takes it along, with priority.
+        r1.set_priority(at(1030), &claim, Value::Int(1)).unwrap();
+        if built {
+            r1.set_key_built(at(1030), &world, value, at(1000)).unwrap();
+        } else {
+            r1.set_key(at(1030), &world, value).unwrap();
+        }
+        r1.handle_timeout(at(1040));
+        let frame = r1
+            .poll_transmit()
+            .expect("the claim's priority lets a frame go at 1.04 s");
+        r2.handle_datagram(at(1045), from, &frame.payload);
+        let e = r2
+            .blackboard()
+            .get(&Key::parse("1.var.world").unwrap())
+            .expect("robot 2 holds robot 1's world model")
+            .clone();
+        assert_eq!(e.value, Value::Bytes(vec![u8::from(built); 43]));
+        stamps.push(e.stamp.as_micros());
+        // The next round's frame may go at once (the test is about the stamp).
+        r1 = Replica::new(cfg.clone(), 1, at(0)).unwrap();
+        r2 = Replica::new(ReplicaConfig::new(2, 1), 2, at(0)).unwrap();
+    }
+    let [late, built] = stamps[..] else {
+        unreachable!()
+    };
+    let ms = |us: u64| us as f64 / 1000.0;
+    assert!(
+        (ms(built) - 1000.0).abs() <= 5.0,
+        "stamped at {} ms, built at 1000 ms",
+        ms(built)
+    );
+    assert!(
+        ms(late) >= 1025.0,
+        "a plain late write is stamped at the write ({} ms): the case the build stamp fixes",
+        ms(late)
+    );
+}

@@ -77,6 +77,11 @@ pub struct Replica {
     peers: BTreeMap<u8, Peer>,
     /// Own recent frames (seq, send time), for teammates' echoes.
     sent: clock::SentLog,
+    /// The transit of the latest frames whose transit was estimated (any teammate, a
+    /// running mean, µs): what a frame from a teammate with no clock estimate yet (or
+    /// any more: under a league's budget echoes are seconds apart) is taken to have
+    /// had, rather than `default_transit`.
+    transit_seen_us: Option<f64>,
     events: VecDeque<Event>,
     stats: Stats,
     deliveries: Vec<Delivery>,
@@ -133,6 +138,7 @@ impl Replica {
             own_conflict_reported: None,
             peers: BTreeMap::new(),
             sent: clock::SentLog::default(),
+            transit_seen_us: None,
             events: VecDeque::new(),
             stats: Stats::default(),
             deliveries: Vec::new(),
@@ -234,6 +240,28 @@ impl Replica {
     /// [`Replica::set`] with a parsed key.
     pub fn set_key(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
         self.set_parts(now, key.as_parts(), value)
+    }
+
+    /// [`Replica::set_key`] for a value built at `built`, before `now` (a snapshot written
+    /// late: a tick's world model riding along a claim decided between ticks). Its binding
+    /// is stamped at `built` (never after `now`), so the age it carries on the wire, and
+    /// every receiver's stamp, are its build time's: a receiver places it where it holds,
+    /// not up to a control period later. Costs no byte: the age field is there anyway
+    /// (a varint: one more byte at most when the age crosses 16.4 ms; a frame's fit is
+    /// checked at the widest age).
+    pub fn set_key_built(
+        &mut self,
+        now: Instant,
+        key: &Key,
+        value: Value,
+        built: Instant,
+    ) -> Result<(), SetError> {
+        self.set_parts(now, key.as_parts(), value)?;
+        if built < now {
+            let scope = self.board.storage_scope(key.as_parts())?;
+            self.board.restamp(scope, key.path(), built);
+        }
+        Ok(())
     }
 
     fn set_parts(&mut self, now: Instant, key: KeyRef<'_>, value: Value) -> Result<(), SetError> {

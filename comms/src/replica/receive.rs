@@ -14,6 +14,9 @@ use super::clock::{SampleOutcome, IMPLAUSIBLE_MARGIN, MAX_TRANSIT};
 use super::talk::TalkItem;
 use super::{Event, Replica};
 
+/// Frames the running mean of seen transits spans (see `Replica::transit_seen_us`).
+const TRANSIT_SEEN_FRAMES: f64 = 16.0;
+
 impl Replica {
     fn drop_frame(&mut self, from: SocketAddr, reason: DropReason) {
         self.stats.count_drop(reason);
@@ -193,16 +196,30 @@ impl Replica {
         } else {
             None
         };
+        // Without an estimate for this sender, the transit frames were last seen to take
+        // (the same air for every teammate), else the configured default: under a
+        // league's budget a sender's echoes are seconds apart and its estimate is mostly
+        // absent, and a transit of zero stamped every value one network delay late.
+        let fallback = self.transit_seen_us.map_or(self.cfg.default_transit, |us| {
+            Duration::from_micros(us.round() as u64)
+        });
         let Some(transit_us) = estimated else {
             self.stats.transit_defaulted += 1;
-            return self.cfg.default_transit;
+            return fallback;
         };
         let plausible = -(IMPLAUSIBLE_MARGIN.as_micros() as f64)..=MAX_TRANSIT.as_micros() as f64;
         if !plausible.contains(&transit_us) {
+            // A stamp that cannot be right (forged, or a broken clock): as documented,
+            // the default (`clock_tests`).
             self.stats.clock_stamps_implausible += 1;
             return self.cfg.default_transit;
         }
-        Duration::from_micros(transit_us.max(0.0).round() as u64)
+        let transit_us = transit_us.max(0.0);
+        self.transit_seen_us = Some(match self.transit_seen_us {
+            Some(mean) => mean + (transit_us - mean) / TRANSIT_SEEN_FRAMES,
+            None => transit_us,
+        });
+        Duration::from_micros(transit_us.round() as u64)
     }
 }
 
