@@ -38,6 +38,8 @@
 //! handed over, a flush barrier ([`flush_barrier`]) waits until the router has routed
 //! every put, and the session is closed.
 
+mod query;
+
 use std::collections::HashMap;
 use std::io;
 use std::net::SocketAddr;
@@ -46,14 +48,14 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use comms::{DropReason, Event, Instant, Key, Pattern, Replica, ReplicaConfig, Scope};
+use comms::{DropReason, Event, Instant, Replica, ReplicaConfig};
 use driver::{Clock, SocketConfig};
 use thiserror::Error;
 use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
-use zenoh::query::{ConsolidationMode, Query};
+use zenoh::query::ConsolidationMode;
 use zenoh::sample::Locality;
 use zenoh::{Session, Wait};
 
@@ -61,6 +63,7 @@ use crate::export::{ExportConfig, Exporter, Op, Sample};
 use crate::keys::TeamKeys;
 use crate::outbox::Outbox;
 use crate::transit::Heard;
+use query::{answer_bridge, answer_values};
 
 /// A put longer than this counts as slow: Zenoh's queue was full (or the machine very
 /// busy), and the field thread leaves puts to the publisher thread for [`SLOW_HOLD`].
@@ -1132,83 +1135,6 @@ fn feed(core: &mut Core, now: Instant, from: SocketAddr, bytes: &[u8]) {
     core.replica.handle_datagram(now, from, bytes);
     core.drain(now);
     core.exporter.frame_done();
-}
-
-/// Answers a `get` on the team's values from the replica, ages at reply time.
-fn answer_values(core: &Mutex<Core>, clock: &Clock, query: &Query) {
-    let replies = {
-        let mut core = lock(core);
-        core.io.queries += 1;
-        if query.payload().is_some() {
-            core.io.queries_refused += 1;
-            drop(core);
-            tracing::warn!(
-                "refused a query on {} with a payload: the bridge is read-only",
-                query.key_expr()
-            );
-            let _ = query.reply_err("huddle-bridge is read-only").wait();
-            return;
-        }
-        let now = clock.now();
-        let Ok(pattern) = Pattern::parse("+.var.#") else {
-            return;
-        };
-        let entries: Vec<(Key, comms::Entry)> = core
-            .replica
-            .iter(&pattern)
-            .filter(|(k, _)| matches!(k.scope(), Scope::Robot(_)))
-            .map(|(k, e)| (k, e.clone()))
-            .collect();
-        let mut replies = Vec::new();
-        for (key, entry) in entries {
-            if let Some(sample) = core.exporter.sample(now, &key, &entry) {
-                let matches = KeyExpr::try_from(sample.key.as_str())
-                    .is_ok_and(|k| k.intersects(query.key_expr()));
-                if matches {
-                    replies.push(sample);
-                }
-            }
-        }
-        core.io.replies += replies.len() as u64;
-        replies
-    };
-    for s in replies {
-        let attachment = s.attachment();
-        if let Err(e) = query
-            .reply(s.key, s.payload)
-            .encoding(Encoding::TEXT_PLAIN)
-            .attachment(attachment)
-            .wait()
-        {
-            tracing::debug!("reply: {e}");
-        }
-    }
-}
-
-/// Answers `@bridge/stats` and `@bridge/peers` (JSON).
-fn answer_bridge(core: &Mutex<Core>, clock: &Clock, keys: &TeamKeys, query: &Query) {
-    let now = clock.now();
-    let mut replies = Vec::new();
-    {
-        let mut core = lock(core);
-        core.io.queries += 1;
-        for (what, json) in [
-            ("stats", core.stats_json(now)),
-            ("peers", core.peers_json(now)),
-        ] {
-            let key = keys.bridge(what);
-            if KeyExpr::try_from(key.as_str()).is_ok_and(|k| k.intersects(query.key_expr())) {
-                replies.push((key, json.to_string()));
-            }
-        }
-        core.io.replies += replies.len() as u64;
-    }
-    for (key, json) in replies {
-        let _ = query
-            .reply(key, json)
-            .encoding(Encoding::APPLICATION_JSON)
-            .wait();
-    }
 }
 
 #[cfg(test)]
