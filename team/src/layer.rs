@@ -285,7 +285,7 @@ pub struct TeamLayer {
 
 /// The kick-off hold lasts this long after the robot hears play, seconds. Tuned on
 /// seeds 4–11 (`huddle sim --budget spl --game full`, drawn and ideal worlds): see
-/// docs/results/gamecontroller-game.md.
+/// docs/results/gamecontroller-game-history.md, "Third session".
 pub const KICK_OFF_HOLD_S: f64 = 3.0;
 
 /// In the kick-off hold, a robot whose cost is below this takes the kick-off (eq. (19),
