@@ -652,15 +652,10 @@ mod tests {
         super::super::WorldModelConfig::default().global
     }
 
-    /// A short game (30 s halves, a 20 s break), seed 3, under the SPL budget: a half's
-    /// kick-off has no goal, but at the GameController's Set every robot's team layer
-    /// puts its ball on the centre spot (`TeamLayer::set_kick_off_next`). So must its
-    /// delivery reference: 1 s into every Set, each holds the centre spot. Before this
-    /// the references were placed at goals only, and a robot that saw no ball out of
-    /// play, told nothing by its teammates there, held no ball or the half before's
-    /// (this test's short-sighted cameras make every robot such a robot).
-    #[test]
-    fn at_every_set_each_delivery_reference_holds_the_centre_spot() {
+    /// A short game (30 s halves, a 20 s break), seed 3, under the SPL budget, with
+    /// short-sighted cameras: from the kick-off spots nobody sees the centre spot, so a
+    /// reference holds it only if it was placed there.
+    fn short_sighted_short_game() -> crate::Simulation {
         let script = crate::referee::GameScript {
             half_s: 30.0,
             break_s: 20.0,
@@ -680,10 +675,20 @@ mod tests {
             game: Some(script),
             ..crate::SimConfig::default()
         };
-        // Short-sighted cameras: from the kick-off spots nobody sees the centre spot, so
-        // a reference holds it only if it was placed there.
         cfg.field.camera.ball_range_m = 0.5;
-        let mut sim = crate::Simulation::new(cfg).expect("a valid configuration");
+        crate::Simulation::new(cfg).expect("a valid configuration")
+    }
+
+    /// A short game (30 s halves, a 20 s break), seed 3, under the SPL budget: a half's
+    /// kick-off has no goal, but at the GameController's Set every robot's team layer
+    /// puts its ball on the centre spot (`TeamLayer::set_kick_off_next`). So must its
+    /// delivery reference: 1 s into every Set, each holds the centre spot. Before this
+    /// the references were placed at goals only, and a robot that saw no ball out of
+    /// play, told nothing by its teammates there, held no ball or the half before's
+    /// (this test's short-sighted cameras make every robot such a robot).
+    #[test]
+    fn at_every_set_each_delivery_reference_holds_the_centre_spot() {
+        let mut sim = short_sighted_short_game();
         let (mut set_since, mut checked) = (None, 0);
         while !sim.finished() {
             sim.step();
@@ -719,27 +724,7 @@ mod tests {
     /// and goals only: their ball at the whistle was 3 s of drift wider than the team's).
     #[test]
     fn when_a_robot_hears_play_the_references_put_the_ball_down_again_with_it() {
-        let script = crate::referee::GameScript {
-            half_s: 30.0,
-            break_s: 20.0,
-            initial_s: 3.0,
-            standby_s: 3.0,
-            ready_s: 10.0,
-            set_s: 3.0,
-            finished_s: 2.0,
-            penalty_s: 15.0,
-            messages_per_game: 120,
-            penalties: Vec::new(),
-        };
-        let mut cfg = crate::SimConfig {
-            duration_s: script.length_s() + 600.0,
-            seed: 3,
-            budget: Some(comms::BudgetSpec::SPL),
-            game: Some(script),
-            ..crate::SimConfig::default()
-        };
-        cfg.field.camera.ball_range_m = 0.5;
-        let mut sim = crate::Simulation::new(cfg).expect("a valid configuration");
+        let mut sim = short_sighted_short_game();
         let mut checked = 0;
         let var = |b: &BallEstimate| b.cov[(0, 0)] + b.cov[(1, 1)];
         while !sim.finished() {
