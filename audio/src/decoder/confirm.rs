@@ -123,8 +123,9 @@ impl Decoder {
             level,
             noise,
         } = self.integrate_slot(t.scale, a, b)?;
+        let own = Some(t.sender.index() as usize);
         let (frame, present) =
-            match Self::apply_rules(&sums, count, P_TONE_CONFIRM, P_TONE_RIVAL, |_, _| true) {
+            match Self::apply_rules(&sums, count, P_TONE_CONFIRM, P_TONE_RIVAL, own, |_, _| true) {
                 (None, _) => {
                     // A rival basic is a second transmitter only if its tones sound like
                     // one: through both halves of the slot, above their neighbourhood,
@@ -139,8 +140,14 @@ impl Decoder {
                     let transmitter = |f: Frame, present: &[bool; TONE_COUNT]| {
                         self.sounds_like_tones(f, present, &sums, count, t.scale, a, b)
                     };
-                    let (frame, present) =
-                        Self::apply_rules(&sums, count, P_TONE_CONFIRM, P_TONE_RIVAL, transmitter);
+                    let (frame, present) = Self::apply_rules(
+                        &sums,
+                        count,
+                        P_TONE_CONFIRM,
+                        P_TONE_RIVAL,
+                        own,
+                        transmitter,
+                    );
                     (
                         frame.filter(|&f| stands_clear(f, &present, &level)),
                         present,
@@ -153,7 +160,37 @@ impl Decoder {
                 let votes: Vec<usize> = (0..crate::tones::BASIC_COUNT)
                     .map(|b| basic_tones(b).iter().filter(|&&k| present[k]).count())
                     .collect();
-                format!("slot refused by the rules: votes per basic {votes:?}")
+                // The tracked frame's tones: per-window excess, and present or not.
+                let n = count.max(1) as f64;
+                let tracked = Frame {
+                    sender: t.sender,
+                    data: t.data[if a > t.onset + 0.5 * self.geometry.slot_samples {
+                        1
+                    } else {
+                        0
+                    }],
+                };
+                let tones: Vec<String> = tracked
+                    .tones()
+                    .iter()
+                    .map(|&k| {
+                        format!(
+                            "{}k{k} {:.1} ({:.1}|{:.1})",
+                            if present[k] { "*" } else { "" },
+                            (sums[k] - n) / n,
+                            if k > 0 { (sums[k - 1] - n) / n } else { 0.0 },
+                            if k + 1 < TONE_COUNT { (sums[k + 1] - n) / n } else { 0.0 },
+                        )
+                    })
+                    .collect();
+                let crowd = present.iter().filter(|&&p| p).count();
+                let (loud_k, loud) = (0..TONE_COUNT)
+                    .map(|k| (k, (sums[k] - n) / n))
+                    .fold((0, f64::NEG_INFINITY), |m, x| if x.1 > m.1 { x } else { m });
+                format!(
+                    "slot refused by the rules: votes per basic {votes:?} tones {} present {crowd} loudest k{loud_k} {loud:.1}",
+                    tones.join(" ")
+                )
             });
             return None;
         };

@@ -83,6 +83,7 @@ impl Decoder {
             count,
             P_TONE,
             P_TONE,
+            None,
             |_, _| true,
         );
         let sums = &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT];
