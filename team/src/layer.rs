@@ -31,8 +31,10 @@ use crate::calibration::{Calibration, WorldModelConfig};
 use crate::frames;
 use crate::geometry::{Pose, Vec2};
 use crate::policy::{self, Action, PolicyState, SendPolicy};
+use keys::LayerKeys;
 
 mod contact;
+mod keys;
 pub use contact::contact_probability;
 
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
@@ -318,49 +320,6 @@ pub enum KickOffPlacement {
     /// The robot heard play: the team ball, if still the Set's placement (no camera and
     /// no kick said otherwise), was put down again at this instant.
     PlayHeard,
-}
-
-/// The keys a [`TeamLayer`] uses at every tick, built once.
-#[derive(Debug, Clone)]
-struct LayerKeys {
-    /// [`WORLD_LOCAL_KEY`], its own.
-    world_local: Key,
-    /// [`PASS_TO_KEY`], its own.
-    pass_to: Key,
-    /// Per robot (index = id − 1): where its LWM is held.
-    world_local_of: Vec<Key>,
-    /// Per robot (index = id − 1): where its pass receiver is held.
-    pass_to_of: Vec<Key>,
-}
-
-impl LayerKeys {
-    fn new(team: usize) -> Self {
-        let pass_to = pass_to_key();
-        LayerKeys {
-            world_local: world_local_key(),
-            world_local_of: (0..team).map(|k| world_local_of(robot_id(k))).collect(),
-            pass_to_of: (0..team)
-                .map(|k| pass_to_of(robot_id(k), &pass_to).expect("a valid key"))
-                .collect(),
-            pass_to,
-        }
-    }
-
-    /// Where robot `id`'s pass receiver is held (`None`: not a valid robot id).
-    fn pass_to_of(&self, id: u8) -> Option<Key> {
-        match usize::from(id)
-            .checked_sub(1)
-            .and_then(|k| self.pass_to_of.get(k))
-        {
-            Some(key) => Some(key.clone()),
-            None => pass_to_of(id, &self.pass_to).ok(),
-        }
-    }
-}
-
-/// Robot `id`'s binding of the pass receiver key `pass_to`.
-fn pass_to_of(id: u8, pass_to: &Key) -> Result<Key, comms::KeyError> {
-    Key::new(Scope::Robot(id), comms::Kind::Var, pass_to.path())
 }
 
 /// The robot id at index `k` of a team's per-robot vectors.
