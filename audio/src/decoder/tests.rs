@@ -8,6 +8,12 @@ use crate::tones::{tone_frequency_hz, Frame};
 
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();
+    decode_with(&mut d, samples, block)
+}
+
+/// Pushes `samples` through `d` in blocks of `block`, finishes, and returns every
+/// message it reported.
+fn decode_with(d: &mut Decoder, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut out = Vec::new();
     for chunk in samples.chunks(block.max(1)) {
         d.push_f32(chunk);
@@ -20,6 +26,24 @@ fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detec
         out.push(m);
     }
     out
+}
+
+/// The default decoder, tracing, over `samples` in blocks of 1,000: the messages, and
+/// its trace outside the search (for an assertion's message).
+fn decode_traced(samples: &[f32]) -> (Vec<Message>, Vec<TraceEvent>, Vec<String>) {
+    let mut d = Decoder::new(DecoderConfig::default()).unwrap();
+    d.enable_trace();
+    let got = decode_with(&mut d, samples, 1000)
+        .into_iter()
+        .map(|m| m.message)
+        .collect();
+    let trace = d.take_trace();
+    let shown = trace
+        .iter()
+        .filter(|e| !e.what.starts_with("search"))
+        .map(|e| format!("{:.2} {}", e.at_s, e.what))
+        .collect();
+    (got, trace, shown)
 }
 
 #[test]
@@ -713,28 +737,10 @@ fn a_slot_inside_its_senders_failed_slot_must_decide_data_that_began_with_it() {
     let sent = Message::long(Sender::RightAttacker, 21 * 14 + 12).unwrap();
     for seed in [5, 6, 7] {
         let x = long_message_with_a_failing_first_slot(seed);
-        let mut d = Decoder::new(DecoderConfig::default()).unwrap();
-        d.enable_trace();
-        let mut got = Vec::new();
-        for chunk in x.chunks(1000) {
-            d.push_f32(chunk);
-            while let Some(m) = d.poll_message() {
-                got.push(m.message);
-            }
-        }
-        d.finish();
-        while let Some(m) = d.poll_message() {
-            got.push(m.message);
-        }
-        let trace = d.take_trace();
+        let (got, trace, shown) = decode_traced(&x);
         assert!(
             got.iter().all(|&m| m == sent),
-            "seed {seed}: decoded {got:?} over {sent}; trace: {:?}",
-            trace
-                .iter()
-                .filter(|e| !e.what.starts_with("search"))
-                .map(|e| format!("{:.2} {}", e.at_s, e.what))
-                .collect::<Vec<_>>()
+            "seed {seed}: decoded {got:?} over {sent}; trace: {shown:?}"
         );
         // The scene does exercise the replay: the first slot fails and a frame is
         // found again inside it.
@@ -792,29 +798,7 @@ fn a_sender_whose_tones_a_room_spreads_keeps_its_vote_in_a_crowd() {
     let sent = Message::short(Sender::LeftAttacker, 13).unwrap();
     for seed in [1, 2, 3] {
         let x = message_with_its_sender_in_notches_under_a_crowd(seed);
-        let mut d = Decoder::new(DecoderConfig::default()).unwrap();
-        d.enable_trace();
-        let mut got = Vec::new();
-        for chunk in x.chunks(1000) {
-            d.push_f32(chunk);
-            while let Some(m) = d.poll_message() {
-                got.push(m.message);
-            }
-        }
-        d.finish();
-        while let Some(m) = d.poll_message() {
-            got.push(m.message);
-        }
-        let trace = d.take_trace();
-        assert_eq!(
-            got,
-            vec![sent],
-            "seed {seed}: trace: {:?}",
-            trace
-                .iter()
-                .filter(|e| !e.what.starts_with("search"))
-                .map(|e| format!("{:.2} {}", e.at_s, e.what))
-                .collect::<Vec<_>>()
-        );
+        let (got, _, shown) = decode_traced(&x);
+        assert_eq!(got, vec![sent], "seed {seed}: trace: {shown:?}");
     }
 }
