@@ -195,6 +195,22 @@ fn a_robots_world_model_fits_the_spl_message_limit_even_with_a_kick() {
     assert_eq!(tagged, plain + 16, "the HMAC tag adds 16 bytes");
 }
 
+/// A team under a league's budget (a message every 5 s each) sending by value of
+/// information: the calibration, the team config and the arbitration as
+/// [`adapt_to_budget`] sets them.
+fn budgeted_voi() -> (Calibration, TeamConfig, ArbitrationParams) {
+    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
+    let mut params = ArbitrationParams::default();
+    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
+    cfg.send_policy = SendPolicy::Voi;
+    (cal, cfg, params)
+}
+
+/// The instant `s` seconds after the clock's start.
+fn at_s(s: f64) -> Instant {
+    Instant::from_micros((s * 1e6).round() as u64)
+}
+
 /// Robot `id`'s claim `[h, going]` as robot 2's blackboard holds it, heard at `at`.
 fn hear_claim(board: &mut Blackboard, id: u8, h: f64, going: bool, version: u64, at: Instant) {
     let posted = Posted { h, going };
@@ -505,11 +521,8 @@ fn a_set_puts_the_team_ball_on_the_centre_spot_without_a_goal() {
 /// (about a second of play) while the hold runs out and a second robot goes too.
 #[test]
 fn at_a_kick_off_the_takers_claim_finds_room_in_a_spent_budget() {
-    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
-    let mut params = ArbitrationParams::default();
-    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
-    cfg.send_policy = SendPolicy::Voi;
-    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let (cal, cfg, params) = budgeted_voi();
+    let at = at_s;
     let half_time_left = Duration::from_secs(600);
     let filler = Key::parse("*.var.x").unwrap();
     let frames = |r: &mut Replica| std::iter::from_fn(|| r.poll_transmit()).count();
@@ -603,11 +616,8 @@ fn at_a_kick_off_the_takers_claim_finds_room_in_a_spent_budget() {
 /// holds.
 #[test]
 fn in_set_the_kick_off_taker_tells_its_claim_and_teammates_leave_it_the_ball() {
-    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
-    let mut params = ArbitrationParams::default();
-    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
-    cfg.send_policy = SendPolicy::Voi;
-    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let (cal, cfg, params) = budgeted_voi();
+    let at = at_s;
     let mut taker = TeamLayer::new(3, false, params, Pose::default(), &cal, &cfg.world_model, 5);
     let mut far = TeamLayer::new(4, false, params, Pose::default(), &cal, &cfg.world_model, 5);
     for r in [&mut taker, &mut far] {
@@ -726,11 +736,8 @@ fn a_teammates_message_is_lent_from_the_gwm_only_as_it_was_taken() {
 /// teammates hold a going claim through the hold's end; then its cost is its own again.
 #[test]
 fn the_kick_off_taker_keeps_its_claim_through_its_kick_until_the_hold_ends() {
-    let (cal, mut cfg) = (Calibration::default(), TeamConfig::default());
-    let mut params = ArbitrationParams::default();
-    adapt_to_budget(&mut params, &mut cfg.world_model, Duration::from_secs(5));
-    cfg.send_policy = SendPolicy::Voi;
-    let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
+    let (cal, cfg, params) = budgeted_voi();
+    let at = at_s;
     let mut taker = TeamLayer::new(3, false, params, Pose::default(), &cal, &cfg.world_model, 5);
     taker.set_in_play(false);
     assert!(taker.set_kick_off_next(true));
