@@ -43,6 +43,11 @@ pub const OUR_TEAM: u8 = 12;
 /// (a kick-off from the formation, the ball on the centre spot), seconds.
 pub const KICK_OFF_WINDOW_S: f64 = 10.0;
 
+/// The report's bins of Playing by time since its stretch's kick-off, seconds (lower
+/// edges; the last runs to the stretch's end): whether the game's open play differs from
+/// the 600 s run by how long ago the team stood in its kick-off formation.
+pub const SINCE_KICK_OFF_BINS_S: [f64; 5] = [0.0, KICK_OFF_WINDOW_S, 30.0, 60.0, 120.0];
+
 /// Where the arbitration's ball-visible time went, by the part of the game it fell in
 /// (kick-off windows, time with one of our robots penalised), in Playing only.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -58,6 +63,9 @@ pub struct PlayBreakdown {
     pub blind_samples: u64,
     /// Their team-ball RMSE, m.
     pub blind_rmse_m: f64,
+    /// Frames the team sent in this part (the pace its open play ran at: the 600 s run
+    /// sends about one a second).
+    pub messages: u64,
     #[serde(skip)]
     blind_sq_sum_m2: f64,
 }
@@ -88,6 +96,7 @@ impl PlayBreakdown {
             no_goer_s: r(self.no_goer_s),
             blind_samples: self.blind_samples,
             blind_rmse_m: (rmse * 1e4).round() / 1e4,
+            messages: self.messages,
             blind_sq_sum_m2: self.blind_sq_sum_m2,
         }
     }
@@ -134,6 +143,12 @@ pub struct GameReport {
     pub game_penalised: PlayBreakdown,
     /// Arbitration in the rest of Playing.
     pub game_open_play: PlayBreakdown,
+    /// Counted frames sent outside Playing (Standby, Ready, Set): what the restarts took
+    /// from the budget that paces open play.
+    pub game_messages_outside_play: u64,
+    /// All of Playing (penalties too) by time since the stretch's kick-off, one part per
+    /// bin of [`SINCE_KICK_OFF_BINS_S`].
+    pub game_since_kick_off: Vec<PlayBreakdown>,
 }
 
 /// Pose, team-ball and blind-robot RMSE over every robot's samples in Playing, penalised
@@ -257,6 +272,8 @@ pub(crate) struct Game {
     penalised: PlayBreakdown,
     open_play: PlayBreakdown,
     with_penalised: WithPenalised,
+    messages_outside_play: u64,
+    since_kick_off: [PlayBreakdown; SINCE_KICK_OFF_BINS_S.len()],
 }
 
 impl Game {
@@ -290,6 +307,8 @@ impl Game {
             penalised: PlayBreakdown::default(),
             open_play: PlayBreakdown::default(),
             with_penalised: WithPenalised::default(),
+            messages_outside_play: 0,
+            since_kick_off: Default::default(),
         }
     }
 
@@ -334,17 +353,40 @@ impl Game {
             &mut self.open_play
         };
         part.add(dt_s, visible, goers);
+        self.since_kick_off[since_bin(t_s - since)].add(dt_s, visible, goers);
     }
 
     /// A blind robot's team-ball sample at `t_s` (its squared error), put in its part of
     /// the game as [`Game::sample_play`] puts the arbitration's.
     pub(crate) fn sample_blind(&mut self, t_s: f64, sq_m2: f64) {
+        if let Some(part) = self.part_at(t_s) {
+            part.blind_samples += 1;
+            part.blind_sq_sum_m2 += sq_m2;
+        }
+        if let Some(bin) = self.bin_at(t_s) {
+            bin.blind_samples += 1;
+            bin.blind_sq_sum_m2 += sq_m2;
+        }
+    }
+
+    /// The bin of [`SINCE_KICK_OFF_BINS_S`] `t_s` falls in (`None` outside Playing).
+    fn bin_at(&mut self, t_s: f64) -> Option<&mut PlayBreakdown> {
         if !self.referee.playing() {
-            return;
+            return None;
+        }
+        let since = self.playing_since_s.map_or(0.0, |s| t_s - s);
+        Some(&mut self.since_kick_off[since_bin(since)])
+    }
+
+    /// The part of Playing `t_s` falls in, as [`Game::sample_play`] puts the
+    /// arbitration's samples (`None` outside Playing).
+    fn part_at(&mut self, t_s: f64) -> Option<&mut PlayBreakdown> {
+        if !self.referee.playing() {
+            return None;
         }
         let penalised =
             (0..self.trackers.len()).any(|i| self.referee.penalised(comms_netsim::robot_id(i)));
-        let part = match self.playing_since_s {
+        Some(match self.playing_since_s {
             Some(since) if t_s - since > KICK_OFF_WINDOW_S => {
                 if penalised {
                     &mut self.penalised
@@ -354,9 +396,19 @@ impl Game {
             }
             // The stretch's first sample comes before its arbitration sample starts it.
             _ => &mut self.kick_off,
-        };
-        part.blind_samples += 1;
-        part.blind_sq_sum_m2 += sq_m2;
+        })
+    }
+
+    /// A frame the team sent at `t_s`, for the pace of each part of the game.
+    fn sample_message(&mut self, t_s: f64) {
+        if let Some(bin) = self.bin_at(t_s) {
+            bin.messages += 1;
+        }
+        if let Some(part) = self.part_at(t_s) {
+            part.messages += 1;
+        } else if self.referee.data().messages_counted() {
+            self.messages_outside_play += 1;
+        }
     }
 
     /// The referee's books as the report shows them.
@@ -386,8 +438,78 @@ impl Game {
             game_kick_off: self.kick_off.rounded(),
             game_penalised: self.penalised.rounded(),
             game_open_play: self.open_play.rounded(),
+            game_messages_outside_play: self.messages_outside_play,
+            game_since_kick_off: self.since_kick_off.iter().map(|b| b.rounded()).collect(),
         }
     }
+}
+
+/// Lower edges of the report's bins of blind robots' team-ball error by the age of the
+/// newest ball a teammate told them (seconds; the last bin also holds "never told").
+pub const TOLD_AGE_BINS_S: [f64; 5] = [0.0, 1.0, 2.0, 4.0, 8.0];
+
+/// One bin of [`BlindByToldAge`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ToldAgeBin {
+    /// Lower edge, seconds.
+    pub from_s: f64,
+    /// Blind robots' team-ball samples.
+    pub samples: u64,
+    /// Their team-ball RMSE, m.
+    pub rmse_m: f64,
+    /// Their share of the squared error of every blind sample, %.
+    pub share_of_sq_pct: f64,
+}
+
+/// Blind robots' team-ball error by how old the newest ball a teammate told them was
+/// (its message's ball time against the robot's clock), in the samples the main figures
+/// count: is a blind robot's error stale news (nobody told it lately under the budget's
+/// pace) or fresh news that was wrong?
+#[derive(Debug, Clone, Default)]
+pub(crate) struct BlindByToldAge {
+    sums: [(u64, f64); TOLD_AGE_BINS_S.len()],
+}
+
+impl BlindByToldAge {
+    /// A blind sample of squared error `sq_m2` whose newest told ball is `age_s` old
+    /// (`None`: no teammate told one).
+    pub(crate) fn add(&mut self, age_s: Option<f64>, sq_m2: f64) {
+        let bin = age_s.map_or(TOLD_AGE_BINS_S.len() - 1, |a| {
+            TOLD_AGE_BINS_S.iter().rposition(|&e| a >= e).unwrap_or(0)
+        });
+        self.sums[bin].0 += 1;
+        self.sums[bin].1 += sq_m2;
+    }
+
+    pub(crate) fn report(&self) -> Vec<ToldAgeBin> {
+        let total: f64 = self.sums.iter().map(|s| s.1).sum();
+        TOLD_AGE_BINS_S
+            .iter()
+            .zip(&self.sums)
+            .map(|(&from_s, &(n, sq))| ToldAgeBin {
+                from_s,
+                samples: n,
+                rmse_m: if n > 0 {
+                    ((sq / n as f64).sqrt() * 1e4).round() / 1e4
+                } else {
+                    0.0
+                },
+                share_of_sq_pct: if total > 0.0 {
+                    (1000.0 * sq / total).round() / 10.0
+                } else {
+                    0.0
+                },
+            })
+            .collect()
+    }
+}
+
+/// The bin of [`SINCE_KICK_OFF_BINS_S`] for `since_s` of Playing.
+fn since_bin(since_s: f64) -> usize {
+    SINCE_KICK_OFF_BINS_S
+        .iter()
+        .rposition(|&edge| since_s > edge)
+        .unwrap_or(0)
 }
 
 impl Simulation {
@@ -408,6 +530,7 @@ impl Simulation {
     pub(super) fn referee_count(&mut self, t_s: f64) {
         let Some(game) = &mut self.game else { return };
         for (_, len) in self.harness.take_sent() {
+            game.sample_message(t_s);
             game.referee.team_message(t_s, len);
         }
     }

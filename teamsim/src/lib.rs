@@ -61,7 +61,7 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use comms_netsim::{Harness, HarnessError};
-pub use game::{GameReport, WithPenalised};
+pub use game::{GameReport, ToldAgeBin, WithPenalised};
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{
     CentralFusion, DelayedCentral, DeliveryReference, KickTruth, Publications, ReferenceConfig,
@@ -392,6 +392,8 @@ pub struct Simulation {
     clock_errors_us: Vec<f64>,
     /// The GameController and what each robot heard of it (`--game`).
     game: Option<game::Game>,
+    /// Blind robots' team-ball error by the age of the newest ball told them.
+    blind_by_told_age: game::BlindByToldAge,
 }
 
 impl Simulation {
@@ -575,6 +577,7 @@ impl Simulation {
             arbitration_run,
             clock_errors_us: Vec::new(),
             game,
+            blind_by_told_age: Default::default(),
         };
         sim.setup_fallback()?;
         Ok(sim)
@@ -986,6 +989,15 @@ impl Simulation {
             }
             if off {
                 continue;
+            }
+            if r.ball.is_none() {
+                let told = r
+                    .gwm
+                    .teammates_iter(now_s)
+                    .filter_map(|m| m.lwm.ball)
+                    .map(|b| b.t_s)
+                    .max_by(f64::total_cmp);
+                self.blind_by_told_age.add(told.map(|t| now_s - t), te);
             }
             let ce = (c.position() - truth).norm_squared();
             self.fusion.ball(&BallSample {

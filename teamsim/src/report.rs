@@ -193,6 +193,10 @@ pub struct Report {
     /// The GameController's books (flattened; absent without `--game`).
     #[serde(flatten)]
     pub game: Option<super::GameReport>,
+    /// Under a budget: blind robots' team-ball error by the age of the newest ball a
+    /// teammate told them (absent without a budget, where news is never old).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blind_by_told_age: Option<Vec<super::ToldAgeBin>>,
 }
 
 /// The team-ball NEES over one band of true ball speeds (see [`metrics`](super::metrics)).
@@ -589,6 +593,11 @@ impl super::Simulation {
             },
             outage: self.outage_report(),
             game: self.game.as_ref().map(game::Game::report),
+            blind_by_told_age: self
+                .cfg
+                .budget
+                .is_some()
+                .then(|| self.blind_by_told_age.report()),
         }
     }
 }
