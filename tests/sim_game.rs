@@ -115,6 +115,39 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
     );
     assert_eq!(g.game_penalties, 1);
     assert!((g.game_playing_s - 120.0).abs() < 1.0, "{g}");
+    // The pace of each part (eighth session): every counted frame is in one part of
+    // Playing or outside it, and the bins by time since the kick-off hold the same play.
+    let parts = [g.game_kick_off, g.game_penalised, g.game_open_play];
+    let in_play: u64 = parts.iter().map(|p| p.messages).sum();
+    assert_eq!(
+        in_play + g.game_messages_outside_play,
+        g.game_messages_counted,
+        "frames by part: {in_play} in Playing + {} outside = counted",
+        g.game_messages_outside_play
+    );
+    assert!(in_play > 0 && g.game_messages_outside_play > 0, "{g}");
+    let bins = &g.game_since_kick_off;
+    assert_eq!(bins.len(), huddle::sim::SINCE_KICK_OFF_BINS_S.len());
+    assert_eq!(bins.iter().map(|b| b.messages).sum::<u64>(), in_play);
+    let blind = |ps: &[huddle::sim::PlayBreakdown]| ps.iter().map(|p| p.blind_samples).sum::<u64>();
+    assert_eq!(
+        blind(bins),
+        blind(&parts),
+        "the same blind samples, binned two ways"
+    );
+    let visible = |ps: &[huddle::sim::PlayBreakdown]| ps.iter().map(|p| p.visible_s).sum::<f64>();
+    assert!((visible(bins) - visible(&parts)).abs() < 0.1);
+    assert_eq!(
+        bins[0].visible_s, g.game_kick_off.visible_s,
+        "bin 0 is the kick-off window"
+    );
+    // Blind robots' error by the age of the newest ball told them: every blind sample
+    // on the field is in one bin.
+    let ages = r
+        .blind_by_told_age
+        .as_ref()
+        .expect("a budgeted run reports it");
+    assert_eq!(ages.iter().map(|b| b.samples).sum::<u64>(), r.blind_samples);
 
     // The penalty: one window, from after 20 s of play (play begins at 19 s).
     let off: Vec<&Sample> = seen.iter().filter(|s| s.penalised).collect();

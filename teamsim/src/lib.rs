@@ -61,7 +61,9 @@ use crate::field::behaviour::{formation_homes, Position};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use comms_netsim::{Harness, HarnessError};
-pub use game::{GameReport, ToldAgeBin, WithPenalised};
+pub use game::{
+    GameReport, PlayBreakdown, ToldAgeBin, WithPenalised, SINCE_KICK_OFF_BINS_S, TOLD_AGE_BINS_S,
+};
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{
     CentralFusion, DelayedCentral, DeliveryReference, KickTruth, Publications, ReferenceConfig,
