@@ -920,11 +920,11 @@ impl Simulation {
             self.delivery[i].place_again(self.robots[i].kick_off_ball(now_s));
         }
         // Its own after its teammates', as its team layer takes them.
-        let own = match self.cfg.references.delivery_as_team.1 {
-            true => self.robots[i].gwm.latest(id).copied().unwrap_or(lwm),
-            false => lwm,
+        let as_published = match self.cfg.references.delivery_as_team.1 {
+            true => self.robots[i].gwm.latest(id).copied(),
+            false => None,
         };
-        self.delivery[i].own(id, &own, now_s);
+        self.delivery[i].own(id, as_published.as_ref().unwrap_or(&lwm), now_s);
         if trace_on() {
             let gwm_line = |g: &fusion::GlobalModel| {
                 let st = g.stats();

@@ -887,7 +887,7 @@ mod tests {
     #[test]
     fn fed_the_teams_stamps_the_delivery_reference_is_the_team_ball() {
         let run = |as_team: (bool, bool)| {
-            let cfg = crate::SimConfig {
+            let mut cfg = crate::SimConfig {
                 duration_s: 40.0,
                 seed: 10,
                 budget: Some(comms::BudgetSpec::SPL),
@@ -895,7 +895,6 @@ mod tests {
                 references: ReferenceConfig::default().with_delivery_as_team(as_team),
                 ..crate::SimConfig::default()
             };
-            let mut cfg = cfg;
             cfg.brain.team.send_policy = team::policy::SendPolicy::Baseline;
             let mut sim = crate::Simulation::new(cfg).expect("a valid configuration");
             while !sim.finished() {
