@@ -69,6 +69,26 @@ pub struct SimArgs {
     /// pose-error sharing 10, no push reports, no widening at contact.
     #[arg(long, hide = true)]
     pub team_q: Option<f64>,
+    /// Seed the network's loss and latency draws with this instead of `--seed` (the
+    /// match's world the same): for measuring how far a figure moves with the network's
+    /// luck alone (#29).
+    #[arg(long, hide = true)]
+    pub net_seed: Option<u64>,
+    /// Place every teammate message in the delivery reference this many ms after its true
+    /// build time (the match itself unchanged): for measuring the delivery ratio's own
+    /// sensitivity (#29).
+    #[arg(long, hide = true, allow_hyphen_values = true)]
+    pub delivery_shift_ms: Option<f64>,
+    /// Feed the delivery reference what the team's GWM had: `stamps` (each teammate
+    /// message at the team's own stamp), `own` (the robot's own message as published), or
+    /// `both` (#29's diagnostics).
+    #[arg(long, hide = true)]
+    pub delivery_as_team: Option<String>,
+    /// Place each teammate message in the delivery reference up to this many ms off its
+    /// true build time (uniform, a fixed hash per message; salted by `--net-seed` or
+    /// `--seed`): a stamp error of the team's size that carries no information (#29).
+    #[arg(long, hide = true)]
+    pub delivery_jitter_ms: Option<f64>,
     /// Tune the robots' field ball model: comma-separated `q0=…` (noise at rest, m²/s³),
     /// `q1=…` (its growth per m/s), `sharing=…` (pose-error sharing k), `rest_sigma=…`,
     /// `boards=0|1`, `push=0|1` (own pushes reported), `push_prob=…`, `push_every=…` (s).
@@ -195,6 +215,10 @@ impl Default for SimArgs {
             reference_q: None,
             reference_q_speed: None,
             team_q: None,
+            net_seed: None,
+            delivery_shift_ms: None,
+            delivery_as_team: None,
+            delivery_jitter_ms: None,
             team_ball: None,
             seed: 1,
             svg: None,
@@ -427,7 +451,19 @@ fn config(args: &SimArgs) -> SimConfig {
                 args.reference_q_speed.unwrap_or(0.0),
             ),
             None => huddle::sim::ReferenceConfig::default(),
-        },
+        }
+        .with_delivery_shift(args.delivery_shift_ms.unwrap_or(0.0) / 1000.0)
+        .with_delivery_as_team(match args.delivery_as_team.as_deref() {
+            Some("stamps") => (true, false),
+            Some("own") => (false, true),
+            Some("both") => (true, true),
+            _ => (false, false),
+        })
+        .with_delivery_jitter(
+            args.delivery_jitter_ms.unwrap_or(0.0) / 1000.0,
+            args.net_seed.unwrap_or(args.seed),
+        ),
+        network_seed: args.net_seed,
         ..SimConfig::default()
     }
 }

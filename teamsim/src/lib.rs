@@ -196,6 +196,10 @@ pub struct SimConfig {
     pub network: NetworkConfig,
     /// The seed of everything random (noise, network, incarnations).
     pub seed: u64,
+    /// The network's own seed (its loss and latency draws, incarnations), if not `seed`:
+    /// the same world with other network luck.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub network_seed: Option<u64>,
     /// The field and its physics.
     pub field: FieldConfig,
     /// How robots sense and play.
@@ -249,6 +253,7 @@ impl Default for SimConfig {
             duration_s: 300.0,
             network: NetworkConfig::default(),
             seed: 1,
+            network_seed: None,
             field: FieldConfig::default(),
             brain: BrainConfig::default(),
             references: ReferenceConfig::default(),
@@ -523,7 +528,7 @@ impl Simulation {
         if let Some(spec) = &cfg.budget {
             replica = replica.with_budget(spec, n);
         }
-        let mut harness = Harness::new(n, net, replica, cfg.seed)?;
+        let mut harness = Harness::new(n, net, replica, cfg.network_seed.unwrap_or(cfg.seed))?;
         harness.set_unicast(cfg.transport == Transport::Unicast);
         if cfg.drawn_world {
             for i in 0..n {
@@ -870,18 +875,49 @@ impl Simulation {
             let harness = &self.harness;
             let publications = &self.publications;
             let layer = &self.robots[i];
+            let shift_s = self.cfg.references.delivery_shift_s;
+            let as_team = self.cfg.references.delivery_as_team;
+            let (jitter_s, salt) = self.cfg.references.delivery_jitter_s;
             self.delivery[i].receive(
                 i,
                 replica.blackboard(),
                 now_s,
                 |j, version| {
+                    if as_team.0 {
+                        return layer
+                            .gwm
+                            .latest(comms_netsim::robot_id(j))
+                            .map(|l| l.t_s);
+                    }
                     let sent = publications.sent_at(j, version)?;
-                    Some(robot::seconds(
-                        harness.local_at(i, Time::from_secs_f64(sent)),
-                    ))
+                    Some(
+                        robot::seconds(harness.local_at(i, Time::from_secs_f64(sent)))
+                            + shift_s
+                            + jitter_s * unit_hash(salt, j as u64, version),
+                    )
                 },
                 |j, incarnation, version| {
-                    layer.decoded_lwm(comms_netsim::robot_id(j), incarnation, version)
+                    let lwm = layer.decoded_lwm(comms_netsim::robot_id(j), incarnation, version);
+                    if trace_on() {
+                        let placed = publications.sent_at(j, version).map(|sent| {
+                            robot::seconds(harness.local_at(i, Time::from_secs_f64(sent)))
+                        });
+                        if let Some(l) = lwm {
+                            let b = l.ball.map(|b| b.position());
+                            let o = l.observation.map(|o| (o.t_s, o.position));
+                            eprintln!(
+                                "M {t_s:.3} r{} from r{} v{version} team_t {:.4} ref_t {:.4} ball {:?} obs {:?} kick {}",
+                                i + 1,
+                                j + 1,
+                                l.t_s,
+                                placed.unwrap_or(f64::NAN),
+                                b.map(|p| (p.x, p.y)),
+                                o,
+                                l.kick.is_some()
+                            );
+                        }
+                    }
+                    lwm
                 },
             );
         }
@@ -889,7 +925,39 @@ impl Simulation {
             self.delivery[i].place_again(self.robots[i].kick_off_ball(now_s));
         }
         // Its own after its teammates', as its team layer takes them.
-        self.delivery[i].own(id, &lwm, now_s);
+        let as_published = match self.cfg.references.delivery_as_team.1 {
+            true => self.robots[i].gwm.latest(id).copied(),
+            false => None,
+        };
+        self.delivery[i].own(id, as_published.as_ref().unwrap_or(&lwm), now_s);
+        if trace_on() {
+            let gwm_line = |g: &fusion::GlobalModel| {
+                let st = g.stats();
+                let own = g
+                    .latest(id)
+                    .and_then(|l| l.observation)
+                    .map(|o| (o.t_s, o.position.x, o.position.y));
+                let b = g.team_ball(now_s, None).map(|b| b.estimate.mean);
+                format!(
+                    "acc {} rej {} late {} rs {} k {} kr {} tr {} own {:?} ball {:?}",
+                    st.accepted,
+                    st.rejected,
+                    st.late,
+                    st.restarts,
+                    st.kicks,
+                    st.kicks_refused,
+                    st.tracks,
+                    own,
+                    b.map(|m| (m[0], m[1], m[2], m[3]))
+                )
+            };
+            eprintln!(
+                "G {t_s:.2} r{} TEAM {} | REF {}",
+                i + 1,
+                gwm_line(&self.robots[i].gwm),
+                gwm_line(self.delivery[i].gwm())
+            );
+        }
     }
 
     /// Each live robot's estimate of each teammate's clock offset against the truth.
@@ -1019,6 +1087,21 @@ impl Simulation {
                 cause_age_s: t_s - self.ball_event.0,
                 at_actor: self.ball_event_by == Some(i),
             });
+            if trace_on() {
+                eprintln!(
+                    "S {t_s:.2} r{} blind {} te {:.3} de {:.3} truth ({:.2},{:.2}) team ({:.2},{:.2}) ref ({:.2},{:.2})",
+                    i + 1,
+                    r.ball.is_none(),
+                    te.sqrt(),
+                    (delivery.position() - truth).norm(),
+                    truth.x,
+                    truth.y,
+                    team.estimate.position().x,
+                    team.estimate.position().y,
+                    delivery.position().x,
+                    delivery.position().y
+                );
+            }
             self.fusion.instants.push((i, (t_s, truth.x, truth.y), te));
         }
     }
@@ -1056,3 +1139,22 @@ impl Simulation {
 
 /// Teammates' clock offsets are sampled every this many physics steps (1 s at 10 ms).
 const CLOCK_SAMPLE_STEPS: u64 = 100;
+
+/// `HUDDLE_SIM_TRACE=1`: print every team-ball sample (team and delivery reference error)
+/// and every teammate message as the team and its delivery reference placed it, to
+/// stderr (#29's traces; read once per process).
+fn trace_on() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("HUDDLE_SIM_TRACE").is_some())
+}
+
+/// A number in [−1, 1) fixed by (`salt`, `a`, `b`): splitmix64's finaliser, for the
+/// delivery reference's diagnostic jitter (no RNG state, the same for the same message).
+fn unit_hash(salt: u64, a: u64, b: u64) -> f64 {
+    let mut z =
+        salt ^ a.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ b.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
