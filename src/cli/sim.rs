@@ -82,8 +82,8 @@ pub struct SimArgs {
     /// Feed the delivery reference what the team's GWM had: `stamps` (each teammate
     /// message at the team's own stamp), `own` (the robot's own message as published), or
     /// `both` (#29's diagnostics).
-    #[arg(long, hide = true)]
-    pub delivery_as_team: Option<String>,
+    #[arg(long, hide = true, value_enum)]
+    pub delivery_as_team: Option<DeliveryAsTeam>,
     /// Place each teammate message in the delivery reference up to this many ms off its
     /// true build time (uniform, a fixed hash per message; salted by `--net-seed` or
     /// `--seed`): a stamp error of the team's size that carries no information (#29).
@@ -194,6 +194,18 @@ fn parse_outage(s: &str) -> Result<(Duration, Duration), String> {
         .split_once('@')
         .ok_or_else(|| format!("outage {s:?}: expected DURATION@START, e.g. 30s@120s"))?;
     Ok((duration::parse(d.trim())?, duration::parse(at.trim())?))
+}
+
+/// What the delivery reference is fed from the team's GWM (`--delivery-as-team`, #29's
+/// diagnostics); a value clap does not know is refused, not read as "none".
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DeliveryAsTeam {
+    /// Each teammate message at the team's own stamp.
+    Stamps,
+    /// The robot's own message as published.
+    Own,
+    /// Both.
+    Both,
 }
 
 impl Default for SimArgs {
@@ -453,11 +465,11 @@ fn config(args: &SimArgs) -> SimConfig {
             None => huddle::sim::ReferenceConfig::default(),
         }
         .with_delivery_shift(args.delivery_shift_ms.unwrap_or(0.0) / 1000.0)
-        .with_delivery_as_team(match args.delivery_as_team.as_deref() {
-            Some("stamps") => (true, false),
-            Some("own") => (false, true),
-            Some("both") => (true, true),
-            _ => (false, false),
+        .with_delivery_as_team(match args.delivery_as_team {
+            Some(DeliveryAsTeam::Stamps) => (true, false),
+            Some(DeliveryAsTeam::Own) => (false, true),
+            Some(DeliveryAsTeam::Both) => (true, true),
+            None => (false, false),
         })
         .with_delivery_jitter(
             args.delivery_jitter_ms.unwrap_or(0.0) / 1000.0,
