@@ -1,0 +1,2 @@
+def future_items(*a): pass
+def mixed_team(*a): pass
