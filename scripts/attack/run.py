@@ -25,6 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import attack_gc  # noqa: E402
 import attack_mixed  # noqa: E402
 import attack_relay  # noqa: E402
+import attack_team  # noqa: E402
 import attack_wire  # noqa: E402
 
 ATTACKS = [
@@ -41,6 +42,7 @@ ATTACKS = [
     ("relay_connections", attack_relay.connections),
     ("relay_no_reader", attack_relay.no_reader),
     ("config_files", attack_relay.config_files),
+    ("team_inputs", attack_team.inputs),
     ("mixed_future", attack_mixed.future_items),
 ]
 
