@@ -1,11 +1,12 @@
 """Attacks on the team's UDP socket: crafted frames with a known fate, mutated frames,
 and the same mutations against a daemon with a team key."""
 
+import socket
 import struct
 import time
 
 import hwire as w
-from harness import Daemon, check, multicast_sender, scratch_group, seeded
+from harness import Daemon, check, free_port, multicast_sender, scratch_group, seeded
 
 TEAM = 7
 DROPS = ["too_short", "oversized", "bad_magic", "unknown_version", "other_team",
@@ -380,4 +381,45 @@ def keyed(binary, seed, log, long=False):
         check(c.value("42.var.keyed") == ("int", "1"), "the keyed value is still there")
         return {"frames": n, "dropped": drops}
     finally:
+        d.stop()
+
+
+def unicast(binary, seed, log, long=False):
+    """`--transport unicast`: frames from an address that is not a `--peer` are refused
+    and counted, every one, mutated or not; the peer's own are read."""
+    rng = seeded(seed, "unicast")
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stranger.bind(("127.0.0.1", 0))
+    port = free_port(socket.SOCK_DGRAM)
+    d = Daemon(binary, 1, ["--transport", "unicast", "--port", str(port), "--team", str(TEAM),
+                           "--peer", "127.0.0.1:%d" % peer.getsockname()[1]])
+    try:
+        c = d.client()
+        n = 20_000 if long else 2_000
+        before = c.stats(["unicast_refused", "frames_in"])
+        kernel0 = d.udp_drops()
+        for i in range(n):
+            data = rng.choice(base_frames(rng))
+            if rng.random() < 0.5:
+                data = mutate(rng, data)
+            stranger.sendto(data, ("127.0.0.1", port))
+            if i % 100 == 99:
+                time.sleep(0.01)
+        good = w.frame(TEAM, 3, rng.getrandbits(62) | 1, 1, [w.update("from_peer", 5)])
+        peer.sendto(good, ("127.0.0.1", port))
+        c.wait_for("3.var.from_peer", lambda v: v == ("int", "5"), 3.0)
+        time.sleep(0.35)
+        after = c.stats(["unicast_refused", "frames_in"])
+        refused = after["unicast_refused"] - before["unicast_refused"]
+        kernel = d.udp_drops() - kernel0
+        log("  %d frames from a stranger: %d refused (+%d dropped by the kernel); the peer's frame read"
+            % (n, refused, kernel))
+        check(refused + kernel == n, "%d refused + %d kernel drops of %d" % (refused, kernel, n))
+        d.assert_healthy("unicast")
+        return {"frames": n, "refused": refused}
+    finally:
+        peer.close()
+        stranger.close()
         d.stop()

@@ -32,6 +32,7 @@ ATTACKS = [
     ("wire_crafted", attack_wire.crafted),
     ("wire_mutated", attack_wire.mutated),
     ("wire_keyed", attack_wire.keyed),
+    ("wire_unicast", attack_wire.unicast),
     ("gc_packets", attack_gc.packets),
     ("gc_order", attack_gc.order),
     ("gc_flood", attack_gc.flood),
