@@ -119,8 +119,16 @@ def packets(binary, seed, log, long=False):
         kernel0 = d.udp_drops()
         want = dict.fromkeys(GC_COUNTERS, 0)
         good = rgme(n + 1, state=4, secs=1)
-        send = gc.send
-        gc.send = lambda data: send(data, 0.0005)  # the socket's buffer holds ~200
+        send, sent = gc.send, [0]
+
+        def paced(data):
+            # The socket's buffer holds ~200 of these: a pause every 40 lets a busy
+            # daemon (a debug build on a loaded CI machine) read them all.
+            send(data, 0.0005)
+            sent[0] += 1
+            if sent[0] % 40 == 0:
+                time.sleep(0.05)
+        gc.send = paced
         for length in range(0, 201):
             if length == 118:
                 continue
@@ -151,9 +159,15 @@ def packets(binary, seed, log, long=False):
         d_ = {k: v - before[k] for k, v in gc_stats(c).items()}
         kernel = d.udp_drops() - kernel0
         log("  bad packets: %s; %d dropped by the kernel" % (", ".join("%s %d" % (k, v) for k, v in d_.items() if v), kernel))
-        check(kernel == 0, "the kernel dropped %d packets: the counts cannot be checked" % kernel)
-        for k in ["bad_length", "bad_header", "wrong_version", "bad_field", "wrong_team", "accepted", "stale"]:
-            check(d_[k] == want[k], "gc.%s moved by %d, expected %d" % (k, d_[k], want[k]))
+        if kernel:
+            # Which reason a dropped packet would have had is unknown: the total holds.
+            total = sum(d_[k] for k in want if k != "status_sent")
+            check(total + kernel == sum(want.values()), "%d counted + %d kernel drops, %d sent"
+                  % (total, kernel, sum(want.values())))
+            check(d_["accepted"] == 0, "a bad packet was accepted")
+        else:
+            for k in ["bad_length", "bad_header", "wrong_version", "bad_field", "wrong_team", "accepted", "stale"]:
+                check(d_[k] == want[k], "gc.%s moved by %d, expected %d" % (k, d_[k], want[k]))
         check(c.value("local.var.gc.state") == ("string", '"playing"'), "a bad packet moved the game")
         check(c.value("local.var.gc.secs_remaining") == ("int", "500"), "a bad packet moved the clock")
         # Extremes a valid packet may carry: the clock past its end, budgets 0 and 65535.
