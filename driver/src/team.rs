@@ -825,3 +825,7 @@ mod core_tests {
         );
     }
 }
+
+#[cfg(test)]
+#[path = "team_input_tests.rs"]
+mod input_tests;

@@ -60,6 +60,18 @@ pub const TICK_KEY: &str = "local.var.team.tick";
 /// Oldest observation the layer takes, s.
 pub const MAX_AGE_S: f64 = 10.0;
 
+/// Farthest a pose or a landmark may be from the field's centre, m (and the longest
+/// landmark range): every league's field fits many times over. A finite value beyond it
+/// (`1e300`) is a program's bug, and the filters' arithmetic overflows on it to infinity
+/// and then NaN, which they would carry from then on.
+pub const MAX_FIELD_M: f64 = 100.0;
+
+/// The variances (m², rad²) an input's covariance may have on its diagonal: σ from a
+/// micrometre to a kilometre. Outside, a filter's update divides by a subnormal or
+/// multiplies out of range, and the team ball turned NaN (the attack suite's extreme
+/// senses, `docs/attack-suite.md`).
+pub const VARIANCE_RANGE: std::ops::RangeInclusive<f64> = 1e-12..=1e6;
+
 /// Why an input is refused.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ContractError {
@@ -197,6 +209,29 @@ fn positive_definite<const N: usize>(m: &fusion::nalgebra::SMatrix<f64, N, N>) -
     (0..N).all(|i| m[(i, i)] > 0.0) && m.cholesky().is_some()
 }
 
+/// A covariance the filters can take: positive definite, its variances in
+/// [`VARIANCE_RANGE`].
+fn usable_covariance<const N: usize>(
+    key: &'static str,
+    m: &fusion::nalgebra::SMatrix<f64, N, N>,
+) -> Result<(), ContractError> {
+    if !positive_definite(m) {
+        return Err(ContractError::Covariance { key });
+    }
+    if !(0..N).all(|i| VARIANCE_RANGE.contains(&m[(i, i)])) {
+        return Err(ContractError::Range {
+            key,
+            what: "a variance outside 1e-12..=1e6 (σ from 1 µm to 1 km)",
+        });
+    }
+    Ok(())
+}
+
+/// Whether a field-frame place is within [`MAX_FIELD_M`] of the centre.
+fn on_field(x: f64, y: f64) -> bool {
+    x.hypot(y) <= MAX_FIELD_M
+}
+
 /// Parses [`POSE_KEY`].
 pub fn parse_pose(value: &comms::Value) -> Result<PoseInput, ContractError> {
     const KEY: &str = POSE_KEY;
@@ -207,8 +242,12 @@ pub fn parse_pose(value: &comms::Value) -> Result<PoseInput, ContractError> {
         &[9, 10],
     )?;
     let cov = Matrix3::new(v[3], v[4], v[5], v[4], v[6], v[7], v[5], v[7], v[8]);
-    if !positive_definite(&cov) {
-        return Err(ContractError::Covariance { key: KEY });
+    usable_covariance(KEY, &cov)?;
+    if !on_field(v[0], v[1]) {
+        return Err(ContractError::Range {
+            key: KEY,
+            what: "a pose more than 100 m from the field's centre",
+        });
     }
     Ok(PoseInput {
         pose: Pose {
@@ -263,6 +302,16 @@ pub fn parse_landmarks(
                     what: "a range below 0 or a σ not above 0",
                 });
             }
+            if !on_field(s[0], s[1])
+                || s[2] > MAX_FIELD_M
+                || !VARIANCE_RANGE.contains(&(s[4] * s[4]))
+                || !VARIANCE_RANGE.contains(&(s[5] * s[5]))
+            {
+                return Err(ContractError::Range {
+                    key: KEY,
+                    what: "a landmark or a range beyond 100 m, or a σ outside 1e-6..=1e3",
+                });
+            }
             Ok((
                 RangeBearingSighting {
                     field: Vector2::new(s[0], s[1]),
@@ -285,9 +334,7 @@ pub fn parse_ball(value: &comms::Value) -> Result<BallInput, ContractError> {
         &[5, 6],
     )?;
     let cov = Matrix2::new(v[2], v[3], v[3], v[4]);
-    if !positive_definite(&cov) {
-        return Err(ContractError::Covariance { key: KEY });
-    }
+    usable_covariance(KEY, &cov)?;
     if v[0].hypot(v[1]) > 50.0 {
         return Err(ContractError::Range {
             key: KEY,
@@ -588,6 +635,50 @@ mod tests {
             );
         }
         assert!(check("local.var.other", &Value::Int(1)).is_none());
+    }
+
+    #[test]
+    fn finite_but_absurd_senses_are_refused_before_they_reach_the_filters() {
+        // What the attack suite's extreme senses wrote (each one taken before, and the
+        // team ball, own ball and pose turned NaN or infinite): a pose 1e300 m away,
+        // variances of 5e-324 and 1e300, a landmark σ that squares to 0, a landmark
+        // range of 1e15 m. A real robot's values pass.
+        let pose =
+            |x: f64, var: f64| Value::Floats(vec![x, 0.0, 0.0, var, 0.0, 0.0, 0.01, 0.0, 0.003]);
+        let ball = |var: f64| Value::Floats(vec![1.0, 0.0, var, 0.0, 0.01]);
+        let landmark =
+            |range: f64, sigma: f64| Value::Floats(vec![4.5, 0.0, range, 0.0, sigma, 0.05]);
+        let refused: [(&str, Value, &str); 8] = [
+            (POSE_KEY, pose(1e300, 0.01), "100 m"),
+            (POSE_KEY, pose(0.0, 5e-324), "variance"),
+            (POSE_KEY, pose(0.0, 1e300), "variance"),
+            (BALL_KEY, ball(5e-324), "variance"),
+            (BALL_KEY, ball(1e300), "variance"),
+            (LANDMARKS_KEY, landmark(1.0, 1e-300), "σ"),
+            (LANDMARKS_KEY, landmark(1e15, 0.1), "range beyond 100 m"),
+            (LANDMARKS_KEY, landmark(1.0, 1e300), "σ"),
+        ];
+        for (key, value, why) in refused {
+            let err = check(key, &value)
+                .expect("an input key")
+                .expect_err(&format!("{key} {value:?} must be refused"));
+            assert!(
+                err.to_string().contains(why),
+                "{key} {value:?}: '{err}' should say '{why}'"
+            );
+        }
+        for (key, value) in [
+            (POSE_KEY, pose(-4.5, 0.0004)),
+            (POSE_KEY, pose(12.0, 25.0)),
+            (BALL_KEY, ball(1e-6)),
+            (LANDMARKS_KEY, landmark(6.0, 0.2)),
+        ] {
+            assert_eq!(
+                check(key, &value),
+                Some(Ok(())),
+                "{key} {value:?} is a robot's"
+            );
+        }
     }
 
     #[test]
