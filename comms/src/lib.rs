@@ -173,8 +173,8 @@ pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
 pub use pattern::{Pattern, PatternError};
 pub use replica::{
-    ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ConfigInvalid, Destination, Event,
-    ExternalCap, PostError, Replica, ReplicaConfig, Transmit, FREE_GAP,
+    ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ChangeAt, ConfigInvalid,
+    Destination, Event, ExternalCap, PostError, Replica, ReplicaConfig, Transmit, FREE_GAP,
 };
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;

@@ -387,7 +387,7 @@ impl Inner {
         // The clock is read only if a relay session needs it (not on every pump).
         let clock = self.clock;
         let mut now = None;
-        while let Some(event) = self.replica.poll_event() {
+        while let Some((event, at)) = self.replica.poll_event_at() {
             match event {
                 Event::ValueChanged { key } => {
                     for slot in self.sessions.values_mut() {
@@ -398,15 +398,18 @@ impl Inner {
                             self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
                     }
-                    // One match per watch and subscriber; the binding is looked up
-                    // (once) and cloned only for a listener whose pattern matches, so
-                    // most changes (this robot's own writes among them) cost a match
-                    // each and nothing more.
+                    // One match per watch and subscriber; the binding is read (once,
+                    // from the slot the change came with) and cloned only for a
+                    // listener whose pattern matches, so most changes (this robot's own
+                    // writes among them) cost a match each and nothing more.
                     let matches = |p: &comms::Pattern| p.matches(&key);
-                    let board = self.replica.blackboard();
+                    let replica = &self.replica;
                     let mut entry = None;
                     let mut notice = || {
-                        let entry = *entry.get_or_insert_with(|| board.get(&key));
+                        let entry = *entry.get_or_insert_with(|| match at {
+                            Some(at) => replica.changed_entry(&key, at),
+                            None => replica.blackboard().get(&key),
+                        });
                         entry.map(|entry| Notice::Changed {
                             key: key.clone(),
                             entry: entry.clone(),
