@@ -164,14 +164,15 @@ impl Handle {
         let pattern = Pattern::parse(pattern)?;
         let mut inner = self.inner.borrow_mut();
         let queue = Rc::new(RefCell::new(SubQueue {
-            pattern,
             queue: VecDeque::new(),
             capacity: inner.subscriber_backlog,
             lagged: 0,
             waker: None,
             closed: false,
         }));
-        inner.subscribers.push(Rc::downgrade(&queue));
+        // Dropped subscriptions the index has not met since go now.
+        inner.subscribers.retain(|weak| weak.strong_count() > 0);
+        inner.subscribers.insert(pattern, Rc::downgrade(&queue));
         Ok(Subscription { queue })
     }
 
@@ -192,12 +193,13 @@ impl Handle {
         let pattern = Pattern::parse(pattern)?;
         // The shared state knows no handles: it gives the reaction itself, wrapped.
         let slot = Rc::new(WatchSlot {
-            pattern,
             reaction: RefCell::new(Box::new(move |inner: &Rc<RefCell<Inner>>, notice| {
                 reaction(&Handle::new(inner.clone()), notice)
             })),
         });
-        self.inner.borrow_mut().watches.push(Rc::downgrade(&slot));
+        let mut inner = self.inner.borrow_mut();
+        inner.watches.retain(|weak| weak.strong_count() > 0);
+        inner.watches.insert(pattern, Rc::downgrade(&slot));
         Ok(Watch { _slot: slot })
     }
 
