@@ -39,6 +39,10 @@ use crate::pattern::{PathSel, Pattern, ScopeSel};
 use crate::time::Instant;
 use crate::value::Value;
 
+mod scopes;
+
+use scopes::ScopeTable;
+
 /// One binding as stored.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Entry {
@@ -215,7 +219,7 @@ pub struct Blackboard {
     len: usize,
     /// Bindings of other robots.
     remote_len: usize,
-    scopes: BTreeMap<Scope, ScopeIndex>,
+    scopes: ScopeTable,
     /// Per path held in robots' scopes: (robot, slot) of each, in robot order, so that
     /// [`Blackboard::robots_at`] reads every robot's binding of a path after one lookup
     /// instead of one per scope (the arbitration asks several times per control tick;
@@ -245,7 +249,7 @@ impl Blackboard {
             free: Vec::new(),
             len: 0,
             remote_len: 0,
-            scopes: BTreeMap::new(),
+            scopes: ScopeTable::default(),
             robots_by_path: HashMap::default(),
             changes: VecDeque::new(),
             limits,
@@ -286,7 +290,7 @@ impl Blackboard {
     }
 
     fn find(&self, scope: Scope, path: &str) -> Option<SlotId> {
-        self.scopes.get(&scope)?.by_path.get(path).copied()
+        self.scopes.get(scope)?.by_path.get(path).copied()
     }
 
     fn is_remote(&self, scope: Scope) -> bool {
@@ -295,7 +299,7 @@ impl Blackboard {
 
     /// Bindings stored under `scope`.
     fn scope_len(&self, scope: Scope) -> usize {
-        self.scopes.get(&scope).map_or(0, |i| i.by_path.len())
+        self.scopes.get(scope).map_or(0, |i| i.by_path.len())
     }
 
     /// Stores a new binding (the caller checked the limits). `None` only if the slot
@@ -322,7 +326,7 @@ impl Blackboard {
             let k = held.partition_point(|&(other, _)| other < robot);
             held.insert(k, (robot, id));
         }
-        let index = self.scopes.entry(scope).or_default();
+        let index = self.scopes.get_or_insert(scope);
         index.by_path.insert(path.clone(), id);
         index.ordered.insert(path, id);
         self.len += 1;
@@ -340,7 +344,7 @@ impl Blackboard {
         mut doomed: impl FnMut(&str, &Entry) -> bool,
     ) -> usize {
         let remote = self.is_remote(scope);
-        let Some(index) = self.scopes.get_mut(&scope) else {
+        let Some(index) = self.scopes.get_mut(scope) else {
             return 0;
         };
         let slots = &mut self.slots;
@@ -376,7 +380,7 @@ impl Blackboard {
             .by_path
             .retain(|_, id| slots.get(*id as usize).is_some_and(Option::is_some));
         if index.by_path.is_empty() {
-            self.scopes.remove(&scope);
+            self.scopes.remove(scope);
         }
         if queued {
             // Before the ids are reused: a queued change of a removed binding goes too.
@@ -429,10 +433,10 @@ impl Blackboard {
         self.write_checked(now, key, value, true)
     }
 
-    /// The binding at `path` in `scope` was set at `stamp` (earlier than its write: see
-    /// `Replica::set_key_built`); nothing if it is not stored.
-    pub(crate) fn restamp(&mut self, scope: Scope, path: &str, stamp: Instant) {
-        if let Some(slot) = self.find(scope, path).and_then(|id| self.slot_mut(id)) {
+    /// The binding in slot `id` (as [`Blackboard::write`] returned it) was set at `stamp`
+    /// (earlier than its write: see `Replica::set_key_built`); nothing if it is gone.
+    pub(crate) fn restamp(&mut self, id: SlotId, stamp: Instant) {
+        if let Some(slot) = self.slot_mut(id) {
             slot.entry.stamp = stamp;
         }
     }
@@ -551,13 +555,19 @@ impl Blackboard {
         // Received now (the replica's input time); a bare blackboard knows the stamp.
         self.advance_clock(stamp);
         let now = self.clock;
-        if let Some(index) = self.scopes.get_mut(&scope) {
+        // One lookup of the scope finds the binding too, unless the owner restarted.
+        let mut held = None;
+        let mut restarted = false;
+        if let Some(index) = self.scopes.get_mut(scope) {
             let previous = index.incarnation.replace(incarnation);
-            if previous.is_some_and(|p| p != incarnation) {
-                // The key being updated stays: the update replaces it below.
-                let n = self.remove_where(scope, |p, e| e.incarnation != incarnation && p != path);
-                self.counts.superseded += n as u64;
-            }
+            restarted = previous.is_some_and(|p| p != incarnation);
+            held = index.by_path.get(path).copied();
+        }
+        if restarted {
+            // The key being updated stays: the update replaces it below.
+            let n = self.remove_where(scope, |p, e| e.incarnation != incarnation && p != path);
+            self.counts.superseded += n as u64;
+            held = self.find(scope, path);
         }
         let fresh = Entry {
             value,
@@ -566,14 +576,14 @@ impl Blackboard {
             incarnation,
             stamp,
         };
-        let Some(id) = self.find(scope, path) else {
+        let Some(id) = held else {
             let full = self.scope_len(scope) >= self.limits.per_owner
                 || (self.is_remote(scope) && self.remote_len >= self.limits.remote);
             if full || self.insert(scope, path, fresh).is_none() {
                 self.counts.refused += 1;
                 return Applied::Refused;
             }
-            if let Some(index) = self.scopes.get_mut(&scope) {
+            if let Some(index) = self.scopes.get_mut(scope) {
                 index.incarnation = Some(incarnation);
             }
             return Applied::Inserted;
@@ -625,8 +635,8 @@ impl Blackboard {
         match key.scope() {
             Scope::Global => self
                 .scopes
-                .range(Scope::Robot(1)..=Scope::Robot(254))
-                .filter_map(|(_, index)| index.by_path.get(key.path()))
+                .robots()
+                .filter_map(|index| index.by_path.get(key.path()))
                 .filter_map(|&id| self.slot(id))
                 .map(|slot| &slot.entry)
                 .fold(None, |best: Option<&Entry>, e| match best {
@@ -657,12 +667,8 @@ impl Blackboard {
         let plan = pattern.var_plan();
         let scopes: Box<dyn Iterator<Item = &'a ScopeIndex> + 'a> = match plan.scopes {
             ScopeSel::All => Box::new(self.scopes.values()),
-            ScopeSel::Robots => Box::new(
-                self.scopes
-                    .range(Scope::Robot(1)..=Scope::Robot(254))
-                    .map(|(_, index)| index),
-            ),
-            ScopeSel::Some(list) => Box::new(list.into_iter().filter_map(|s| self.scopes.get(&s))),
+            ScopeSel::Robots => Box::new(self.scopes.robots()),
+            ScopeSel::Some(list) => Box::new(list.into_iter().filter_map(|s| self.scopes.get(s))),
         };
         let path = plan.path;
         scopes
@@ -700,7 +706,7 @@ impl Blackboard {
     /// The bindings this robot owns under `scope` (for the replica's refresh), in path
     /// order.
     pub(crate) fn scope_entries(&self, scope: Scope) -> impl Iterator<Item = (&str, &Entry)> {
-        self.scopes.get(&scope).into_iter().flat_map(move |index| {
+        self.scopes.get(scope).into_iter().flat_map(move |index| {
             index
                 .ordered
                 .iter()
@@ -728,6 +734,18 @@ impl Blackboard {
             .filter_map(move |&(robot, id)| Some((robot, &self.slot(id)?.entry)))
     }
 
+    /// The binding of `path` in `scope`, read from slot `id` when that slot still holds
+    /// it (a slot remembered since a write or a change: no lookup), else looked up. The
+    /// path is the blackboard's own (from [`Blackboard::shared_path`] or a change's key),
+    /// so the same allocation means the same binding: a removed binding's slot reused
+    /// for another path has another one, and the caller's copy keeps this one alive.
+    pub(crate) fn get_at(&self, id: SlotId, scope: Scope, path: &Arc<str>) -> Option<&Entry> {
+        match self.slot(id) {
+            Some(slot) if slot.scope == scope && Arc::ptr_eq(&slot.path, path) => Some(&slot.entry),
+            _ => self.get_stored(scope, path),
+        }
+    }
+
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
         self.find(scope, path)
@@ -749,10 +767,15 @@ impl Blackboard {
     /// first. Changes are coalesced: a key appears at most once until drained. A
     /// binding removed before its change was drained is not reported.
     pub fn poll_change(&mut self) -> Option<Key> {
+        self.poll_change_at().map(|(key, _)| key)
+    }
+
+    /// [`Blackboard::poll_change`] with the binding's slot, for [`Blackboard::get_at`].
+    pub(crate) fn poll_change_at(&mut self) -> Option<(Key, SlotId)> {
         while let Some(id) = self.changes.pop_front() {
             if let Some(slot) = self.slot_mut(id) {
                 slot.change_queued = false;
-                return Some(slot.key());
+                return Some((slot.key(), id));
             }
         }
         None
@@ -1042,6 +1065,30 @@ mod tests {
         let p = Pattern::parse("+.var.+.x").unwrap();
         assert_eq!(bb.iter(&p).count(), 20_001);
         assert_eq!(bb.visited(&p), bb.len());
+    }
+
+    #[test]
+    fn a_remembered_slot_reads_its_binding_and_a_reused_one_is_looked_past() {
+        let mut bb = Blackboard::new(1);
+        bb.apply_remote(3, 9, "ball".into(), Value::Int(3), 1, t(0));
+        let (key, slot) = bb.poll_change_at().expect("inserted");
+        let read = |bb: &Blackboard| bb.get_at(slot, key.scope(), key.shared_path()).cloned();
+        assert_eq!(read(&bb).map(|e| e.value), Some(Value::Int(3)));
+        // Robot 3 is released and its slot goes to robot 4's `pose`: the remembered slot
+        // no longer holds robot 3's `ball`, and nothing is read from it.
+        assert_eq!(bb.release_owner(3), 1);
+        bb.apply_remote(4, 9, "pose".into(), Value::Int(4), 1, t(1));
+        let (pose, reused) = bb.poll_change_at().expect("inserted");
+        assert_eq!((pose.to_string(), reused), ("4.var.pose".to_string(), slot));
+        assert_eq!(read(&bb), None, "robot 3's ball is gone");
+        // Robot 3 comes back: its `ball` is found by its path, in whatever slot.
+        bb.apply_remote(3, 10, "ball".into(), Value::Int(5), 1, t(2));
+        assert_eq!(read(&bb).map(|e| e.value), Some(Value::Int(5)));
+        assert_eq!(
+            bb.get_at(reused, Scope::Robot(4), pose.shared_path())
+                .map(|e| &e.value),
+            Some(&Value::Int(4))
+        );
     }
 
     mod robots_at {

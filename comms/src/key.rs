@@ -143,6 +143,12 @@ impl Key {
     pub(crate) fn from_shared(scope: Scope, kind: Kind, path: Arc<str>) -> Key {
         Key { scope, kind, path }
     }
+
+    /// The path as shared with the blackboard (a stored binding's key holds its
+    /// allocation).
+    pub(crate) fn shared_path(&self) -> &Arc<str> {
+        &self.path
+    }
 }
 
 /// A key's parts borrowed from the text they were parsed from: what a write needs, with

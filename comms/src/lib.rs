@@ -171,10 +171,10 @@ pub use blackboard::{Applied, Blackboard, BoardLimits, Entry, SetError};
 pub use config::{parse_config, ConfigEntry, ConfigError, LineError};
 pub use key::{validate_path, Key, KeyError, Kind, Scope, MAX_PATH_LEN, ROBOT_IDS};
 pub use literal::{parse_literal, parse_literal_prefix, LiteralError};
-pub use pattern::{Pattern, PatternError};
+pub use pattern::{Pattern, PatternError, PatternIndex};
 pub use replica::{
-    ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ConfigInvalid, Destination, Event,
-    ExternalCap, PostError, Replica, ReplicaConfig, Transmit, FREE_GAP,
+    ordered_incarnation, Budget, BudgetParseError, BudgetSpec, ChangeAt, ConfigInvalid,
+    Destination, Event, ExternalCap, PostError, Replica, ReplicaConfig, Transmit, FREE_GAP,
 };
 pub use stats::{DropReason, PeerInfo, Stats};
 pub use talk::TalkLimits;

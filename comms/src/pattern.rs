@@ -11,6 +11,10 @@ use thiserror::Error;
 
 use crate::key::{Kind, Scope};
 
+mod index;
+
+pub use index::PatternIndex;
+
 /// A parsed pattern such as `+.var.machine.heuristic` or `2.var.#`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Pattern {
@@ -20,6 +24,23 @@ pub struct Pattern {
     /// dispatches is matched against every watch and subscriber, so the robot id in
     /// `2.var.x` is not parsed again per match.
     first: FirstLevel,
+    /// What the second level accepts, decided once too (no string compare per match).
+    second: SecondLevel,
+}
+
+/// The kinds a pattern's second level accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SecondLevel {
+    /// None: the pattern has one level (`#` is decided by the first).
+    Missing,
+    /// `#`: every kind and path.
+    Rest,
+    /// `+`: either kind; the path decides.
+    One,
+    /// `var` or `talk`; the path decides.
+    Kind(Kind),
+    /// Anything else: no key.
+    Never,
 }
 
 /// The scopes a pattern's first level accepts.
@@ -96,10 +117,21 @@ impl Pattern {
                 },
             },
         };
+        let second = match levels.get(1) {
+            None => SecondLevel::Missing,
+            Some(Level::Rest) => SecondLevel::Rest,
+            Some(Level::One) => SecondLevel::One,
+            Some(Level::Exact(l)) => match l.as_str() {
+                "var" => SecondLevel::Kind(Kind::Var),
+                "talk" => SecondLevel::Kind(Kind::Talk),
+                _ => SecondLevel::Never,
+            },
+        };
         Ok(Pattern {
             text: s.to_owned(),
             levels,
             first,
+            second,
         })
     }
 
@@ -110,8 +142,18 @@ impl Pattern {
 
     /// Whether `key` (given as parts, so callers need not build a `Key`) matches.
     pub fn matches_parts(&self, scope: Scope, kind: Kind, path: &str) -> bool {
+        match self.head(scope, kind) {
+            Head::All => true,
+            Head::Nothing => false,
+            Head::Path(path_levels) => match_path(path_levels, path.as_bytes()),
+        }
+    }
+
+    /// What the scope and kind of a key decide: all of it (`#`, `2.#`), nothing (another
+    /// scope or kind), or that the path levels decide.
+    fn head(&self, scope: Scope, kind: Kind) -> Head<'_> {
         let scope_ok = match self.first {
-            FirstLevel::Rest => return true,
+            FirstLevel::Rest => return Head::All,
             FirstLevel::One => true,
             FirstLevel::Robots => matches!(scope, Scope::Global | Scope::Robot(_)),
             FirstLevel::Local => scope == Scope::Local,
@@ -119,18 +161,36 @@ impl Pattern {
             FirstLevel::Never => false,
         };
         if !scope_ok {
-            return false;
+            return Head::Nothing;
         }
-        let kind_str = match kind {
-            Kind::Var => "var",
-            Kind::Talk => "talk",
-        };
-        match self.levels[1..].split_first() {
-            None => false,
-            Some((Level::Rest, _)) => true,
-            Some((Level::Exact(l), _)) if l != kind_str => false,
-            Some((_, path_levels)) => match_path(path_levels, path.as_bytes()),
+        match self.second {
+            SecondLevel::Missing | SecondLevel::Never => Head::Nothing,
+            SecondLevel::Rest => Head::All,
+            SecondLevel::Kind(k) if k != kind => Head::Nothing,
+            SecondLevel::One | SecondLevel::Kind(_) => Head::Path(&self.levels[2..]),
         }
+    }
+
+    /// The literal start of every path this pattern matches, if its path begins with a
+    /// literal level: the levels up to the first wildcard, joined with dots, and whether
+    /// that is all of it (the pattern names one path). `None` for a pattern whose path
+    /// may begin anywhere (`#`, `2.#`, `+.var.+.x`) or that has no path level.
+    fn path_literal(&self) -> Option<(String, bool)> {
+        if self.first == FirstLevel::Rest || matches!(self.levels.get(1), Some(Level::Rest)) {
+            return None;
+        }
+        let path = self.levels.get(2..)?;
+        let literal: Vec<&str> = path
+            .iter()
+            .map_while(|level| match level {
+                Level::Exact(l) => Some(l.as_str()),
+                _ => None,
+            })
+            .collect();
+        if literal.is_empty() {
+            return None;
+        }
+        Some((literal.join("."), literal.len() == path.len()))
     }
 
     /// Whether a parsed key matches.
@@ -204,6 +264,14 @@ impl Pattern {
             path: PathSel::Exact(literal),
         }
     }
+}
+
+/// What a key's scope and kind decide about a match ([`Pattern::head`]).
+enum Head<'a> {
+    All,
+    Nothing,
+    /// The path levels of the pattern decide.
+    Path(&'a [Level]),
 }
 
 /// Which stored `var` bindings a pattern can match ([`Pattern::var_plan`]).

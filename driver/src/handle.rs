@@ -68,6 +68,26 @@ impl Handle {
         Ok(())
     }
 
+    /// [`Handle::set`] with a key parsed once ([`Key::parse`]): a program whose keys are
+    /// fixed writes them without checking the text again at every write.
+    ///
+    /// ```no_run
+    /// # async fn f(h: driver::Handle) -> Result<(), comms::SetError> {
+    /// let heuristic = comms::Key::parse("*.var.machine.heuristic").expect("a valid key");
+    /// h.set_key(&heuristic, 2.5)?;
+    /// # Ok(()) }
+    /// ```
+    pub fn set_key(&self, key: &Key, value: impl Into<Value>) -> Result<(), SetError> {
+        {
+            let mut inner = self.inner.borrow_mut();
+            let now = inner.clock.now();
+            inner.replica.set_key(now, key, value.into())?;
+            inner.pump();
+        }
+        run_reactions(&self.inner);
+        Ok(())
+    }
+
     /// Several writes sent together: the replica packs them into as few frames as the
     /// MTU allows, sent when `f` returns (a single [`Handle::set`] sends at once, which
     /// is best for latency and worst for throughput).
@@ -144,14 +164,15 @@ impl Handle {
         let pattern = Pattern::parse(pattern)?;
         let mut inner = self.inner.borrow_mut();
         let queue = Rc::new(RefCell::new(SubQueue {
-            pattern,
             queue: VecDeque::new(),
             capacity: inner.subscriber_backlog,
             lagged: 0,
             waker: None,
             closed: false,
         }));
-        inner.subscribers.push(Rc::downgrade(&queue));
+        // Dropped subscriptions the index has not met since go now.
+        inner.subscribers.retain(|weak| weak.strong_count() > 0);
+        inner.subscribers.insert(pattern, Rc::downgrade(&queue));
         Ok(Subscription { queue })
     }
 
@@ -172,12 +193,13 @@ impl Handle {
         let pattern = Pattern::parse(pattern)?;
         // The shared state knows no handles: it gives the reaction itself, wrapped.
         let slot = Rc::new(WatchSlot {
-            pattern,
             reaction: RefCell::new(Box::new(move |inner: &Rc<RefCell<Inner>>, notice| {
                 reaction(&Handle::new(inner.clone()), notice)
             })),
         });
-        self.inner.borrow_mut().watches.push(Rc::downgrade(&slot));
+        let mut inner = self.inner.borrow_mut();
+        inner.watches.retain(|weak| weak.strong_count() > 0);
+        inner.watches.insert(pattern, Rc::downgrade(&slot));
         Ok(Watch { _slot: slot })
     }
 
@@ -257,6 +279,11 @@ impl Batch<'_> {
         self.inner.replica.set(self.now, key, value.into())
     }
 
+    /// As [`Handle::set_key`], sent when the batch ends.
+    pub fn set_key(&mut self, key: &Key, value: impl Into<Value>) -> Result<(), SetError> {
+        self.inner.replica.set_key(self.now, key, value.into())
+    }
+
     /// As [`Handle::post`], sent when the batch ends.
     pub fn post(&mut self, key: &str, value: impl Into<Value>) -> Result<u64, PostError> {
         self.inner.replica.post(self.now, key, value.into())
@@ -289,6 +316,38 @@ mod tests {
             }
         });
         wait.await.expect("a change within 5 s")
+    }
+
+    /// A robot program parses its fixed keys once: a write through the parsed key is the
+    /// write its text makes (the same binding, the next version, the same refusals).
+    #[test]
+    fn a_key_parsed_once_writes_what_its_text_writes() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime");
+        tokio::task::LocalSet::new().block_on(&rt, async {
+            let group = crate::scratch_group().expect("a scratch group");
+            let one = Driver::bind(config(1, group)).expect("robot 1 binds");
+            let h = one.handle();
+            let pose = Key::parse("*.var.pose").expect("a valid key");
+            h.set_key(&pose, 3).expect("robot 1 sets its own key");
+            h.set("*.var.pose", 4).expect("the same key as text");
+            h.batch(|b| b.set_key(&pose, 5)).expect("in a batch");
+            let e = h.get("1.var.pose").expect("valid").expect("stored");
+            assert_eq!(
+                (e.version, e.value),
+                (3, Value::Int(5)),
+                "one binding, three writes"
+            );
+            let theirs = Key::parse("2.var.pose").expect("a valid key");
+            assert_eq!(
+                h.set_key(&theirs, 1),
+                h.set("2.var.pose", 1),
+                "robot 2's copy is refused alike"
+            );
+            assert!(h.set_key(&theirs, 1).is_err());
+        });
     }
 
     /// Robot 2 answers robot 1's question from a watch, inside its driver's turn; its

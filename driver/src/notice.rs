@@ -7,7 +7,7 @@ use std::future::poll_fn;
 use std::rc::Rc;
 use std::task::{Poll, Waker};
 
-use comms::{Entry, Key, Pattern, Value};
+use comms::{Entry, Key, Value};
 
 /// Something a subscription reports.
 #[derive(Clone, Debug, PartialEq)]
@@ -48,7 +48,6 @@ pub enum Notice {
 
 /// A subscriber's queue, shared with the driver.
 pub(crate) struct SubQueue {
-    pub(crate) pattern: Pattern,
     pub(crate) queue: VecDeque<Notice>,
     pub(crate) capacity: usize,
     pub(crate) lagged: u64,

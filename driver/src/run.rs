@@ -13,7 +13,7 @@ use thiserror::Error;
 use tokio::net::UdpSocket;
 
 use comms::relay::SessionLimits;
-use comms::{ConfigInvalid, Key, Replica, ReplicaConfig, SetError, Value};
+use comms::{ConfigInvalid, Key, PatternIndex, Replica, ReplicaConfig, SetError, Value};
 
 use crate::handle::Handle;
 use crate::impair::Impairment;
@@ -239,8 +239,8 @@ impl Driver {
             destination,
             peers: config.peers,
             backlog: VecDeque::new(),
-            subscribers: Vec::new(),
-            watches: Vec::new(),
+            subscribers: PatternIndex::new(),
+            watches: PatternIndex::new(),
             reactions: VecDeque::new(),
             reacting: false,
             guards: Vec::new(),
@@ -300,7 +300,7 @@ impl Driver {
     pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), DriverError> {
         let result = self.run_loop(shutdown).await;
         let mut inner = self.inner.borrow_mut();
-        for weak in inner.subscribers.drain(..) {
+        for weak in inner.subscribers.drain() {
             if let Some(sub) = weak.upgrade() {
                 sub.borrow_mut().close();
             }

@@ -15,7 +15,7 @@ use tokio::net::UdpSocket;
 use tokio::sync::Notify;
 
 use comms::relay::{Session, SessionLimits};
-use comms::{DropReason, Event, Instant, Kind, Pattern, Replica, Scope, Value};
+use comms::{DropReason, Event, Instant, Kind, PatternIndex, Replica, Scope, Value};
 
 use crate::guard::{GuardSlot, GuardedBoard};
 use crate::impair::{Held, Impairment};
@@ -226,9 +226,11 @@ pub(crate) struct Inner {
     pub(crate) destination: Option<SocketAddr>,
     pub(crate) peers: Vec<SocketAddr>,
     pub(crate) backlog: VecDeque<(Vec<u8>, SocketAddr)>,
-    pub(crate) subscribers: Vec<Weak<RefCell<SubQueue>>>,
-    /// Reactions registered with [`crate::Handle::watch`].
-    pub(crate) watches: Vec<Weak<WatchSlot>>,
+    /// Subscriptions ([`crate::Handle::subscribe`]), found by the keys their patterns
+    /// can match: a change is matched only against those that might match it.
+    pub(crate) subscribers: PatternIndex<Weak<RefCell<SubQueue>>>,
+    /// Reactions registered with [`crate::Handle::watch`], indexed the same way.
+    pub(crate) watches: PatternIndex<Weak<WatchSlot>>,
     /// Reactions due, run once the shared state is no longer borrowed.
     pub(crate) reactions: VecDeque<(Weak<WatchSlot>, Notice)>,
     /// Reactions are running further up the stack.
@@ -387,7 +389,7 @@ impl Inner {
         // The clock is read only if a relay session needs it (not on every pump).
         let clock = self.clock;
         let mut now = None;
-        while let Some(event) = self.replica.poll_event() {
+        while let Some((event, at)) = self.replica.poll_event_at() {
             match event {
                 Event::ValueChanged { key } => {
                     for slot in self.sessions.values_mut() {
@@ -398,15 +400,18 @@ impl Inner {
                             self.handed_up += u64::from(wake_if_changed(slot, before));
                         }
                     }
-                    // One match per watch and subscriber; the binding is looked up
-                    // (once) and cloned only for a listener whose pattern matches, so
-                    // most changes (this robot's own writes among them) cost a match
-                    // each and nothing more.
-                    let matches = |p: &comms::Pattern| p.matches(&key);
-                    let board = self.replica.blackboard();
+                    // Only the watches and subscribers whose patterns may match are
+                    // looked at (most changes, this robot's own writes among them, meet
+                    // none); the binding is read (once, from the slot the change came
+                    // with) and cloned only for a listener whose pattern matches.
+                    let matches = (key.scope(), key.kind(), key.path());
+                    let replica = &self.replica;
                     let mut entry = None;
                     let mut notice = || {
-                        let entry = *entry.get_or_insert_with(|| board.get(&key));
+                        let entry = *entry.get_or_insert_with(|| match at {
+                            Some(at) => replica.changed_entry(&key, at),
+                            None => replica.blackboard().get(&key),
+                        });
                         entry.map(|entry| Notice::Changed {
                             key: key.clone(),
                             entry: entry.clone(),
@@ -434,9 +439,7 @@ impl Inner {
                             value: value.clone(),
                         })
                     };
-                    let matches = |p: &comms::Pattern| {
-                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
-                    };
+                    let matches = (Scope::Robot(from), Kind::Talk, queue.as_str());
                     queue_reactions(&mut self.watches, &mut self.reactions, matches, &mut notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, &mut notice);
                 }
@@ -469,9 +472,7 @@ impl Inner {
                             last,
                         })
                     };
-                    let matches = |p: &comms::Pattern| {
-                        p.matches_parts(Scope::Robot(from), Kind::Talk, &queue)
-                    };
+                    let matches = (Scope::Robot(from), Kind::Talk, queue.as_str());
                     queue_reactions(&mut self.watches, &mut self.reactions, matches, &mut notice);
                     self.handed_up += deliver(&mut self.subscribers, matches, &mut notice);
                 }
@@ -630,45 +631,44 @@ fn wake_if_changed(slot: &mut SessionSlot, before: usize) -> bool {
     wake
 }
 
-/// Queues a notice for every live watch whose pattern matches (`notice` gives none when
-/// there is nothing to tell); forgets dropped ones.
+/// The key a notice is about, as parts: scope, kind, path.
+type About<'a> = (Scope, Kind, &'a str);
+
+/// Queues a notice for every live watch whose pattern matches the key (`notice` gives
+/// none when there is nothing to tell); forgets dropped ones it meets.
 fn queue_reactions(
-    watches: &mut Vec<Weak<WatchSlot>>,
+    watches: &mut PatternIndex<Weak<WatchSlot>>,
     reactions: &mut VecDeque<(Weak<WatchSlot>, Notice)>,
-    matches: impl Fn(&comms::Pattern) -> bool,
+    (scope, kind, path): About<'_>,
     notice: &mut impl FnMut() -> Option<Notice>,
 ) {
-    watches.retain(|weak| {
-        let Some(watch) = weak.upgrade() else {
+    watches.visit_matching(scope, kind, path, |weak| {
+        if weak.strong_count() == 0 {
             return false;
-        };
-        if matches(&watch.pattern) {
-            if let Some(notice) = notice() {
-                reactions.push_back((weak.clone(), notice));
-            }
+        }
+        if let Some(notice) = notice() {
+            reactions.push_back((weak.clone(), notice));
         }
         true
     });
 }
 
-/// Hands a notice to every live subscriber whose pattern matches (`notice` gives none
-/// when there is nothing to tell); forgets dropped ones. Returns how many got it.
+/// Hands a notice to every live subscriber whose pattern matches the key (`notice` gives
+/// none when there is nothing to tell); forgets dropped ones it meets. Returns how many
+/// got it.
 fn deliver(
-    subscribers: &mut Vec<Weak<RefCell<SubQueue>>>,
-    matches: impl Fn(&comms::Pattern) -> bool,
+    subscribers: &mut PatternIndex<Weak<RefCell<SubQueue>>>,
+    (scope, kind, path): About<'_>,
     notice: &mut impl FnMut() -> Option<Notice>,
 ) -> u64 {
     let mut handed = 0;
-    subscribers.retain(|weak| {
+    subscribers.visit_matching(scope, kind, path, |weak| {
         let Some(sub) = weak.upgrade() else {
             return false;
         };
-        let mut sub = sub.borrow_mut();
-        if matches(&sub.pattern) {
-            if let Some(notice) = notice() {
-                sub.push(notice);
-                handed += 1;
-            }
+        if let Some(notice) = notice() {
+            sub.borrow_mut().push(notice);
+            handed += 1;
         }
         true
     });
@@ -708,9 +708,9 @@ impl Nudge {
 /// handle from (`Handle::watch` wraps the robot's closure).
 pub(crate) type Reaction = dyn FnMut(&Rc<RefCell<Inner>>, Notice);
 
-/// A watch's pattern and reaction, shared (weakly) with the driver.
+/// A watch's reaction, shared (weakly) with the driver (which files it under its
+/// pattern).
 pub(crate) struct WatchSlot {
-    pub(crate) pattern: Pattern,
     pub(crate) reaction: RefCell<Box<Reaction>>,
 }
 

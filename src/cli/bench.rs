@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use comms::{ReplicaConfig, Value};
+use comms::{Key, ReplicaConfig, Value};
 use driver::{Driver, DriverConfig, Handle, Notice, SocketConfig, Transport};
 use huddle::summary::percentile;
 use nix::sched::{sched_setaffinity, CpuSet};
@@ -253,7 +253,7 @@ fn raw_ping_pong(
     transport: Transport,
 ) -> Result<Vec<f64>> {
     let [(a, to), (b, back)] = raw_ends(g, transport)?;
-    let ponger = std::thread::spawn(move || -> Result<()> {
+    let ponger = named_thread("raw-pong", move || -> Result<()> {
         pin.apply(1);
         let mut buf = [0u8; 64];
         loop {
@@ -268,7 +268,7 @@ fn raw_ping_pong(
         }
     });
     // The pinger runs on a thread of its own too, as in the other two measurements.
-    let pinger = std::thread::spawn(move || -> Result<Vec<f64>> {
+    let pinger = named_thread("raw-ping", move || -> Result<Vec<f64>> {
         pin.apply(0);
         let mut rtts = Vec::with_capacity(rounds);
         let mut buf = [0u8; 64];
@@ -292,6 +292,18 @@ fn raw_ping_pong(
     Ok(rtts)
 }
 
+/// Spawns `f` on a thread called `name`: what `/proc/<pid>/task/*/comm` shows, so that the
+/// context switches of each ping-pong's threads can be told apart while it runs.
+fn named_thread<T: Send + 'static>(
+    name: &str,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> std::thread::JoinHandle<T> {
+    std::thread::Builder::new()
+        .name(name.to_owned())
+        .spawn(f)
+        .expect("a thread for the bench")
+}
+
 /// Runs `f` on its own thread (pinned as `end`) inside a current-thread runtime and
 /// LocalSet, as the driver runs.
 fn on_runtime_thread<T: Send + 'static, F, Fut>(
@@ -303,7 +315,7 @@ where
     F: FnOnce() -> Fut + Send + 'static,
     Fut: std::future::Future<Output = Result<T>>,
 {
-    std::thread::spawn(move || {
+    named_thread(["tokio-ping", "tokio-pong"][end.min(1)], move || {
         pin.apply(end);
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
@@ -383,36 +395,40 @@ where
     F: FnOnce(Handle) -> Fut + Send + 'static,
     Fut: std::future::Future<Output = Result<T>> + 'static,
 {
-    std::thread::spawn(move || {
-        pin.apply(usize::from(id) - 1);
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()?;
-        let local = tokio::task::LocalSet::new();
-        local.block_on(&rt, async move {
-            let mut cfg = DriverConfig::new(ReplicaConfig::new(id, 0).with_refresh_period(refresh));
-            cfg.socket = socket_config(id, g, transport);
-            if transport == Transport::Unicast {
-                cfg.peers = vec![SocketAddr::from((unicast_iface(3 - id), g.port()))];
-            }
-            let driver = Driver::bind(cfg)?;
-            let handle = driver.handle();
-            let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-            let robot = tokio::task::spawn_local(async move {
-                let out = f(handle).await;
-                let _ = stop_tx.send(());
-                out
-            });
-            // Ends when the robot's software does (or fails, or panics: the sender is
-            // dropped).
-            driver
-                .run(async move {
-                    let _ = stop_rx.await;
-                })
-                .await?;
-            robot.await.context("the robot's task panicked")?
-        })
-    })
+    named_thread(
+        ["huddle-ping", "huddle-pong"][usize::from(id == 2)],
+        move || {
+            pin.apply(usize::from(id) - 1);
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()?;
+            let local = tokio::task::LocalSet::new();
+            local.block_on(&rt, async move {
+                let mut cfg =
+                    DriverConfig::new(ReplicaConfig::new(id, 0).with_refresh_period(refresh));
+                cfg.socket = socket_config(id, g, transport);
+                if transport == Transport::Unicast {
+                    cfg.peers = vec![SocketAddr::from((unicast_iface(3 - id), g.port()))];
+                }
+                let driver = Driver::bind(cfg)?;
+                let handle = driver.handle();
+                let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+                let robot = tokio::task::spawn_local(async move {
+                    let out = f(handle).await;
+                    let _ = stop_tx.send(());
+                    out
+                });
+                // Ends when the robot's software does (or fails, or panics: the sender is
+                // dropped).
+                driver
+                    .run(async move {
+                        let _ = stop_rx.await;
+                    })
+                    .await?;
+                robot.await.context("the robot's task panicked")?
+            })
+        },
+    )
 }
 
 async fn next_value(sub: &mut driver::Subscription) -> Result<Value> {
@@ -438,6 +454,8 @@ fn huddle_ping_pong(
     let (r2, d2) = (ready.clone(), done.clone());
     let refresh = Duration::from_millis(100);
     let ponger = on_driver_thread(2, g, refresh, pin, move |h| async move {
+        // The keys are fixed, as a robot program's are: parsed once.
+        let pong = Key::parse("*.var.bench.pong")?;
         match reply {
             Reply::Watch => {
                 // B's robot software reacts inside the driver's turn that applied the
@@ -446,7 +464,7 @@ fn huddle_ping_pong(
                 let failed_in = failed.clone();
                 let _watch = h.watch("1.var.bench.ping", move |h, notice| {
                     if let Notice::Changed { entry, .. } = notice {
-                        if let Err(e) = h.set("*.var.bench.pong", entry.value) {
+                        if let Err(e) = h.set_key(&pong, entry.value) {
                             failed_in.borrow_mut().get_or_insert(e);
                         }
                     }
@@ -468,7 +486,7 @@ fn huddle_ping_pong(
                     let wait =
                         tokio::time::timeout(Duration::from_millis(200), next_value(&mut pings));
                     if let Ok(v) = wait.await {
-                        h.set("*.var.bench.pong", v?)?;
+                        h.set_key(&pong, v?)?;
                     }
                 }
             }
@@ -484,10 +502,11 @@ fn huddle_ping_pong(
             Reply::Watch => watch_pings(&h, total).await?,
             Reply::Subscribe => {
                 let mut pongs = h.subscribe("2.var.bench.pong")?;
+                let ping = Key::parse("*.var.bench.ping")?;
                 let mut rtts = Vec::with_capacity(rounds);
                 for i in 0..total {
                     let t0 = Instant::now();
-                    h.set("*.var.bench.ping", i)?;
+                    h.set_key(&ping, i)?;
                     let reply = tokio::time::timeout(Duration::from_secs(2), async {
                         loop {
                             if next_value(&mut pongs).await? == Value::Int(i) {
@@ -527,6 +546,8 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
         failed: None,
     }));
     let state = rounds.clone();
+    let key = Key::parse("*.var.bench.ping")?;
+    let first = key.clone();
     let _watch = h.watch("2.var.bench.pong", move |h, notice| {
         let Notice::Changed { entry, .. } = notice else {
             return;
@@ -545,12 +566,12 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
             r.t0 = Instant::now();
             r.next
         };
-        if let Err(e) = h.set("*.var.bench.ping", ping) {
+        if let Err(e) = h.set_key(&key, ping) {
             state.borrow_mut().failed.get_or_insert(e);
         }
     })?;
     rounds.borrow_mut().t0 = Instant::now();
-    h.set("*.var.bench.ping", 0)?;
+    h.set_key(&first, 0)?;
     // The reactions do the work; this task only watches for the end or a stall.
     let mut last = (0, Instant::now());
     loop {
@@ -624,7 +645,9 @@ fn throughput(g: (SocketAddrV4, Transport), updates: u64, pin: Pin) -> Result<Th
             h.stats().replica.frames_out,
             frames_from_a.load(Ordering::Acquire),
         );
-        let keys: Vec<String> = (0..KEYS).map(|k| format!("*.var.bench.k{k}")).collect();
+        let keys = (0..KEYS)
+            .map(|k| Key::parse(&format!("*.var.bench.k{k}")))
+            .collect::<Result<Vec<Key>, _>>()?;
         let base = applied.load(Ordering::Acquire);
         let t0 = Instant::now();
         let mut sent = 0u64;
@@ -635,7 +658,7 @@ fn throughput(g: (SocketAddrV4, Transport), updates: u64, pin: Pin) -> Result<Th
             }
             h.batch(|b| {
                 for key in &keys {
-                    b.set(key, sent as i64)?;
+                    b.set_key(key, sent as i64)?;
                     sent += 1;
                 }
                 Ok::<_, comms::SetError>(())

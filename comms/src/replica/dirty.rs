@@ -3,7 +3,7 @@
 use std::collections::{HashSet, VecDeque};
 use std::sync::Arc;
 
-use crate::blackboard::PathHasher;
+use crate::blackboard::{PathHasher, SlotId};
 
 /// Changed values waiting for a frame, in the order they first changed; a value set again
 /// while it waits keeps its place. The value that has waited longest goes first, so a
@@ -12,6 +12,8 @@ use crate::blackboard::PathHasher;
 /// starved by small values set again at every tick.
 ///
 /// Paths are the blackboard's own (shared): marking a value changed copies no string.
+/// Each comes with the slot its binding was written to, so the frame that sends it reads
+/// the binding there instead of looking it up ([`crate::Blackboard`]'s `get_at`).
 ///
 /// A short queue (the usual case: a robot sets a few values per tick, and a frame takes
 /// them all) is searched by a scan of its few paths; the hash set of members is built
@@ -19,7 +21,7 @@ use crate::blackboard::PathHasher;
 /// on every write and every send cost more than the scan.
 #[derive(Debug, Default)]
 pub(super) struct DirtyQueue {
-    order: VecDeque<Arc<str>>,
+    order: VecDeque<(Arc<str>, SlotId)>,
     /// The paths in `order`, while the queue is indexed; empty otherwise.
     members: HashSet<Arc<str>, PathHasher>,
 }
@@ -34,23 +36,28 @@ impl DirtyQueue {
     }
 
     fn position(&self, path: &str) -> Option<usize> {
-        self.order.iter().position(|p| **p == *path)
+        self.order.iter().position(|(p, _)| **p == *path)
     }
 
-    /// Marks `path` changed (a no-op if it already waits).
-    pub(super) fn insert(&mut self, path: &Arc<str>) {
+    /// Marks `path`, written to `slot`, changed (if it already waits it keeps its place).
+    pub(super) fn insert(&mut self, path: &Arc<str>, slot: SlotId) {
         if !self.indexed() {
-            if self.position(path).is_some() {
+            if let Some(i) = self.position(path) {
+                self.order[i].1 = slot;
                 return;
             }
             if self.order.len() + 1 < INDEXED_FROM {
-                self.order.push_back(path.clone());
+                self.order.push_back((path.clone(), slot));
                 return;
             }
-            self.members.extend(self.order.iter().cloned());
+            self.members
+                .extend(self.order.iter().map(|(p, _)| p.clone()));
         }
+        // Indexed, a path already waiting keeps the slot it came with: a binding's slot
+        // changes only if it was removed and written again, and `get_at` then finds it
+        // by its path.
         if self.members.insert(path.clone()) {
-            self.order.push_back(path.clone());
+            self.order.push_back((path.clone(), slot));
         }
     }
 
@@ -68,17 +75,17 @@ impl DirtyQueue {
 
     /// The waiting paths, longest-waiting first.
     pub(super) fn iter(&self) -> impl Iterator<Item = &Arc<str>> {
-        self.order.iter()
+        self.order.iter().map(|(p, _)| p)
     }
 
-    /// The `i`-th waiting path.
-    pub(super) fn get(&self, i: usize) -> Option<&Arc<str>> {
-        self.order.get(i)
+    /// The `i`-th waiting path and the slot it was written to.
+    pub(super) fn get(&self, i: usize) -> Option<(&Arc<str>, SlotId)> {
+        self.order.get(i).map(|(p, slot)| (p, *slot))
     }
 
     /// Takes the `i`-th waiting path out of the queue.
     pub(super) fn remove_at(&mut self, i: usize) -> Option<Arc<str>> {
-        let path = self.order.remove(i)?;
+        let (path, _) = self.order.remove(i)?;
         if self.indexed() {
             self.members.remove(&*path);
         }
@@ -141,7 +148,7 @@ mod tests {
                 match op {
                     Op::Insert(i) => {
                         let p = &paths[usize::from(i)];
-                        q.insert(p);
+                        q.insert(p, u32::from(i));
                         if !model.contains(p) {
                             model.push(p.clone());
                         }
@@ -181,13 +188,13 @@ mod tests {
         let mut q = DirtyQueue::default();
         let (world, machine): (Arc<str>, Arc<str>) =
             ("world.local".into(), "machine.heuristic".into());
-        q.insert(&world);
-        q.insert(&machine);
-        q.insert(&world);
+        q.insert(&world, 0);
+        q.insert(&machine, 1);
+        q.insert(&world, 0);
         let order: Vec<&str> = q.iter().map(|p| &**p).collect();
         assert_eq!(order, ["world.local", "machine.heuristic"]);
         assert!(q.remove("world.local"));
-        q.insert(&world);
+        q.insert(&world, 0);
         let order: Vec<&str> = q.iter().map(|p| &**p).collect();
         assert_eq!(
             order,

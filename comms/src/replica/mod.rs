@@ -23,8 +23,8 @@ use std::sync::atomic::AtomicU64;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::blackboard::{Applied, Blackboard, Entry, SetError};
-use crate::key::{Key, KeyError, KeyRef, Scope};
+use crate::blackboard::{Applied, Blackboard, Entry, SetError, SlotId};
+use crate::key::{Key, KeyError, KeyRef, Kind, Scope};
 use crate::pattern::Pattern;
 use crate::stats::Stats;
 use crate::talk::{Delivery, Outbox};
@@ -49,6 +49,11 @@ pub use events::{Destination, Event, Transmit};
 pub use peers::ordered_incarnation;
 use peers::Peer;
 pub use talk::PostError;
+
+/// Where a changed binding is stored, from [`Replica::poll_event_at`] for
+/// [`Replica::changed_entry`]; opaque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChangeAt(SlotId);
 
 /// One robot's replicated blackboard. See the crate docs for the run loop.
 #[derive(Debug)]
@@ -234,12 +239,12 @@ impl Replica {
     /// values go out with the next [`Replica::poll_transmit`].
     pub fn set(&mut self, now: Instant, key: &str, value: Value) -> Result<(), SetError> {
         // Parsed in place: a write of a key already held copies no string.
-        self.set_parts(now, KeyRef::parse(key)?, value)
+        self.set_parts(now, KeyRef::parse(key)?, value).map(drop)
     }
 
     /// [`Replica::set`] with a parsed key.
     pub fn set_key(&mut self, now: Instant, key: &Key, value: Value) -> Result<(), SetError> {
-        self.set_parts(now, key.as_parts(), value)
+        self.set_parts(now, key.as_parts(), value).map(drop)
     }
 
     /// [`Replica::set_key`] for a value built at `built`, before `now` (a snapshot written
@@ -256,15 +261,20 @@ impl Replica {
         value: Value,
         built: Instant,
     ) -> Result<(), SetError> {
-        self.set_parts(now, key.as_parts(), value)?;
+        let slot = self.set_parts(now, key.as_parts(), value)?;
         if built < now {
-            let scope = self.board.storage_scope(key.as_parts())?;
-            self.board.restamp(scope, key.path(), built);
+            self.board.restamp(slot, built);
         }
         Ok(())
     }
 
-    fn set_parts(&mut self, now: Instant, key: KeyRef<'_>, value: Value) -> Result<(), SetError> {
+    /// Writes `key`; returns the slot it is stored in.
+    fn set_parts(
+        &mut self,
+        now: Instant,
+        key: KeyRef<'_>,
+        value: Value,
+    ) -> Result<SlotId, SetError> {
         self.timers_may_change();
         self.advance(now);
         let scope = self.board.storage_scope(key)?;
@@ -295,10 +305,10 @@ impl Replica {
         let slot = self.board.write(now, key, value)?;
         if global {
             if let Some(path) = self.board.shared_path(slot) {
-                self.dirty.insert(path);
+                self.dirty.insert(path, slot);
             }
         }
-        Ok(())
+        Ok(slot)
     }
 
     /// [`Replica::set_key`] for an item that must not wait for the budget's pacing (a
@@ -413,12 +423,29 @@ impl Replica {
 
     /// The next event, oldest first (value changes after the other events).
     pub fn poll_event(&mut self) -> Option<Event> {
+        self.poll_event_at().map(|(event, _)| event)
+    }
+
+    /// [`Replica::poll_event`], and for an [`Event::ValueChanged`] where the binding is
+    /// stored: [`Replica::changed_entry`] reads it from there without a lookup (a driver
+    /// telling its listeners reads every change it matches).
+    pub fn poll_event_at(&mut self) -> Option<(Event, Option<ChangeAt>)> {
         if let Some(e) = self.events.pop_front() {
-            return Some(e);
+            return Some((e, None));
         }
         self.board
-            .poll_change()
-            .map(|key| Event::ValueChanged { key })
+            .poll_change_at()
+            .map(|(key, slot)| (Event::ValueChanged { key }, Some(ChangeAt(slot))))
+    }
+
+    /// The binding a change polled with [`Replica::poll_event_at`] is about, as it is now:
+    /// what `blackboard().get(key)` returns, read from the slot `at` while that still
+    /// holds it (else looked up).
+    pub fn changed_entry(&self, key: &Key, at: ChangeAt) -> Option<&Entry> {
+        match key.kind() {
+            Kind::Var => self.board.get_at(at.0, key.scope(), key.shared_path()),
+            Kind::Talk => None,
+        }
     }
 }
 

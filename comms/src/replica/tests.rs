@@ -539,3 +539,31 @@ proptest::proptest! {
         proptest::prop_assert_eq!(s.drops_total(), expected, "well-formed frames decode");
     }
 }
+
+#[test]
+fn a_change_polled_with_its_slot_reads_the_binding_the_blackboard_holds() {
+    let (mut a, mut b) = (robot(1, 11), robot(2, 22));
+    a.set(t(1), "*.var.ball.dist", Value::Float(1.5)).unwrap();
+    deliver(t(2), &frames(&mut a), &mut b);
+    b.set(t(3), "local.var.mode", Value::Int(2)).unwrap();
+    b.set(t(3), "*.var.pose", Value::Int(7)).unwrap();
+    let mut changed = Vec::new();
+    while let Some((event, at)) = b.poll_event_at() {
+        if let Event::ValueChanged { key } = event {
+            let at = at.expect("a value change says where its binding is");
+            let entry = b.changed_entry(&key, at).cloned();
+            assert_eq!(entry.as_ref(), b.blackboard().get(&key), "{key}");
+            changed.push((key.to_string(), entry.map(|e| e.value)));
+        } else {
+            assert!(at.is_none(), "{event:?} is no value change");
+        }
+    }
+    assert_eq!(
+        changed,
+        [
+            ("1.var.ball.dist".to_string(), Some(Value::Float(1.5))),
+            ("local.var.mode".to_string(), Some(Value::Int(2))),
+            ("2.var.pose".to_string(), Some(Value::Int(7))),
+        ]
+    );
+}

@@ -355,10 +355,10 @@ fn push_values(
     let mut i = 0;
     let mut skipped = 0;
     while skipped < MAX_SKIPPED {
-        let Some(path) = dirty.get(i) else {
+        let Some((path, slot)) = dirty.get(i) else {
             break;
         };
-        let pushed = match board.get_stored(me, path) {
+        let pushed = match board.get_at(slot, me, path) {
             Some(e) if !w.push(update_ref(path, e, now, age_cap)) => {
                 full = true;
                 skipped += 1;

@@ -1010,3 +1010,42 @@ proptest! {
         one_pass_agrees(&bytes, frame.team, None, KnownPaths::none())?;
     }
 }
+
+proptest! {
+    /// The clock may be set before the items (the writer's usual path: only the seq
+    /// follows the header, and is written again after the echo), after them (the items
+    /// move), or set twice with another echo first: the bytes are the same.
+    #[test]
+    fn the_clock_set_before_after_or_again_gives_the_same_frame(
+        frame in any_frame(),
+        other in any_frame(),
+    ) {
+        let build = |order: u8| {
+            let mut w = FrameWriter::new(
+                frame.team,
+                frame.sender,
+                frame.incarnation,
+                frame.seq,
+                usize::MAX,
+                None,
+            );
+            if order == 1 {
+                w.set_clock(other.clock);
+            }
+            if order != 2 {
+                w.set_clock(frame.clock);
+            }
+            for item in &frame.items {
+                assert!(w.push(item.as_ref()));
+            }
+            if order == 2 {
+                w.set_clock(other.clock);
+                w.set_clock(frame.clock);
+            }
+            w.finish()
+        };
+        let first = build(0);
+        prop_assert_eq!(&build(1), &first, "set twice before the items");
+        prop_assert_eq!(&build(2), &first, "set after the items");
+    }
+}

@@ -26,6 +26,8 @@ pub struct FrameWriter<'k> {
     buf: Vec<u8>,
     /// Where the items start in `buf`.
     items_at: usize,
+    /// The frame's seq (its varint ends the header part, after any echo).
+    seq: u64,
     count: usize,
     budget: usize,
     key: Option<&'k TeamKey>,
@@ -64,16 +66,19 @@ impl<'k> FrameWriter<'k> {
         if buf.capacity() == 0 {
             buf.reserve(budget.min(2048));
         }
-        buf.extend_from_slice(&MAGIC);
-        buf.push(VERSION);
-        buf.push(if key.is_some() { FLAG_TAGGED } else { 0 });
-        buf.push(team);
-        buf.push(sender);
-        buf.extend_from_slice(&incarnation.to_le_bytes());
-        buf.extend_from_slice(&[0; 4]);
+        // The header in one copy (a push per field checked the capacity each time).
+        let mut header = [0u8; HEADER_LEN];
+        header[..2].copy_from_slice(&MAGIC);
+        header[2] = VERSION;
+        header[3] = if key.is_some() { FLAG_TAGGED } else { 0 };
+        header[4] = team;
+        header[5] = sender;
+        header[6..14].copy_from_slice(&incarnation.to_le_bytes());
+        buf.extend_from_slice(&header);
         codec::put_varint(seq, &mut buf);
         FrameWriter {
             items_at: buf.len(),
+            seq,
             buf,
             count: 0,
             budget,
@@ -113,6 +118,14 @@ impl<'k> FrameWriter<'k> {
                 b[3..5].copy_from_slice(&e.hold_10us.to_le_bytes());
                 if had {
                     self.buf[HEADER_LEN..HEADER_LEN + ECHO_LEN].copy_from_slice(&b);
+                } else if self.count == 0 {
+                    // Only the seq follows the header (the usual case: the clock is set
+                    // first): written again after the echo.
+                    self.buf.truncate(HEADER_LEN);
+                    self.buf.extend_from_slice(&b);
+                    codec::put_varint(self.seq, &mut self.buf);
+                    self.items_at = self.buf.len();
+                    self.buf[3] |= FLAG_ECHO;
                 } else {
                     // Room after the header: the few bytes behind it (the seq, any items)
                     // move up in one copy (a `splice` cost more than the rest of this
