@@ -746,6 +746,12 @@ impl Blackboard {
         }
     }
 
+    /// The path and binding in slot `id`, if one is stored there (the stats mirror reads
+    /// its keys by the slots it found them in).
+    pub(crate) fn stored_at(&self, id: SlotId) -> Option<(&Arc<str>, &Entry)> {
+        self.slot(id).map(|slot| (&slot.path, &slot.entry))
+    }
+
     /// One stored binding by scope and path.
     pub(crate) fn get_stored(&self, scope: Scope, path: &str) -> Option<&Entry> {
         self.find(scope, path)

@@ -134,12 +134,8 @@ impl Key {
         }
     }
 
-    /// Unchecked constructor for parts already validated (wire decoding, storage).
-    pub(crate) fn from_valid_parts(scope: Scope, kind: Kind, path: String) -> Key {
-        Key::from_shared(scope, kind, Arc::from(path))
-    }
-
-    /// [`Key::from_valid_parts`] sharing a path already stored (no copy).
+    /// Unchecked constructor for parts already validated (a stored binding's key),
+    /// sharing the stored path (no copy).
     pub(crate) fn from_shared(scope: Scope, kind: Kind, path: Arc<str>) -> Key {
         Key { scope, kind, path }
     }

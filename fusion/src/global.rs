@@ -206,9 +206,11 @@ pub struct GlobalModel {
     /// Observations not yet committed, in time order, and the state after each
     /// (checkpoints, so that a late arrival replays only what follows it).
     /// Queues: `commit` takes from the front at every message.
+    /// The newest state (the head of the track) is the last checkpoint, or the committed
+    /// ball when nothing is pending (`GlobalModel::head`): not kept apart, so no
+    /// insertion copies it.
     pending: VecDeque<Measured>,
     after: VecDeque<BallEstimate>,
-    head: Option<BallEstimate>,
     last_support_t_s: f64,
     /// Ball information from before this time is void (see [`GlobalModel::forget_ball`]).
     forgotten_before_t_s: f64,
@@ -234,7 +236,6 @@ struct Rewind {
     committed: BallEstimate,
     pending: VecDeque<Measured>,
     after: VecDeque<BallEstimate>,
-    head: Option<BallEstimate>,
     rejected: VecDeque<Measured>,
 }
 
@@ -248,7 +249,6 @@ impl GlobalModel {
             committed: None,
             pending: VecDeque::new(),
             after: VecDeque::new(),
-            head: None,
             last_support_t_s: f64::NEG_INFINITY,
             forgotten_before_t_s: f64::NEG_INFINITY,
             last_accepted_obs_t_s: f64::NEG_INFINITY,
@@ -385,7 +385,6 @@ impl GlobalModel {
                 .ball
                 .unwrap_or_else(|| initial_estimate(&model, obs, self.config.initial_velocity_var));
             self.committed = Some(start);
-            self.head = Some(start);
             self.clear_pending();
             self.last_support_t_s = now_s;
             self.last_accepted_obs_t_s = obs.t_s;
@@ -440,20 +439,34 @@ impl GlobalModel {
         // observations after it (arrived earlier, made later) forward from there.
         let next = obs.apply(&model, prior).unwrap_or(*prior);
         self.after.insert(at, next);
-        self.replay_from(at + 1, next);
+        self.replay_from(at + 1);
     }
 
-    /// Carries `state` (the state before pending observation `from`) through the pending
-    /// observations from `from` on, rewriting their checkpoints and the head.
-    fn replay_from(&mut self, from: usize, mut state: BallEstimate) {
+    /// Carries the state before pending observation `from` (its checkpoint, or the
+    /// committed ball for the first) through the pending observations from `from` on,
+    /// rewriting their checkpoints and the head.
+    fn replay_from(&mut self, from: usize) {
         let model = self.config.ball;
+        // Each checkpoint is written in place and read back as the next one's state: no
+        // copy of a 168-byte estimate through a local per step.
         for k in from..self.pending.len() {
-            if let Some(e) = self.pending[k].apply(&model, &state) {
-                state = e;
-            }
-            self.after[k] = state;
+            let before = match k.checked_sub(1) {
+                Some(j) => &self.after[j],
+                None => self
+                    .committed
+                    .as_ref()
+                    .expect("a committed ball under pending ones"),
+            };
+            self.after[k] = match self.pending[k].apply(&model, before) {
+                Some(e) => e,
+                None => *before,
+            };
         }
-        self.head = Some(state);
+    }
+
+    /// The newest state: after every pending observation, or the committed ball.
+    fn head(&self) -> Option<&BallEstimate> {
+        self.after.back().or(self.committed.as_ref())
     }
 
     /// The state after the committed ball and every pending observation up to `t_s`,
@@ -461,9 +474,9 @@ impl GlobalModel {
     fn replay(&self, t_s: f64) -> Option<BallEstimate> {
         let n = partition_near_back(&self.pending, |p| p.t_s <= t_s);
         let state = if n == 0 {
-            self.committed?
+            self.committed.as_ref()?
         } else {
-            self.after[n - 1]
+            &self.after[n - 1]
         };
         Some(state.predict_to(&self.config.ball, t_s))
     }
@@ -474,7 +487,7 @@ impl GlobalModel {
     }
 
     fn state_at(&self, t_s: f64) -> Option<BallEstimate> {
-        let head = self.head?;
+        let head = self.head()?;
         if t_s >= head.t_s {
             Some(head.predict_to(&self.config.ball, t_s))
         } else {
@@ -648,7 +661,6 @@ impl GlobalModel {
         let turned = kicked.apply(&model, &before).unwrap_or(before);
         self.pending.push_back(kicked);
         self.after.push_back(turned);
-        self.head = Some(turned);
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = kick.t_s;
         self.regate(later);
@@ -705,7 +717,7 @@ impl GlobalModel {
             mean: u.mean,
             cov: u.cov,
         });
-        self.replay_from(0, self.committed.expect("just set"));
+        self.replay_from(0);
     }
 
     /// The team ball restarts from `first`; every observation made after it (pending or
@@ -725,7 +737,6 @@ impl GlobalModel {
             committed,
             pending: self.pending.clone(),
             after: self.after.clone(),
-            head: self.head,
             rejected: self.rejected.clone(),
         });
     }
@@ -741,7 +752,6 @@ impl GlobalModel {
             .copied()
             .collect();
         self.committed = Some(fresh);
-        self.head = Some(fresh);
         self.placed = false;
         self.clear_pending();
         self.rejected.clear();
@@ -872,7 +882,6 @@ impl GlobalModel {
         }
         self.keep_for_rewind(fused.t_s);
         self.committed = Some(fused);
-        self.head = Some(fused);
         self.placed = false;
         self.clear_pending();
         self.rejected.clear();
@@ -893,7 +902,6 @@ impl GlobalModel {
     pub fn forget_ball(&mut self, t_s: f64) {
         self.rewind = None;
         self.committed = None;
-        self.head = None;
         self.placed = false;
         self.clear_pending();
         self.forgotten_before_t_s = t_s;
@@ -920,7 +928,6 @@ impl GlobalModel {
     pub fn place_ball(&mut self, placed: BallEstimate) {
         self.forget_ball(placed.t_s);
         self.committed = Some(placed);
-        self.head = Some(placed);
         self.last_support_t_s = placed.t_s;
         self.last_accepted_obs_t_s = placed.t_s;
         self.placed = true;

@@ -89,6 +89,8 @@ pub struct Replica {
     transit_seen_us: Option<f64>,
     events: VecDeque<Event>,
     stats: Stats,
+    /// Where `local.var.huddle.stats.*` are stored (see `timers::StatsMirror`).
+    stats_mirror: timers::StatsMirror,
     deliveries: Vec<Delivery>,
     /// The message budget in use, if the configuration has one.
     budget: Option<budget::BudgetState>,
@@ -146,6 +148,7 @@ impl Replica {
             transit_seen_us: None,
             events: VecDeque::new(),
             stats: Stats::default(),
+            stats_mirror: timers::StatsMirror::default(),
             deliveries: Vec::new(),
             budget: config_budget.map(|b| budget::BudgetState::new(b, now)),
             urgent: BTreeSet::new(),

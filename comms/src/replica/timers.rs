@@ -4,8 +4,10 @@
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
 use std::sync::atomic::Ordering::Relaxed;
+use std::sync::Arc;
 
-use crate::key::{Key, Kind, Scope};
+use crate::blackboard::{Blackboard, SlotId};
+use crate::key::{KeyRef, Kind, Scope};
 use crate::stats::DropReason;
 use crate::talk::NACKS_WAITING_MAX;
 use crate::time::Instant;
@@ -150,91 +152,71 @@ impl Replica {
     }
 
     /// Mirrors the counters into `local.var.huddle.stats.*`. It runs at every refresh of
-    /// every replica, so it builds no key for a counter that did not change: the path is
-    /// written into one reused buffer and looked up in place.
+    /// every replica (about 50 keys with four teammates), so a key already written is read
+    /// back through its cached slot, not by hashing its path, and only a counter whose
+    /// stored value differs is written; no path is built once its key exists.
     fn mirror_stats(&mut self, now: Instant) {
         let s = &self.stats;
-        let counters: [(&str, u64); 27] = [
-            ("frames_in", s.frames_in),
-            ("frames_out", s.frames_out),
-            ("bytes_in", s.bytes_in),
-            ("bytes_out", s.bytes_out),
-            ("updates_applied", s.updates_applied),
-            ("updates_stale", s.updates_stale),
-            ("items_skipped", s.items_skipped),
-            ("updates_refused", s.updates_refused),
-            (
-                "updates_unconfirmed_replaced",
-                s.updates_unconfirmed_replaced,
-            ),
-            ("bindings_superseded", s.bindings_superseded),
-            ("bindings_released", s.bindings_released),
-            ("talk_delivered", s.talk_delivered),
-            ("talk_given_up", s.talk_given_up),
-            ("talk_resent", s.talk_resent),
-            ("talk_refused", s.talk_refused),
-            ("talk_refused_full", s.talk_refused_full),
-            ("talk_repair_limited", s.talk_repair_limited),
-            ("id_conflicts", s.id_conflicts),
-            ("nacks_sent", s.nacks_sent),
-            ("nacks_limited", s.nacks_limited),
-            ("nacks_superseded", s.nacks_superseded),
-            ("clock_samples", s.clock_samples),
-            ("clock_echoes_rejected", s.clock_echoes_rejected),
-            ("clock_outliers", s.clock_outliers),
-            ("clock_stamps_implausible", s.clock_stamps_implausible),
-            ("transit_defaulted", s.transit_defaulted),
-            ("drops.total", s.drops_total()),
+        let counters = [
+            s.frames_in,
+            s.frames_out,
+            s.bytes_in,
+            s.bytes_out,
+            s.updates_applied,
+            s.updates_stale,
+            s.items_skipped,
+            s.updates_refused,
+            s.updates_unconfirmed_replaced,
+            s.bindings_superseded,
+            s.bindings_released,
+            s.talk_delivered,
+            s.talk_given_up,
+            s.talk_resent,
+            s.talk_refused,
+            s.talk_refused_full,
+            s.talk_repair_limited,
+            s.id_conflicts,
+            s.nacks_sent,
+            s.nacks_limited,
+            s.nacks_superseded,
+            s.clock_samples,
+            s.clock_echoes_rejected,
+            s.clock_outliers,
+            s.clock_stamps_implausible,
+            s.transit_defaulted,
+            s.drops_total(),
         ];
-        let drops = DropReason::ALL.map(|r| (r.name(), s.drops(r) as i64));
+        let (board, mirror) = (&mut self.board, &mut self.stats_mirror);
+        let (fixed, scratch) = (&mut mirror.fixed, &mut mirror.scratch);
+        fixed.resize_with(COUNTERS.len() + DropReason::ALL.len(), || None);
+        let (counter_slots, drop_slots) = fixed.split_at_mut(COUNTERS.len());
+        for ((name, v), cached) in COUNTERS.iter().zip(counters).zip(counter_slots) {
+            mirror_one(board, now, cached, scratch, v as i64, |p| {
+                p.push_str(name);
+            });
+        }
+        for (r, cached) in DropReason::ALL.iter().zip(drop_slots) {
+            mirror_one(board, now, cached, scratch, s.drops(*r) as i64, |p| {
+                p.push_str("drops.");
+                p.push_str(r.name());
+            });
+        }
         // Two robots sending with one id: which ids, as of their last frames.
         // (Not through `peers()`, which works out every peer's clock as well.)
         let live_within = self.cfg.departed_after;
-        let conflicting: Vec<(u8, i64)> = self
-            .peers
-            .iter()
-            .map(|(&robot, p)| (robot, i64::from(p.conflicting(live_within))))
-            .collect();
-        let heard: Vec<(u8, i64)> = s
-            .last_heard
-            .iter()
-            .map(|(&robot, t)| (robot, t.as_micros() as i64))
-            .collect();
-        let mut path = String::with_capacity(64);
-        let put = |board: &mut crate::blackboard::Blackboard, path: &str, v: i64| {
-            let unchanged = board
-                .get_stored(Scope::Local, path)
-                .is_some_and(|e| e.value == Value::Int(v));
-            if !unchanged {
-                let key = Key::from_valid_parts(Scope::Local, Kind::Var, path.to_owned());
-                // A local key of valid shape, not subject to the local-key limit: this
-                // cannot fail.
-                let _ = board.write_unlimited(now, key.as_parts(), Value::Int(v));
-            }
-        };
-        const PREFIX: &str = "huddle.stats.";
-        for (name, v) in counters {
-            path.clear();
-            path.push_str(PREFIX);
-            path.push_str(name);
-            put(&mut self.board, &path, v as i64);
+        let per_peer = &mut mirror.peers;
+        for (&robot, p) in &self.peers {
+            let v = i64::from(p.conflicting(live_within));
+            let cached = &mut peer_slots(per_peer, robot)[0];
+            mirror_one(board, now, cached, scratch, v, |p| {
+                let _ = write!(p, "peer.{robot}.conflicting");
+            });
         }
-        for (name, v) in drops {
-            path.clear();
-            path.push_str(PREFIX);
-            path.push_str("drops.");
-            path.push_str(name);
-            put(&mut self.board, &path, v);
-        }
-        for (robot, v) in conflicting {
-            path.clear();
-            let _ = write!(path, "{PREFIX}peer.{robot}.conflicting");
-            put(&mut self.board, &path, v);
-        }
-        for (robot, v) in heard {
-            path.clear();
-            let _ = write!(path, "{PREFIX}peer.{robot}.last_heard_us");
-            put(&mut self.board, &path, v);
+        for (&robot, t) in &s.last_heard {
+            let cached = &mut peer_slots(per_peer, robot)[1];
+            mirror_one(board, now, cached, scratch, t.as_micros() as i64, |p| {
+                let _ = write!(p, "peer.{robot}.last_heard_us");
+            });
         }
     }
 
@@ -293,3 +275,127 @@ impl Replica {
 
 /// `timeout_cache` holds no answer.
 pub(super) const STALE: u64 = u64::MAX;
+
+/// The counters mirrored first, in this order, as `huddle.stats.<name>`; then the drops
+/// by reason (`drops.<reason>`), then per peer `peer.<id>.conflicting` and
+/// `peer.<id>.last_heard_us`. The order is the order of the change events.
+const COUNTERS: [&str; 27] = [
+    "frames_in",
+    "frames_out",
+    "bytes_in",
+    "bytes_out",
+    "updates_applied",
+    "updates_stale",
+    "items_skipped",
+    "updates_refused",
+    "updates_unconfirmed_replaced",
+    "bindings_superseded",
+    "bindings_released",
+    "talk_delivered",
+    "talk_given_up",
+    "talk_resent",
+    "talk_refused",
+    "talk_refused_full",
+    "talk_repair_limited",
+    "id_conflicts",
+    "nacks_sent",
+    "nacks_limited",
+    "nacks_superseded",
+    "clock_samples",
+    "clock_echoes_rejected",
+    "clock_outliers",
+    "clock_stamps_implausible",
+    "transit_defaulted",
+    "drops.total",
+];
+
+const PREFIX: &str = "huddle.stats.";
+
+/// Where the stats mirror last found each of its keys, so that a refresh reads the
+/// stored value through the slot instead of a path lookup (a `BTreeMap` search and a
+/// hash of a 30-byte path, about 400 instructions, for each of ~50 keys per refresh).
+#[derive(Debug, Default)]
+pub(super) struct StatsMirror {
+    /// The [`COUNTERS`], then the drops in [`DropReason::ALL`]'s order.
+    fixed: Vec<Option<MirrorSlot>>,
+    /// Per robot id: `conflicting`, `last_heard_us`.
+    peers: Vec<[Option<MirrorSlot>; 2]>,
+    /// A path being built (only for a key not yet found).
+    scratch: String,
+}
+
+/// A mirrored key's slot, and its path as the blackboard stores it: the slot is taken
+/// as the key's only while it holds this very path (held here, so the allocation cannot
+/// be reused), so a binding removed and its slot reused is never mistaken for it.
+#[derive(Debug)]
+struct MirrorSlot {
+    id: SlotId,
+    path: Arc<str>,
+}
+
+fn peer_slots(
+    per_peer: &mut Vec<[Option<MirrorSlot>; 2]>,
+    robot: u8,
+) -> &mut [Option<MirrorSlot>; 2] {
+    let i = usize::from(robot);
+    if per_peer.len() <= i {
+        per_peer.resize_with(i + 1, Default::default);
+    }
+    &mut per_peer[i]
+}
+
+/// Writes `v` to `local.var.huddle.stats.<name>` unless that is stored already (the
+/// value compared as the blackboard would: `Value::Int(v)`), so a counter that did not
+/// change costs no version, stamp or change event; `name` writes the name after the
+/// prefix, called only while the key's slot is unknown.
+fn mirror_one(
+    board: &mut Blackboard,
+    now: Instant,
+    cached: &mut Option<MirrorSlot>,
+    scratch: &mut String,
+    v: i64,
+    name: impl FnOnce(&mut String),
+) {
+    let value = Value::Int(v);
+    if let Some(c) = cached {
+        if let Some((path, entry)) = board.stored_at(c.id) {
+            if Arc::ptr_eq(path, &c.path) {
+                if entry.value != value {
+                    let key = KeyRef {
+                        scope: Scope::Local,
+                        kind: Kind::Var,
+                        path: &c.path,
+                    };
+                    // A local key of valid shape, not subject to the local-key limit:
+                    // this cannot fail.
+                    let _ = board.write_unlimited(now, key, value);
+                }
+                return;
+            }
+        }
+        *cached = None;
+    }
+    scratch.clear();
+    scratch.push_str(PREFIX);
+    name(scratch);
+    if board
+        .get_stored(Scope::Local, scratch)
+        .is_some_and(|e| e.value == value)
+    {
+        return; // found again next time (rare: someone else wrote the same value)
+    }
+    let key = KeyRef {
+        scope: Scope::Local,
+        kind: Kind::Var,
+        path: scratch,
+    };
+    if let Ok(id) = board.write_unlimited(now, key, value) {
+        *cached = board.shared_path(id).map(|path| MirrorSlot {
+            id,
+            path: path.clone(),
+        });
+    }
+}
+
+#[cfg(test)]
+mod mirror_tests;

@@ -55,7 +55,14 @@ impl BallEstimate {
         model: &BallModel,
         obs: &FieldObservation,
     ) -> Option<f64> {
-        let p = self.predict_to(model, obs.t_s);
+        // No copy of `self` when no time passes (see `predict_to`).
+        let predicted;
+        let p = if obs.t_s <= self.t_s {
+            self
+        } else {
+            predicted = self.predict_to(model, obs.t_s);
+            &predicted
+        };
         kalman::mahalanobis_sq(
             &(obs.position - p.position()),
             &(p.position_cov() + obs.cov),

@@ -22,7 +22,15 @@ pub fn update(
     obs: &FieldObservation,
     gate_chi2: Option<f64>,
 ) -> Result<(BallEstimate, f64), UpdateError> {
-    let prior = est.predict_to(model, obs.t_s);
+    // Borrowed when no time passes (`predict_to` would return a copy of `est`): the GWM
+    // updates a state it just predicted to the observation's time.
+    let predicted;
+    let prior = if obs.t_s <= est.t_s {
+        est
+    } else {
+        predicted = est.predict_to(model, obs.t_s);
+        &predicted
+    };
     let nu = obs.position - prior.position();
     if !nu.iter().chain(obs.cov.iter()).all(|v| v.is_finite()) {
         return Err(UpdateError::NonFinite);
