@@ -145,7 +145,9 @@ impl ReferenceConfig {
 
     /// The team's GWM settings `team` as the delayed reference runs them at each robot:
     /// every message of every tick (batches, never the compact track), and times that are
-    /// exact (no margin for the shared clock's placement error).
+    /// exact (no margin for the shared clock's placement error). The margin is not the
+    /// team's information but the price of its clock: given it, every reference lost
+    /// ground at goals on all 34 competition tuning seeds (#29's eighth session).
     pub fn delayed_fusion(&self, team: GlobalConfig) -> GlobalConfig {
         self.tuned(GlobalConfig {
             track_after_s: None,
@@ -916,6 +918,38 @@ mod tests {
             "with true stamps the reference should differ from the team ball (team {team:.4} \
              m, reference {truth:.4} m): else this test shows nothing"
         );
+    }
+
+    /// A goal at 10 s; the referee puts the ball 0.73 m off the centre spot (as on check
+    /// seed 721 at 24.1 s) and a teammate sees it there 12 ms later. The team's GWM voids
+    /// that sighting (inside its forget margin, which guards against its clock's error:
+    /// `late`); the references place at true times and take it. On purpose: with the
+    /// team's margin every reference lost ground at goals on every competition tuning seed
+    /// (#29's eighth session), so the margin is a cost of the clock, not information.
+    #[test]
+    fn a_teammate_sighting_just_after_a_placement_is_taken_by_every_reference_not_voided() {
+        let refs = ReferenceConfig::default();
+        let sighting = lwm(10.012, 2, Some(seen(10.012, 0.73, 0.06)));
+        let late = |gwm: &mut GlobalModel| {
+            gwm.place_ball(centre_spot(10.0));
+            gwm.ingest(2, &sighting, 10.05);
+            gwm.stats().late
+        };
+        assert_eq!(
+            late(&mut GlobalModel::new(1, team())),
+            1,
+            "the team voids it inside its forget margin"
+        );
+        let mut central = CentralFusion::new(refs.central_fusion(team()));
+        let mut delivery = DeliveryReference::new(1, refs.delivery_fusion(team()), 2);
+        let mut delayed = GlobalModel::new(1, refs.delayed_fusion(team()));
+        for (who, gwm) in [
+            ("central", &mut central.gwm),
+            ("delivery", &mut delivery.gwm),
+            ("delayed", &mut delayed),
+        ] {
+            assert_eq!(late(gwm), 0, "{who} takes the sighting at its true time");
+        }
     }
 
     /// A goal at 10 s: the referee puts the ball on the centre spot, and the team layer
