@@ -166,6 +166,10 @@ pub struct SimArgs {
 pub enum GameKind {
     /// Two 10-minute halves, a 10-minute break, two penalties.
     Full,
+    /// One 10-minute half, no break, no penalties: the 600 s run with the game's
+    /// kick-off sequence (Ready, Set, the whistle) at its start and after every goal,
+    /// the like-for-like counterpart of the full game (#34).
+    Restarts,
 }
 
 /// `30s@120s`: an outage of 30 s starting at 120 s.
@@ -366,6 +370,7 @@ fn config(args: &SimArgs) -> SimConfig {
     }
     let game = args.game.map(|g| match g {
         GameKind::Full => huddle::sim::referee::GameScript::spl_full(args.robots),
+        GameKind::Restarts => huddle::sim::referee::GameScript::one_half(),
     });
     // A game ends when its referee says so; the duration only caps it (an hour of goals).
     let duration_s = game
