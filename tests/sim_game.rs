@@ -320,7 +320,10 @@ fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_on
         ..GameScript::one_half()
     };
     assert_eq!(script.halves, 1);
-    assert!(script.penalties.is_empty(), "no penalties in the counterpart");
+    assert!(
+        script.penalties.is_empty(),
+        "no penalties in the counterpart"
+    );
     let cfg = SimConfig {
         duration_s: script.length_s() + 600.0,
         seed: 2,
@@ -346,7 +349,10 @@ fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_on
         .windows(3)
         .filter(|w| w == &[Ready, Set, Playing])
         .count() as u32;
-    assert!(goals >= 1, "seed 2 scores in 240 s, so the run restarts: {states:?}");
+    assert!(
+        goals >= 1,
+        "seed 2 scores in 240 s, so the run restarts: {states:?}"
+    );
     assert_eq!(
         kick_offs,
         1 + goals,

@@ -156,6 +156,8 @@ pub struct SimArgs {
     /// Ready/Set restarts, two 45 s penalties, the GC's count of the team's messages).
     /// The robots hear its packets and, under `--budget spl`, pace by its figures as
     /// `huddle daemon` does; the report says whether the team was ever illegal.
+    /// `restarts`: one 10-minute half under the same referee, no break, no penalties
+    /// (the 600 s run restarting from the formation after each goal, as a game does).
     /// `--duration` is ignored: the game ends when the referee says so.
     #[arg(long, value_enum)]
     pub game: Option<GameKind>,
