@@ -2,7 +2,7 @@
 """The full game against the 600 s run of the same build (#34), as a table.
 
 usage: scripts/gc-game-table.py HUDDLE_BIN OUT_DIR [--seeds 1,2,3,601,...] [--worlds drawn,ideal]
-       [--jobs 2] [--only game|600] [--tag NAME]
+       [--jobs 2] [--only game|600|restarts] [--modes 600,game,restarts] [--tag NAME]
 
 Runs `huddle sim --budget spl --game full --seed S --json` and `huddle sim --duration 600s
 --budget spl --seed S --json` for each seed and world (a run whose JSON is already in
@@ -11,7 +11,10 @@ one goer %, blind-robot error, team-ball RMSE, longest conflict; then the means 
 seeds 1-3, 601-606 and all seeds given. Since the seventh session a game's world-model
 figures leave out penalised robots off the field (the 600 s runs have none); the columns
 "... with penalised" give the old definition (the report's `game_with_penalised`; for a
-600 s run the same figure). Standard library only.
+600 s run the same figure). Mode `restarts` (eighth session, second part) adds the 600 s
+run's like-for-like counterpart, `huddle sim --budget spl --game restarts`: one 10-minute
+half under the referee, kicking off from the formation (Ready, Set, the whistle) at its
+start and after every goal, as the game does; no break, no penalties. Standard library only.
 """
 import argparse, json, os, subprocess, sys
 from concurrent.futures import ThreadPoolExecutor
@@ -22,7 +25,12 @@ def run(binary, out_dir, tag, mode, world, seed):
     if os.path.exists(path) and os.path.getsize(path) > 0:
         return path
     cmd = [binary, "sim", "--budget", "spl", "--seed", str(seed), "--json"]
-    cmd += ["--game", "full"] if mode == "game" else ["--duration", "600s"]
+    if mode == "game":
+        cmd += ["--game", "full"]
+    elif mode == "restarts":
+        cmd += ["--game", "restarts"]
+    else:
+        cmd += ["--duration", "600s"]
     if world != "drawn":
         cmd += ["--world", world]
     out = subprocess.run(cmd, capture_output=True, text=True)
@@ -33,6 +41,9 @@ def run(binary, out_dir, tag, mode, world, seed):
         f.write(out.stdout)
     os.replace(path + ".tmp", path)
     return path
+
+
+NAMES = {"game": "full game", "600": "600 s", "restarts": "600 s restarting"}
 
 
 def with_penalised(r, key):
@@ -48,19 +59,20 @@ def main():
     ap.add_argument("--seeds", default="1,2,3,601,602,603,604,605,606")
     ap.add_argument("--worlds", default="drawn,ideal")
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--only", choices=["game", "600"], default=None)
+    ap.add_argument("--only", choices=["game", "600", "restarts"], default=None)
+    ap.add_argument("--modes", default="600,game", help="runs per seed: 600, game, restarts")
     ap.add_argument("--tag", default="main")
     ap.add_argument("--no-run", action="store_true")
     a = ap.parse_args()
     os.makedirs(a.out_dir, exist_ok=True)
     seeds = [int(s) for s in a.seeds.split(",")]
     worlds = a.worlds.split(",")
-    modes = [a.only] if a.only else ["600", "game"]
+    modes = [a.only] if a.only else a.modes.split(",")
     jobs = [(m, w, s) for w in worlds for s in seeds for m in modes]
     if not a.no_run:
         with ThreadPoolExecutor(max_workers=a.jobs) as ex:
             list(ex.map(lambda j: run(a.binary, a.out_dir, a.tag, *j), jobs))
-    cols = "world | seed | run | illegal | budget used % | one goer % | conflict % | blind RMSE m | blind with penalised | team ball RMSE m | pose RMSE m | pose with penalised | longest conflict ms (at s) | GC counted | left | score"
+    cols = "world | seed | run | kick-offs | illegal | budget used % | one goer % | conflict % | blind RMSE m | blind with penalised | team ball RMSE m | pose RMSE m | pose with penalised | longest conflict ms (at s) | GC counted | left | score"
     print(cols)
     for w in worlds:
         for s in seeds:
@@ -71,10 +83,11 @@ def main():
                 except (OSError, ValueError):
                     print(f"{w} | {s} | {m} | (no result)")
                     continue
-                game = m == "game"
-                used = r.get("game_budget_used_pct") if game else round(100.0 * r["team_messages_sent"] / 600, 1)
+                game = m in ("game", "restarts")
+                used = (r.get("game_budget_used_pct") if m == "game"
+                        else round(100.0 * r.get("game_messages_counted", r["team_messages_sent"]) / 600, 1))
                 print(" | ".join(str(x) for x in [
-                    w, s, "full game" if game else "600 s",
+                    w, s, NAMES[m], r.get("game_kick_offs", 1),
                     r.get("game_illegal_messages", "–") if game else "–",
                     used,
                     r["exactly_one_goer_pct"], r["conflict_pct"],
@@ -109,14 +122,19 @@ def main():
             for m, rows in res.items():
                 n = len(rows)
                 better = "–"
-                if m == "game" and "600" in res:
-                    g1 = sum(1 for g, r in zip(rows, res["600"]) if g["exactly_one_goer_pct"] >= r["exactly_one_goer_pct"])
-                    gb = sum(1 for g, r in zip(rows, res["600"]) if g["blind_team_ball_rmse_m"] <= r["blind_team_ball_rmse_m"])
-                    gw = sum(1 for g, r in zip(rows, res["600"])
-                             if with_penalised(g, "blind_team_ball_rmse_m") <= r["blind_team_ball_rmse_m"])
-                    better = f"{g1}/{n}, {gb}/{n}, {gw}/{n}"
+                vs = []
+                for base in ("600", "restarts"):
+                    if m == "game" and base in res:
+                        b = res[base]
+                        g1 = sum(1 for g, r in zip(rows, b) if g["exactly_one_goer_pct"] >= r["exactly_one_goer_pct"])
+                        gb = sum(1 for g, r in zip(rows, b) if g["blind_team_ball_rmse_m"] <= r["blind_team_ball_rmse_m"])
+                        gw = sum(1 for g, r in zip(rows, b)
+                                 if with_penalised(g, "blind_team_ball_rmse_m") <= r["blind_team_ball_rmse_m"])
+                        vs.append(f"vs {NAMES[base]}: {g1}/{n}, {gb}/{n}, {gw}/{n}")
+                if vs:
+                    better = "; ".join(vs)
                 print(" | ".join(str(x) for x in [
-                    w, name, "full game" if m == "game" else "600 s",
+                    w, name, NAMES[m],
                     round(sum(r["exactly_one_goer_pct"] for r in rows) / n, 2),
                     round(sum(r["blind_team_ball_rmse_m"] for r in rows) / n, 3),
                     round(sum(with_penalised(r, "blind_team_ball_rmse_m") for r in rows) / n, 3),

@@ -23,6 +23,7 @@ use huddle::sim::{Report, SimConfig, Simulation};
 
 fn short_game() -> GameScript {
     GameScript {
+        halves: 2,
         half_s: 60.0,
         break_s: 20.0,
         initial_s: 3.0,
@@ -305,4 +306,65 @@ fn a_penalised_robot_s_samples_leave_the_game_s_world_model_figures_but_are_repo
         w.blind_team_ball_rmse_m > 0.0 && w.team_ball_rmse_m > 0.0,
         "the team-ball figures with the penalised are reported: {w:?}"
     );
+}
+
+/// `huddle sim --game restarts` (#34, eighth session, second part): the 600 s run's
+/// like-for-like counterpart plays one half under the referee. Seed 2, a 240 s half
+/// with the game's own timings: it kicks off from the formation after the game's
+/// Initial, Standby, Ready and Set, and again after every goal (Ready, Set, the
+/// whistle), and ends at the half's end with no break and no second half.
+#[test]
+fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_one_half() {
+    let script = GameScript {
+        half_s: 240.0,
+        ..GameScript::one_half()
+    };
+    assert_eq!(script.halves, 1);
+    assert!(
+        script.penalties.is_empty(),
+        "no penalties in the counterpart"
+    );
+    let cfg = SimConfig {
+        duration_s: script.length_s() + 600.0,
+        seed: 2,
+        budget: Some(comms::BudgetSpec::SPL),
+        game: Some(script.clone()),
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    let mut states = vec![gamecontroller::State::Initial];
+    while !sim.finished() {
+        sim.step();
+        let s = sim.referee().expect("a referee").state();
+        if states.last() != Some(&s) {
+            states.push(s);
+        }
+    }
+    let r = sim.report(0.0);
+    let g = r.game.as_ref().expect("a game's report");
+    let goals = u32::from(g.game_score[0]) + u32::from(g.game_score[1]);
+    use gamecontroller::State::*;
+    // Every kick-off, the first and each after a goal, goes Ready → Set → Playing.
+    let kick_offs = states
+        .windows(3)
+        .filter(|w| w == &[Ready, Set, Playing])
+        .count() as u32;
+    assert!(
+        goals >= 1,
+        "seed 2 scores in 240 s, so the run restarts: {states:?}"
+    );
+    assert_eq!(
+        kick_offs,
+        1 + goals,
+        "one kick-off at the start and one after each of the {goals} goals: {states:?}"
+    );
+    assert_eq!(g.game_kick_offs, kick_offs, "the report counts each: {g}");
+    assert_eq!(
+        states.iter().filter(|&&s| s == Finished).count(),
+        1,
+        "one half, no break: Finished only at the end: {states:?}"
+    );
+    assert_eq!(&states[..3], &[Initial, Standby, Ready], "{states:?}");
+    assert!((g.game_playing_s - 240.0).abs() < 1.0, "{g}");
+    assert!(!g.game_illegal && g.game_penalties == 0, "{g}");
 }

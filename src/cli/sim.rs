@@ -176,6 +176,8 @@ pub struct SimArgs {
     /// Ready/Set restarts, two 45 s penalties, the GC's count of the team's messages).
     /// The robots hear its packets and, under `--budget spl`, pace by its figures as
     /// `huddle daemon` does; the report says whether the team was ever illegal.
+    /// `restarts`: one 10-minute half under the same referee, no break, no penalties
+    /// (the 600 s run restarting from the formation after each goal, as a game does).
     /// `--duration` is ignored: the game ends when the referee says so.
     #[arg(long, value_enum)]
     pub game: Option<GameKind>,
@@ -186,6 +188,10 @@ pub struct SimArgs {
 pub enum GameKind {
     /// Two 10-minute halves, a 10-minute break, two penalties.
     Full,
+    /// One 10-minute half, no break, no penalties: the 600 s run with the game's
+    /// kick-off sequence (Ready, Set, the whistle) at its start and after every goal,
+    /// the like-for-like counterpart of the full game (#34).
+    Restarts,
 }
 
 /// `30s@120s`: an outage of 30 s starting at 120 s.
@@ -402,6 +408,7 @@ fn config(args: &SimArgs) -> SimConfig {
     }
     let game = args.game.map(|g| match g {
         GameKind::Full => huddle::sim::referee::GameScript::spl_full(args.robots),
+        GameKind::Restarts => huddle::sim::referee::GameScript::one_half(),
     });
     // A game ends when its referee says so; the duration only caps it (an hour of goals).
     let duration_s = game

@@ -60,6 +60,9 @@ pub struct ScriptedPenalty {
 /// How the game goes: the league's timings and the scripted penalties.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GameScript {
+    /// Halves played: 2 for a game; 1 for the 600 s run's like-for-like counterpart
+    /// ([`GameScript::one_half`]): the game ends at the first half's end, no break.
+    pub halves: u8,
     /// A half's playing time, seconds (SPL: 600).
     pub half_s: f64,
     /// The half-time break, seconds (SPL: 600).
@@ -89,6 +92,7 @@ impl GameScript {
     pub fn spl_full(robots: usize) -> GameScript {
         let last = u8::try_from(robots.max(1)).unwrap_or(u8::MAX);
         GameScript {
+            halves: 2,
             half_s: 600.0,
             break_s: 600.0,
             initial_s: 10.0,
@@ -113,10 +117,27 @@ impl GameScript {
         }
     }
 
+    /// The 600 s run's like-for-like counterpart (`huddle sim --game restarts`): one
+    /// 10-minute half under the referee, with the game's Initial/Standby/Ready/Set
+    /// before its kick-off and the game's Ready/Set restart from the formation after
+    /// every goal, but no break, no penalties. What is left between it and the full
+    /// game is the second half, the break and the penalties.
+    pub fn one_half() -> GameScript {
+        GameScript {
+            halves: 1,
+            penalties: Vec::new(),
+            ..GameScript::spl_full(1)
+        }
+    }
+
     /// The game's length if no goal is scored, seconds (each goal adds a Ready and a Set).
     pub fn length_s(&self) -> f64 {
         let half = self.initial_s + self.standby_s + self.ready_s + self.set_s + self.half_s;
-        2.0 * half + self.break_s + self.finished_s
+        if self.halves <= 1 {
+            half + self.finished_s
+        } else {
+            2.0 * half + self.break_s + self.finished_s
+        }
     }
 }
 
@@ -303,7 +324,7 @@ impl Referee {
                 self.play_left_s = 0.0;
                 // A half's end stops the penalty timers; the robots stay off until the
                 // half-time switch (or the game's end).
-                if self.data.first_half {
+                if self.data.first_half && self.script.halves > 1 {
                     self.stage = Stage::Break;
                     self.enter(State::Finished, now_s + self.script.break_s, &mut events);
                 } else {

@@ -715,6 +715,7 @@ mod tests {
     /// reference holds it only if it was placed there.
     fn short_sighted_short_game() -> crate::Simulation {
         let script = crate::referee::GameScript {
+            halves: 2,
             half_s: 30.0,
             break_s: 20.0,
             initial_s: 3.0,
