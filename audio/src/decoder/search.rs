@@ -179,8 +179,8 @@ impl Decoder {
     /// start was missed) decays. The search waits (a real frame passes a window later),
     /// unless the frame's whole slot has already been heard (see `detect`): under talkers
     /// the rules may find a frame only once its whole tone is in the sums, when its newest
-    /// window is already past its end (lab T60 0.5 s at 0 dB, tuning row 801009: 19 of
-    /// 59 lost messages were found that way and dropped as decaying).
+    /// window is already past its end (lab T60 0.5 s at 0 dB, tuning row 801009: 20 of
+    /// its 59 lost messages are decided once such a frame is tracked).
     fn decaying(&self, frame: Frame, scale: usize, count: usize) -> Option<Decay> {
         let newest = self.search_newest()?;
         let tones = frame.tones();
