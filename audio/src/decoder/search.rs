@@ -40,6 +40,15 @@ pub(super) struct Recent {
     pub(super) until: u64,
 }
 
+/// Why a frame found is not tracked yet (see [`Decoder::decaying`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Decay {
+    /// The tail of the transmission just decided.
+    TailOfRecent,
+    /// Its newest window falls below the windows summed.
+    Falling,
+}
+
 /// The same valid frame found in consecutive windows.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Run {
@@ -78,15 +87,8 @@ impl Decoder {
             return;
         }
         let j = best.1;
-        let (frame, present) = Self::apply_rules(
-            &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT],
-            count,
-            P_TONE,
-            P_TONE,
-            None,
-            |_, _| true,
-        );
         let sums = &self.sliding[j * TONE_COUNT..(j + 1) * TONE_COUNT];
+        let (frame, present) = Self::apply_rules(sums, count, P_TONE, P_TONE, None, |_, _| true);
         let frame = frame.or_else(|| {
             let leader = clear_leader(sums, count, &present);
             if let Some(f) = leader {
@@ -100,14 +102,33 @@ impl Decoder {
                     r.filter(|&b| basic_tones(b).iter().filter(|&&k| present[k]).count() >= 2)
                         .collect()
                 };
+                // Each voted basic's tones: per-window excess (* present).
+                let n = count.max(1) as f64;
+                let detail: Vec<String> = voted(0..BASIC_COUNT)
+                    .iter()
+                    .map(|&b| {
+                        let t: Vec<String> = basic_tones(b)
+                            .iter()
+                            .map(|&k| {
+                                format!(
+                                    "{}{:.0}",
+                                    if present[k] { "*" } else { "" },
+                                    (sums[k] - n) / n
+                                )
+                            })
+                            .collect();
+                        format!("b{b}[{}]", t.join(" "))
+                    })
+                    .collect();
                 format!(
-                    "rules: senders {:?} data {:?} ({} tones present)",
+                    "rules: senders {:?} data {:?} ({} tones present) {}",
                     voted(0..SENDER_COUNT),
                     voted(SENDER_COUNT..BASIC_COUNT)
                         .iter()
                         .map(|b| b - SENDER_COUNT)
                         .collect::<Vec<_>>(),
-                    present.iter().filter(|&&p| p).count()
+                    present.iter().filter(|&&p| p).count(),
+                    detail.join(" ")
                 )
             });
             self.run = None;
@@ -126,10 +147,18 @@ impl Decoder {
             _ => Run { frame, count: 1 },
         };
         self.run = Some(run);
-        if run.count >= 2 && !self.decaying(frame, j, count) {
-            self.start_tracking(frame, j);
-        } else if run.count >= 2 {
-            self.note_search(|| format!("decaying {frame:?}"));
+        if run.count >= 2 {
+            match self.decaying(frame, j, count) {
+                None => self.start_tracking(frame, j),
+                // The rules found it only once the whole tone was in the sums (talkers
+                // kept a vote down, or a rival up, until then): its slot has been heard
+                // whole, and is decided on the windows from its onset like any other.
+                Some(Decay::Falling) if self.slot_heard(frame, j) => {
+                    self.note_search(|| format!("found falling {frame:?}"));
+                    self.start_tracking(frame, j);
+                }
+                Some(_) => self.note_search(|| format!("decaying {frame:?}")),
+            }
         } else {
             self.note_search(|| format!("seen {frame:?}"));
         }
@@ -147,11 +176,13 @@ impl Decoder {
     /// window holds less than [`DECAYING_SHARE`] of the mean per-window excess of the
     /// `count` windows summed (beyond the noise's spread). A message's onset is rising or
     /// steady there; a reverberant tail (of a message already decided, or of one whose
-    /// start was missed) decays. The search just waits: a real frame passes a window later.
-    fn decaying(&self, frame: Frame, scale: usize, count: usize) -> bool {
-        let Some(newest) = self.search_newest() else {
-            return false;
-        };
+    /// start was missed) decays. The search waits (a real frame passes a window later),
+    /// unless the frame's whole slot has already been heard (see `detect`): under talkers
+    /// the rules may find a frame only once its whole tone is in the sums, when its newest
+    /// window is already past its end (lab T60 0.5 s at 0 dB, tuning row 801009: 20 of
+    /// its 59 lost messages are decided once such a frame is tracked).
+    fn decaying(&self, frame: Frame, scale: usize, count: usize) -> Option<Decay> {
+        let newest = self.search_newest()?;
         let tones = frame.tones();
         let n = count.max(1) as f64;
         let mean = (tones
@@ -169,8 +200,24 @@ impl Decoder {
         // Tones only a few windows long end within the search's two-window run, so
         // their newest window is past their peak as a matter of course: no decay test.
         let long_tone = self.geometry.slot_windows >= DECAYING_MIN_WINDOWS;
-        tail_of_recent
-            || (long_tone && latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt())
+        if tail_of_recent {
+            Some(Decay::TailOfRecent)
+        } else if long_tone && latest < DECAYING_SHARE * mean - DECAYING_NOISE_Z * 6f64.sqrt() {
+            Some(Decay::Falling)
+        } else {
+            None
+        }
+    }
+
+    /// Whether the whole slot of `frame` at `scale`, from the onset it would be tracked
+    /// at, lies in the windows the search has heard.
+    fn slot_heard(&self, frame: Frame, scale: usize) -> bool {
+        let (Some(onset), Some(newest)) = (self.estimate_onset(frame, scale), self.search_newest())
+        else {
+            return false;
+        };
+        onset + self.geometry.slot_samples
+            <= (newest.start + self.geometry.window_len as u64) as f64
     }
 
     /// The window the search stands at: the newest heard, or the one a replay is at.

@@ -802,3 +802,36 @@ fn a_sender_whose_tones_a_room_spreads_keeps_its_vote_in_a_crowd() {
         assert_eq!(got, vec![sent], "seed {seed}: trace: {shown:?}");
     }
 }
+
+#[test]
+fn a_message_the_search_finds_only_at_its_end_is_still_decided() {
+    // Lab T60 0.5 s with four talkers at 0 dB (tuning row 801009): a talker's harmonics
+    // give a second data basic two tones at the message's level for most of the message,
+    // so the search's rules find the frame only once the harmonics have left its sums,
+    // when the newest window is already past the message's end. The decay gate took that
+    // for a tail and the message was never tracked. Here a held pair on data 5's tones
+    // (8 and 32) at the message's level from before it to 0.8 s into it: no basic leads
+    // clearly while the pair is in the sums, and by the time it is not, the message has
+    // ended. Its whole slot has been heard, so it is tracked from its onset and decided
+    // there (the pair does not sound through the slot). Old code: nothing decoded.
+    let frame = Frame {
+        sender: Sender::LeftAttacker,
+        data: 9,
+    };
+    let pair: Vec<(usize, f64, f64, f64)> =
+        [8, 32].into_iter().map(|k| (k, 0.01, 0.2, 1.3)).collect();
+    for seed in [1, 2, 3] {
+        let x = faint_scene(frame, &[], 0.01, 0.0, &pair, (seed, 0.02));
+        let (got, trace, shown) = decode_traced(&x);
+        assert_eq!(
+            got,
+            vec![Message::short(Sender::LeftAttacker, 9).unwrap()],
+            "seed {seed}: a message found only at its end; trace: {shown:?}, search: {:?}",
+            trace
+                .iter()
+                .filter(|e| e.what.starts_with("search") && e.at_s > 0.4)
+                .map(|e| format!("{:.2} {}", e.at_s, e.what))
+                .collect::<Vec<_>>()
+        );
+    }
+}
