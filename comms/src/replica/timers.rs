@@ -157,35 +157,7 @@ impl Replica {
     /// stored value differs is written; no path is built once its key exists.
     fn mirror_stats(&mut self, now: Instant) {
         let s = &self.stats;
-        let counters = [
-            s.frames_in,
-            s.frames_out,
-            s.bytes_in,
-            s.bytes_out,
-            s.updates_applied,
-            s.updates_stale,
-            s.items_skipped,
-            s.updates_refused,
-            s.updates_unconfirmed_replaced,
-            s.bindings_superseded,
-            s.bindings_released,
-            s.talk_delivered,
-            s.talk_given_up,
-            s.talk_resent,
-            s.talk_refused,
-            s.talk_refused_full,
-            s.talk_repair_limited,
-            s.id_conflicts,
-            s.nacks_sent,
-            s.nacks_limited,
-            s.nacks_superseded,
-            s.clock_samples,
-            s.clock_echoes_rejected,
-            s.clock_outliers,
-            s.clock_stamps_implausible,
-            s.transit_defaulted,
-            s.drops_total(),
-        ];
+        let counters = counter_values(s);
         let (board, mirror) = (&mut self.board, &mut self.stats_mirror);
         let (fixed, scratch) = (&mut mirror.fixed, &mut mirror.scratch);
         fixed.resize_with(COUNTERS.len() + DropReason::ALL.len(), || None);
@@ -279,6 +251,39 @@ pub(super) const STALE: u64 = u64::MAX;
 /// The counters mirrored first, in this order, as `huddle.stats.<name>`; then the drops
 /// by reason (`drops.<reason>`), then per peer `peer.<id>.conflicting` and
 /// `peer.<id>.last_heard_us`. The order is the order of the change events.
+/// The values of [`COUNTERS`], in its order (the mirror's and its test's one list).
+fn counter_values(s: &crate::stats::Stats) -> [u64; COUNTERS.len()] {
+    [
+        s.frames_in,
+        s.frames_out,
+        s.bytes_in,
+        s.bytes_out,
+        s.updates_applied,
+        s.updates_stale,
+        s.items_skipped,
+        s.updates_refused,
+        s.updates_unconfirmed_replaced,
+        s.bindings_superseded,
+        s.bindings_released,
+        s.talk_delivered,
+        s.talk_given_up,
+        s.talk_resent,
+        s.talk_refused,
+        s.talk_refused_full,
+        s.talk_repair_limited,
+        s.id_conflicts,
+        s.nacks_sent,
+        s.nacks_limited,
+        s.nacks_superseded,
+        s.clock_samples,
+        s.clock_echoes_rejected,
+        s.clock_outliers,
+        s.clock_stamps_implausible,
+        s.transit_defaulted,
+        s.drops_total(),
+    ]
+}
+
 const COUNTERS: [&str; 27] = [
     "frames_in",
     "frames_out",

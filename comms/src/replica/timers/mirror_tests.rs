@@ -15,35 +15,7 @@ fn reference_mirror(r: &Replica, board: &mut Blackboard, now: Instant) {
     let s = &r.stats;
     let mut expected: Vec<(String, i64)> = super::COUNTERS
         .iter()
-        .zip([
-            s.frames_in,
-            s.frames_out,
-            s.bytes_in,
-            s.bytes_out,
-            s.updates_applied,
-            s.updates_stale,
-            s.items_skipped,
-            s.updates_refused,
-            s.updates_unconfirmed_replaced,
-            s.bindings_superseded,
-            s.bindings_released,
-            s.talk_delivered,
-            s.talk_given_up,
-            s.talk_resent,
-            s.talk_refused,
-            s.talk_refused_full,
-            s.talk_repair_limited,
-            s.id_conflicts,
-            s.nacks_sent,
-            s.nacks_limited,
-            s.nacks_superseded,
-            s.clock_samples,
-            s.clock_echoes_rejected,
-            s.clock_outliers,
-            s.clock_stamps_implausible,
-            s.transit_defaulted,
-            s.drops_total(),
-        ])
+        .zip(super::counter_values(s))
         .map(|(name, v)| (format!("huddle.stats.{name}"), v as i64))
         .collect();
     for reason in DropReason::ALL {
