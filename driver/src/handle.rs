@@ -7,8 +7,8 @@ use std::rc::Rc;
 use std::time::Duration;
 
 use comms::{
-    Entry, Instant, Key, KeyError, Pattern, PatternError, PeerInfo, PostError, SetError, Stats,
-    Value,
+    Entry, Instant, Key, KeyError, Pattern, PatternError, PeerInfo, PostError, Replica, SetError,
+    Stats, Value,
 };
 
 use crate::guard::{Guard, GuardSlot};
@@ -58,14 +58,8 @@ impl Handle {
     /// Sets `local.var.x`, `*.var.x` or `<own id>.var.x`; a global value is published
     /// before this returns.
     pub fn set(&self, key: &str, value: impl Into<Value>) -> Result<(), SetError> {
-        {
-            let mut inner = self.inner.borrow_mut();
-            let now = inner.clock.now();
-            inner.replica.set(now, key, value.into())?;
-            inner.pump();
-        }
-        run_reactions(&self.inner);
-        Ok(())
+        let value = value.into();
+        self.write(|replica, now| replica.set(now, key, value))
     }
 
     /// [`Handle::set`] with a key parsed once ([`Key::parse`]): a program whose keys are
@@ -78,10 +72,20 @@ impl Handle {
     /// # Ok(()) }
     /// ```
     pub fn set_key(&self, key: &Key, value: impl Into<Value>) -> Result<(), SetError> {
+        let value = value.into();
+        self.write(|replica, now| replica.set_key(now, key, value))
+    }
+
+    /// One write at the clock's now, sent at once, then the reactions it caused.
+    fn write(
+        &self,
+        f: impl FnOnce(&mut Replica, Instant) -> Result<(), SetError>,
+    ) -> Result<(), SetError> {
         {
             let mut inner = self.inner.borrow_mut();
+            let inner = &mut *inner;
             let now = inner.clock.now();
-            inner.replica.set_key(now, key, value.into())?;
+            f(&mut inner.replica, now)?;
             inner.pump();
         }
         run_reactions(&self.inner);
