@@ -735,21 +735,21 @@ impl Blackboard {
     }
 
     /// The binding of `path` in `scope`, read from slot `id` when that slot still holds
-    /// it (a slot remembered since a write or a change: no lookup), else looked up. The
-    /// path is the blackboard's own (from [`Blackboard::shared_path`] or a change's key),
-    /// so the same allocation means the same binding: a removed binding's slot reused
-    /// for another path has another one, and the caller's copy keeps this one alive.
+    /// it (a slot remembered since a write or a change: no lookup), else looked up.
     pub(crate) fn get_at(&self, id: SlotId, scope: Scope, path: &Arc<str>) -> Option<&Entry> {
-        match self.slot(id) {
-            Some(slot) if slot.scope == scope && Arc::ptr_eq(&slot.path, path) => Some(&slot.entry),
-            _ => self.get_stored(scope, path),
-        }
+        self.at_slot(id, scope, path)
+            .or_else(|| self.get_stored(scope, path))
     }
 
-    /// The path and binding in slot `id`, if one is stored there (the stats mirror reads
-    /// its keys by the slots it found them in).
-    pub(crate) fn stored_at(&self, id: SlotId) -> Option<(&Arc<str>, &Entry)> {
-        self.slot(id).map(|slot| (&slot.path, &slot.entry))
+    /// The binding in slot `id` if that slot still holds `path` in `scope`, else `None`
+    /// (no lookup). The path is the blackboard's own (from [`Blackboard::shared_path`], a
+    /// change's key, or a slot remembered with it), so the same allocation means the same
+    /// binding: a removed binding's slot reused for another path has another one, and the
+    /// caller's copy keeps this one alive.
+    pub(crate) fn at_slot(&self, id: SlotId, scope: Scope, path: &Arc<str>) -> Option<&Entry> {
+        self.slot(id)
+            .filter(|slot| slot.scope == scope && Arc::ptr_eq(&slot.path, path))
+            .map(|slot| &slot.entry)
     }
 
     /// One stored binding by scope and path.

@@ -363,20 +363,18 @@ fn mirror_one(
 ) {
     let value = Value::Int(v);
     if let Some(c) = cached {
-        if let Some((path, entry)) = board.stored_at(c.id) {
-            if Arc::ptr_eq(path, &c.path) {
-                if entry.value != value {
-                    let key = KeyRef {
-                        scope: Scope::Local,
-                        kind: Kind::Var,
-                        path: &c.path,
-                    };
-                    // A local key of valid shape, not subject to the local-key limit:
-                    // this cannot fail.
-                    let _ = board.write_unlimited(now, key, value);
-                }
-                return;
+        if let Some(entry) = board.at_slot(c.id, Scope::Local, &c.path) {
+            if entry.value != value {
+                let key = KeyRef {
+                    scope: Scope::Local,
+                    kind: Kind::Var,
+                    path: &c.path,
+                };
+                // A local key of valid shape, not subject to the local-key limit:
+                // this cannot fail.
+                let _ = board.write_unlimited(now, key, value);
             }
+            return;
         }
         *cached = None;
     }
