@@ -3,7 +3,7 @@
 import time
 
 import hwire as w
-from harness import Daemon, check, multicast_sender, scratch_group, seeded
+from harness import Daemon, ROBOT_POSE, check, multicast_sender, scratch_group, seeded, team_net
 
 TEAM = 7
 VALUES = [("i", "int", "-42", -42), ("f", "float", "2.5", 2.5), ("b", "bool", "true", True),
@@ -42,7 +42,7 @@ def future_items(binary, seed, log, long=False):
     read, every item they do not is skipped and counted, no frame dropped."""
     rng = seeded(seed, "future")
     group, port = scratch_group(rng)
-    net = ["--group", "%s:%d" % (group, port), "--team", str(TEAM)]
+    net = team_net(group, port, TEAM)
     d1, d2 = Daemon(binary, 1, net), Daemon(binary, 2, net)
     sock = multicast_sender()
     try:
@@ -78,7 +78,7 @@ def mixed_team(binary, old, seed, log, long=False):
     build's frames, and what the older one does with them is reported."""
     rng = seeded(seed, "mixed")
     group, port = scratch_group(rng)
-    net = ["--group", "%s:%d" % (group, port), "--team", str(TEAM)]
+    net = team_net(group, port, TEAM)
     new, older = Daemon(binary, 1, net), Daemon(old, 2, net)
     sock = multicast_sender()
     try:
@@ -86,7 +86,7 @@ def mixed_team(binary, old, seed, log, long=False):
         watch_n, watch_o = new.client(), older.client()
         for c in (watch_n, watch_o):
             check(c.ask("ADDW +.talk.plan") == "OK", "watch talk")
-        pose = "[0.5, -1.0, 0.25, 0.01, 0, 0, 0.01, 0, 0.003]"
+        pose = ROBOT_POSE
         for me, c in ((1, cn), (2, co)):
             for path, _, text, _ in VALUES:
                 check(c.ask("SETV *.var.mix.%s %s" % (path, text)) == "OK", "robot %d sets %s" % (me, path))

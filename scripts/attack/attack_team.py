@@ -7,7 +7,7 @@ import math
 import time
 
 import hwire as w
-from harness import Daemon, check, multicast_sender, scratch_group, seeded
+from harness import Daemon, ROBOT_POSE, check, multicast_sender, scratch_group, seeded, team_net
 
 TEAM = 7
 EXTREMES = [0.0, -0.0, 1e-300, -1e-300, 5e-324, 1e300, -1e300, 1.7e308, -1.7e308, 1e15, -1e15,
@@ -79,12 +79,12 @@ def inputs(binary, seed, log, long=False):
     outputs stay finite, and robot 2 still hears robot 1."""
     rng = seeded(seed, "team")
     group, port = scratch_group(rng)
-    net = ["--group", "%s:%d" % (group, port), "--team", str(TEAM)]
+    net = team_net(group, port, TEAM)
     d1, d2 = Daemon(binary, 1, net), Daemon(binary, 2, net)
     sock = multicast_sender()
     try:
         c1, c2 = d1.client(), d2.client()
-        pose = "[0.5, -1.0, 0.25, 0.01, 0, 0, 0.01, 0, 0.003]"
+        pose = ROBOT_POSE
         for c in (c1, c2):
             check(c.ask("SETV local.var.robot.pose %s" % pose) == "OK", "pose")
             check(c.ask("SETV local.var.robot.ball [1.0, 0.5, 0.01, 0.0, 0.01]") == "OK", "ball")

@@ -6,7 +6,7 @@ import struct
 import time
 
 import hwire as w
-from harness import Daemon, check, free_port, multicast_sender, scratch_group, seeded
+from harness import Daemon, check, free_port, multicast_sender, scratch_group, seeded, team_net
 
 TEAM = 7
 DROPS = ["too_short", "oversized", "bad_magic", "unknown_version", "other_team",
@@ -30,7 +30,7 @@ class Team:
 
     def __init__(self, binary, rng, extra=()):
         self.group, self.port = scratch_group(rng)
-        net = ["--group", "%s:%d" % (self.group, self.port), "--team", str(TEAM)]
+        net = team_net(self.group, self.port, TEAM)
         self.d1 = Daemon(binary, 1, net, extra)
         self.d2 = Daemon(binary, 2, net, extra)
         self.c1, self.c2 = self.d1.client(), self.d2.client()
@@ -309,7 +309,7 @@ def mutated(binary, seed, log, long=False):
     n = 60_000 if long else 4_000
     team = Team(binary, rng)
     group, port = scratch_group(rng)
-    solo = Daemon(binary, 5, ["--group", "%s:%d" % (group, port), "--team", str(TEAM)])
+    solo = Daemon(binary, 5, team_net(group, port, TEAM))
     try:
         c5 = solo.client()
         before = snapshot(c5)
@@ -347,12 +347,12 @@ def keyed(binary, seed, log, long=False):
     n = 30_000 if long else 2_000
     key = bytes(rng.getrandbits(8) for _ in range(32)).hex().encode()
     group, port = scratch_group(rng)
-    d = Daemon(binary, 1, ["--group", "%s:%d" % (group, port), "--team", str(TEAM)], [])
+    d = Daemon(binary, 1, team_net(group, port, TEAM), [])
     keyfile = d.dir + "/team.key"
     d.stop()
     with open(keyfile, "wb") as f:
         f.write(key + b"\n")
-    d = Daemon(binary, 1, ["--group", "%s:%d" % (group, port), "--team", str(TEAM)], ["--key-file", keyfile])
+    d = Daemon(binary, 1, team_net(group, port, TEAM), ["--key-file", keyfile])
     sock = multicast_sender()
     try:
         c = d.client()

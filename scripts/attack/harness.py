@@ -34,6 +34,15 @@ def scratch_group(rng):
     return "239.255.%d.%d" % (rng.randint(1, 254), rng.randint(1, 254)), free_port(socket.SOCK_DGRAM)
 
 
+def team_net(group, port, team):
+    """The daemon flags that put a robot on this run's group, in `team`."""
+    return ["--group", "%s:%d" % (group, port), "--team", str(team)]
+
+
+# A plausible robot pose for `local.var.robot.pose` (x, y, heading and its covariance).
+ROBOT_POSE = "[0.5, -1.0, 0.25, 0.01, 0, 0, 0.01, 0, 0.003]"
+
+
 def multicast_sender():
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
