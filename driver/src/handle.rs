@@ -322,15 +322,21 @@ mod tests {
         wait.await.expect("a change within 5 s")
     }
 
-    /// A robot program parses its fixed keys once: a write through the parsed key is the
-    /// write its text makes (the same binding, the next version, the same refusals).
-    #[test]
-    fn a_key_parsed_once_writes_what_its_text_writes() {
+    /// Runs a test's future on a current-thread runtime inside a `LocalSet`, as a
+    /// program using the `!Send` driver does.
+    fn on_local<F: std::future::Future>(f: F) -> F::Output {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
             .expect("runtime");
-        tokio::task::LocalSet::new().block_on(&rt, async {
+        tokio::task::LocalSet::new().block_on(&rt, f)
+    }
+
+    /// A robot program parses its fixed keys once: a write through the parsed key is the
+    /// write its text makes (the same binding, the next version, the same refusals).
+    #[test]
+    fn a_key_parsed_once_writes_what_its_text_writes() {
+        on_local(async {
             let group = crate::scratch_group().expect("a scratch group");
             let one = Driver::bind(config(1, group)).expect("robot 1 binds");
             let h = one.handle();
@@ -359,11 +365,7 @@ mod tests {
     /// the answers.
     #[test]
     fn a_watch_answers_a_teammate_in_the_drivers_turn() {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .expect("runtime");
-        tokio::task::LocalSet::new().block_on(&rt, async {
+        on_local(async {
             let group = crate::scratch_group().expect("a scratch group");
             let one = Driver::bind(config(1, group)).expect("robot 1 binds");
             let two = Driver::bind(config(2, group)).expect("robot 2 binds");
