@@ -142,7 +142,10 @@ fn review_allocations_per_frame_in_steady_state() {
         v
     };
     for (name, f) in [
-        ("scalars (float, int, bool; a known path)", &scalars as &dyn Fn(u64) -> _),
+        (
+            "scalars (float, int, bool; a known path)",
+            &scalars as &dyn Fn(u64) -> _,
+        ),
         ("scalars + a 75-byte world model (Bytes)", &with_bytes),
     ] {
         let into = run(f, true);
@@ -157,7 +160,11 @@ fn review_allocations_per_frame_in_steady_state() {
             per_frame(into.receive, into.frames),
             per_frame(into.events, into.frames),
         );
-        assert!(into.frames > 500, "{name}: frames went out ({})", into.frames);
+        assert!(
+            into.frames > 500,
+            "{name}: frames went out ({})",
+            into.frames
+        );
         assert_eq!(
             into.transmit_into, 0,
             "{name}: poll_transmit_into into a kept buffer allocates nothing per frame"
