@@ -607,6 +607,24 @@ impl DelayedCentral {
                     let p = b.estimate.position();
                     (p.x - x).powi(2) + (p.y - y).powi(2)
                 });
+                if super::trace_on() {
+                    let st = gwm.stats();
+                    let b = gwm.team_ball(t, None).map(|b| b.estimate.mean);
+                    eprintln!(
+                        "D {t:.2} r{} de {:.3} truth ({x:.2},{y:.2}) ball {:?} acc {} rej {} \
+                         late {} rs {} k {} kr {} placed {}",
+                        i + 1,
+                        out[s].map_or(f64::NAN, f64::sqrt),
+                        b.map(|m| (m[0], m[1], m[2], m[3])),
+                        st.accepted,
+                        st.rejected,
+                        st.late,
+                        st.restarts,
+                        st.kicks,
+                        st.kicks_refused,
+                        gwm.is_placed()
+                    );
+                }
             }
         }
         out
