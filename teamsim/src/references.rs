@@ -504,6 +504,31 @@ impl DeliveryReference {
 /// Times this close count as one instant (well under a physics step), s.
 const PLACED_WITHIN_S: f64 = 1e-6;
 
+/// Diagnostics of the delayed reference, read from the environment once (like
+/// `HUDDLE_SIM_TRACE`; unset, the reference is as documented): `HUDDLE_SIM_DELAYED_MS`
+/// replaces the run's median delay, `HUDDLE_SIM_DELAYED_NO_TEAMMATE_KICKS` drops every
+/// teammate's kick and push reports. For measuring what moves its ratio (#29's ninth
+/// session); a reference run under either is no longer the delayed reference.
+#[derive(Debug, Clone, Copy, Default)]
+struct DelayedDiagnostic {
+    delay_s: Option<f64>,
+    no_teammate_kicks: bool,
+}
+
+impl DelayedDiagnostic {
+    fn from_env() -> Self {
+        static ON: std::sync::OnceLock<DelayedDiagnostic> = std::sync::OnceLock::new();
+        *ON.get_or_init(|| DelayedDiagnostic {
+            delay_s: std::env::var("HUDDLE_SIM_DELAYED_MS")
+                .ok()
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|ms| ms.is_finite() && *ms >= 0.0)
+                .map(|ms| ms / 1e3),
+            no_teammate_kicks: std::env::var_os("HUDDLE_SIM_DELAYED_NO_TEAMMATE_KICKS").is_some(),
+        })
+    }
+}
+
 /// The delayed-centralized reference (not a bound: see the module docs), computed once
 /// the run's median delay is known: every robot's LWM of every tick is recorded (global
 /// clock), and [`DelayedCentral::squared_errors`] replays them, per robot, into the
@@ -555,6 +580,8 @@ impl DelayedCentral {
         samples: &[(usize, (f64, f64, f64))],
     ) -> Vec<Option<f64>> {
         let mut out = vec![None; samples.len()];
+        let diagnostic = DelayedDiagnostic::from_env();
+        let delay_s = diagnostic.delay_s.unwrap_or(delay_s);
         for i in 0..self.n {
             let mut gwm = GlobalModel::new(comms_netsim::robot_id(i), self.config);
             let mut order: Vec<(f64, usize)> = self
@@ -591,7 +618,11 @@ impl DelayedCentral {
                         }
                         (Some(&(at, k)), _) => {
                             let (_, j, lwm) = &self.events[k];
-                            gwm.ingest(comms_netsim::robot_id(*j), lwm, at);
+                            let mut lwm = *lwm;
+                            if *j != i && diagnostic.no_teammate_kicks {
+                                lwm.kick = None;
+                            }
+                            gwm.ingest(comms_netsim::robot_id(*j), &lwm, at);
                             next += 1;
                         }
                         (None, Some(&(p, again))) => {
@@ -607,6 +638,24 @@ impl DelayedCentral {
                     let p = b.estimate.position();
                     (p.x - x).powi(2) + (p.y - y).powi(2)
                 });
+                if super::trace_on() {
+                    let st = gwm.stats();
+                    let b = gwm.team_ball(t, None).map(|b| b.estimate.mean);
+                    eprintln!(
+                        "D {t:.2} r{} de {:.3} truth ({x:.2},{y:.2}) ball {:?} acc {} rej {} \
+                         late {} rs {} k {} kr {} placed {}",
+                        i + 1,
+                        out[s].map_or(f64::NAN, f64::sqrt),
+                        b.map(|m| (m[0], m[1], m[2], m[3])),
+                        st.accepted,
+                        st.rejected,
+                        st.late,
+                        st.restarts,
+                        st.kicks,
+                        st.kicks_refused,
+                        gwm.is_placed()
+                    );
+                }
             }
         }
         out
