@@ -6,8 +6,9 @@
 //! every 20 ms. The GC says Playing with plenty left: frames go and the game state is on
 //! the blackboard. A stale packet (an older packetNumber saying Set) and truncated,
 //! oversized, wrong-version and wrong-team packets are counted and change nothing. The GC
-//! penalizes the robot: its keys change. Its status packets carry the pose, the ball
-//! relative to the robot and `fallen`. Then the GC says the team's budget is 0: the
+//! penalizes the robot: its keys change. A program cannot write the GC's keys or the
+//! team layer's outputs (`ERR 423`). Its status packets carry the pose, the team layer's
+//! ball relative to the robot and `fallen`. Then the GC says the team's budget is 0: the
 //! daemon sends nothing more while the program keeps writing.
 
 #![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
@@ -152,14 +153,36 @@ fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero()
     let secs = c.ask("GETV local.var.gc.penalty_secs");
     assert!(secs.contains(" 45 "), "{secs:?}");
 
-    // Status: pose (1 m, 2 m, facing +x), team ball at (2 m, 2 m): 1 m ahead; fallen.
+    // The GC's keys and the team layer's outputs are the daemon's: a program cannot
+    // write them (`ERR 423`), so no program makes the others read a false game.
     for line in [
-        "SETV local.var.robot.pose [1.0, 2.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]",
+        "SETV local.var.gc.state \"set\"",
+        "SETP local.var.gc.penalty 0",
         "SETV local.var.team.ball [2.0, 2.0]",
-        "SETV local.var.robot.fallen true",
     ] {
-        assert!(c.ask(line).starts_with("OK"), "{line}");
+        let answer = c.ask(line);
+        assert!(answer.starts_with("ERR 423 "), "{line}: {answer}");
     }
+    assert!(
+        c.ask("GETV local.var.gc.state").contains("\"playing\""),
+        "the GC's word stands"
+    );
+
+    // Status: pose (1 m, 2 m, facing +x); the program sees the ball 1 m ahead, so the
+    // team layer's ball is at (2 m, 2 m); fallen.
+    for _ in 0..10 {
+        for line in [
+            "SETV local.var.robot.ball [1.0, 0.0, 0.0004, 0.0, 0.0004]",
+            "SETV local.var.robot.pose [1.0, 2.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]",
+        ] {
+            assert!(c.ask(line).starts_with("OK"), "{line}");
+        }
+        std::thread::sleep(Duration::from_millis(40));
+    }
+    c.wait_for("local.var.team.ball", Duration::from_secs(5), |a| {
+        a.contains(" floats [") && !a.contains(" floats []")
+    });
+    assert!(c.ask("SETV local.var.robot.fallen true").starts_with("OK"));
     let deadline = Instant::now() + Duration::from_secs(5);
     let mut buf = [0u8; 64];
     let msg = loop {
@@ -172,8 +195,8 @@ fn a_scripted_gamecontroller_drives_the_keys_the_status_and_the_budget_to_zero()
     assert_eq!((msg.player_num, msg.team_num, msg.fallen), (1, 12, true));
     assert_eq!(msg.pose, [1000.0, 2000.0, 0.0]);
     assert!(
-        (msg.ball[0] - 1000.0).abs() < 1e-3 && msg.ball[1].abs() < 1e-3,
-        "{msg:?}"
+        (msg.ball[0] - 1000.0).abs() < 20.0 && msg.ball[1].abs() < 20.0,
+        "the team layer's ball, 1 m ahead (mm, robot frame): {msg:?}"
     );
     assert!((0.0..5.0).contains(&msg.ball_age), "{msg:?}");
 

@@ -22,6 +22,10 @@
 //! | `local.var.gc.penalty_secs` | int | seconds till this robot is unpenalised |
 //! | `local.var.gc.penalized` | floats | this team's penalised player numbers (this robot's included; substitutes count) |
 //!
+//! The keys are the listener's while it runs: a relay client's `SETV` of one gets
+//! `ERR 423` (a key is written only when the GC's packet changes it, so a client's value
+//! would stand until then), as does the C node's set call while its listener runs.
+//!
 //! The team layer ([`crate::team`]) reads `local.var.gc.penalized` each tick: a penalised
 //! robot leaves the arbitration and tells its team, and its teammates stop counting its
 //! claim ([`team::TeamLayer::set_penalties`]).
@@ -102,6 +106,8 @@ impl GameControllerConfig {
 pub struct GameController {
     task: tokio::task::JoinHandle<()>,
     listener: Rc<RefCell<GcListener>>,
+    /// `local.var.gc.*` is the listener's while it runs: relay clients get `ERR 423`.
+    _read_only: crate::Guard,
 }
 
 impl Drop for GameController {
@@ -134,8 +140,15 @@ impl GameController {
             None => None,
         };
         let listener = Rc::new(RefCell::new(GcListener::new(config)));
+        let read_only = handle
+            .reserve(crate::guard::GC_KEYS, crate::guard::GC_OWNER)
+            .expect("a valid pattern");
         let task = tokio::task::spawn_local(run(handle.clone(), listen, status, listener.clone()));
-        Ok(GameController { task, listener })
+        Ok(GameController {
+            task,
+            listener,
+            _read_only: read_only,
+        })
     }
 
     /// The tracker's counters and newest packet so far.

@@ -11,7 +11,7 @@ use comms::{
     Stats, Value,
 };
 
-use crate::guard::{Guard, GuardSlot};
+use crate::guard::{Guard, GuardSlot, ReadOnlySlot};
 use crate::notice::{Notice, SubQueue, Subscription};
 use crate::state::{run_reactions, Clock, Inner, IoStats, WatchSlot};
 
@@ -225,6 +225,22 @@ impl Handle {
             check: RefCell::new(Box::new(check)),
         });
         self.inner.borrow_mut().guards.push(Rc::downgrade(&slot));
+        Ok(Guard::new(slot))
+    }
+
+    /// Makes every key matching `pattern` (`local.var.team.#`) the daemon's own while
+    /// the returned [`Guard`] lives: a relay client's `SETV` or `SETP` of one gets
+    /// `ERR 423` saying that `owner` writes it, nothing is written, and
+    /// [`IoStats::relay_read_only_refused`] counts it. For a part of the daemon whose
+    /// outputs other programs trust (the team layer, the GameController listener);
+    /// writes through a [`Handle`] are not checked. `local.var.huddle.*`, the counters,
+    /// is the daemon's own always.
+    pub fn reserve(&self, pattern: &str, owner: &'static str) -> Result<Guard, PatternError> {
+        let pattern = Pattern::parse(pattern)?;
+        let slot = Rc::new(ReadOnlySlot { pattern, owner });
+        let mut inner = self.inner.borrow_mut();
+        inner.read_only.retain(|g| g.strong_count() > 0);
+        inner.read_only.push(Rc::downgrade(&slot));
         Ok(Guard::new(slot))
     }
 

@@ -36,6 +36,8 @@
 //! 72-tone codec over raw PCM pipes to shell commands (`arecord`, `aplay`, files): heard
 //! messages become blackboard writes, and a relay client's `SETV local.var.audio.say`
 //! is checked by a write guard ([`Handle::guard`]) and queued for the loudspeaker.
+//! The daemon's own keys (the team layer's outputs, the GameController's state, the
+//! counters) are read-only to relay clients ([`Handle::reserve`], `ERR 423`).
 //!
 //! To rehearse a bad WLAN, [`Driver::set_impairment`] passes every outgoing datagram
 //! through an [`Impairment`] model (`huddle daemon --impair` plugs in netsim's link
@@ -86,7 +88,10 @@ pub use config_files::{
 pub use gamecontroller::{
     budget_figures, penalized_players, GameController, GameControllerConfig, GcBoard, GcListener,
 };
-pub use guard::Guard;
+pub use guard::{
+    read_only, read_only_owner, Guard, COUNTERS_OWNER, COUNTER_KEYS, GC_KEYS, GC_OWNER, TEAM_KEYS,
+    TEAM_OWNER,
+};
 pub use handle::{Batch, DriverStats, Handle, Watch};
 pub use iface::{broadcast_address, resolve_iface, IfaceError};
 pub use impair::Impairment;

@@ -244,6 +244,7 @@ impl Driver {
             reactions: VecDeque::new(),
             reacting: false,
             guards: Vec::new(),
+            read_only: Vec::new(),
             subscriber_backlog: config.subscriber_backlog.max(1),
             sessions: BTreeMap::new(),
             next_session: 0,
@@ -252,6 +253,7 @@ impl Driver {
                 recv_buffer_bytes: recv_buffer_granted,
                 ..IoStats::default()
             },
+            io_mirrored: None,
             wake: wake.clone(),
             impairment: None,
             held: BinaryHeap::new(),

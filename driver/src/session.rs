@@ -173,6 +173,8 @@ struct State {
     peer_events: Vec<Weak<Mutex<Feed<PeerEvent>>>>,
     feed_capacity: usize,
     io: IoStats,
+    /// The counts [`IoStats::mirror`] last wrote to `local.var.huddle.stats.*`.
+    io_mirrored: Option<[u64; 7]>,
     /// The deadline the receive task sleeps until: a call that makes an earlier one (or
     /// fills the backlog) wakes it.
     sleeping_until: Option<Instant>,
@@ -229,6 +231,18 @@ impl State {
         } else {
             self.backlog.push_back((payload.to_vec(), to));
         }
+    }
+
+    /// Mirrors the I/O counters (a full backlog's drops among them) into
+    /// `local.var.huddle.stats.*`, as the driver does.
+    fn mirror_io(&mut self, now: Instant) {
+        let State {
+            io,
+            io_mirrored,
+            replica,
+            ..
+        } = self;
+        io.mirror(io_mirrored, replica, now);
     }
 
     /// Sends what the backlog holds until the kernel refuses again.
@@ -423,6 +437,7 @@ impl Session {
                 recv_buffer_bytes: recv_buffer_granted,
                 ..IoStats::default()
             },
+            io_mirrored: None,
             sleeping_until: None,
             closed: false,
         };
@@ -562,6 +577,24 @@ impl Session {
     pub fn close(&self) {
         close(&self.shared);
     }
+
+    /// Fills the send backlog (8-byte frames to the group), as a send buffer full for
+    /// long would have, then sets `key`: its frame meets the limit. The backlog drops
+    /// counted so far.
+    #[cfg(test)]
+    pub(crate) fn fill_backlog_and_set_for_test(&self, key: &str, value: i64) -> u64 {
+        self.with(|state, now| {
+            let to = state.destination.expect("a group");
+            while state.backlog.len() < SEND_BACKLOG_FRAMES {
+                state.backlog.push_back((vec![0u8; 8], to));
+            }
+            state
+                .replica
+                .set(now, key, Value::Int(value))
+                .expect("an own key");
+        });
+        lock(&self.shared.state).io.send_backlog_drops
+    }
 }
 
 /// The receive task: datagrams, deadlines and the send backlog until the session closes.
@@ -621,6 +654,7 @@ async fn receive(
                 let mut state = lock(&shared.state);
                 let now = shared.clock.now();
                 state.replica.handle_timeout(now);
+                state.mirror_io(now);
                 state.pump();
             }
         }

@@ -17,7 +17,7 @@ use tokio::sync::Notify;
 use comms::relay::{Session, SessionLimits};
 use comms::{DropReason, Event, Instant, Kind, PatternIndex, Replica, Scope, Value};
 
-use crate::guard::{GuardSlot, GuardedBoard};
+use crate::guard::{GuardSlot, GuardedBoard, ReadOnlySlot};
 use crate::impair::{Held, Impairment};
 use crate::notice::{Notice, SubQueue};
 use crate::rate_limit::RateLimit;
@@ -202,16 +202,68 @@ pub struct IoStats {
     /// `local.var.huddle.stats.relay_lost_suppressed`.
     pub relay_lost_suppressed: u64,
     /// Sends that failed with an error other than a full buffer (a peer or network
-    /// unreachable, a broadcast refused): logged, at most one warning per 10 s.
+    /// unreachable, a broadcast refused): logged, at most one warning per 10 s;
+    /// mirrored to `local.var.huddle.stats.send_errors`.
     pub send_errors: u64,
-    /// Frames dropped because the send backlog was full.
+    /// Frames dropped because the send backlog was full (the kernel's send buffer was
+    /// full while 1,024 frames waited); mirrored to
+    /// `local.var.huddle.stats.send_backlog_drops`.
     pub send_backlog_drops: u64,
-    /// Relay clients cut off for not reading.
+    /// Relay clients cut off for not reading their output; mirrored to
+    /// `local.var.huddle.stats.relay_cutoffs`.
     pub relay_cutoffs: u64,
-    /// Datagrams an [`Impairment`] lost (or that found its hold queue full).
+    /// Relay clients' writes refused because the key is the daemon's own (`ERR 423`,
+    /// [`crate::Handle::reserve`]); mirrored to
+    /// `local.var.huddle.stats.relay_read_only_refused`.
+    pub relay_read_only_refused: u64,
+    /// Datagrams an [`Impairment`] lost (or that found its hold queue full); mirrored to
+    /// `local.var.huddle.stats.impair_dropped`.
     pub impair_dropped: u64,
     /// Extra copies an [`Impairment`] made (duplicates).
     pub impair_duplicated: u64,
+}
+
+impl IoStats {
+    /// Every count of something dropped or refused, by the name it has under
+    /// `local.var.huddle.stats.` (and in `huddle stats`).
+    pub fn dropped(&self) -> [(&'static str, u64); 7] {
+        [
+            ("unicast_refused", self.unicast_refused),
+            ("relay_lost_suppressed", self.relay_lost_suppressed),
+            ("relay_cutoffs", self.relay_cutoffs),
+            ("relay_read_only_refused", self.relay_read_only_refused),
+            ("send_backlog_drops", self.send_backlog_drops),
+            ("send_errors", self.send_errors),
+            ("impair_dropped", self.impair_dropped),
+        ]
+    }
+
+    /// Mirrors [`IoStats::dropped`] into `local.var.huddle.stats.*` of `replica`, where
+    /// `huddle stats` and every relay client read the replica's own counters. `last` is
+    /// what the previous call mirrored: nothing is looked at while no count moved (the
+    /// driver calls this at every timer); then each key is written if it differs. The
+    /// replica mirrors its own counters at its refresh; the driver and
+    /// [`crate::Session`] call this at their timers.
+    pub(crate) fn mirror(&self, last: &mut Option<[u64; 7]>, replica: &mut Replica, now: Instant) {
+        let counts = self.dropped().map(|(_, n)| n);
+        if *last == Some(counts) {
+            return;
+        }
+        *last = Some(counts);
+        for (name, count) in self.dropped() {
+            let key = format!("local.var.huddle.stats.{name}");
+            let value = Value::Int(i64::try_from(count).unwrap_or(i64::MAX));
+            let same = replica
+                .get(&key)
+                .ok()
+                .flatten()
+                .is_some_and(|e| e.value == value);
+            if !same {
+                // A local key of valid shape: only the local-key limit could refuse it.
+                let _ = replica.set(now, &key, value);
+            }
+        }
+    }
 }
 
 /// The state shared by the driver task, its handles and the relay connections.
@@ -237,11 +289,15 @@ pub(crate) struct Inner {
     pub(crate) reacting: bool,
     /// Checks in front of relay clients' writes of some keys ([`crate::Handle::guard`]).
     pub(crate) guards: Vec<Weak<GuardSlot>>,
+    /// Families of keys relay clients may not write ([`crate::Handle::reserve`]).
+    pub(crate) read_only: Vec<Weak<ReadOnlySlot>>,
     pub(crate) subscriber_backlog: usize,
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
     pub(crate) next_session: u64,
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
+    /// The counts [`IoStats::mirror`] last wrote.
+    pub(crate) io_mirrored: Option<[u64; 7]>,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
@@ -558,27 +614,10 @@ impl Inner {
         self.pump();
     }
 
-    /// Mirrors the I/O counters `huddle stats` shows into `local.var.huddle.stats.*`
-    /// (written when they change).
+    /// Mirrors the I/O counters into `local.var.huddle.stats.*` ([`IoStats::mirror`]).
     fn mirror_io(&mut self, now: Instant) {
-        let counters = [
-            ("unicast_refused", self.io.unicast_refused),
-            ("relay_lost_suppressed", self.io.relay_lost_suppressed),
-        ];
-        for (name, count) in counters {
-            let key = format!("local.var.huddle.stats.{name}");
-            let value = Value::Int(i64::try_from(count).unwrap_or(i64::MAX));
-            let same = self
-                .replica
-                .get(&key)
-                .ok()
-                .flatten()
-                .is_some_and(|e| e.value == value);
-            if !same {
-                // A local key of valid shape: only the local-key limit could refuse it.
-                let _ = self.replica.set(now, &key, value);
-            }
-        }
+        self.io
+            .mirror(&mut self.io_mirrored, &mut self.replica, now);
     }
 
     /// A new relay session: its id and the notifier its connection waits on.
@@ -608,6 +647,8 @@ impl Inner {
         let mut board = GuardedBoard {
             replica: &mut self.replica,
             guards: &self.guards,
+            read_only: &self.read_only,
+            refused: &mut self.io.relay_read_only_refused,
         };
         slot.session.handle_input(now, bytes, &mut board);
         if slot.session.poll_timeout() != timer_before {
@@ -814,3 +855,7 @@ mod clock_tests {
         );
     }
 }
+
+#[cfg(test)]
+#[path = "mirror_tests.rs"]
+mod mirror_tests;

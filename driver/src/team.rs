@@ -5,7 +5,8 @@
 //! `docs/team-layer.md` ([`team::contract`]).
 //!
 //! A malformed input is refused at the relay's `SETV` (a guard per input key), so the
-//! layer only ever sees values it can take. The layer stays dormant, writing and sending
+//! layer only ever sees values it can take; its outputs (`local.var.team.*`) are its own
+//! while it runs: a client's write of one is refused (`ERR 423`, [`Handle::reserve`]). The layer stays dormant, writing and sending
 //! nothing, until the robot program has said where it is (a pose or an odometry reading):
 //! a daemon without a robot program behind it is a plain blackboard.
 
@@ -142,6 +143,11 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
                 })
                 .expect("the contract's keys are valid")
         })
+        .chain(std::iter::once(
+            handle
+                .reserve(crate::guard::TEAM_KEYS, crate::guard::TEAM_OWNER)
+                .expect("a valid pattern"),
+        ))
         .collect();
     let claims = Rc::clone(&core);
     let react = handle

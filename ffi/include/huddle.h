@@ -44,7 +44,9 @@
 #define HUDDLE_E_UTF8 2
 
 // A key that does not parse, or one this call may not use (another robot's key, a
-// talk queue given to set, a value key given to post).
+// talk queue given to set, a value key given to post, a key the node itself writes:
+// `local.var.team.*` while its team layer runs, `local.var.gc.*` while its
+// GameController listener runs, `local.var.huddle.*`).
 #define HUDDLE_E_KEY 3
 
 // A value literal that does not parse (see `comms::literal`: `42`, `1.5`, `true`,

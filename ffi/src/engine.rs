@@ -107,6 +107,8 @@ pub(crate) struct State {
     pub(crate) io: Io,
     /// The robot's team layer, unless the config turned it off.
     team: Option<TeamRun>,
+    /// Whether the GameController listener runs (`local.var.gc.*` is then its own).
+    gc: bool,
     /// Teammates' should-I-go claims (`+.var.machine.heuristic`, as the daemon's layer
     /// watches them).
     claims: Pattern,
@@ -166,7 +168,8 @@ pub(crate) struct Io {
 
 impl State {
     /// Writes `value` to `key` for the robot program with `write` (a set, or a set on the
-    /// priority path). A team-layer input is checked by its contract first
+    /// priority path). The node's own keys are refused (`HUDDLE_E_KEY`, see
+    /// [`State::not_read_only`]). A team-layer input is checked by its contract first
     /// (`HUDDLE_E_VALUE`, nothing written), then taken; a pose or odometry closes the
     /// program's cycle and the layer ticks at once by the daemon's rule
     /// ([`driver::team::Pacer`]: not within half a period of the last cycle's tick, but
@@ -180,6 +183,7 @@ impl State {
         value: Value,
         write: impl FnOnce(&mut Replica, Value) -> Result<(), Failure>,
     ) -> Result<(), Failure> {
+        self.not_read_only(key)?;
         let closes_cycle = match &mut self.team {
             Some(team) => team
                 .core
@@ -197,6 +201,28 @@ impl State {
             }
         }
         Ok(())
+    }
+
+    /// Refuses the node's own keys (`HUDDLE_E_KEY`), as the daemon's relay does with
+    /// `ERR 423` (`driver::read_only_owner`): the team layer's outputs while it runs, the
+    /// GameController listener's keys while it runs, the counters always.
+    fn not_read_only(&self, key: &str) -> Result<(), Failure> {
+        if !key.starts_with("local.var.") {
+            return Ok(());
+        }
+        let Ok(parsed) = comms::Key::parse(key) else {
+            return Ok(()); // the write itself says what is wrong with it
+        };
+        match driver::read_only_owner(&parsed, self.team.is_some(), self.gc) {
+            Some(owner) => Err(Failure::new(
+                HUDDLE_E_KEY,
+                format!(
+                    "{}; nothing written",
+                    driver::read_only(&parsed, owner).text
+                ),
+            )),
+            None => Ok(()),
+        }
     }
 
     /// The team layer's timer: its tick if due, and when the next one is.
@@ -404,6 +430,7 @@ impl Engine {
                 watches: Vec::new(),
                 io: Io::default(),
                 team: team_layer.map(|cfg| TeamRun::new(robot_id, cfg)),
+                gc: false,
                 claims: Pattern::parse("+.var.machine.heuristic").expect("a valid pattern"),
             }),
             clock,
@@ -450,6 +477,8 @@ impl Engine {
             })?;
         }
         let shared = self.shared.clone();
+        // From now on `local.var.gc.*` is the listener's, as at the daemon's relay.
+        shared.lock().gc = true;
         let listener = driver::GcListener::new(config);
         let thread = std::thread::Builder::new()
             .name("huddle-node-gc".into())

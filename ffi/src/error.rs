@@ -11,7 +11,9 @@ pub const HUDDLE_E_NULL: i32 = 1;
 /// A string argument was not valid UTF-8.
 pub const HUDDLE_E_UTF8: i32 = 2;
 /// A key that does not parse, or one this call may not use (another robot's key, a
-/// talk queue given to set, a value key given to post).
+/// talk queue given to set, a value key given to post, a key the node itself writes:
+/// `local.var.team.*` while its team layer runs, `local.var.gc.*` while its
+/// GameController listener runs, `local.var.huddle.*`).
 pub const HUDDLE_E_KEY: i32 = 3;
 /// A value literal that does not parse (see `comms::literal`: `42`, `1.5`, `true`,
 /// `"text"`, `[1, 2.5]`, `0x0a0b`).

@@ -725,6 +725,24 @@ fn the_team_layer_refuses_a_bad_input_from_any_set_call_and_runs_on_a_pose() {
             1
         );
         assert_eq!((goer, going), (0, 0), "no ball seen: nobody goes");
+        // The layer's outputs are its own, the counters the node's: a set call of one is
+        // refused (the relay's `ERR 423`) and writes nothing.
+        let out = c("local.var.team.goer");
+        let rc = huddle_node_set(node.0, out.as_ptr(), c("2").as_ptr(), &mut err);
+        assert_eq!((rc, err.code), (-1, HUDDLE_E_KEY), "{}", text(&err.message));
+        assert!(
+            text(&err.message).starts_with("local.var.team.goer is written by the team layer"),
+            "{}",
+            text(&err.message)
+        );
+        let counter = c("local.var.huddle.stats.frames_in");
+        let rc = huddle_node_set_int(node.0, counter.as_ptr(), 0, &mut err);
+        assert_eq!((rc, err.code), (-1, HUDDLE_E_KEY), "{}", text(&err.message));
+        assert_eq!(
+            huddle_node_get_team_goer(node.0, &mut goer, &mut going, &mut err),
+            1
+        );
+        assert_eq!(goer, 0, "a refused set writes nothing");
         let mut held: huddle_pose = zeroed();
         assert_eq!(huddle_node_get_team_pose(node.0, &mut held, &mut err), 1);
         assert!(
@@ -738,6 +756,13 @@ fn the_team_layer_refuses_a_bad_input_from_any_set_call_and_runs_on_a_pose() {
         let plain = with_layer(1);
         let rc = huddle_node_set_floats(plain.0, key.as_ptr(), not_pd.as_ptr(), 5, &mut err);
         assert_eq!(rc, 0, "no layer: a plain key ({})", text(&err.message));
+        let rc = huddle_node_set(plain.0, out.as_ptr(), c("2").as_ptr(), &mut err);
+        assert_eq!(
+            rc,
+            0,
+            "no layer: its outputs are plain keys ({})",
+            text(&err.message)
+        );
     }
 }
 

@@ -110,6 +110,21 @@ fn a_scripted_gamecontroller_drives_a_nodes_keys_status_and_budget() {
         literal(node, "local.var.gc.budget").as_deref(),
         Some("1150")
     );
+    // The listener's keys are its own: the program's set call is refused (as the
+    // daemon's relay answers `ERR 423`) and the GC's word stands.
+    let (state, set) = (c("local.var.gc.state"), c("\"set\""));
+    // SAFETY: a live node, NUL-terminated strings, a writable error.
+    let rc = unsafe { huddle_node_set(node, state.as_ptr(), set.as_ptr(), &mut err) };
+    assert_eq!((rc, err.code), (-1, HUDDLE_E_KEY), "{}", text(&err.message));
+    assert!(
+        text(&err.message).contains("written by the GameController listener"),
+        "{}",
+        text(&err.message)
+    );
+    assert_eq!(
+        literal(node, "local.var.gc.state").as_deref(),
+        Some("\"playing\"")
+    );
 
     // The program's pose reaches the GC in a status packet.
     let cov = [0.01, 0.0, 0.0, 0.01, 0.0, 0.001];

@@ -258,9 +258,13 @@ def flood(binary, seed, log, long=False):
         c = d.client()
         for line in ["SETV local.var.robot.pose [1e300, -1e300, 7.0, 0.01, 0, 0, 0.01, 0, 0.003]",
                      "SETV local.var.robot.pose [4.5, -3.0, 3.14, 0.01, 0, 0, 0.01, 0, 0.003]",
-                     "SETV local.var.team.ball [NaN, inf]", "SETV local.var.team.ball [1e39, -1e39]",
                      "SETV local.var.robot.fallen true"]:
             c.ask(line)
+        # The team ball the status packets carry is the team layer's: a program cannot
+        # write it, NaN or not.
+        for line in ["SETV local.var.team.ball [NaN, inf]", "SETV local.var.team.ball [1e39, -1e39]"]:
+            a = c.ask(line)
+            check(a.startswith("ERR 423 "), "%s: %r (the team layer's key)" % (line, a))
         n = 60_000 if long else 6_000
         before = gc_stats(c)
         kernel0 = d.udp_drops()

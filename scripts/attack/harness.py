@@ -56,8 +56,16 @@ def multicast_sender():
 class Relay:
     """A raw relay connection: bytes out, lines in, every read with a timeout."""
 
-    def __init__(self, port, timeout=5.0):
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+    def __init__(self, port, timeout=5.0, rcvbuf=None):
+        if rcvbuf is None:
+            self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+        else:
+            # A small receive buffer set before connecting: a small window, so a client
+            # that stops reading leaves its output in the daemon, not in the kernel.
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+            self.sock.settimeout(timeout)
+            self.sock.connect(("127.0.0.1", port))
         self.sock.settimeout(timeout)
         self.buf = b""
         self.greeting = self.line()
@@ -151,8 +159,8 @@ class Daemon:
             check(time.monotonic() < deadline, "daemon %d's relay never came up" % self.robot)
             time.sleep(0.05)
 
-    def client(self, timeout=5.0):
-        return Relay(self.relay_port, timeout)
+    def client(self, timeout=5.0, rcvbuf=None):
+        return Relay(self.relay_port, timeout, rcvbuf)
 
     def log(self):
         self.stderr.flush()

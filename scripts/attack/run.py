@@ -22,6 +22,7 @@ import traceback
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import attack_edges  # noqa: E402
 import attack_gc  # noqa: E402
 import attack_mixed  # noqa: E402
 import attack_relay  # noqa: E402
@@ -45,6 +46,12 @@ ATTACKS = [
     ("config_files", attack_relay.config_files),
     ("team_inputs", attack_team.inputs),
     ("mixed_future", attack_mixed.future_items),
+    ("relay_line_limit", attack_edges.line_limit),
+    ("relay_interleaved", attack_edges.interleaved),
+    ("relay_watch_flood", attack_edges.watch_flood),
+    ("relay_utf8_keys", attack_edges.utf8_keys),
+    ("relay_read_only", attack_edges.read_only),
+    ("gc_stale_storm", attack_edges.gc_stale_storm),
 ]
 
 

@@ -387,13 +387,23 @@ pub fn stats(args: StatsArgs) -> Result<()> {
             format!(" ({})", drops.join(", "))
         }
     )?;
-    // Refusals of the I/O layer (the daemon mirrors them; older daemons do not).
-    let io: Vec<String> = ["unicast_refused", "relay_lost_suppressed", "nacks_limited"]
-        .iter()
-        .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
-        .collect();
+    // Drops and refusals of the I/O layer (`driver::IoStats::dropped`: the daemon mirrors
+    // them; older daemons mirror fewer or none), shown when not 0.
+    let io: Vec<String> = [
+        "unicast_refused",
+        "relay_lost_suppressed",
+        "relay_cutoffs",
+        "relay_read_only_refused",
+        "send_backlog_drops",
+        "send_errors",
+        "impair_dropped",
+        "nacks_limited",
+    ]
+    .iter()
+    .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
+    .collect();
     if !io.is_empty() {
-        writeln!(out, "refused {}", io.join("  "))?;
+        writeln!(out, "dropped or refused {}", io.join("  "))?;
     }
     // Only a daemon that speaks or listens (`--audio-in`, `--audio-out`) has these.
     let audio: Vec<String> = all

@@ -40,7 +40,9 @@ class RelayError(HuddleError):
 
     ``code`` is the relay's stable numeric code (404 no value, 406 older than the
     ``max_age_ms`` asked for, 410 bad key, 411 bad pattern, 412 bad value, 413 bad
-    period, 420 another robot's key, 421 wrong kind of key, 422 too large, 429 too many,
+    period, 420 another robot's key, 421 wrong kind of key, 422 too large, 423 the
+    daemon's own key, read-only (``local.var.team.*``, ``local.var.gc.*``,
+    ``local.var.huddle.*``), 429 too many,
     430 the talk queue's retention is full, 503 not available, 400-403 malformed
     commands);
     ``text`` is the explanation, for people.

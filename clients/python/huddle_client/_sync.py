@@ -283,7 +283,8 @@ class Relay(TeamMixin):
         """Binds ``key`` (``*.var.x`` published to the team, ``local.var.x`` this robot
         only) to ``value``; see :func:`encode_value` for the types (numpy scalars and
         1-D arrays included). Raises ``RelayError`` when the relay refuses (420:
-        another robot's key, 410: bad key, 422: too large), ``TypeError``/``ValueError``
+        another robot's key, 410: bad key, 422: too large, 423: the daemon's own key,
+        such as the team layer's ``local.var.team.*``), ``TypeError``/``ValueError``
         for a value that cannot be sent exactly (nothing is sent then)."""
         value = plain_value(value)
         literal = encode_value(value)

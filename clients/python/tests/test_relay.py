@@ -171,6 +171,12 @@ def test_errors_carry_the_relay_s_code_and_text(team, connect):
     with pytest.raises(RelayError) as e:
         r.watch("2.var.#.x")
     assert e.value.code == 411
+    with pytest.raises(RelayError) as e:
+        r.set("local.var.team.goer", 2)
+    assert e.value.code == 423 and "team layer" in e.value.text, "the team layer's own output"
+    with pytest.raises(RelayError) as e:
+        r.set("local.var.huddle.stats.frames_in", 0)
+    assert e.value.code == 423, "the daemon's counters"
     with pytest.raises(ValueError):
         r.watch("x", interval_ms=-1)
     r.set("*.var.fine", 3)

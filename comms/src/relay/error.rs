@@ -19,6 +19,7 @@ use std::fmt;
 /// | 420 | write refused: the key belongs to another robot |
 /// | 421 | write refused: wrong kind of key (a talk queue has no value to get or set; only own queues can be posted to) |
 /// | 422 | write refused: the value does not fit in one frame |
+/// | 423 | write refused: the key is the daemon's own, read-only to clients (`local.var.team.*` while its team layer runs, `local.var.gc.*` while its GameController listener runs, `local.var.huddle.*`: its counters) |
 /// | 429 | limit reached: too many watch patterns, talk queues, or keys (`SETV` of a new `local` key beyond the local-key limit, or of a new own global beyond the per-robot limit) |
 /// | 430 | post refused: the talk queue's retention buffer is full of messages teammates may still need; retry later |
 /// | 503 | not available here (e.g. posting without a replica) |
@@ -50,6 +51,8 @@ pub enum ErrCode {
     WrongKind,
     /// 422
     TooLarge,
+    /// 423
+    ReadOnly,
     /// 429
     TooMany,
     /// 430
@@ -75,6 +78,7 @@ impl ErrCode {
             ErrCode::NotOwner => 420,
             ErrCode::WrongKind => 421,
             ErrCode::TooLarge => 422,
+            ErrCode::ReadOnly => 423,
             ErrCode::TooMany => 429,
             ErrCode::QueueFull => 430,
             ErrCode::Unavailable => 503,

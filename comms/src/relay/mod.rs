@@ -56,6 +56,15 @@
 //! - `SETV` follows the library's rules: another robot's `n.var.x` gives `ERR 420`; a new
 //!   key beyond the limits (65536 `local` keys, 4096 own globals by default) `ERR 429`;
 //!   a post the queue's full retention buffer cannot take `ERR 430`.
+//! - The daemon's own keys are read-only to clients: `SETV` or `SETP` of one gives
+//!   `ERR 423` naming who writes it, and nothing is written. They are `local.var.team.*`
+//!   while the daemon's team layer runs (its outputs), `local.var.gc.*` while its
+//!   GameController listener runs (the game's state) and `local.var.huddle.*` (its
+//!   counters). A client that wrote them would make the robot's other programs read a
+//!   false decision, game state or count; without the part that writes them (`huddle
+//!   daemon --no-team-layer`, no listener) the first two are ordinary local keys, for a
+//!   program that runs its own. The daemon counts refusals in
+//!   `local.var.huddle.stats.relay_read_only_refused`.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).
