@@ -8,11 +8,16 @@ use crate::local::{Heard, LocalWorldModel};
 use crate::pose::PoseEstimate;
 use crate::wire::DecodeError;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
+use std::cell::RefCell;
 use std::collections::VecDeque;
 
+mod checkpoints;
+#[cfg(test)]
+mod lazy_tests;
 mod measured;
 mod records;
 mod search;
+use checkpoints::{Base, Checkpoints};
 use measured::Measured;
 use records::Records;
 use search::{partition_near_back, partition_near_front};
@@ -197,20 +202,20 @@ impl RobotRecord {
 
 /// A robot's GWM. Feed it every LWM (teammates' through [`GlobalModel::receive`], its own
 /// through [`GlobalModel::ingest`]) and ask for [`GlobalModel::team_ball`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct GlobalModel {
     own_id: u8,
     config: GlobalConfig,
     robots: Records<RobotRecord>,
     committed: Option<BallEstimate>,
     /// Observations not yet committed, in time order, and the state after each
-    /// (checkpoints, so that a late arrival replays only what follows it).
-    /// Queues: `commit` takes from the front at every message.
+    /// (checkpoints, so that a late arrival replays only what follows it, and only when
+    /// read: a read through `&self`, [`GlobalModel::team_ball`], brings them up to date,
+    /// hence the cell). Queues: `commit` takes from the front at every message.
     /// The newest state (the head of the track) is the last checkpoint, or the committed
-    /// ball when nothing is pending (`GlobalModel::head`): not kept apart, so no
-    /// insertion copies it.
+    /// ball when nothing is pending: not kept apart, so no insertion copies it.
     pending: VecDeque<Measured>,
-    after: VecDeque<BallEstimate>,
+    after: RefCell<Checkpoints>,
     last_support_t_s: f64,
     /// Ball information from before this time is void (see [`GlobalModel::forget_ball`]).
     forgotten_before_t_s: f64,
@@ -226,6 +231,30 @@ pub struct GlobalModel {
     /// restarted it and no kick has moved it since.
     placed: bool,
     stats: GlobalStats,
+}
+
+/// Two GWMs are equal when they hold the same state: stale checkpoints (see
+/// `checkpoints`) are brought up to date before they are compared.
+impl PartialEq for GlobalModel {
+    fn eq(&self, other: &Self) -> bool {
+        for gwm in [self, other] {
+            let base = gwm.base();
+            gwm.after.borrow_mut().settled(&base);
+        }
+        self.own_id == other.own_id
+            && self.config == other.config
+            && self.robots == other.robots
+            && self.committed == other.committed
+            && self.pending == other.pending
+            && self.after.borrow().states() == other.after.borrow().states()
+            && self.last_support_t_s == other.last_support_t_s
+            && self.forgotten_before_t_s == other.forgotten_before_t_s
+            && self.last_accepted_obs_t_s == other.last_accepted_obs_t_s
+            && self.rejected == other.rejected
+            && self.rewind == other.rewind
+            && self.placed == other.placed
+            && self.stats == other.stats
+    }
 }
 
 /// A track set aside by a restart.
@@ -248,7 +277,7 @@ impl GlobalModel {
             robots: Records::default(),
             committed: None,
             pending: VecDeque::new(),
-            after: VecDeque::new(),
+            after: RefCell::default(),
             last_support_t_s: f64::NEG_INFINITY,
             forgotten_before_t_s: f64::NEG_INFINITY,
             last_accepted_obs_t_s: f64::NEG_INFINITY,
@@ -430,69 +459,38 @@ impl GlobalModel {
     }
 
     /// Fuses `obs` (which passed the gate against `prior`, the state at its time) into the
-    /// pending observations and replays the ones after it.
+    /// pending observations; the ones after it are carried forward when next read.
     fn insert_pending(&mut self, obs: &Measured, prior: &BallEstimate) {
         let model = self.config.ball;
         let at = partition_near_back(&self.pending, |p| p.t_s <= obs.t_s);
+        // Up to date already: `prior` was read there.
+        self.after.borrow_mut().settle(&self.base(), at);
         self.pending.insert(at, *obs);
-        // `prior` is the state just before this observation: update it, then carry the
-        // observations after it (arrived earlier, made later) forward from there.
+        // `prior` is the state just before this observation: update it; the observations
+        // after it (arrived earlier, made later) go on from there.
         let next = obs.apply(&model, prior).unwrap_or(*prior);
-        self.after.insert(at, next);
-        self.replay_from(at + 1);
+        let base = self.base();
+        self.after.borrow_mut().insert(&base, at, next);
     }
 
-    /// Carries the state before pending observation `from` (its checkpoint, or the
-    /// committed ball for the first) through the pending observations from `from` on,
-    /// rewriting their checkpoints and the head.
-    fn replay_from(&mut self, from: usize) {
-        let model = self.config.ball;
-        // Each checkpoint is written in place and read back as the next one's state: no
-        // copy of a 168-byte estimate through a local per step.
-        for k in from..self.pending.len() {
-            let before = match k.checked_sub(1) {
-                Some(j) => &self.after[j],
-                None => self
-                    .committed
-                    .as_ref()
-                    .expect("a committed ball under pending ones"),
-            };
-            self.after[k] = match self.pending[k].apply(&model, before) {
-                Some(e) => e,
-                None => *before,
-            };
+    /// What the checkpoints are computed from.
+    fn base(&self) -> Base<'_> {
+        Base {
+            model: &self.config.ball,
+            committed: self.committed.as_ref(),
+            pending: &self.pending,
         }
-    }
-
-    /// The newest state: after every pending observation, or the committed ball.
-    fn head(&self) -> Option<&BallEstimate> {
-        self.after.back().or(self.committed.as_ref())
-    }
-
-    /// The state after the committed ball and every pending observation up to `t_s`,
-    /// predicted to `t_s` (the checkpoints make this a lookup and one prediction).
-    fn replay(&self, t_s: f64) -> Option<BallEstimate> {
-        let n = partition_near_back(&self.pending, |p| p.t_s <= t_s);
-        let state = if n == 0 {
-            self.committed.as_ref()?
-        } else {
-            &self.after[n - 1]
-        };
-        Some(state.predict_to(&self.config.ball, t_s))
     }
 
     fn clear_pending(&mut self) {
         self.pending.clear();
-        self.after.clear();
+        self.after.get_mut().clear();
     }
 
+    /// The team track at `t_s`: the state after the committed ball and every pending
+    /// observation up to `t_s`, predicted to `t_s` (see `checkpoints`).
     fn state_at(&self, t_s: f64) -> Option<BallEstimate> {
-        let head = self.head()?;
-        if t_s >= head.t_s {
-            Some(head.predict_to(&self.config.ball, t_s))
-        } else {
-            self.replay(t_s)
-        }
+        self.after.borrow_mut().state_at(&self.base(), t_s)
     }
 
     fn commit(&mut self, before_t_s: f64) {
@@ -502,9 +500,13 @@ impl GlobalModel {
         if n == 0 || self.committed.is_none() {
             return;
         }
-        self.committed = Some(self.after[n - 1]);
+        let base = self.base();
+        let mut after = self.after.borrow_mut();
+        let committed = *after.after(&base, n).expect("a committed ball");
+        after.drain_front(n);
+        drop(after);
+        self.committed = Some(committed);
         self.pending.drain(..n);
-        self.after.drain(..n);
     }
 
     /// A robot's observations disagree with the team ball: a kick, bounce or shove that
@@ -638,12 +640,14 @@ impl GlobalModel {
                 rw.after.truncate(keep);
                 self.committed = Some(rw.committed);
                 self.pending = rw.pending;
-                self.after = rw.after;
+                self.after.get_mut().restore(rw.after);
                 later
             }
             None => {
                 let keep = self.pending.partition_point(|o| o.t_s <= kick.t_s);
-                self.after.truncate(keep);
+                // Up to date already: the state at the kick was read there.
+                self.after.borrow_mut().settle(&self.base(), keep);
+                self.after.get_mut().truncate(keep);
                 self.pending
                     .drain(keep..)
                     .chain(self.rejected.iter().filter(|o| o.t_s > kick.t_s).copied())
@@ -660,7 +664,7 @@ impl GlobalModel {
         let kicked = Measured::kick(kick);
         let turned = kicked.apply(&model, &before).unwrap_or(before);
         self.pending.push_back(kicked);
-        self.after.push_back(turned);
+        self.after.get_mut().push_back(turned);
         self.last_support_t_s = now_s;
         self.last_accepted_obs_t_s = kick.t_s;
         self.regate(later);
@@ -717,7 +721,8 @@ impl GlobalModel {
             mean: u.mean,
             cov: u.cov,
         });
-        self.replay_from(0);
+        let base = self.base();
+        self.after.borrow_mut().stale_from(&base, 0);
     }
 
     /// The team ball restarts from `first`; every observation made after it (pending or
@@ -732,13 +737,15 @@ impl GlobalModel {
 
     /// Sets the current track aside before a restart at `restart_t_s`.
     fn keep_for_rewind(&mut self, restart_t_s: f64) {
-        self.rewind = self.committed.map(|committed| Rewind {
+        let base = self.base();
+        let rewind = self.committed.map(|committed| Rewind {
             restart_t_s,
             committed,
             pending: self.pending.clone(),
-            after: self.after.clone(),
+            after: self.after.borrow_mut().settled(&base).clone(),
             rejected: self.rejected.clone(),
         });
+        self.rewind = rewind;
     }
 
     /// The team ball restarts as `fresh`; every observation made after it (pending or
