@@ -74,10 +74,16 @@ pub struct CommsArgs {
     #[arg(long, value_enum, default_value_t = TransportKind::Multicast)]
     pub transport: TransportKind,
     /// Also write every ping-pong round trip to this file as CSV (`what,block,index,
-    /// start_us,rtt_us`; `start_us` from the start of the run), to see what the slow
-    /// ones have in common.
+    /// start_us,rtt_us,start_mono_us`; `start_us` from the start of the run,
+    /// `start_mono_us` on CLOCK_MONOTONIC, as `perf --clockid monotonic` stamps), to see
+    /// what the slow ones have in common.
     #[arg(long, value_name = "FILE")]
     pub dump_rtts: Option<std::path::PathBuf>,
+    /// A/A: run the bare-tokio ping-pong a second time in every block, after huddle's,
+    /// and report it against the first (`aa` in the JSON): how far apart the p50 and
+    /// p99 of two identical systems land in one run.
+    #[arg(long)]
+    pub aa: bool,
 }
 
 /// A count of at least one (no measurement is made of nothing).
@@ -156,6 +162,18 @@ pub struct CommsReport {
     pub rss_mb_10k_keys: f64,
     pub recv_buffer_bytes: usize,
     pub build: &'static str,
+    /// With `--aa`: the second bare-tokio ping-pong against the first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub aa: Option<AaReport>,
+}
+
+/// Bare tokio against itself in the same run (`--aa`): the noise of the ratios.
+#[derive(Serialize, Debug)]
+pub struct AaReport {
+    pub tokio_b_p50_us: f64,
+    pub tokio_b_p99_us: f64,
+    pub p50_b_over_a: f64,
+    pub p99_b_over_a: f64,
 }
 
 fn group(port: u16, last: u8) -> SocketAddrV4 {
@@ -197,6 +215,9 @@ fn raw_ends(g: SocketAddrV4, transport: Transport) -> Result<[(UdpSocket, Socket
     };
     Ok([end(1)?, end(2)?])
 }
+
+/// Round trips as measured: each one's start and its length in µs.
+type Rtts = Vec<(Instant, f64)>;
 
 /// p50 and p99 in microseconds of round trips.
 fn summarize(mut v: Vec<f64>) -> (f64, f64) {
@@ -246,12 +267,7 @@ fn echo(datagram: &mut [u8]) -> Echo {
 }
 
 /// (a): two threads, blocking sockets on one group and port; each skips its own echoes.
-fn raw_ping_pong(
-    g: SocketAddrV4,
-    rounds: usize,
-    pin: Pin,
-    transport: Transport,
-) -> Result<Vec<f64>> {
+fn raw_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin, transport: Transport) -> Result<Rtts> {
     let [(a, to), (b, back)] = raw_ends(g, transport)?;
     let ponger = named_thread("raw-pong", move || -> Result<()> {
         pin.apply(1);
@@ -268,7 +284,7 @@ fn raw_ping_pong(
         }
     });
     // The pinger runs on a thread of its own too, as in the other two measurements.
-    let pinger = named_thread("raw-ping", move || -> Result<Vec<f64>> {
+    let pinger = named_thread("raw-ping", move || -> Result<Rtts> {
         pin.apply(0);
         let mut rtts = Vec::with_capacity(rounds);
         let mut buf = [0u8; 64];
@@ -282,7 +298,7 @@ fn raw_ping_pong(
                     break;
                 }
             }
-            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+            rtts.push((t0, t0.elapsed().as_secs_f64() * 1e6));
         }
         a.send_to(b"Q", to)?;
         Ok(rtts.split_off(WARM_UP_ROUNDS))
@@ -326,12 +342,7 @@ where
 
 /// (a'): the raw ping-pong over tokio sockets, same socket options, threads and runtime
 /// set-up as the replicas: the floor that "the cost of tokio" sets for (b).
-fn tokio_ping_pong(
-    g: SocketAddrV4,
-    rounds: usize,
-    pin: Pin,
-    transport: Transport,
-) -> Result<Vec<f64>> {
+fn tokio_ping_pong(g: SocketAddrV4, rounds: usize, pin: Pin, transport: Transport) -> Result<Rtts> {
     let [(a, to), (b, back)] = raw_ends(g, transport)?;
     a.set_nonblocking(true)?;
     b.set_nonblocking(true)?;
@@ -368,7 +379,7 @@ fn tokio_ping_pong(
             reply
                 .await
                 .context("tokio ping-pong: no reply within 2 s")??;
-            rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+            rtts.push((t0, t0.elapsed().as_secs_f64() * 1e6));
         }
         a.send_to(b"Q", to).await?;
         Ok(rtts.split_off(WARM_UP_ROUNDS))
@@ -448,10 +459,13 @@ fn huddle_ping_pong(
     rounds: usize,
     pin: Pin,
     reply: Reply,
-) -> Result<Vec<f64>> {
+) -> Result<Rtts> {
     let ready = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
-    let (r2, d2) = (ready.clone(), done.clone());
+    // The ponger's robot waits for the end on this, not on a timer: a timer firing
+    // inside the measurement is a wake-up the bare-tokio ping-pong does not have.
+    let finished = Arc::new(tokio::sync::Notify::new());
+    let (r2, d2, f2) = (ready.clone(), done.clone(), finished.clone());
     let refresh = Duration::from_millis(100);
     let ponger = on_driver_thread(2, g, refresh, pin, move |h| async move {
         // The keys are fixed, as a robot program's are: parsed once.
@@ -471,7 +485,7 @@ fn huddle_ping_pong(
                 })?;
                 r2.store(true, Ordering::Release);
                 while !d2.load(Ordering::Acquire) {
-                    tokio::time::sleep(Duration::from_millis(20)).await;
+                    f2.notified().await;
                 }
                 let failure = failed.borrow_mut().take();
                 if let Some(e) = failure {
@@ -517,12 +531,13 @@ fn huddle_ping_pong(
                     reply
                         .await
                         .context("huddle ping-pong: no reply within 2 s")??;
-                    rtts.push(t0.elapsed().as_secs_f64() * 1e6);
+                    rtts.push((t0, t0.elapsed().as_secs_f64() * 1e6));
                 }
                 rtts
             }
         };
         done.store(true, Ordering::Release);
+        finished.notify_one();
         Ok(rtts[WARM_UP_ROUNDS..].to_vec())
     });
     let rtts = pinger.join().expect("pinger thread")?;
@@ -532,11 +547,11 @@ fn huddle_ping_pong(
 
 /// Robot 1's side of the ping-pong as a reaction: each pong seen in the driver's turn
 /// records the round trip and sets the next ping. Returns every round trip in µs.
-async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
+async fn watch_pings(h: &Handle, total: i64) -> Result<Rtts> {
     struct Rounds {
         next: i64,
         t0: Instant,
-        rtts: Vec<f64>,
+        rtts: Rtts,
         failed: Option<comms::SetError>,
     }
     let rounds = std::rc::Rc::new(std::cell::RefCell::new(Rounds {
@@ -546,6 +561,11 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
         failed: None,
     }));
     let state = rounds.clone();
+    // The reaction says when it is done (or failed); this task waits for that, not on a
+    // polling timer (a wake-up inside the measurement the bare-tokio pinger does not
+    // have: it showed as slow round trips 20 ms into every block).
+    let ended = std::rc::Rc::new(tokio::sync::Notify::new());
+    let end = ended.clone();
     let key = Key::parse("*.var.bench.ping")?;
     let first = key.clone();
     let _watch = h.watch("2.var.bench.pong", move |h, notice| {
@@ -557,10 +577,11 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
             if entry.value != Value::Int(r.next) {
                 return;
             }
-            let rtt = r.t0.elapsed().as_secs_f64() * 1e6;
+            let rtt = (r.t0, r.t0.elapsed().as_secs_f64() * 1e6);
             r.rtts.push(rtt);
             r.next += 1;
             if r.next == total {
+                end.notify_one();
                 return;
             }
             r.t0 = Instant::now();
@@ -568,14 +589,16 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
         };
         if let Err(e) = h.set_key(&key, ping) {
             state.borrow_mut().failed.get_or_insert(e);
+            end.notify_one();
         }
     })?;
     rounds.borrow_mut().t0 = Instant::now();
     h.set_key(&first, 0)?;
-    // The reactions do the work; this task only watches for the end or a stall.
-    let mut last = (0, Instant::now());
+    // The reactions do the work; this task only waits for the end, or finds a stall (no
+    // round trip completed in 2 s).
+    let mut last = 0;
     loop {
-        tokio::time::sleep(Duration::from_millis(20)).await;
+        let woken = tokio::time::timeout(Duration::from_secs(2), ended.notified()).await;
         let mut r = rounds.borrow_mut();
         if let Some(e) = r.failed.take() {
             return Err(e.into());
@@ -583,11 +606,10 @@ async fn watch_pings(h: &Handle, total: i64) -> Result<Vec<f64>> {
         if r.next == total {
             return Ok(std::mem::take(&mut r.rtts));
         }
-        if r.next != last.0 {
-            last = (r.next, Instant::now());
-        } else if last.1.elapsed() > Duration::from_secs(2) {
+        if woken.is_err() && r.next == last {
             bail!("huddle ping-pong: no reply within 2 s");
         }
+        last = r.next;
     }
 }
 
@@ -776,33 +798,36 @@ pub fn run(args: BenchArgs) -> Result<()> {
     const BLOCKS: usize = 20;
     let per_block = args.rounds.div_ceil(BLOCKS);
     let transport = Transport::from(args.transport);
-    let (mut raw, mut bare, mut hud) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut raw, mut bare, mut hud, mut bare_b) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let start = Instant::now();
+    // CLOCK_MONOTONIC (what `Instant` reads on Linux) at `start`, so that the dump's
+    // times can be put beside a `perf --clockid monotonic` trace of the same run.
+    let start_mono_us = nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+        .map_or(0.0, |t| t.tv_sec() as f64 * 1e6 + t.tv_nsec() as f64 / 1e3);
     let mut dump = String::new();
-    // A block's round trips run back to back after its warm-up: their starts are
-    // the block's measured end minus the round trips after them.
-    let mut dump_block = |what: &str, block: usize, rtts: &[f64]| {
+    let mut dump_block = |what: &str, block: usize, rtts: &[(Instant, f64)]| {
         if args.dump_rtts.is_some() {
-            let end = start.elapsed().as_secs_f64() * 1e6;
-            let mut at = end - rtts.iter().sum::<f64>();
-            for (i, rtt) in rtts.iter().enumerate() {
-                dump += &format!("{what},{block},{i},{at:.1},{rtt:.3}\n");
-                at += rtt;
+            for (i, (t0, rtt)) in rtts.iter().enumerate() {
+                let at = t0.duration_since(start).as_secs_f64() * 1e6;
+                let mono = start_mono_us + at;
+                dump += &format!("{what},{block},{i},{at:.1},{rtt:.3},{mono:.1}\n");
             }
         }
     };
+    let us = |rtts: Rtts| rtts.into_iter().map(|(_, us)| us);
     for block in 0..BLOCKS {
         say(&format!(
-            "ping-pong block {} of {BLOCKS}: raw, tokio, huddle...",
-            block + 1
+            "ping-pong block {} of {BLOCKS}: raw, tokio, huddle{}...",
+            block + 1,
+            if args.aa { ", tokio again" } else { "" }
         ));
         let g = group(args.port, 1);
         let r = raw_ping_pong(g, per_block, args.pin, transport)?;
         dump_block("raw", block, &r);
-        raw.extend(r);
+        raw.extend(us(r));
         let t = tokio_ping_pong(g, per_block, args.pin, transport)?;
         dump_block("tokio", block, &t);
-        bare.extend(t);
+        bare.extend(us(t));
         let h = huddle_ping_pong(
             (group(args.port + 1, 2), transport),
             per_block,
@@ -810,16 +835,32 @@ pub fn run(args: BenchArgs) -> Result<()> {
             args.reply,
         )?;
         dump_block("huddle", block, &h);
-        hud.extend(h);
+        hud.extend(us(h));
+        if args.aa {
+            // The same bare-tokio ping-pong again, after huddle's: how far apart two
+            // identical systems land in one run.
+            let t = tokio_ping_pong(g, per_block, args.pin, transport)?;
+            dump_block("tokio-b", block, &t);
+            bare_b.extend(us(t));
+        }
     }
     if let Some(path) = &args.dump_rtts {
-        let header = "what,block,index,start_us,rtt_us\n";
+        let header = "what,block,index,start_us,rtt_us,start_mono_us\n";
         std::fs::write(path, format!("{header}{dump}"))
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     let (raw_p50, raw_p99) = summarize(raw);
     let (tokio_p50, tokio_p99) = summarize(bare);
     let (h_p50, h_p99) = summarize(hud);
+    let aa = args.aa.then(|| {
+        let (p50, p99) = summarize(bare_b);
+        AaReport {
+            tokio_b_p50_us: p50,
+            tokio_b_p99_us: p99,
+            p50_b_over_a: p50 / tokio_p50,
+            p99_b_over_a: p99 / tokio_p99,
+        }
+    });
     say("sustained updates A -> B...");
     let tp = throughput((group(args.port + 2, 3), transport), args.updates, args.pin)?;
     say("daemon resident memory with 10,000 keys...");
@@ -851,6 +892,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         } else {
             "release"
         },
+        aa,
     };
     if args.json {
         outln!("{}", serde_json::to_string(&report)?);
@@ -897,6 +939,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "daemon RSS with 10,000 keys: {:.1} MB   (target <= 20)",
             r.rss_mb_10k_keys
         );
+        if let Some(aa) = &r.aa {
+            outln!(
+                "A/A: bare tokio again p50 {:7.1} us   p99 {:7.1} us   (against the first: p50 {:.3}x, p99 {:.3}x)",
+                aa.tokio_b_p50_us, aa.tokio_b_p99_us, aa.p50_b_over_a, aa.p99_b_over_a
+            );
+        }
     }
     Ok(())
 }

@@ -94,9 +94,19 @@ fn wrapping_diff(a: u32, b: u32) -> i64 {
 }
 
 /// This robot's recent frames: seq and send instant, for matching echoes.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(super) struct SentLog {
     frames: VecDeque<(u64, Instant)>,
+}
+
+impl Default for SentLog {
+    /// Its whole length at once (2 KiB): the log never grows, so no frame ever pays for
+    /// a reallocation (see [`ClockEstimate::default`]).
+    fn default() -> SentLog {
+        SentLog {
+            frames: VecDeque::with_capacity(SENT_LOG_LEN),
+        }
+    }
 }
 
 impl SentLog {
@@ -159,8 +169,12 @@ pub(super) enum SampleOutcome {
     Outlier,
 }
 
+/// Most runs of samples in one bin the window can hold: one per [`BIN`] of [`WINDOW`],
+/// and the bin the window's oldest edge falls in.
+const MAX_RUNS: usize = (WINDOW.as_secs() / BIN.as_secs()) as usize + 1;
+
 /// The estimate of one peer's clock against this robot's.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(super) struct ClockEstimate {
     anchor: Option<u32>,
     samples: VecDeque<Sample>,
@@ -174,7 +188,34 @@ pub(super) struct ClockEstimate {
     outliers_in_row: u32,
 }
 
+impl Default for ClockEstimate {
+    /// An estimate with no sample yet, its buffers at their full size (12 KiB and
+    /// 1.5 KiB): a deque that doubles copies its samples into fresh memory inside the
+    /// frame whose echo fills it (at the 256th sample: two page faults and a 6 KiB copy
+    /// in one round trip, a tenth of `bench comms`'s slowest), so it is sized once,
+    /// when the peer appears.
+    fn default() -> ClockEstimate {
+        ClockEstimate {
+            anchor: None,
+            samples: VecDeque::with_capacity(MAX_SAMPLES),
+            best: VecDeque::with_capacity(MAX_RUNS),
+            fit: None,
+            used: 0,
+            outliers_in_row: 0,
+        }
+    }
+}
+
 impl ClockEstimate {
+    /// Forgets every sample (keeping the count of those used, and the buffers).
+    fn start_over(&mut self) {
+        self.anchor = None;
+        self.samples.clear();
+        self.best.clear();
+        self.fit = None;
+        self.outliers_in_row = 0;
+    }
+
     /// Adds the sample from an echo of own frame sent at `t1`, held `hold_us` by the
     /// peer, in a frame stamped `t3` (peer's clock) received at `t4`.
     pub(super) fn add_echo(
@@ -215,10 +256,7 @@ impl ClockEstimate {
                     return SampleOutcome::Outlier;
                 }
                 // Consistently elsewhere: the estimate is what is wrong. Start over.
-                *self = ClockEstimate {
-                    used: self.used,
-                    ..ClockEstimate::default()
-                };
+                self.start_over();
                 return self.add_echo(t1, hold_us, t3, t4);
             }
         }
@@ -582,6 +620,50 @@ mod tests {
             est.samples.len() < MAX_SAMPLES,
             "the quiet stretch emptied old bins"
         );
+    }
+
+    /// A ping-pong at 20 µs round trips (as `bench comms` runs): 3,000 echoes in one
+    /// bin, so the window fills to `MAX_SAMPLES` and every later echo pops one, then
+    /// eight outliers in a row make the estimate start over. Its buffers never grow:
+    /// no echo pays for a reallocation (and the fresh memory's page faults).
+    #[test]
+    fn the_estimates_buffers_are_sized_once() {
+        let mut est = ClockEstimate::default();
+        let (samples_cap, best_cap) = (est.samples.capacity(), est.best.capacity());
+        assert!(samples_cap >= MAX_SAMPLES && best_cap >= MAX_RUNS);
+        let mut t = 1_000_000u64;
+        for i in 0..3_000u64 {
+            let rtt = 20 + i % 7;
+            let t4 = Instant::from_micros(t);
+            let t1 = Instant::from_micros(t - rtt);
+            assert_eq!(est.add_echo(t1, 0, stamp_of(t4), t4), SampleOutcome::Used);
+            t += 25;
+        }
+        assert_eq!(est.samples.len(), MAX_SAMPLES, "the window is full");
+        for _ in 0..OUTLIERS_TO_RESET {
+            // The peer's clock jumped by a minute.
+            let t4 = Instant::from_micros(t);
+            let t3 = stamp_of(t4).wrapping_add(60_000_000);
+            est.add_echo(Instant::from_micros(t - 20), 0, t3, t4);
+            t += 25;
+        }
+        assert_eq!(
+            est.samples.len(),
+            1,
+            "the estimate started over from the newest"
+        );
+        assert_eq!(est.samples(), 3_001, "the count of samples used goes on");
+        assert_eq!(
+            (est.samples.capacity(), est.best.capacity()),
+            (samples_cap, best_cap),
+            "no buffer was reallocated"
+        );
+        let mut log = SentLog::default();
+        let log_cap = log.frames.capacity();
+        for seq in 1..=1_000u64 {
+            log.record(seq, Instant::from_micros(seq));
+        }
+        assert_eq!(log.frames.capacity(), log_cap, "the sent log never grows");
     }
 
     #[test]
