@@ -29,6 +29,8 @@
 //! The team layer ([`crate::team`]) reads `local.var.gc.penalized` each tick: a penalised
 //! robot leaves the arbitration and tells its team, and its teammates stop counting its
 //! claim ([`team::TeamLayer::set_penalties`]).
+//! It reads the two scores too: either rising is a goal heard, and the layer forgets
+//! the ball then ([`team::TeamLayer::set_scores`]), with no robot-program ball reset.
 //!
 //! Counters go to `local.var.huddle.stats.gc.*` (`huddle stats`): `accepted`, `stale`,
 //! `bad_length`, `bad_header`, `wrong_version`, `bad_field`, `wrong_team`, `status_sent`.
@@ -478,7 +480,7 @@ impl Written {
             Value::Bool(g.messages_counted()),
         );
         if let Some(team) = t.own_team() {
-            self.put(handle, "local.var.gc.score", int(team.score.into()));
+            self.put(handle, crate::team::GC_SCORE_KEY, int(team.score.into()));
             self.put(
                 handle,
                 "local.var.gc.budget",
@@ -488,7 +490,7 @@ impl Written {
         if let Some(other) = t.opponent() {
             self.put(
                 handle,
-                "local.var.gc.opponent_score",
+                crate::team::GC_OPPONENT_SCORE_KEY,
                 int(other.score.into()),
             );
         }

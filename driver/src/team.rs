@@ -413,6 +413,20 @@ pub const GC_SET_PLAY_KEY: &str = "local.var.gc.set_play";
 /// Where the GameController listener writes this team's penalised player numbers.
 pub const PENALIZED_KEY: &str = "local.var.gc.penalized";
 
+/// Where the GameController listener writes this team's score and the other team's.
+pub const GC_SCORE_KEY: &str = "local.var.gc.score";
+/// See [`GC_SCORE_KEY`].
+pub const GC_OPPONENT_SCORE_KEY: &str = "local.var.gc.opponent_score";
+
+/// A score the GameController listener wrote under `key` (an int of 0-255), if any.
+fn gc_score(board: &comms::Blackboard, key: &str) -> Option<u8> {
+    let key = Key::parse(key).expect("a valid key");
+    match board.get(&key).map(|e| &e.value) {
+        Some(Value::Int(n)) => u8::try_from(*n).ok(),
+        _ => None,
+    }
+}
+
 /// Seconds from `earlier` to `now` on the driver's clock.
 fn since(now: Instant, earlier: Instant) -> f64 {
     now.saturating_duration_since(earlier).as_secs_f64()
@@ -444,6 +458,20 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     }
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
+    // A goal the GameController announces (a score rose in its newest packet: the
+    // listener keeps only the newest by `packetNumber`) puts the ball back, with no
+    // robot program's ball reset (`TeamLayer::set_scores`).
+    let scores = (
+        gc_score(replica.blackboard(), GC_SCORE_KEY),
+        gc_score(replica.blackboard(), GC_OPPONENT_SCORE_KEY),
+    );
+    if let (Some(own), Some(other)) = scores {
+        if layer.set_scores(own, other, team::seconds(now)) {
+            // Sightings from before the goal are of a ball that is gone.
+            inputs.balls.clear();
+            tracing::info!(own, other, "team layer: goal heard from the GameController");
+        }
+    }
     // Out of play (the GC's state is not Playing) the layer tells the team nothing but,
     // in Set, the kick-off taker's claim. Set starts the kick-off hold and puts the ball
     // on the centre spot (both in `TeamLayer::set_kick_off_next`'s doc); a penalty
@@ -749,6 +777,40 @@ mod core_tests {
         assert!(
             matches!(&spot, Some(Value::Floats(f)) if f.len() >= 2 && f[0].abs() < 1e-6 && f[1].abs() < 1e-6),
             "after the reset the layer's team ball is the centre spot: {spot:?}"
+        );
+    }
+
+    #[test]
+    fn a_goal_the_gamecontroller_announces_puts_the_ball_back_with_no_program_reset() {
+        // Robot 2 sees the ball 1.5 m ahead while the GC's packets say 0:0; then a packet
+        // says 1:0 (a goal). With no ball reset from the robot program, the layer's team
+        // ball must be the kick-off spot (the centre) at the next tick, not the old ball.
+        let mut now = Instant::from_micros(1_000_000);
+        let (mut core, mut replica) = robot_2_at_the_origin(now);
+        let score = |r: &mut Replica, now, own: i64| {
+            r.set(now, super::GC_SCORE_KEY, Value::Int(own))
+                .expect("a local key");
+            r.set(now, super::GC_OPPONENT_SCORE_KEY, Value::Int(0))
+                .expect("a local key");
+        };
+        score(&mut replica, now, 0);
+        for _ in 0..12 {
+            cycle(&mut core, &mut replica, now, &[1.5, 0.0, 0.01, 0.0, 0.01]);
+            now += Duration::from_millis(40);
+        }
+        let held = team_ball(&replica);
+        assert!(
+            matches!(&held, Some(Value::Floats(f)) if f.len() >= 2 && f[0] > 1.0),
+            "at 0:0 the layer holds the ball it saw: {held:?}"
+        );
+        score(&mut replica, now, 1);
+        core.input(contract::ODOMETRY_KEY, &floats(&[0.0, 0.0, 0.0]), now)
+            .expect("valid odometry");
+        core.tick(&mut replica, now);
+        let spot = team_ball(&replica);
+        assert!(
+            matches!(&spot, Some(Value::Floats(f)) if f.len() >= 2 && f[0].abs() < 1e-6 && f[1].abs() < 1e-6),
+            "after the GC's 1:0 the layer's team ball is the centre spot: {spot:?}"
         );
     }
 

@@ -283,6 +283,8 @@ pub struct TeamLayer {
     kick_off_place: bool,
     /// The ball was in play at the latest tick.
     was_in_play: bool,
+    /// The scores (this team's, the other's) in the newest GameController packet heard.
+    scores_heard: Option<(u8, u8)>,
 }
 
 /// The kick-off hold lasts this long after the robot hears play, seconds. Tuned on
@@ -400,6 +402,7 @@ impl TeamLayer {
             kick_off_claims: (0, f64::NEG_INFINITY),
             kick_off_place: false,
             was_in_play: true,
+            scores_heard: None,
         }
     }
 
@@ -472,6 +475,21 @@ impl TeamLayer {
             _ => {}
         }
         self.kick_off_hold_until_s.is_some()
+    }
+
+    /// The scores in the newest GameController packet (`now_s`: when it was heard). A
+    /// goal is heard when either score rises over the previous packet's: the layer
+    /// forgets the ball then ([`TeamLayer::forget_ball`]), as a robot program's ball
+    /// reset does, whatever the game state says (GC3 may show Playing for seconds after
+    /// a goal). The first packet, or a score that falls (a new game), is no goal.
+    /// Returns whether it heard a goal.
+    pub fn set_scores(&mut self, own: u8, other: u8, now_s: f64) -> bool {
+        let goal = self.scores_heard.is_some_and(|(o, t)| own > o || other > t);
+        self.scores_heard = Some((own, other));
+        if goal {
+            self.forget_ball(now_s);
+        }
+        goal
     }
 
     /// The robots the GameController says are penalised (player numbers, this robot's
