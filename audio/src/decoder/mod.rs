@@ -111,7 +111,12 @@
 //!    the comb's edge the power must not still be rising outward; tones 20 dB above their
 //!    neighbourhood must have interpolated peaks that agree with one scale within a
 //!    fraction of a hertz (babble around a tone pulls its peak, and a hall's low tones sit
-//!    in the talkers' band), and none may peak on the bin just beyond the comb).
+//!    in the talkers' band), and none may peak on the bin just beyond the comb). One tone
+//!    of a frame clear of the floor may miss the common scale, or one loud tone's peak
+//!    disagree (or lie beyond the comb) while at least three others agree, when its
+//!    basic keeps its 2-of-3 vote on its other two tones: in a babble hall a talker's
+//!    harmonic beside a low tone pulls it by hertz, while another codec's tones are each
+//!    off by their own amount.
 //!    A tone outside the frame much louder than one its 2-of-3 votes rest on is a stray
 //!    too.
 //!    And each vote must be a tone's, not babble's: the two tones of each basic its vote
@@ -134,6 +139,9 @@
 //!    onset rather than half over. Replays run one after another, each starting after the
 //!    last one's floor. A first slot failing right after the same sender's decided
 //!    transmission is that transmission's tail, not a long message's lost first frame.
+//!    A failed second slot is replayed from its start too (a message of another robot may
+//!    have begun under it), without tracking its sender's frames that begin inside the
+//!    failed transmission (its own second frame, or its tail).
 //!
 //! # False alarms
 //!
@@ -309,6 +317,10 @@ pub struct Decoder {
     /// Sender and end (sample) of the last slot that failed its decision: a frame from
     /// the same sender right after it is the second half of a long message.
     failed_slot: Option<(Sender, f64)>,
+    /// Sender and end (sample) of the last transmission whose second slot failed: the
+    /// replay after it does not track that sender's frames beginning before that end
+    /// (its own second frame, or its tail; see `Decoder::decide_slot`).
+    failed_transmission: Option<(Sender, f64)>,
     /// While the search replays windows already heard (see [`Decoder::replay_search`]):
     /// the index of the window it stands at, which it treats as the newest.
     replaying: Option<u64>,
@@ -387,6 +399,7 @@ impl Decoder {
             blocked: None,
             recent: None,
             failed_slot: None,
+            failed_transmission: None,
             replaying: None,
             pending_replay: None,
             output: VecDeque::new(),

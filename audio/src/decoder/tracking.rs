@@ -72,6 +72,13 @@ impl Decoder {
         let Some(onset) = self.estimate_onset(frame, scale) else {
             return;
         };
+        if matches!(self.failed_transmission, Some((sender, end)) if sender == frame.sender && onset < end)
+        {
+            self.note(onset, || {
+                format!("{frame:?} inside its sender's failed transmission: not tracked")
+            });
+            return;
+        }
         self.note(onset, || format!("found {frame:?} at scale {scale}"));
         self.tracking = Some(Tracking {
             sender: frame.sender,
@@ -193,7 +200,17 @@ impl Decoder {
                     (from.max(0.0).floor() as u64).max(self.floor + self.geometry.hop as u64);
                 self.pending_replay = Some(resume);
             } else {
+                // A failed second slot ends its transmission. A message of another robot
+                // may have begun during that slot (in a babble hall the end test takes a
+                // short message's tail for a continuation now and then, and the second
+                // slot is then the tail plus talkers): the search resumes at the second
+                // slot's start, as after a failed first slot, so that message is found at
+                // its onset rather than at this slot's end. The tracked sender's frames
+                // beginning before this end are its own second frame or tail, never a
+                // message (a robot leaves half a tone of silence between messages).
                 self.end_transmission(b, false);
+                self.failed_transmission = Some((t.sender, b));
+                self.pending_replay = Some(a.max(0.0).floor() as u64);
             }
             return Step::Wait;
         };
