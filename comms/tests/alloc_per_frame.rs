@@ -141,7 +141,7 @@ fn scalars(step: u64) -> Vec<(&'static str, Value)> {
     vec![
         ("*.var.machine.heuristic", Value::Float(step as f64 * 0.5)),
         ("*.var.pose.x", Value::Int(step as i64)),
-        ("*.var.ball.seen", Value::Bool(step % 2 == 0)),
+        ("*.var.ball.seen", Value::Bool(step.is_multiple_of(2))),
     ]
 }
 
