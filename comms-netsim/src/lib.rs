@@ -35,6 +35,7 @@
 
 use std::collections::VecDeque;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+use std::sync::Arc;
 use std::time::Duration;
 
 use comms::{Event, Instant, Key, PostError, Replica, ReplicaConfig, SetError, Value};
@@ -72,6 +73,8 @@ pub struct Harness {
     keep_events: bool,
     rng: ChaCha8Rng,
     max_payload: usize,
+    /// The frame buffer `flush` reuses (`poll_transmit_into`).
+    frame: Vec<u8>,
     unicast: bool,
     /// Every frame sent (robot index, bytes), when asked for (a referee counts them).
     sent_log: Option<Vec<(usize, usize)>>,
@@ -110,6 +113,7 @@ impl Harness {
             keep_events: true,
             rng: ChaCha8Rng::seed_from_u64(0),
             max_payload: 0,
+            frame: Vec::with_capacity(2048),
             unicast: false,
             sent_log: None,
             deadline_cache: vec![None; n],
@@ -315,29 +319,29 @@ impl Harness {
             let Some(r) = self.replicas[i].as_mut() else {
                 continue;
             };
-            while let Some(t) = r.poll_transmit() {
-                self.max_payload = self.max_payload.max(t.payload.len());
+            while r.poll_transmit_into(&mut self.frame).is_some() {
+                let len = self.frame.len();
+                self.max_payload = self.max_payload.max(len);
                 if let Some(log) = &mut self.sent_log {
                     let copies = if self.unicast {
                         self.nodes.len() - 1
                     } else {
                         1
                     };
-                    log.extend(std::iter::repeat_n((i, t.payload.len()), copies));
+                    log.extend(std::iter::repeat_n((i, len), copies));
                 }
+                // The one allocation per frame: the datagram in flight in the simulated
+                // network (shared by every unicast copy).
+                let bytes: Arc<[u8]> = Arc::from(self.frame.as_slice());
                 // Known nodes and group: sending cannot fail.
                 if self.unicast {
                     for (j, &to) in self.nodes.iter().enumerate() {
                         if j != i {
-                            let _ = self
-                                .net
-                                .send(self.nodes[i], Dest::Node(to), t.payload.clone());
+                            let _ = self.net.send(self.nodes[i], Dest::Node(to), bytes.clone());
                         }
                     }
                 } else {
-                    let _ = self
-                        .net
-                        .send(self.nodes[i], Dest::Group(self.group), t.payload);
+                    let _ = self.net.send(self.nodes[i], Dest::Group(self.group), bytes);
                 }
             }
             if self.keep_events {

@@ -133,6 +133,9 @@ pub struct Stats {
     pub talk_delivered: u64,
     /// Talk messages given up.
     pub talk_given_up: u64,
+    /// Talk messages whose value has a tag this build does not know (a newer build's):
+    /// acknowledged and handed up as `TalkGivenUp` for that one seq, not delivered.
+    pub talk_unknown_value: u64,
     /// Talk messages re-sent on request.
     pub talk_resent: u64,
     /// NACK items sent.

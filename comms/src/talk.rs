@@ -237,8 +237,9 @@ impl Outbox {
 /// What a receiver hands up, in order.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Delivery {
-    /// The next message of the queue.
-    Message { seq: u64, value: Value },
+    /// The next message of the queue; `None`: its value has a tag this build does not
+    /// know (a newer build's), handed up as skipped.
+    Message { seq: u64, value: Option<Value> },
     /// Messages `first..=last` will never arrive.
     GivenUp { first: u64, last: u64 },
 }
@@ -256,7 +257,7 @@ pub(crate) enum Heard {
 #[derive(Debug)]
 pub(crate) struct Inbox {
     next: u64,
-    buffer: BTreeMap<u64, Value>,
+    buffer: BTreeMap<u64, Option<Value>>,
     buffered_bytes: usize,
     known_last: u64,
     /// From which sequence number on messages became known to exist, and when: increasing
@@ -311,7 +312,7 @@ impl Inbox {
         &mut self,
         now: Instant,
         seq: u64,
-        value: Value,
+        value: Option<Value>,
         limits: &TalkLimits,
         room: usize,
         out: &mut Vec<Delivery>,
@@ -330,7 +331,7 @@ impl Inbox {
         } else if seq > self.next {
             self.learn(now, seq);
             if !self.buffer.contains_key(&seq) {
-                let bytes = message_bytes(&value);
+                let bytes = value.as_ref().map_or(0, message_bytes);
                 if bytes > room || self.buffered_bytes + bytes > limits.window_bytes {
                     // Over the byte bound: dropped; a NACK brings it back later.
                     heard = Heard::Refused;
@@ -378,7 +379,7 @@ impl Inbox {
         while self.next < until {
             match self.buffer.pop_first() {
                 Some((seq, value)) if seq < until => {
-                    self.buffered_bytes -= message_bytes(&value);
+                    self.buffered_bytes -= value.as_ref().map_or(0, message_bytes);
                     if seq > self.next {
                         out.push(Delivery::GivenUp {
                             first: self.next,
@@ -410,7 +411,7 @@ impl Inbox {
 
     fn drain(&mut self, out: &mut Vec<Delivery>) {
         while let Some(value) = self.buffer.remove(&self.next) {
-            self.buffered_bytes -= message_bytes(&value);
+            self.buffered_bytes -= value.as_ref().map_or(0, message_bytes);
             out.push(Delivery::Message {
                 seq: self.next,
                 value,
@@ -424,7 +425,7 @@ impl Inbox {
                 break;
             }
             if let Some((_, v)) = self.buffer.pop_first() {
-                self.buffered_bytes -= message_bytes(&v);
+                self.buffered_bytes -= v.as_ref().map_or(0, message_bytes);
             }
         }
         // Forget when messages before `next` became known.
@@ -555,7 +556,7 @@ mod tests {
     fn msg(seq: u64) -> Delivery {
         Delivery::Message {
             seq,
-            value: Value::Int(seq as i64),
+            value: Some(Value::Int(seq as i64)),
         }
     }
 
@@ -565,7 +566,14 @@ mod tests {
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
         for seq in [2, 3, 2, 1, 3, 4, 1] {
-            inbox.on_message(t(0), seq, Value::Int(seq as i64), &limits, ROOM, &mut out);
+            inbox.on_message(
+                t(0),
+                seq,
+                Some(Value::Int(seq as i64)),
+                &limits,
+                ROOM,
+                &mut out,
+            );
         }
         assert_eq!(out, vec![msg(1), msg(2), msg(3), msg(4)]);
         assert_eq!(inbox.deadline(&limits), None, "no gap left");
@@ -576,8 +584,8 @@ mod tests {
         let limits = TalkLimits::default();
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
-        inbox.on_message(t(0), 1, Value::Int(1), &limits, ROOM, &mut out);
-        inbox.on_message(t(0), 4, Value::Int(4), &limits, ROOM, &mut out);
+        inbox.on_message(t(0), 1, Some(Value::Int(1)), &limits, ROOM, &mut out);
+        inbox.on_message(t(0), 4, Some(Value::Int(4)), &limits, ROOM, &mut out);
         inbox.on_head(t(0), 1, 6, &limits, &mut out);
         assert_eq!(
             inbox.on_timeout(t(10), &limits, &mut out),
@@ -589,7 +597,7 @@ mod tests {
             vec![(2, 3), (5, 6)]
         );
         assert_eq!(inbox.deadline(&limits), Some(t(40)));
-        inbox.on_message(t(30), 3, Value::Int(3), &limits, ROOM, &mut out);
+        inbox.on_message(t(30), 3, Some(Value::Int(3)), &limits, ROOM, &mut out);
         inbox.on_timeout(t(1000), &limits, &mut out);
         assert_eq!(
             out,
@@ -610,7 +618,7 @@ mod tests {
         let limits = TalkLimits::default();
         let mut inbox = Inbox::default();
         let mut out = Vec::new();
-        inbox.on_message(t(0), 3, Value::Int(3), &limits, ROOM, &mut out);
+        inbox.on_message(t(0), 3, Some(Value::Int(3)), &limits, ROOM, &mut out);
         inbox.on_head(t(0), 5, 6, &limits, &mut out);
         assert_eq!(
             out,

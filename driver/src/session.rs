@@ -168,6 +168,8 @@ struct State {
     /// The group or broadcast address every frame goes to; `None` with unicast.
     destination: Option<SocketAddr>,
     peers: Vec<SocketAddr>,
+    /// The frame buffer `pump` reuses (`poll_transmit_into`): no allocation per frame.
+    frame: Vec<u8>,
     backlog: VecDeque<(Vec<u8>, SocketAddr)>,
     updates: Vec<(Pattern, Weak<Mutex<Feed<Notice>>>)>,
     peer_events: Vec<Weak<Mutex<Feed<PeerEvent>>>>,
@@ -185,15 +187,18 @@ impl State {
     /// Drains the replica: frames to the sockets, events to the streams. Returns whether
     /// the receive task must look again (an earlier deadline, a backlog to flush).
     fn pump(&mut self) -> bool {
-        while let Some(transmit) = self.replica.poll_transmit() {
+        // The kept buffer is taken out while `send` borrows `self`, then put back.
+        let mut frame = std::mem::take(&mut self.frame);
+        while self.replica.poll_transmit_into(&mut frame).is_some() {
             for i in 0..self.peers.len() {
                 let peer = self.peers[i];
-                self.send(&transmit.payload, peer);
+                self.send(&frame, peer);
             }
             if let Some(destination) = self.destination {
-                self.send(&transmit.payload, destination);
+                self.send(&frame, destination);
             }
         }
+        self.frame = frame;
         while let Some(event) = self.replica.poll_event() {
             self.dispatch(event);
         }
@@ -429,6 +434,7 @@ impl Session {
             unicast: unicast.clone(),
             destination,
             peers: config.peers,
+            frame: Vec::with_capacity(2048),
             backlog: VecDeque::new(),
             updates: Vec::new(),
             peer_events: Vec::new(),

@@ -112,6 +112,8 @@ pub(crate) struct State {
     /// Teammates' should-I-go claims (`+.var.machine.heuristic`, as the daemon's layer
     /// watches them).
     claims: Pattern,
+    /// The frame buffer `drain` reuses (`poll_transmit_into`): no allocation per frame.
+    frame: Vec<u8>,
 }
 
 /// The team layer on the node and when it ticks.
@@ -252,7 +254,7 @@ impl State {
     /// [`State::pump`] once; whether a teammate's claim changed.
     fn drain(&mut self, own: Scope) -> bool {
         let mut claim = false;
-        while let Some(transmit) = self.replica.poll_transmit() {
+        while self.replica.poll_transmit_into(&mut self.frame).is_some() {
             let Some(sockets) = &self.sockets else {
                 continue;
             };
@@ -263,7 +265,7 @@ impl State {
             let group = self.destination.map(|d| (&sockets.team, d));
             for (socket, to) in targets.chain(group) {
                 // A failed send is a lost datagram, which the protocol repairs.
-                match socket.send_to(&transmit.payload, to) {
+                match socket.send_to(&self.frame, to) {
                     Ok(_) => self.io.datagrams_sent += 1,
                     Err(_) => self.io.send_errors += 1,
                 }
@@ -432,6 +434,7 @@ impl Engine {
                 team: team_layer.map(|cfg| TeamRun::new(robot_id, cfg)),
                 gc: false,
                 claims: Pattern::parse("+.var.machine.heuristic").expect("a valid pattern"),
+                frame: Vec::with_capacity(2048),
             }),
             clock,
             events,

@@ -43,7 +43,10 @@ pub enum Event {
         /// The message.
         value: Value,
     },
-    /// Messages `first..=last` of a teammate's queue could not be recovered.
+    /// Messages `first..=last` of a teammate's queue could not be recovered; or, with
+    /// `first == last`, one message arrived whose value has a tag this build does not
+    /// know (a newer build's): acknowledged, counted in `Stats::talk_unknown_value`, and
+    /// skipped here rather than delivered as something else.
     TalkGivenUp {
         /// Queue path.
         queue: String,

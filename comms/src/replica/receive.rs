@@ -133,7 +133,7 @@ impl Replica {
                     queue,
                     TalkItem::Message {
                         seq,
-                        value: value.to_value(),
+                        value: value.value(),
                     },
                 ),
                 ItemView::TalkHead { queue, first, last } => {

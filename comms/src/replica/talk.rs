@@ -53,8 +53,15 @@ pub enum PostError {
 
 /// A teammate's talk item, as [`Replica::on_talk_item`] takes it.
 pub(super) enum TalkItem {
-    Message { seq: u64, value: Value },
-    Head { first: u64, last: u64 },
+    /// `value` is `None` for a value tag this build does not know.
+    Message {
+        seq: u64,
+        value: Option<Value>,
+    },
+    Head {
+        first: u64,
+        last: u64,
+    },
 }
 
 impl Replica {
@@ -175,7 +182,22 @@ impl Replica {
     ) {
         for d in deliveries.drain(..) {
             events.push_back(match d {
-                Delivery::Message { seq, value } => {
+                // A newer build's value this build cannot decode: acknowledged (the
+                // queue moves on, no NACK), counted and handed up as skipped, never
+                // delivered as something else.
+                Delivery::Message { seq, value: None } => {
+                    stats.talk_unknown_value += 1;
+                    Event::TalkGivenUp {
+                        queue: queue.to_owned(),
+                        from,
+                        first: seq,
+                        last: seq,
+                    }
+                }
+                Delivery::Message {
+                    seq,
+                    value: Some(value),
+                } => {
                     stats.talk_delivered += 1;
                     Event::TalkDelivered {
                         queue: queue.to_owned(),

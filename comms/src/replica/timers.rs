@@ -267,6 +267,7 @@ fn counter_values(s: &crate::stats::Stats) -> [u64; COUNTERS.len()] {
         s.bindings_released,
         s.talk_delivered,
         s.talk_given_up,
+        s.talk_unknown_value,
         s.talk_resent,
         s.talk_refused,
         s.talk_refused_full,
@@ -284,7 +285,7 @@ fn counter_values(s: &crate::stats::Stats) -> [u64; COUNTERS.len()] {
     ]
 }
 
-const COUNTERS: [&str; 27] = [
+const COUNTERS: [&str; 28] = [
     "frames_in",
     "frames_out",
     "bytes_in",
@@ -298,6 +299,7 @@ const COUNTERS: [&str; 27] = [
     "bindings_released",
     "talk_delivered",
     "talk_given_up",
+    "talk_unknown_value",
     "talk_resent",
     "talk_refused",
     "talk_refused_full",

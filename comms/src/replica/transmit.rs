@@ -121,6 +121,11 @@ impl Replica {
     /// With a budget, only NACKs, talk messages and changed values start a frame, and only
     /// when the budget allows one (a priority item may draw on the reserve); the refresh
     /// and talk heads ride along in the room left.
+    ///
+    /// The allocating convenience: one fresh `Vec` per frame. Drivers drain with
+    /// [`Replica::poll_transmit_into`] and one kept buffer instead (the daemon, the Rust
+    /// `Session`, the C node and the netsim harness do; `comms/tests/alloc_per_frame.rs`
+    /// holds that path at 0 allocations per frame).
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
         let mut payload = Vec::new();
         let destination = self.poll_transmit_into(&mut payload)?;

@@ -352,6 +352,17 @@ impl<'a> Reader<'a> {
         Ok(RawValue(&start[..start.len() - self.bytes.len()]))
     }
 
+    /// A talk item whose value has a tag this build does not know (format 4 only, where
+    /// the item's length bounds it): queue and seq read, the value left as the rest of
+    /// the item's bytes ([`RawValue::value`] is `None`). The message is acknowledged
+    /// and handed up as skipped, never retried for ever (see the compatibility promise).
+    pub(super) fn talk_of_unknown_value(&mut self) -> Result<ItemView<'a>, Fault> {
+        let queue = self.str()?;
+        let seq = self.varint()?;
+        let value = RawValue(self.take(self.remaining())?);
+        Ok(ItemView::Talk { queue, seq, value })
+    }
+
     /// The fields of an item of type `ty`. `Fault::Unknown` for a type or a value type
     /// this build does not know, `Fault::Skip` for a known-path index beyond its table.
     pub(super) fn item(&mut self, ty: u64, known: &'a KnownPaths) -> Result<ItemView<'a>, Fault> {

@@ -4,7 +4,7 @@
 use thiserror::Error;
 
 use super::auth::TeamKey;
-use super::codec::{Fault, Reader};
+use super::codec::{Fault, Reader, ITEM_TALK};
 use super::{
     Echo, Frame, FrameClock, ItemView, KnownPaths, ECHO_LEN, FLAG_ECHO, FLAG_TAGGED, HEADER_LEN,
     LEGACY_VERSION, MAGIC, MAX_FRAME_LEN, MAX_TALK_SEQ, TAG_LEN, VERSION,
@@ -105,7 +105,12 @@ impl<'a> FrameRef<'a> {
             incarnation: self.incarnation,
             seq: self.seq,
             clock: self.clock,
-            items: self.items().map(|i| i.to_item()).collect(),
+            // A talk message whose value this build cannot decode is left out too.
+            items: self
+                .items()
+                .filter(|i| !matches!(i, ItemView::Talk { value, .. } if value.value().is_none()))
+                .map(|i| i.to_item())
+                .collect(),
         }
     }
 }
@@ -145,10 +150,17 @@ impl<'a> Items<'a> {
             .ok()
             .filter(|&n| n <= self.r.remaining())
             .ok_or_else(|| DecodeError::Malformed(format!("item of {len} bytes past the body")))?;
-        let mut fields = Reader::new(self.r.take(len).map_err(fault)?);
+        let bytes = self.r.take(len).map_err(fault)?;
+        let mut fields = Reader::new(bytes);
         match fields.item(ty, self.known) {
             // Bytes after the fields we know: a newer build's added fields.
             Ok(item) => Ok(Some(item)),
+            // A talk message with a value tag this build lacks: read as a message it
+            // cannot decode (acknowledged, handed up as skipped), not skipped unseen.
+            Err(Fault::Unknown) if ty == ITEM_TALK => Reader::new(bytes)
+                .talk_of_unknown_value()
+                .map(Some)
+                .map_err(fault),
             Err(Fault::Unknown | Fault::Skip) => Ok(None),
             Err(e) => Err(fault(e)),
         }

@@ -57,7 +57,11 @@
 //! ([`FrameRef::skipped`], the replica's `items_skipped`); the rest of the frame is
 //! applied. An item it cannot read is one of a type it does not know, one whose value has
 //! a tag it does not know, and an item 4 whose index is beyond its table. Bytes after
-//! the fields a reader knows, inside an item's length, are ignored. Anything else wrong
+//! the fields a reader knows, inside an item's length, are ignored. One exception: a
+//! `Talk` item (type 1) whose value has a tag the reader does not know is **read, not
+//! skipped**: its queue and seq are valid, its value is the rest of the item's bytes and
+//! [`RawValue::value`] is `None` (format 4 only; format 3 has no length to bound it).
+//! Anything else wrong
 //! (a length running past the body, a truncated or invalid field of a known item, a bad
 //! path, a talk seq out of range) makes the frame malformed: it is dropped whole and
 //! nothing in it applied.
@@ -68,8 +72,21 @@
 //! (minus what it does not know), and need **no new VERSION**:
 //! - a new item type (the next free number; never reuse one);
 //! - new fields at the end of an existing item's fields;
-//! - a new value tag (an older reader skips the items that carry it);
+//! - a new value tag (an older reader skips the updates that carry it; a talk message
+//!   that carries it follows the talk rule below);
 //! - new entries at the end of the application's [`KnownPaths`] table.
+//!
+//! The talk rule for a mixed-version team: a talk message whose value an older reader
+//! cannot decode is **acknowledged** (its seq counts as received: no NACK, the sender
+//! stops re-sending it, and the queue's order moves on to the next message at once),
+//! **counted** (`Stats::talk_unknown_value`, mirrored as
+//! `huddle.stats.talk_unknown_value`) and **surfaced** to the program in its place in the
+//! queue as `Event::TalkGivenUp` with `first == last == seq`: never retried for ever,
+//! never delivered as some other value. A newer build that needs the older reader to
+//! act on such a message must post it with a value the older build knows. Golden
+//! bytes: `GOLDEN_FUTURE_TALK` in `wire/tests.rs` and `comms/tests/talk_unknown_value.rs`.
+//! (Builds up to afe99d9 skipped such a message as an unknown item:
+//! 18 NACKs, the next message held ~1 s, then `TalkGivenUp`.)
 //!
 //! These need a **new VERSION** (and the reader of the old one kept, as format 3 is):
 //! - anything in the 18-byte header or the echo, or a new flag bit (readers drop frames
@@ -461,6 +478,15 @@ impl RawValue<'_> {
         // Checked on decode, so this cannot fail; should it, an empty value is stored
         // rather than a panic.
         codec::decode_value(self.0).unwrap_or(Value::Bytes(Vec::new()))
+    }
+
+    /// The value, or `None` for a tag this build does not know (only a talk message
+    /// carries one: see "The compatibility promise").
+    pub fn value(&self) -> Option<Value> {
+        match self.0.first() {
+            Some(&tag) if tag <= 5 => Some(self.to_value()),
+            _ => None,
+        }
     }
 
     /// Its encoded bytes.

@@ -343,6 +343,68 @@ fn a_newer_builds_frame_is_read_minus_what_this_build_does_not_know() {
     ));
 }
 
+/// A newer build's talk queue `plan`: messages 1 (`Int(5)`), 2 (value tag 6, which
+/// this build does not know) and 3 (`Int(7)`).
+const GOLDEN_FUTURE_TALK: &str = concat!(
+    "4844040007030807060504030201", // format 4, no flags, team 7, robot 3, incarnation
+    "00000000",                     // stamp 0
+    "01",                           // seq 1
+    "01",
+    "08",
+    "04706c616e",
+    "01",
+    "000a", // Talk plan #1 = Int(5)
+    "01",
+    "09",
+    "04706c616e",
+    "02",
+    "06",
+    "0102", // Talk plan #2, value tag 6 (2 bytes): read as a message it cannot decode
+    "01",
+    "08",
+    "04706c616e",
+    "03",
+    "000e", // Talk plan #3 = Int(7)
+);
+
+#[test]
+fn a_talk_message_with_an_unknown_value_tag_is_read_as_undecodable_not_skipped() {
+    let bytes = hex_bytes(GOLDEN_FUTURE_TALK);
+    let known = team_paths();
+    let frame = decode_frame_with(&bytes, 7, None, &known).expect("not malformed");
+    assert_eq!(frame.skipped(), 0, "the talk message is kept, not skipped");
+    let talk: Vec<(u64, Option<Value>)> = frame
+        .items()
+        .map(|i| match i {
+            ItemView::Talk { queue, seq, value } => {
+                assert_eq!(queue, "plan");
+                (seq, value.value())
+            }
+            other => panic!("only talk items in this frame: {other:?}"),
+        })
+        .collect();
+    assert_eq!(
+        talk,
+        [
+            (1, Some(Value::Int(5))),
+            (2, None),
+            (3, Some(Value::Int(7)))
+        ],
+        "message 2 keeps its seq (so it is acknowledged) and reads as no value"
+    );
+    let owned = frame.to_frame();
+    assert_eq!(
+        owned.items.len(),
+        2,
+        "an owned copy leaves the undecodable message out, never stores it as another value"
+    );
+    // The same frame cut inside the last item's length is malformed, not skipped.
+    assert!(matches!(
+        decode_frame_with(&bytes[..bytes.len() - 1], 7, None, &known),
+        Err(DecodeError::Malformed(_))
+    ));
+}
+
 #[test]
 fn floats_that_do_not_fit_f32_cross_the_wire_exactly() {
     let wide = vec![123_456_789.123, 1e-50, -1e300, f64::MIN_POSITIVE, 0.1];
