@@ -38,13 +38,20 @@
 //! With a [`GcBudget`], each packet also feeds the replica's budget
 //! ([`Handle::set_external_budget`]): the game clock over the halves and the GC's
 //! messages left less the margin, which no frame goes beyond. Without a packet for
-//! [`GameControllerConfig::lost_after`], the replica goes back to its own accounting (and
-//! the log says so loudly).
+//! [`GameControllerConfig::lost_after`] the log says so loudly, and the GC's last figure
+//! stays in force: frames sent since (this robot's, counted and free, and the teammates'
+//! heard) are taken off it, so a silence never unlocks more than the GC last allowed.
+//! Across a half-time break in silence the game clock set by the last packet keeps
+//! running down (the GC's stops), so the pacing line opens earlier than the GC's would;
+//! the cap (last figure less frames since, less the margin) still holds, and free frames
+//! in an uncounted state (one per 250 ms) are taken off it too. A robot that never heard
+//! a GC is paced by its own accounting from its start.
 //!
 //! Status packets go to the GC's address (its IP, port 3939) every
 //! [`GameControllerConfig::status_period`] once a packet was heard, from
 //! `local.var.robot.pose` (floats `[x_m, y_m, theta_rad, ...]`, field frame),
-//! `local.var.team.ball` (floats `[x_m, y_m, ...]`, field frame; its age is the entry's)
+//! `local.var.team.ball` (floats `[x_m, y_m, ..., age_s]`, field frame; its age is the
+//! 9th float `age_s` plus the entry's age, -1 when no ball is known)
 //! and `local.var.robot.fallen` (bool).
 //!
 //! The logic is [`GcListener`] over a [`GcBoard`]: [`GameController`] runs it on the
@@ -290,11 +297,19 @@ impl GcListener {
             return;
         }
         if self.following {
+            // The GC's last figure stays in force: the replica keeps counting this robot's
+            // frames and the teammates' heard against it, so the team never goes past the
+            // GC's last `messageBudget` less the margin, however long the silence (a GC
+            // still counting the team's messages, only its own packets lost, would see no
+            // more). The replica's own pacing still applies on top (`next_ordinary` takes
+            // the later of the two), so it can only be stricter. Forgetting the figure
+            // here let a robot go back to its own accounting from its start: +17 frames
+            // in 30 s of silence with 16 left and a margin of 14
+            // (`docs/review-30-34/gc_outage.py`).
             self.following = false;
-            board.set_external_budget(None, None);
             tracing::warn!(
-                "GameController not heard for {:?}: the message budget is paced by this \
-                 daemon's own accounting again (it cannot know the team's count)",
+                "GameController not heard for {:?}: the message budget keeps to its last \
+                 figure less the frames sent since, until it is heard again",
                 self.config.lost_after
             );
             self.warned_at = Some(now);
@@ -406,6 +421,10 @@ pub fn penalized_players(t: &GameTracker) -> Vec<u8> {
     })
 }
 
+/// Where `age_s` is in `local.var.team.ball`'s floats
+/// (`[x, y, vx, vy, var_x, cov_xy, var_y, confidence, age_s]`, `docs/team-layer.md`).
+const TEAM_BALL_AGE_S: usize = 8;
+
 /// The status packet's inputs from the documented keys.
 fn status_inputs(board: &impl GcBoard) -> StatusInputs {
     let floats = |key: &str| match board.get(key) {
@@ -419,11 +438,16 @@ fn status_inputs(board: &impl GcBoard) -> StatusInputs {
     let pose = floats("local.var.robot.pose")
         .filter(|(v, _)| v.len() >= 3)
         .map(|(v, _)| [v[0], v[1], v[2]]);
+    // The team layer rewrites `local.var.team.ball` every tick: the entry's own age is
+    // ~0 always. The ball's age is the value's `age_s` (its 9th float, the newest
+    // sighting's age when written) plus the entry's age since. A program's own `[x, y]`
+    // without `age_s` has only the entry's age to go by.
     let ball = floats("local.var.team.ball")
         .filter(|(v, _)| v.len() >= 2)
         .map(|(v, stamp)| {
-            let age = now.saturating_duration_since(stamp).as_secs_f64();
-            ([v[0], v[1]], age)
+            let since = now.saturating_duration_since(stamp).as_secs_f64();
+            let age_s = v.get(TEAM_BALL_AGE_S).copied().unwrap_or(0.0);
+            ([v[0], v[1]], age_s + since)
         });
     let fallen = matches!(
         board.get("local.var.robot.fallen"),
