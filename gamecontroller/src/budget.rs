@@ -26,6 +26,8 @@ use crate::control::{GameControlData, GamePhase};
 /// The team's league budget and how much of it is kept back.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GcBudget {
+    /// Robots in the team (the margin is drawn for them).
+    pub robots: u8,
     /// One half's length (SPL: 600 s).
     pub half: Duration,
     /// Messages per team per game (SPL: 1,200, GameController3 `messagesPerTeam`).
@@ -54,6 +56,7 @@ impl GcBudget {
     pub fn spl(robots: u8) -> GcBudget {
         let robots = robots.max(1);
         GcBudget {
+            robots,
             half: Duration::from_secs(600),
             messages_per_game: 1200,
             margin: 2 * u32::from(robots) + 4,
