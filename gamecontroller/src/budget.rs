@@ -1,32 +1,32 @@
-//! [`GcBudget`]: pacing a team's messages by the GameController's own figures.
+//! [`GcBudget`]: the team's budget as the GameController's own figures state it.
 //!
 //! The GC is the authority on the budget: its `messageBudget` is what the team may still
 //! send, and one message sent at 0 makes the team illegal (its score is set to 0 and every
-//! later goal is void). So the pacing is a pure function of the GC's newest figures and of
-//! what the team sent since them:
+//! later goal is void). This module reads those figures; the pacing itself is `comms`'
+//! (`ExternalCap`, fed by the daemon's and the simulator's GC listeners with
+//! `driver::budget_figures`, which draws on [`GcBudget::cap`]):
 //!
 //! - the clock is the GC's: `secsRemaining` of this half plus a whole second half while
 //!   in the first (the break and timeouts do not run it down);
 //! - only the states the GC counts spend messages ([`GameControlData::messages_counted`]);
-//!   in the others a frame is free;
 //! - the team keeps [`GcBudget::margin`] short of the GC's figure: the GC tells its count
 //!   only twice a second, and teammates' frames sent since may not have been heard yet;
-//! - ordinary frames keep to a line that leaves `ceil(rate · time left)` messages for the
-//!   rest of the game, and [`GcBudget::reserve`] more for priority frames, which may go
-//!   down to the line less one frame per robot, and never below the margin;
 //! - extra time needs nothing special: the GC adds 60 messages per extra minute to
-//!   `messageBudget` and the minute to the clock, the same rate the line keeps;
+//!   `messageBudget` and the minute to the clock;
 //! - a robot restarted mid-game knows as much as one that ran all along: all it needs is
 //!   the GC's next packet.
+//!
+//! The scenarios (a greedy team never illegal, a restarted robot, extra time) are tested
+//! where the pacing runs: `comms/src/replica/budget_gc_tests.rs`.
 
 use std::time::Duration;
 
-use crate::control::{GameControlData, GamePhase, State};
+use crate::control::{GameControlData, GamePhase};
 
 /// The team's league budget and how much of it is kept back.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GcBudget {
-    /// Robots in the team (each may send while it has not heard the others).
+    /// Robots in the team (the margin is drawn for them).
     pub robots: u8,
     /// One half's length (SPL: 600 s).
     pub half: Duration,
@@ -34,8 +34,6 @@ pub struct GcBudget {
     pub messages_per_game: u32,
     /// Messages kept short of the GC's figure.
     pub margin: u32,
-    /// Messages ordinary frames leave to priority frames.
-    pub reserve: u32,
 }
 
 /// What the GC's newest packet says about the budget, for one team.
@@ -49,44 +47,12 @@ pub struct GcCap {
     pub message_budget: u16,
     /// Game time left over the halves, as of the packet.
     pub game_remaining: Duration,
-    /// Whether the game clock runs (Playing): otherwise the time left stands still.
-    pub clock_running: bool,
-}
-
-/// Which allowance a frame draws on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MessageClass {
-    /// Ordinary news: paced along the line.
-    Ordinary,
-    /// A goer change, a kick, a referee event: may go ahead of the line.
-    Priority,
-}
-
-/// Whether a frame may go now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Decision {
-    /// The GC does not count messages now: the frame costs nothing.
-    Free,
-    /// The frame may go and will be counted.
-    Send,
-    /// The pacing holds it back for now.
-    Wait,
-    /// Nothing may go until the GC's figure grows (extra time): the team is at its margin.
-    Exhausted,
-}
-
-impl Decision {
-    /// Whether the frame may go.
-    pub fn may_send(self) -> bool {
-        matches!(self, Decision::Free | Decision::Send)
-    }
 }
 
 impl GcBudget {
     /// The SPL's rule for a team of `robots`: 1,200 messages over two 10-minute halves.
     /// The margin is two frames per robot and four more (what a team paced at about one
-    /// message a second can send in one GC period, twice over, plus frames in flight);
-    /// the reserve two per robot.
+    /// message a second can send in one GC period, twice over, plus frames in flight).
     pub fn spl(robots: u8) -> GcBudget {
         let robots = robots.max(1);
         GcBudget {
@@ -94,17 +60,7 @@ impl GcBudget {
             half: Duration::from_secs(600),
             messages_per_game: 1200,
             margin: 2 * u32::from(robots) + 4,
-            reserve: 2 * u32::from(robots),
         }
-    }
-
-    /// Messages per second of game time the line allows.
-    pub fn rate_per_s(&self) -> f64 {
-        let game = 2.0 * self.half.as_secs_f64();
-        if game <= 0.0 {
-            return 0.0;
-        }
-        f64::from(self.messages_per_game) / game
     }
 
     /// Game time left over the halves in `game`: this half's `secsRemaining` (none once
@@ -129,48 +85,6 @@ impl GcBudget {
             team_left: u32::from(t.message_budget).saturating_sub(self.margin),
             message_budget: t.message_budget,
             game_remaining: self.game_remaining(game),
-            clock_running: game.state == State::Playing
-                && game.game_phase != GamePhase::PenaltyShoot,
         })
-    }
-
-    /// Messages the line keeps for the game left after `elapsed` since `cap`'s packet.
-    pub fn line(&self, cap: &GcCap, elapsed: Duration) -> u32 {
-        let left = if cap.clock_running {
-            cap.game_remaining.saturating_sub(elapsed)
-        } else {
-            cap.game_remaining
-        };
-        (self.rate_per_s() * left.as_secs_f64())
-            .ceil()
-            .min(f64::from(u32::MAX)) as u32
-    }
-
-    /// May a frame of `class` go, `elapsed` after `cap`'s packet arrived, when the team
-    /// has sent `spent_since` frames since (this robot's and the teammates' heard)?
-    pub fn decide(
-        &self,
-        cap: &GcCap,
-        spent_since: u32,
-        elapsed: Duration,
-        class: MessageClass,
-    ) -> Decision {
-        if !cap.counted {
-            return Decision::Free;
-        }
-        let left = cap.team_left.saturating_sub(spent_since);
-        if left == 0 {
-            return Decision::Exhausted;
-        }
-        let line = self.line(cap, elapsed);
-        let go = match class {
-            MessageClass::Ordinary => left > line.saturating_add(self.reserve),
-            MessageClass::Priority => left + u32::from(self.robots) > line,
-        };
-        if go {
-            Decision::Send
-        } else {
-            Decision::Wait
-        }
     }
 }

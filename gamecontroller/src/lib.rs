@@ -1,5 +1,5 @@
 //! The RoboCup SPL GameController, sans I/O: its packets, the game as a robot follows
-//! it, and the pacing of the team's messages by the GC's own count.
+//! it, and the team's message budget as the GC's own figures state it.
 //!
 //! - [`GameControlData`] ("RGme" v18, 118 B, broadcast on port 3838 twice a second): a
 //!   checked decoder ([`ControlView`], then the value) and an encoder (for a simulated GC
@@ -9,8 +9,10 @@
 //! - [`GameTracker`]: the newest packet by its wrapping `packetNumber` (a stale or
 //!   reordered one never moves the game backwards), this team's and robot's figures, the
 //!   GC's address, and counters of bad packets.
-//! - [`GcBudget`]: may a frame go now, as a pure function of the GC's figures and what
-//!   the team sent since.
+//! - [`GcBudget`]: the team's budget by the GC's figures ([`GcCap`]: counted or not, the
+//!   `messageBudget` less a margin, the game time left over the halves). The pacing is
+//!   not here: the daemon's and the simulator's listeners hand these figures to `comms`
+//!   (`driver::budget_figures`, `comms::ExternalCap`), whose replica paces by them.
 //!
 //! What it is not: no sockets, no clock (every time is an argument, a [`Duration`](std::time::Duration)
 //! since any origin the caller keeps), no threads. The daemon's listener and the simulator's GC
@@ -23,7 +25,7 @@
 //!
 //! ```
 //! use std::time::Duration;
-//! use gamecontroller::{GameControlData, GameTracker, GcBudget, MessageClass, State};
+//! use gamecontroller::{GameControlData, GameTracker, GcBudget, State};
 //!
 //! // A simulated GC's packet: team 12 against team 34, Playing, 300 s left in the first
 //! // half, 950 messages left.
@@ -41,11 +43,13 @@
 //! assert_eq!(tracker.message_budget(), Some(950));
 //! assert_eq!(tracker.gc_address(), Some("10.0.0.1:3939".parse().unwrap()));
 //!
-//! // 950 left with 900 s of game to go (300 of this half and the second): ahead of the
-//! // line (about one message a second), an ordinary frame may go.
+//! // What the listener hands to the replica's budget: 950 less the margin of 14 for five
+//! // robots, counted, with 900 s of game to go (300 of this half and the second).
 //! let budget = GcBudget::spl(5);
 //! let cap = budget.cap(tracker.game().unwrap(), 12).unwrap();
-//! assert!(budget.decide(&cap, 0, Duration::ZERO, MessageClass::Ordinary).may_send());
+//! assert!(cap.counted);
+//! assert_eq!(cap.team_left, 936);
+//! assert_eq!(cap.game_remaining, Duration::from_secs(900));
 //! ```
 
 mod budget;
@@ -56,7 +60,7 @@ mod tracker;
 #[cfg(test)]
 mod tests;
 
-pub use budget::{Decision, GcBudget, GcCap, MessageClass};
+pub use budget::{GcBudget, GcCap};
 pub use control::{
     ControlView, GameControlData, GamePhase, RobotInfo, SetPlay, State, TeamInfo,
     GAMECONTROLLER_DATA_PORT, GAMECONTROLLER_STRUCT_HEADER, GAMECONTROLLER_STRUCT_SIZE,

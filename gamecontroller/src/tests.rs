@@ -1,5 +1,5 @@
 //! Byte fixtures from the published header layout, round trips, property tests of the
-//! decoders on arbitrary bytes, the tracker's ordering and the budget's pacing.
+//! decoders on arbitrary bytes, the tracker's ordering and the budget's figures.
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -333,138 +333,43 @@ fn playing(budget: u16, secs_remaining: i16, first_half: bool) -> GameControlDat
     g
 }
 
+/// The figures the daemon's listener hands to `comms` (`driver::budget_figures`): the
+/// GC's budget less the margin, counted or not, and the game time left over the halves.
 #[test]
-fn the_budget_never_lets_a_frame_go_at_the_gcs_zero_or_within_its_margin() {
+fn the_gcs_figures_give_the_team_its_budget_less_the_margin_and_the_games_time_left() {
     let b = GcBudget::spl(5);
-    assert_eq!(b.margin, 14);
-    for budget in [0u16, 1, 14] {
-        let cap = b.cap(&playing(budget, 1, false), 12).unwrap();
-        for class in [MessageClass::Ordinary, MessageClass::Priority] {
-            assert_eq!(
-                b.decide(&cap, 0, secs(10), class),
-                Decision::Exhausted,
-                "{budget} left, {class:?}"
-            );
-        }
+    assert_eq!(b.margin, 14, "two frames per robot and four more");
+    for (budget, left) in [(0u16, 0u32), (14, 0), (15, 1), (950, 936)] {
+        let cap = b.cap(&playing(budget, 300, false), 12).unwrap();
+        assert_eq!(cap.team_left, left, "{budget} left by the GC");
+        assert_eq!(cap.message_budget, budget);
+        assert!(cap.counted, "Playing is counted");
     }
-    // 15 left, one over the margin: one priority frame at the end of the game, and what
-    // the team sent since the packet counts against it.
-    let cap = b.cap(&playing(15, 0, false), 12).unwrap();
     assert_eq!(
-        b.decide(&cap, 0, secs(0), MessageClass::Priority),
-        Decision::Send
+        b.cap(&playing(950, 300, false), 99),
+        None,
+        "not this team's game"
     );
-    assert_eq!(
-        b.decide(&cap, 1, secs(0), MessageClass::Priority),
-        Decision::Exhausted
-    );
-}
-
-#[test]
-fn the_pacing_clock_is_the_gcs_over_both_halves_and_the_break_costs_nothing() {
-    let b = GcBudget::spl(5);
-    // First half, 300 s left: 900 s of game to go, 900 messages on the line + reserve.
+    // First half, 300 s left: 900 s of game to go.
     let g = playing(920, 300, true);
     assert_eq!(b.game_remaining(&g), secs(900));
-    let cap = b.cap(&g, 12).unwrap();
-    assert_eq!(b.line(&cap, Duration::ZERO), 900);
-    assert_eq!(
-        b.decide(&cap, 0, secs(0), MessageClass::Ordinary),
-        Decision::Wait,
-        "906 left: at the line"
-    );
-    assert_eq!(
-        b.decide(&cap, 0, secs(0), MessageClass::Priority),
-        Decision::Send
-    );
-    // 20 s later the line has moved by 20 messages.
-    assert_eq!(
-        b.decide(&cap, 0, secs(20), MessageClass::Ordinary),
-        Decision::Send
-    );
-    // The half-time break: not counted, and the clock stands.
+    // Over time: none left of this half, never a negative time.
+    assert_eq!(b.game_remaining(&playing(920, -5, false)), secs(0));
+    // The half-time break is not counted, and the clock stands at the second half.
     let mut brk = playing(400, 0, true);
     brk.state = State::Finished;
     let cap = b.cap(&brk, 12).unwrap();
-    assert_eq!(
-        b.decide(&cap, 1000, secs(0), MessageClass::Ordinary),
-        Decision::Free
-    );
-    assert_eq!(b.line(&cap, secs(300)), 600, "the second half's 600 s");
-    // The penalty shoot-out is not counted either.
+    assert!(!cap.counted, "the break costs nothing");
+    assert_eq!(cap.game_remaining, secs(600), "the second half's 600 s");
+    // The penalty shoot-out is not counted and has no game time.
     let mut shoot = playing(3, 0, false);
     shoot.game_phase = GamePhase::PenaltyShoot;
-    assert_eq!(
-        b.decide(
-            &b.cap(&shoot, 12).unwrap(),
-            0,
-            secs(0),
-            MessageClass::Ordinary
-        ),
-        Decision::Free
-    );
-}
-
-#[test]
-fn a_robot_restarted_mid_game_paces_from_the_gcs_figures_and_extra_time_adds_its_share() {
-    let b = GcBudget::spl(5);
-    // Second half, 200 s left, the team spent down to 200 + margin + reserve: at the line.
-    let g = playing(200 + 14 + 10, 200, false);
-    let cap = b.cap(&g, 12).unwrap();
-    assert_eq!(
-        b.decide(&cap, 0, secs(0), MessageClass::Ordinary),
-        Decision::Wait
-    );
-    assert_eq!(
-        b.decide(&cap, 0, secs(2), MessageClass::Ordinary),
-        Decision::Send
-    );
-    // Two minutes of extra time: 120 messages and 120 s more; the same standing.
-    let extra = playing(200 + 120 + 14 + 10, 200 + 120, false);
-    let cap = b.cap(&extra, 12).unwrap();
-    assert_eq!(
-        b.decide(&cap, 0, secs(0), MessageClass::Ordinary),
-        Decision::Wait
-    );
-    assert_eq!(
-        b.decide(&cap, 0, secs(2), MessageClass::Ordinary),
-        Decision::Send
-    );
-}
-
-/// A whole game in steps of 100 ms, the GC publishing every 500 ms: a team that would
-/// send at every step spends at most the GC's budget, never at 0, and nearly all of it.
-#[test]
-fn a_greedy_team_under_the_gcs_pacing_is_never_illegal_and_spends_nearly_all() {
-    let b = GcBudget::spl(5);
-    let mut left: u16 = 1200;
-    let (mut illegal, mut spent) = (0u32, 0u32);
-    for first_half in [true, false] {
-        let mut published = (playing(left, 600, first_half), spent);
-        for step in 0..6000u32 {
-            if step % 5 == 0 {
-                let secs_remaining = (600 - step / 10) as i16;
-                published = (playing(left, secs_remaining, first_half), spent);
-            }
-            let cap = b.cap(&published.0, 12).unwrap();
-            let elapsed = Duration::from_millis(u64::from(step % 5) * 100);
-            let class = if step % 97 == 0 {
-                MessageClass::Priority
-            } else {
-                MessageClass::Ordinary
-            };
-            if b.decide(&cap, spent - published.1, elapsed, class)
-                .may_send()
-            {
-                illegal += u32::from(left == 0);
-                left = left.saturating_sub(1);
-                spent += 1;
-            }
-        }
-    }
-    assert_eq!(illegal, 0, "never sent at the GC's zero");
-    assert!(spent >= 1140, "95% of the budget used: {spent}");
-    assert!(left > 0, "the margin is kept: {left} left");
+    let cap = b.cap(&shoot, 12).unwrap();
+    assert!(!cap.counted && cap.game_remaining == secs(0));
+    // Two minutes of extra time: the GC's 120 messages and 120 s more reach the figures.
+    let extra = b.cap(&playing(20 + 120, 120, false), 12).unwrap();
+    assert_eq!(extra.team_left, 20 + 120 - 14);
+    assert_eq!(extra.game_remaining, secs(120));
 }
 
 proptest! {

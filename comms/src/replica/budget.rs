@@ -939,3 +939,7 @@ mod tests {
 #[cfg(test)]
 #[path = "budget_replica_tests.rs"]
 mod replica_tests;
+
+#[cfg(test)]
+#[path = "budget_gc_tests.rs"]
+mod gc_tests;
