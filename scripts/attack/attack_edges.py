@@ -7,15 +7,11 @@ import socket
 import threading
 import time
 
-from attack_gc import OTHER, TEAM, Gc, gc_stats, rgme
+from attack_gc import OTHER, TEAM, Gc, gc_stats, rgme, start
+from attack_relay import daemon
 from harness import Daemon, Relay, check, free_port, scratch_group, seeded
 
 LIMIT = 4096  # the relay's longest line, without its terminator
-
-
-def daemon(binary, rng, robot=4, extra=()):
-    group, port = scratch_group(rng)
-    return Daemon(binary, robot, ["--group", "%s:%d" % (group, port)], extra)
 
 
 def edge_line(length, fill):
@@ -365,12 +361,7 @@ def gc_stale_storm(binary, seed, log, long=False):
     number, for a GC restarted on another machine: a storm without the GC's packets
     lasts no longer than that.)"""
     rng = seeded(seed, "gc_stale_storm")
-    group, port = scratch_group(rng)
-    gc_port = free_port(socket.SOCK_DGRAM)
-    gc = Gc(("127.0.0.1", gc_port))
-    d = Daemon(binary, 1, ["--group", "%s:%d" % (group, port), "--team", str(TEAM)],
-               ["--budget", "spl", "--gc-listen", "127.0.0.1:%d" % gc_port,
-                "--gc-status-port", str(gc.status_port)])
+    d, gc = start(binary, rng)
     try:
         c = d.client()
         last = rng.randrange(1, 256)
