@@ -1,0 +1,334 @@
+//! The GameController's loose ends on real sockets: real `huddle daemon` processes on
+//! loopback, a scripted GC sending RGme by unicast to the daemon's `--gc-listen` port, an
+//! RGrt receiver on the `--gc-status-port`, and (where frames are counted) the daemon's
+//! own frames counted on the wire by the test: the daemon runs `--transport unicast` with
+//! the test's socket as its one `--peer`.
+//!
+//! - The status packet's `ballAge` is the team layer's ball age (`age_s` of
+//!   `local.var.team.ball` plus the entry's age), −1 before any ball: a ball seen once
+//!   ages in the packets as it ages in the layer.
+//! - A GC that goes quiet leaves its last figure in force: the daemon, pushed to send, sends
+//!   no more than that figure allows, however long the silence.
+//!
+//! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
+//! own figures, and on frame counts the GC's figures bound.
+
+#![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
+
+mod daemon_support;
+
+use std::net::UdpSocket;
+use std::time::{Duration, Instant};
+
+use daemon_support::{free_tcp_port, Client, Daemon};
+use gamecontroller::{GameControlData, GcBudget, State, StatusMessage};
+
+/// The status period (`GameControllerConfig::new`: 750 ms): the tolerance of an age
+/// compared across a packet and a read of the blackboard.
+const STATUS_PERIOD_S: f32 = 0.75;
+
+/// The margin the SPL budget keeps short of the GC's 0 for a team of five (the daemon's
+/// default `--team-size`).
+fn margin() -> u64 {
+    u64::from(GcBudget::spl(5).margin)
+}
+
+struct ScriptedGc {
+    socket: UdpSocket,
+    to: String,
+    game: GameControlData,
+}
+
+impl ScriptedGc {
+    /// Team 12 against 34, sending to the daemon's GC port `port`.
+    fn new(port: u16) -> ScriptedGc {
+        ScriptedGc {
+            socket: UdpSocket::bind("127.0.0.1:0").unwrap(),
+            to: format!("127.0.0.1:{port}"),
+            game: GameControlData::new([12, 34]),
+        }
+    }
+
+    /// Sends the game as it stands, numbered one after the last.
+    fn send(&mut self) {
+        self.game.packet_number = self.game.packet_number.wrapping_add(1);
+        self.socket.send_to(&self.game.encode(), &self.to).unwrap();
+    }
+
+    fn set_budget(&mut self, left: u16) {
+        self.game.team_mut(12).unwrap().message_budget = left;
+    }
+}
+
+/// A UDP port free on 127.0.0.1 right now (the GC's port for a daemon).
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The daemon's one unicast peer: every frame it sends arrives here, to be counted.
+struct Wire {
+    socket: UdpSocket,
+    frames: u64,
+}
+
+impl Wire {
+    /// Bound on 127.0.0.2 (the daemon binds the same port on 127.0.0.1).
+    fn new() -> Wire {
+        let socket = UdpSocket::bind("127.0.0.2:0").expect("bind 127.0.0.2");
+        socket.set_nonblocking(true).unwrap();
+        Wire { socket, frames: 0 }
+    }
+
+    fn port(&self) -> u16 {
+        self.socket.local_addr().unwrap().port()
+    }
+
+    /// Counts what arrived since the last call; the total so far.
+    fn drain(&mut self) -> u64 {
+        let mut buf = [0u8; 2048];
+        while let Ok((_, from)) = self.socket.recv_from(&mut buf) {
+            // Only the daemon sends to this port; a stray would be a test bug.
+            assert_eq!(from.ip().to_string(), "127.0.0.1", "a frame from {from}");
+            self.frames += 1;
+        }
+        self.frames
+    }
+}
+
+/// Robot 1 of team 12 with the GC listener on `gc_port` (status packets to
+/// `status_port` on 127.0.0.1) and `extra` flags, sending by unicast to `wire` only.
+fn daemon(
+    wire: &Wire,
+    gc_port: u16,
+    status_port: u16,
+    extra: &[&str],
+) -> (Daemon, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let port = wire.port().to_string();
+    let peer = format!("127.0.0.2:{port}");
+    let net = [
+        "--transport",
+        "unicast",
+        "--port",
+        &port,
+        "--iface",
+        "127.0.0.1",
+        "--peer",
+        &peer,
+    ];
+    let listen = format!("127.0.0.1:{gc_port}");
+    let status = status_port.to_string();
+    let mut args = vec![
+        "--team",
+        "12",
+        "--gamecontroller",
+        "--gc-listen",
+        &listen,
+        "--gc-status-port",
+        &status,
+    ];
+    args.extend_from_slice(extra);
+    let d = Daemon::start_on(1, &net, free_tcp_port(), &args, dir.path());
+    (d, dir)
+}
+
+/// The floats of a `VAL key floats [...]` answer (empty for anything else).
+fn floats(answer: &str) -> Vec<f32> {
+    let Some(b) = comms::relay::Binding::parse(answer) else {
+        return Vec::new();
+    };
+    b.value
+        .trim_matches(['[', ']'])
+        .split(',')
+        .filter_map(|f| f.trim().parse().ok())
+        .collect()
+}
+
+/// The team layer's own figure for its ball's age now: `age_s` (the 9th float of
+/// `local.var.team.ball`) plus the entry's age; `None` while it has no ball.
+fn layer_ball_age(c: &mut Client) -> Option<f32> {
+    let answer = c.ask("GETV local.var.team.ball");
+    let v = floats(&answer);
+    let age_ms = comms::relay::Binding::parse(&answer)?.age_ms;
+    (v.len() >= 9).then(|| v[8] + age_ms as f32 / 1000.0)
+}
+
+#[test]
+fn the_status_packets_ball_age_is_the_team_layers_minus_one_before_any_ball() {
+    // Scenario: robot 1 knows its pose; the GC (Playing) is heard twice a second, so the
+    // daemon sends its status. Before any ball every packet says −1. Then the program
+    // writes ONE sighting, 1.5 m ahead, and nothing more: the packets' ballAge rises from
+    // packet to packet, and each agrees with the layer's own age of its ball (read from
+    // the blackboard right after the packet came) within one status period.
+    let wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    status
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(&wire, gc_port, status.local_addr().unwrap().port(), &[]);
+    let mut c = d.client();
+    let pose = "SETV local.var.robot.pose [0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
+    assert!(c.ask(pose).starts_with("OK"));
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Playing;
+    gc.game.secs_remaining = 500;
+
+    // Status packets for a while: (ballAge, the layer's figure just after), in order.
+    let listen = |gc: &mut ScriptedGc, c: &mut Client, packets: usize| {
+        let mut got = Vec::new();
+        let mut next_gc = Instant::now();
+        let give_up = Instant::now() + Duration::from_secs(30);
+        let mut buf = [0u8; 64];
+        while got.len() < packets {
+            assert!(
+                Instant::now() < give_up,
+                "status packets stopped coming: {got:?}"
+            );
+            if Instant::now() >= next_gc {
+                gc.send();
+                next_gc += Duration::from_millis(500);
+            }
+            let Ok((n, _)) = status.recv_from(&mut buf) else {
+                continue;
+            };
+            let msg = StatusMessage::decode(&buf[..n]).expect("a valid RGrt");
+            got.push((msg.ball_age, layer_ball_age(c)));
+        }
+        got
+    };
+
+    let before = listen(&mut gc, &mut c, 3);
+    for (age, layer) in &before {
+        assert_eq!(
+            (*age, *layer),
+            (-1.0, None),
+            "no ball seen yet: ballAge -1 and no team ball ({before:?})"
+        );
+    }
+
+    assert!(c
+        .ask("SETV local.var.robot.ball [1.5, 0.0, 0.01, 0.0, 0.01]")
+        .starts_with("OK"));
+    // Packets computed before the layer's tick took the sighting may still say -1.
+    let mut after = listen(&mut gc, &mut c, 8);
+    let first_ball = after
+        .iter()
+        .position(|(age, _)| *age >= 0.0)
+        .expect("a packet with the ball");
+    after.drain(..first_ball);
+    assert!(
+        after.len() >= 5,
+        "at least five packets with the ball: {after:?}"
+    );
+    for (i, (age, layer)) in after.iter().enumerate() {
+        let layer = layer.unwrap_or_else(|| panic!("the layer lost its ball: {after:?}"));
+        assert!(
+            (age - layer).abs() <= STATUS_PERIOD_S,
+            "packet {i}: ballAge {age} s, the layer's age of its ball {layer} s: \
+             they must agree within a status period ({after:?})"
+        );
+        if i > 0 {
+            assert!(
+                *age > after[i - 1].0,
+                "packet {i}: the ball seen once ages from packet to packet ({after:?})"
+            );
+        }
+    }
+    eprintln!("(ballAge s, the layer's age s) per status packet: {after:?}");
+    let (first, last) = (after[0], after[after.len() - 1]);
+    let (grew, layer_grew) = (last.0 - first.0, last.1.unwrap() - first.1.unwrap());
+    assert!(
+        (grew - layer_grew).abs() <= STATUS_PERIOD_S,
+        "ballAge grew {grew} s over the packets, the layer's age {layer_grew} s ({after:?})"
+    );
+}
+
+#[test]
+fn a_gc_gone_quiet_leaves_its_last_figure_in_force_on_the_wire() {
+    // Scenario: robot 1 under the SPL budget, its program writing a value every 20 ms
+    // (and the daemon's heartbeats: it always has something to send). The GC says
+    // Playing, 2 s left in the second half (the pacing line is open: it is the figure
+    // that binds), and `margin + 3` messages left: the team may send 3 more. It keeps
+    // saying so, less what it counted on the wire, for 1.5 s, then goes quiet for longer
+    // than the listener's `lost_after` (5 s) and then some. Counted on the wire: from the
+    // GC's first packet on, the daemon sends at most the 3, and after its last packet at
+    // most what that one allowed. (Before the fix a silent GC's figure was forgotten
+    // after 5 s and the daemon paced by its own share again: frames at the GC's 0.)
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(
+        &wire,
+        gc_port,
+        status.local_addr().unwrap().port(),
+        &["--budget", "spl"],
+    );
+    let mut c = d.client();
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Playing;
+    gc.game.first_half = false;
+    gc.game.secs_remaining = 2;
+    let start_left = margin() + 3;
+    gc.set_budget(start_left as u16);
+
+    let mut k = 0;
+    let mut write = |c: &mut Client| {
+        let answer = c.ask(&format!("SETV *.var.x {k}"));
+        assert!(answer.starts_with("OK"), "{answer:?}");
+        k += 1;
+        std::thread::sleep(Duration::from_millis(20));
+    };
+
+    // Before the GC: whatever the daemon's own pacing sent.
+    let before = wire.drain();
+    gc.send();
+    c.wait_for("local.var.gc.budget", Duration::from_secs(5), |a| {
+        a.contains(&format!(" {start_left} "))
+    });
+    // Heard: its figure every 500 ms, less the frames it counted.
+    let heard_until = Instant::now() + Duration::from_millis(1500);
+    let mut next_gc = Instant::now() + Duration::from_millis(500);
+    let mut last_left = start_left;
+    while Instant::now() < heard_until {
+        write(&mut c);
+        if Instant::now() >= next_gc {
+            last_left = start_left.saturating_sub(wire.drain() - before);
+            gc.set_budget(last_left as u16);
+            gc.send();
+            next_gc += Duration::from_millis(500);
+        }
+    }
+    let at_last_packet = wire.drain();
+    // Quiet: 5 s until the listener calls the GC lost, 4 s more.
+    let quiet_until = Instant::now() + Duration::from_secs(9);
+    while Instant::now() < quiet_until {
+        write(&mut c);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let end = wire.drain();
+    let (since_first, in_silence) = (end - before, end - at_last_packet);
+    eprintln!(
+        "frames on the wire: {before} before the GC, {since_first} since its first packet \
+         ({start_left} left), {in_silence} in its silence (last figure {last_left})"
+    );
+    assert!(
+        since_first >= 1,
+        "the daemon was pushed and the figure let 3 go: it sent some ({since_first})"
+    );
+    assert!(
+        since_first + margin() <= start_left,
+        "the GC said {start_left} left (margin {}): {since_first} frames on the wire since",
+        margin()
+    );
+    assert!(
+        in_silence + margin() <= last_left,
+        "the GC's last figure was {last_left} (margin {}): {in_silence} frames on the wire \
+         in its 9 s of silence",
+        margin()
+    );
+}
