@@ -9,6 +9,8 @@
 //!   ages in the packets as it ages in the layer.
 //! - A GC that goes quiet leaves its last figure in force: the daemon, pushed to send, sends
 //!   no more than that figure allows, however long the silence.
+//! - A relay client's `CLOK` cannot move the game clock the budget paces by while the GC's
+//!   figures are in force (`ERR 424`, counted).
 //!
 //! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
 //! own figures, and on frame counts the GC's figures bound.
@@ -330,5 +332,60 @@ fn a_gc_gone_quiet_leaves_its_last_figure_in_force_on_the_wire() {
         "the GC's last figure was {last_left} (margin {}): {in_silence} frames on the wire \
          in its 9 s of silence",
         margin()
+    );
+}
+
+#[test]
+fn a_clients_clok_is_refused_while_the_gcs_figures_set_the_clock() {
+    // Scenario: robot 1 under the SPL budget. Before any GC, `CLOK` sets the game clock
+    // (OK). The GC says Playing, 300 s left in the second half, 30 messages left (16 to
+    // spend after the margin): the pacing line keeps ~296 for the rest of the half, so
+    // nothing ordinary goes. A client then says `CLOK 1` (one second left): that would
+    // open the line until the GC's next packet, and the 16 would go at once. It is
+    // refused (`ERR 424`), counted, and in the GC's silence that follows (shorter than
+    // its `lost_after`) nothing goes on the wire while the program writes.
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(
+        &wire,
+        gc_port,
+        status.local_addr().unwrap().port(),
+        &["--budget", "spl", "--refresh", "50ms"],
+    );
+    let mut c = d.client();
+    let answer = c.ask("CLOK 1200");
+    assert_eq!(answer, "OK", "no GC heard: the client's clock is taken");
+
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Playing;
+    gc.game.first_half = false;
+    gc.game.secs_remaining = 300;
+    gc.set_budget(30);
+    gc.send();
+    c.wait_for("local.var.gc.budget", Duration::from_secs(5), |a| {
+        a.contains(" 30 ")
+    });
+    let before = wire.drain();
+    let answer = c.ask("CLOK 1");
+    assert!(
+        answer.starts_with("ERR 424 "),
+        "the GC's figures set the clock: {answer:?}"
+    );
+    for k in 0..75 {
+        let answer = c.ask(&format!("SETV *.var.x {k}"));
+        assert!(answer.starts_with("OK"), "{answer:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let sent = wire.drain() - before;
+    assert_eq!(
+        sent, 0,
+        "the GC's clock (300 s left) holds the line: {sent} frames went after the CLOK"
+    );
+    c.wait_for(
+        "local.var.huddle.stats.relay_clock_refused",
+        Duration::from_secs(3),
+        |a| a.contains(" 1 "),
     );
 }

@@ -37,7 +37,11 @@
 //!
 //! With a [`GcBudget`], each packet also feeds the replica's budget
 //! ([`Handle::set_external_budget`]): the game clock over the halves and the GC's
-//! messages left less the margin, which no frame goes beyond. Without a packet for
+//! messages left less the margin, which no frame goes beyond. The clock is the GC's from
+//! its first packet on: a relay client's `CLOK` gets `ERR 424` (counted in
+//! `local.var.huddle.stats.relay_clock_refused`); it used to move the pacing line until
+//! the GC's next packet (a `CLOK 1` with 300 s left let the team's last 16 frames go at
+//! once, `tests/daemon_gc_wire.rs`). Without a packet for
 //! [`GameControllerConfig::lost_after`] the log says so loudly, and the GC's last figure
 //! stays in force: frames sent since (this robot's, counted and free, and the teammates'
 //! heard) are taken off it, so a silence never unlocks more than the GC last allowed.

@@ -95,6 +95,8 @@ pub(crate) struct GuardedBoard<'a> {
     pub(crate) read_only: &'a [Weak<ReadOnlySlot>],
     /// Writes refused because the key is the daemon's own.
     pub(crate) refused: &'a mut u64,
+    /// `CLOK`s refused because the GameController sets the game clock (`ERR 424`).
+    pub(crate) clock_refused: &'a mut u64,
 }
 
 impl GuardedBoard<'_> {
@@ -147,8 +149,14 @@ impl Board for GuardedBoard<'_> {
         Board::set_priority(&mut *self.replica, now, key, value)
     }
 
-    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
-        Board::set_game_clock(&mut *self.replica, now, remaining);
+    fn set_game_clock(
+        &mut self,
+        now: Instant,
+        remaining: std::time::Duration,
+    ) -> Result<(), Rejected> {
+        Board::set_game_clock(&mut *self.replica, now, remaining).inspect_err(|_| {
+            *self.clock_refused += 1;
+        })
     }
 
     fn departed(&self, owner: u8) -> bool {

@@ -216,6 +216,9 @@ pub struct IoStats {
     /// [`crate::Handle::reserve`]); mirrored to
     /// `local.var.huddle.stats.relay_read_only_refused`.
     pub relay_read_only_refused: u64,
+    /// Relay clients' `CLOK`s refused because a GameController's figures set the game
+    /// clock (`ERR 424`); mirrored to `local.var.huddle.stats.relay_clock_refused`.
+    pub relay_clock_refused: u64,
     /// Datagrams an [`Impairment`] lost (or that found its hold queue full); mirrored to
     /// `local.var.huddle.stats.impair_dropped`.
     pub impair_dropped: u64,
@@ -226,12 +229,13 @@ pub struct IoStats {
 impl IoStats {
     /// Every count of something dropped or refused, by the name it has under
     /// `local.var.huddle.stats.` (and in `huddle stats`).
-    pub fn dropped(&self) -> [(&'static str, u64); 7] {
+    pub fn dropped(&self) -> [(&'static str, u64); 8] {
         [
             ("unicast_refused", self.unicast_refused),
             ("relay_lost_suppressed", self.relay_lost_suppressed),
             ("relay_cutoffs", self.relay_cutoffs),
             ("relay_read_only_refused", self.relay_read_only_refused),
+            ("relay_clock_refused", self.relay_clock_refused),
             ("send_backlog_drops", self.send_backlog_drops),
             ("send_errors", self.send_errors),
             ("impair_dropped", self.impair_dropped),
@@ -244,7 +248,7 @@ impl IoStats {
     /// driver calls this at every timer); then each key is written if it differs. The
     /// replica mirrors its own counters at its refresh; the driver and
     /// [`crate::Session`] call this at their timers.
-    pub(crate) fn mirror(&self, last: &mut Option<[u64; 7]>, replica: &mut Replica, now: Instant) {
+    pub(crate) fn mirror(&self, last: &mut Option<[u64; 8]>, replica: &mut Replica, now: Instant) {
         let counts = self.dropped().map(|(_, n)| n);
         if *last == Some(counts) {
             return;
@@ -297,7 +301,7 @@ pub(crate) struct Inner {
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
     /// The counts [`IoStats::mirror`] last wrote.
-    pub(crate) io_mirrored: Option<[u64; 7]>,
+    pub(crate) io_mirrored: Option<[u64; 8]>,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
@@ -649,6 +653,7 @@ impl Inner {
             guards: &self.guards,
             read_only: &self.read_only,
             refused: &mut self.io.relay_read_only_refused,
+            clock_refused: &mut self.io.relay_clock_refused,
         };
         slot.session.handle_input(now, bytes, &mut board);
         if slot.session.poll_timeout() != timer_before {

@@ -394,6 +394,7 @@ pub fn stats(args: StatsArgs) -> Result<()> {
         "relay_lost_suppressed",
         "relay_cutoffs",
         "relay_read_only_refused",
+        "relay_clock_refused",
         "send_backlog_drops",
         "send_errors",
         "impair_dropped",

@@ -31,9 +31,15 @@ pub trait Board {
         self.set(now, key, value)
     }
     /// The game clock a league budget paces itself over: `remaining` of play left. A
-    /// board without a budget has nothing to pace.
-    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
+    /// board without a budget has nothing to pace. Refused (`ERR 424`) while the
+    /// league's referee system sets the clock (an [`crate::ExternalCap`] is in force).
+    fn set_game_clock(
+        &mut self,
+        now: Instant,
+        remaining: std::time::Duration,
+    ) -> Result<(), Rejected> {
         let _ = (now, remaining);
+        Ok(())
     }
     /// Whether robot `owner` is departed (its values are old news): replies about its
     /// bindings carry the `departed` flag. A bare blackboard knows of no departures.
@@ -136,11 +142,59 @@ impl Board for Replica {
         Replica::set_priority(self, now, key, value).map_err(Rejected::from)
     }
 
-    fn set_game_clock(&mut self, now: Instant, remaining: std::time::Duration) {
+    fn set_game_clock(
+        &mut self,
+        now: Instant,
+        remaining: std::time::Duration,
+    ) -> Result<(), Rejected> {
+        // The referee system's figures bring their own clock (its `secsRemaining` over
+        // the halves), fed with every figure: a client's clock would move the pacing line
+        // the figures are paced by until the next figure came, and a clock run ahead
+        // opens the line early. The referee's clock is the authority while its figures
+        // are (from the first on: its last figure stays in force through a silence).
+        if self.has_external_budget() {
+            return Err(Rejected::new(
+                ErrCode::ClockOwned,
+                "the game clock is the GameController's while its figures are in force \
+                 (the budget paces by its secsRemaining); CLOK is refused",
+            ));
+        }
         Replica::set_game_clock(self, now, remaining);
+        Ok(())
     }
 
     fn departed(&self, owner: u8) -> bool {
         self.is_departed(owner)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+    use crate::{BudgetSpec, ExternalCap, ReplicaConfig};
+
+    #[test]
+    fn a_clients_clock_is_refused_while_the_referees_figures_are_in_force() {
+        // Scenario: a replica under the SPL budget takes a client's clock until the
+        // referee system's first figure; from then on the clock is the referee's (its
+        // figures bring it) and a client's is refused with `ERR 424`, the clock unmoved.
+        let at = Instant::from_micros;
+        let cfg = ReplicaConfig::new(1, 1).with_budget(&BudgetSpec::SPL, 5);
+        let mut r = Replica::new(cfg, 7, at(0)).expect("a replica");
+        assert!(Board::set_game_clock(&mut r, at(0), Duration::from_secs(600)).is_ok());
+        r.set_game_clock(at(0), Duration::from_secs(300));
+        r.set_external_budget(Some(ExternalCap {
+            counted: true,
+            team_left: 16,
+            rate_per_s: 1.0,
+            margin: 14,
+        }));
+        let headroom = r.budget_headroom();
+        let refused = Board::set_game_clock(&mut r, at(0), Duration::from_secs(1))
+            .expect_err("the referee's clock stands");
+        assert_eq!(refused.code, ErrCode::ClockOwned, "{}", refused.text);
+        assert_eq!(r.budget_headroom(), headroom, "the clock did not move");
     }
 }

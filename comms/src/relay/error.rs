@@ -20,6 +20,7 @@ use std::fmt;
 /// | 421 | write refused: wrong kind of key (a talk queue has no value to get or set; only own queues can be posted to) |
 /// | 422 | write refused: the value does not fit in one frame |
 /// | 423 | write refused: the key is the daemon's own, read-only to clients (`local.var.team.*` while its team layer runs, `local.var.gc.*` while its GameController listener runs, `local.var.huddle.*`: its counters) |
+/// | 424 | `CLOK` refused: the budget's game clock follows the league's referee system (a GameController's figures are in force on this robot: the daemon's listener heard one, and its last figure stays in force through a silence); the clock is its, not a client's |
 /// | 429 | limit reached: too many watch patterns, talk queues, or keys (`SETV` of a new `local` key beyond the local-key limit, or of a new own global beyond the per-robot limit) |
 /// | 430 | post refused: the talk queue's retention buffer is full of messages teammates may still need; retry later |
 /// | 503 | not available here (e.g. posting without a replica) |
@@ -53,6 +54,8 @@ pub enum ErrCode {
     TooLarge,
     /// 423
     ReadOnly,
+    /// 424
+    ClockOwned,
     /// 429
     TooMany,
     /// 430
@@ -79,6 +82,7 @@ impl ErrCode {
             ErrCode::WrongKind => 421,
             ErrCode::TooLarge => 422,
             ErrCode::ReadOnly => 423,
+            ErrCode::ClockOwned => 424,
             ErrCode::TooMany => 429,
             ErrCode::QueueFull => 430,
             ErrCode::Unavailable => 503,

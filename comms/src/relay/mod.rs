@@ -65,6 +65,12 @@
 //!   daemon --no-team-layer`, no listener) the first two are ordinary local keys, for a
 //!   program that runs its own. The daemon counts refusals in
 //!   `local.var.huddle.stats.relay_read_only_refused`.
+//! - `CLOK secs` sets the game clock a league budget paces over, unless the league's
+//!   referee system sets it: while a GameController's figures are in force on the robot
+//!   (the daemon's listener heard one; its last figure stays in force through a
+//!   silence), `CLOK` gets `ERR 424` and the clock is left as the GC's packets set it
+//!   (a client's clock would move the pacing line until the GC's next packet). The
+//!   daemon counts refusals in `local.var.huddle.stats.relay_clock_refused`.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).

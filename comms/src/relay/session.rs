@@ -297,8 +297,10 @@ impl Session {
                 }
             }
             Command::GameClock(secs) => {
-                board.set_game_clock(now, std::time::Duration::from_secs_f64(secs));
-                self.push(format_args!("OK"));
+                match board.set_game_clock(now, std::time::Duration::from_secs_f64(secs)) {
+                    Ok(()) => self.push(format_args!("OK")),
+                    Err(rejected) => self.push_err(&rejected),
+                }
             }
             Command::AddWatch(pattern) => {
                 if self.watches.contains(&pattern) {

@@ -359,6 +359,12 @@ impl Replica {
         }
     }
 
+    /// Whether the referee system's figures are in force ([`Replica::set_external_budget`]
+    /// gave one, and no `None` since).
+    pub fn has_external_budget(&self) -> bool {
+        self.budget.as_ref().is_some_and(|b| b.has_external())
+    }
+
     /// Whether this robot's value at `key` changed and waits for a frame (a budget's
     /// pacing holds it): a caller that wants the newest value to go, not the one it had
     /// when it decided to send, sets it again until this is false.
