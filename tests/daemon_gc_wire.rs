@@ -11,6 +11,8 @@
 //!   no more than that figure allows, however long the silence.
 //! - A relay client's `CLOK` cannot move the game clock the budget paces by while the GC's
 //!   figures are in force (`ERR 424`, counted).
+//! - A daemon killed mid-game and started again keeps to the GC's figures across both
+//!   lives (#34: "a daemon restarted mid-game resumes from the GC's figures").
 //!
 //! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
 //! own figures, and on frame counts the GC's figures bound.
@@ -387,5 +389,97 @@ fn a_clients_clok_is_refused_while_the_gcs_figures_set_the_clock() {
         "local.var.huddle.stats.relay_clock_refused",
         Duration::from_secs(3),
         |a| a.contains(" 1 "),
+    );
+}
+
+#[test]
+fn a_daemon_restarted_mid_game_keeps_to_the_gcs_figures_on_the_wire() {
+    // Scenario: robot 1 under the SPL budget, its program writing every 20 ms; the GC says
+    // Playing, the last 4 s of the second half running down (the pacing line opens for
+    // the last frames in the last 2 s: then the figure binds) and `margin + 3` left, and
+    // counts what it sees on the wire. The daemon spends what the
+    // figure allows and is killed (SIGKILL, a crash); a fresh daemon of the same robot
+    // starts with no memory of it while the GC goes on saying what is left. Counted on
+    // the wire over both lives: the team sends the 3, and the new life nothing once it
+    // has the GC's figure (before it, only its start frame: a fresh replica's own
+    // accounting sends one at once, out of the margin).
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let status_port = status.local_addr().unwrap().port();
+    let gc_port = free_udp_port();
+    let (mut first, dir) = daemon(&wire, gc_port, status_port, &["--budget", "spl"]);
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Playing;
+    gc.game.first_half = false;
+    gc.game.secs_remaining = 4;
+    let start_left = margin() + 3;
+    gc.set_budget(start_left as u16);
+
+    let before = wire.drain();
+    let kick_off = Instant::now();
+    gc.send();
+    // One life: pushed to send while the GC counts, for `d`.
+    let live = |c: &mut Client, gc: &mut ScriptedGc, wire: &mut Wire, d: Duration| {
+        let until = Instant::now() + d;
+        let mut next_gc = Instant::now() + Duration::from_millis(500);
+        let mut k = 0;
+        while Instant::now() < until {
+            let answer = c.ask(&format!("SETV *.var.x {k}"));
+            assert!(answer.starts_with("OK"), "{answer:?}");
+            k += 1;
+            std::thread::sleep(Duration::from_millis(20));
+            if Instant::now() >= next_gc {
+                let left = start_left.saturating_sub(wire.drain() - before);
+                gc.set_budget(left as u16);
+                let played = kick_off.elapsed().as_secs();
+                gc.game.secs_remaining = 4i16.saturating_sub(played as i16).max(0);
+                gc.send();
+                next_gc += Duration::from_millis(500);
+            }
+        }
+    };
+    let mut c = first.client();
+    c.wait_for("local.var.gc.budget", Duration::from_secs(5), |a| {
+        a.contains(&format!(" {start_left} "))
+    });
+    live(&mut c, &mut gc, &mut wire, Duration::from_millis(4500));
+    first.kill();
+    let first_life = wire.drain() - before;
+
+    // The same robot again, while the GC keeps sending.
+    let (second, _dir2) = {
+        let d = dir; // the first life's config dir is dropped with it
+        drop(d);
+        daemon(&wire, gc_port, status_port, &["--budget", "spl"])
+    };
+    let mut c = second.client();
+    gc.send();
+    let left = start_left.saturating_sub(wire.drain() - before);
+    c.wait_for("local.var.gc.budget", Duration::from_secs(5), |a| {
+        a.contains(&format!(" {left} ")) || a.contains(&format!(" {} ", left.saturating_sub(1)))
+    });
+    let at_figure = wire.drain();
+    live(&mut c, &mut gc, &mut wire, Duration::from_secs(3));
+    std::thread::sleep(Duration::from_millis(300));
+    let end = wire.drain();
+    let (second_before_figure, second_after) = (at_figure - before - first_life, end - at_figure);
+    eprintln!(
+        "frames on the wire: first life {first_life} (the GC said {start_left} left), second \
+         life {second_before_figure} before its first figure and {second_after} after"
+    );
+    assert!(
+        first_life + margin() <= start_left,
+        "the first life sent {first_life} with {start_left} left (margin {})",
+        margin()
+    );
+    assert!(
+        second_before_figure <= 1,
+        "before its first figure the new life sends its start frame at most: \
+         {second_before_figure}"
+    );
+    assert_eq!(
+        second_after, 0,
+        "the new life has the GC's figure (nothing left after the margin): it sent \
+         {second_after} frames"
     );
 }
