@@ -85,6 +85,10 @@
 // definite, an age outside 0..=10 s.
 #define HUDDLE_E_VALUE 14
 
+// `huddle_node_set_game_clock` while the node's GameController listener has heard the
+// GC: the GC's `secsRemaining` is the budget's clock (the relay's `ERR 424`).
+#define HUDDLE_E_CLOCK 15
+
 // A teammate's talk message, in order, exactly once: `robot` sent message `seq` of
 // queue `name` (`plan` for `n.talk.plan`), `type` and `value` hold it.
 #define HUDDLE_EVENT_TALK_DELIVERED 1
@@ -424,7 +428,8 @@ int huddle_node_set_priority_floats(huddle_node *node,
 
 // Tells the budget that `remaining_ms` of play are left now (the GameController's
 // `secsRemaining`): it paces the rest of its messages over that. Without a budget it
-// does nothing. Returns 0, or -1.
+// does nothing. Returns 0, or -1 (`HUDDLE_E_CLOCK`: the node's GameController listener
+// has heard the GC, whose clock the budget follows; nothing changed).
 //
 // Thread safety: may be called from any thread, concurrently with any node function.
 //

@@ -125,7 +125,8 @@ pub unsafe extern "C" fn huddle_node_set_priority_floats(
 
 /// Tells the budget that `remaining_ms` of play are left now (the GameController's
 /// `secsRemaining`): it paces the rest of its messages over that. Without a budget it
-/// does nothing. Returns 0, or -1.
+/// does nothing. Returns 0, or -1 (`HUDDLE_E_CLOCK`: the node's GameController listener
+/// has heard the GC, whose clock the budget follows; nothing changed).
 ///
 /// Thread safety: may be called from any thread, concurrently with any node function.
 ///
@@ -140,11 +141,23 @@ pub unsafe extern "C" fn huddle_node_set_game_clock(
 ) -> c_int {
     let body = || {
         let node = lookup(node)?;
-        node.with_state(|state, now| {
-            state
-                .replica
-                .set_game_clock(now, Duration::from_millis(remaining_ms));
+        let taken = node.with_state(|state, now| {
+            // The GC's figures bring their clock: a program's would move the pacing line
+            // until the GC's next packet (as a relay client's `CLOK`, refused there too).
+            let taken = !state.replica.has_external_budget();
+            if taken {
+                state
+                    .replica
+                    .set_game_clock(now, Duration::from_millis(remaining_ms));
+            }
+            taken
         })?;
+        if !taken {
+            return Err(Failure::new(
+                HUDDLE_E_CLOCK,
+                "the game clock is the GameController's while its figures are in force",
+            ));
+        }
         Ok(0)
     };
     // SAFETY: the caller promises `err` is NULL or writable.

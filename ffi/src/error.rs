@@ -40,6 +40,9 @@ pub const HUDDLE_E_TYPE: i32 = 13;
 /// A value a typed call refuses: NaN or infinity, a covariance that is not positive
 /// definite, an age outside 0..=10 s.
 pub const HUDDLE_E_VALUE: i32 = 14;
+/// `huddle_node_set_game_clock` while the node's GameController listener has heard the
+/// GC: the GC's `secsRemaining` is the budget's clock (the relay's `ERR 424`).
+pub const HUDDLE_E_CLOCK: i32 = 15;
 
 /// What went wrong in a call: a `HUDDLE_E_*` code (0 when the call succeeded) and a
 /// NUL-terminated UTF-8 message, cut to fit. Every function taking a `huddle_error *`

@@ -126,6 +126,16 @@ fn a_scripted_gamecontroller_drives_a_nodes_keys_status_and_budget() {
         Some("\"playing\"")
     );
 
+    // The GC's clock is the budget's: the program's is refused, as the relay's `CLOK`.
+    // SAFETY: a live node, a writable error.
+    let rc = unsafe { huddle_node_set_game_clock(node, 1000, &mut err) };
+    assert_eq!(
+        (rc, err.code),
+        (-1, HUDDLE_E_CLOCK),
+        "{}",
+        text(&err.message)
+    );
+
     // The program's pose reaches the GC in a status packet.
     let cov = [0.01, 0.0, 0.0, 0.01, 0.0, 0.001];
     // SAFETY: a live node, 6 readable doubles, a writable error.
