@@ -72,6 +72,13 @@ const STEADY_EDGE: f64 = 0.1;
 const MEDIAN_PRESENT: f64 = 1.3;
 /// Least probability, under a steady tone, of as many dropouts as a vote tone shows.
 const P_DROPOUTS: f64 = 1e-3;
+/// Share of its median window below which a window of a loud vote tone counts as a
+/// dip (−10 dB; see [`Decoder::votes_sound_steadily`]). A steady tone of excess 20 falls
+/// that low in a window about once in 10⁵ (below excess 10 the cut is the noise mean); a
+/// note with tremolo, or a warbling whistle, does so every other window while its median
+/// stays high (everything dry, seed 13050: a false message at 1153.8 s whose data tone
+/// read 374, 39, 235, 232, 75, 379, 25, 497, 28 … in successive windows).
+const DEEP_SHARE: f64 = 0.1;
 /// Least mean excess per window (noise mean 1, 6 dB) of a tone whose median window is
 /// held to its mean (see [`Decoder::votes_sound_steadily`]): a steady tone of excess 4
 /// has a median window of about 4.5, with a spread of about 1 over a dozen windows.
@@ -645,7 +652,22 @@ impl Decoder {
             let middle = median(r.clone());
             let lambda = (middle - 1.0).max(0.0);
             let dropouts = r.iter().filter(|&&x| x < 1.0).count();
-            let tail = binomial_upper_tail(r.len(), dropouts, probability_below_noise_mean(lambda));
+            let tail = binomial_upper_tail(r.len(), dropouts, probability_below(1.0, lambda));
+            // A loud tone must not dip either: a window below DEEP_SHARE of its median,
+            // with windows at the median both before and after it, is a dip a steady tone
+            // far above the noise does not make, while a warbling or pulsed sound (a note
+            // with tremolo, a whistle's chirps) dips by 10–20 dB between its beats
+            // without reaching the floor. Only dips inside the tone count: a window past
+            // a tone that ends early (an onset found late) falls as far, once.
+            let cut = (DEEP_SHARE * middle).max(1.0);
+            let dips = (0..r.len())
+                .filter(|&i| {
+                    r[i] < cut
+                        && r[..i].iter().any(|&x| x >= middle)
+                        && r[i + 1..].iter().any(|&x| x >= middle)
+                })
+                .count();
+            let dip_tail = binomial_upper_tail(r.len(), dips, probability_below(cut, lambda));
             // Where the neighbourhood stands above the floor (speech around), the median
             // window must also show the tone: a tone made of a few bursts has a median at
             // the floor, and at that level of λ its dropouts are no surprise.
@@ -658,7 +680,7 @@ impl Decoder {
             // tell, and the tests above judge alone.
             let mean = r.iter().sum::<f64>() / r.len() as f64 - 1.0;
             let not_bursts = mean < BURST_MIN || middle - 1.0 >= BURST_SHARE * mean;
-            tail >= P_DROPOUTS && median_shows && not_bursts
+            tail >= P_DROPOUTS && dip_tail >= P_DROPOUTS && median_shows && not_bursts
         })
     }
 
@@ -771,13 +793,13 @@ fn each_vote_holds(
     })
 }
 
-/// `P(r < 1)` for the normalised power `r` of a steady tone of excess `lambda` in noise of
+/// `P(r < x)` for the normalised power `r` of a steady tone of excess `lambda` in noise of
 /// mean 1 (Simpson's rule on the non-central χ² density, 32 intervals).
-pub(super) fn probability_below_noise_mean(lambda: f64) -> f64 {
+pub(super) fn probability_below(x: f64, lambda: f64) -> f64 {
     let steps = 32;
-    let h = 1.0 / steps as f64;
+    let h = x.max(0.0) / steps as f64;
     let density = |r: f64| ln_tone_likelihood(r, lambda).exp();
-    let mut sum = density(0.0) + density(1.0);
+    let mut sum = density(0.0) + density(x.max(0.0));
     for i in 1..steps {
         sum += density(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
     }
