@@ -961,3 +961,49 @@ fn a_note_with_tremolo_on_the_data_tones_is_not_a_message() {
         );
     }
 }
+
+#[test]
+fn a_frame_ringing_under_the_hall_level_is_not_refused_by_a_rival_of_babble() {
+    // Hall T60 1.2 s with four talkers at 0 dB (tuning row 11018): 23 of 55 lost short
+    // messages were refused by a rival basic that a talker's harmonics gave two tones for
+    // part of the slot. Their typical tone (10–14 dB) was under the 15 dB at which a
+    // rival must sound like a transmitter to count, though each basic had a tone far
+    // above that (the room puts the others in notches). Here sender 0 and data 7 each
+    // have one loud tone, one at about 12 dB and one weak; sender 1's k1 and k25 sound
+    // for a fifth of the slot (old code: nothing). The same rival held through the slot
+    // is a second transmitter: nothing.
+    let frame = Frame {
+        sender: Sender::Goalkeeper,
+        data: 7,
+    };
+    let [k0, k10, k24, k34, k48, k58] = frame.tones();
+    let loud = |_: f64| 0.02;
+    let middle = |_: f64| 0.0035;
+    let weak = |_: f64| 0.002;
+    let burst = |t: f64| if (0.3..0.5).contains(&t) { 0.009 } else { 0.0 };
+    let held = |_: f64| 0.0045;
+    for (rival_held, expected) in [(false, 1), (true, 0)] {
+        let rival: &dyn Fn(f64) -> f64 = if rival_held { &held } else { &burst };
+        let x = shaped_frame(
+            &[
+                (k0, &loud),
+                (k24, &middle),
+                (k48, &weak),
+                (k10, &loud),
+                (k34, &middle),
+                (k58, &weak),
+                (1, rival),
+                (25, rival),
+            ],
+            0.01,
+            11018,
+        );
+        let (got, _, shown) = decode_traced(&x);
+        assert_eq!(
+            got.len(),
+            expected,
+            "rival held: {rival_held}; decoded {got:?}\n{}",
+            shown.join("\n")
+        );
+    }
+}
