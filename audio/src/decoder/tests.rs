@@ -932,7 +932,7 @@ fn a_note_with_tremolo_on_the_data_tones_is_not_a_message() {
     let tones = frame.tones(); // 0, 10, 24, 34, 48, 58
     let steady = |_: f64| 0.01;
     let pulsed = |t: f64| {
-        if (t / 0.192) as usize % 2 == 0 {
+        if ((t / 0.192) as usize).is_multiple_of(2) {
             0.02
         } else {
             0.0036
