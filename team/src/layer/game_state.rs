@@ -1,0 +1,234 @@
+//! What the GameController's word does to a robot's team layer: play or not, Set and the
+//! kick-off hold, scores (a goal forgets the ball), penalties, and the ball put back on
+//! the kick-off spot. Part of [`TeamLayer`]; a room of its own so that the layer's file
+//! keeps to its tick.
+
+use fusion::{BallEstimate, TeamBall};
+
+use super::{TeamLayer, PENALIZED_COST};
+use crate::frames;
+
+/// The kick-off hold lasts this long after the robot hears play, seconds. Tuned on
+/// seeds 4–11 (`huddle sim --budget spl --game full`, drawn and ideal worlds): see
+/// docs/results/gamecontroller-game-history.md, "Third session".
+pub const KICK_OFF_HOLD_S: f64 = 3.0;
+
+/// In the kick-off hold, a robot whose cost is below this takes the kick-off (eq. (19),
+/// about metres to the ball: the kicker stands at the centre spot, the rest of the team
+/// outside the centre circle, 0.75 m in the SPL, and further).
+pub const KICK_OFF_TAKER_COST: f64 = 1.0;
+
+/// In Set the kick-off taker tells its claim this often (see
+/// [`TeamLayer::set_kick_off_next`]). Tuned on seeds 4–11 (`huddle sim --budget spl
+/// --game full`, both worlds; docs/results/gamecontroller-game.md, "Sixth session"): 1,
+/// 2 and 3 were within the games' noise of each other, and one frame a kick-off is the
+/// cheapest.
+pub const KICK_OFF_SET_CLAIMS: u32 = 1;
+
+/// … at least this far apart, seconds.
+pub const KICK_OFF_SET_CLAIM_GAP_S: f64 = 1.5;
+
+/// σ of where the referee puts the ball for a kick-off, per axis, m: on the centre
+/// mark, give or take a ball's width.
+pub const KICK_OFF_SPOT_SIGMA_M: f64 = 0.1;
+
+/// σ of the velocity of a ball put down for a kick-off, per axis, m/s: it lies still.
+pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
+
+/// A kick-off placement a tick made (see [`TeamLayer::kick_off_placement`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KickOffPlacement {
+    /// The GameController said Set: the team ball was put on the centre spot.
+    Set,
+    /// The robot heard play: the team ball, if still the Set's placement (no camera and
+    /// no kick said otherwise), was put down again at this instant.
+    PlayHeard,
+}
+
+impl TeamLayer {
+    /// Whether the ball is in play: the GameController says Playing (true when there is
+    /// no GameController). Out of play (Initial, Standby, Ready, Set, Finished) nobody
+    /// plays the ball, so the layer keeps deciding for itself but tells the team nothing
+    /// (a penalty aside): a league counts messages in Standby, Ready and Set, and a claim
+    /// there is spent on nothing.
+    pub fn set_in_play(&mut self, in_play: bool) {
+        self.in_play = in_play;
+    }
+
+    /// Whether the GameController says Set: every robot stands on its kick-off spot, the
+    /// ball on the centre spot, and play starts next with a kick-off. From Set until
+    /// [`KICK_OFF_HOLD_S`] after the robot hears play, the **kick-off hold**: only a
+    /// robot whose own cost is below [`KICK_OFF_TAKER_COST`] (the kicker the rules put
+    /// at the centre spot) may claim the ball; every other robot decides as if it had no
+    /// ball, on its own cost, not on a claim it told before the restart. The taker tells
+    /// its claim in Set, with priority, [`KICK_OFF_SET_CLAIMS`] times: so at the end of
+    /// the hold its teammates hold it and leave it the ball; the others tell nothing.
+    ///
+    /// Why: out of play nothing is told, and a goal's Ready and Set last longer than a
+    /// claim is held under a budget (15 s in the SPL), so at the whistle no robot holds a
+    /// fresh claim; and the team comes to a kick-off with no room for priority frames
+    /// (under the knock-out clock it stands through Ready and Set, and the attack before
+    /// the goal spent the room). Every robot that saw the ball went, and the claims that
+    /// would settle it waited seconds for the budget. In a simulated SPL game (seeds
+    /// 4–11) 78–86% of all conflict time fell in the first 10 s after a kick-off. The
+    /// earlier remedy, every robot telling its cost in Set, spent a counted message per
+    /// robot per kick-off, and under a budget with no room those claims did not go out
+    /// at all.
+    ///
+    /// Why the taker's claim in Set (one counted message a kick-off, from the priority
+    /// room the replica restarts at Set): at the whistle its claim was otherwise news
+    /// only if it changed what the taker told last (35 s and more ago, dropped by every
+    /// teammate) and so went as an ordinary frame, if at all; at the game's first
+    /// kick-off it was the team's first message, and the pacing line opens no ordinary
+    /// frame in the game's first seconds. At the end of the hold a teammate that had not
+    /// heard it went too: seeds 4–43 (both worlds), 2.3–2.5 s of conflict at the first
+    /// kick-off on average, 0.1–0.2 s with the claim in Set.
+    ///
+    /// Set also says where the ball is: on the centre spot, so at the next tick every
+    /// ball belief goes and the team ball is put there (see [`TeamLayer::forget_ball`]);
+    /// a caller whose Set is for a penalty kick (the ball on a penalty mark) must not
+    /// call this.
+    ///
+    /// Returns whether a kick-off begins (the first Set heard): the caller then tells
+    /// its replica (`comms::Replica::restart_priority_room`), so that the claims that
+    /// change at the whistle find room for priority frames in the team's budget.
+    pub fn set_kick_off_next(&mut self, set: bool) -> bool {
+        let begins = set && !self.kick_off_next;
+        if begins {
+            self.kick_off_hold_until_s = Some(f64::INFINITY);
+            self.kick_off_place = true;
+            self.kick_off_claims = (0, f64::NEG_INFINITY);
+            self.kick_off_taker_h = None;
+        }
+        self.kick_off_next = set;
+        begins
+    }
+
+    /// The kick-off hold at `t_s` (see [`TeamLayer::set_kick_off_next`]): whether it
+    /// runs, started once the robot hears play.
+    pub(super) fn kick_off_hold(&mut self, t_s: f64) -> bool {
+        match self.kick_off_hold_until_s {
+            Some(until) if until.is_infinite() && self.in_play && !self.kick_off_next => {
+                self.kick_off_hold_until_s = Some(t_s + KICK_OFF_HOLD_S);
+            }
+            Some(until) if t_s >= until => self.kick_off_hold_until_s = None,
+            _ => {}
+        }
+        self.kick_off_hold_until_s.is_some()
+    }
+
+    /// The scores in the newest GameController packet (`now_s`: when it was heard). A
+    /// goal is heard when either score rises over the previous packet's: the layer
+    /// forgets the ball then ([`TeamLayer::forget_ball`]), as a robot program's ball
+    /// reset does, whatever the game state says (GC3 may show Playing for seconds after
+    /// a goal). The first packet, or a score that falls (a new game), is no goal.
+    /// Returns whether it heard a goal.
+    pub fn set_scores(&mut self, own: u8, other: u8, now_s: f64) -> bool {
+        let goal = self.scores_heard.is_some_and(|(o, t)| own > o || other > t);
+        self.scores_heard = Some((own, other));
+        if goal {
+            self.forget_ball(now_s);
+        }
+        goal
+    }
+
+    /// The robots the GameController says are penalised (player numbers, this robot's
+    /// included; substitutes count: they are not on the field). A penalised robot leaves
+    /// the arbitration: it claims nothing (it posts [`PENALIZED_COST`], not going, once,
+    /// with priority, and is otherwise silent), and its teammates stop counting its claim
+    /// at once, whatever it last said. Called with each new GameController packet.
+    pub fn set_penalties(&mut self, penalized: &[u8]) {
+        let was = self.penalized();
+        self.penalized.iter_mut().for_each(|p| *p = false);
+        for &id in penalized {
+            if let Some(p) = usize::from(id)
+                .checked_sub(1)
+                .and_then(|k| self.penalized.get_mut(k))
+            {
+                *p = true;
+            }
+        }
+        if self.penalized() && !was {
+            self.penalty_told = false;
+            self.h = PENALIZED_COST;
+        }
+    }
+
+    /// Its "penalised" claim goes to the replica: the sending policy takes it as told.
+    pub(super) fn told_penalty(&mut self) {
+        self.penalty_told = true;
+        self.untold_claim = None;
+        if self.compact {
+            self.policy
+                .wrote_claim(false, PENALIZED_COST, PENALIZED_COST);
+        } else {
+            self.policy
+                .sent_going(false, PENALIZED_COST, PENALIZED_COST);
+        }
+    }
+
+    /// Whether the GameController says this robot is penalised.
+    pub fn penalized(&self) -> bool {
+        self.is_out(self.id)
+    }
+
+    /// Whether robot `id` is penalised by the GameController's word.
+    pub(super) fn is_out(&self, id: u8) -> bool {
+        usize::from(id)
+            .checked_sub(1)
+            .and_then(|k| self.penalized.get(k))
+            .copied()
+            .unwrap_or(false)
+    }
+
+    /// The game controller says the ball was put back for a kick-off (`now_s` on the
+    /// robot's clock): every ball belief goes, and the team ball starts on the kick-off
+    /// spot the rules name (the centre spot of the field the robot is calibrated for,
+    /// [`KICK_OFF_SPOT_SIGMA_M`] for the referee's placement), not with the first message
+    /// a teammate can afford to send. Sightings are gated against it and fused with it;
+    /// cameras that see the ball elsewhere restart it (see
+    /// [`fusion::GlobalModel::place_ball`]).
+    ///
+    /// Why: every robot forgot the ball at each of a game's ~20 kick-offs, so a robot
+    /// that did not see the ball itself held no team ball until a teammate's message
+    /// came, seconds under a league's budget (about one message a second for the team).
+    pub fn forget_ball(&mut self, now_s: f64) {
+        self.lwm.forget_ball();
+        let placed = self.kick_off_ball(now_s);
+        self.gwm.place_ball(placed);
+        self.ball = None;
+        self.ball_seen_at_s = None;
+        self.team_ball = None;
+        // Held too: a daemon publishes it between ticks (a teammate's claim changing
+        // makes it decide and publish again), and the old ball must not come back then:
+        // what it publishes is the kick-off spot.
+        self.team_ball_held = Some(TeamBall {
+            estimate: placed,
+            gbc: fusion::position_confidence(&placed.position_cov()),
+            source: fusion::TeamBallSource::Fused,
+        });
+    }
+
+    /// The ball on the kick-off spot at `t_s`, as the robot knows the field: at rest, give
+    /// or take the referee's placement.
+    pub fn kick_off_ball(&self, t_s: f64) -> BallEstimate {
+        let at = frames::to_fusion_point(self.cal.field.centre_spot());
+        let p = KICK_OFF_SPOT_SIGMA_M.powi(2);
+        let v = KICK_OFF_SPEED_SIGMA_MPS.powi(2);
+        BallEstimate {
+            t_s,
+            mean: fusion::nalgebra::Vector4::new(at.x, at.y, 0.0, 0.0),
+            cov: fusion::nalgebra::Matrix4::from_diagonal(&fusion::nalgebra::Vector4::new(
+                p, p, v, v,
+            )),
+        }
+    }
+
+    /// What the latest tick ([`TeamLayer::sense`]) did for a kick-off: put the team ball
+    /// on the centre spot for Set, or heard play (and put it down again if it was still
+    /// that placement). A reference of the team ball makes the same placement at the
+    /// same instant, by its own rule.
+    pub fn kick_off_placement(&self) -> Option<KickOffPlacement> {
+        self.tick_placement
+    }
+}
