@@ -198,3 +198,45 @@ fn a_client_that_never_reads_is_cut_off_and_the_others_carry_on() {
         .ask("GETV local.var.tick")
         .starts_with("VAL local.var.tick int 0 "));
 }
+
+#[test]
+fn a_non_ascii_watch_pattern_or_key_is_refused_and_counted() {
+    // Robot 5; a client watches `*.var.balé.#` (it would never match: keys are ASCII),
+    // then tries keys with non-ASCII letters in SETV, GETV and a talk post.
+    let (d, _dir) = daemon(5);
+    let mut c = d.client();
+    let refused = [
+        ("ADDW *.var.bal\u{e9}.#", "ERR 411 "),
+        ("DELW +.var.\u{3b2}", "ERR 411 "),
+        ("SETV *.var.caf\u{e9} 1", "ERR 410 "),
+        ("GETV 2.var.\u{3b2}", "ERR 410 "),
+        ("SETV *.talk.pl\u{e4}n 1", "ERR 410 "),
+    ];
+    for (line, want) in refused {
+        let answer = c.ask(line);
+        assert!(answer.starts_with(want), "{line:?} answered {answer:?}");
+    }
+    c.send_raw(b"LSTW\n");
+    assert_eq!(c.line(), "END", "the pattern was not added");
+    assert_eq!(
+        c.ask("SETV local.var.name \"Jos\u{e9}\""),
+        "OK",
+        "a string value"
+    );
+    // The counter is mirrored at the daemon's timers.
+    let want = refused.len().to_string();
+    c.wait_for(
+        "local.var.huddle.stats.relay_non_ascii_refused",
+        Duration::from_secs(5),
+        |a| a.contains(&format!(" int {want} ")),
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_huddle"))
+        .args(["stats", "--relay", &d.relay.to_string()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!("relay_non_ascii_refused {want}")),
+        "huddle stats shows it:\n{stdout}"
+    );
+}

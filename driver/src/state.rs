@@ -216,6 +216,10 @@ pub struct IoStats {
     /// [`crate::Handle::reserve`]); mirrored to
     /// `local.var.huddle.stats.relay_read_only_refused`.
     pub relay_read_only_refused: u64,
+    /// Relay clients' watch patterns and keys refused for not being ASCII (`ERR 411`,
+    /// `ERR 410`; keys are ASCII, such a pattern would never match); mirrored to
+    /// `local.var.huddle.stats.relay_non_ascii_refused`.
+    pub relay_non_ascii_refused: u64,
     /// Datagrams an [`Impairment`] lost (or that found its hold queue full); mirrored to
     /// `local.var.huddle.stats.impair_dropped`.
     pub impair_dropped: u64,
@@ -226,12 +230,13 @@ pub struct IoStats {
 impl IoStats {
     /// Every count of something dropped or refused, by the name it has under
     /// `local.var.huddle.stats.` (and in `huddle stats`).
-    pub fn dropped(&self) -> [(&'static str, u64); 7] {
+    pub fn dropped(&self) -> [(&'static str, u64); 8] {
         [
             ("unicast_refused", self.unicast_refused),
             ("relay_lost_suppressed", self.relay_lost_suppressed),
             ("relay_cutoffs", self.relay_cutoffs),
             ("relay_read_only_refused", self.relay_read_only_refused),
+            ("relay_non_ascii_refused", self.relay_non_ascii_refused),
             ("send_backlog_drops", self.send_backlog_drops),
             ("send_errors", self.send_errors),
             ("impair_dropped", self.impair_dropped),
@@ -244,7 +249,7 @@ impl IoStats {
     /// driver calls this at every timer); then each key is written if it differs. The
     /// replica mirrors its own counters at its refresh; the driver and
     /// [`crate::Session`] call this at their timers.
-    pub(crate) fn mirror(&self, last: &mut Option<[u64; 7]>, replica: &mut Replica, now: Instant) {
+    pub(crate) fn mirror(&self, last: &mut Option<[u64; 8]>, replica: &mut Replica, now: Instant) {
         let counts = self.dropped().map(|(_, n)| n);
         if *last == Some(counts) {
             return;
@@ -297,7 +302,7 @@ pub(crate) struct Inner {
     pub(crate) session_limits: SessionLimits,
     pub(crate) io: IoStats,
     /// The counts [`IoStats::mirror`] last wrote.
-    pub(crate) io_mirrored: Option<[u64; 7]>,
+    pub(crate) io_mirrored: Option<[u64; 8]>,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
@@ -643,6 +648,7 @@ impl Inner {
             return;
         };
         let timer_before = slot.session.poll_timeout();
+        let non_ascii_before = slot.session.non_ascii_refused();
         self.guards.retain(|g| g.strong_count() > 0);
         let mut board = GuardedBoard {
             replica: &mut self.replica,
@@ -651,6 +657,7 @@ impl Inner {
             refused: &mut self.io.relay_read_only_refused,
         };
         slot.session.handle_input(now, bytes, &mut board);
+        self.io.relay_non_ascii_refused += slot.session.non_ascii_refused() - non_ascii_before;
         if slot.session.poll_timeout() != timer_before {
             self.wake.notify_one();
         }

@@ -65,6 +65,10 @@
 //!   daemon --no-team-layer`, no listener) the first two are ordinary local keys, for a
 //!   program that runs its own. The daemon counts refusals in
 //!   `local.var.huddle.stats.relay_read_only_refused`.
+//! - Keys are ASCII, so a watch pattern that is not (`ADDW *.var.café`) could never
+//!   match: `ADDW` and `DELW` refuse it with `ERR 411`, as a key that is not ASCII gets
+//!   `ERR 410` in every command. The daemon counts both in
+//!   `local.var.huddle.stats.relay_non_ascii_refused`. String values may hold any UTF-8.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).
