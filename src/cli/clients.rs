@@ -370,12 +370,13 @@ const STATS_NAMED: [&str; 12] = [
 
 /// Drops and refusals of the I/O layer (`driver::IoStats::dropped`: the daemon mirrors
 /// them; older daemons mirror fewer or none), on their own line when not 0.
-const STATS_IO: [&str; 9] = [
+const STATS_IO: [&str; 10] = [
     "unicast_refused",
     "relay_lost_suppressed",
     "relay_cutoffs",
     "relay_read_only_refused",
     "relay_non_ascii_refused",
+    "relay_clients_refused",
     "send_backlog_drops",
     "send_errors",
     "impair_dropped",

@@ -70,6 +70,10 @@
 //!   `ERR 410` in every command. The daemon counts both in
 //!   `local.var.huddle.stats.relay_non_ascii_refused`. String values may hold any UTF-8.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
+//! - `huddle daemon` serves at most `--max-clients` clients at once (64 by default): a
+//!   connection beyond gets one line `ERR 503 too many relay clients (N connected,
+//!   --max-clients); try again later` in place of the greeting and is closed, counted in
+//!   `local.var.huddle.stats.relay_clients_refused`; the clients connected are unaffected.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).
 
