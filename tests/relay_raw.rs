@@ -334,4 +334,16 @@ fn max_clients_sets_the_cap() {
         "{over}"
     );
     assert_eq!(clients[1].ask("SETV local.var.x 1"), "OK");
+    // The command line says why it cannot connect.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_huddle"))
+        .args(["get", "local.var.x", "--relay", &d.relay.to_string()])
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("refused the connection: ERR 503 too many relay clients"),
+        "{stderr}"
+    );
 }
