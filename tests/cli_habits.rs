@@ -390,3 +390,66 @@ fn get_with_a_maximum_age_refuses_a_stale_value() {
     assert!(err.contains("406") && err.contains("ms old"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// The golden frame of `comms/tests/talk_unknown_value.rs` (robot 3 of team 7, a newer
+/// build): talk queue `plan`, messages 1 (`Int(5)`), 2 (value tag 6, unknown here) and 3
+/// (`Int(7)`).
+const GOLDEN_FUTURE_TALK: &str = concat!(
+    "4844040007030807060504030201",
+    "00000000",
+    "01",
+    "0108",
+    "04706c616e",
+    "01",
+    "000a",
+    "0109",
+    "04706c616e",
+    "02",
+    "06",
+    "0102",
+    "0108",
+    "04706c616e",
+    "03",
+    "000e",
+);
+
+#[test]
+fn huddle_stats_shows_a_newer_builds_talk_value_on_its_talk_line() {
+    // Robot 1 of team 7 hears robot 3 of a newer build post a value type it does not
+    // know: `huddle stats` says so (before, only `--json` and the blackboard did).
+    let dir = tempfile::tempdir().unwrap();
+    let group = daemon_support::scratch_group();
+    let d = Daemon::start(
+        1,
+        &group.to_string(),
+        daemon_support::free_tcp_port(),
+        &["--team", "7", "--refresh", "50ms"],
+        dir.path(),
+    );
+    let socket = driver::open_multicast(&driver::SocketConfig {
+        group,
+        iface: std::net::Ipv4Addr::LOCALHOST,
+        ..driver::SocketConfig::default()
+    })
+    .expect("the newer robot joins on loopback")
+    .socket;
+    let frame: Vec<u8> = (0..GOLDEN_FUTURE_TALK.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&GOLDEN_FUTURE_TALK[i..i + 2], 16).unwrap())
+        .collect();
+    socket.send_to(&frame, group).expect("send on loopback");
+    let mut c = d.client();
+    c.wait_for(
+        "local.var.huddle.stats.talk_unknown_value",
+        Duration::from_secs(5),
+        |a| a.contains(" int 1 "),
+    );
+    let relay = d.relay.to_string();
+    let out = run(&["stats", "--relay", &relay]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        stdout.contains("talk delivered 2  given up 0  unknown value 1  resent 0"),
+        "messages 1 and 3 delivered, 2 counted on the talk line:\n{stdout}"
+    );
+}

@@ -24,17 +24,12 @@ use std::time::{Duration, Instant};
 
 use comms::relay::Binding;
 use daemon_support::netns::{NetnsPair, ADDRESSES, BROADCAST};
-use daemon_support::{free_tcp_port, replay_json, Daemon};
+use daemon_support::{free_tcp_port, free_udp_port, replay_json, Daemon};
 
 fn huddle() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_huddle"));
     c.env("RUST_LOG", "warn");
     c
-}
-
-/// A UDP port no one uses now (the kernel's pick).
-fn free_udp_port() -> u16 {
-    daemon_support::scratch_group().port()
 }
 
 /// Every daemon sets a value of its own; every other reads it fresh, and nothing was

@@ -198,3 +198,152 @@ fn a_client_that_never_reads_is_cut_off_and_the_others_carry_on() {
         .ask("GETV local.var.tick")
         .starts_with("VAL local.var.tick int 0 "));
 }
+
+#[test]
+fn a_non_ascii_watch_pattern_or_key_is_refused_and_counted() {
+    // Robot 5; a client watches `*.var.balé.#` (it would never match: keys are ASCII),
+    // then tries keys with non-ASCII letters in SETV, GETV and a talk post.
+    let (d, _dir) = daemon(5);
+    let mut c = d.client();
+    let refused = [
+        ("ADDW *.var.bal\u{e9}.#", "ERR 411 "),
+        ("DELW +.var.\u{3b2}", "ERR 411 "),
+        ("SETV *.var.caf\u{e9} 1", "ERR 410 "),
+        ("GETV 2.var.\u{3b2}", "ERR 410 "),
+        ("SETV *.talk.pl\u{e4}n 1", "ERR 410 "),
+    ];
+    for (line, want) in refused {
+        let answer = c.ask(line);
+        assert!(answer.starts_with(want), "{line:?} answered {answer:?}");
+    }
+    c.send_raw(b"LSTW\n");
+    assert_eq!(c.line(), "END", "the pattern was not added");
+    assert_eq!(
+        c.ask("SETV local.var.name \"Jos\u{e9}\""),
+        "OK",
+        "a string value"
+    );
+    // The counter is mirrored at the daemon's timers.
+    let want = refused.len().to_string();
+    c.wait_for(
+        "local.var.huddle.stats.relay_non_ascii_refused",
+        Duration::from_secs(5),
+        |a| a.contains(&format!(" int {want} ")),
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_huddle"))
+        .args(["stats", "--relay", &d.relay.to_string()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!("relay_non_ascii_refused {want}")),
+        "huddle stats shows it:\n{stdout}"
+    );
+}
+
+/// Connects, and returns the client if it was served, or the one line it got before
+/// the daemon closed the connection.
+fn served_or_refused(d: &Daemon) -> Result<Client, String> {
+    let mut c = d.client();
+    if !c.greeting.starts_with("ERR ") {
+        return Ok(c);
+    }
+    let mut rest = String::new();
+    let n = std::io::BufRead::read_line(&mut c.reader, &mut rest).unwrap_or(0);
+    assert_eq!(n, 0, "closed after the one line, not {rest:?}");
+    Err(c.greeting)
+}
+
+#[test]
+fn clients_over_the_cap_get_one_err_503_line_and_the_others_carry_on() {
+    // Robot 6 with the default cap of 64 relay clients: one host opens 65. The
+    // connection the start-up probe made may still count for a moment, so the 64 are
+    // retried until served; from then on every connection over the cap is refused.
+    let (d, _dir) = daemon(6);
+    let cap = 64;
+    let mut refused = 0;
+    let mut clients = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while clients.len() < cap {
+        match served_or_refused(&d) {
+            Ok(c) => clients.push(c),
+            Err(_) => {
+                refused += 1;
+                assert!(Instant::now() < deadline, "only {} served", clients.len());
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+    let over = served_or_refused(&d).err().expect("the 65th is refused");
+    refused += 1;
+    assert!(
+        over.starts_with("ERR 503 too many relay clients (64 connected, --max-clients)"),
+        "{over}"
+    );
+    // Every client already connected still works.
+    for (i, c) in clients.iter_mut().enumerate() {
+        assert_eq!(
+            c.ask(&format!("SETV local.var.c{i} {i}")),
+            "OK",
+            "client {i}"
+        );
+    }
+    let b = Binding::parse(&clients[0].ask("GETV local.var.c63")).unwrap();
+    assert_eq!(b.value, "63");
+    clients[0].wait_for(
+        "local.var.huddle.stats.relay_clients_refused",
+        Duration::from_secs(5),
+        |a| a.contains(&format!(" int {refused} ")),
+    );
+    // One leaves: a newcomer is served again.
+    drop(clients.pop());
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let newcomer = loop {
+        match served_or_refused(&d) {
+            Ok(c) => break c,
+            Err(_) => {
+                assert!(Instant::now() < deadline, "no room after one left");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    };
+    assert_eq!(newcomer.greeting, "HUDDLE 2 robot 6");
+}
+
+#[test]
+fn max_clients_sets_the_cap() {
+    // Robot 7 with --max-clients 2: the third connection is refused and counted.
+    let dir = tempfile::tempdir().unwrap();
+    let group = daemon_support::scratch_group().to_string();
+    let port = daemon_support::free_tcp_port();
+    let d = Daemon::start(7, &group, port, &["--max-clients", "2"], dir.path());
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut clients = Vec::new();
+    while clients.len() < 2 {
+        match served_or_refused(&d) {
+            Ok(c) => clients.push(c),
+            Err(_) => {
+                assert!(Instant::now() < deadline, "only {} served", clients.len());
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+    let over = served_or_refused(&d).err().expect("the third is refused");
+    assert!(
+        over.starts_with("ERR 503 too many relay clients (2 connected"),
+        "{over}"
+    );
+    assert_eq!(clients[1].ask("SETV local.var.x 1"), "OK");
+    // The command line says why it cannot connect.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_huddle"))
+        .args(["get", "local.var.x", "--relay", &d.relay.to_string()])
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("refused the connection: ERR 503 too many relay clients"),
+        "{stderr}"
+    );
+}

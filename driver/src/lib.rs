@@ -99,7 +99,7 @@ pub use incarnation::new_incarnation;
 pub use notice::{Notice, Subscription};
 pub use rate_limit::RateLimit;
 pub use relay::serve;
-pub use run::{Driver, DriverConfig, DriverError};
+pub use run::{Driver, DriverConfig, DriverError, DEFAULT_MAX_RELAY_CLIENTS};
 pub use session::{PeerEvent, PeerEvents, Session, Updates};
 pub use socket::{
     broadcast_destination, open, open_broadcast, open_multicast, open_unicast, scratch_group,

@@ -6,13 +6,16 @@ use std::io;
 
 use tokio::net::{TcpListener, TcpStream};
 
-use comms::relay::{CloseReason, SessionState};
+use comms::relay::{CloseReason, ErrCode, SessionState};
 
 use crate::handle::Handle;
 
 /// Accepts relay clients on `listener` until `shutdown` completes. Each client runs as a
 /// local task on this thread (call this inside a [`tokio::task::LocalSet`] on the
-/// driver's thread); a failing or cut-off client never affects the others.
+/// driver's thread); a failing or cut-off client never affects the others. Beyond
+/// [`crate::DriverConfig::max_relay_clients`] connected clients, a new connection gets
+/// one line `ERR 503 ...` and is closed (counted in
+/// [`crate::IoStats::relay_clients_refused`]).
 pub async fn serve(listener: TcpListener, handle: Handle, shutdown: impl Future<Output = ()>) {
     tokio::pin!(shutdown);
     loop {
@@ -21,8 +24,16 @@ pub async fn serve(listener: TcpListener, handle: Handle, shutdown: impl Future<
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
                     let _ = stream.set_nodelay(true);
-                    tracing::debug!(%peer, "relay client connected");
-                    tokio::task::spawn_local(connection(stream, handle.clone(), peer));
+                    // Opened here, not in the task: a burst of connections is counted
+                    // against the cap as it is accepted.
+                    let opened = handle.inner().borrow_mut().open_session();
+                    match opened {
+                        Some(session) => {
+                            tracing::debug!(%peer, "relay client connected");
+                            tokio::task::spawn_local(connection(stream, handle.clone(), peer, session));
+                        }
+                        None => refuse(stream, handle.inner().borrow().max_relay_clients),
+                    }
                 }
                 // Out of file descriptors and the like: keep serving the others.
                 Err(e) => {
@@ -34,8 +45,24 @@ pub async fn serve(listener: TcpListener, handle: Handle, shutdown: impl Future<
     }
 }
 
-async fn connection(stream: TcpStream, handle: Handle, peer: std::net::SocketAddr) {
-    let (id, notify) = handle.inner().borrow_mut().open_session();
+/// Answers a connection over the cap with one line and closes it. The socket is fresh,
+/// so the line fits its send buffer at once; a client that cannot take even that gets
+/// nothing (no task waits for it).
+fn refuse(stream: TcpStream, max: usize) {
+    let line = format!(
+        "ERR {} too many relay clients ({max} connected, --max-clients); try again later\n",
+        ErrCode::Unavailable
+    );
+    let _ = stream.try_write(line.as_bytes());
+    drop(stream);
+}
+
+async fn connection(
+    stream: TcpStream,
+    handle: Handle,
+    peer: std::net::SocketAddr,
+    (id, notify): (u64, std::rc::Rc<tokio::sync::Notify>),
+) {
     let mut buf = vec![0u8; 16 * 1024];
     let outcome: io::Result<()> = async {
         loop {

@@ -60,12 +60,22 @@ pub struct DriverConfig {
     pub subscriber_backlog: usize,
     /// Limits of each relay session.
     pub session_limits: SessionLimits,
+    /// Relay clients served at once (default [`DEFAULT_MAX_RELAY_CLIENTS`]): a
+    /// connection beyond gets one line `ERR 503 ...` and is closed, counted in
+    /// [`IoStats::relay_clients_refused`]; the clients already connected are unaffected.
+    /// Each session holds up to a line and 1 MiB of output, so one host opening
+    /// thousands of connections could otherwise take the daemon's memory and descriptors.
+    pub max_relay_clients: usize,
     /// The incarnation; `None`: a random one (it must differ between starts).
     pub incarnation: Option<u64>,
     /// A deliberate error of this robot's clock, for rehearsing a team whose clocks
     /// disagree on one machine ([`ClockSkew`]); none by default.
     pub clock_skew: ClockSkew,
 }
+
+/// Relay clients a driver serves at once unless configured otherwise
+/// ([`DriverConfig::max_relay_clients`], `huddle daemon --max-clients`).
+pub const DEFAULT_MAX_RELAY_CLIENTS: usize = 64;
 
 impl DriverConfig {
     /// Defaults around `replica`: the seed's group `224.0.0.1:2000` on loopback, TTL 1,
@@ -85,6 +95,7 @@ impl DriverConfig {
             start_values: Vec::new(),
             subscriber_backlog: 4096,
             session_limits: SessionLimits::default(),
+            max_relay_clients: DEFAULT_MAX_RELAY_CLIENTS,
             incarnation: None,
             clock_skew: ClockSkew::NONE,
         }
@@ -249,6 +260,8 @@ impl Driver {
             sessions: BTreeMap::new(),
             next_session: 0,
             session_limits: config.session_limits,
+            max_relay_clients: config.max_relay_clients,
+            clients_refused_warnings: RateLimit::new(SEND_WARNING_PERIOD),
             io: IoStats {
                 recv_buffer_bytes: recv_buffer_granted,
                 ..IoStats::default()

@@ -176,7 +176,7 @@ struct State {
     feed_capacity: usize,
     io: IoStats,
     /// The counts [`IoStats::mirror`] last wrote to `local.var.huddle.stats.*`.
-    io_mirrored: Option<[u64; 8]>,
+    io_mirrored: Option<[u64; 10]>,
     /// The deadline the receive task sleeps until: a call that makes an earlier one (or
     /// fills the backlog) wakes it.
     sleeping_until: Option<Instant>,

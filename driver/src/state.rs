@@ -219,6 +219,14 @@ pub struct IoStats {
     /// Relay clients' `CLOK`s refused because a GameController's figures set the game
     /// clock (`ERR 424`); mirrored to `local.var.huddle.stats.relay_clock_refused`.
     pub relay_clock_refused: u64,
+    /// Relay clients' watch patterns and keys refused for not being ASCII (`ERR 411`,
+    /// `ERR 410`; keys are ASCII, such a pattern would never match); mirrored to
+    /// `local.var.huddle.stats.relay_non_ascii_refused`.
+    pub relay_non_ascii_refused: u64,
+    /// Relay connections refused because [`crate::DriverConfig::max_relay_clients`]
+    /// clients were connected (each got one `ERR 503` line and was closed); mirrored to
+    /// `local.var.huddle.stats.relay_clients_refused`.
+    pub relay_clients_refused: u64,
     /// Datagrams an [`Impairment`] lost (or that found its hold queue full); mirrored to
     /// `local.var.huddle.stats.impair_dropped`.
     pub impair_dropped: u64,
@@ -229,13 +237,15 @@ pub struct IoStats {
 impl IoStats {
     /// Every count of something dropped or refused, by the name it has under
     /// `local.var.huddle.stats.` (and in `huddle stats`).
-    pub fn dropped(&self) -> [(&'static str, u64); 8] {
+    pub fn dropped(&self) -> [(&'static str, u64); 10] {
         [
             ("unicast_refused", self.unicast_refused),
             ("relay_lost_suppressed", self.relay_lost_suppressed),
             ("relay_cutoffs", self.relay_cutoffs),
             ("relay_read_only_refused", self.relay_read_only_refused),
             ("relay_clock_refused", self.relay_clock_refused),
+            ("relay_non_ascii_refused", self.relay_non_ascii_refused),
+            ("relay_clients_refused", self.relay_clients_refused),
             ("send_backlog_drops", self.send_backlog_drops),
             ("send_errors", self.send_errors),
             ("impair_dropped", self.impair_dropped),
@@ -248,7 +258,7 @@ impl IoStats {
     /// driver calls this at every timer); then each key is written if it differs. The
     /// replica mirrors its own counters at its refresh; the driver and
     /// [`crate::Session`] call this at their timers.
-    pub(crate) fn mirror(&self, last: &mut Option<[u64; 8]>, replica: &mut Replica, now: Instant) {
+    pub(crate) fn mirror(&self, last: &mut Option<[u64; 10]>, replica: &mut Replica, now: Instant) {
         let counts = self.dropped().map(|(_, n)| n);
         if *last == Some(counts) {
             return;
@@ -299,9 +309,13 @@ pub(crate) struct Inner {
     pub(crate) sessions: BTreeMap<u64, SessionSlot>,
     pub(crate) next_session: u64,
     pub(crate) session_limits: SessionLimits,
+    /// Relay clients served at once at most ([`crate::DriverConfig::max_relay_clients`]).
+    pub(crate) max_relay_clients: usize,
+    /// Warnings about relay connections refused over that cap, rate-limited.
+    pub(crate) clients_refused_warnings: RateLimit,
     pub(crate) io: IoStats,
     /// The counts [`IoStats::mirror`] last wrote.
-    pub(crate) io_mirrored: Option<[u64; 8]>,
+    pub(crate) io_mirrored: Option<[u64; 10]>,
     /// Wakes the driver task when deadlines or the backlog changed from outside it.
     pub(crate) wake: Rc<Nudge>,
     /// Outgoing impairment (`huddle daemon --impair`), and the copies it holds back.
@@ -624,8 +638,22 @@ impl Inner {
             .mirror(&mut self.io_mirrored, &mut self.replica, now);
     }
 
-    /// A new relay session: its id and the notifier its connection waits on.
-    pub(crate) fn open_session(&mut self) -> (u64, Rc<Notify>) {
+    /// A new relay session: its id and the notifier its connection waits on; `None`, and
+    /// counted in [`IoStats::relay_clients_refused`], when `max_relay_clients` sessions
+    /// are open (a warning at most every 10 s says so).
+    pub(crate) fn open_session(&mut self) -> Option<(u64, Rc<Notify>)> {
+        if self.sessions.len() >= self.max_relay_clients {
+            self.io.relay_clients_refused += 1;
+            if let Some(n) = self.clients_refused_warnings.record(self.clock.now()) {
+                tracing::warn!(
+                    refused = n,
+                    max = self.max_relay_clients,
+                    "relay connections refused: as many clients as --max-clients are connected"
+                );
+            }
+            self.wake.notify_one(); // the mirror runs at the driver's timers
+            return None;
+        }
         let id = self.next_session;
         self.next_session += 1;
         let notify = Rc::new(Notify::new());
@@ -637,7 +665,7 @@ impl Inner {
                 notify: notify.clone(),
             },
         );
-        (id, notify)
+        Some((id, notify))
     }
 
     /// Feeds a relay client's bytes to its session; writes go through the replica.
@@ -647,6 +675,7 @@ impl Inner {
             return;
         };
         let timer_before = slot.session.poll_timeout();
+        let non_ascii_before = slot.session.non_ascii_refused();
         self.guards.retain(|g| g.strong_count() > 0);
         let mut board = GuardedBoard {
             replica: &mut self.replica,
@@ -656,6 +685,7 @@ impl Inner {
             clock_refused: &mut self.io.relay_clock_refused,
         };
         slot.session.handle_input(now, bytes, &mut board);
+        self.io.relay_non_ascii_refused += slot.session.non_ascii_refused() - non_ascii_before;
         if slot.session.poll_timeout() != timer_before {
             self.wake.notify_one();
         }

@@ -1,6 +1,6 @@
 /* typed_node.c: two robots on a loopback group, written from huddle.h alone: typed set
  * and get (no text in between), a long value read whole through a length query,
- * value-changed events, the key list and the stats.
+ * value-changed events, the key list and the stats (the struct, and a counter by name).
  *
  *   cc -std=c11 -I ffi/include ffi/examples/typed_node.c target/ffi/libhuddle.a \
  *      -lpthread -ldl -lm -o typed_node && ./typed_node 239.255.7.7 47000
@@ -108,6 +108,14 @@ int main(int argc, char **argv) {
     CHECK(huddle_node_stats(two, &stats, &err));
     printf("robot 2: %d peer(s) present, %llu frames in\n", stats.peers_present,
            (unsigned long long)stats.frames_in);
+    /* Counters added after huddle_stats was fixed are read by name: 1 found, 0 when
+     * this library has no such counter (an older one), -1 on error. */
+    uint64_t unknown_values = 0, dropped = 0;
+    CHECK(huddle_node_stats_counter(two, "talk_unknown_value", &unknown_values, &err));
+    CHECK(huddle_node_stats_counter(two, "drops.total", &dropped, &err));
+    int found = huddle_node_stats_counter(two, "no_such_counter", &dropped, &err);
+    printf("robot 2: talk_unknown_value %llu, drops %llu, no_such_counter found %d\n",
+           (unsigned long long)unknown_values, (unsigned long long)dropped, found);
     huddle_node_stop(one);
     huddle_node_stop(two);
     printf("typed_node: OK\n");

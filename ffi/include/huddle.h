@@ -175,6 +175,10 @@ typedef struct {
 } huddle_budget;
 
 // A node's counters (`huddle_node_stats`).
+//
+// The struct's layout is fixed (programs built against an older `huddle.h` keep
+// working): counters added since are read by name with `huddle_node_stats_counter`,
+// which knows every counter, these included.
 typedef struct {
   // Frames accepted from teammates.
   uint64_t frames_in;
@@ -508,6 +512,28 @@ int huddle_node_keys(huddle_node *node,
 //
 // `out` is NULL or writable; `err` is NULL or writable.
 int huddle_node_stats(huddle_node *node, huddle_stats *out, huddle_error *err);
+
+// Reads the node's counter `name` into `out`: any counter the replica mirrors as
+// `local.var.huddle.stats.<name>` (`frames_in`, `talk_given_up`, `talk_unknown_value`,
+// `items_skipped`, `nacks_limited`, `clock_outliers`, ..., `drops.total`,
+// `drops.<reason>` such as `drops.bad_tag`), the node's sockets' (`datagrams_sent`,
+// `datagrams_received`, `send_errors`, `unicast_refused`) and `peers_present`,
+// `peers_departed`. `huddle stats --json` and `docs/` name them; `huddle_stats` holds
+// the oldest of them in a fixed layout, and counters added later are read here only, so
+// that the struct never changes size under a program built against an older header.
+//
+// Returns 1 with `*out` set, 0 when this library has no counter by that name (a program
+// written for a newer library can tell; `out` untouched), -1 on error.
+//
+// Thread safety: may be called from any thread, concurrently with any node function.
+//
+// # Safety
+//
+// `name` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+int huddle_node_stats_counter(huddle_node *node,
+                              const char *name,
+                              uint64_t *out,
+                              huddle_error *err);
 
 // Starts a node: opens the team's multicast socket on the interface, applies the
 // config files, sends the first frame, and receives (and runs the replica's timers) on a

@@ -29,6 +29,10 @@ pub struct huddle_budget {
 }
 
 /// A node's counters (`huddle_node_stats`).
+///
+/// The struct's layout is fixed (programs built against an older `huddle.h` keep
+/// working): counters added since are read by name with `huddle_node_stats_counter`,
+/// which knows every counter, these included.
 #[repr(C)]
 #[allow(non_camel_case_types)]
 pub struct huddle_stats {
@@ -425,4 +429,110 @@ pub unsafe extern "C" fn huddle_node_stats(
     };
     // SAFETY: the caller promises `err` is NULL or writable.
     unsafe { guard(err, -1, body) }
+}
+
+/// Reads the node's counter `name` into `out`: any counter the replica mirrors as
+/// `local.var.huddle.stats.<name>` (`frames_in`, `talk_given_up`, `talk_unknown_value`,
+/// `items_skipped`, `nacks_limited`, `clock_outliers`, ..., `drops.total`,
+/// `drops.<reason>` such as `drops.bad_tag`), the node's sockets' (`datagrams_sent`,
+/// `datagrams_received`, `send_errors`, `unicast_refused`) and `peers_present`,
+/// `peers_departed`. `huddle stats --json` and `docs/` name them; `huddle_stats` holds
+/// the oldest of them in a fixed layout, and counters added later are read here only, so
+/// that the struct never changes size under a program built against an older header.
+///
+/// Returns 1 with `*out` set, 0 when this library has no counter by that name (a program
+/// written for a newer library can tell; `out` untouched), -1 on error.
+///
+/// Thread safety: may be called from any thread, concurrently with any node function.
+///
+/// # Safety
+///
+/// `name` is NULL or NUL-terminated; `out` is NULL or writable; `err` is NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn huddle_node_stats_counter(
+    node: *mut huddle_node,
+    name: *const c_char,
+    out: *mut u64,
+    err: *mut huddle_error,
+) -> c_int {
+    let body = || {
+        let node = lookup(node)?;
+        // SAFETY: the caller promises NULL or a NUL-terminated string.
+        let name = unsafe { read_str(name, "name") }?;
+        // SAFETY: the caller promises `out` is NULL or valid for writes.
+        let out = unsafe { out.as_mut() }.ok_or_else(|| Failure::null("out"))?;
+        let value = node.with_state(|state, _| {
+            let io = &state.io;
+            match name {
+                "datagrams_sent" => Some(io.datagrams_sent),
+                "datagrams_received" => Some(io.datagrams_received),
+                "send_errors" => Some(io.send_errors),
+                "unicast_refused" => Some(io.unicast_refused),
+                "peers_present" | "peers_departed" => {
+                    let present = name == "peers_present";
+                    let n = state
+                        .replica
+                        .peers()
+                        .filter(|p| p.present == present)
+                        .count();
+                    Some(n as u64)
+                }
+                _ => replica_counter(state.replica.stats(), name),
+            }
+        })?;
+        Ok(match value {
+            Some(v) => {
+                *out = v;
+                1
+            }
+            None => 0,
+        })
+    };
+    // SAFETY: the caller promises `err` is NULL or writable.
+    unsafe { guard(err, -1, body) }
+}
+
+/// The replica's counter `name`, by the name it has in `local.var.huddle.stats.*`.
+fn replica_counter(s: &comms::Stats, name: &str) -> Option<u64> {
+    if let Some(reason) = name.strip_prefix("drops.") {
+        if reason == "total" {
+            return Some(s.drops_total());
+        }
+        let reason = comms::DropReason::ALL
+            .into_iter()
+            .find(|r| r.name() == reason)?;
+        return Some(s.drops(reason));
+    }
+    Some(match name {
+        "frames_in" => s.frames_in,
+        "frames_out" => s.frames_out,
+        "bytes_in" => s.bytes_in,
+        "bytes_out" => s.bytes_out,
+        "own_frames" => s.own_frames,
+        "items_skipped" => s.items_skipped,
+        "updates_applied" => s.updates_applied,
+        "updates_stale" => s.updates_stale,
+        "updates_refused" => s.updates_refused,
+        "updates_unconfirmed_replaced" => s.updates_unconfirmed_replaced,
+        "bindings_superseded" => s.bindings_superseded,
+        "bindings_released" => s.bindings_released,
+        "talk_delivered" => s.talk_delivered,
+        "talk_given_up" => s.talk_given_up,
+        "talk_unknown_value" => s.talk_unknown_value,
+        "talk_resent" => s.talk_resent,
+        "nacks_sent" => s.nacks_sent,
+        "nacks_limited" => s.nacks_limited,
+        "nacks_superseded" => s.nacks_superseded,
+        "talk_queue_overflow" => s.talk_queue_overflow,
+        "talk_refused" => s.talk_refused,
+        "talk_refused_full" => s.talk_refused_full,
+        "talk_repair_limited" => s.talk_repair_limited,
+        "id_conflicts" => s.id_conflicts,
+        "clock_samples" => s.clock_samples,
+        "clock_echoes_rejected" => s.clock_echoes_rejected,
+        "clock_outliers" => s.clock_outliers,
+        "clock_stamps_implausible" => s.clock_stamps_implausible,
+        "transit_defaulted" => s.transit_defaulted,
+        _ => return None,
+    })
 }

@@ -234,6 +234,11 @@ fn a_c_program_uses_the_typed_calls_events_keys_and_stats() {
         "{out}"
     );
     assert!(out.contains("robot 2: 1 peer(s) present"), "{out}");
+    assert!(
+        out.contains("robot 2: talk_unknown_value 0, drops ")
+            && out.contains(", no_such_counter found 0\n"),
+        "a counter by name from C, and 0 for a name this library does not know: {out}"
+    );
     assert!(out.ends_with("typed_node: OK\n"), "{out}");
 }
 

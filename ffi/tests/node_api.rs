@@ -373,6 +373,67 @@ fn watched_changes_arrive_as_events_and_keys_and_stats_are_listed() {
         );
         assert_eq!(stats.peers_present, 1, "robot 1");
         assert_eq!(stats.id_conflicts, 0);
+
+        // Every counter the replica mirrors is readable by name (the struct holds the
+        // oldest ones only), and agrees with the struct where both have it.
+        let mut len = 0;
+        let stats_keys = c("local.var.huddle.stats.#");
+        huddle_node_keys(
+            two.0,
+            stats_keys.as_ptr(),
+            std::ptr::null_mut(),
+            0,
+            &mut len,
+            &mut err,
+        );
+        let mut buf = vec![0 as c_char; len + 1];
+        huddle_node_keys(
+            two.0,
+            stats_keys.as_ptr(),
+            buf.as_mut_ptr(),
+            buf.len(),
+            &mut len,
+            &mut err,
+        );
+        let names: Vec<String> = text(&buf)
+            .lines()
+            .map(|k| k.trim_start_matches("local.var.huddle.stats.").to_owned())
+            .filter(|n| !n.starts_with("peer."))
+            .collect();
+        assert!(
+            names.iter().any(|n| n == "talk_unknown_value"),
+            "mirrored: {names:?}"
+        );
+        for name in &names {
+            let mut v = u64::MAX;
+            assert_eq!(
+                huddle_node_stats_counter(two.0, c(name).as_ptr(), &mut v, &mut err),
+                1,
+                "huddle_node_stats_counter knows the mirrored counter {name}"
+            );
+            assert_ne!(v, u64::MAX, "{name} was written");
+        }
+        let mut v = 7;
+        assert_eq!(
+            huddle_node_stats_counter(two.0, c("no_such_counter").as_ptr(), &mut v, &mut err),
+            0,
+            "an unknown name is 0, not an error"
+        );
+        assert_eq!(v, 7, "out untouched");
+        assert_eq!(
+            huddle_node_stats_counter(two.0, std::ptr::null(), &mut v, &mut err),
+            -1
+        );
+        assert_eq!(err.code, HUDDLE_E_NULL);
+        let mut conflicts = u64::MAX;
+        assert_eq!(
+            huddle_node_stats_counter(two.0, c("id_conflicts").as_ptr(), &mut conflicts, &mut err),
+            1
+        );
+        assert_eq!(
+            conflicts, stats.id_conflicts,
+            "the struct and the name agree"
+        );
         assert_eq!(
             huddle_node_unwatch(two.0, c("+.var.ball.#").as_ptr(), &mut err),
             1

@@ -234,8 +234,10 @@ def utf8_keys(binary, seed, log, long=False):
     """Keys with malformed UTF-8 (overlong, surrogate, 5-byte, lone continuation, cut
     short at the line's end, beyond U+10FFFF) in every verb: one refusal each (403),
     nothing stored. Keys of valid non-ASCII text are refused by the key syntax (410:
-    ASCII letters, digits, - and _) in every verb alike, on one line each; the same
-    text as a string value is stored, read and pushed byte for byte."""
+    ASCII letters, digits, - and _) in every verb alike, on one line each, and so are
+    watch patterns of it (411: they could never match a key), all counted in
+    `relay_non_ascii_refused`; the same text as a string value is stored, read and
+    pushed byte for byte."""
     rng = seeded(seed, "relay_utf8_keys")
     d = daemon(binary, rng)
     try:
@@ -252,19 +254,18 @@ def utf8_keys(binary, seed, log, long=False):
         c.send(b"ADDW local.var.u.#\nREFR 0\n")
         check(c.line() == "OK" and c.line() == "OK", "watch")
         w = d.client()
-        syntax = patterns_taken = 0
+        non_ascii0 = w.stat("relay_non_ascii_refused")
+        syntax = patterns = 0
         for i, good in enumerate(UTF8_GOOD):
             key = "local.var.u.%s" % good
             for verb in ("SETV %s %d" % (key, i), "GETV %s" % key):
                 a = w.ask(verb)
                 check(a.startswith("ERR 410"), "%r: %r" % (verb, a[:80]))
                 syntax += 1
-            # A watch pattern takes any text (it then matches no key): noted, not checked.
-            a = w.ask("ADDW %s" % key)
-            check(a == "OK" or a.startswith("ERR 411"), "ADDW %r: %r" % (key, a[:80]))
-            patterns_taken += a == "OK"
-            if a == "OK":
-                check(w.ask("DELW %s" % key) == "OK", "DELW %r" % key)
+            for verb in ("ADDW %s" % key, "DELW %s.#" % key, "ADDW +.var.%s" % good):
+                a = w.ask(verb)
+                check(a.startswith("ERR 411"), "%r: %r" % (verb, a[:80]))
+                patterns += 1
             value = '"%s %d"' % (good, i)
             check(w.ask("SETV local.var.u.s%d %s" % (i, value)) == "OK", "a string of %r" % good)
             upd = c.line()
@@ -275,11 +276,13 @@ def utf8_keys(binary, seed, log, long=False):
         w.send(b"LSTW\n")
         check(w.line() == "END", "no watch on the writer")
         check(c.value("local.var.kept") == ("int", "3"), "a stored value was lost")
+        w.wait_for("local.var.huddle.stats.relay_non_ascii_refused",
+                   lambda v: int(v[1]) == non_ascii0 + syntax + patterns)
         log("  %d lines with malformed UTF-8 in the key refused (403); %d uses of non-ASCII keys refused by the key "
-            "syntax (410), %d of %d such watch patterns taken (they match nothing); %d non-ASCII strings stored, "
-            "read and pushed exactly" % (refused, syntax, patterns_taken, len(UTF8_GOOD), len(UTF8_GOOD)))
+            "syntax (410) and %d non-ASCII watch patterns (411), all counted; %d non-ASCII strings stored, "
+            "read and pushed exactly" % (refused, syntax, patterns, len(UTF8_GOOD)))
         d.assert_healthy("utf-8 keys")
-        return {"refused": refused, "syntax": syntax, "strings": len(UTF8_GOOD)}
+        return {"refused": refused, "syntax": syntax, "patterns": patterns, "strings": len(UTF8_GOOD)}
     finally:
         d.stop()
 

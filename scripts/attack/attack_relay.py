@@ -147,15 +147,16 @@ def half_lines(binary, seed, log, long=False):
 
 
 def connections(binary, seed, log, long=False):
-    """Thousands of clients at once, most silent: each greeted, the daemon answers the
-    last one, and its descriptors and memory come back when they go."""
+    """Thousands of clients at once, most silent, on a daemon whose --max-clients lets
+    them all in: each greeted, the daemon answers the last one, and its descriptors and
+    memory come back when they go."""
     rng = seeded(seed, "relay_conns")
-    d = daemon(binary, rng)
+    n = 4_000 if long else 1_000
+    d = daemon(binary, rng, extra=["--max-clients", str(n + 16)])
     try:
         c = d.client()
         check(c.ask("SETV local.var.kept 5") == "OK", "setup")
         fds0, rss0 = d.fds(), d.rss_mib()
-        n = 4_000 if long else 1_000
         socks, greeted = [], 0
         for i in range(n):
             s = socket.create_connection(("127.0.0.1", d.relay_port), timeout=10)
@@ -177,6 +178,107 @@ def connections(binary, seed, log, long=False):
         check(rss1 - rss0 < 200, "%.0f MiB for %d clients" % (rss1 - rss0, n))
         d.assert_healthy("connections")
         return {"clients": n, "rss_mib": round(rss1 - rss0, 1)}
+    finally:
+        d.stop()
+
+
+CAP = 64  # huddle daemon's default --max-clients
+REFUSAL = "ERR 503 too many relay clients (%d connected, --max-clients)" % CAP
+
+
+def first_line_then_eof(s, within=5.0):
+    """The first line a connection gets, and, for an `ERR` line, whether the daemon closed
+    the connection after it with nothing more."""
+    s.settimeout(within)
+    buf = b""
+    try:
+        while b"\n" not in buf:
+            chunk = s.recv(256)
+            if not chunk:
+                return buf.decode("utf-8", "replace"), True
+            buf += chunk
+        line, rest = buf.split(b"\n", 1)
+        if rest or not line.startswith(b"ERR "):
+            return line.decode("utf-8", "replace"), False  # a greeting: served, stays open
+        s.settimeout(0.5)
+        try:
+            closed = s.recv(64) == b""
+        except socket.timeout:
+            closed = False
+        except OSError:
+            closed = True
+        return line.decode("utf-8", "replace"), closed
+    except (socket.timeout, OSError):
+        return buf.decode("utf-8", "replace"), False
+
+
+def client_cap(binary, seed, log, long=False):
+    """One host opens 1,000 (long: 4,000) connections while a few clients work: the
+    daemon serves 64 at most (its default --max-clients), each connection over the cap
+    gets one line `ERR 503` and is closed, the refusals are counted, the working clients
+    never notice, and descriptors and memory come back."""
+    rng = seeded(seed, "relay_client_cap")
+    d = daemon(binary, rng)
+    try:
+        k = rng.randint(3, 12)
+        workers = [d.client() for _ in range(k)]
+        for i, w in enumerate(workers):
+            check(w.ask("SETV local.var.e%d %d" % (i, i)) == "OK", "setup %d" % i)
+        watcher = workers[0]
+        watcher.send(b"ADDW local.var.w\nREFR 0\n")
+        check(watcher.line() == "OK" and watcher.line() == "OK", "watch")
+        refused0 = watcher.stat("relay_clients_refused")
+        fds0, rss0 = d.fds(), d.rss_mib()
+        n = 4_000 if long else 1_000
+        socks = []
+        for i in range(n):
+            socks.append(socket.create_connection(("127.0.0.1", d.relay_port), timeout=10))
+            if i % 97 == 0:
+                # The working clients are answered in the middle of the flood.
+                j = rng.randrange(k)
+                v = workers[j].value("local.var.e%d" % j)
+                check(v == ("int", str(j)), "client %d during the flood: %r" % (j, v))
+        greeted, refused, odd = [], 0, []
+        for s in socks:
+            line, closed = first_line_then_eof(s)
+            if line.startswith("HUDDLE "):
+                greeted.append(s)
+            elif line.startswith(REFUSAL) and closed:
+                refused += 1
+            else:
+                odd.append((line[:80], closed))
+        fds1, rss1 = d.fds(), d.rss_mib()
+        check(not odd, "%d connections neither greeted nor refused with one line: %r" % (len(odd), odd[:5]))
+        check(len(greeted) + k == CAP, "%d greeted beside %d working clients, cap %d" % (len(greeted), k, CAP))
+        check(refused == n - len(greeted), "%d refused of %d" % (refused, n))
+        # The working clients: each reads its value, one writes, the watcher is pushed it.
+        for j, w in enumerate(workers):
+            check(w.value("local.var.e%d" % j) == ("int", str(j)), "client %d after the flood" % j)
+        check(workers[-1].ask("SETV local.var.w 7") == "OK", "a write after the flood")
+        upd = watcher.line()
+        check(upd.startswith("UPD local.var.w int 7 "), "the watcher was pushed %r" % upd[:80])
+        # A greeted one of the flood works too.
+        if greeted:
+            r = greeted[0]
+            r.settimeout(5)
+            r.sendall(b"GETV local.var.e0\n")
+            check(r.recv(256).startswith(b"VAL local.var.e0 int 0 "), "a greeted flood client")
+        watcher.wait_for("local.var.huddle.stats.relay_clients_refused",
+                         lambda v: int(v[1]) == refused0 + refused)
+        for s in socks:
+            s.close()
+        time.sleep(1.0)
+        fds2 = d.fds()
+        # Room again: a newcomer is greeted.
+        late = d.client()
+        check(late.greeting.startswith("HUDDLE "), "a newcomer after the flood: %r" % late.greeting)
+        log("  %d working clients; %d connections: %d greeted, %d refused with ERR 503 and counted; "
+            "descriptors %d -> %d -> %d, RSS %.1f -> %.1f MiB" % (k, n, len(greeted), refused, fds0, fds1, fds2, rss0, rss1))
+        check(fds2 <= fds0 + 5, "descriptors not given back: %d -> %d" % (fds0, fds2))
+        check(rss1 - rss0 < 100, "%.0f MiB for %d connections" % (rss1 - rss0, n))
+        d.assert_healthy("client cap")
+        return {"working": k, "connections": n, "greeted": len(greeted), "refused": refused,
+                "rss_mib": round(rss1 - rss0, 1)}
     finally:
         d.stop()
 

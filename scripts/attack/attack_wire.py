@@ -25,6 +25,21 @@ def delta(a, b):
     return {k: b[k] - a[k] for k in a}
 
 
+def settled(client, before, n, kernel_drops, within=5.0):
+    """The counters' change since `before` once all `n` datagrams sent are accounted for
+    (counted in, or dropped by the kernel: `kernel_drops()`), or as they stand after
+    `within` s; and the kernel's drops. On a loaded machine the daemon may still be
+    working through its socket's queue when the sender is done, and its counters are
+    mirrored once a refresh and read one at a time: one snapshot can hold `frames_in` of
+    one refresh and `drops.*` of the next (seed 1201 at load 18: 3,984 of 4,000)."""
+    deadline = time.monotonic() + within
+    while True:
+        d = delta(before, snapshot(client))
+        kernel = kernel_drops()
+        if d["frames_in"] - d["frames_out"] + kernel >= n or time.monotonic() > deadline:
+            return d, kernel
+
+
 class Team:
     """Robots 1 and 2 of team 7 on a scratch group, each holding canaries."""
 
@@ -323,8 +338,7 @@ def mutated(binary, seed, log, long=False):
             team.sock.sendto(data, (group, port))
             if i % 100 == 99:
                 time.sleep(0.01)
-        d = delta(before, snapshot(c5))
-        kernel = solo.udp_drops() - kernel0
+        d, kernel = settled(c5, before, n, lambda: solo.udp_drops() - kernel0)
         mine = d["frames_in"] - d["frames_out"] + kernel
         drops = sum(v for k, v in d.items() if k.startswith("drops."))
         log("  %d mutated frames: counted in %d (%d dropped by the kernel, full buffer), %d dropped (%s), "
@@ -367,8 +381,7 @@ def keyed(binary, seed, log, long=False):
             sock.sendto(data, (group, port))
             if i % 100 == 99:
                 time.sleep(0.01)
-        dl = delta(before, snapshot(c))
-        kernel = d.udp_drops() - kernel0
+        dl, kernel = settled(c, before, n, lambda: d.udp_drops() - kernel0)
         mine = dl["frames_in"] - dl["frames_out"] + kernel
         drops = sum(v for k, v in dl.items() if k.startswith("drops.")) + kernel
         log("  %d mutated keyed frames: %d in, %d dropped (%s), %d updates applied"

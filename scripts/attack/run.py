@@ -42,6 +42,7 @@ ATTACKS = [
     ("relay_long_lines", attack_relay.long_lines),
     ("relay_half_lines", attack_relay.half_lines),
     ("relay_connections", attack_relay.connections),
+    ("relay_client_cap", attack_relay.client_cap),
     ("relay_no_reader", attack_relay.no_reader),
     ("config_files", attack_relay.config_files),
     ("team_inputs", attack_team.inputs),

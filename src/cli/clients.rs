@@ -344,32 +344,77 @@ pub fn stats(args: StatsArgs) -> Result<()> {
     let mut out = std::io::stdout().lock();
     if args.json {
         writeln!(out, "{}", stats_json(&all))?;
-        return Ok(());
+    } else {
+        write!(out, "{}", stats_text(&all))?;
     }
+    Ok(())
+}
+
+/// The counters `huddle stats` names on its own lines (`stats_text`); every other
+/// mirrored counter goes on its `also` line when it is not 0, so that a counter added to
+/// the mirror is never invisible in the human form (`--json` has them all).
+const STATS_NAMED: [&str; 12] = [
+    "frames_in",
+    "frames_out",
+    "bytes_in",
+    "bytes_out",
+    "updates_applied",
+    "updates_stale",
+    "talk_delivered",
+    "talk_given_up",
+    "talk_unknown_value",
+    "talk_resent",
+    "nacks_sent",
+    "drops.total",
+];
+
+/// Drops and refusals of the I/O layer (`driver::IoStats::dropped`: the daemon mirrors
+/// them; older daemons mirror fewer or none), on their own line when not 0.
+const STATS_IO: [&str; 11] = [
+    "unicast_refused",
+    "relay_lost_suppressed",
+    "relay_cutoffs",
+    "relay_read_only_refused",
+    "relay_clock_refused",
+    "relay_non_ascii_refused",
+    "relay_clients_refused",
+    "send_backlog_drops",
+    "send_errors",
+    "impair_dropped",
+    "nacks_limited",
+];
+
+/// `huddle stats` without `--json`: a few lines for people.
+fn stats_text(all: &[Binding]) -> String {
+    use std::fmt::Write as _;
     let get = |n: &str| {
         all.iter()
             .find(|b| stat_name(b) == n)
             .map(|b| b.value.clone())
     };
     let or0 = |n: &str| get(n).unwrap_or_else(|| "0".into());
-    writeln!(
+    let mut out = String::new();
+    // Writing into a String cannot fail.
+    let _ = writeln!(
         out,
         "frames in {}  out {}   bytes in {}  out {}",
         or0("frames_in"),
         or0("frames_out"),
         or0("bytes_in"),
         or0("bytes_out")
-    )?;
-    writeln!(
+    );
+    let _ = writeln!(
         out,
-        "updates applied {}  stale {}   talk delivered {}  given up {}  resent {}  nacks {}",
+        "updates applied {}  stale {}   talk delivered {}  given up {}  unknown value {}  \
+         resent {}  nacks {}",
         or0("updates_applied"),
         or0("updates_stale"),
         or0("talk_delivered"),
         or0("talk_given_up"),
+        or0("talk_unknown_value"),
         or0("talk_resent"),
         or0("nacks_sent")
-    )?;
+    );
     let drops: Vec<String> = all
         .iter()
         .filter_map(|b| {
@@ -377,7 +422,7 @@ pub fn stats(args: StatsArgs) -> Result<()> {
             (reason != "total" && b.value != "0").then(|| format!("{reason} {}", b.value))
         })
         .collect();
-    writeln!(
+    let _ = writeln!(
         out,
         "drops {}{}",
         or0("drops.total"),
@@ -386,25 +431,13 @@ pub fn stats(args: StatsArgs) -> Result<()> {
         } else {
             format!(" ({})", drops.join(", "))
         }
-    )?;
-    // Drops and refusals of the I/O layer (`driver::IoStats::dropped`: the daemon mirrors
-    // them; older daemons mirror fewer or none), shown when not 0.
-    let io: Vec<String> = [
-        "unicast_refused",
-        "relay_lost_suppressed",
-        "relay_cutoffs",
-        "relay_read_only_refused",
-        "relay_clock_refused",
-        "send_backlog_drops",
-        "send_errors",
-        "impair_dropped",
-        "nacks_limited",
-    ]
-    .iter()
-    .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
-    .collect();
+    );
+    let io: Vec<String> = STATS_IO
+        .iter()
+        .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
+        .collect();
     if !io.is_empty() {
-        writeln!(out, "dropped or refused {}", io.join("  "))?;
+        let _ = writeln!(out, "dropped or refused {}", io.join("  "));
     }
     // Only a daemon that speaks or listens (`--audio-in`, `--audio-out`) has these.
     let audio: Vec<String> = all
@@ -418,19 +451,37 @@ pub fn stats(args: StatsArgs) -> Result<()> {
         })
         .collect();
     if !audio.is_empty() {
-        writeln!(out, "audio {}", audio.join("  "))?;
+        let _ = writeln!(out, "audio {}", audio.join("  "));
     }
-    for b in &all {
+    // Every other counter that is not 0 (the replica's refusals, clock estimates, the
+    // GameController listener's counts, ...).
+    let also: Vec<String> = all
+        .iter()
+        .filter(|b| {
+            let n = stat_name(b);
+            !STATS_NAMED.contains(&n)
+                && !STATS_IO.contains(&n)
+                && !n.starts_with("drops.")
+                && !n.starts_with("audio.")
+                && !n.starts_with("peer.")
+                && b.value != "0"
+        })
+        .map(|b| format!("{} {}", stat_name(b), b.value))
+        .collect();
+    if !also.is_empty() {
+        let _ = writeln!(out, "also {}", also.join("  "));
+    }
+    for b in all {
         if let Some(robot) = stat_name(b)
             .strip_prefix("peer.")
             .and_then(|r| r.strip_suffix(".last_heard_us"))
         {
             // The counter is mirrored once per refresh period when it moves, so its age
             // is the time since the peer was last heard, to within one period.
-            writeln!(out, "peer {robot}: last heard {} ms ago", b.age_ms)?;
+            let _ = writeln!(out, "peer {robot}: last heard {} ms ago", b.age_ms);
         }
     }
-    Ok(())
+    out
 }
 
 #[cfg(test)]
@@ -505,5 +556,38 @@ mod tests {
         assert_eq!(v["frames_in"], json!(10));
         assert_eq!(v["drops"]["garbage"], json!(2));
         assert_eq!(v["peers"]["3"]["last_heard_ms"], json!(40));
+    }
+
+    #[test]
+    fn stats_text_names_every_counter_that_is_not_zero() {
+        // A daemon whose replica acknowledged one talk message of a newer build's value
+        // type, cut off two relay clients and saw a stale GameController packet.
+        let b = |line: &str| Binding::parse(line).unwrap();
+        let all = [
+            b("UPD local.var.huddle.stats.frames_in int 10 0"),
+            b("UPD local.var.huddle.stats.talk_given_up int 0 0"),
+            b("UPD local.var.huddle.stats.talk_unknown_value int 1 0"),
+            b("UPD local.var.huddle.stats.items_skipped int 0 0"),
+            b("UPD local.var.huddle.stats.clock_outliers int 4 0"),
+            b("UPD local.var.huddle.stats.gc.stale int 1 0"),
+            b("UPD local.var.huddle.stats.relay_cutoffs int 2 0"),
+            b("UPD local.var.huddle.stats.drops.total int 0 0"),
+            b("UPD local.var.huddle.stats.peer.3.last_heard_us int 99 40"),
+        ];
+        let text = stats_text(&all);
+        assert!(
+            text.contains("given up 0  unknown value 1  resent 0"),
+            "talk_unknown_value is on the talk line:\n{text}"
+        );
+        assert!(
+            text.contains("dropped or refused relay_cutoffs 2\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("also clock_outliers 4  gc.stale 1\n"),
+            "counters without a line of their own are listed when not 0:\n{text}"
+        );
+        assert!(!text.contains("items_skipped"), "zeros stay out:\n{text}");
+        assert!(text.ends_with("peer 3: last heard 40 ms ago\n"), "{text}");
     }
 }

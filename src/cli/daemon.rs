@@ -42,6 +42,12 @@ pub struct DaemonArgs {
     /// 2001); any other than loopback must be given explicitly.
     #[arg(long, env = "HUDDLE_RELAY", default_value = "127.0.0.1:2001")]
     pub relay: RelayTarget,
+    /// Relay clients served at once: a connection beyond gets one line `ERR 503 too many
+    /// relay clients ...` and is closed (counted in `huddle stats` as
+    /// relay_clients_refused); clients already connected are unaffected.
+    #[arg(long, value_name = "N", default_value_t = driver::DEFAULT_MAX_RELAY_CLIENTS as u32,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_clients: u32,
     /// Directory of config.dat and config-<id>.dat.
     #[arg(long, default_value = ".")]
     pub config_dir: PathBuf,
@@ -325,6 +331,7 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     config.socket = args.transport.socket_config(iface, Some(args.team))?;
     config.socket.ttl = args.ttl;
     config.peers = args.peers.clone();
+    config.max_relay_clients = args.max_clients as usize;
     if config.socket.transport == driver::Transport::Unicast && config.peers.is_empty() {
         bail!("--transport unicast sends to each --peer only: give at least one --peer ADDR:PORT");
     }

@@ -144,6 +144,14 @@ impl RelayClient {
             greeting: String::new(),
         };
         client.greeting = client.line()?;
+        if client.greeting.starts_with("ERR ") {
+            // A relay that refuses the connection (`ERR 503`: as many clients as its
+            // `--max-clients` are connected) says why instead of greeting.
+            bail!(
+                "the relay at {target} refused the connection: {}",
+                client.greeting
+            );
+        }
         if !client.greeting.starts_with("HUDDLE ") {
             bail!(
                 "{target} is not a huddle relay (it said {:?})",

@@ -67,6 +67,27 @@ pub fn free_tcp_port() -> u16 {
     }
 }
 
+/// A UDP port on 127.0.0.1 that nothing uses right now (the kernel's pick), for a
+/// daemon's team port or a GameController socket, and never the same twice in one test
+/// binary (for the reason [`free_tcp_port`] gives).
+pub fn free_udp_port() -> u16 {
+    static HANDED_OUT: std::sync::Mutex<std::collections::BTreeSet<u16>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    loop {
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+            .and_then(|s| s.local_addr())
+            .expect("a free UDP port on loopback")
+            .port();
+        if HANDED_OUT
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(port)
+        {
+            return port;
+        }
+    }
+}
+
 /// A running daemon, killed when dropped.
 pub struct Daemon {
     pub child: Child,

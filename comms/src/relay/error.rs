@@ -12,8 +12,8 @@ use std::fmt;
 /// | 403 | line is not UTF-8 text |
 /// | 404 | `GETV`: no value bound to the key; `DELW`: pattern not watched |
 /// | 406 | `GETV key max_age_ms`: the value is older than `max_age_ms` |
-/// | 410 | malformed key |
-/// | 411 | malformed watch pattern |
+/// | 410 | malformed key (one that is not ASCII too) |
+/// | 411 | malformed watch pattern, or one that is not ASCII (it could never match a key) |
 /// | 412 | malformed value literal |
 /// | 413 | `REFR` period is not whole milliseconds in 0..=3600000 |
 /// | 420 | write refused: the key belongs to another robot |

@@ -71,7 +71,15 @@
 //!   silence), `CLOK` gets `ERR 424` and the clock is left as the GC's packets set it
 //!   (a client's clock would move the pacing line until the GC's next packet). The
 //!   daemon counts refusals in `local.var.huddle.stats.relay_clock_refused`.
+//! - Keys are ASCII, so a watch pattern that is not (`ADDW *.var.café`) could never
+//!   match: `ADDW` and `DELW` refuse it with `ERR 411`, as a key that is not ASCII gets
+//!   `ERR 410` in every command. The daemon counts both in
+//!   `local.var.huddle.stats.relay_non_ascii_refused`. String values may hold any UTF-8.
 //! - Empty lines are ignored. Errors never end a session; see [`ErrCode`] for codes.
+//! - `huddle daemon` serves at most `--max-clients` clients at once (64 by default): a
+//!   connection beyond gets one line `ERR 503 too many relay clients (N connected,
+//!   --max-clients); try again later` in place of the greeting and is closed, counted in
+//!   `local.var.huddle.stats.relay_clients_refused`; the clients connected are unaffected.
 //! - A line longer than 4 KiB gets `ERR 402` and is discarded up to its end. A client
 //!   with more than 1 MiB of unread output is cut off (see [`SessionLimits`]).
 

@@ -102,6 +102,8 @@ pub struct Session {
     lost_allowance: (f64, Option<Instant>),
     /// `LOST` lines not sent because the allowance was spent.
     lost_suppressed: u64,
+    /// Patterns and keys refused because they are not ASCII.
+    non_ascii_refused: u64,
 }
 
 /// `LOST` lines a session sends per second at most (a burst of as many): given-up talk
@@ -125,6 +127,7 @@ impl Session {
             state: SessionState::Open,
             lost_allowance: (LOST_LINES_PER_S, None),
             lost_suppressed: 0,
+            non_ascii_refused: 0,
         };
         s.push(format_args!("HUDDLE {PROTOCOL_VERSION} robot {robot_id}"));
         s
@@ -244,8 +247,24 @@ impl Session {
             return; // a bare Enter from a person at a terminal
         }
         match Command::parse(text) {
+            // Keys are ASCII (`[A-Za-z0-9_-]` and the scope), so a pattern with anything
+            // else would be accepted and never match: refused, as a bad key is.
+            Ok(Command::AddWatch(ref p) | Command::DelWatch(ref p)) if !p.as_str().is_ascii() => {
+                self.non_ascii_refused += 1;
+                let text = format!(
+                    "pattern {:?} is not ASCII: keys are ASCII, so it would never match",
+                    p.as_str()
+                );
+                self.push_err(&Rejected::new(ErrCode::BadPattern, text));
+            }
             Ok(command) => self.execute(now, command, board),
-            Err(rejected) => self.push_err(&rejected),
+            Err(rejected) => {
+                let key = text.split_whitespace().nth(1).unwrap_or("");
+                if rejected.code == ErrCode::BadKey && !key.is_ascii() {
+                    self.non_ascii_refused += 1;
+                }
+                self.push_err(&rejected)
+            }
         }
     }
 
@@ -441,6 +460,12 @@ impl Session {
     /// `LOST` lines not sent because this client's allowance was spent.
     pub fn lost_suppressed(&self) -> u64 {
         self.lost_suppressed
+    }
+
+    /// Watch patterns (`ERR 411`) and keys (`ERR 410`) this client sent that were refused
+    /// for not being ASCII.
+    pub fn non_ascii_refused(&self) -> u64 {
+        self.non_ascii_refused
     }
 
     /// Whether the session is open and watches `from`'s talk queue `queue`.
@@ -692,6 +717,51 @@ mod tests {
             bb.get(&Key::parse("3.var.x").unwrap()).unwrap().value,
             Value::Int(1)
         );
+    }
+
+    #[test]
+    fn a_non_ascii_pattern_or_key_is_refused_and_counted() {
+        // Robot 1's relay; a client types a pattern and keys with an accented letter, a
+        // Greek letter and a non-breaking hyphen. Keys are ASCII: the pattern would never
+        // match, so it is refused like a malformed one.
+        let (mut s, mut bb) = open();
+        let cases = [
+            (
+                "ADDW *.var.bal\u{e9}.#\n",
+                "ERR 411 pattern \"*.var.bal\u{e9}.#\" is not ASCII",
+            ),
+            ("ADDW +.var.\u{3b2}\n", "ERR 411 "),
+            ("DELW 2.var.x\u{2011}y\n", "ERR 411 "),
+            ("addw \u{1f916}.var.#\n", "ERR 411 "),
+            ("SETV *.var.caf\u{e9} 1\n", "ERR 410 "),
+            ("GETV 3.var.\u{3b2}\n", "ERR 410 "),
+            ("SETV *.talk.pl\u{e4}n 1\n", "ERR 410 "),
+            ("SETP local.var.\u{e9} 1\n", "ERR 410 "),
+        ];
+        for (i, (line, want)) in cases.iter().enumerate() {
+            let got = say(&mut s, &mut bb, t(0), line);
+            assert!(
+                got.starts_with(want),
+                "{line:?} answered {got:?}, expected {want:?}"
+            );
+            assert_eq!(s.non_ascii_refused(), i as u64 + 1, "{line:?} is counted");
+        }
+        assert_eq!(
+            say(&mut s, &mut bb, t(0), "LSTW\n"),
+            "END\n",
+            "no watch was added"
+        );
+        // Non-ASCII inside a string value is text, not a key: accepted, not counted.
+        assert_eq!(
+            say(&mut s, &mut bb, t(0), "SETV local.var.name \"Jos\u{e9}\"\n"),
+            "OK\n"
+        );
+        assert_eq!(
+            say(&mut s, &mut bb, t(0), "ADDW 2.var.x!y\n"),
+            "OK\n",
+            "ASCII: as before"
+        );
+        assert_eq!(s.non_ascii_refused(), cases.len() as u64);
     }
 
     #[test]
