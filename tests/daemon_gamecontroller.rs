@@ -18,7 +18,7 @@ mod daemon_support;
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use daemon_support::{free_tcp_port, scratch_group, Client, Daemon};
+use daemon_support::{free_tcp_port, free_udp_port, scratch_group, Client, Daemon};
 use gamecontroller::{GameControlData, State, StatusMessage};
 
 struct ScriptedGc {
@@ -52,14 +52,6 @@ fn write_for(c: &mut Client, gc: &mut ScriptedGc, d: Duration) {
         k += 1;
         std::thread::sleep(Duration::from_millis(20));
     }
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 #[test]

@@ -24,7 +24,7 @@ mod daemon_support;
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use daemon_support::{free_tcp_port, Client, Daemon};
+use daemon_support::{free_tcp_port, free_udp_port, Client, Daemon};
 use gamecontroller::{GameControlData, GcBudget, State, StatusMessage};
 
 /// The status period (`GameControllerConfig::new`: 750 ms): the tolerance of an age
@@ -62,15 +62,6 @@ impl ScriptedGc {
     fn set_budget(&mut self, left: u16) {
         self.game.team_mut(12).unwrap().message_budget = left;
     }
-}
-
-/// A UDP port free on 127.0.0.1 right now (the GC's port for a daemon).
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// The daemon's one unicast peer: every frame it sends arrives here, to be counted.
