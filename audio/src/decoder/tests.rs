@@ -4,7 +4,7 @@
 use super::end_test::tone_powers;
 use super::*;
 use crate::encoder::{Encoder, EncoderConfig};
-use crate::tones::{tone_frequency_hz, Frame};
+use crate::tones::{basic_tones, tone_frequency_hz, Frame, SENDER_COUNT};
 
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();
@@ -359,6 +359,70 @@ fn a_long_message_whose_second_data_is_faint_is_decided_on_its_second_slot() {
             "second data {db} dB below the rest: {shown:#?}"
         );
     }
+}
+
+/// A long message of sender 1 (its tones k1 silent, k25 sounding, k49 12 dB below k25: a
+/// room's notches), data 16 then `second` (`None`: no second data at all), 1 s after the
+/// start, in a T60 2.0 s room's way: every tone rings on after it stops, falling 30 dB per
+/// second. The second frame's middle data tone sounds 14 dB above the rest, so k49 is
+/// 26 dB below it. White noise at 0 dB in-band to the first frame (seed 33).
+fn long_message_with_a_weak_sender_tone(second: Option<u8>) -> Vec<f32> {
+    let rate = 16_000.0;
+    let a = 0.05;
+    // (tone, amplitude, from, to) in samples.
+    let mut tones: Vec<(usize, f64, usize, usize)> =
+        vec![(25, a, 16_000, 48_000), (49, 0.25 * a, 16_000, 48_000)];
+    for k in basic_tones(SENDER_COUNT + 16) {
+        tones.push((k, a, 16_000, 32_000));
+    }
+    if let Some(d) = second {
+        let [low, middle, high] = basic_tones(SENDER_COUNT + usize::from(d));
+        tones.extend([
+            (low, a, 32_000, 48_000),
+            (middle, 5.0 * a, 32_000, 48_000),
+            (high, a, 32_000, 48_000),
+        ]);
+    }
+    let mut x = vec![0.0f32; 88_000];
+    for (k, amp, from, to) in tones {
+        let w = 2.0 * std::f64::consts::PI * tone_frequency_hz(k) / rate;
+        for (n, v) in x.iter_mut().enumerate().skip(from) {
+            // 30 dB per second after the tone stops: amplitude × 10^(−1.5 t).
+            let ring = if n < to {
+                1.0
+            } else {
+                10f64.powf(-1.5 * (n - to) as f64 / rate)
+            };
+            *v += (amp * ring * (w * n as f64).sin()) as f32;
+        }
+    }
+    let sigma = crate::channel::white_sigma_for_in_band_snr(4.0 * a * a / 2.0, 0.0, 16_000);
+    crate::channel::Source::add_to(&mut crate::channel::WhiteNoise::new(33, sigma), &mut x);
+    x
+}
+
+#[test]
+fn a_second_frame_louder_than_the_first_keeps_the_senders_weak_tone() {
+    // Lab T60 2.0 s at 0 dB (tuning rows 11027, 14027, 15027): 16 of 25 second slots
+    // refused by the rules had the sender's weak tone at its first-slot level, but 25 dB
+    // below the second frame's loudest data tone, where the rules stop counting tones
+    // (e.g. k49 at 14 per window in both slots, k41 at 8,060), while the first frame's
+    // data rang on into the slot. The sender is the first slot's, and its tone kept its
+    // level: the long message (old code: nothing).
+    let long = Message::long(Sender::LeftAttacker, 21 * 16 + 5).unwrap();
+    let (got, _, shown) = decode_traced(&long_message_with_a_weak_sender_tone(Some(5)));
+    assert_eq!(
+        got,
+        vec![long],
+        "a data tone 26 dB above the sender's weak one: {shown:#?}"
+    );
+    // With no second data at all, the first frame's data ringing on into the second slot
+    // is no second frame: never the first data twice, nor a short.
+    let (got, _, shown) = decode_traced(&long_message_with_a_weak_sender_tone(None));
+    assert!(
+        got.is_empty(),
+        "the first frame's data ringing on is not a second frame: {got:?} {shown:#?}"
+    );
 }
 
 #[test]
