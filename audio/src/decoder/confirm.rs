@@ -169,6 +169,13 @@ impl Decoder {
                 }
                 decided => decided,
             };
+        // A long message's second slot: its sender is the first slot's (tracking.rs).
+        let (frame, present) = match frame {
+            None if t.stage == super::tracking::Stage::Slot2 => self
+                .second_slot_rules(t, a, b)
+                .map_or((None, present), |(f, p)| (Some(f), p)),
+            decided => (decided, present),
+        };
         let Some(frame) = frame else {
             self.note(a, || {
                 let votes: Vec<usize> = (0..crate::tones::BASIC_COUNT)
