@@ -368,3 +368,123 @@ fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_on
     assert!((g.game_playing_s - 240.0).abs() < 1.0, "{g}");
     assert!(!g.game_illegal && g.game_penalties == 0, "{g}");
 }
+
+/// #34, tenth session: a robot learns of a goal from the GameController's packets it
+/// receives (`TeamLayer::set_scores`, as the daemon), not at the goal's true instant.
+/// Seed 3, the short game: robot 2 hears no packet from 5 s into the first Playing until
+/// 4 s after the first goal. Each of its teammates puts the ball on the centre spot at the
+/// first packet with the new score that reaches it (its team ball is the placement then:
+/// `GlobalModel::is_placed`); robot 2 keeps the ball it tracked through those 4 s and
+/// puts it down at the first packet it receives after.
+#[test]
+fn a_goal_lost_to_one_robot_leaves_its_ball_until_a_packet_with_the_score_reaches_it() {
+    let script = short_game();
+    let cfg = SimConfig {
+        duration_s: script.length_s() + 600.0,
+        seed: 3,
+        budget: Some(comms::BudgetSpec::SPL),
+        game: Some(script),
+        ..SimConfig::default()
+    };
+    let deaf = 1;
+    let deaf_for_s = 4.0;
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    let n = sim.robots.len();
+    let mut playing_since = None;
+    let mut goal_at = None;
+    let mut placed_at: Vec<Option<f64>> = vec![None; n];
+    let mut placed_at_goal = Vec::new();
+    let mut placed_before: Vec<bool> = vec![false; n];
+    while !sim.finished() {
+        sim.step();
+        let t_s = sim.time_s();
+        let referee = sim.referee().expect("a game has a referee");
+        let goals: u32 = referee
+            .data()
+            .teams
+            .iter()
+            .map(|t| u32::from(t.score))
+            .sum();
+        if referee.playing() && playing_since.is_none() {
+            playing_since = Some(t_s);
+        }
+        if playing_since.is_some_and(|p| t_s >= p + 5.0) && goal_at.is_none() {
+            sim.set_gc_deaf(deaf, true);
+        }
+        match goal_at {
+            None if goals > 0 => {
+                goal_at = Some(t_s);
+                // As the step before the goal's left it.
+                placed_at_goal = placed_before.clone();
+                for (i, r) in sim.robots.iter().enumerate() {
+                    if r.gwm.is_placed() {
+                        placed_at[i] = Some(t_s);
+                    }
+                }
+            }
+            Some(g) => {
+                if t_s >= g + deaf_for_s {
+                    sim.set_gc_deaf(deaf, false);
+                }
+                for (i, r) in sim.robots.iter().enumerate() {
+                    if placed_at[i].is_none() && r.gwm.is_placed() {
+                        placed_at[i] = Some(t_s);
+                    }
+                }
+                if t_s > g + deaf_for_s + 3.0 {
+                    break;
+                }
+            }
+            None => {}
+        }
+        placed_before = sim.robots.iter().map(|r| r.gwm.is_placed()).collect();
+    }
+    let goal_at = goal_at.expect("seed 3 scores in the short game's first half");
+    assert!(
+        placed_at_goal.iter().all(|&p| !p),
+        "no robot's team ball is a kick-off placement when the goal falls (else the test \
+         could not see the goal's): {placed_at_goal:?}"
+    );
+    let heard: Vec<_> = sim.goals_heard().iter().filter(|h| h.goal == 0).collect();
+    assert_eq!(
+        heard.len(),
+        n,
+        "every robot learnt of the goal once: {heard:?}"
+    );
+    let dt = 0.01;
+    for h in &heard {
+        let i = usize::from(h.robot) - 1;
+        assert!(
+            !h.at_set,
+            "robot {} learnt it from a packet's score, before Set: {h:?}",
+            h.robot
+        );
+        let placed = placed_at[i].expect("every robot put the ball down");
+        assert!(
+            (placed - (h.at_s + dt)).abs() < 1e-6,
+            "robot {}'s team layer put the ball down at the packet it heard the goal in \
+             ({:.2} s), not before or after: {placed:.2} s (goal at {goal_at:.2} s)",
+            h.robot,
+            h.at_s
+        );
+        if i == deaf {
+            assert!(
+                h.at_s >= goal_at + deaf_for_s - dt - 1e-6,
+                "robot 2 kept its ball while it heard nothing: learnt at {:.2} s, goal at \
+                 {goal_at:.2} s, deaf until {:.2} s",
+                h.at_s,
+                goal_at + deaf_for_s
+            );
+            assert!(
+                h.after_s <= deaf_for_s + 0.5 + 1e-6,
+                "and learnt it from the first packet it received after: {h:?}"
+            );
+        } else {
+            assert!(
+                h.at_s < goal_at + deaf_for_s - 0.5,
+                "robot {} heard the goal from a packet soon after it ({h:?}), before robot 2",
+                h.robot
+            );
+        }
+    }
+}

@@ -10,6 +10,16 @@
 //! Playing, walk to its kick-off spot in Ready, stand otherwise. The referee counts every
 //! frame the team's replicas send, with its size, in the state it was sent in.
 //!
+//! A goal reaches a robot the same way: when a packet it receives carries a higher score
+//! than the one before, its team layer forgets the ball and puts it on the centre spot
+//! ([`team::TeamLayer::set_scores`], what the daemon's tick does with the listener's
+//! `gc.score` keys); a robot that received no such packet before Set puts the ball down
+//! at Set ([`team::TeamLayer::set_kick_off_next`]). Each robot's delivery reference puts
+//! the ball down when its robot does; the references that see the whole team when the
+//! first robot does. The report says how long after each goal the robots learnt it
+//! ([`GoalNews`]). Before the tenth session every robot forgot the ball at the goal's true
+//! instant, which no robot can know.
+//!
 //! The field follows the referee's truth: outside Playing the ball lies on the centre spot
 //! and the opponents on their kick-off spots; a penalised robot's body is carried to the
 //! sideline, off the field (no body on it: nothing there shoves it, see
@@ -32,7 +42,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use super::referee::{GameScript, Referee, RefereeEvent};
-use super::robot::Order;
+use super::robot::{self, Order};
 use super::Simulation;
 use crate::field::geometry::{Pose, Vec2};
 
@@ -149,6 +159,8 @@ pub struct GameReport {
     /// All of Playing (penalties too) by time since the stretch's kick-off, one part per
     /// bin of [`SINCE_KICK_OFF_BINS_S`].
     pub game_since_kick_off: Vec<PlayBreakdown>,
+    /// How long after each goal each robot learnt of it (from the GC's packets).
+    pub game_goal_news: GoalNews,
 }
 
 /// Pose, team-ball and blind-robot RMSE over every robot's samples in Playing, penalised
@@ -247,6 +259,12 @@ impl std::fmt::Display for GameReport {
             w.blind_team_ball_rmse_m,
             w.penalised_pose_samples,
             w.penalised_ball_samples
+        )?;
+        let n = &self.game_goal_news;
+        write!(
+            f,
+            "\ngoals heard           {} goals; robots learnt them {:.2} s after on average (the first {:.2} s, the last at most {:.2} s), {} from a packet's score, {} only at Set",
+            n.goals, n.mean_after_s, n.first_mean_after_s, n.max_after_s, n.from_score, n.at_set
         )
     }
 }
@@ -274,6 +292,55 @@ pub(crate) struct Game {
     with_penalised: WithPenalised,
     messages_outside_play: u64,
     since_kick_off: [PlayBreakdown; SINCE_KICK_OFF_BINS_S.len()],
+    /// When each goal the referee counted was scored, simulated seconds.
+    goal_times_s: Vec<f64>,
+    /// How many of those goals each robot's team layer has learnt of.
+    goals_known: Vec<usize>,
+    /// How many of them the references that see the whole team have been told of (at
+    /// the first robot's hearing).
+    goals_told_references: usize,
+    /// When and how each robot learnt each goal.
+    goals_heard: Vec<GoalHeard>,
+    /// Robots that receive no packet now (see [`Simulation::set_gc_deaf`]).
+    deaf: Vec<bool>,
+}
+
+/// How one robot learnt of one goal (`huddle sim --game`): from the first GameController
+/// packet it received with the new score ([`team::TeamLayer::set_scores`]), or, if it
+/// received none before Set, at Set (the kick-off placement,
+/// [`team::TeamLayer::set_kick_off_next`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct GoalHeard {
+    /// The goal, counted from 0 in the game.
+    pub goal: usize,
+    /// Our robot (player number).
+    pub robot: u8,
+    /// When it learnt it, simulated seconds.
+    pub at_s: f64,
+    /// How long after the goal, seconds.
+    pub after_s: f64,
+    /// At Set (no packet with the new score reached it before): its team layer puts the
+    /// ball on the centre spot at its next tick.
+    pub at_set: bool,
+}
+
+/// How long after a goal the robots learnt of it, over every (robot, goal) (in the
+/// report of a `--game` run).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct GoalNews {
+    /// Goals the referee counted.
+    pub goals: u32,
+    /// (robot, goal) pairs learnt from a packet's score.
+    pub from_score: u32,
+    /// Pairs learnt only at Set.
+    pub at_set: u32,
+    /// Mean delay after the goal, seconds, over every pair learnt.
+    pub mean_after_s: f64,
+    /// The longest delay, seconds.
+    pub max_after_s: f64,
+    /// Mean delay of the first robot to learn each goal, seconds (when the references
+    /// that see the whole team put the ball down).
+    pub first_mean_after_s: f64,
 }
 
 impl Game {
@@ -309,6 +376,72 @@ impl Game {
             with_penalised: WithPenalised::default(),
             messages_outside_play: 0,
             since_kick_off: Default::default(),
+            goal_times_s: Vec::new(),
+            goals_known: vec![0; robots],
+            goals_told_references: 0,
+            goals_heard: Vec::new(),
+            deaf: vec![false; robots],
+        }
+    }
+
+    /// Robot `i` learnt of every goal up to the `known`-th at `t_s` (`at_set`: at Set, no
+    /// packet with the new score having reached it). Returns whether it was the first
+    /// robot to learn of one of them (the references that see the whole team put the
+    /// ball down then).
+    fn learnt_goals(&mut self, i: usize, known: usize, t_s: f64, at_set: bool) -> bool {
+        let known = known.min(self.goal_times_s.len());
+        let Some(before) = self.goals_known.get(i).copied() else {
+            return false;
+        };
+        if known <= before {
+            return false;
+        }
+        for goal in before..known {
+            self.goals_heard.push(GoalHeard {
+                goal,
+                robot: comms_netsim::robot_id(i),
+                at_s: t_s,
+                after_s: t_s - self.goal_times_s[goal],
+                at_set,
+            });
+        }
+        self.goals_known[i] = known;
+        let first = known > self.goals_told_references;
+        self.goals_told_references = self.goals_told_references.max(known);
+        first
+    }
+
+    fn goal_news(&self) -> GoalNews {
+        let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+        let n = self.goals_heard.len();
+        let mean = |it: &mut dyn Iterator<Item = f64>, n: usize| {
+            if n > 0 {
+                r3(it.sum::<f64>() / n as f64)
+            } else {
+                0.0
+            }
+        };
+        let firsts: Vec<f64> = (0..self.goal_times_s.len())
+            .filter_map(|g| {
+                self.goals_heard
+                    .iter()
+                    .filter(|h| h.goal == g)
+                    .map(|h| h.after_s)
+                    .reduce(f64::min)
+            })
+            .collect();
+        let at_set = self.goals_heard.iter().filter(|h| h.at_set).count();
+        GoalNews {
+            goals: u32::try_from(self.goal_times_s.len()).unwrap_or(u32::MAX),
+            from_score: u32::try_from(n - at_set).unwrap_or(u32::MAX),
+            at_set: u32::try_from(at_set).unwrap_or(u32::MAX),
+            mean_after_s: mean(&mut self.goals_heard.iter().map(|h| h.after_s), n),
+            max_after_s: r3(self
+                .goals_heard
+                .iter()
+                .map(|h| h.after_s)
+                .fold(0.0, f64::max)),
+            first_mean_after_s: mean(&mut firsts.iter().copied(), firsts.len()),
         }
     }
 
@@ -440,6 +573,7 @@ impl Game {
             game_open_play: self.open_play.rounded(),
             game_messages_outside_play: self.messages_outside_play,
             game_since_kick_off: self.since_kick_off.iter().map(|b| b.rounded()).collect(),
+            game_goal_news: self.goal_news(),
         }
     }
 }
@@ -544,10 +678,15 @@ impl Simulation {
             self.referee_event(e);
         }
         let Some(game) = &mut self.game else { return };
+        let mut goal_heard = Vec::new();
+        let mut first_heard = false;
         if let Some(bytes) = game.referee.packet(t_s) {
             game.packets += 1;
             for i in 0..self.robots.len() {
-                if game.rng.random::<f64>() < game.loss {
+                // (The draw is made for a deaf robot too: deafening one robot leaves the
+                // others' receptions as they were.)
+                let lost = game.rng.random::<f64>() < game.loss;
+                if lost || game.deaf.get(i).copied().unwrap_or(false) {
                     game.packets_lost += 1;
                     continue;
                 }
@@ -565,9 +704,31 @@ impl Simulation {
                     }
                 }
                 self.robots[i].set_penalties(&driver::penalized_players(tracker));
+                // A goal is news to a robot when its packet's score says so: the daemon's
+                // `TeamLayer::set_scores` on the listener's `gc.score` keys (which it reads
+                // at its next tick; here at the packet, as the penalties above).
+                let scores = (tracker.score(), tracker.opponent().map(|t| t.score));
+                if let (Some(own), Some(other)) = scores {
+                    if self.robots[i].set_scores(own, other, robot::seconds(local)) {
+                        let known = usize::from(own) + usize::from(other);
+                        first_heard |= game.learnt_goals(i, known, t_s, false);
+                        goal_heard.push(i);
+                    }
+                }
             }
         }
-        let Some(game) = &self.game else { return };
+        // Each robot that heard a goal: its delivery reference puts the ball on the centre
+        // spot on its clock, as its team layer just did; the references that see the
+        // whole team put it there when the first robot hears of the goal (the team knows
+        // no sooner).
+        for &i in &goal_heard {
+            let now_s = robot::seconds(self.harness.local_now(i));
+            self.delivery[i].place(self.robots[i].kick_off_ball(now_s));
+        }
+        if first_heard {
+            self.place_whole_team_references(t_s, false);
+        }
+        let Some(game) = &mut self.game else { return };
         // The robots that hear Set now: the references place the ball as they do.
         let mut set_heard = Vec::new();
         // Each robot's order from what it heard; a body off the field stands.
@@ -577,6 +738,10 @@ impl Simulation {
                 || game.referee.penalised(comms_netsim::robot_id(i));
             self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
             if self.robots[i].set_kick_off_next(heard == Some(State::Set)) {
+                // A goal it had not heard of (every packet with the new score lost to
+                // it) goes with the ball the layer puts down at Set.
+                let known = game.goal_times_s.len();
+                game.learnt_goals(i, known, t_s, true);
                 // What the daemon does at Set (driver::team).
                 let local = self.harness.local_now(i);
                 if let Some(replica) = self.harness.replica_mut(i) {
@@ -621,10 +786,28 @@ impl Simulation {
     /// A goal in the world, for the referee (`for_us`: ours).
     pub(super) fn referee_goal(&mut self, t_s: f64, for_us: bool) {
         if let Some(game) = &mut self.game {
-            for e in game.referee.goal(t_s, for_us) {
+            let events = game.referee.goal(t_s, for_us);
+            if !events.is_empty() {
+                game.goal_times_s.push(t_s);
+            }
+            for e in events {
                 self.referee_event(e);
             }
         }
+    }
+
+    /// Robot `i` (index) receives no GameController packet while `deaf` (its wireless
+    /// down, or every packet lost to it): for tests of what a robot does on what it
+    /// did not hear. No effect without `--game`.
+    pub fn set_gc_deaf(&mut self, i: usize, deaf: bool) {
+        if let Some(d) = self.game.as_mut().and_then(|g| g.deaf.get_mut(i)) {
+            *d = deaf;
+        }
+    }
+
+    /// When and how each robot learnt of each goal (empty without `--game`).
+    pub fn goals_heard(&self) -> &[GoalHeard] {
+        self.game.as_ref().map_or(&[], |g| &g.goals_heard)
     }
 
     fn referee_event(&mut self, e: RefereeEvent) {

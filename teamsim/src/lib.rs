@@ -62,7 +62,8 @@ use crate::field::geometry::{Pose, Vec2};
 use crate::field::{FieldConfig, World};
 use comms_netsim::{Harness, HarnessError};
 pub use game::{
-    GameReport, PlayBreakdown, ToldAgeBin, WithPenalised, SINCE_KICK_OFF_BINS_S, TOLD_AGE_BINS_S,
+    GameReport, GoalHeard, GoalNews, PlayBreakdown, ToldAgeBin, WithPenalised,
+    SINCE_KICK_OFF_BINS_S, TOLD_AGE_BINS_S,
 };
 pub use metrics::{BallEvent, BallSample, FusionMetrics, Metrics, Timeline, FLAP_WINDOW_S};
 pub use references::{
@@ -708,9 +709,16 @@ impl Simulation {
         }
         self.referee_hold();
         self.note_ball_event(t + dt, &ball_before);
-        if goal.is_some() {
-            // The referee puts the ball back on the centre spot and the game controller
-            // tells every robot: the ball they tracked is gone.
+        if goal.is_some() && self.game.is_none() {
+            // No GameController (plain `huddle sim`): the ball is put back near the centre
+            // spot and play goes on at once, with no Ready or Set. Every robot's team
+            // layer is told at the goal's instant, as the robot program's ball reset
+            // (`player::remote::RemoteRobot::ball_reset`, the contract's `BALL_RESET_KEY`,
+            // which `huddle sim --daemons` writes to each daemon at this same instant)
+            // tells it: this stands in for a GameController with no delay and no lost
+            // packet, the best case of how a team learns a goal. Under `--game` each
+            // robot learns it from the simulated GC's packets it receives
+            // (`TeamLayer::set_scores` in `game.rs`, or at Set), as the daemon does.
             // It happened during this step, after every sighting made at its start.
             // Every reference puts it there too, as the team layer does.
             for i in 0..self.robots.len() {

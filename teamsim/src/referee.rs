@@ -32,6 +32,13 @@
 //! Set take fixed times ([`GameScript`]), and neither the 15 s delay after a goal nor the
 //! mercy rule (10 goals ahead ends the game) is modelled.
 //!
+//! A goal ([`Referee::goal`]) changes the score and the state (to Ready) at the step the
+//! ball crosses the line: the operator presses "goal" at once. On a real field the
+//! operator presses it after the referee's whistle, seconds later (not modelled: no
+//! operator delay is added), so the packets here carry a goal sooner than a real GC's.
+//! The robots learn it only from those packets, each from the first one with the new
+//! score that reaches it (`TeamLayer::set_scores`), or at Set if none did.
+//!
 //! No clock and no randomness: every call takes the simulated time, seconds.
 
 use gamecontroller::{GameControlData, SetPlay, State, KICKING_TEAM_NONE};
