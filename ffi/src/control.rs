@@ -145,16 +145,16 @@ pub unsafe extern "C" fn huddle_node_set_game_clock(
 ) -> c_int {
     let body = || {
         let node = lookup(node)?;
+        // The GC's figures bring their clock: a program's would move the pacing line
+        // until the GC's next packet. The relay's rule decides (a client's `CLOK` is
+        // refused with `ERR 424` in the same cases).
         let taken = node.with_state(|state, now| {
-            // The GC's figures bring their clock: a program's would move the pacing line
-            // until the GC's next packet (as a relay client's `CLOK`, refused there too).
-            let taken = !state.replica.has_external_budget();
-            if taken {
-                state
-                    .replica
-                    .set_game_clock(now, Duration::from_millis(remaining_ms));
-            }
-            taken
+            comms::relay::Board::set_game_clock(
+                &mut state.replica,
+                now,
+                Duration::from_millis(remaining_ms),
+            )
+            .is_ok()
         })?;
         if !taken {
             return Err(Failure::new(
