@@ -492,47 +492,12 @@ pub unsafe extern "C" fn huddle_node_stats_counter(
     unsafe { guard(err, -1, body) }
 }
 
-/// The replica's counter `name`, by the name it has in `local.var.huddle.stats.*`.
+/// The replica's counter `name`, by the name it has in `local.var.huddle.stats.*`
+/// ([`comms::Stats::mirrored`]), and two the node reads that the mirror does not write.
 fn replica_counter(s: &comms::Stats, name: &str) -> Option<u64> {
-    if let Some(reason) = name.strip_prefix("drops.") {
-        if reason == "total" {
-            return Some(s.drops_total());
-        }
-        let reason = comms::DropReason::ALL
-            .into_iter()
-            .find(|r| r.name() == reason)?;
-        return Some(s.drops(reason));
+    match name {
+        "own_frames" => Some(s.own_frames),
+        "talk_queue_overflow" => Some(s.talk_queue_overflow),
+        _ => s.mirrored(name),
     }
-    Some(match name {
-        "frames_in" => s.frames_in,
-        "frames_out" => s.frames_out,
-        "bytes_in" => s.bytes_in,
-        "bytes_out" => s.bytes_out,
-        "own_frames" => s.own_frames,
-        "items_skipped" => s.items_skipped,
-        "updates_applied" => s.updates_applied,
-        "updates_stale" => s.updates_stale,
-        "updates_refused" => s.updates_refused,
-        "updates_unconfirmed_replaced" => s.updates_unconfirmed_replaced,
-        "bindings_superseded" => s.bindings_superseded,
-        "bindings_released" => s.bindings_released,
-        "talk_delivered" => s.talk_delivered,
-        "talk_given_up" => s.talk_given_up,
-        "talk_unknown_value" => s.talk_unknown_value,
-        "talk_resent" => s.talk_resent,
-        "nacks_sent" => s.nacks_sent,
-        "nacks_limited" => s.nacks_limited,
-        "nacks_superseded" => s.nacks_superseded,
-        "talk_queue_overflow" => s.talk_queue_overflow,
-        "talk_refused" => s.talk_refused,
-        "talk_refused_full" => s.talk_refused_full,
-        "talk_repair_limited" => s.talk_repair_limited,
-        "id_conflicts" => s.id_conflicts,
-        "clock_samples" => s.clock_samples,
-        "clock_echoes_rejected" => s.clock_echoes_rejected,
-        "clock_outliers" => s.clock_outliers,
-        "clock_stamps_implausible" => s.clock_stamps_implausible,
-        "transit_defaulted" => s.transit_defaulted,
-        _ => return None,
-    })
 }

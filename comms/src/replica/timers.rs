@@ -316,6 +316,22 @@ const COUNTERS: [&str; 28] = [
     "drops.total",
 ];
 
+impl crate::stats::Stats {
+    /// The counter mirrored as `huddle.stats.<name>` (one of the mirror's fixed counters,
+    /// `drops.total` or `drops.<reason>`), read from these stats; `None` for a name the
+    /// mirror does not write (the per-peer keys included). One list serves the mirror and
+    /// every front door that reads a counter by name (the C node's
+    /// `huddle_node_stats_counter`).
+    pub fn mirrored(&self, name: &str) -> Option<u64> {
+        if let Some(reason) = name.strip_prefix("drops.").filter(|&r| r != "total") {
+            let reason = DropReason::ALL.into_iter().find(|r| r.name() == reason)?;
+            return Some(self.drops(reason));
+        }
+        let i = COUNTERS.iter().position(|&n| n == name)?;
+        Some(counter_values(self)[i])
+    }
+}
+
 const PREFIX: &str = "huddle.stats.";
 
 /// Where the stats mirror last found each of its keys, so that a refresh reads the
