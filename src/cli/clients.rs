@@ -368,21 +368,16 @@ const STATS_NAMED: [&str; 12] = [
     "drops.total",
 ];
 
-/// Drops and refusals of the I/O layer (`driver::IoStats::dropped`: the daemon mirrors
-/// them; older daemons mirror fewer or none), on their own line when not 0.
-const STATS_IO: [&str; 11] = [
-    "unicast_refused",
-    "relay_lost_suppressed",
-    "relay_cutoffs",
-    "relay_read_only_refused",
-    "relay_clock_refused",
-    "relay_non_ascii_refused",
-    "relay_clients_refused",
-    "send_backlog_drops",
-    "send_errors",
-    "impair_dropped",
-    "nacks_limited",
-];
+/// Drops and refusals of the I/O layer, by the names the daemon mirrors them under
+/// (`driver::IoStats::dropped`, one list; older daemons mirror fewer or none), and the
+/// replica's NACKs held back, on their own line when not 0.
+fn stats_io() -> impl Iterator<Item = &'static str> {
+    driver::IoStats::default()
+        .dropped()
+        .into_iter()
+        .map(|(name, _)| name)
+        .chain(["nacks_limited"])
+}
 
 /// `huddle stats` without `--json`: a few lines for people.
 fn stats_text(all: &[Binding]) -> String {
@@ -432,8 +427,7 @@ fn stats_text(all: &[Binding]) -> String {
             format!(" ({})", drops.join(", "))
         }
     );
-    let io: Vec<String> = STATS_IO
-        .iter()
+    let io: Vec<String> = stats_io()
         .filter_map(|n| get(n).filter(|v| v != "0").map(|v| format!("{n} {v}")))
         .collect();
     if !io.is_empty() {
@@ -460,7 +454,7 @@ fn stats_text(all: &[Binding]) -> String {
         .filter(|b| {
             let n = stat_name(b);
             !STATS_NAMED.contains(&n)
-                && !STATS_IO.contains(&n)
+                && !stats_io().any(|io| io == n)
                 && !n.starts_with("drops.")
                 && !n.starts_with("audio.")
                 && !n.starts_with("peer.")
