@@ -3,10 +3,12 @@
 //! (`netns`) build a pair of network namespaces for tests that need two hosts.
 #![allow(dead_code)] // each test file uses a different part
 
+use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, SocketAddrV4, TcpListener, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 pub mod netns;
@@ -50,35 +52,36 @@ pub fn scratch_group() -> SocketAddrV4 {
 /// before the first test's daemon binds it (the second daemon then fails to bind, and its
 /// test talks to the first test's daemon until that one stops).
 pub fn free_tcp_port() -> u16 {
-    static HANDED_OUT: std::sync::Mutex<std::collections::BTreeSet<u16>> =
-        std::sync::Mutex::new(std::collections::BTreeSet::new());
-    loop {
-        let port = TcpListener::bind("127.0.0.1:0")
+    static HANDED_OUT: PortsHandedOut = Mutex::new(BTreeSet::new());
+    unused_port(&HANDED_OUT, || {
+        TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
             .expect("a free TCP port on loopback")
-            .port();
-        if HANDED_OUT
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(port)
-        {
-            return port;
-        }
-    }
+            .port()
+    })
 }
 
 /// A UDP port on 127.0.0.1 that nothing uses right now (the kernel's pick), for a
 /// daemon's team port or a GameController socket, and never the same twice in one test
 /// binary (for the reason [`free_tcp_port`] gives).
 pub fn free_udp_port() -> u16 {
-    static HANDED_OUT: std::sync::Mutex<std::collections::BTreeSet<u16>> =
-        std::sync::Mutex::new(std::collections::BTreeSet::new());
-    loop {
-        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+    static HANDED_OUT: PortsHandedOut = Mutex::new(BTreeSet::new());
+    unused_port(&HANDED_OUT, || {
+        std::net::UdpSocket::bind("127.0.0.1:0")
             .and_then(|s| s.local_addr())
             .expect("a free UDP port on loopback")
-            .port();
-        if HANDED_OUT
+            .port()
+    })
+}
+
+/// The ports of one kind this test binary has handed out.
+type PortsHandedOut = Mutex<BTreeSet<u16>>;
+
+/// The kernel's picks (`pick`) until one not in `handed_out`, which then holds it too.
+fn unused_port(handed_out: &PortsHandedOut, pick: impl Fn() -> u16) -> u16 {
+    loop {
+        let port = pick();
+        if handed_out
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .insert(port)
