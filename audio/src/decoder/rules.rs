@@ -27,6 +27,18 @@ const OWN_CROWD_RANGE: f64 = 0.0316;
 /// A rival basic counts only with its vote at least this share of the top basic's (−6 dB).
 const RIVAL_RANGE: f64 = 0.25;
 
+/// Whether tone `k` of the integrated sums `sums` (of `n` windows) is leakage of an
+/// adjacent louder tone: its excess below [`NEIGHBOUR_LEAKAGE`] of a neighbour's.
+pub(super) fn is_leakage(sums: &[f64], n: f64, k: usize) -> bool {
+    let left = if k > 0 { sums[k - 1] - n } else { 0.0 };
+    let right = if k + 1 < TONE_COUNT {
+        sums[k + 1] - n
+    } else {
+        0.0
+    };
+    sums[k] - n < NEIGHBOUR_LEAKAGE * left.max(right)
+}
+
 impl Decoder {
     /// The rules on integrated sums `sums` (72 tones) of `count` windows: tones present
     /// at `p_tone`; when several sender (or data) basics have 2 of 3 tones present, the
@@ -61,16 +73,9 @@ impl Decoder {
         let mut present = [false; TONE_COUNT];
         let loudest = sums.iter().fold(0.0f64, |m, &s| m.max(s - n));
         for k in 0..TONE_COUNT {
-            let excess = sums[k] - n;
-            let left = if k > 0 { sums[k - 1] - n } else { 0.0 };
-            let right = if k + 1 < TONE_COUNT {
-                sums[k + 1] - n
-            } else {
-                0.0
-            };
             present[k] = sums[k] >= threshold
-                && excess >= NEIGHBOUR_LEAKAGE * left.max(right)
-                && excess >= DYNAMIC_RANGE * loudest;
+                && !is_leakage(sums, n, k)
+                && sums[k] - n >= DYNAMIC_RANGE * loudest;
         }
         // A crowd of present tones is not noise of the kind the thresholds assume: babble's
         // voiced harmonics and formants, or a hall's reverberant smear, lift many tones

@@ -3,6 +3,7 @@
 
 use super::confirm::{P_TONE_CONFIRM, P_TONE_RIVAL};
 use super::end_test::{EndTest, EndVerdict, SPRT_HORIZON};
+use super::rules::is_leakage;
 use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
 use crate::significance::gamma_upper_quantile;
@@ -24,9 +25,6 @@ const RECENT_SLOTS: f64 = 3.0;
 const SECOND_SLOT_SENDER_SHARE: f64 = 0.3;
 /// Noise allowance of that test, standard deviations of the tone's slot mean.
 const SECOND_SLOT_SENDER_Z: f64 = 2.0;
-/// A tone is leakage of a louder neighbour below this share of its excess (as the rules'
-/// neighbour test, −20 dB).
-const SECOND_SLOT_LEAKAGE: f64 = 0.01;
 /// The first frame's data basic in the second slot is its reverberant tail when its
 /// tones' excess over the slot's second half is below this share of the first half's
 /// (−6 dB; a tail of T60 2.5 s falls 12 dB from one half to the next, a tone holds) and
@@ -459,16 +457,10 @@ impl Decoder {
             if !t.present[k] || t.level[k] <= 0.0 || present[k] {
                 continue;
             }
-            let left = if k > 0 { excess(k - 1) } else { 0.0 };
-            let right = if k + 1 < TONE_COUNT {
-                excess(k + 1)
-            } else {
-                0.0
-            };
             let level = excess(k) / n * to_first;
             let spread = ((1.0 + 2.0 * t.level[k]) / n).sqrt();
             present[k] = sums[k] >= threshold
-                && excess(k) >= SECOND_SLOT_LEAKAGE * left.max(right)
+                && !is_leakage(sums, n, k)
                 && level >= SECOND_SLOT_SENDER_SHARE * t.level[k] - SECOND_SLOT_SENDER_Z * spread;
         }
         let votes = |present: &[bool; TONE_COUNT], b: usize| {
