@@ -394,24 +394,7 @@ fn get_with_a_maximum_age_refuses_a_stale_value() {
 /// The golden frame of `comms/tests/talk_unknown_value.rs` (robot 3 of team 7, a newer
 /// build): talk queue `plan`, messages 1 (`Int(5)`), 2 (value tag 6, unknown here) and 3
 /// (`Int(7)`).
-const GOLDEN_FUTURE_TALK: &str = concat!(
-    "4844040007030807060504030201",
-    "00000000",
-    "01",
-    "0108",
-    "04706c616e",
-    "01",
-    "000a",
-    "0109",
-    "04706c616e",
-    "02",
-    "06",
-    "0102",
-    "0108",
-    "04706c616e",
-    "03",
-    "000e",
-);
+const GOLDEN_FUTURE_TALK: &str = include_str!("../comms/tests/golden/future_talk.hex");
 
 #[test]
 fn huddle_stats_shows_a_newer_builds_talk_value_on_its_talk_line() {
@@ -433,9 +416,10 @@ fn huddle_stats_shows_a_newer_builds_talk_value_on_its_talk_line() {
     })
     .expect("the newer robot joins on loopback")
     .socket;
-    let frame: Vec<u8> = (0..GOLDEN_FUTURE_TALK.len())
+    let hex = GOLDEN_FUTURE_TALK.trim();
+    let frame: Vec<u8> = (0..hex.len())
         .step_by(2)
-        .map(|i| u8::from_str_radix(&GOLDEN_FUTURE_TALK[i..i + 2], 16).unwrap())
+        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap())
         .collect();
     socket.send_to(&frame, group).expect("send on loopback");
     let mut c = d.client();

@@ -12,24 +12,7 @@ use comms::{Event, Instant, Replica, ReplicaConfig, Value};
 
 /// The same golden frame as `wire/tests.rs` `GOLDEN_FUTURE_TALK`: robot 3 of team 7,
 /// queue `plan`, messages 1 (`Int(5)`), 2 (value tag 6) and 3 (`Int(7)`).
-const GOLDEN_FUTURE_TALK: &str = concat!(
-    "4844040007030807060504030201",
-    "00000000",
-    "01",
-    "0108",
-    "04706c616e",
-    "01",
-    "000a",
-    "0109",
-    "04706c616e",
-    "02",
-    "06",
-    "0102",
-    "0108",
-    "04706c616e",
-    "03",
-    "000e",
-);
+const GOLDEN_FUTURE_TALK: &str = include_str!("golden/future_talk.hex");
 
 fn hex_bytes(hex: &str) -> Vec<u8> {
     (0..hex.len())
@@ -47,7 +30,7 @@ fn an_unknown_talk_value_is_acknowledged_counted_and_handed_up_as_skipped() {
     // Robot 2 of this build, seed 22; the frame comes from robot 3 of a newer build.
     let mut b = Replica::new(ReplicaConfig::new(2, 7), 22, at_ms(0)).expect("robot 2 starts");
     let from = SocketAddr::from(([127, 0, 0, 1], 2003));
-    b.handle_datagram(at_ms(10), from, &hex_bytes(GOLDEN_FUTURE_TALK));
+    b.handle_datagram(at_ms(10), from, &hex_bytes(GOLDEN_FUTURE_TALK.trim()));
     let mut talk = Vec::new();
     let mut buf = Vec::new();
     // Three seconds of timers: a NACK or a give-up timer would show here.

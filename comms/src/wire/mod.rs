@@ -84,7 +84,7 @@
 //! queue as `Event::TalkGivenUp` with `first == last == seq`: never retried for ever,
 //! never delivered as some other value. A newer build that needs the older reader to
 //! act on such a message must post it with a value the older build knows. Golden
-//! bytes: `GOLDEN_FUTURE_TALK` in `wire/tests.rs` and `comms/tests/talk_unknown_value.rs`.
+//! bytes: `comms/tests/golden/future_talk.hex`, read by `wire/tests.rs`, `comms/tests/talk_unknown_value.rs` and the root `tests/cli_habits.rs`.
 //! (Builds up to afe99d9 skipped such a message as an unknown item:
 //! 18 NACKs, the next message held ~1 s, then `TalkGivenUp`.)
 //!

@@ -345,31 +345,18 @@ fn a_newer_builds_frame_is_read_minus_what_this_build_does_not_know() {
 
 /// A newer build's talk queue `plan`: messages 1 (`Int(5)`), 2 (value tag 6, which
 /// this build does not know) and 3 (`Int(7)`).
-const GOLDEN_FUTURE_TALK: &str = concat!(
-    "4844040007030807060504030201", // format 4, no flags, team 7, robot 3, incarnation
-    "00000000",                     // stamp 0
-    "01",                           // seq 1
-    "01",
-    "08",
-    "04706c616e",
-    "01",
-    "000a", // Talk plan #1 = Int(5)
-    "01",
-    "09",
-    "04706c616e",
-    "02",
-    "06",
-    "0102", // Talk plan #2, value tag 6 (2 bytes): read as a message it cannot decode
-    "01",
-    "08",
-    "04706c616e",
-    "03",
-    "000e", // Talk plan #3 = Int(7)
-);
+/// The bytes are in `comms/tests/golden/future_talk.hex`, shared with
+/// `comms/tests/talk_unknown_value.rs` and the root `tests/cli_habits.rs`. Layout:
+// 4844 04 00 07 03 0807060504030201  magic, format 4, no flags, team 7, robot 3, incarnation
+// 00000000 01                        stamp 0, seq 1
+// 01 08 04706c616e 01 000a           Talk plan #1 = Int(5)
+// 01 09 04706c616e 02 06 0102        Talk plan #2, value tag 6 (2 bytes): a message it cannot decode
+// 01 08 04706c616e 03 000e           Talk plan #3 = Int(7)
+const GOLDEN_FUTURE_TALK: &str = include_str!("../../tests/golden/future_talk.hex");
 
 #[test]
 fn a_talk_message_with_an_unknown_value_tag_is_read_as_undecodable_not_skipped() {
-    let bytes = hex_bytes(GOLDEN_FUTURE_TALK);
+    let bytes = hex_bytes(GOLDEN_FUTURE_TALK.trim());
     let known = team_paths();
     let frame = decode_frame_with(&bytes, 7, None, &known).expect("not malformed");
     assert_eq!(frame.skipped(), 0, "the talk message is kept, not skipped");
