@@ -1150,7 +1150,8 @@ fn a_frame_found_late_whose_slot_ends_in_a_talkers_harmonic_is_decided_a_hop_ear
     let after = |t: f64| if (1.5..1.9).contains(&t) { 3.0 } else { 0.0 };
     let through = |t: f64| if (0.5..1.9).contains(&t) { 0.02 } else { 0.0 };
     let none = |_: f64| 0.0;
-    let cases: [(&str, &dyn Fn(f64) -> f64, usize); 3] = [
+    type Amplitude<'a> = &'a dyn Fn(f64) -> f64;
+    let cases: [(&str, Amplitude, usize); 3] = [
         ("after the frame", &after, 1),
         ("absent", &none, 1),
         ("through the slot", &through, 0),
