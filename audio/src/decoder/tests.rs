@@ -6,6 +6,8 @@ use super::*;
 use crate::encoder::{Encoder, EncoderConfig};
 use crate::tones::{basic_tones, tone_frequency_hz, Frame, SENDER_COUNT};
 
+mod room;
+
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();
     decode_with(&mut d, samples, block)

@@ -5,16 +5,19 @@
 //! times a trial if it wants a speed.
 
 mod backgrounds;
+mod oracle;
 mod room;
 mod scene;
 
 pub use backgrounds::{
     run_background_false_alarm_trial, run_background_false_alarm_trial_traced, Background,
 };
+pub use oracle::OracleVerdict;
 pub use room::{run_room_false_alarm_trial, run_room_trial, RoomNoise, RoomTrial};
 pub use scene::{
     load_room_set, run_scene_false_alarm_trial, run_scene_trial, run_scene_trial_traced,
-    ExternalRoom, RoomSet, RoomSetError, SceneOutcome, SceneTrial, ROOM_SET_RATE_HZ,
+    run_scene_trial_with_oracle, ExternalRoom, RoomSet, RoomSetError, SceneOutcome, SceneTrial,
+    ROOM_SET_RATE_HZ,
 };
 
 use rand::{RngExt, SeedableRng};

@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::oracle::{Oracle, OracleVerdict};
 use super::{random_message, shifted, TrialError, SIGNAL_POWER};
 use crate::channel::{in_band_power, Convolver};
 use crate::decoder::{Decoder, DecoderConfig, Detection, TraceEvent};
@@ -269,6 +270,7 @@ struct Sent {
     end_s: f64,
     matched: bool,
     overlapped: bool,
+    clock_error: f64,
 }
 
 /// A message waiting to be played: where it starts (sample), from which position.
@@ -335,7 +337,7 @@ pub fn run_scene_trial(
     babble: &[Vec<f32>],
     trial: &SceneTrial,
 ) -> Result<SceneOutcome, TrialError> {
-    Ok(scene_trial(room, babble, trial, false)?.0)
+    Ok(scene_trial(room, babble, trial, false, None)?.0)
 }
 
 /// [`run_scene_trial`] with the decoder's trace (see [`Decoder::enable_trace`]), for
@@ -345,7 +347,20 @@ pub fn run_scene_trial_traced(
     babble: &[Vec<f32>],
     trial: &SceneTrial,
 ) -> Result<(SceneOutcome, Vec<TraceEvent>), TrialError> {
-    scene_trial(room, babble, trial, true)
+    let (out, trace, _) = scene_trial(room, babble, trial, true, None)?;
+    Ok((out, trace))
+}
+
+/// [`run_scene_trial_traced`] with tones of `tone_duration_s` (the format's is 1 s) and
+/// the oracle-timing reference decoder (see [`OracleVerdict`]) beside the decoder: each
+/// sent message's verdict, in the order of their starts.
+pub fn run_scene_trial_with_oracle(
+    room: &ExternalRoom,
+    babble: &[Vec<f32>],
+    trial: &SceneTrial,
+    tone_duration_s: f64,
+) -> Result<(SceneOutcome, Vec<TraceEvent>, Vec<OracleVerdict>), TrialError> {
+    scene_trial(room, babble, trial, true, Some(tone_duration_s))
 }
 
 fn scene_trial(
@@ -353,12 +368,19 @@ fn scene_trial(
     babble: &[Vec<f32>],
     trial: &SceneTrial,
     trace: bool,
-) -> Result<(SceneOutcome, Vec<TraceEvent>), TrialError> {
+    oracle_tone_s: Option<f64>,
+) -> Result<(SceneOutcome, Vec<TraceEvent>, Vec<OracleVerdict>), TrialError> {
     let rate = ROOM_SET_RATE_HZ;
     let rate_f = f64::from(rate);
-    let config = DecoderConfig::default();
+    let mut config = DecoderConfig::default();
+    let mut encoder_config = EncoderConfig::default();
+    if let Some(t) = oracle_tone_s {
+        config.tone_duration_s = t;
+        encoder_config.tone_duration_s = t;
+    }
     let tone_s = config.tone_duration_s;
-    let encoder = Encoder::new(EncoderConfig::default())?;
+    let max_frequency_error = config.max_frequency_error;
+    let encoder = Encoder::new(encoder_config)?;
     let mut decoder = Decoder::new(config)?;
     if trace {
         decoder.enable_trace();
@@ -429,6 +451,7 @@ fn scene_trial(
                 end_s: (start + x.len() as f64) / rate_f + delays[position],
                 matched: false,
                 overlapped: false,
+                clock_error: error,
             });
             episode_end = episode_end.max(start + x.len() as f64);
             queue.push(Queued {
@@ -448,6 +471,20 @@ fn scene_trial(
             .any(|(j, s)| j != i && s.start_s < b && a < s.end_s);
     }
     let total = (t + (2.0 + 2.0 * room.t60_measured_s) * rate_f) as u64;
+    let mut oracle = oracle_tone_s.map(|_| {
+        let schedule: Vec<_> = sent
+            .iter()
+            .map(|s| {
+                (
+                    s.message,
+                    s.start_s * rate_f,
+                    s.end_s * rate_f,
+                    s.clock_error,
+                )
+            })
+            .collect();
+        Oracle::new(rate, tone_s, max_frequency_error, &schedule)
+    });
 
     let mut detections = Vec::new();
     let block_len = rate as usize;
@@ -492,6 +529,9 @@ fn scene_trial(
             t.add_to(babble, &mut mix);
         }
         decoder.push_f32(&mix);
+        if let Some(o) = oracle.as_mut() {
+            o.push(&mix);
+        }
         detections.extend(std::iter::from_fn(|| decoder.poll_message()));
         at = end;
     }
@@ -540,7 +580,8 @@ fn scene_trial(
             out.overlapped_correct += usize::from(s.matched);
         }
     }
-    Ok((out, decoder.take_trace()))
+    let verdicts = oracle.map(|o| o.verdicts()).unwrap_or_default();
+    Ok((out, decoder.take_trace(), verdicts))
 }
 
 /// False messages in `seconds` of `talkers` talkers in `room` with no message.
