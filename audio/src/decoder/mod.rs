@@ -12,6 +12,7 @@
 //! | `onset.rs`      | where a found frame began                                            |
 //! | `confirm.rs`    | the decision on one aligned slot, and the checks a message must pass |
 //! | `off_grid.rs`   | the check that all six tones share one frequency scale               |
+//! | `coherence.rs`  | the check that a frame's two basics begin and end together           |
 //! | `tracking.rs`   | following a frame from its first slot to a report                    |
 //! | `end_test.rs`   | the end test after a slot: short or long message                     |
 //!
@@ -191,6 +192,7 @@
 //! holding wrong accepts at 1e-3 needs about 7 nats, i.e. more than the half-slot horizon
 //! holds: the lean decides there, about half a tone after the end.
 
+mod coherence;
 mod confirm;
 mod end_test;
 mod noise_floor;
