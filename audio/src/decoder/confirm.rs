@@ -242,9 +242,13 @@ impl Decoder {
             // Its two basics did not begin and end together (see `coherence.rs`).
             self.note(a, || why);
             Some("basics not together")
-        } else if let Some(basic) =
-            self.second_transmitter(frame, &present, &sums, count, t.scale, a, b)
+        } else if let Some(basic) = (t.stage == super::tracking::Stage::Slot1)
+            .then(|| self.second_transmitter(frame, &present, &sums, count, t.scale, a, b))
+            .flatten()
         {
+            // A second slot's sender is the first slot's, its data began with the slot
+            // (the quarters above): another robot sounding under it does not make its
+            // data ambiguous, save in the rare case that robot began with the slot.
             self.note(a, || {
                 format!("basic {basic} sounds like a second transmitter")
             });
