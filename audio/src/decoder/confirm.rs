@@ -238,6 +238,21 @@ impl Decoder {
             Some("a vote not above its neighbours")
         } else if !self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b) {
             Some("a vote not steady")
+        } else if let Err(why) = self.basics_sound_together(frame, &present, t.scale, a, b) {
+            // Its two basics did not begin and end together (see `coherence.rs`).
+            self.note(a, || why);
+            Some("basics not together")
+        } else if let Some(basic) = (t.stage == super::tracking::Stage::Slot1)
+            .then(|| self.second_transmitter(frame, &present, &sums, count, t.scale, a, b))
+            .flatten()
+        {
+            // A second slot's sender is the first slot's, its data began with the slot
+            // (the quarters above): another robot sounding under it does not make its
+            // data ambiguous, save in the rare case that robot began with the slot.
+            self.note(a, || {
+                format!("basic {basic} sounds like a second transmitter")
+            });
+            Some("a second transmitter")
         } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear) {
             self.note(a, || {
                 let own = frame.tones();
@@ -332,7 +347,7 @@ impl Decoder {
     /// babble's: they hold in each half, stand above their neighbourhood and sound
     /// steadily (the checks a frame's own votes must pass).
     #[allow(clippy::too_many_arguments)]
-    fn sounds_like_tones(
+    pub(super) fn sounds_like_tones(
         &self,
         frame: Frame,
         present: &[bool; TONE_COUNT],

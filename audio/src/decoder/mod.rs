@@ -12,6 +12,7 @@
 //! | `onset.rs`      | where a found frame began                                            |
 //! | `confirm.rs`    | the decision on one aligned slot, and the checks a message must pass |
 //! | `off_grid.rs`   | the check that all six tones share one frequency scale               |
+//! | `coherence.rs`  | the check that a frame's two basics begin and end together           |
 //! | `tracking.rs`   | following a frame from its first slot to a report                    |
 //! | `end_test.rs`   | the end test after a slot: short or long message                     |
 //!
@@ -124,6 +125,13 @@
 //!    the band's other tones there), stand above their neighbourhood (a formant region of
 //!    speech lifts all its tones), and not fall to the floor between bursts more often
 //!    than a steady tone at their level would (a held harmonic does).
+//!    And the frame's two basics must be one transmitter's (`coherence.rs`): neither fades
+//!    from a quarter of the slot the other holds (two robots a fraction of a tone apart
+//!    put one's sender and the other's data in a slot found between them); the frame does
+//!    not fade from the slot's last quarter unless it sounded just before the onset (a
+//!    burst shorter than a tone); and under a first slot no other sender or data basic
+//!    with two tones at the rival level sounds like a transmitter's, at any level (two
+//!    robots starting together: which data is whose cannot be told).
 //!    Symmetrically, a first frame whose sender was already sounding just before it is the
 //!    second half of a long message whose first half was missed, and is dropped; so is
 //!    one right after a failed slot of the same sender, unless (for a frame clear of the
@@ -191,6 +199,7 @@
 //! holding wrong accepts at 1e-3 needs about 7 nats, i.e. more than the half-slot horizon
 //! holds: the lean decides there, about half a tone after the end.
 
+mod coherence;
 mod confirm;
 mod end_test;
 mod noise_floor;
@@ -201,6 +210,8 @@ mod search;
 mod tracking;
 mod windows;
 
+#[cfg(test)]
+mod coherence_tests;
 #[cfg(test)]
 mod tests;
 

@@ -32,7 +32,7 @@ fn decode_with(d: &mut Decoder, samples: &[f32], block: usize) -> Vec<Detection>
 
 /// The default decoder, tracing, over `samples` in blocks of 1,000: the messages, and
 /// its trace outside the search (for an assertion's message).
-fn decode_traced(samples: &[f32]) -> (Vec<Message>, Vec<TraceEvent>, Vec<String>) {
+pub(super) fn decode_traced(samples: &[f32]) -> (Vec<Message>, Vec<TraceEvent>, Vec<String>) {
     let mut d = Decoder::new(DecoderConfig::default()).unwrap();
     d.enable_trace();
     let got = decode_with(&mut d, samples, 1000)
