@@ -18,7 +18,7 @@
 //! "beyond the touchline" for "penalised" and failed on robot 3 playing the ball there
 //! before and after its penalty, with its teammates rightly naming it the goer).
 
-use huddle::sim::referee::{GameScript, GcDelays, ScriptedPenalty};
+use huddle::sim::referee::{GameScript, GcDelays, ScriptedPenalty, WhistleHearing};
 use huddle::sim::{Report, SimConfig, Simulation};
 
 fn short_game() -> GameScript {
@@ -41,6 +41,7 @@ fn short_game() -> GameScript {
         // The packets show the true state (GameController3's `test.no_delay`): these
         // tests tell what the robots do on the GC's word; the delays have their own.
         delays: GcDelays::none(),
+        whistle: WhistleHearing::deaf(),
     }
 }
 

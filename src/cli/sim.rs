@@ -188,6 +188,12 @@ pub struct SimArgs {
     /// before the eleventh session).
     #[arg(long, value_enum, default_value = "gc3", requires = "game")]
     pub gc_delays: GcDelayKind,
+    /// With --game: the chance each robot program hears each referee's whistle (play
+    /// starts, a goal, Standby → Ready), 0.2–1.0 s late, and tells its team layer
+    /// (`local.var.robot.whistle`); 0: no program hears one, the team goes by the GC's
+    /// packets alone.
+    #[arg(long, value_name = "P", default_value_t = 0.9, requires = "game")]
+    pub whistle: f64,
 }
 
 /// How late `--game`'s packets show the game (`--gc-delays`).
@@ -275,6 +281,7 @@ impl Default for SimArgs {
             daemon_logs: None,
             game: None,
             gc_delays: GcDelayKind::Gc3,
+            whistle: 0.9,
         }
     }
 }
@@ -432,6 +439,7 @@ fn config(args: &SimArgs) -> SimConfig {
             GcDelayKind::Gc3 => huddle::sim::referee::GcDelays::gc3(),
             GcDelayKind::None => huddle::sim::referee::GcDelays::none(),
         };
+        script.whistle.p_heard = args.whistle.clamp(0.0, 1.0);
         script
     });
     // A game ends when its referee says so; the duration only caps it (an hour of goals).

@@ -121,6 +121,43 @@ impl GcDelays {
     }
 }
 
+/// How the robot programs hear the referee's whistle (the robots' side of the game, not
+/// the team layer's): each robot hears each whistle (Standby → Ready, the kick-off's
+/// Set → Playing, a goal) with probability `p_heard`, after a delay drawn uniformly
+/// from `delay_s`; one that misses it goes by the GC's (delayed) packets. The
+/// simulator tells the program's whistle to its team layer through the daemon's path
+/// (`TeamLayer::heard_whistle`, contract key `local.var.robot.whistle`).
+///
+/// The default ([`WhistleHearing::typical`], 90%, 0.2–1.0 s) is an assumption, not a
+/// measurement: SPL teams' whistle detectors are reported to hear most whistles on a
+/// quiet field and to miss some in a loud hall; the delay is a detector's window of
+/// a few hundred ms and the time a program takes to act on it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct WhistleHearing {
+    /// The chance a robot hears a whistle.
+    pub p_heard: f64,
+    /// How late it hears it, seconds: drawn uniformly between the two.
+    pub delay_s: (f64, f64),
+}
+
+impl WhistleHearing {
+    /// 90% of whistles heard, 0.2–1.0 s late.
+    pub fn typical() -> WhistleHearing {
+        WhistleHearing {
+            p_heard: 0.9,
+            delay_s: (0.2, 1.0),
+        }
+    }
+
+    /// No robot program hears a whistle: the team goes by the GC's packets alone.
+    pub fn deaf() -> WhistleHearing {
+        WhistleHearing {
+            p_heard: 0.0,
+            ..WhistleHearing::typical()
+        }
+    }
+}
+
 /// How the game goes: the league's timings and the scripted penalties.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GameScript {
@@ -149,6 +186,8 @@ pub struct GameScript {
     pub penalties: Vec<ScriptedPenalty>,
     /// How late the packets show the game ([`GcDelays::gc3`] by default).
     pub delays: GcDelays,
+    /// How the robot programs hear the whistle ([`WhistleHearing::typical`] by default).
+    pub whistle: WhistleHearing,
 }
 
 impl GameScript {
@@ -181,6 +220,7 @@ impl GameScript {
                 },
             ],
             delays: GcDelays::gc3(),
+            whistle: WhistleHearing::typical(),
         }
     }
 
@@ -217,6 +257,9 @@ pub enum RefereeEvent {
     Penalised(u8),
     /// Our robot's penalty is over: put it back on the field.
     Unpenalised(u8),
+    /// The referee whistled: Standby → Ready, Set → Playing, or a goal (with the goal's
+    /// `State(Ready)`). What the robots may hear, the packets aside.
+    Whistle,
 }
 
 /// The GC's count of the team's messages.
@@ -408,6 +451,7 @@ impl Referee {
             (Stage::Start, State::Standby) if now_s >= self.state_until_s => {
                 self.stage = Stage::Half;
                 self.fork(now_s, self.script.delays.after_ready_s);
+                events.push(RefereeEvent::Whistle);
                 self.enter(State::Ready, now_s + self.script.ready_s, &mut events);
             }
             (Stage::Half, State::Ready) if now_s >= self.state_until_s => {
@@ -417,6 +461,7 @@ impl Referee {
             }
             (Stage::Half, State::Set) if now_s >= self.state_until_s => {
                 self.fork(now_s, self.script.delays.after_playing_s);
+                events.push(RefereeEvent::Whistle);
                 self.enter(State::Playing, f64::INFINITY, &mut events);
             }
             (Stage::Half, State::Playing) if self.play_left_s <= 0.0 => {
@@ -492,6 +537,7 @@ impl Referee {
         // The copy forked before the goal: Playing, the old score (a goal within the Set
         // delay forks anew, as GameController3's `Goal` does).
         self.fork(now_s, self.script.delays.after_goal_s);
+        events.push(RefereeEvent::Whistle);
         if let Some(t) = self.data.team_mut(scorer) {
             t.score = t.score.saturating_add(1);
         }
@@ -655,7 +701,7 @@ mod tests {
         );
         let pens: Vec<_> = events
             .iter()
-            .filter(|(_, e)| !matches!(e, RefereeEvent::State(_)))
+            .filter(|(_, e)| matches!(e, RefereeEvent::Penalised(_) | RefereeEvent::Unpenalised(_)))
             .collect();
         assert_eq!(pens.len(), 4, "two penalties, each with its end: {pens:?}");
         let (on, off) = (pens[0].0, pens[1].0);
