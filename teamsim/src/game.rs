@@ -7,7 +7,9 @@
 //! (never the referee's truth) it feeds its replica's budget with
 //! [`driver::budget_figures`] (what `huddle daemon` does with each packet), tells its team
 //! layer who is penalised ([`driver::penalized_players`]) and takes its order: play in
-//! Playing, walk to its kick-off spot in Ready, stand otherwise. The referee counts every
+//! Playing, walk to its kick-off spot in Ready, stand otherwise; a robot whose program
+//! heard the referee's whistle (`GameScript::whistle`) goes by it ahead of the packets,
+//! which show GameController3's delayed state. The referee counts every
 //! frame the team's replicas send, with its size, in the state it was sent in.
 //!
 //! A goal reaches a robot the same way: when a packet it receives carries a higher score
