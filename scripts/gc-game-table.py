@@ -3,6 +3,7 @@
 
 usage: scripts/gc-game-table.py HUDDLE_BIN OUT_DIR [--seeds 1,2,3,601,...] [--worlds drawn,ideal]
        [--jobs 2] [--only game|600|restarts] [--modes 600,game,restarts] [--tag NAME]
+       [--gc-delays gc3|none|default] [--whistle P]
 
 Runs `huddle sim --budget spl --game full --seed S --json` and `huddle sim --duration 600s
 --budget spl --seed S --json` for each seed and world (a run whose JSON is already in
@@ -14,10 +15,21 @@ figures leave out penalised robots off the field (the 600 s runs have none); the
 600 s run the same figure). Mode `restarts` (eighth session, second part) adds the 600 s
 run's like-for-like counterpart, `huddle sim --budget spl --game restarts`: one 10-minute
 half under the referee, kicking off from the formation (Ready, Set, the whistle) at its
-start and after every goal, as the game does; no break, no penalties. Standard library only.
+start and after every goal, as the game does; no break, no penalties. `--gc-delays` (eleventh
+session) is passed to the game runs: `gc3` (the default, as `huddle sim`'s) plays them under
+a referee whose packets show the game as GameController3 sends it (Set 15 s after play
+starts, the old score 15 s after a goal), `none` under the undelayed referee of the tenth
+session and before; `default` passes no flag (for a binary from before the flag, whose
+referee is undelayed). `--whistle P` passes `huddle sim --whistle P` to the game runs (the
+chance each robot program hears each referee's whistle; the binary's default, 0.9, when not
+given). Standard library only.
 """
 import argparse, json, os, subprocess, sys
 from concurrent.futures import ThreadPoolExecutor
+
+
+GC_DELAYS = "gc3"
+WHISTLE = None
 
 
 def run(binary, out_dir, tag, mode, world, seed):
@@ -33,6 +45,10 @@ def run(binary, out_dir, tag, mode, world, seed):
         cmd += ["--duration", "600s"]
     if world != "drawn":
         cmd += ["--world", world]
+    if mode in ("game", "restarts") and GC_DELAYS != "default":
+        cmd += ["--gc-delays", GC_DELAYS]
+    if mode in ("game", "restarts") and WHISTLE is not None:
+        cmd += ["--whistle", WHISTLE]
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode != 0:
         sys.stderr.write(f"{' '.join(cmd)} failed: {out.stderr[-2000:]}\n")
@@ -63,7 +79,14 @@ def main():
     ap.add_argument("--modes", default="600,game", help="runs per seed: 600, game, restarts")
     ap.add_argument("--tag", default="main")
     ap.add_argument("--no-run", action="store_true")
+    ap.add_argument("--gc-delays", choices=["gc3", "none", "default"], default="gc3",
+                    help="the game runs' referee: gc3 (GameController3's delays), none, or "
+                    "default (no flag: a binary from before --gc-delays)")
+    ap.add_argument("--whistle", default=None, help="the game runs' --whistle P (binary's default if not given)")
     a = ap.parse_args()
+    global GC_DELAYS, WHISTLE
+    GC_DELAYS = a.gc_delays
+    WHISTLE = a.whistle
     os.makedirs(a.out_dir, exist_ok=True)
     seeds = [int(s) for s in a.seeds.split(",")]
     worlds = a.worlds.split(",")

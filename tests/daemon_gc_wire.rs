@@ -13,6 +13,9 @@
 //!   figures are in force (`ERR 424`, counted).
 //! - A daemon killed mid-game and started again keeps to the GC's figures across both
 //!   lives (#34: "a daemon restarted mid-game resumes from the GC's figures").
+//! - A whistle the robot program hears (`local.var.robot.whistle`) starts play while the
+//!   GC still says Set (GameController3 shows play 15 s late): the layer goes and its
+//!   frames resume at the whistle.
 //!
 //! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
 //! own figures, and on frame counts the GC's figures bound.
@@ -472,5 +475,85 @@ fn a_daemon_restarted_mid_game_keeps_to_the_gcs_figures_on_the_wire() {
         second_after, 0,
         "the new life has the GC's figure (nothing left after the margin): it sent \
          {second_after} frames"
+    );
+}
+
+#[test]
+fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
+    // Scenario (#34, eleventh session): GameController3 keeps saying Set for 15 s after
+    // the whistle that starts play (`delayAfterPlaying`). Robot 1's program writes its
+    // pose every 40 ms and a cost of 2 (not the kick-off taker); the scripted GC says Set
+    // throughout, every 500 ms. For 3 s the program hears no whistle: the layer is out of
+    // play, in the kick-off hold, and does not go. Then it writes the whistle: the layer
+    // is in play at once and, after the hold's 3 s, goes, while the GC still says Set;
+    // its frames on the wire resume then, not when the GC says Playing (it never does
+    // here).
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(
+        &wire,
+        gc_port,
+        status.local_addr().unwrap().port(),
+        &["--refresh", "50ms"],
+    );
+    let mut c = d.client();
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Set;
+    gc.send();
+    c.wait_for("local.var.gc.state", Duration::from_secs(5), |a| {
+        a.contains("set")
+    });
+    let pose = "[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
+    let mut next_gc = Instant::now();
+    // Feeds the program's pose and cost for `d`, the GC's Set every 500 ms; whether the
+    // layer said it goes at any read.
+    let mut feed = |c: &mut Client, gc: &mut ScriptedGc, d: Duration| -> bool {
+        let until = Instant::now() + d;
+        let mut went = false;
+        while Instant::now() < until {
+            for line in [
+                format!("SETV local.var.robot.pose {pose}"),
+                "SETV local.var.robot.cost 2.0".to_string(),
+            ] {
+                assert!(c.ask(&line).starts_with("OK"), "{line}");
+            }
+            if Instant::now() >= next_gc {
+                gc.send();
+                next_gc += Duration::from_millis(500);
+            }
+            went |= c.ask("GETV local.var.team.going").contains(" true ");
+            std::thread::sleep(Duration::from_millis(40));
+        }
+        went
+    };
+    let before = wire.drain();
+    assert!(
+        !feed(&mut c, &mut gc, Duration::from_secs(3)),
+        "in Set with no whistle the layer does not go"
+    );
+    let in_set = wire.drain() - before;
+    assert!(c.ask("SETV local.var.robot.whistle true").starts_with("OK"));
+    // The hold's 3 s and then some: it goes.
+    assert!(
+        feed(&mut c, &mut gc, Duration::from_secs(6)),
+        "after the whistle and the hold the layer goes, the GC still saying Set"
+    );
+    let state = c.ask("GETV local.var.gc.state");
+    assert!(state.contains("set"), "the GC still says Set: {state:?}");
+    let at_go = wire.drain();
+    feed(&mut c, &mut gc, Duration::from_secs(3));
+    let in_play = wire.drain() - at_go;
+    eprintln!(
+        "frames on the wire: {in_set} in 3 s of Set, {in_play} in 3 s of play after the whistle"
+    );
+    assert!(
+        in_play > in_set,
+        "its frames resume at the whistle: {in_play} in play against {in_set} in Set"
+    );
+    // A malformed whistle is refused like any input.
+    assert!(
+        c.ask("SETV local.var.robot.whistle 3").starts_with("ERR"),
+        "a whistle must be a bool"
     );
 }

@@ -18,7 +18,7 @@
 //! "beyond the touchline" for "penalised" and failed on robot 3 playing the ball there
 //! before and after its penalty, with its teammates rightly naming it the goer).
 
-use huddle::sim::referee::{GameScript, ScriptedPenalty};
+use huddle::sim::referee::{GameScript, GcDelays, ScriptedPenalty, WhistleHearing};
 use huddle::sim::{Report, SimConfig, Simulation};
 
 fn short_game() -> GameScript {
@@ -38,6 +38,10 @@ fn short_game() -> GameScript {
             half: 1,
             after_play_s: 20.0,
         }],
+        // The packets show the true state (GameController3's `test.no_delay`): these
+        // tests tell what the robots do on the GC's word; the delays have their own.
+        delays: GcDelays::none(),
+        whistle: WhistleHearing::deaf(),
     }
 }
 
@@ -487,4 +491,67 @@ fn a_goal_lost_to_one_robot_leaves_its_ball_until_a_packet_with_the_score_reache
             );
         }
     }
+}
+
+/// #34, eleventh session: under GameController3's delays (Set shown 15 s after play
+/// starts, the old score 15 s after a goal) a team whose programs hear no whistle stays
+/// out of play for the first 15 s of every kick-off: it tells nothing then. Programs that
+/// hear the whistle (90%, 0.2–1.0 s late) start play at it. Seed 2, the restarting run's
+/// 240 s half; the same seed's referee, its packets and their losses, only the whistle
+/// differs.
+#[test]
+fn under_gamecontroller3_s_delays_the_programs_whistle_starts_play_at_the_kick_off() {
+    let run = |whistle: WhistleHearing| {
+        let script = GameScript {
+            half_s: 240.0,
+            whistle,
+            ..GameScript::one_half()
+        };
+        assert_eq!(
+            script.delays,
+            GcDelays::gc3(),
+            "the default is GC3's delays"
+        );
+        let cfg = SimConfig {
+            duration_s: script.length_s() + 600.0,
+            seed: 2,
+            budget: Some(comms::BudgetSpec::SPL),
+            game: Some(script),
+            ..SimConfig::default()
+        };
+        let mut sim = Simulation::new(cfg).expect("a valid configuration");
+        while !sim.finished() {
+            sim.step();
+        }
+        sim.report(0.0).game.expect("a game's report")
+    };
+    let (deaf, hearing) = (run(WhistleHearing::deaf()), run(WhistleHearing::typical()));
+    assert_eq!(
+        (deaf.game_whistles_heard, hearing.game_whistles_missed > 0),
+        (0, true),
+        "deaf programs hear none; 90% miss some: {hearing}"
+    );
+    assert!(hearing.game_whistles_heard > 0, "{hearing}");
+    assert!(
+        deaf.game_kick_off.messages <= u64::from(deaf.game_kick_offs),
+        "deaf: in the first 10 s of each kick-off the GC still says Set, the team tells \
+         at most the taker's claim a kick-off: {deaf}"
+    );
+    eprintln!(
+        "frames in the first 10 s of play: deaf {} in {} kick-offs, hearing {} in {}",
+        deaf.game_kick_off.messages,
+        deaf.game_kick_offs,
+        hearing.game_kick_off.messages,
+        hearing.game_kick_offs
+    );
+    assert!(
+        hearing.game_kick_off.messages > u64::from(hearing.game_kick_offs)
+            && hearing.game_kick_off.messages > deaf.game_kick_off.messages,
+        "hearing the whistle the team plays, and tells, from the kick-off on: {} frames \
+         in {} kick-offs' first 10 s (deaf: {})",
+        hearing.game_kick_off.messages,
+        hearing.game_kick_offs,
+        deaf.game_kick_off.messages
+    );
+    assert!(!deaf.game_illegal && !hearing.game_illegal);
 }

@@ -72,6 +72,12 @@ struct Inputs {
     goalkeeper: Option<bool>,
     /// The referee put the ball back, when the robot program said so.
     ball_reset: Option<Instant>,
+    /// The robot program heard the referee's whistle, when.
+    whistle: Option<Instant>,
+    /// The program has written a whistle at least once; the log said once that it had
+    /// not when the GC first said Playing.
+    whistle_ever: bool,
+    whistle_unheard_logged: bool,
     /// The robot program has said where it is: the layer runs.
     fed: bool,
 }
@@ -385,6 +391,12 @@ fn take(inputs: &mut Inputs, key: &str, value: &Value, stamp: Instant) {
                 inputs.balls.clear();
             }
         }
+        contract::WHISTLE_KEY => {
+            if matches!(contract::parse_bool(contract::WHISTLE_KEY, value), Ok(true)) {
+                inputs.whistle = Some(stamp);
+                inputs.whistle_ever = true;
+            }
+        }
         _ => {}
     }
 }
@@ -478,11 +490,35 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     // kick's Set has the ball elsewhere.
     let board = replica.blackboard();
     let state = gc_text(board, GC_STATE_KEY);
+    let gc_playing = state == Some("playing");
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
     let kick_off = state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick");
     if layer.set_kick_off_next(kick_off) {
         // Every claim changes at the whistle: the team's priority frames get their room.
         replica.restart_priority_room(now);
+    }
+    // The referee's whistle, heard by the robot program: GameController3 shows play and
+    // goals 15 s late (`TeamLayer::heard_whistle`).
+    if let Some(at) = inputs.whistle.take() {
+        match layer.heard_whistle(team::seconds(at)) {
+            Some(team::Whistle::PlayStarted(_)) => {
+                tracing::info!("team layer: whistle heard in Set, play started");
+            }
+            Some(team::Whistle::Goal(_)) => {
+                // Sightings from before the goal are of a ball that is gone.
+                inputs.balls.clear();
+                tracing::info!("team layer: whistle heard in play, a goal");
+            }
+            None => tracing::debug!("team layer: whistle heard, nothing to start"),
+        }
+    } else if gc_playing && !inputs.whistle_ever && !inputs.whistle_unheard_logged {
+        inputs.whistle_unheard_logged = true;
+        tracing::info!(
+            "team layer: the robot program writes no whistle ({}): under GameController3 \
+             the layer stays out of play for the GC's delay (15 s) after each kick-off's \
+             whistle and learns each goal that late",
+            contract::WHISTLE_KEY
+        );
     }
     let balls: Vec<_> = inputs
         .balls

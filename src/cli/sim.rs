@@ -181,6 +181,28 @@ pub struct SimArgs {
     /// `--duration` is ignored: the game ends when the referee says so.
     #[arg(long, value_enum)]
     pub game: Option<GameKind>,
+    /// With --game: how late the referee's packets show the game. `gc3` (the default):
+    /// as GameController3 sends it with the league's delays (Set for 15 s after play
+    /// starts, Playing with the old score for 15 s after a goal, Standby up to 45 s into a
+    /// half's Ready); `none`: the true state at once (GC3's `test.no_delay`, the referee
+    /// before the eleventh session).
+    #[arg(long, value_enum, default_value = "gc3", requires = "game")]
+    pub gc_delays: GcDelayKind,
+    /// With --game: the chance each robot program hears each referee's whistle (play
+    /// starts, a goal, Standby → Ready), 0.2–1.0 s late, and tells its team layer
+    /// (`local.var.robot.whistle`); 0: no program hears one, the team goes by the GC's
+    /// packets alone.
+    #[arg(long, value_name = "P", default_value_t = 0.9, requires = "game")]
+    pub whistle: f64,
+}
+
+/// How late `--game`'s packets show the game (`--gc-delays`).
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GcDelayKind {
+    /// GameController3's delays with the league's parameters (15 s, 15 s, 45 s).
+    Gc3,
+    /// No delay: the packets show the true state.
+    None,
 }
 
 /// A game `--game` plays.
@@ -258,6 +280,8 @@ impl Default for SimArgs {
             impair: None,
             daemon_logs: None,
             game: None,
+            gc_delays: GcDelayKind::Gc3,
+            whistle: 0.9,
         }
     }
 }
@@ -406,9 +430,17 @@ fn config(args: &SimArgs) -> SimConfig {
     if let Some(spec) = &args.team_ball {
         tune_team_ball(&mut brain.team.world_model, spec);
     }
-    let game = args.game.map(|g| match g {
-        GameKind::Full => huddle::sim::referee::GameScript::spl_full(args.robots),
-        GameKind::Restarts => huddle::sim::referee::GameScript::one_half(),
+    let game = args.game.map(|g| {
+        let mut script = match g {
+            GameKind::Full => huddle::sim::referee::GameScript::spl_full(args.robots),
+            GameKind::Restarts => huddle::sim::referee::GameScript::one_half(),
+        };
+        script.delays = match args.gc_delays {
+            GcDelayKind::Gc3 => huddle::sim::referee::GcDelays::gc3(),
+            GcDelayKind::None => huddle::sim::referee::GcDelays::none(),
+        };
+        script.whistle.p_heard = args.whistle.clamp(0.0, 1.0);
+        script
     });
     // A game ends when its referee says so; the duration only caps it (an hour of goals).
     let duration_s = game

@@ -31,6 +31,10 @@ pub const FALLEN_KEY: &str = "local.var.robot.fallen";
 /// The referee put the ball back (a kick-off after a goal): `true` makes the layer
 /// forget the ball it tracked, as a robot program that handles the game's restarts says.
 pub const BALL_RESET_KEY: &str = "local.var.robot.ball_reset";
+/// The robot program heard the referee's whistle now (bool; each `true` is one whistle):
+/// under GameController3, whose packets show play and goals 15 s late, it starts play in
+/// Set and is a goal in play (`TeamLayer::heard_whistle`).
+pub const WHISTLE_KEY: &str = "local.var.robot.whistle";
 
 /// The team ball (floats `[x, y, vx, vy, var_x, cov_xy, var_y, confidence, age_s]`).
 pub const TEAM_BALL_KEY: &str = "local.var.team.ball";
@@ -371,7 +375,8 @@ pub fn parse_kick(value: &comms::Value) -> Result<KickInput, ContractError> {
     })
 }
 
-/// Parses a bool key ([`GOAL_IN_VIEW_KEY`], [`GOALKEEPER_KEY`], [`FALLEN_KEY`]).
+/// Parses a bool key ([`GOAL_IN_VIEW_KEY`], [`GOALKEEPER_KEY`], [`FALLEN_KEY`],
+/// [`BALL_RESET_KEY`], [`WHISTLE_KEY`]).
 pub fn parse_bool(key: &'static str, value: &comms::Value) -> Result<bool, ContractError> {
     match value {
         comms::Value::Bool(b) => Ok(*b),
@@ -417,13 +422,14 @@ pub fn check(key: &str, value: &comms::Value) -> Option<Result<(), ContractError
         GOALKEEPER_KEY => parse_bool(GOALKEEPER_KEY, value).map(drop),
         FALLEN_KEY => parse_bool(FALLEN_KEY, value).map(drop),
         BALL_RESET_KEY => parse_bool(BALL_RESET_KEY, value).map(drop),
+        WHISTLE_KEY => parse_bool(WHISTLE_KEY, value).map(drop),
         COST_KEY => parse_cost(value).map(drop),
         _ => return None,
     })
 }
 
 /// The input keys, for guards and watches.
-pub const INPUT_KEYS: [&str; 10] = [
+pub const INPUT_KEYS: [&str; 11] = [
     POSE_KEY,
     ODOMETRY_KEY,
     LANDMARKS_KEY,
@@ -434,6 +440,7 @@ pub const INPUT_KEYS: [&str; 10] = [
     GOALKEEPER_KEY,
     FALLEN_KEY,
     BALL_RESET_KEY,
+    WHISTLE_KEY,
 ];
 
 /// A pose estimate as [`POSE_OUT_KEY`] gives it (REP-103).

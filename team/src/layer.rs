@@ -41,8 +41,8 @@ pub use contact::contact_probability;
 #[cfg(test)]
 use game_state::KICK_OFF_SPOT_SIGMA_M;
 pub use game_state::{
-    KickOffPlacement, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS, KICK_OFF_SET_CLAIM_GAP_S,
-    KICK_OFF_TAKER_COST,
+    KickOffPlacement, Whistle, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS, KICK_OFF_SET_CLAIM_GAP_S,
+    KICK_OFF_TAKER_COST, WHISTLE_TRUST_S,
 };
 
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
@@ -293,6 +293,13 @@ pub struct TeamLayer {
     was_in_play: bool,
     /// The scores (this team's, the other's) in the newest GameController packet heard.
     scores_heard: Option<(u8, u8)>,
+    /// The GameController's own word: Playing (or none), and Set (see
+    /// [`TeamLayer::heard_whistle`]: a whistle can run ahead of it).
+    gc_in_play: bool,
+    gc_set: bool,
+    /// The whistle the robot program heard, while the GameController has not caught up
+    /// (see [`TeamLayer::heard_whistle`]).
+    whistle: Option<game_state::Whistle>,
 }
 
 /// The robot id at index `k` of a team's per-robot vectors.
@@ -374,6 +381,9 @@ impl TeamLayer {
             kick_off_place: false,
             was_in_play: true,
             scores_heard: None,
+            gc_in_play: true,
+            gc_set: false,
+            whistle: None,
         }
     }
 
@@ -525,6 +535,7 @@ impl TeamLayer {
         // play (no camera and no kick said otherwise), it is put down again then, so at
         // the whistle it is as sure as the placement, not a Ready and a Set's worth of
         // prediction old.
+        self.whistle_timeout(now_s);
         let play_heard = self.in_play && !self.was_in_play;
         self.was_in_play = self.in_play;
         if play_heard {

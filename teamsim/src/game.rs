@@ -7,7 +7,9 @@
 //! (never the referee's truth) it feeds its replica's budget with
 //! [`driver::budget_figures`] (what `huddle daemon` does with each packet), tells its team
 //! layer who is penalised ([`driver::penalized_players`]) and takes its order: play in
-//! Playing, walk to its kick-off spot in Ready, stand otherwise. The referee counts every
+//! Playing, walk to its kick-off spot in Ready, stand otherwise; a robot whose program
+//! heard the referee's whistle (`GameScript::whistle`) goes by it ahead of the packets,
+//! which show GameController3's delayed state. The referee counts every
 //! frame the team's replicas send, with its size, in the state it was sent in.
 //!
 //! A goal reaches a robot the same way: when a packet it receives carries a higher score
@@ -45,6 +47,7 @@ use super::referee::{GameScript, Referee, RefereeEvent};
 use super::robot::{self, Order};
 use super::Simulation;
 use crate::field::geometry::{Pose, Vec2};
+use team::Whistle;
 
 /// Our team's number in the simulated game (any; the opponents are `OUR_TEAM + 1`).
 pub const OUR_TEAM: u8 = 12;
@@ -159,8 +162,13 @@ pub struct GameReport {
     /// All of Playing (penalties too) by time since the stretch's kick-off, one part per
     /// bin of [`SINCE_KICK_OFF_BINS_S`].
     pub game_since_kick_off: Vec<PlayBreakdown>,
-    /// How long after each goal each robot learnt of it (from the GC's packets).
+    /// How long after each goal each robot learnt of it (from the GC's packets, or,
+    /// since the eleventh session, its program's whistle).
     pub game_goal_news: GoalNews,
+    /// (robot, whistle) pairs the robot programs heard, and missed
+    /// ([`crate::referee::WhistleHearing`]).
+    pub game_whistles_heard: u32,
+    pub game_whistles_missed: u32,
 }
 
 /// Pose, team-ball and blind-robot RMSE over every robot's samples in Playing, penalised
@@ -303,6 +311,15 @@ pub(crate) struct Game {
     goals_heard: Vec<GoalHeard>,
     /// Robots that receive no packet now (see [`Simulation::set_gc_deaf`]).
     deaf: Vec<bool>,
+    /// The whistle draws (apart from the packets' losses, which stay as they were).
+    whistle_rng: ChaCha8Rng,
+    /// When each robot's program will hear the whistles it is to hear, simulated s.
+    whistles: Vec<Vec<f64>>,
+    /// Whistles the programs heard, and missed.
+    whistles_heard: u32,
+    whistles_missed: u32,
+    /// Each robot's program heard the whistle in Standby: it walks to Ready.
+    standby_whistle: Vec<bool>,
 }
 
 /// How one robot learnt of one goal (`huddle sim --game`): from the first GameController
@@ -378,6 +395,11 @@ impl Game {
             since_kick_off: Default::default(),
             goal_times_s: Vec::new(),
             goals_known: vec![0; robots],
+            whistle_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x7768_6973_746c_6521),
+            whistles: vec![Vec::new(); robots],
+            whistles_heard: 0,
+            whistles_missed: 0,
+            standby_whistle: vec![false; robots],
             goals_told_references: 0,
             goals_heard: Vec::new(),
             deaf: vec![false; robots],
@@ -388,6 +410,24 @@ impl Game {
     /// packet with the new score having reached it). Returns whether it was the first
     /// robot to learn of one of them (the references that see the whole team put the
     /// ball down then).
+    /// The referee whistled at `t_s`: each robot's program is to hear it (or not) as the
+    /// script's [`crate::referee::WhistleHearing`] draws.
+    fn whistle(&mut self, t_s: f64) {
+        let w = self.script.whistle;
+        for heard in &mut self.whistles {
+            // Both draws for every robot, heard or not: one robot's luck leaves the
+            // others' as they were.
+            let hears = self.whistle_rng.random::<f64>() < w.p_heard;
+            let u = self.whistle_rng.random::<f64>();
+            if hears {
+                heard.push(t_s + w.delay_s.0 + u * (w.delay_s.1 - w.delay_s.0).max(0.0));
+                self.whistles_heard += 1;
+            } else {
+                self.whistles_missed += 1;
+            }
+        }
+    }
+
     fn learnt_goals(&mut self, i: usize, known: usize, t_s: f64, at_set: bool) -> bool {
         let known = known.min(self.goal_times_s.len());
         let Some(before) = self.goals_known.get(i).copied() else {
@@ -574,6 +614,8 @@ impl Game {
             game_messages_outside_play: self.messages_outside_play,
             game_since_kick_off: self.since_kick_off.iter().map(|b| b.rounded()).collect(),
             game_goal_news: self.goal_news(),
+            game_whistles_heard: self.whistles_heard,
+            game_whistles_missed: self.whistles_missed,
         }
     }
 }
@@ -675,6 +717,11 @@ impl Simulation {
         let Some(game) = &mut self.game else { return };
         let events = game.referee.advance(t_s);
         for e in events {
+            if e == RefereeEvent::Whistle {
+                if let Some(g) = &mut self.game {
+                    g.whistle(t_s);
+                }
+            }
             self.referee_event(e);
         }
         let Some(game) = &mut self.game else { return };
@@ -731,6 +778,7 @@ impl Simulation {
         let Some(game) = &mut self.game else { return };
         // The robots that hear Set now: the references place the ball as they do.
         let mut set_heard = Vec::new();
+        let mut whistle_first = false;
         // Each robot's order from what it heard; a body off the field stands.
         for i in 0..self.robots.len() {
             let heard = game.trackers[i].state();
@@ -749,10 +797,39 @@ impl Simulation {
                 }
                 set_heard.push(i);
             }
-            self.robots[i].order = match heard {
+            // The program hears the whistle (its own microphone, not the packets): in
+            // Standby it walks to Ready; otherwise its team layer takes it as the daemon
+            // does with `local.var.robot.whistle` (`TeamLayer::heard_whistle`).
+            let due = game.whistles[i].iter().filter(|&&at| at <= t_s).count();
+            game.whistles[i].retain(|&at| at > t_s);
+            if heard != Some(State::Standby) {
+                game.standby_whistle[i] = false;
+            }
+            if due > 0 && !penalised {
+                if heard == Some(State::Standby) {
+                    game.standby_whistle[i] = true;
+                } else {
+                    let local = robot::seconds(self.harness.local_now(i));
+                    if let Some(Whistle::Goal(_)) = self.robots[i].heard_whistle(local) {
+                        // The goal's news, from the whistle: the layer forgot the ball.
+                        let known = game.goal_times_s.len();
+                        if game.learnt_goals(i, known, t_s, false) {
+                            whistle_first = true;
+                        }
+                        self.delivery[i].place(self.robots[i].kick_off_ball(local));
+                    }
+                }
+            }
+            // Its body follows its program: the whistle runs ahead of the packets. After
+            // a goal's whistle a program walks to its kick-off spot (the goal's Ready,
+            // which the GC shows 15 s late), as a robot program that hears it does.
+            self.robots[i].order = match (heard, self.robots[i].whistle()) {
                 _ if penalised => Order::Stand,
-                Some(State::Playing) => Order::Play,
-                Some(State::Ready) => Order::KickOffSpot,
+                (_, Some(Whistle::PlayStarted(_))) => Order::Play,
+                (_, Some(Whistle::Goal(_))) => Order::KickOffSpot,
+                (Some(State::Playing), _) => Order::Play,
+                (Some(State::Ready), _) => Order::KickOffSpot,
+                (Some(State::Standby), _) if game.standby_whistle[i] => Order::KickOffSpot,
                 _ => Order::Stand,
             };
         }
@@ -760,6 +837,9 @@ impl Simulation {
         // layer places the ball (see `feed_references`).
         if !set_heard.is_empty() {
             self.place_whole_team_references(self.time_s(), false);
+        }
+        if whistle_first {
+            self.place_whole_team_references(t_s, false);
         }
     }
 
@@ -790,6 +870,9 @@ impl Simulation {
             if !events.is_empty() {
                 game.goal_times_s.push(t_s);
             }
+            if events.contains(&RefereeEvent::Whistle) {
+                game.whistle(t_s);
+            }
             for e in events {
                 self.referee_event(e);
             }
@@ -812,7 +895,7 @@ impl Simulation {
 
     fn referee_event(&mut self, e: RefereeEvent) {
         match e {
-            RefereeEvent::State(_) => {}
+            RefereeEvent::State(_) | RefereeEvent::Whistle => {}
             RefereeEvent::Penalised(id) => {
                 let Some(i) = usize::from(id)
                     .checked_sub(1)

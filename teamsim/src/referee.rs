@@ -25,12 +25,36 @@
 //! (`FinishHalf`) and the robots stay off until the half-time switch, half way through
 //! the break, unpenalises them all (`SwitchHalf`).
 //!
-//! What it simplifies: the state it shows is the true state (GameController3 can show
-//! Playing up to 15 s late; both are counted states, so the count is the same), the game
-//! clock stands in Ready and Set (GameController3's rule for a "long" game, a knock-out
-//! one; in other games it runs on after the half's first kick-off), a goal's Ready and
-//! Set take fixed times ([`GameScript`]), and neither the 15 s delay after a goal nor the
-//! mercy rule (10 goals ahead ends the game) is modelled.
+//! **What it shows** ([`Referee::shown`], the packets) is GameController3's *delayed
+//! copy* of the game, as GC3 forms it (`game_controller_runtime` sends
+//! `get_game(true)`; `action.rs` `fork`, `lib.rs` `DelayHandler`, `apply_delayed`), with
+//! the league's delays ([`GcDelays`], `config/*/params.yaml`: 15, 15 and 45 s):
+//!
+//! - **Set → Playing** (`free_set_play.rs`, `delayAfterPlaying`): the packets say Set,
+//!   with the clock as it stood, for 15 s after the whistle (a robot is expected to hear
+//!   the whistle itself);
+//! - **a goal** (`goal.rs`, `delayAfterGoal`): the packets say Playing with the old score
+//!   (the clock running on in the copy) for 15 s, then Ready with the new score (the
+//!   goal is not applied to the copy); a goal during the Set delay forks a new copy, so
+//!   the packets jump from Set to Playing with the old score;
+//! - **Standby → Ready** for a half's kick-off (`start_set_play.rs`, `delayAfterReady`):
+//!   the packets say Standby for 45 s, or until the operator calls Set, whichever comes
+//!   first: the Set is illegal in the copy (still Standby) and `apply_delayed` ends the
+//!   delay then (with the SPL's `readyDuration` of 45 s the timer's own Set ends it at
+//!   45 s, the same instant);
+//! - the team's `messageBudget` and the penalties are current (every action is applied to
+//!   the copy too), and a half's end ends a delay (`FinishHalf` in the copy, or illegal
+//!   there).
+//!
+//! The field, the message count and the report go by the **true** state ([`Referee::data`]).
+//! [`GcDelays::none`] is GameController3's `test.no_delay` (`huddle sim --gc-delays none`):
+//! the packets show the true state, the referee of the tenth session and before.
+//!
+//! What it simplifies: the clock stands in Ready and Set (GameController3's rule for a
+//! "long" game, a knock-out one; in other games it runs on after the half's first
+//! kick-off), a goal's Ready and Set take fixed times ([`GameScript`]), the delayed copy's
+//! own penalty timers are not run apart (its penalties are the true ones), and the mercy
+//! rule (10 goals ahead ends the game, with no delay) is not modelled.
 //!
 //! A goal ([`Referee::goal`]) changes the score and the state (to Ready) at the step the
 //! ball crosses the line: the operator presses "goal" at once. On a real field the
@@ -64,6 +88,76 @@ pub struct ScriptedPenalty {
     pub after_play_s: f64,
 }
 
+/// GameController3's delays of the state it sends the robots (`params.yaml`'s
+/// `delayAfterPlaying`, `delayAfterGoal`, `delayAfterReady`; see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct GcDelays {
+    /// Set shown after the whistle that starts play, seconds (GC3: 15).
+    pub after_playing_s: f64,
+    /// Playing with the old score shown after a goal, seconds (GC3: 15).
+    pub after_goal_s: f64,
+    /// Standby shown after a half's Standby → Ready, seconds (GC3: 45; the operator's Set
+    /// ends it sooner).
+    pub after_ready_s: f64,
+}
+
+impl GcDelays {
+    /// The league's (GameController3's `config/champions_cup/params.yaml`): 15, 15, 45 s.
+    pub fn gc3() -> GcDelays {
+        GcDelays {
+            after_playing_s: 15.0,
+            after_goal_s: 15.0,
+            after_ready_s: 45.0,
+        }
+    }
+
+    /// No delay (GameController3's `test.no_delay`): the packets show the true state.
+    pub fn none() -> GcDelays {
+        GcDelays {
+            after_playing_s: 0.0,
+            after_goal_s: 0.0,
+            after_ready_s: 0.0,
+        }
+    }
+}
+
+/// How the robot programs hear the referee's whistle (the robots' side of the game, not
+/// the team layer's): each robot hears each whistle (Standby → Ready, the kick-off's
+/// Set → Playing, a goal) with probability `p_heard`, after a delay drawn uniformly
+/// from `delay_s`; one that misses it goes by the GC's (delayed) packets. The
+/// simulator tells the program's whistle to its team layer through the daemon's path
+/// (`TeamLayer::heard_whistle`, contract key `local.var.robot.whistle`).
+///
+/// The default ([`WhistleHearing::typical`], 90%, 0.2–1.0 s) is an assumption, not a
+/// measurement: SPL teams' whistle detectors are reported to hear most whistles on a
+/// quiet field and to miss some in a loud hall; the delay is a detector's window of
+/// a few hundred ms and the time a program takes to act on it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct WhistleHearing {
+    /// The chance a robot hears a whistle.
+    pub p_heard: f64,
+    /// How late it hears it, seconds: drawn uniformly between the two.
+    pub delay_s: (f64, f64),
+}
+
+impl WhistleHearing {
+    /// 90% of whistles heard, 0.2–1.0 s late.
+    pub fn typical() -> WhistleHearing {
+        WhistleHearing {
+            p_heard: 0.9,
+            delay_s: (0.2, 1.0),
+        }
+    }
+
+    /// No robot program hears a whistle: the team goes by the GC's packets alone.
+    pub fn deaf() -> WhistleHearing {
+        WhistleHearing {
+            p_heard: 0.0,
+            ..WhistleHearing::typical()
+        }
+    }
+}
+
 /// How the game goes: the league's timings and the scripted penalties.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GameScript {
@@ -90,6 +184,10 @@ pub struct GameScript {
     pub messages_per_game: u16,
     /// The penalties, in any order.
     pub penalties: Vec<ScriptedPenalty>,
+    /// How late the packets show the game ([`GcDelays::gc3`] by default).
+    pub delays: GcDelays,
+    /// How the robot programs hear the whistle ([`WhistleHearing::typical`] by default).
+    pub whistle: WhistleHearing,
 }
 
 impl GameScript {
@@ -121,6 +219,8 @@ impl GameScript {
                     after_play_s: 300.0,
                 },
             ],
+            delays: GcDelays::gc3(),
+            whistle: WhistleHearing::typical(),
         }
     }
 
@@ -157,6 +257,9 @@ pub enum RefereeEvent {
     Penalised(u8),
     /// Our robot's penalty is over: put it back on the field.
     Unpenalised(u8),
+    /// The referee whistled: Standby → Ready, Set → Playing, or a goal (with the goal's
+    /// `State(Ready)`). What the robots may hear, the packets aside.
+    Whistle,
 }
 
 /// The GC's count of the team's messages.
@@ -187,6 +290,17 @@ enum Stage {
     Over,
 }
 
+/// GameController3's delayed copy of the game while a delay runs (its `DelayHandler`).
+#[derive(Debug, Clone)]
+struct Delayed {
+    /// The copy: the game as it was when the delay began.
+    data: GameControlData,
+    /// When the delay ends, seconds.
+    until_s: f64,
+    /// The copy's own play left in the half (its clock runs in Playing), seconds.
+    play_left_s: f64,
+}
+
 /// The simulated GameController. See the module docs.
 #[derive(Debug, Clone)]
 pub struct Referee {
@@ -207,6 +321,10 @@ pub struct Referee {
     /// Seconds spent in each state (for the report).
     playing_s: f64,
     last_s: f64,
+    /// The delayed copy the packets show while a delay runs.
+    delayed: Option<Delayed>,
+    /// What the packets show: the delayed copy, or the true game.
+    shown: GameControlData,
 }
 
 impl Referee {
@@ -230,12 +348,25 @@ impl Referee {
             count: MessageCount::default(),
             playing_s: 0.0,
             last_s: now_s,
+            delayed: None,
+            shown: data,
             data,
             script,
         }
     }
 
-    /// The game as the GC shows it now.
+    /// The game as the packets show it now: GameController3's delayed copy while a delay
+    /// runs (see the module docs), the true game otherwise.
+    pub fn shown(&self) -> &GameControlData {
+        &self.shown
+    }
+
+    /// Whether a delay runs now: the packets show the game as it was.
+    pub fn delayed(&self) -> bool {
+        self.delayed.is_some()
+    }
+
+    /// The true game (the GC's own, undelayed; the packets show [`Referee::shown`]).
     pub fn data(&self) -> &GameControlData {
         &self.data
     }
@@ -319,16 +450,24 @@ impl Referee {
             }
             (Stage::Start, State::Standby) if now_s >= self.state_until_s => {
                 self.stage = Stage::Half;
+                self.fork(now_s, self.script.delays.after_ready_s);
+                events.push(RefereeEvent::Whistle);
                 self.enter(State::Ready, now_s + self.script.ready_s, &mut events);
             }
             (Stage::Half, State::Ready) if now_s >= self.state_until_s => {
+                // The operator's Set is illegal in a copy still in Standby: the delay ends.
+                self.delayed = None;
                 self.enter(State::Set, now_s + self.script.set_s, &mut events);
             }
             (Stage::Half, State::Set) if now_s >= self.state_until_s => {
+                self.fork(now_s, self.script.delays.after_playing_s);
+                events.push(RefereeEvent::Whistle);
                 self.enter(State::Playing, f64::INFINITY, &mut events);
             }
             (Stage::Half, State::Playing) if self.play_left_s <= 0.0 => {
                 self.play_left_s = 0.0;
+                // `FinishHalf` ends the copy's delay (it is illegal in it, or finishes it).
+                self.delayed = None;
                 // A half's end stops the penalty timers; the robots stay off until the
                 // half-time switch (or the game's end).
                 if self.data.first_half && self.script.halves > 1 {
@@ -361,8 +500,26 @@ impl Referee {
             }
             _ => {}
         }
+        if let Some(d) = &mut self.delayed {
+            if d.data.state == State::Playing {
+                d.play_left_s = (d.play_left_s - dt).max(0.0);
+            }
+            if now_s >= d.until_s {
+                self.delayed = None;
+            }
+        }
         self.refresh(now_s);
         events
+    }
+
+    /// GameController3's `fork`: the packets show the game as it is now (before the
+    /// action that calls it) for `delay_s` (none at 0).
+    fn fork(&mut self, now_s: f64, delay_s: f64) {
+        self.delayed = (delay_s > 0.0).then_some(Delayed {
+            data: self.data,
+            until_s: now_s + delay_s,
+            play_left_s: self.play_left_s,
+        });
     }
 
     /// A goal: `for_us` says whose. Counted in Playing only; the conceding team kicks
@@ -377,6 +534,10 @@ impl Referee {
         } else {
             (self.theirs(), self.ours)
         };
+        // The copy forked before the goal: Playing, the old score (a goal within the Set
+        // delay forks anew, as GameController3's `Goal` does).
+        self.fork(now_s, self.script.delays.after_goal_s);
+        events.push(RefereeEvent::Whistle);
         if let Some(t) = self.data.team_mut(scorer) {
             t.score = t.score.saturating_add(1);
         }
@@ -422,7 +583,12 @@ impl Referee {
         }
         self.next_packet_s += PACKET_PERIOD_S;
         self.data.packet_number = self.data.packet_number.wrapping_add(1);
-        Some(self.data.encode())
+        self.shown.packet_number = self.data.packet_number;
+        // The budget as counted up to now (messages come between the referee's steps).
+        for (s, t) in self.shown.teams.iter_mut().zip(&self.data.teams) {
+            s.message_budget = t.message_budget;
+        }
+        Some(self.shown.encode())
     }
 
     fn theirs(&self) -> u8 {
@@ -469,6 +635,21 @@ impl Referee {
                 }
             }
         }
+        self.shown = match &self.delayed {
+            None => self.data,
+            Some(d) => {
+                // The copy, with what every action keeps current in it: the budgets and
+                // the penalties (and the packet's number).
+                let mut shown = d.data;
+                shown.secs_remaining = d.play_left_s.ceil().clamp(0.0, 32767.0) as i16;
+                shown.packet_number = self.data.packet_number;
+                for (s, t) in shown.teams.iter_mut().zip(&self.data.teams) {
+                    s.message_budget = t.message_budget;
+                    s.players = t.players;
+                }
+                shown
+            }
+        };
     }
 }
 
@@ -520,7 +701,7 @@ mod tests {
         );
         let pens: Vec<_> = events
             .iter()
-            .filter(|(_, e)| !matches!(e, RefereeEvent::State(_)))
+            .filter(|(_, e)| matches!(e, RefereeEvent::Penalised(_) | RefereeEvent::Unpenalised(_)))
             .collect();
         assert_eq!(pens.len(), 4, "two penalties, each with its end: {pens:?}");
         let (on, off) = (pens[0].0, pens[1].0);
@@ -684,5 +865,99 @@ mod tests {
         assert_eq!(tracker.penalized(), Some(true), "robot 3 is off the field");
         assert!(tracker.own_secs_till_unpenalised().is_some_and(|s| s <= 45));
         assert_eq!(tracker.state(), Some(State::Playing));
+    }
+
+    /// The state and our score the packets show now (decoded, as a robot hears them).
+    fn heard(r: &Referee) -> (State, u8) {
+        let d = GameControlData::decode(&r.shown().encode()).expect("the GC's own packet");
+        (d.state, d.team(12).map_or(0, |t| t.score))
+    }
+
+    #[test]
+    fn the_packets_show_gamecontroller3_s_delayed_copy_and_the_current_budget() {
+        // Script: the SPL game with GC3's delays (15 s after play, 15 s after a goal,
+        // 45 s after Standby → Ready). Standby ends at 20 s, Ready at 50 s (the operator's
+        // Set), Set at 55 s; a goal for us at 100 s.
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        run_to(&mut r, 0.0, 30.0);
+        assert_eq!(r.state(), State::Ready);
+        assert_eq!(
+            heard(&r).0,
+            State::Standby,
+            "Standby shown into the half's Ready"
+        );
+        run_to(&mut r, 30.0, 51.0);
+        assert_eq!(
+            (r.state(), heard(&r).0),
+            (State::Set, State::Set),
+            "the operator's Set ends the Standby delay (30 s < 45 s)"
+        );
+        run_to(&mut r, 51.0, 60.0);
+        assert!(r.playing());
+        assert_eq!(heard(&r).0, State::Set, "Set shown 5 s after the whistle");
+        r.team_message(60.0, 60);
+        r.packet(60.0);
+        let d = GameControlData::decode(&r.shown().encode()).expect("decodes");
+        assert_eq!(
+            d.team(12).map(|t| t.message_budget),
+            Some(r.budget_left()),
+            "the budget in the packets is current"
+        );
+        run_to(&mut r, 60.0, 70.1);
+        assert_eq!(
+            heard(&r).0,
+            State::Playing,
+            "Playing shown 15 s after the whistle"
+        );
+        run_to(&mut r, 70.1, 100.0);
+        r.goal(100.0, true);
+        assert_eq!(r.state(), State::Ready);
+        run_to(&mut r, 100.0, 114.9);
+        assert_eq!(
+            heard(&r),
+            (State::Playing, 0),
+            "Playing with the old score for 15 s after the goal"
+        );
+        let clock = r.shown().secs_remaining;
+        assert!(
+            clock < r.data().secs_remaining,
+            "the copy's clock ran on in its Playing: {clock} vs {}",
+            r.data().secs_remaining
+        );
+        run_to(&mut r, 114.9, 115.1);
+        assert_eq!(
+            heard(&r),
+            (State::Ready, 1),
+            "then Ready with the new score"
+        );
+        // Without delays (GC3's `test.no_delay`) the packets show the truth.
+        let script = GameScript {
+            delays: GcDelays::none(),
+            ..GameScript::spl_full(5)
+        };
+        let mut r = Referee::new(script, 12, 34, 0.0);
+        run_to(&mut r, 0.0, 56.0);
+        assert_eq!(heard(&r).0, State::Playing, "no delay: Playing at once");
+    }
+
+    #[test]
+    fn a_goal_in_the_set_delay_forks_a_new_copy_showing_playing_with_the_old_score() {
+        let mut r = Referee::new(GameScript::spl_full(5), 12, 34, 0.0);
+        run_to(&mut r, 0.0, 60.0);
+        assert_eq!(heard(&r).0, State::Set);
+        r.goal(60.0, false);
+        run_to(&mut r, 60.0, 74.0);
+        assert_eq!(
+            heard(&r),
+            (State::Playing, 0),
+            "the Goal forked the pre-goal game: Playing, 0–0"
+        );
+        run_to(&mut r, 74.0, 75.1);
+        let d = GameControlData::decode(&r.shown().encode()).expect("decodes");
+        assert_eq!(
+            (d.state, d.team(34).map(|t| t.score)),
+            (State::Ready, Some(1)),
+            "Ready with their goal 15 s after it"
+        );
     }
 }

@@ -775,6 +775,8 @@ mod tests {
             penalty_s: 15.0,
             messages_per_game: 120,
             penalties: Vec::new(),
+            delays: crate::referee::GcDelays::none(),
+            whistle: crate::referee::WhistleHearing::deaf(),
         };
         let mut cfg = crate::SimConfig {
             duration_s: script.length_s() + 600.0,

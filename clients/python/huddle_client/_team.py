@@ -27,6 +27,7 @@ COST = "local.var.robot.cost"
 GOALKEEPER = "local.var.robot.goalkeeper"
 FALLEN = "local.var.robot.fallen"
 BALL_RESET = "local.var.robot.ball_reset"
+WHISTLE = "local.var.robot.whistle"
 TEAM_BALL = "local.var.team.ball"
 TEAM_GOER = "local.var.team.goer"
 TEAM_GOING = "local.var.team.going"
@@ -233,6 +234,12 @@ class TeamMixin:
         """The referee put the ball back (a kick-off): the layer forgets the ball it tracked."""
         self.set(BALL_RESET, True)
 
+    def whistle(self) -> None:
+        """The program heard the referee's whistle now: under GameController3 (whose
+        packets show play and goals 15 s late) it starts play in Set, and is a goal in
+        play (see docs/team-layer.md)."""
+        self.set(WHISTLE, True)
+
     def team_ball(self) -> Optional[TeamBall]:
         """The team ball now, or ``None`` until some robot saw the ball (and
         again after a kick-off's ``ball_reset``, until somebody sees it)."""
@@ -304,6 +311,9 @@ class AsyncTeamMixin:
 
     async def ball_reset(self) -> None:
         await self.set(BALL_RESET, True)
+
+    async def whistle(self) -> None:
+        await self.set(WHISTLE, True)
 
     async def team_ball(self) -> Optional[TeamBall]:
         return team_ball_of(await self.get(TEAM_BALL))

@@ -35,6 +35,25 @@ pub const KICK_OFF_SPOT_SIGMA_M: f64 = 0.1;
 /// σ of the velocity of a ball put down for a kick-off, per axis, m/s: it lies still.
 pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
 
+/// A whistle the layer acts on before the GameController says so stands this long at
+/// most, robot seconds: GameController3 shows play and goals 15 s late
+/// (`delayAfterPlaying`, `delayAfterGoal`), and a robot hears the whistle up to a second
+/// late and can miss a few of the GC's packets (one every 0.5 s); 5 s covers both. A
+/// GameController that still says the same after that was not late: the whistle was not
+/// the one the layer took it for (another field's, a free kick's), and the layer goes by
+/// the GameController's word again (see [`TeamLayer::heard_whistle`]).
+pub const WHISTLE_TRUST_S: f64 = 20.0;
+
+/// What a whistle the robot program heard meant to the layer
+/// ([`TeamLayer::heard_whistle`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Whistle {
+    /// Heard in Set: play started (robot seconds, when).
+    PlayStarted(f64),
+    /// Heard in play: a goal (robot seconds, when).
+    Goal(f64),
+}
+
 /// A kick-off placement a tick made (see [`TeamLayer::kick_off_placement`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum KickOffPlacement {
@@ -51,8 +70,91 @@ impl TeamLayer {
     /// plays the ball, so the layer keeps deciding for itself but tells the team nothing
     /// (a penalty aside): a league counts messages in Standby, Ready and Set, and a claim
     /// there is spent on nothing.
+    ///
+    /// A whistle the robot program heard runs ahead of it (see
+    /// [`TeamLayer::heard_whistle`]): after a goal's whistle the layer is out of play
+    /// while the GC still says Playing; after play's whistle it is in play while the GC
+    /// still says Set.
     pub fn set_in_play(&mut self, in_play: bool) {
-        self.in_play = in_play;
+        self.gc_in_play = in_play;
+        match self.whistle {
+            // The GameController caught up (or moved on: Ready, Finished).
+            Some(Whistle::PlayStarted(_)) if in_play => self.whistle = None,
+            Some(Whistle::Goal(_)) if !in_play => self.whistle = None,
+            _ => {}
+        }
+        self.in_play = self.whistled_in_play();
+    }
+
+    /// In play by the GameController's word and the whistle that runs ahead of it.
+    fn whistled_in_play(&self) -> bool {
+        match self.whistle {
+            Some(Whistle::PlayStarted(_)) => true,
+            Some(Whistle::Goal(_)) => false,
+            None => self.gc_in_play,
+        }
+    }
+
+    /// The robot program heard the referee's whistle at `now_s` (robot seconds): contract
+    /// key `local.var.robot.whistle`. Under GameController3 the robots learn of play and
+    /// of goals 15 s late (its packets show Set for 15 s after the whistle that starts
+    /// play, and Playing with the old score for 15 s after a goal): a robot program is
+    /// expected to hear the whistle itself. What the whistle means follows the GC's word
+    /// when it is heard, as a robot program takes it:
+    ///
+    /// - **in Set** (the GC says Set, no whistle pending): play started. The layer is in
+    ///   play and the kick-off hold starts ([`TeamLayer::set_kick_off_next`]), as if the
+    ///   GC had said Playing; the GC's Set that follows is the delayed word of the same
+    ///   kick-off, not a new one;
+    /// - **in play** (the GC says Playing, or a play whistle is pending: a goal within
+    ///   15 s of the kick-off): a goal. The layer forgets the ball ([`TeamLayer::forget_ball`],
+    ///   as [`TeamLayer::set_scores`] does when the new score comes) and leaves play until
+    ///   the GC says something else than Playing (its Ready for the kick-off);
+    /// - anything else (Initial, Standby, Ready, Finished, a goal's whistle pending) changes
+    ///   nothing here: out of play the layer has nothing to start. (A whistle in Standby
+    ///   sends the robots to Ready: that is the robot program's walk, not the layer's.)
+    ///
+    /// A whistle stands [`WHISTLE_TRUST_S`] at most: if the GC still says Set (or Playing)
+    /// then, the whistle was not what the layer took it for, and the GC's word counts
+    /// again. Chosen over trusting it until the GC changes: a goal's whistle the GC never
+    /// follows (a goal disallowed, another field's whistle) would otherwise keep the team
+    /// out of play, silent, for the rest of the half; a play whistle that was not play
+    /// would have it tell claims in Set. Both cost 20 s at most.
+    ///
+    /// Returns what it meant (`None`: nothing).
+    pub fn heard_whistle(&mut self, now_s: f64) -> Option<Whistle> {
+        let meant = match self.whistle {
+            Some(Whistle::Goal(_)) => None,
+            Some(Whistle::PlayStarted(_)) => Some(Whistle::Goal(now_s)),
+            None if self.gc_set => Some(Whistle::PlayStarted(now_s)),
+            None if self.gc_in_play => Some(Whistle::Goal(now_s)),
+            None => None,
+        }?;
+        self.whistle = Some(meant);
+        match meant {
+            Whistle::PlayStarted(_) => self.kick_off_next = false,
+            Whistle::Goal(_) => self.forget_ball(now_s),
+        }
+        self.in_play = self.whistled_in_play();
+        Some(meant)
+    }
+
+    /// The whistle the layer acts on, if the GameController has not caught up.
+    pub fn whistle(&self) -> Option<Whistle> {
+        self.whistle
+    }
+
+    /// A whistle older than [`WHISTLE_TRUST_S`] at `now_s` is dropped: the
+    /// GameController's word counts again. Called at each tick.
+    pub(super) fn whistle_timeout(&mut self, now_s: f64) {
+        let at = match self.whistle {
+            Some(Whistle::PlayStarted(at) | Whistle::Goal(at)) => at,
+            None => return,
+        };
+        if now_s - at > WHISTLE_TRUST_S {
+            self.whistle = None;
+            self.in_play = self.gc_in_play;
+        }
     }
 
     /// Whether the GameController says Set: every robot stands on its kick-off spot, the
@@ -92,7 +194,17 @@ impl TeamLayer {
     /// Returns whether a kick-off begins (the first Set heard): the caller then tells
     /// its replica (`comms::Replica::restart_priority_room`), so that the claims that
     /// change at the whistle find room for priority frames in the team's budget.
+    ///
+    /// After a whistle heard in Set ([`TeamLayer::heard_whistle`]) the GC's Set is the
+    /// delayed word of the kick-off that has started: it begins nothing.
     pub fn set_kick_off_next(&mut self, set: bool) -> bool {
+        self.gc_set = set;
+        if !set && matches!(self.whistle, Some(Whistle::PlayStarted(_))) && !self.gc_in_play {
+            // The GC left Set for something else than Playing (Ready, Finished).
+            self.whistle = None;
+            self.in_play = self.gc_in_play;
+        }
+        let set = set && !matches!(self.whistle, Some(Whistle::PlayStarted(_)));
         let begins = set && !self.kick_off_next;
         if begins {
             self.kick_off_hold_until_s = Some(f64::INFINITY);
@@ -232,3 +344,7 @@ impl TeamLayer {
         self.tick_placement
     }
 }
+
+#[cfg(test)]
+#[path = "whistle_tests.rs"]
+mod whistle_tests;

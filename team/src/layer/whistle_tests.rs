@@ -1,0 +1,166 @@
+//! The whistle a robot program hears ([`TeamLayer::heard_whistle`]) against
+//! GameController3's delayed word: a scenario each.
+
+use comms::Blackboard;
+use comms::Instant;
+
+use super::{Whistle, KICK_OFF_HOLD_S, WHISTLE_TRUST_S};
+use crate::layer::{ArbitrationParams, Senses, TeamConfig, TeamLayer};
+use crate::{Calibration, Pose};
+
+/// Robot 2 of 5 at the origin; its cost is `h` (about metres to the ball).
+fn robot(h: f64) -> (TeamLayer, TeamConfig) {
+    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
+    let mut r = TeamLayer::new(
+        2,
+        false,
+        ArbitrationParams::default(),
+        Pose::default(),
+        &cal,
+        &cfg.world_model,
+        5,
+    );
+    r.h = h;
+    (r, cfg)
+}
+
+fn at(s: f64) -> Instant {
+    Instant::from_micros((s * 1e6).round() as u64)
+}
+
+/// What the daemon's tick does with the GC's word: `state` as the listener keeps it.
+fn gc_says(r: &mut TeamLayer, state: &str) -> bool {
+    r.set_in_play(state == "playing");
+    r.set_kick_off_next(state == "set")
+}
+
+#[test]
+fn a_whistle_in_set_starts_play_and_the_kick_off_hold_while_the_gc_still_says_set() {
+    // Scenario: a kick-off under GameController3. Robot 2 stands 2 m from the ball, the
+    // GC says Set; the referee whistles at 20 s and the GC says Set until 35 s. The
+    // program hears the whistle at 20.5 s: the layer is in play then, robot 2 holds back
+    // for the hold's 3 s and goes after it, at 23.6 s, with the GC still saying Set. The
+    // GC's Set after the whistle begins no second kick-off; its Playing changes nothing.
+    let (mut r, _) = robot(2.0);
+    let board = Blackboard::new(2);
+    assert!(gc_says(&mut r, "set"), "Set: a kick-off begins");
+    r.decide(&board, at(15.0));
+    assert!(!r.going(), "in Set robot 2 leaves the ball to the taker");
+    assert_eq!(
+        r.heard_whistle(20.5),
+        Some(Whistle::PlayStarted(20.5)),
+        "a whistle in Set: play started"
+    );
+    assert!(r.in_play, "in play at the whistle");
+    for s in [20.6, 20.5 + KICK_OFF_HOLD_S - 0.1] {
+        assert!(
+            !gc_says(&mut r, "set"),
+            "{s} s: the GC's late Set begins nothing"
+        );
+        r.decide(&board, at(s));
+        assert!(r.in_play && !r.going(), "{s} s: in play, in the hold");
+    }
+    assert!(!gc_says(&mut r, "set"));
+    r.decide(&board, at(20.5 + KICK_OFF_HOLD_S + 0.1));
+    assert!(
+        r.going(),
+        "after the hold robot 2 goes, 11 s before the GC says Playing"
+    );
+    assert!(!gc_says(&mut r, "playing"));
+    assert!(r.in_play && r.whistle().is_none(), "the GC caught up");
+}
+
+#[test]
+fn a_whistle_in_play_is_a_goal_the_ball_is_forgotten_and_play_left_until_ready() {
+    // Scenario: robot 2 in play; a goal at 100 s, the program hears the whistle at
+    // 100.4 s; GameController3 says Playing (the old score) until 115 s, then Ready with
+    // the new score. From the whistle the layer is out of play (it tells nothing, goes
+    // for no ball) and its team ball is the kick-off spot; at Ready the whistle is done.
+    let (mut r, cfg) = robot(0.5);
+    let board = Blackboard::new(2);
+    gc_says(&mut r, "playing");
+    r.set_scores(0, 0, 90.0);
+    r.decide(&board, at(99.0));
+    assert!(r.going(), "before the goal it plays the ball");
+    assert_eq!(r.heard_whistle(100.4), Some(Whistle::Goal(100.4)));
+    assert!(!r.in_play, "a goal: out of play at the whistle");
+    let spot = r.team_ball_held.expect("the ball put back").estimate;
+    assert!(
+        spot.position().norm() < 1e-6,
+        "the ball forgotten, put on the centre spot: {:?}",
+        spot.position()
+    );
+    for s in [101.0, 114.9] {
+        gc_says(&mut r, "playing");
+        r.sense(&cfg, at(s), &Senses::default(), &board, false);
+        assert!(
+            !r.in_play,
+            "{s} s: the GC's late Playing does not put it back in play"
+        );
+    }
+    assert_eq!(
+        r.heard_whistle(105.0),
+        None,
+        "a second whistle before the GC caught up means nothing more"
+    );
+    r.set_scores(1, 0, 115.0);
+    gc_says(&mut r, "ready");
+    assert!(
+        r.whistle().is_none() && !r.in_play,
+        "Ready: the GC caught up"
+    );
+}
+
+#[test]
+fn a_whistle_the_gc_never_follows_stands_twenty_seconds_at_most() {
+    // Scenario: a whistle from the next field while in play at 50 s: GameController3 says
+    // Playing on. The layer takes it for a goal, then after WHISTLE_TRUST_S (15 s of
+    // GC3's delay and 5 s of margin) goes by the GC's Playing again. In Ready (or
+    // Standby, Initial, Finished) a whistle changes nothing in the layer.
+    let (mut r, cfg) = robot(0.5);
+    let board = Blackboard::new(2);
+    gc_says(&mut r, "playing");
+    assert_eq!(r.heard_whistle(50.0), Some(Whistle::Goal(50.0)));
+    gc_says(&mut r, "playing");
+    r.sense(
+        &cfg,
+        at(50.0 + WHISTLE_TRUST_S - 0.1),
+        &Senses::default(),
+        &board,
+        false,
+    );
+    assert!(!r.in_play, "within the trust: out of play");
+    gc_says(&mut r, "playing");
+    r.sense(
+        &cfg,
+        at(50.0 + WHISTLE_TRUST_S + 0.1),
+        &Senses::default(),
+        &board,
+        false,
+    );
+    assert!(
+        r.in_play && r.whistle().is_none(),
+        "the GC never followed: in play again"
+    );
+    // A play whistle in Set that the GC never follows: Set again, a kick-off begins anew.
+    assert!(gc_says(&mut r, "set"));
+    assert!(r.heard_whistle(200.0).is_some());
+    gc_says(&mut r, "set");
+    r.sense(
+        &cfg,
+        at(200.0 + WHISTLE_TRUST_S + 0.1),
+        &Senses::default(),
+        &board,
+        false,
+    );
+    assert!(!r.in_play, "the GC still says Set: out of play");
+    assert!(gc_says(&mut r, "set"), "… and a kick-off begins again");
+    // Ready: nothing.
+    gc_says(&mut r, "ready");
+    assert_eq!(
+        r.heard_whistle(300.0),
+        None,
+        "a whistle in Ready means nothing here"
+    );
+    assert!(!r.in_play);
+}
