@@ -354,10 +354,7 @@ fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
             .game
             .as_ref()
             .map_or(args.duration.as_secs_f64(), |g| g.length_s());
-        ProgressBar::with_draw_target(
-            Some((length_s * 1e3) as u64),
-            ProgressDrawTarget::stderr(),
-        )
+        ProgressBar::with_draw_target(Some((length_s * 1e3) as u64), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
     };

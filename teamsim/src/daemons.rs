@@ -484,7 +484,9 @@ fn free_tcp_port() -> Result<u16, DaemonsError> {
         .port())
 }
 
-/// Starts robot `id`'s daemon and connects to its relay.
+/// Starts robot `id`'s daemon and connects to its relay; `gc_args` point its
+/// GameController listener at the simulated referee (`--game`).
+#[allow(clippy::too_many_arguments)]
 fn start_daemon(
     id: u8,
     cfg: &SimConfig,
@@ -880,8 +882,7 @@ pub fn run(
             if gc.is_some() && robots[i].view.pose.is_some() {
                 // The order of the state its daemon heard: outside Playing, no play.
                 let order = daemons_game::order(gc_heard.0.as_deref(), gc_heard.1);
-                if let Some(c) = daemons_game::command(order, &robots[i], &out.believed, &homes)
-                {
+                if let Some(c) = daemons_game::command(order, &robots[i], &out.believed, &homes) {
                     out.command = Some(c);
                     out.kick = None;
                     out.writes.clear();
@@ -1004,11 +1005,7 @@ pub fn run(
                 // from the GC's packets (their scores), as a daemon on a field does.
                 g.goal(t + dt, goal == crate::field::Goal::For);
             }
-            for (d, r) in daemons
-                .iter_mut()
-                .zip(&mut robots)
-                .filter(|_| gc.is_none())
-            {
+            for (d, r) in daemons.iter_mut().zip(&mut robots).filter(|_| gc.is_none()) {
                 d.heard
                     .lock()
                     .unwrap_or_else(|e| e.into_inner())

@@ -154,12 +154,7 @@ impl std::fmt::Display for DaemonsGameReport {
         let status: Vec<String> = self
             .status
             .iter()
-            .map(|s| {
-                format!(
-                    "{}: {} (gap {:.2} s)",
-                    s.robot, s.packets, s.longest_gap_s
-                )
-            })
+            .map(|s| format!("{}: {} (gap {:.2} s)", s.robot, s.packets, s.longest_gap_s))
             .collect();
         write!(
             f,
@@ -281,7 +276,9 @@ fn io(what: &str) -> impl FnOnce(std::io::Error) -> DaemonsError + '_ {
 
 fn free_udp_port() -> Result<u16, DaemonsError> {
     let s = UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).map_err(io("finding a free UDP port"))?;
-    Ok(s.local_addr().map_err(io("finding a free UDP port"))?.port())
+    Ok(s.local_addr()
+        .map_err(io("finding a free UDP port"))?
+        .port())
 }
 
 impl GcSide {
