@@ -34,6 +34,10 @@
 //! per tick (and in the in-process run per step) to stderr, for finding where an error
 //! comes from (`scripts/daemons-trace.py`).
 //!
+//! Under `--game` the match is played under the simulated GameController, its packets sent
+//! over UDP on loopback to each daemon's listener and the team's frames counted as the GC
+//! counts them: [`super::daemons_game`].
+//!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
 
