@@ -178,7 +178,9 @@ pub struct SimArgs {
     /// `huddle daemon` does; the report says whether the team was ever illegal.
     /// `restarts`: one 10-minute half under the same referee, no break, no penalties
     /// (the 600 s run restarting from the formation after each goal, as a game does).
-    /// `--duration` is ignored: the game ends when the referee says so.
+    /// `--duration` is ignored: the game ends when the referee says so. With --daemons
+    /// the referee sends its packets over UDP on loopback to each daemon's listener
+    /// (real time: a game lasts its length).
     #[arg(long, value_enum)]
     pub game: Option<GameKind>,
     /// With --game: how late the referee's packets show the game. `gc3` (the default):
@@ -363,9 +365,8 @@ fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
         || args.record.is_some()
         || args.monitor.is_some()
         || !args.kill.is_empty()
-        || args.game.is_some()
     {
-        bail!("--daemons does not take --svg, --record, --monitor, --kill or --game");
+        bail!("--daemons does not take --svg, --record, --monitor or --kill");
     }
     let opts = huddle::sim::daemons::DaemonsOptions {
         exe: std::env::current_exe().context("finding the huddle binary")?,
@@ -373,10 +374,11 @@ fn run_daemons(args: &SimArgs, cfg: SimConfig) -> Result<()> {
         log_dir: args.daemon_logs.clone(),
     };
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(
-            Some(args.duration.as_millis() as u64),
-            ProgressDrawTarget::stderr(),
-        )
+        let length_s = cfg
+            .game
+            .as_ref()
+            .map_or(args.duration.as_secs_f64(), |g| g.length_s());
+        ProgressBar::with_draw_target(Some((length_s * 1e3) as u64), ProgressDrawTarget::stderr())
     } else {
         ProgressBar::hidden()
     };

@@ -34,6 +34,10 @@
 //! per tick (and in the in-process run per step) to stderr, for finding where an error
 //! comes from (`scripts/daemons-trace.py`).
 //!
+//! Under `--game` the match is played under the simulated GameController, its packets sent
+//! over UDP on loopback to each daemon's listener and the team's frames counted as the GC
+//! counts them: [`super::daemons_game`].
+//!
 //! Networking rule: everything binds 127.0.0.1 and uses an organisation-local scratch
 //! group (`driver::scratch_group`) with `IP_MULTICAST_IF` 127.0.0.1.
 
@@ -56,6 +60,7 @@ use player::Percepts;
 use serde::Serialize;
 use team::contract;
 
+use super::daemons_game::{self, DaemonsGameReport, GcSide};
 use super::references::CentralFusion;
 use super::{Metrics, SimConfig, Simulation, Transport};
 use crate::field::World;
@@ -186,6 +191,9 @@ pub struct DaemonsReport {
     pub clocks: Vec<[f64; 2]>,
     /// The same match in process (same seed and configuration), for the ratio.
     pub in_process: Option<InProcess>,
+    /// Under `--game`: the referee's books ([`super::daemons_game`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub game: Option<DaemonsGameReport>,
 }
 
 /// A distribution in brief, ms.
@@ -373,7 +381,11 @@ impl std::fmt::Display for DaemonsReport {
             self.relay_errors, self.late_steps, self.stale_views
         )?;
         writeln!(f, "view lag              {}", self.view_lag_ms)?;
-        write!(f, "world behind clock    {}", self.behind_ms)
+        write!(f, "world behind clock    {}", self.behind_ms)?;
+        if let Some(g) = &self.game {
+            write!(f, "\n{g}")?;
+        }
+        Ok(())
     }
 }
 
@@ -397,6 +409,9 @@ struct Heard {
     /// The layer's own world-model messages (`local.var.team.world`) since the central
     /// reference last took them, in order.
     lwms: Vec<Vec<u8>>,
+    /// Under `--game`: the daemon's `local.var.gc.state` and `local.var.gc.penalty`.
+    gc_state: Option<String>,
+    gc_penalty: i64,
 }
 
 /// A robot's daemon: its process and its relay connection.
@@ -473,7 +488,9 @@ fn free_tcp_port() -> Result<u16, DaemonsError> {
         .port())
 }
 
-/// Starts robot `id`'s daemon and connects to its relay.
+/// Starts robot `id`'s daemon and connects to its relay; `gc_args` point its
+/// GameController listener at the simulated referee (`--game`).
+#[allow(clippy::too_many_arguments)]
 fn start_daemon(
     id: u8,
     cfg: &SimConfig,
@@ -482,6 +499,7 @@ fn start_daemon(
     spec: &str,
     clock: netsim::NodeClock,
     dir: &Path,
+    gc_args: &[String],
 ) -> Result<Daemon, DaemonsError> {
     let relay: SocketAddr = (Ipv4Addr::LOCALHOST, free_tcp_port()?).into();
     let log = dir.join(format!("daemon-{id}.log"));
@@ -506,9 +524,12 @@ fn start_daemon(
     if let Some(b) = &cfg.budget {
         // The simulated team pools its budget (every robot runs huddle).
         cmd.args(["--budget", &b.to_string(), "--budget-pool"]);
-        // No GameController here: the budget paces itself, as the daemon does without one.
-        cmd.arg("--no-gamecontroller");
+        if gc_args.is_empty() {
+            // No GameController: the budget paces itself, as the daemon does without one.
+            cmd.arg("--no-gamecontroller");
+        }
     }
+    cmd.args(gc_args);
     let policy = clap::ValueEnum::to_possible_value(&cfg.brain.team.send_policy)
         .map(|v| v.get_name().to_owned())
         .unwrap_or_else(|| "every".into());
@@ -607,6 +628,18 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
         if b.key == "local.var.huddle.stats.frames_out" {
             if let Value::Int(n) = value {
                 h.frames_out = u64::try_from(n).ok();
+            }
+            continue;
+        }
+        if b.key == "local.var.gc.state" {
+            if let Value::String(s) = value {
+                h.gc_state = Some(s);
+            }
+            continue;
+        }
+        if b.key == "local.var.gc.penalty" {
+            if let Value::Int(p) = value {
+                h.gc_penalty = p;
             }
             continue;
         }
@@ -719,6 +752,11 @@ pub fn run(
 
     let spec = opts.impair.clone().unwrap_or_else(|| impair_spec(cfg));
     let group = driver::scratch_group().map_err(io("picking a scratch group"))?;
+    // Under `--game`: the referee, listening to the group before the daemons start.
+    let mut gc = match cfg.game.clone() {
+        Some(script) => Some(GcSide::start(cfg, script, group, &world)?),
+        None => None,
+    };
     let dir = match &opts.log_dir {
         Some(d) => d.clone(),
         None => std::env::temp_dir().join(format!(
@@ -729,8 +767,11 @@ pub fn run(
     };
     std::fs::create_dir_all(&dir).map_err(io(format!("creating {}", dir.display())))?;
     let mut daemons = Vec::with_capacity(robots.len());
-    for (r, &clock) in robots.iter().zip(&clocks) {
-        daemons.push(start_daemon(r.id, cfg, opts, group, &spec, clock, &dir)?);
+    for (i, (r, &clock)) in robots.iter().zip(&clocks).enumerate() {
+        let gc_args = gc.as_ref().map_or_else(Vec::new, |g| g.daemon_args(i));
+        daemons.push(start_daemon(
+            r.id, cfg, opts, group, &spec, clock, &dir, &gc_args,
+        )?);
     }
     // Each program says who it is and where it was put, then watches its layer.
     for ((d, r), start) in daemons.iter_mut().zip(&robots).zip(&starts) {
@@ -746,6 +787,10 @@ pub fn run(
             contract::POSE_KEY,
             start_pose_value(start, wm.start_sigma_m, wm.start_sigma_rad)
         );
+        if gc.is_some() {
+            // The game as its daemon's listener wrote it, as a robot program reads it.
+            hello += "ADDW local.var.gc.state\nADDW local.var.gc.penalty\n";
+        }
         hello += "ADDW local.var.team.#\nADDW +.var.machine.pass_to\nREFR 0\n";
         d.send(&hello)?;
     }
@@ -780,6 +825,17 @@ pub fn run(
             late_steps += 1;
         }
         behind_us.push(Instant::now().saturating_duration_since(due).as_micros() as u64);
+        if let Some(g) = &mut gc {
+            if g.over() {
+                break;
+            }
+            // Robots the referee carried off or back: each program tells its layer where.
+            for (i, spot) in g.step(t, &mut world, &robots, &homes, cfg)? {
+                let pose = start_pose_value(&spot, wm.start_sigma_m, wm.start_sigma_rad);
+                daemons[i].send(&format!("SETV {} {pose}\n", contract::POSE_KEY))?;
+            }
+        }
+        let in_play = gc.as_ref().is_none_or(|g| g.playing());
         if step % 100 == 0 {
             for d in &mut daemons {
                 d.check_alive()?;
@@ -823,9 +879,22 @@ pub fn run(
                     .unwrap_or_else(|e| e.into_inner())
                     .0;
             };
+            let gc_heard = (heard.gc_state.clone(), heard.gc_penalty);
             drop(heard);
             robots[i].view = view;
-            let out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
+            let mut out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
+            if gc.is_some() && robots[i].view.pose.is_some() {
+                // The order of the state its daemon heard: outside Playing, no play.
+                let order = daemons_game::order(gc_heard.0.as_deref(), gc_heard.1);
+                if let Some(c) = daemons_game::command(order, &robots[i], &out.believed, &homes) {
+                    out.command = Some(c);
+                    out.kick = None;
+                    out.writes.clear();
+                }
+            }
+            if let Some(g) = &mut gc {
+                g.judge_claim(robots[i].id, robots[i].view.goer, t);
+            }
             if !out.writes.is_empty() {
                 daemons[i].send(&setv_lines(&out.writes))?;
             }
@@ -838,7 +907,7 @@ pub fn run(
                     fusion::wrap_angle(world.robots[i].pose.theta_rad - out.believed.theta_rad);
                 world.kick(i, k.direction_rad + off);
             }
-            if robots[i].view.pose.is_some() {
+            if robots[i].view.pose.is_some() && on_field(&gc, robots[i].id) {
                 // The pose it played on: the layer's, brought up to now by its odometry.
                 let pose = out.believed;
                 let truth = world.robots[i].pose.at;
@@ -886,11 +955,14 @@ pub fn run(
             }
             ticked.push(i);
         }
-        let visible = robots.iter().any(|r| r.is_field_player() && r.sees_ball());
+        let visible = in_play
+            && robots
+                .iter()
+                .any(|r| r.is_field_player() && r.sees_ball() && on_field(&gc, r.id));
         if visible {
             let truth = world.ball.at;
             let c = central.estimate_at(t);
-            for &i in &ticked {
+            for &i in ticked.iter().filter(|&&i| on_field(&gc, robots[i].id)) {
                 let r = &robots[i];
                 let (Some(team), Some(c)) = (r.view.team_ball_now(0.0), c) else {
                     continue;
@@ -921,7 +993,8 @@ pub fn run(
                 }
             }
         }
-        if world.step(dt).is_some() {
+        let goal = world.step(dt);
+        if let Some(goal) = goal {
             if std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some() {
                 eprintln!("goal t={t:.2} ball now {:?}", world.ball.at);
             }
@@ -931,7 +1004,12 @@ pub fn run(
                 t_s: t + dt,
                 ..kick_off
             });
-            for (d, r) in daemons.iter_mut().zip(&mut robots) {
+            if let Some(g) = &mut gc {
+                // The referee's goal: Ready and Set, then a kick-off. The layers learn it
+                // from the GC's packets (their scores), as a daemon on a field does.
+                g.goal(t + dt, goal == crate::field::Goal::For);
+            }
+            for (d, r) in daemons.iter_mut().zip(&mut robots).filter(|_| gc.is_none()) {
                 d.heard
                     .lock()
                     .unwrap_or_else(|e| e.into_inner())
@@ -944,9 +1022,12 @@ pub fn run(
                 ))?;
             }
         }
+        if let Some(g) = &gc {
+            g.hold(&mut world, cfg);
+        }
         let goers: Vec<u8> = robots
             .iter()
-            .filter(|r| r.is_field_player() && r.view.going)
+            .filter(|r| r.is_field_player() && r.view.going && on_field(&gc, r.id))
             .map(|r| r.id)
             .collect();
         metrics.sample(t + dt, dt, visible, &goers);
@@ -973,6 +1054,13 @@ pub fn run(
         .iter()
         .map(|d| d.heard.lock().map_or(0, |h| h.errors))
         .sum();
+    // The frames still in flight when the daemons said what they sent, then the books.
+    let game = gc.as_mut().map(|g| {
+        std::thread::sleep(Duration::from_millis(50));
+        g.count_frames(played_s);
+        g.report()
+    });
+    drop(gc);
     for d in &mut daemons {
         let _ = d.send("QUIT\n");
     }
@@ -1029,7 +1117,14 @@ pub fn run(
             .map(|c| [c.offset().as_secs_f64(), c.drift_ppm()])
             .collect(),
         in_process: None,
+        game,
     })
+}
+
+/// Whether robot `id`'s figures are sampled now: always without a referee; under one,
+/// in Playing and on the field.
+fn on_field(gc: &Option<GcSide>, id: u8) -> bool {
+    gc.as_ref().is_none_or(|g| g.playing() && !g.penalised(id))
 }
 
 /// How far robot `i` is from the nearest teammate's and the nearest opponent's body

@@ -36,6 +36,7 @@
 pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
+pub mod daemons_game;
 pub mod field;
 mod game;
 pub mod metrics;
