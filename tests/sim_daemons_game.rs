@@ -20,7 +20,7 @@
 #![allow(clippy::disallowed_methods)] // real daemons over loopback, real time
 
 use huddle::sim::daemons::{self, DaemonsOptions};
-use huddle::sim::referee::{GameScript, ScriptedPenalty};
+use huddle::sim::referee::{GameScript, GcDelays, ScriptedPenalty, WhistleHearing};
 use huddle::sim::SimConfig;
 
 #[test]
@@ -42,6 +42,11 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
             half: 1,
             after_play_s: 10.0,
         }],
+        // GameController3's late packets, as on a real field; the daemons' robot
+        // programs here write no whistle (they follow `local.var.gc.state`), so each
+        // layer goes by the GC's delayed word.
+        delays: GcDelays::gc3(),
+        whistle: WhistleHearing::deaf(),
     };
     let mut cfg = SimConfig {
         robots: 3,
