@@ -481,7 +481,9 @@ impl GcSide {
                 self.kick_off_spot_error_m
                     .push((far * 1000.0).round() / 1000.0);
             }
-            RefereeEvent::State(_) => {}
+            // The daemons' robot programs here hear no whistle: they go by their
+            // listener's `local.var.gc.state` (GameController3's late word).
+            RefereeEvent::State(_) | RefereeEvent::Whistle => {}
             RefereeEvent::Penalised(id) => {
                 let Some(i) = index(id) else { return };
                 self.penalties += 1;
