@@ -406,10 +406,6 @@ impl Game {
         }
     }
 
-    /// Robot `i` learnt of every goal up to the `known`-th at `t_s` (`at_set`: at Set, no
-    /// packet with the new score having reached it). Returns whether it was the first
-    /// robot to learn of one of them (the references that see the whole team put the
-    /// ball down then).
     /// The referee whistled at `t_s`: each robot's program is to hear it (or not) as the
     /// script's [`crate::referee::WhistleHearing`] draws.
     fn whistle(&mut self, t_s: f64) {
@@ -428,6 +424,10 @@ impl Game {
         }
     }
 
+    /// Robot `i` learnt of every goal up to the `known`-th at `t_s` (`at_set`: at Set, no
+    /// packet with the new score having reached it). Returns whether it was the first
+    /// robot to learn of one of them (the references that see the whole team put the
+    /// ball down then).
     fn learnt_goals(&mut self, i: usize, known: usize, t_s: f64, at_set: bool) -> bool {
         let known = known.min(self.goal_times_s.len());
         let Some(before) = self.goals_known.get(i).copied() else {
