@@ -5,19 +5,25 @@ use comms::wire::{FrameWriter, ItemRef, TeamKey};
 use comms::{Replica, ReplicaConfig};
 use fusion::nalgebra::Vector3;
 
-/// A robot at the origin facing +x that has watched the ball lie still at `range_m`
-/// straight ahead for a second, and moved `forward_m` over its latest control period.
-fn robot_at_a_still_ball(range_m: f64, forward_m: f64) -> (TeamLayer, Calibration, TeamConfig) {
+/// Robot 2 of a team of 5 with the default calibration and settings, standing at `home`.
+pub(super) fn robot_2_of_5(home: Pose) -> (TeamLayer, Calibration, TeamConfig) {
     let (cal, cfg) = (Calibration::default(), TeamConfig::default());
-    let mut r = TeamLayer::new(
+    let r = TeamLayer::new(
         2,
         false,
         ArbitrationParams::default(),
-        Pose::default(),
+        home,
         &cal,
         &cfg.world_model,
         5,
     );
+    (r, cal, cfg)
+}
+
+/// A robot at the origin facing +x that has watched the ball lie still at `range_m`
+/// straight ahead for a second, and moved `forward_m` over its latest control period.
+fn robot_at_a_still_ball(range_m: f64, forward_m: f64) -> (TeamLayer, Calibration, TeamConfig) {
+    let (mut r, cal, cfg) = robot_2_of_5(Pose::default());
     // The camera's σ: range 0.02 m + 5% along the line of sight, bearing 0.02 rad across.
     let along = cal.sensors.range_noise_m + cal.sensors.range_noise_frac * range_m;
     let across = range_m * cal.sensors.bearing_noise_rad;
@@ -378,20 +384,11 @@ fn after_a_kick_off_a_blind_robot_holds_the_ball_on_the_centre_spot_until_a_came
     // the ball and hears nobody (a budget sends nothing out of play). Before, it held no
     // team ball at all until a teammate's message came; now it holds the centre spot
     // through the restart, and at the whistle as sure as the referee's placement.
-    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
     let home = Pose {
         at: Vec2::new(-2.0, 1.0),
         theta_rad: 0.0,
     };
-    let mut r = TeamLayer::new(
-        2,
-        false,
-        ArbitrationParams::default(),
-        home,
-        &cal,
-        &cfg.world_model,
-        5,
-    );
+    let (mut r, _cal, cfg) = robot_2_of_5(home);
     let board = Blackboard::new(2);
     let at = |s: f64| Instant::from_micros((s * 1e6).round() as u64);
     let pose = Some((home, fusion::nalgebra::Matrix3::identity() * 1e-4));

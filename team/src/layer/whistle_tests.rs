@@ -5,21 +5,12 @@ use comms::Blackboard;
 use comms::Instant;
 
 use super::{Whistle, KICK_OFF_HOLD_S, WHISTLE_TRUST_S};
-use crate::layer::{ArbitrationParams, Senses, TeamConfig, TeamLayer};
-use crate::{Calibration, Pose};
+use crate::layer::{Senses, TeamConfig, TeamLayer};
+use crate::Pose;
 
 /// Robot 2 of 5 at the origin; its cost is `h` (about metres to the ball).
 fn robot(h: f64) -> (TeamLayer, TeamConfig) {
-    let (cal, cfg) = (Calibration::default(), TeamConfig::default());
-    let mut r = TeamLayer::new(
-        2,
-        false,
-        ArbitrationParams::default(),
-        Pose::default(),
-        &cal,
-        &cfg.world_model,
-        5,
-    );
+    let (mut r, _cal, cfg) = crate::layer::tests::robot_2_of_5(Pose::default());
     r.h = h;
     (r, cfg)
 }
