@@ -28,6 +28,15 @@ const PART_NOISE_Z: f64 = 3.0;
 /// correlated): a sum of m windows spreads like about 1.5 m independent ones.
 const OVERLAP_INFLATION: f64 = 1.5;
 
+/// Whether a part of the slot, `n` windows that summed `observed` where the basic's level
+/// over the slot gives `expected`, is one the basic faded from: under [`PART_SHARE`] of
+/// it beyond [`PART_NOISE_Z`] standard deviations of the part's sum (a window's variance
+/// `variance`, inflated by the windows' overlap).
+fn faded(observed: f64, expected: f64, variance: f64, n: usize) -> bool {
+    let spread = (OVERLAP_INFLATION * variance * n as f64).sqrt();
+    observed < PART_SHARE * expected - PART_NOISE_Z * spread
+}
+
 impl Decoder {
     /// Whether the frame's two basics (its `present` tones) sound together through the
     /// slot `[a, b)` at `scale`; the reason when they do not, for the trace.
@@ -95,8 +104,7 @@ impl Decoder {
             let quarter = (b - a) / PARTS as f64;
             if let Some((observed, n)) = self.part_excess(&tones, scale, a - quarter, a) {
                 let expected = whole.mean * n as f64;
-                let spread = (OVERLAP_INFLATION * whole.variance * n as f64).sqrt();
-                if observed < PART_SHARE * expected - PART_NOISE_Z * spread {
+                if faded(observed, expected, whole.variance, n) {
                     return Err(format!(
                         "the frame faded from the last quarter and sounded {:.2} of its level before the onset",
                         observed / expected
@@ -222,9 +230,8 @@ impl Decoder {
         };
         for (i, &(observed, n)) in parts.iter().enumerate() {
             let expected = mean * n as f64;
-            let spread = (OVERLAP_INFLATION * variance * n as f64).sqrt();
             q.share[i] = observed / expected;
-            q.faded[i] = observed < PART_SHARE * expected - PART_NOISE_Z * spread;
+            q.faded[i] = faded(observed, expected, variance, n);
             q.held[i] = observed >= HOLD_SHARE * expected;
         }
         Some(q)
