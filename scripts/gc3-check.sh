@@ -6,6 +6,8 @@
 # 1: a check failed; 2: it could not run (the reason is printed).
 #
 # usage: scripts/gc3-check.sh GC3 [ROBOTS]
+#   GC3_WHISTLE=off: the robot programs hear no whistle (default on: they write
+#        local.var.robot.whistle at each kick-off and goal the operator whistles).
 #   GC3: a checkout of github.com/RoboCup-SPL/GameController3, or its git directory
 #        (no registry has it, so it is not fetched here).
 # Needs: root (a network namespace with a veth pair: the GC's broadcasts and the team's
@@ -63,7 +65,7 @@ unshare -n bash -c '
   ip addr add 10.0.0.1/16 brd 10.0.255.255 dev gc0
   ip link set gc0 up
   ip link set gc1 up
-  exec "$@"' _ "$bin" --gc3 "$dst" --huddle "$huddle" --work "$work" --robots "$robots"
+  exec "$@"' _ "$bin" --gc3 "$dst" --huddle "$huddle" --work "$work" --robots "$robots" --whistle "${GC3_WHISTLE:-on}"
 rc=$?
 set -e
 echo "gc3-check: exit $rc (logs in $work)"

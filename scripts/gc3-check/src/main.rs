@@ -16,6 +16,14 @@
 //! 5. the team is never over budget: GC3's `messageBudget` never reaches 0 while a
 //!    message is counted at 0 (implied by 3) and ends at or above 0.
 //!
+//! Besides the checks it reports what GC3's delayed copy costs the team's play: GC3
+//! sends robots Set for 15 s after the whistle that starts play (`delayAfterPlaying`),
+//! so a daemon that only reads the GC sits out the kick-off. The robot programs here
+//! hear each whistle the operator blows (kick-offs and goals, `--whistle on`, the
+//! default) and write `local.var.robot.whistle`, as a program with a whistle detector
+//! does; `--whistle off` is a team without one. From GC3's own log: the team's frames
+//! in the first 10 s after each kick-off whistle, against 10 s of later play.
+//!
 //! Run inside a network namespace (scripts/gc3-check.sh makes one with a veth pair), so
 //! the broadcasts never leave the machine.
 
@@ -23,7 +31,7 @@ use std::collections::BTreeMap;
 use std::net::IpAddr;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -63,6 +71,7 @@ struct Args {
     broadcast: IpAddr,
     iface_name: String,
     write_ms: u64,
+    whistle: bool,
 }
 
 fn args() -> Result<Args> {
@@ -77,6 +86,7 @@ fn args() -> Result<Args> {
         broadcast: "10.0.255.255".parse()?,
         iface_name: "gc0".into(),
         write_ms: 100,
+        whistle: true,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -92,11 +102,18 @@ fn args() -> Result<Args> {
             "--broadcast" => a.broadcast = val()?.parse()?,
             "--iface-name" => a.iface_name = val()?,
             "--write-ms" => a.write_ms = val()?.parse()?,
+            "--whistle" => {
+                a.whistle = match val()?.as_str() {
+                    "on" => true,
+                    "off" => false,
+                    other => bail!("--whistle on|off, not {other}"),
+                }
+            }
             _ => bail!("unknown flag {flag}"),
         }
     }
     if a.gc3.as_os_str().is_empty() || a.huddle.as_os_str().is_empty() {
-        bail!("usage: gc3-check --gc3 GC3_SOURCE --huddle HUDDLE_BIN [--robots N] [--half-s S] [--messages M]");
+        bail!("usage: gc3-check --gc3 GC3_SOURCE --huddle HUDDLE_BIN [--robots N] [--half-s S] [--messages M] [--whistle on|off]");
     }
     Ok(a)
 }
@@ -160,8 +177,14 @@ fn spawn_daemon(a: &Args, id: u8) -> Result<Child> {
 }
 
 /// A robot program: writes a new small value every `every` through the relay, as a robot
-/// program would, so that the daemon always has news and the budget binds.
-async fn writer(id: u8, every: Duration, stop: Arc<AtomicBool>) -> Result<u64> {
+/// program would, so that the daemon always has news and the budget binds. Each time
+/// `whistles` goes up it writes the whistle, `0.2 · id` s late (a detector's delay).
+async fn writer(
+    id: u8,
+    every: Duration,
+    stop: Arc<AtomicBool>,
+    whistles: Arc<AtomicU64>,
+) -> Result<u64> {
     let addr = format!("127.0.0.1:{}", RELAY_BASE + u16::from(id));
     let stream = loop {
         match TcpStream::connect(&addr).await {
@@ -176,7 +199,22 @@ async fn writer(id: u8, every: Duration, stop: Arc<AtomicBool>) -> Result<u64> {
     let mut lines = BufReader::new(r).lines();
     lines.next_line().await?; // the greeting
     let mut n = 0u64;
+    let mut heard = 0u64;
+    let mut due: Option<Instant> = None;
     while !stop.load(Ordering::Relaxed) {
+        let blown = whistles.load(Ordering::Relaxed);
+        if blown > heard {
+            heard = blown;
+            due = Some(Instant::now() + Duration::from_millis(200 * u64::from(id)));
+        }
+        if due.is_some_and(|at| Instant::now() >= at) {
+            due = None;
+            w.write_all(b"SETV local.var.robot.whistle true\n").await?;
+            let reply = lines.next_line().await?.unwrap_or_default();
+            if !reply.starts_with("OK") {
+                bail!("robot {id}: the whistle's SETV answered {reply:?}");
+            }
+        }
         n += 1;
         w.write_all(format!("SETV *.var.check.n{id} {n}\n").as_bytes())
             .await?;
@@ -294,14 +332,25 @@ async fn main() -> Result<()> {
         daemons.push((id, spawn_daemon(&a, id)?));
     }
     let stop = Arc::new(AtomicBool::new(false));
+    let whistles = Arc::new(AtomicU64::new(0));
     let writers: Vec<_> = (1..=a.robots)
-        .map(|id| tokio::spawn(writer(id, Duration::from_millis(a.write_ms), stop.clone())))
+        .map(|id| {
+            let every = Duration::from_millis(a.write_ms);
+            tokio::spawn(writer(id, every, stop.clone(), whistles.clone()))
+        })
         .collect();
+    // The operator blows the whistle with the action; the programs hear it if asked to.
+    let blow = || {
+        if a.whistle {
+            whistles.fetch_add(1, Ordering::Relaxed);
+        }
+    };
 
     // The operator's script: Initial → Standby → kick-off (Ready, Set) → Playing; a goal
     // and a pick-up penalty in the first half; the break; the second half; Finished.
     let start = Instant::now();
     let mut set_since: Option<Instant> = None;
+    let mut whistled = false;
     let mut initial_since = Some(start);
     let mut goal_given = false;
     let mut penalised = false;
@@ -352,11 +401,16 @@ async fn main() -> Result<()> {
             State::Set => {
                 let since = *set_since.get_or_insert_with(Instant::now);
                 if since.elapsed() >= Duration::from_secs(3) {
+                    if !whistled {
+                        whistled = true;
+                        blow();
+                    }
                     act(VAction::FreeSetPlay(FreeSetPlay));
                 }
             }
             State::Playing => {
                 set_since = None;
+                whistled = false;
                 polls_playing += 1;
                 // Connected: every robot heard within 2 s (GC3's "good"), once play runs.
                 for id in 1..=a.robots {
@@ -367,6 +421,7 @@ async fn main() -> Result<()> {
                 let first = game.phase == Phase::FirstHalf;
                 if first && !goal_given && primary <= a.half_s as f64 * 0.6 {
                     goal_given = true;
+                    blow();
                     act(VAction::Goal(Goal { side: Side::Home }));
                 } else if first && !penalised && primary <= a.half_s as f64 * 0.4 {
                     penalised = true;
@@ -437,22 +492,47 @@ async fn main() -> Result<()> {
     let mut received = 0u64;
     let mut longest = 0usize;
     let mut counted = 0u64;
+    // When GC3 logged each kick-off's whistle (the true Playing) and each team frame.
+    let mut kick_offs: Vec<f64> = Vec::new();
+    // When each stretch of true play ended (a goal or the half's end).
+    let mut play_ends: Vec<f64> = Vec::new();
+    let mut frames_at: Vec<f64> = Vec::new();
     for e in &entries {
+        let t = e.timestamp.as_secs_f64();
         match &e.entry {
             LogEntry::TeamMessage(m) if m.team == TEAM => {
                 received += 1;
                 longest = longest.max(m.data.len());
+                frames_at.push(t);
             }
-            LogEntry::Action(la) => {
-                if let VAction::TeamMessage(tm) = &la.action {
-                    if tm.side == Side::Home {
-                        counted += 1;
-                    }
+            LogEntry::Action(la) => match &la.action {
+                VAction::TeamMessage(tm) if tm.side == Side::Home => counted += 1,
+                VAction::FreeSetPlay(_) if kick_offs.len() == play_ends.len() => kick_offs.push(t),
+                VAction::Goal(_) | VAction::FinishHalf(_) if kick_offs.len() > play_ends.len() => {
+                    play_ends.push(t)
                 }
-            }
+                _ => {}
+            },
             _ => {}
         }
     }
+    let frames_between =
+        |from: f64, to: f64| frames_at.iter().filter(|&&f| f >= from && f < to).count() as f64;
+    // The first 10 s after each whistle (GC3 still shows Set), and 10 s of play after
+    // the delay (from 20 s on) for comparison.
+    let first_10s: Vec<f64> = kick_offs
+        .iter()
+        .zip(&play_ends)
+        .map(|(&k, &end)| frames_between(k, end.min(k + 10.0)))
+        .collect();
+    // Play after GC3 has caught up (15 s on), as frames per 10 s.
+    let later_10s: Vec<f64> = kick_offs
+        .iter()
+        .zip(&play_ends)
+        .filter(|(&k, &end)| end > k + 20.0)
+        .map(|(&k, &end)| 10.0 * frames_between(k + 15.0, end) / (end - k - 15.0))
+        .collect();
+    let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len().max(1) as f64;
     let s = seen.lock().unwrap();
     let final_game = s.game.clone().context("GC3 showed no state")?;
     let ours = &final_game.teams[Side::Home];
@@ -472,6 +552,11 @@ async fn main() -> Result<()> {
         "gc3_score": [ours.score, final_game.teams[Side::Away].score],
         "gc3_states_seen": s.states,
         "longest_datagram_bytes": longest,
+        "whistle": a.whistle,
+        "kick_off_whistles_s": kick_offs,
+        "frames_first_10s_after_whistle": first_10s,
+        "play_ends_s": play_ends,
+        "frames_per_10s_of_play_from_15s_after_whistle": later_10s,
         "daemons_frames_out": sent,
         "daemons_frames_out_total": total_sent,
         "playing_polls": polls_playing,
@@ -510,6 +595,14 @@ async fn main() -> Result<()> {
             format!("{budget_fall} of {}", a.messages),
         ),
     ];
+    println!(
+        "INFO whistle {}: team frames in the 10 s after each kick-off whistle {:.1} (per kick-off {:?}), per 10 s of play from 15 s on (GC3 caught up) {:.1} ({:?})",
+        if a.whistle { "heard" } else { "not heard" },
+        mean(&first_10s),
+        first_10s,
+        mean(&later_10s),
+        later_10s
+    );
     let mut ok = true;
     for (what, pass, detail) in &checks {
         println!("{} {what}: {detail}", if *pass { "PASS" } else { "FAIL" });
