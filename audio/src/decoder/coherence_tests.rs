@@ -238,28 +238,32 @@ fn a_frame_refused_for_a_foreign_sound_stays_refused_when_found_again_a_few_wind
         data: 2,
     };
     let a = 1049.96 * rate;
-    d.remember_refusal(frame, a, a, "off grid");
+    d.remember_refusal(frame, a, a, 23, "off grid");
     let later = a + 0.06 * rate;
     assert!(
-        d.recalled_refusal(frame, later, later).is_some(),
+        d.recalled_refusal(frame, later, later, 23).is_some(),
         "the same frame found again 0.06 s later by another tracking must be refused"
     );
     assert!(
-        d.recalled_refusal(frame, a - 0.064 * rate, a).is_none(),
+        d.recalled_refusal(frame, a - 0.064 * rate, a, 23).is_none(),
         "the refused tracking's own retries at earlier onsets are decided on their own"
     );
     let other = Frame { data: 9, ..frame };
     assert!(
-        d.recalled_refusal(other, later, later).is_none(),
+        d.recalled_refusal(other, later, later, 23).is_none(),
         "another frame is not refused"
     );
     let far = a + 0.5 * d.geometry.slot_samples;
     assert!(
-        d.recalled_refusal(frame, far, far).is_none(),
+        d.recalled_refusal(frame, far, far, 23).is_none(),
         "the same frame half a slot away is another transmission"
+    );
+    assert!(
+        d.recalled_refusal(frame, later, later, 22).is_none(),
+        "an off-grid refusal is a verdict on the scale: the frame found a bin away is decided anew"
     );
     // A refusal for the onset or the level (not a foreign sound) is not remembered.
     let e = Decoder::new(DecoderConfig::default()).unwrap();
-    e.remember_refusal(frame, a, a, "does not sound through");
-    assert!(e.recalled_refusal(frame, later, later).is_none());
+    e.remember_refusal(frame, a, a, 23, "does not sound through");
+    assert!(e.recalled_refusal(frame, later, later, 23).is_none());
 }

@@ -308,15 +308,17 @@ impl Decoder {
         let first = t.stage == super::tracking::Stage::Slot1;
         let refused = match refused {
             Some(why) if first => {
-                self.remember_refusal(frame, a, t.onset, why);
+                self.remember_refusal(frame, a, t.onset, t.scale, why);
                 Some(why)
             }
-            None if first => self.recalled_refusal(frame, a, t.onset).map(|(why, ago)| {
-                self.note(a, || {
-                    format!("the same frame was refused {ago:.2} s away: {why}")
-                });
-                "refused nearby"
-            }),
+            None if first => self
+                .recalled_refusal(frame, a, t.onset, t.scale)
+                .map(|(why, ago)| {
+                    self.note(a, || {
+                        format!("the same frame was refused {ago:.2} s away: {why}")
+                    });
+                    "refused nearby"
+                }),
             refused => refused,
         };
         self.note(a, || {

@@ -30,6 +30,8 @@ pub(super) struct Refusal {
     frame: Frame,
     /// The slot's first sample.
     a: f64,
+    /// The frequency scale the frame was found at.
+    scale: usize,
     /// The onset of the tracking that decided it (its retries share it).
     tracking_onset: f64,
     /// Why it was refused.
@@ -41,13 +43,14 @@ pub(super) struct Refusal {
 pub(super) struct Refusals([Option<Refusal>; REMEMBERED]);
 
 impl Decoder {
-    /// Remembers that the first slot at `a` of the tracking from `tracking_onset` decided
-    /// `frame` and was refused for `why`, when that is a foreign sound.
+    /// Remembers that the first slot at `a` of the tracking from `tracking_onset` (found
+    /// at `scale`) decided `frame` and was refused for `why`, when that is a foreign sound.
     pub(super) fn remember_refusal(
         &self,
         frame: Frame,
         a: f64,
         tracking_onset: f64,
+        scale: usize,
         why: &'static str,
     ) {
         if !FOREIGN_REASONS.contains(&why) {
@@ -58,6 +61,7 @@ impl Decoder {
         list.0[REMEMBERED - 1] = Some(Refusal {
             frame,
             a,
+            scale,
             tracking_onset,
             why,
         });
@@ -65,12 +69,19 @@ impl Decoder {
     }
 
     /// A remembered refusal of `frame` by another tracking (found earlier, then dropped)
-    /// at an onset within the recall distance of `a`: the reason, and how far it was.
+    /// at an onset within the recall distance of `a`: the reason, and how far it was. An
+    /// `off grid` refusal is a verdict on the scale the frame was found at, so it is
+    /// recalled only by a tracking found at the same `scale`: one robot's frame found a
+    /// bin off its own scale is refused off grid and passes when found on it (tuning rows
+    /// 11015 at 1757.80 s, scale 19 then 20, and 20021 at 1316.49 s, 19 then 18, lost
+    /// with every refusal recalled), while the two robots' frame of check row 990036 came
+    /// back at its scale (23).
     pub(super) fn recalled_refusal(
         &self,
         frame: Frame,
         a: f64,
         tracking_onset: f64,
+        scale: usize,
     ) -> Option<(&'static str, f64)> {
         let recall = RECALL_SHARE * self.geometry.slot_samples;
         self.refusals
@@ -79,6 +90,7 @@ impl Decoder {
             .iter()
             .flatten()
             .filter(|r| r.frame == frame && r.tracking_onset != tracking_onset)
+            .filter(|r| r.why != "off grid" || r.scale == scale)
             .find(|r| (r.a - a).abs() <= recall)
             .map(|r| (r.why, (a - r.a) / self.rate()))
     }
