@@ -143,3 +143,127 @@ fn two_robots_starting_together_with_one_sender_faint_give_no_mixed_frame() {
         );
     }
 }
+
+#[test]
+fn a_second_slot_whose_data_began_in_the_first_slot_is_another_robots_frame() {
+    // Lab T60 0.5 s, two robots at 10 dB (tuning row 18031, 1530.56 s): sender 2 sent
+    // long (13, 20), its second data (k23, k47, k71) in the room's notches; sender 1 began
+    // long (11, 20) 0.19 s before sender 2's second slot, its data 11 loud (k38 3,311 per
+    // window against sender 2's k26 1,645). The second slot passed as sender 2 with data
+    // 11: long 284, a wrong message. A robot's second frame begins with its slot; data
+    // that sounded through the end of the first slot at its level is another robot's.
+    // Amplitudes from the row's per-window levels (amplitude ∝ √level, k26 = 0.02).
+    let (s2, s1) = (Sender::RightAttacker, Sender::LeftAttacker);
+    let tones = |frame: Frame, amps: [f64; 6], from: f64| -> Vec<(usize, f64, f64, f64)> {
+        frame
+            .tones()
+            .into_iter()
+            .zip(amps)
+            .filter(|&(_, amp)| amp > 0.0)
+            .map(|(k, amp)| (k, amp, from, from + 1.0))
+            .collect()
+    };
+    // Frame::tones order: sender low, data low, sender mid, data mid, sender high, data high.
+    // Sender 1 began 0.19 s before sender 2's second slot.
+    let lead = 0.19;
+    let mut all = Vec::new();
+    for (frame, amps, from) in [
+        (
+            Frame {
+                sender: s2,
+                data: 13,
+            },
+            [0.0094, 0.0085, 0.02, 0.009, 0.001, 0.0019],
+            0.5,
+        ),
+        (
+            Frame {
+                sender: s2,
+                data: 20,
+            },
+            [0.0094, 0.001, 0.02, 0.001, 0.001, 0.0046],
+            1.5,
+        ),
+        (
+            Frame {
+                sender: s1,
+                data: 11,
+            },
+            [0.0, 0.0072, 0.0016, 0.0186, 0.0019, 0.0025],
+            1.5 - lead,
+        ),
+        (
+            Frame {
+                sender: s1,
+                data: 20,
+            },
+            [0.0, 0.0033, 0.0016, 0.0017, 0.0019, 0.0034],
+            2.5 - lead,
+        ),
+    ] {
+        all.extend(tones(frame, amps, from));
+    }
+    let sent = [
+        Message::Long {
+            sender: s2,
+            value: 13 * 21 + 20,
+        },
+        Message::Long {
+            sender: s1,
+            value: 11 * 21 + 20,
+        },
+    ];
+    for seed in [18_031u64, 1, 2, 3] {
+        let x = timed_tones(&all, 5.0, 0.5, 0.002, seed);
+        let (got, _, shown) = decode_traced(&x);
+        assert!(
+            got.iter().all(|m| sent.contains(m)),
+            "seed {seed}: decoded {got:?}, sent {sent:?}\n{}",
+            shown.join("\n")
+        );
+    }
+}
+
+#[test]
+fn a_frame_refused_for_a_foreign_sound_stays_refused_when_found_again_a_few_windows_away() {
+    // Hall T60 2 s, two robots at 10 dB (check row 990036): the slot of sender 0 with
+    // sender 1's data 2 was refused off grid at 1049.96 s; the search found the frame
+    // again at 1050.02 s, where the windows at the slot's edges differ, and it passed: a
+    // wrong message. The refusal is remembered over the frame's span.
+    use super::{Decoder, DecoderConfig};
+    let d = Decoder::new(DecoderConfig::default()).unwrap();
+    let rate = 16_000.0;
+    let frame = Frame {
+        sender: Sender::Goalkeeper,
+        data: 2,
+    };
+    let a = 1049.96 * rate;
+    d.remember_refusal(frame, a, a, 23, "off grid");
+    let later = a + 0.06 * rate;
+    assert!(
+        d.recalled_refusal(frame, later, later, 23).is_some(),
+        "the same frame found again 0.06 s later by another tracking must be refused"
+    );
+    assert!(
+        d.recalled_refusal(frame, a - 0.064 * rate, a, 23).is_none(),
+        "the refused tracking's own retries at earlier onsets are decided on their own"
+    );
+    let other = Frame { data: 9, ..frame };
+    assert!(
+        d.recalled_refusal(other, later, later, 23).is_none(),
+        "another frame is not refused"
+    );
+    let far = a + 0.5 * d.geometry.slot_samples;
+    assert!(
+        d.recalled_refusal(frame, far, far, 23).is_none(),
+        "the same frame half a slot away is another transmission"
+    );
+    assert!(
+        d.recalled_refusal(frame, later, later, 22).is_none(),
+        "an off-grid refusal is a verdict on the scale: the frame found a bin away is decided anew"
+    );
+    // A refusal for the onset or the level (not a foreign sound) is not remembered.
+    let e = Decoder::new(DecoderConfig::default()).unwrap();
+    e.remember_refusal(frame, a, a, 23, "does not sound through");
+    assert!(e.recalled_refusal(frame, later, later, 23).is_none());
+}

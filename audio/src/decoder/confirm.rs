@@ -253,6 +253,19 @@ impl Decoder {
                 format!("basic {basic} sounds like a second transmitter")
             });
             Some("a second transmitter")
+        } else if let Some(share) = (t.stage == super::tracking::Stage::Slot2
+            && frame.data != t.data[0])
+            .then(|| self.second_data_began_before(t, frame.data, &present, a, b))
+            .flatten()
+        {
+            // Another robot's frame that began in the first slot (see `coherence.rs`).
+            self.note(a, || {
+                format!(
+                    "second slot: data {} held {share:.2} of its level before the slot",
+                    frame.data
+                )
+            });
+            Some("data began before the slot")
         } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear) {
             self.note(a, || {
                 let own = frame.tones();
@@ -291,6 +304,22 @@ impl Decoder {
             Some("off grid")
         } else {
             None
+        };
+        let first = t.stage == super::tracking::Stage::Slot1;
+        let refused = match refused {
+            Some(why) if first => {
+                self.remember_refusal(frame, a, t.onset, t.scale, why);
+                Some(why)
+            }
+            None if first => self
+                .recalled_refusal(frame, a, t.onset, t.scale)
+                .map(|(why, ago)| {
+                    self.note(a, || {
+                        format!("the same frame was refused {ago:.2} s away: {why}")
+                    });
+                    "refused nearby"
+                }),
+            refused => refused,
         };
         self.note(a, || {
             let typical = typical_level(frame, &present, &level);

@@ -13,6 +13,7 @@
 //! | `confirm.rs`    | the decision on one aligned slot, and the checks a message must pass |
 //! | `off_grid.rs`   | the check that all six tones share one frequency scale               |
 //! | `coherence.rs`  | the check that a frame's two basics begin and end together           |
+//! | `refusals.rs`   | first slots refused for a foreign sound, remembered over their span  |
 //! | `tracking.rs`   | following a frame from its first slot to a report                    |
 //! | `end_test.rs`   | the end test after a slot: short or long message                     |
 //!
@@ -205,6 +206,7 @@ mod end_test;
 mod noise_floor;
 mod off_grid;
 mod onset;
+mod refusals;
 mod rules;
 mod search;
 mod tracking;
@@ -338,6 +340,8 @@ pub struct Decoder {
     /// A replay asked for (from this floor) by a decision taken during a search or a
     /// replay; run once that has returned (see [`Decoder::run_pending_replays`]).
     pending_replay: Option<u64>,
+    /// First slots lately refused for a foreign sound under them (see `refusals.rs`).
+    refusals: std::cell::Cell<refusals::Refusals>,
     output: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     /// The end test's short window.
@@ -413,6 +417,7 @@ impl Decoder {
             failed_transmission: None,
             replaying: None,
             pending_replay: None,
+            refusals: std::cell::Cell::default(),
             output: VecDeque::new(),
             eof: false,
             trace: std::cell::RefCell::new(None),
