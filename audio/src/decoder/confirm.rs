@@ -263,7 +263,7 @@ impl Decoder {
             a,
             b,
             clear,
-            &[false; TONE_COUNT],
+            &self.first_data_tail(t, a, b, &level),
         ) {
             self.note(a, || {
                 let own = frame.tones();
