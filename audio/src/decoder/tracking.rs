@@ -582,7 +582,7 @@ impl Decoder {
     ///
     /// At T60 1.2 s a first frame's loud data tone still sounds in the second slot at a
     /// twentieth of its level, steadily falling, often as loud as the second frame's
-    /// median tone (long lab-1.2 0 dB, tuning row 22021: 4 of 16 second slots refused as
+    /// median tone (long lab-1.2 0 dB, tuning row 22021: 5 of 16 second slots refused as
     /// "stray tone" were refused for the first data's tail alone, e.g. 2811.69 s: k37 at
     /// 2,515 per window in the first slot, 122 in the second, 1.9 times the second frame's
     /// median tone). Every tone of any other basic is judged as before, and a tone that

@@ -147,7 +147,7 @@ fn a_first_frames_data_ringing_into_the_second_slot_is_no_stray() {
     // Lab T60 1.2 s with four talkers at 0 dB (tuning row 22021, e.g. 2811.69 s): the
     // first frame's loudest data tone (k37 at 2,515 per window) still sounded in the
     // second slot at a twentieth of that, falling, 1.9 times the second frame's median
-    // tone, and the second slot was refused as "stray tone" (4 of the row's 16 second
+    // tone, and the second slot was refused as "stray tone" (5 of the row's 16 second
     // slots refused so). Here the first frame's k38 (data 11), 10 dB above the other
     // tones, rings on at 30 dB/s (a T60 2.0 s room) after the first frame ends: the long
     // message (old code: nothing). The same tone held steady through the second slot at
