@@ -266,7 +266,18 @@ impl Decoder {
                 )
             });
             Some("data began before the slot")
-        } else if self.has_stray_tone(frame, &present, &level, &sums, count, t.scale, a, b, clear) {
+        } else if self.has_stray_tone(
+            frame,
+            &present,
+            &level,
+            &sums,
+            count,
+            t.scale,
+            a,
+            b,
+            clear,
+            &self.first_data_tail(t, a, b, &level),
+        ) {
             self.note(a, || {
                 let own = frame.tones();
                 let med = median(
@@ -746,7 +757,9 @@ impl Decoder {
     /// ([`STRAY_SHARE`] of their median excess), or far louder than a tone a 2-of-3 vote
     /// rests on ([`STRAY_OVER_VOTE`]): the mark of someone else's multi-tone signal that
     /// happens to contain our two basics, not of noise (the tone must pass [`P_STRAY`])
-    /// nor of leakage (ruled out by the neighbour and dynamic-range tests already).
+    /// nor of leakage (ruled out by the neighbour and dynamic-range tests already). Tones
+    /// marked in `own_tail` (the first frame's data dying away in a second slot, see
+    /// `Decoder::first_data_tail` in tracking.rs) are the message's own and never strays.
     #[allow(clippy::too_many_arguments)]
     fn has_stray_tone(
         &self,
@@ -759,6 +772,7 @@ impl Decoder {
         a: f64,
         b: f64,
         clear: bool,
+        own_tail: &[bool; TONE_COUNT],
     ) -> bool {
         let own = frame.tones();
         let strict = gamma_upper_quantile(count.max(1) as f64, P_STRAY);
@@ -787,6 +801,7 @@ impl Decoder {
         (0..TONE_COUNT).any(|k| {
             present[k]
                 && !own.contains(&k)
+                && !own_tail[k]
                 && sums[k] >= strict
                 && (level[k] >= STRAY_SHARE * median || level[k] >= STRAY_OVER_VOTE * weakest_vote)
                 && steady.as_ref().is_none_or(|steady| steady(k))

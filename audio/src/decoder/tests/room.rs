@@ -141,3 +141,54 @@ fn a_second_frame_with_three_loud_tones_one_pulled_by_a_talker_is_still_long() {
         "k1 and k43 each 1.0 Hz off their own way: {got:?}\n{shown}"
     );
 }
+
+#[test]
+fn a_first_frames_data_ringing_into_the_second_slot_is_no_stray() {
+    // Lab T60 1.2 s with four talkers at 0 dB (tuning row 22021, e.g. 2811.69 s): the
+    // first frame's loudest data tone (k37 at 2,515 per window) still sounded in the
+    // second slot at a twentieth of that, falling, 1.9 times the second frame's median
+    // tone, and the second slot was refused as "stray tone" (5 of the row's 16 second
+    // slots refused so). Here the first frame's k38 (data 11), 10 dB above the other
+    // tones, rings on at 30 dB/s (a T60 2.0 s room) after the first frame ends: the long
+    // message (old code: nothing). The same tone held steady through the second slot at
+    // the level of the second frame's tones is someone's tone, not our tail: a stray, and
+    // not the long message.
+    let long = Message::long(Sender::LeftAttacker, 21 * 11 + 16).unwrap();
+    let sender = |t: f64| if (0.5..2.5).contains(&t) { 0.01 } else { 0.0 };
+    let first = |t: f64| if (0.5..1.5).contains(&t) { 0.01 } else { 0.0 };
+    let second = |t: f64| if (1.5..2.5).contains(&t) { 0.01 } else { 0.0 };
+    let ringing = |t: f64| {
+        if (0.5..1.5).contains(&t) {
+            0.03
+        } else if t >= 1.5 {
+            0.03 * 10f64.powf(-30.0 * (t - 1.5) / 20.0)
+        } else {
+            0.0
+        }
+    };
+    let held = |t: f64| {
+        if (0.5..1.5).contains(&t) {
+            0.03
+        } else if (1.5..2.5).contains(&t) {
+            0.013
+        } else {
+            0.0
+        }
+    };
+    type Amplitude<'a> = &'a dyn Fn(f64) -> f64;
+    let cases: [(&str, Amplitude, bool); 2] =
+        [("rings on", &ringing, true), ("held", &held, false)];
+    for (what, k38, expected) in cases {
+        let mut tones: Vec<(usize, Amplitude)> = vec![(1, &sender), (25, &sender), (49, &sender)];
+        tones.extend([(14, &first as Amplitude), (38, k38), (62, &first)]);
+        tones.extend([(19, &second as Amplitude), (43, &second), (67, &second)]);
+        let x = shaped_scene(&tones, 4.0, 0.002, 22021);
+        let (got, _, shown) = decode_traced(&x);
+        assert_eq!(
+            got.contains(&long),
+            expected,
+            "k38 {what}: decoded {got:?}\n{}",
+            shown.join("\n")
+        );
+    }
+}
