@@ -557,3 +557,97 @@ fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
         "a whistle must be a bool"
     );
 }
+
+#[test]
+fn after_a_heard_whistle_the_budget_paces_through_the_gc_s_delayed_set() {
+    // Scenario (#34, twelfth session): the kick-off of a game under `--budget spl`
+    // (1,200 messages over 1,200 s, a team of five pooling them) with GameController3's
+    // delayed copy: its packets say Set, the clock standing at 600 s of the first half,
+    // for 15 s after the whistle that starts play, and its budget falls by every frame
+    // it hears. Robot 1's program writes its pose and a new shared value every 40 ms, so
+    // the daemon always has news and sends as the team's pacing line allows. For 8 s it
+    // hears no whistle: the line stands at the kick-off. Then it hears the whistle: the
+    // pacing clock runs from it (the GC still standing at 600 s), the team's line
+    // advances about a message a second, and the daemon, the only one of the five
+    // sending, borrows what its teammates leave once the line is a frame per robot
+    // ahead. On the old daemon each packet set the clock back to 600 s and the line stood
+    // through the whole delay.
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(
+        &wire,
+        gc_port,
+        status.local_addr().unwrap().port(),
+        &["--budget", "spl", "--refresh", "50ms"],
+    );
+    let mut c = d.client();
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Set;
+    gc.set_budget(1200);
+    gc.send();
+    c.wait_for("local.var.gc.state", Duration::from_secs(5), |a| {
+        a.contains("set")
+    });
+    let pose = "[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
+    // The program's cycle: its pose and a new value the team shares, as the programs of
+    // the check against GameController3 write (scripts/gc3-check); the GC's packet every
+    // 500 ms, its budget less every frame it heard.
+    let mut n = 0u64;
+    let mut next_gc = Instant::now();
+    let mut feed = |c: &mut Client, gc: &mut ScriptedGc, wire: &mut Wire, d: Duration| {
+        let until = Instant::now() + d;
+        while Instant::now() < until {
+            n += 1;
+            for line in [
+                format!("SETV local.var.robot.pose {pose}"),
+                format!("SETV *.var.check.n {n}"),
+            ] {
+                assert!(c.ask(&line).starts_with("OK"), "{line}");
+            }
+            if Instant::now() >= next_gc {
+                gc.set_budget(1200u64.saturating_sub(wire.drain()) as u16);
+                gc.send();
+                next_gc += Duration::from_millis(500);
+            }
+            std::thread::sleep(Duration::from_millis(40));
+        }
+    };
+    let window = Duration::from_secs(15);
+    feed(&mut c, &mut gc, &mut wire, Duration::from_secs(2));
+    let start = wire.drain();
+    feed(&mut c, &mut gc, &mut wire, Duration::from_secs(8));
+    let no_whistle = wire.drain() - start;
+    assert!(c.ask("SETV local.var.robot.whistle true").starts_with("OK"));
+    let heard = wire.drain();
+    feed(&mut c, &mut gc, &mut wire, window);
+    let after_whistle = wire.drain() - heard;
+    let state = c.ask("GETV local.var.gc.state");
+    assert!(state.contains("set"), "the GC still says Set: {state:?}");
+    let whistle = c.ask("GETV local.var.team.play_whistle");
+    eprintln!(
+        "frames: {no_whistle} in 8 s of Set before the whistle, {after_whistle} in the \
+         {window:?} after it (the GC still in Set); {whistle}"
+    );
+    assert!(
+        floats(&whistle).len() == 1,
+        "the layer publishes the play whistle it acts on: {whistle:?}"
+    );
+    // This robot's own part of the team's line (a fifth of the usable messages over
+    // the game's 1,200 s) advances about 3 frames in the window; on the old daemon it
+    // stood. Two of them, so that a frame a whistle moves otherwise (a changed claim at
+    // the hold's end) cannot pass for it.
+    let usable = 1200 - margin();
+    let advance = usable as f64 / 5.0 / 1200.0 * window.as_secs_f64();
+    assert!(
+        after_whistle >= no_whistle + 2,
+        "the pacing line runs from the whistle: {after_whistle} frames in the {window:?} \
+         after it against {no_whistle} in 8 s before (its own line advances {advance:.1})"
+    );
+    // And never past the team's line: what it allows since the whistle and the priority
+    // room (a frame per robot).
+    assert!(
+        (after_whistle as f64) <= 5.0 * advance + 5.0,
+        "the whistle lets the line run, not the budget loose: {after_whistle} frames"
+    );
+}
