@@ -746,6 +746,12 @@ impl Simulation {
                 // What the daemon does with each packet (driver::gamecontroller).
                 if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i)) {
                     if let Some((remaining, cap)) = driver::budget_figures(budget, tracker) {
+                        let set = tracker.state() == Some(State::Set);
+                        let remaining = self.robots[i].paced_game_remaining(
+                            remaining,
+                            set,
+                            robot::seconds(local),
+                        );
                         replica.set_game_clock(local, remaining);
                         replica.set_external_budget(Some(cap));
                     }

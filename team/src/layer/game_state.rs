@@ -139,6 +139,39 @@ impl TeamLayer {
         Some(meant)
     }
 
+    /// The game clock the budget paces by at `now_s`, from the GC's figure
+    /// `gc_remaining` (the game time left its newest packet gives) and whether that
+    /// packet says Set (`gc_says_set`). One rule for the daemon and the simulator.
+    ///
+    /// While the layer acts on a play whistle the GC has not caught up with
+    /// ([`Whistle::PlayStarted`], the GC still says Set), the clock runs from the
+    /// whistle: the GC's standing figure less the play since the whistle. Without it
+    /// each packet of GameController3's delayed Set (15 s) set the clock back, the pacing
+    /// line stood and only the priority room's frames went out: `huddle sim --budget spl
+    /// --game restarts --whistle 1`, seeds 4–11, 3.6–3.9 frames in the first 10 s of a
+    /// kick-off against 8.5–9.2 under the undelayed referee
+    /// (docs/results/gamecontroller-game.md, "Eleventh session, the clock"). When the GC
+    /// says Playing its figure (the true one) rules again.
+    ///
+    /// A goal's whistle keeps the GC's figure: GameController3 shows Playing with its
+    /// clock running for 15 s while the game stands in Ready, so the line runs ahead
+    /// while the layer is out of play and sends next to nothing; the GC's Ready puts the
+    /// true figure back before the kick-off, so the credit is gone before play needs it.
+    pub fn paced_game_remaining(
+        &self,
+        gc_remaining: std::time::Duration,
+        gc_says_set: bool,
+        now_s: f64,
+    ) -> std::time::Duration {
+        match self.whistle {
+            Some(Whistle::PlayStarted(at)) if gc_says_set => {
+                let played = (now_s - at).max(0.0);
+                gc_remaining.saturating_sub(std::time::Duration::from_secs_f64(played))
+            }
+            _ => gc_remaining,
+        }
+    }
+
     /// The whistle the layer acts on, if the GameController has not caught up.
     pub fn whistle(&self) -> Option<Whistle> {
         self.whistle
