@@ -258,7 +258,15 @@ impl GcListener {
                         tracing::info!(%from, "GameController heard: the message budget follows its figures");
                     }
                     self.following = true;
-                    feed_budget(board, budget, &self.tracker);
+                    if let Some(remaining) = feed_budget(board, budget, &self.tracker) {
+                        // The team layer's pacing clock starts from this figure
+                        // (`crate::team`, `TeamLayer::paced_game_remaining`).
+                        self.written.put(
+                            board,
+                            crate::team::GC_GAME_REMAINING_KEY,
+                            Value::Float(remaining.as_secs_f64()),
+                        );
+                    }
                 }
             }
             Ok(gamecontroller::Received::Stale) => {}
@@ -376,11 +384,11 @@ async fn run(
     }
 }
 
-/// The replica's budget from the GC's newest figures.
-fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) {
-    if let Some((remaining, cap)) = budget_figures(budget, t) {
-        board.set_external_budget(Some(remaining), Some(cap));
-    }
+/// The replica's budget from the GC's newest figures; the game time left it gave.
+fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) -> Option<Duration> {
+    let (remaining, cap) = budget_figures(budget, t)?;
+    board.set_external_budget(Some(remaining), Some(cap));
+    Some(remaining)
 }
 
 /// What the GC's newest packet in `t` gives a replica's budget: the game time left over

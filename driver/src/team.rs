@@ -425,6 +425,12 @@ pub const GC_SET_PLAY_KEY: &str = "local.var.gc.set_play";
 /// Where the GameController listener writes this team's penalised player numbers.
 pub const PENALIZED_KEY: &str = "local.var.gc.penalized";
 
+/// Where the GameController listener writes the game time left (seconds, over both
+/// halves) its newest packet gives the budget (only under a budget): the team layer's
+/// pacing clock starts from it while the GC's delayed Set stands after a play whistle
+/// ([`team::TeamLayer::paced_game_remaining`]).
+pub const GC_GAME_REMAINING_KEY: &str = "local.var.gc.game_remaining";
+
 /// Where the GameController listener writes this team's score and the other team's.
 pub const GC_SCORE_KEY: &str = "local.var.gc.score";
 /// See [`GC_SCORE_KEY`].
@@ -450,6 +456,28 @@ fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
     match board.get(&key).map(|e| &e.value) {
         Some(Value::String(s)) => Some(s.as_str()),
         _ => None,
+    }
+}
+
+/// The budget's game clock by the layer's rule while a play whistle runs ahead of the
+/// GC (GameController3's Set stands for 15 s after the whistle, its clock too): the
+/// listener sets the GC's standing figure at each packet, and each tick sets the clock
+/// the layer paces by ([`team::TeamLayer::paced_game_remaining`], the rule the simulator
+/// applies at each packet too). Otherwise the GC's figure stands as the listener set it.
+/// Without a GC under a budget (no [`GC_GAME_REMAINING_KEY`]) nothing changes.
+fn pace_game_clock(replica: &mut Replica, layer: &TeamLayer, now: Instant) {
+    let board = replica.blackboard();
+    let gc_remaining = match board
+        .get(&Key::parse(GC_GAME_REMAINING_KEY).expect("a valid key"))
+        .map(|e| &e.value)
+    {
+        Some(Value::Float(s)) if s.is_finite() && *s >= 0.0 => Duration::from_secs_f64(*s),
+        _ => return,
+    };
+    let set = gc_text(board, GC_STATE_KEY) == Some("set");
+    let paced = layer.paced_game_remaining(gc_remaining, set, team::seconds(now));
+    if paced != gc_remaining {
+        replica.set_game_clock(now, paced);
     }
 }
 
@@ -520,6 +548,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
             contract::WHISTLE_KEY
         );
     }
+    pace_game_clock(replica, layer, now);
     let balls: Vec<_> = inputs
         .balls
         .drain(..)
