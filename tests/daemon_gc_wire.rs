@@ -16,6 +16,9 @@
 //! - A whistle the robot program hears (`local.var.robot.whistle`) starts play while the
 //!   GC still says Set (GameController3 shows play 15 s late): the layer goes and its
 //!   frames resume at the whistle.
+//! - Under the SPL budget the same whistle starts the pacing clock while the GC's delayed
+//!   Set keeps its clock standing (`TeamLayer::paced_game_remaining`, #34): more frames
+//!   than the standing line lets out, none beyond the running line.
 //!
 //! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
 //! own figures, and on frame counts the GC's figures bound.
@@ -558,20 +561,12 @@ fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
     );
 }
 
-#[test]
-fn after_a_heard_whistle_the_budget_paces_through_the_gc_s_delayed_set() {
-    // Scenario (#34, twelfth session): the kick-off of a game under `--budget spl`
-    // (1,200 messages over 1,200 s, a team of five pooling them) with GameController3's
-    // delayed copy: its packets say Set, the clock standing at 600 s of the first half,
-    // for 15 s after the whistle that starts play, and its budget falls by every frame
-    // it hears. Robot 1's program writes its pose and a new shared value every 40 ms, so
-    // the daemon always has news and sends as the team's pacing line allows. For 8 s it
-    // hears no whistle: the line stands at the kick-off. Then it hears the whistle: the
-    // pacing clock runs from it (the GC still standing at 600 s), the team's line
-    // advances about a message a second, and the daemon, the only one of the five
-    // sending, borrows what its teammates leave once the line is a frame per robot
-    // ahead. On the old daemon each packet set the clock back to 600 s and the line stood
-    // through the whole delay.
+/// Frames on the wire in `window` of the GC's delayed Set, its clock standing at the
+/// first half's start, robot 1 (a team of one: the team's whole line is its own) under
+/// `--budget spl` with its program writing its pose,
+/// its cost and a shared value every 40 ms; the program hears the whistle at the
+/// window's start if `whistle`. The GC counts what it sees on the wire.
+fn frames_in_delayed_set(whistle: bool, window: Duration) -> u64 {
     let mut wire = Wire::new();
     let status = UdpSocket::bind("127.0.0.1:0").unwrap();
     let gc_port = free_udp_port();
@@ -579,75 +574,84 @@ fn after_a_heard_whistle_the_budget_paces_through_the_gc_s_delayed_set() {
         &wire,
         gc_port,
         status.local_addr().unwrap().port(),
-        &["--budget", "spl", "--refresh", "50ms"],
+        &["--budget", "spl", "--team-size", "1", "--refresh", "50ms"],
     );
     let mut c = d.client();
     let mut gc = ScriptedGc::new(gc_port);
     gc.game.state = State::Set;
-    gc.set_budget(1200);
+    gc.game.first_half = true;
+    gc.game.secs_remaining = 600;
+    let start_left: u16 = 1200;
+    gc.set_budget(start_left);
     gc.send();
-    c.wait_for("local.var.gc.state", Duration::from_secs(5), |a| {
-        a.contains("set")
+    c.wait_for("local.var.gc.secs_remaining", Duration::from_secs(5), |a| {
+        a.contains(" 600 ")
     });
     let pose = "[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
-    // The program's cycle: its pose and a new value the team shares, as the programs of
-    // the check against GameController3 write (scripts/gc3-check); the GC's packet every
-    // 500 ms, its budget less every frame it heard.
-    let mut n = 0u64;
+    let before = wire.drain();
+    if whistle {
+        assert!(c.ask("SETV local.var.robot.whistle true").starts_with("OK"));
+    }
+    let until = Instant::now() + window;
     let mut next_gc = Instant::now();
-    let mut feed = |c: &mut Client, gc: &mut ScriptedGc, wire: &mut Wire, d: Duration| {
-        let until = Instant::now() + d;
-        while Instant::now() < until {
-            n += 1;
-            for line in [
-                format!("SETV local.var.robot.pose {pose}"),
-                format!("SETV *.var.check.n {n}"),
-            ] {
-                assert!(c.ask(&line).starts_with("OK"), "{line}");
-            }
-            if Instant::now() >= next_gc {
-                gc.set_budget(1200u64.saturating_sub(wire.drain()) as u16);
-                gc.send();
-                next_gc += Duration::from_millis(500);
-            }
-            std::thread::sleep(Duration::from_millis(40));
+    let mut k = 0;
+    while Instant::now() < until {
+        for line in [
+            format!("SETV local.var.robot.pose {pose}"),
+            "SETV local.var.robot.cost 2.0".to_string(),
+            format!("SETV *.var.x {k}"),
+        ] {
+            assert!(c.ask(&line).starts_with("OK"), "{line}");
         }
-    };
-    let window = Duration::from_secs(15);
-    feed(&mut c, &mut gc, &mut wire, Duration::from_secs(2));
-    let start = wire.drain();
-    feed(&mut c, &mut gc, &mut wire, Duration::from_secs(8));
-    let no_whistle = wire.drain() - start;
-    assert!(c.ask("SETV local.var.robot.whistle true").starts_with("OK"));
-    let heard = wire.drain();
-    feed(&mut c, &mut gc, &mut wire, window);
-    let after_whistle = wire.drain() - heard;
+        k += 1;
+        if Instant::now() >= next_gc {
+            // GameController3's delayed Set: the state and the clock stand.
+            let sent = wire.drain() - before;
+            gc.set_budget(start_left.saturating_sub(sent as u16));
+            gc.send();
+            next_gc += Duration::from_millis(500);
+        }
+        std::thread::sleep(Duration::from_millis(40));
+    }
     let state = c.ask("GETV local.var.gc.state");
     assert!(state.contains("set"), "the GC still says Set: {state:?}");
-    let whistle = c.ask("GETV local.var.team.play_whistle");
+    // The layer tells its GC listener the play whistle it acts on (or none).
+    let published = floats(&c.ask("GETV local.var.team.play_whistle"));
+    assert_eq!(
+        published.len(),
+        usize::from(whistle),
+        "local.var.team.play_whistle holds the whistle the layer acts on: {published:?}"
+    );
+    std::thread::sleep(Duration::from_millis(200));
+    wire.drain() - before
+}
+
+#[test]
+fn a_play_whistle_runs_the_pacing_clock_while_the_gcs_delayed_set_stands() {
+    // Scenario (#34, twelfth session): GameController3 says Set with its clock standing
+    // for 15 s after the whistle that starts play. Without the program's whistle the
+    // pacing line stands with the GC's clock and only the priority room's frames go; with
+    // it the daemon's clock runs from the whistle (the rule the simulator applies,
+    // `TeamLayer::paced_game_remaining`), so its ordinary frames go at the line's rate
+    // (1,194 / 1,200 s for a team of one): more than the standing line's, and no more than the
+    // running line allows beyond them.
+    let window = Duration::from_secs(15);
+    let standing = frames_in_delayed_set(false, window);
+    let running = frames_in_delayed_set(true, window);
+    let spl = GcBudget::spl(1);
+    let usable = f64::from(spl.messages_per_game - spl.margin);
+    let line = (window.as_secs_f64() + 1.0) * usable / 1200.0;
     eprintln!(
-        "frames: {no_whistle} in 8 s of Set before the whistle, {after_whistle} in the \
-         {window:?} after it (the GC still in Set); {whistle}"
+        "frames on the wire in {window:?} of delayed Set: {standing} without the whistle, \
+         {running} with it (the running line allows {line:.1} beyond the standing one)"
     );
     assert!(
-        floats(&whistle).len() == 1,
-        "the layer publishes the play whistle it acts on: {whistle:?}"
+        running as f64 >= standing as f64 + line / 2.0,
+        "the whistle runs the pacing clock: {running} frames with it against {standing} \
+         without (the standing line)"
     );
-    // This robot's own part of the team's line (a fifth of the usable messages over
-    // the game's 1,200 s) advances about 3 frames in the window; on the old daemon it
-    // stood. Two of them, so that a frame a whistle moves otherwise (a changed claim at
-    // the hold's end) cannot pass for it.
-    let usable = 1200 - margin();
-    let advance = usable as f64 / 5.0 / 1200.0 * window.as_secs_f64();
     assert!(
-        after_whistle >= no_whistle + 2,
-        "the pacing line runs from the whistle: {after_whistle} frames in the {window:?} \
-         after it against {no_whistle} in 8 s before (its own line advances {advance:.1})"
-    );
-    // And never past the team's line: what it allows since the whistle and the priority
-    // room (a frame per robot).
-    assert!(
-        (after_whistle as f64) <= 5.0 * advance + 5.0,
-        "the whistle lets the line run, not the budget loose: {after_whistle} frames"
+        running as f64 <= standing as f64 + line + 2.0,
+        "nothing beyond the running line: {running} frames, {standing} standing + {line:.1}"
     );
 }
