@@ -16,6 +16,9 @@
 //! - A whistle the robot program hears (`local.var.robot.whistle`) starts play while the
 //!   GC still says Set (GameController3 shows play 15 s late): the layer goes and its
 //!   frames resume at the whistle.
+//! - Under the SPL budget the same whistle starts the pacing clock while the GC's delayed
+//!   Set keeps its clock standing (`TeamLayer::paced_game_remaining`, #34): more frames
+//!   than the standing line lets out, none beyond the running line.
 //!
 //! No wall-clock thresholds: the assertions are on order, on agreement with the daemon's
 //! own figures, and on frame counts the GC's figures bound.
@@ -555,5 +558,100 @@ fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
     assert!(
         c.ask("SETV local.var.robot.whistle 3").starts_with("ERR"),
         "a whistle must be a bool"
+    );
+}
+
+/// Frames on the wire in `window` of the GC's delayed Set, its clock standing at the
+/// first half's start, robot 1 (a team of one: the team's whole line is its own) under
+/// `--budget spl` with its program writing its pose,
+/// its cost and a shared value every 40 ms; the program hears the whistle at the
+/// window's start if `whistle`. The GC counts what it sees on the wire.
+fn frames_in_delayed_set(whistle: bool, window: Duration) -> u64 {
+    let mut wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, _dir) = daemon(
+        &wire,
+        gc_port,
+        status.local_addr().unwrap().port(),
+        &["--budget", "spl", "--team-size", "1", "--refresh", "50ms"],
+    );
+    let mut c = d.client();
+    let mut gc = ScriptedGc::new(gc_port);
+    gc.game.state = State::Set;
+    gc.game.first_half = true;
+    gc.game.secs_remaining = 600;
+    let start_left: u16 = 1200;
+    gc.set_budget(start_left);
+    gc.send();
+    c.wait_for("local.var.gc.secs_remaining", Duration::from_secs(5), |a| {
+        a.contains(" 600 ")
+    });
+    let pose = "[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]";
+    let before = wire.drain();
+    if whistle {
+        assert!(c.ask("SETV local.var.robot.whistle true").starts_with("OK"));
+    }
+    let until = Instant::now() + window;
+    let mut next_gc = Instant::now();
+    let mut k = 0;
+    while Instant::now() < until {
+        for line in [
+            format!("SETV local.var.robot.pose {pose}"),
+            "SETV local.var.robot.cost 2.0".to_string(),
+            format!("SETV *.var.x {k}"),
+        ] {
+            assert!(c.ask(&line).starts_with("OK"), "{line}");
+        }
+        k += 1;
+        if Instant::now() >= next_gc {
+            // GameController3's delayed Set: the state and the clock stand.
+            let sent = wire.drain() - before;
+            gc.set_budget(start_left.saturating_sub(sent as u16));
+            gc.send();
+            next_gc += Duration::from_millis(500);
+        }
+        std::thread::sleep(Duration::from_millis(40));
+    }
+    let state = c.ask("GETV local.var.gc.state");
+    assert!(state.contains("set"), "the GC still says Set: {state:?}");
+    // The layer tells its GC listener the play whistle it acts on (or none).
+    let published = floats(&c.ask("GETV local.var.team.play_whistle"));
+    assert_eq!(
+        published.len(),
+        usize::from(whistle),
+        "local.var.team.play_whistle holds the whistle the layer acts on: {published:?}"
+    );
+    std::thread::sleep(Duration::from_millis(200));
+    wire.drain() - before
+}
+
+#[test]
+fn a_play_whistle_runs_the_pacing_clock_while_the_gcs_delayed_set_stands() {
+    // Scenario (#34, twelfth session): GameController3 says Set with its clock standing
+    // for 15 s after the whistle that starts play. Without the program's whistle the
+    // pacing line stands with the GC's clock and only the priority room's frames go; with
+    // it the daemon's clock runs from the whistle (the rule the simulator applies,
+    // `TeamLayer::paced_game_remaining`), so its ordinary frames go at the line's rate
+    // (1,194 / 1,200 s for a team of one): more than the standing line's, and no more than the
+    // running line allows beyond them.
+    let window = Duration::from_secs(15);
+    let standing = frames_in_delayed_set(false, window);
+    let running = frames_in_delayed_set(true, window);
+    let spl = GcBudget::spl(1);
+    let usable = f64::from(spl.messages_per_game - spl.margin);
+    let line = (window.as_secs_f64() + 1.0) * usable / 1200.0;
+    eprintln!(
+        "frames on the wire in {window:?} of delayed Set: {standing} without the whistle, \
+         {running} with it (the running line allows {line:.1} beyond the standing one)"
+    );
+    assert!(
+        running as f64 >= standing as f64 + line / 2.0,
+        "the whistle runs the pacing clock: {running} frames with it against {standing} \
+         without (the standing line)"
+    );
+    assert!(
+        running as f64 <= standing as f64 + line + 2.0,
+        "nothing beyond the running line: {running} frames, {standing} standing + {line:.1}"
     );
 }

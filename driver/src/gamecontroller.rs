@@ -376,16 +376,28 @@ async fn run(
     }
 }
 
-/// The replica's budget from the GC's newest figures.
+/// The replica's budget from the GC's newest figures, its clock paced from the play
+/// whistle the team layer acts on (which its tick publishes at
+/// [`team::contract::PLAY_WHISTLE_KEY`]; a daemon without the layer has none).
 fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) {
-    if let Some((remaining, cap)) = budget_figures(budget, t) {
+    let play_whistle_at = board
+        .get(team::contract::PLAY_WHISTLE_KEY)
+        .and_then(|e| match e.value {
+            Value::Floats(at) => at.first().copied(),
+            _ => None,
+        });
+    let now_s = team::seconds(board.now());
+    if let Some((remaining, cap)) = budget_figures(budget, t, play_whistle_at, now_s) {
         board.set_external_budget(Some(remaining), Some(cap));
     }
 }
 
-/// What the GC's newest packet in `t` gives a replica's budget: the game time left over
-/// the halves and the team's cap (`None`: no packet of this team's game yet). The
-/// daemon's listener and the simulator's robots feed their replicas with this.
+/// What the GC's newest packet in `t` gives a replica's budget at `now_s`: the game time
+/// left over the halves and the team's cap (`None`: no packet of this team's game yet).
+/// The daemon's listener and the simulator's robots feed their replicas with this. The
+/// game time is [`team::paced_game_remaining`]'s: it runs from `play_whistle_at`, the
+/// play whistle the team layer acts on ([`team::TeamLayer::play_whistle_at`]), while the
+/// packet still says Set (GameController3's delayed copy).
 ///
 /// The line is drawn on what the team may spend, the GC's messages less the margin
 /// (1,186 of 1,200 over the game for five robots), so that the margin is never counted
@@ -393,12 +405,18 @@ fn feed_budget(board: &mut impl GcBoard, budget: &GcBudget, t: &GameTracker) {
 /// kick-off and sent nothing, claims included, for the first 10–20 s of play, while
 /// every robot went for the ball (`huddle sim --game full`, seeds 1–3: a 17 s conflict
 /// at the first kick-off).
-pub fn budget_figures(budget: &GcBudget, t: &GameTracker) -> Option<(Duration, ExternalCap)> {
+pub fn budget_figures(
+    budget: &GcBudget,
+    t: &GameTracker,
+    play_whistle_at: Option<f64>,
+    now_s: f64,
+) -> Option<(Duration, ExternalCap)> {
     let cap = budget.cap(t.game()?, t.team_number())?;
+    let says_set = t.state() == Some(gamecontroller::State::Set);
     let game_s = 2.0 * budget.half.as_secs_f64();
     let usable = budget.messages_per_game.saturating_sub(budget.margin);
     Some((
-        cap.game_remaining,
+        team::paced_game_remaining(play_whistle_at, cap.game_remaining, says_set, now_s),
         ExternalCap {
             counted: cap.counted,
             team_left: u64::from(cap.team_left),

@@ -453,6 +453,22 @@ fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
     }
 }
 
+/// The play whistle the layer acts on, for the GameController listener, which paces the
+/// budget's clock from it at its next packet (`driver::budget_figures`): GameController3
+/// shows Set for 15 s after the whistle, and each of its packets would otherwise set the
+/// clock back. Written when it changes (`[t]`, or `[]` once the GC caught up).
+fn publish_play_whistle(replica: &mut Replica, now: Instant, at: Option<f64>) {
+    let value: Vec<f64> = at.into_iter().collect();
+    let key = Key::parse(contract::PLAY_WHISTLE_KEY).expect("a valid key");
+    let shown = replica.blackboard().get(&key).map(|e| &e.value);
+    if shown == Some(&Value::Floats(value.clone())) || (shown.is_none() && value.is_empty()) {
+        return;
+    }
+    if let Err(e) = replica.set(now, contract::PLAY_WHISTLE_KEY, Value::Floats(value)) {
+        tracing::warn!(error = %e, "team layer: cannot publish the play whistle");
+    }
+}
+
 /// One control tick of the layer on what the robot program wrote since the previous one.
 fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs) {
     let Shared {
@@ -520,6 +536,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
             contract::WHISTLE_KEY
         );
     }
+    publish_play_whistle(replica, now, layer.play_whistle_at());
     let balls: Vec<_> = inputs
         .balls
         .drain(..)

@@ -57,6 +57,11 @@ pub const BUDGET_KEY: &str = "local.var.team.budget";
 /// tick whatever the league's budget lets it send: what a log, or a reference fed every
 /// robot's messages at once (`huddle sim --daemons`), wants.
 pub const WORLD_OUT_KEY: &str = "local.var.team.world";
+/// The time (float seconds on the driver's clock, as `[t]`; `[]` for none) of the play
+/// whistle the layer acts on while the GameController still says Set
+/// (`TeamLayer::play_whistle_at`): the daemon's GC listener paces the budget's clock
+/// from it (`team::paced_game_remaining`).
+pub const PLAY_WHISTLE_KEY: &str = "local.var.team.play_whistle";
 /// The layer's ticks so far (int): it changes every tick, so a program that wrote a
 /// cycle's senses can wait for the tick that took them.
 pub const TICK_KEY: &str = "local.var.team.tick";

@@ -41,8 +41,8 @@ pub use contact::contact_probability;
 #[cfg(test)]
 use game_state::KICK_OFF_SPOT_SIGMA_M;
 pub use game_state::{
-    KickOffPlacement, Whistle, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS, KICK_OFF_SET_CLAIM_GAP_S,
-    KICK_OFF_TAKER_COST, WHISTLE_TRUST_S,
+    paced_game_remaining, KickOffPlacement, Whistle, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS,
+    KICK_OFF_SET_CLAIM_GAP_S, KICK_OFF_TAKER_COST, WHISTLE_TRUST_S,
 };
 
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).

@@ -745,7 +745,11 @@ impl Simulation {
                 }
                 // What the daemon does with each packet (driver::gamecontroller).
                 if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i)) {
-                    if let Some((remaining, cap)) = driver::budget_figures(budget, tracker) {
+                    let whistle = self.robots[i].play_whistle_at();
+                    let now_s = robot::seconds(local);
+                    if let Some((remaining, cap)) =
+                        driver::budget_figures(budget, tracker, whistle, now_s)
+                    {
                         replica.set_game_clock(local, remaining);
                         replica.set_external_budget(Some(cap));
                     }

@@ -139,6 +139,18 @@ impl TeamLayer {
         Some(meant)
     }
 
+    /// The time (s) of the play whistle the layer acts on while the GameController still
+    /// says Set ([`Whistle::PlayStarted`]), `None` otherwise: what the pacing clock runs
+    /// from ([`paced_game_remaining`]). The daemon's tick publishes it at
+    /// [`crate::contract::PLAY_WHISTLE_KEY`] for its GC listener; the simulator's
+    /// robots hand it to the same call.
+    pub fn play_whistle_at(&self) -> Option<f64> {
+        match self.whistle {
+            Some(Whistle::PlayStarted(at)) => Some(at),
+            _ => None,
+        }
+    }
+
     /// The whistle the layer acts on, if the GameController has not caught up.
     pub fn whistle(&self) -> Option<Whistle> {
         self.whistle
@@ -348,3 +360,37 @@ impl TeamLayer {
 #[cfg(test)]
 #[path = "whistle_tests.rs"]
 mod whistle_tests;
+
+/// The game clock the budget paces by at `now_s`, from the GC's figure `gc_remaining`
+/// (the game time left its newest packet gives), whether that packet says Set
+/// (`gc_says_set`) and the play whistle the layer acts on
+/// ([`TeamLayer::play_whistle_at`]). One rule: the daemon's GameController listener and
+/// the simulator's robots both pace by it (through `driver::budget_figures`).
+///
+/// While the layer acts on a play whistle the GC has not caught up with (the GC still
+/// says Set), the clock runs from the whistle: the GC's standing figure less the play
+/// since the whistle. Without it each packet of GameController3's delayed Set (15 s)
+/// set the clock back, the pacing line stood and only the priority room's frames went
+/// out: `huddle sim --budget spl --game restarts --whistle 1`, seeds 4–11, 3.6–3.9
+/// frames in the first 10 s of a kick-off against 8.5–9.2 under the undelayed referee
+/// (docs/results/gamecontroller-game.md, "Eleventh session, the clock"). When the GC
+/// says Playing its figure (the true one) rules again.
+///
+/// A goal's whistle keeps the GC's figure: GameController3 shows Playing with its clock
+/// running for 15 s while the game stands in Ready, so the line runs ahead while the
+/// layer is out of play and sends next to nothing; the GC's Ready puts the true figure
+/// back before the kick-off, so the credit is gone before play needs it.
+pub fn paced_game_remaining(
+    play_whistle_at: Option<f64>,
+    gc_remaining: std::time::Duration,
+    gc_says_set: bool,
+    now_s: f64,
+) -> std::time::Duration {
+    match play_whistle_at {
+        Some(at) if gc_says_set => {
+            let played = (now_s - at).max(0.0);
+            gc_remaining.saturating_sub(std::time::Duration::from_secs_f64(played))
+        }
+        _ => gc_remaining,
+    }
+}

@@ -3,8 +3,9 @@
 
 use comms::Blackboard;
 use comms::Instant;
+use std::time::Duration;
 
-use super::{Whistle, KICK_OFF_HOLD_S, WHISTLE_TRUST_S};
+use super::{paced_game_remaining, Whistle, KICK_OFF_HOLD_S, WHISTLE_TRUST_S};
 use crate::layer::{Senses, TeamConfig, TeamLayer};
 use crate::Pose;
 
@@ -154,4 +155,55 @@ fn a_whistle_the_gc_never_follows_stands_twenty_seconds_at_most() {
         "a whistle in Ready means nothing here"
     );
     assert!(!r.in_play);
+}
+
+#[test]
+fn the_pacing_clock_runs_from_a_play_whistle_while_the_gc_s_delayed_set_stands() {
+    // Scenario: a kick-off under GameController3 with 300 s of the game left. The
+    // referee whistles at 20 s; the program hears it at 20.5 s; the GC's packets say Set
+    // with its figure standing at 300 s until 35 s, then Playing with the true figure.
+    // The clock the budget paces by runs from the whistle (296 s at 24.5 s, 286 s at
+    // 34.5 s), not the GC's standing 300 s; once the GC says Playing its figure rules.
+    let (mut r, _) = robot(2.0);
+    let standing = Duration::from_secs(300);
+    assert!(gc_says(&mut r, "set"), "Set: a kick-off begins");
+    assert_eq!(
+        paced_game_remaining(r.play_whistle_at(), standing, true, 15.0),
+        standing,
+        "in Set before the whistle the GC's standing figure is the clock"
+    );
+    assert_eq!(r.heard_whistle(20.5), Some(Whistle::PlayStarted(20.5)));
+    for (s, left) in [(24.5, 296.0), (34.5, 286.0)] {
+        gc_says(&mut r, "set");
+        let paced = paced_game_remaining(r.play_whistle_at(), standing, true, s).as_secs_f64();
+        assert!(
+            (paced - left).abs() < 1e-6,
+            "{s} s: the GC's late Set stands at 300 s, the pacing clock runs from the \
+             whistle: {paced} s left, expected {left}"
+        );
+    }
+    // The GC caught up: Playing, its own (true) figure.
+    let true_left = Duration::from_secs_f64(285.4);
+    gc_says(&mut r, "playing");
+    assert_eq!(
+        paced_game_remaining(r.play_whistle_at(), true_left, false, 35.1),
+        true_left,
+        "the GC says Playing: its figure rules again"
+    );
+}
+
+#[test]
+fn a_goal_whistle_keeps_the_gc_s_figure_for_the_pacing_clock() {
+    // Scenario: the GC says Playing; a goal's whistle at 100 s. The GC's clock runs on
+    // (its delayed copy) and the pacing clock follows it: the rule moves only play's
+    // whistle (see `paced_game_remaining`).
+    let (mut r, _) = robot(2.0);
+    gc_says(&mut r, "playing");
+    assert_eq!(r.heard_whistle(100.0), Some(Whistle::Goal(100.0)));
+    let gc = Duration::from_secs(200);
+    assert_eq!(
+        paced_game_remaining(r.play_whistle_at(), gc, false, 105.0),
+        gc,
+        "a goal's whistle: the GC's figure"
+    );
 }
