@@ -43,8 +43,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::referee::{GameScript, Referee, RefereeEvent};
-use super::robot::{self, Order};
+use super::referee::{program_order, GameScript, Referee, RefereeEvent};
+use super::robot;
 use super::Simulation;
 use crate::field::geometry::{Pose, Vec2};
 use team::Whistle;
@@ -409,17 +409,13 @@ impl Game {
     /// The referee whistled at `t_s`: each robot's program is to hear it (or not) as the
     /// script's [`crate::referee::WhistleHearing`] draws.
     fn whistle(&mut self, t_s: f64) {
-        let w = self.script.whistle;
         for heard in &mut self.whistles {
-            // Both draws for every robot, heard or not: one robot's luck leaves the
-            // others' as they were.
-            let hears = self.whistle_rng.random::<f64>() < w.p_heard;
-            let u = self.whistle_rng.random::<f64>();
-            if hears {
-                heard.push(t_s + w.delay_s.0 + u * (w.delay_s.1 - w.delay_s.0).max(0.0));
-                self.whistles_heard += 1;
-            } else {
-                self.whistles_missed += 1;
+            match self.script.whistle.hear(&mut self.whistle_rng, t_s) {
+                Some(at) => {
+                    heard.push(at);
+                    self.whistles_heard += 1;
+                }
+                None => self.whistles_missed += 1,
             }
         }
     }
@@ -717,12 +713,7 @@ impl Simulation {
         let Some(game) = &mut self.game else { return };
         let events = game.referee.advance(t_s);
         for e in events {
-            if e == RefereeEvent::Whistle {
-                if let Some(g) = &mut self.game {
-                    g.whistle(t_s);
-                }
-            }
-            self.referee_event(e);
+            self.referee_event(e, t_s);
         }
         let Some(game) = &mut self.game else { return };
         let mut goal_heard = Vec::new();
@@ -823,15 +814,12 @@ impl Simulation {
             // Its body follows its program: the whistle runs ahead of the packets. After
             // a goal's whistle a program walks to its kick-off spot (the goal's Ready,
             // which the GC shows 15 s late), as a robot program that hears it does.
-            self.robots[i].order = match (heard, self.robots[i].whistle()) {
-                _ if penalised => Order::Stand,
-                (_, Some(Whistle::PlayStarted(_))) => Order::Play,
-                (_, Some(Whistle::Goal(_))) => Order::KickOffSpot,
-                (Some(State::Playing), _) => Order::Play,
-                (Some(State::Ready), _) => Order::KickOffSpot,
-                (Some(State::Standby), _) if game.standby_whistle[i] => Order::KickOffSpot,
-                _ => Order::Stand,
-            };
+            self.robots[i].order = program_order(
+                heard,
+                penalised,
+                self.robots[i].whistle(),
+                game.standby_whistle[i],
+            );
         }
         // The delivery references are placed at each robot's next tick, where its team
         // layer places the ball (see `feed_references`).
@@ -870,11 +858,8 @@ impl Simulation {
             if !events.is_empty() {
                 game.goal_times_s.push(t_s);
             }
-            if events.contains(&RefereeEvent::Whistle) {
-                game.whistle(t_s);
-            }
             for e in events {
-                self.referee_event(e);
+                self.referee_event(e, t_s);
             }
         }
     }
@@ -893,9 +878,15 @@ impl Simulation {
         self.game.as_ref().map_or(&[], |g| &g.goals_heard)
     }
 
-    fn referee_event(&mut self, e: RefereeEvent) {
+    /// What the field and the robots' programs make of the referee's event at `t_s`.
+    fn referee_event(&mut self, e: RefereeEvent, t_s: f64) {
         match e {
-            RefereeEvent::State(_) | RefereeEvent::Whistle => {}
+            RefereeEvent::State(_) => {}
+            RefereeEvent::Whistle => {
+                if let Some(g) = &mut self.game {
+                    g.whistle(t_s);
+                }
+            }
             RefereeEvent::Penalised(id) => {
                 let Some(i) = usize::from(id)
                     .checked_sub(1)

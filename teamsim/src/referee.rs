@@ -63,10 +63,14 @@
 //! The robots learn it only from those packets, each from the first one with the new
 //! score that reaches it (`TeamLayer::set_scores`), or at Set if none did.
 //!
-//! No clock and no randomness: every call takes the simulated time, seconds.
+//! No clock and no randomness of its own: every call takes the simulated time, seconds
+//! ([`WhistleHearing::hear`] draws from its caller's generator).
 
 use gamecontroller::{GameControlData, SetPlay, State, KICKING_TEAM_NONE};
+use player::robot::Order;
+use rand::RngExt;
 use serde::Serialize;
+use team::Whistle;
 
 /// GameController3's `PENALTY_SPL_PLAYER_PUSHING`: the scripted penalties' code.
 pub const PENALTY_PUSHING: u8 = 2;
@@ -155,6 +159,42 @@ impl WhistleHearing {
             p_heard: 0.0,
             ..WhistleHearing::typical()
         }
+    }
+}
+
+impl WhistleHearing {
+    /// One robot program's hearing of a whistle blown at `t_s`: when it hears it
+    /// (simulated seconds), or `None` if it misses it. Two draws from `rng` whether it
+    /// hears or not, so one robot's luck leaves the others' draws as they were. The
+    /// in-process game and `--daemons --game` both draw with this.
+    pub fn hear(&self, rng: &mut impl rand::Rng, t_s: f64) -> Option<f64> {
+        let hears = rng.random::<f64>() < self.p_heard;
+        let u = rng.random::<f64>();
+        hears.then(|| t_s + self.delay_s.0 + u * (self.delay_s.1 - self.delay_s.0).max(0.0))
+    }
+}
+
+/// What a robot program does on what it heard of the referee: the one rule of the
+/// in-process robots and of the `--daemons` programs. `heard`: the state the GC's
+/// packets show it (`None`: none heard yet); `penalised`: it is (its packets say so, or
+/// it stands on the sideline); `whistle`: a whistle it heard that the GC has not caught
+/// up with (play started: it plays; a goal: it walks to its kick-off spot, the goal's
+/// Ready that the GC shows 15 s late); `standby_whistle`: it heard the whistle that ends
+/// a half's Standby (the half's Ready, which the GC shows up to 45 s late).
+pub fn program_order(
+    heard: Option<State>,
+    penalised: bool,
+    whistle: Option<Whistle>,
+    standby_whistle: bool,
+) -> Order {
+    match (heard, whistle) {
+        _ if penalised => Order::Stand,
+        (_, Some(Whistle::PlayStarted(_))) => Order::Play,
+        (_, Some(Whistle::Goal(_))) => Order::KickOffSpot,
+        (Some(State::Playing), _) => Order::Play,
+        (Some(State::Ready), _) => Order::KickOffSpot,
+        (Some(State::Standby), _) if standby_whistle => Order::KickOffSpot,
+        _ => Order::Stand,
     }
 }
 
