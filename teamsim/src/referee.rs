@@ -317,6 +317,79 @@ pub struct MessageCount {
     pub illegal_at_s: Option<f64>,
 }
 
+/// The referee's books at a game's end as both reports show them (flattened into the
+/// in-process [`crate::GameReport`] and the `--daemons` one,
+/// [`crate::daemons_game::DaemonsGameReport`]). [`Referee::books`] fills what the
+/// referee keeps; the tallies of what its caller does with it (penalties carried off,
+/// kick-offs, packets sent and lost, whistles heard) come from the caller.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct GcBooks {
+    /// The team became illegal at least once (a message over 128 B or at a budget of 0).
+    pub game_illegal: bool,
+    /// Messages that made the team illegal.
+    pub game_illegal_messages: u64,
+    /// When it first became illegal, game seconds.
+    pub game_illegal_at_s: Option<f64>,
+    /// Messages the GC counted (sent in Standby, Ready, Set or Playing).
+    pub game_messages_counted: u64,
+    /// Frames sent in states the GC does not count (Initial, Finished, the break).
+    pub game_messages_uncounted: u64,
+    /// Messages over 128 B.
+    pub game_messages_oversized: u64,
+    /// The GC's `messageBudget` for the team at the end.
+    pub game_budget_left: u16,
+    /// Counted messages as a share of the game's budget, %.
+    pub game_budget_used_pct: f64,
+    /// The score, ours first.
+    pub game_score: [u8; 2],
+    /// Seconds of Playing.
+    pub game_playing_s: f64,
+    /// Penalties given to our robots (the caller's tally).
+    pub game_penalties: u32,
+    /// Stretches of Playing, each beginning with a kick-off (the caller's tally).
+    pub game_kick_offs: u32,
+    /// GC packets sent (the caller's tally).
+    pub game_packets: u64,
+    /// Packet receptions lost on the way to the robots (the caller's tally).
+    pub game_packets_lost: u64,
+    /// (robot, whistle) pairs the robot programs heard ([`WhistleHearing`]; the
+    /// caller's tally).
+    pub game_whistles_heard: u32,
+    /// … and missed.
+    pub game_whistles_missed: u32,
+}
+
+impl std::fmt::Display for GcBooks {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "game                  score {}–{}, {:.0} s played, {} kick-offs, {} penalties; {} GC packets ({} receptions lost); whistles {} heard, {} missed",
+            self.game_score[0],
+            self.game_score[1],
+            self.game_playing_s,
+            self.game_kick_offs,
+            self.game_penalties,
+            self.game_packets,
+            self.game_packets_lost,
+            self.game_whistles_heard,
+            self.game_whistles_missed
+        )?;
+        write!(
+            f,
+            "GC's count            {} counted ({:.1}% of the budget, {} left), {} in uncounted states, {} over 128 B; illegal: {}",
+            self.game_messages_counted,
+            self.game_budget_used_pct,
+            self.game_budget_left,
+            self.game_messages_uncounted,
+            self.game_messages_oversized,
+            match self.game_illegal_at_s {
+                Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
+                None => "never".to_string(),
+            }
+        )
+    }
+}
+
 /// Where the game is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
@@ -444,6 +517,29 @@ impl Referee {
     /// Seconds of Playing so far.
     pub fn playing_s(&self) -> f64 {
         self.playing_s
+    }
+
+    /// The books as the reports show them, the caller's tallies at 0 (see [`GcBooks`]).
+    pub fn books(&self) -> GcBooks {
+        let c = self.count;
+        let score = |n: u8| self.data.team(n).map_or(0, |t| t.score);
+        let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+        GcBooks {
+            game_illegal: c.illegal > 0,
+            game_illegal_messages: c.illegal,
+            game_illegal_at_s: c.illegal_at_s.map(r3),
+            game_messages_counted: c.counted,
+            game_messages_uncounted: c.uncounted,
+            game_messages_oversized: c.oversized,
+            game_budget_left: self.budget_left(),
+            game_budget_used_pct: (1000.0 * c.counted as f64
+                / f64::from(self.script.messages_per_game.max(1)))
+            .round()
+                / 10.0,
+            game_score: [score(self.ours), score(self.theirs())],
+            game_playing_s: r3(self.playing_s),
+            ..GcBooks::default()
+        }
     }
 
     /// Runs the game up to `now_s`; returns what happened, in order.
