@@ -436,7 +436,8 @@ pub struct Referee {
     last_s: f64,
     /// The delayed copy the packets show while a delay runs.
     delayed: Option<Delayed>,
-    /// What the packets show: the delayed copy, or the true game.
+    /// What the packets show: the delayed copy, or the true game, as of the last step
+    /// (read through [`Referee::shown`], which brings its budgets up to date).
     shown: GameControlData,
 }
 
@@ -469,9 +470,17 @@ impl Referee {
     }
 
     /// The game as the packets show it now: GameController3's delayed copy while a delay
-    /// runs (see the module docs), the true game otherwise.
-    pub fn shown(&self) -> &GameControlData {
-        &self.shown
+    /// runs (see the module docs), the true game otherwise; with what every action keeps
+    /// current in the copy, from the true game: the packet's number, the budgets as
+    /// counted up to now (messages come between the referee's steps) and the penalties.
+    pub fn shown(&self) -> GameControlData {
+        let mut shown = self.shown;
+        shown.packet_number = self.data.packet_number;
+        for (s, t) in shown.teams.iter_mut().zip(&self.data.teams) {
+            s.message_budget = t.message_budget;
+            s.players = t.players;
+        }
+        shown
     }
 
     /// Whether a delay runs now: the packets show the game as it was.
@@ -719,12 +728,7 @@ impl Referee {
         }
         self.next_packet_s += PACKET_PERIOD_S;
         self.data.packet_number = self.data.packet_number.wrapping_add(1);
-        self.shown.packet_number = self.data.packet_number;
-        // The budget as counted up to now (messages come between the referee's steps).
-        for (s, t) in self.shown.teams.iter_mut().zip(&self.data.teams) {
-            s.message_budget = t.message_budget;
-        }
-        Some(self.shown.encode())
+        Some(self.shown().encode())
     }
 
     fn theirs(&self) -> u8 {
@@ -773,16 +777,10 @@ impl Referee {
         }
         self.shown = match &self.delayed {
             None => self.data,
+            // The copy with its own clock ([`Referee::shown`] puts in what is current).
             Some(d) => {
-                // The copy, with what every action keeps current in it: the budgets and
-                // the penalties (and the packet's number).
                 let mut shown = d.data;
                 shown.secs_remaining = d.play_left_s.ceil().clamp(0.0, 32767.0) as i16;
-                shown.packet_number = self.data.packet_number;
-                for (s, t) in shown.teams.iter_mut().zip(&self.data.teams) {
-                    s.message_budget = t.message_budget;
-                    s.players = t.players;
-                }
                 shown
             }
         };
