@@ -127,7 +127,10 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
 /// 10 s of play. Programs that hear every whistle (0.2–1.0 s late) start play at it, and
 /// their daemons tell the team from the kick-off on. Seed 6, three robots, a 90 s half
 /// with no penalty, the two games played at once (each its own daemons, group and
-/// ports); only the whistle differs.
+/// ports); only the whistle differs. (The daemons pace `--budget spl` for a 600 s half:
+/// on this 90 s one they may spend freely, and the hearing team sends most of its frames
+/// in the kick-offs' first 10 s, ~170 a kick-off; the figure says when the team speaks,
+/// not how much a real game's pace lets it.)
 #[test]
 fn daemons_whose_programs_hear_the_whistle_play_from_the_kick_off() {
     let game = |whistle: WhistleHearing| {
