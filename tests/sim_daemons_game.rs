@@ -42,9 +42,9 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
             half: 1,
             after_play_s: 10.0,
         }],
-        // GameController3's late packets, as on a real field; the daemons' robot
-        // programs here write no whistle (they follow `local.var.gc.state`), so each
-        // layer goes by the GC's delayed word.
+        // GameController3's late packets, as on a real field; the robot programs here
+        // hear no whistle (they follow `local.var.gc.state`), so each layer goes by the
+        // GC's delayed word.
         delays: GcDelays::gc3(),
         whistle: WhistleHearing::deaf(),
     };
@@ -68,27 +68,30 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
     eprintln!("{shown}");
     assert_eq!(r.relay_errors, 0, "every relay write is taken: {shown}");
     assert_eq!(
-        g.game_illegal_messages, 0,
+        g.books.game_illegal_messages, 0,
         "the team is never illegal: {shown}"
     );
-    assert_eq!(g.game_messages_oversized, 0, "no frame over 128 B: {shown}");
+    assert_eq!(
+        g.books.game_messages_oversized, 0,
+        "no frame over 128 B: {shown}"
+    );
     // The GC's count against the daemons' own.
     let sent = r.team_messages_sent;
-    let heard = g.game_messages_counted + g.game_messages_uncounted;
+    let heard = g.books.game_messages_counted + g.books.game_messages_uncounted;
     assert!(
-        g.game_messages_counted > 50,
+        g.books.game_messages_counted > 50,
         "the GC counted the team's play: {shown}"
     );
     assert!(
         sent.abs_diff(heard) <= r.robots as u64,
         "the GC counts what the daemons sent ({} counted = frames_out {sent} less {} heard in \
          uncounted states, but for ≤ {} in flight at the end): {shown}",
-        g.game_messages_counted,
-        g.game_messages_uncounted,
+        g.books.game_messages_counted,
+        g.books.game_messages_uncounted,
         r.robots
     );
     assert!(
-        g.game_kick_offs >= 1,
+        g.books.game_kick_offs >= 1,
         "at least the half's first kick-off: {shown}"
     );
     let far = g.kick_off_spot_error_m[0];
@@ -96,7 +99,7 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
         far < 1.0,
         "the robots walked to their kick-off spots in Ready (farthest {far} m): {shown}"
     );
-    assert_eq!(g.game_penalties, 1, "robot 3 was penalised: {shown}");
+    assert_eq!(g.books.game_penalties, 1, "robot 3 was penalised: {shown}");
     assert!(
         g.penalised_claims_checked > 100,
         "the teammates were judged during the penalty: {shown}"
@@ -113,6 +116,109 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
             s.robot,
             s.packets,
             s.longest_gap_s
+        );
+    }
+}
+
+/// #34, twelfth session: the daemons' robot programs hear the referee's whistle and write
+/// `local.var.robot.whistle` to their daemons. Under GameController3's delays (Set shown
+/// for 15 s after play starts) a team whose programs hear none sits out every kick-off's
+/// first 15 s: its daemons send at most the taker's Set claim a kick-off in the first
+/// 10 s of play. Programs that hear every whistle (0.2–1.0 s late) start play at it, and
+/// their daemons tell the team from the kick-off on. Seed 6, three robots, a 90 s half
+/// with no penalty, the two games played at once (each its own daemons, group and
+/// ports); only the whistle differs. (The daemons pace `--budget spl` for a 600 s half:
+/// on this 90 s one they may spend freely, and the hearing team sends most of its frames
+/// in the kick-offs' first 10 s, ~170 a kick-off; the figure says when the team speaks,
+/// not how much a real game's pace lets it.)
+#[test]
+fn daemons_whose_programs_hear_the_whistle_play_from_the_kick_off() {
+    let game = |whistle: WhistleHearing| {
+        let script = GameScript {
+            halves: 1,
+            half_s: 90.0,
+            break_s: 0.0,
+            initial_s: 3.0,
+            standby_s: 3.0,
+            ready_s: 10.0,
+            set_s: 3.0,
+            finished_s: 3.0,
+            penalty_s: 20.0,
+            messages_per_game: 1200,
+            penalties: Vec::new(),
+            delays: GcDelays::gc3(),
+            whistle,
+        };
+        let mut cfg = SimConfig {
+            robots: 3,
+            seed: 6,
+            budget: Some(comms::BudgetSpec::SPL),
+            duration_s: script.length_s() + 600.0,
+            game: Some(script),
+            ..SimConfig::default()
+        };
+        cfg.network.loss = Some(0.0);
+        let opts = DaemonsOptions {
+            exe: env!("CARGO_BIN_EXE_huddle").into(),
+            impair: Some("loss=0".into()),
+            log_dir: None,
+        };
+        std::thread::spawn(move || daemons::run(&cfg, &opts, |_| {}))
+    };
+    let hearing = WhistleHearing {
+        p_heard: 1.0,
+        ..WhistleHearing::typical()
+    };
+    let (deaf, hearing) = (game(WhistleHearing::deaf()), game(hearing));
+    type Played = std::thread::JoinHandle<Result<daemons::DaemonsReport, daemons::DaemonsError>>;
+    let report = |h: Played| {
+        let r: daemons::DaemonsReport = h
+            .join()
+            .expect("the game's thread")
+            .expect("the game is played with daemons");
+        (r.game.clone().expect("a game report under --game"), r)
+    };
+    let ((deaf, deaf_r), (hearing, hearing_r)) = (report(deaf), report(hearing));
+    let shown = format!("deaf:\n{deaf_r}\nhearing:\n{hearing_r}");
+    eprintln!("{shown}");
+    assert_eq!(
+        (
+            deaf.books.game_whistles_heard,
+            hearing.books.game_whistles_missed
+        ),
+        (0, 0),
+        "deaf programs hear no whistle, the others every one: {shown}"
+    );
+    assert!(
+        hearing.books.game_whistles_heard >= 3 * 2,
+        "the half's Standby and first kick-off whistles, each robot: {shown}"
+    );
+    assert!(
+        deaf.books.game_kick_offs >= 1 && hearing.books.game_kick_offs >= 1,
+        "{shown}"
+    );
+    assert!(
+        deaf.game_kick_off_messages <= u64::from(deaf.books.game_kick_offs),
+        "without the whistle the daemons' layers think it is Set for the first 15 s of \
+         play: at most the taker's claim a kick-off in its first 10 s ({} frames, {} \
+         kick-offs): {shown}",
+        deaf.game_kick_off_messages,
+        deaf.books.game_kick_offs
+    );
+    assert!(
+        hearing.game_kick_off_messages > u64::from(hearing.books.game_kick_offs)
+            && hearing.game_kick_off_messages > deaf.game_kick_off_messages,
+        "hearing the whistle the daemons tell the team from the kick-off on: {} frames in \
+         {} kick-offs' first 10 s (deaf: {}): {shown}",
+        hearing.game_kick_off_messages,
+        hearing.books.game_kick_offs,
+        deaf.game_kick_off_messages
+    );
+    for (g, r) in [(&deaf, &deaf_r), (&hearing, &hearing_r)] {
+        assert_eq!(
+            (g.books.game_illegal_messages, r.relay_errors),
+            (0, 0),
+            "never illegal, every relay write taken (the whistle's too): {shown}"
         );
     }
 }

@@ -101,32 +101,32 @@ fn a_short_game_under_the_gamecontroller_is_legal_and_spends_its_budget() {
     let g = r.game.as_ref().expect("a game's report");
     eprintln!("{g}");
     assert!(
-        !g.game_illegal,
+        !g.books.game_illegal,
         "the team must never be illegal: {} illegal messages, first at {:?} s",
-        g.game_illegal_messages, g.game_illegal_at_s
+        g.books.game_illegal_messages, g.books.game_illegal_at_s
     );
     assert_eq!(
-        g.game_messages_oversized, 0,
+        g.books.game_messages_oversized, 0,
         "largest {} B",
         r.max_payload_bytes
     );
     assert!(
-        g.game_budget_used_pct >= 75.0,
+        g.books.game_budget_used_pct >= 75.0,
         "most of the budget is used: {g}"
     );
     assert!(
-        g.game_messages_uncounted <= 20,
+        g.books.game_messages_uncounted <= 20,
         "out of play the team is quiet: {g}"
     );
-    assert_eq!(g.game_penalties, 1);
-    assert!((g.game_playing_s - 120.0).abs() < 1.0, "{g}");
+    assert_eq!(g.books.game_penalties, 1);
+    assert!((g.books.game_playing_s - 120.0).abs() < 1.0, "{g}");
     // The pace of each part (eighth session): every counted frame is in one part of
     // Playing or outside it, and the bins by time since the kick-off hold the same play.
     let parts = [g.game_kick_off, g.game_penalised, g.game_open_play];
     let in_play: u64 = parts.iter().map(|p| p.messages).sum();
     assert_eq!(
         in_play + g.game_messages_outside_play,
-        g.game_messages_counted,
+        g.books.game_messages_counted,
         "frames by part: {in_play} in Playing + {} outside = counted",
         g.game_messages_outside_play
     );
@@ -346,7 +346,7 @@ fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_on
     }
     let r = sim.report(0.0);
     let g = r.game.as_ref().expect("a game's report");
-    let goals = u32::from(g.game_score[0]) + u32::from(g.game_score[1]);
+    let goals = u32::from(g.books.game_score[0]) + u32::from(g.books.game_score[1]);
     use gamecontroller::State::*;
     // Every kick-off, the first and each after a goal, goes Ready → Set → Playing.
     let kick_offs = states
@@ -362,15 +362,18 @@ fn the_restarting_run_kicks_off_from_the_formation_after_every_goal_and_plays_on
         1 + goals,
         "one kick-off at the start and one after each of the {goals} goals: {states:?}"
     );
-    assert_eq!(g.game_kick_offs, kick_offs, "the report counts each: {g}");
+    assert_eq!(
+        g.books.game_kick_offs, kick_offs,
+        "the report counts each: {g}"
+    );
     assert_eq!(
         states.iter().filter(|&&s| s == Finished).count(),
         1,
         "one half, no break: Finished only at the end: {states:?}"
     );
     assert_eq!(&states[..3], &[Initial, Standby, Ready], "{states:?}");
-    assert!((g.game_playing_s - 240.0).abs() < 1.0, "{g}");
-    assert!(!g.game_illegal && g.game_penalties == 0, "{g}");
+    assert!((g.books.game_playing_s - 240.0).abs() < 1.0, "{g}");
+    assert!(!g.books.game_illegal && g.books.game_penalties == 0, "{g}");
 }
 
 /// #34, tenth session: a robot learns of a goal from the GameController's packets it
@@ -527,31 +530,34 @@ fn under_gamecontroller3_s_delays_the_programs_whistle_starts_play_at_the_kick_o
     };
     let (deaf, hearing) = (run(WhistleHearing::deaf()), run(WhistleHearing::typical()));
     assert_eq!(
-        (deaf.game_whistles_heard, hearing.game_whistles_missed > 0),
+        (
+            deaf.books.game_whistles_heard,
+            hearing.books.game_whistles_missed > 0
+        ),
         (0, true),
         "deaf programs hear none; 90% miss some: {hearing}"
     );
-    assert!(hearing.game_whistles_heard > 0, "{hearing}");
+    assert!(hearing.books.game_whistles_heard > 0, "{hearing}");
     assert!(
-        deaf.game_kick_off.messages <= u64::from(deaf.game_kick_offs),
+        deaf.game_kick_off.messages <= u64::from(deaf.books.game_kick_offs),
         "deaf: in the first 10 s of each kick-off the GC still says Set, the team tells \
          at most the taker's claim a kick-off: {deaf}"
     );
     eprintln!(
         "frames in the first 10 s of play: deaf {} in {} kick-offs, hearing {} in {}",
         deaf.game_kick_off.messages,
-        deaf.game_kick_offs,
+        deaf.books.game_kick_offs,
         hearing.game_kick_off.messages,
-        hearing.game_kick_offs
+        hearing.books.game_kick_offs
     );
     assert!(
-        hearing.game_kick_off.messages > u64::from(hearing.game_kick_offs)
+        hearing.game_kick_off.messages > u64::from(hearing.books.game_kick_offs)
             && hearing.game_kick_off.messages > deaf.game_kick_off.messages,
         "hearing the whistle the team plays, and tells, from the kick-off on: {} frames \
          in {} kick-offs' first 10 s (deaf: {})",
         hearing.game_kick_off.messages,
-        hearing.game_kick_offs,
+        hearing.books.game_kick_offs,
         deaf.game_kick_off.messages
     );
-    assert!(!deaf.game_illegal && !hearing.game_illegal);
+    assert!(!deaf.books.game_illegal && !hearing.books.game_illegal);
 }

@@ -192,8 +192,8 @@ pub struct SimArgs {
     pub gc_delays: GcDelayKind,
     /// With --game: the chance each robot program hears each referee's whistle (play
     /// starts, a goal, Standby → Ready), 0.2–1.0 s late, and tells its team layer
-    /// (`local.var.robot.whistle`); 0: no program hears one, the team goes by the GC's
-    /// packets alone.
+    /// (`local.var.robot.whistle`; with --daemons it writes the key to its daemon over
+    /// the relay); 0: no program hears one, the team goes by the GC's packets alone.
     #[arg(long, value_name = "P", default_value_t = 0.9, requires = "game")]
     pub whistle: f64,
 }

@@ -63,6 +63,7 @@ use team::contract;
 use super::daemons_game::{self, DaemonsGameReport, GcSide};
 use super::references::CentralFusion;
 use super::{Metrics, SimConfig, Simulation, Transport};
+use crate::field::geometry::Pose;
 use crate::field::World;
 
 /// The longest a robot program waits for its layer's tick on the senses it just wrote.
@@ -795,6 +796,11 @@ pub fn run(
         d.send(&hello)?;
     }
 
+    // A program tells its layer where the referee put it.
+    let place = |d: &mut Daemon, spot: &Pose| {
+        let pose = start_pose_value(spot, wm.start_sigma_m, wm.start_sigma_rad);
+        d.send(&format!("SETV {} {pose}\n", contract::POSE_KEY))
+    };
     let n = robots.len();
     let dt = cfg.physics_dt_s;
     let period = cfg.brain.team.control_period_s;
@@ -831,8 +837,7 @@ pub fn run(
             }
             // Robots the referee carried off or back: each program tells its layer where.
             for (i, spot) in g.step(t, &mut world, &robots, &homes, cfg)? {
-                let pose = start_pose_value(&spot, wm.start_sigma_m, wm.start_sigma_rad);
-                daemons[i].send(&format!("SETV {} {pose}\n", contract::POSE_KEY))?;
+                place(&mut daemons[i], &spot)?;
             }
         }
         let in_play = gc.as_ref().is_none_or(|g| g.playing());
@@ -857,9 +862,20 @@ pub fn run(
             // team's decisions each cycle does; a layer slower than a few ms leaves the
             // robot to play on what it last had.
             let clock = |at: Instant| at.saturating_duration_since(started).as_secs_f64();
+            // Under `--game`: the program hears the whistle (it tells its layer, before
+            // the senses its layer ticks on) and takes its order from what it heard.
+            let order = gc.as_mut().map(|g| {
+                let h = daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner());
+                g.program(i, t, h.gc_state.as_deref(), h.gc_penalty)
+            });
+            let mut lines = match order {
+                Some((true, _)) => format!("SETV {} true\n", contract::WHISTLE_KEY),
+                _ => String::new(),
+            };
             let senses = robots[i].sense(clock(Instant::now()), percepts);
+            lines += &setv_lines(&senses);
             let sent = Instant::now();
-            daemons[i].send(&setv_lines(&senses))?;
+            daemons[i].send(&lines)?;
             let fresh = sent + FRESH_WAIT;
             let d = &daemons[i];
             let mut heard = d.heard.lock().unwrap_or_else(|e| e.into_inner());
@@ -879,17 +895,16 @@ pub fn run(
                     .unwrap_or_else(|e| e.into_inner())
                     .0;
             };
-            let gc_heard = (heard.gc_state.clone(), heard.gc_penalty);
             drop(heard);
             robots[i].view = view;
             let mut out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
-            if gc.is_some() && robots[i].view.pose.is_some() {
-                // The order of the state its daemon heard: outside Playing, no play.
-                let order = daemons_game::order(gc_heard.0.as_deref(), gc_heard.1);
+            if let Some((_, order)) = order.filter(|_| robots[i].view.pose.is_some()) {
+                // Outside play it walks or stands: no kick, so no kick's report (its
+                // senses went above, in every state).
                 if let Some(c) = daemons_game::command(order, &robots[i], &out.believed, &homes) {
                     out.command = Some(c);
                     out.kick = None;
-                    out.writes.clear();
+                    out.writes.retain(|(key, _)| *key != contract::KICK_KEY);
                 }
             }
             if let Some(g) = &mut gc {
@@ -1006,8 +1021,12 @@ pub fn run(
             });
             if let Some(g) = &mut gc {
                 // The referee's goal: Ready and Set, then a kick-off. The layers learn it
-                // from the GC's packets (their scores), as a daemon on a field does.
-                g.goal(t + dt, goal == crate::field::Goal::For);
+                // from the GC's packets (their scores) or their programs' whistles, as a
+                // daemon on a field does.
+                let for_us = goal == crate::field::Goal::For;
+                for (i, spot) in g.goal(t + dt, for_us, &mut world, &robots, &homes, cfg) {
+                    place(&mut daemons[i], &spot)?;
+                }
             }
             for (d, r) in daemons.iter_mut().zip(&mut robots).filter(|_| gc.is_none()) {
                 d.heard

@@ -19,6 +19,17 @@
 //!   Ready (the in-process robot's `Order::KickOffSpot`), stand otherwise and while their
 //!   daemon says they are penalised. Nothing else of the game is told to them: their team
 //!   layers learn goals, penalties and Set from the listener themselves.
+//! - **The whistle.** Each program hears each of the referee's whistles as the in-process
+//!   robots do (the script's [`WhistleHearing`], `huddle sim --whistle P`, drawn with
+//!   [`WhistleHearing::hear`] from a generator of its own, so the packets' losses do not
+//!   move) and writes `local.var.robot.whistle true` to its daemon, as the Python
+//!   client's `whistle()` does; its daemon's layer takes it at its next tick
+//!   (`TeamLayer::heard_whistle`). Its body follows its own reading of the whistle
+//!   ([`ProgramEars`]) ahead of the GC's late packets: it plays from a whistle heard in Set,
+//!   walks to its kick-off spot from one heard in Playing (a goal) or in Standby.
+//! - **Senses.** A program writes what it senses every tick in every state (its pose,
+//!   odometry, landmarks, ball): outside Playing it only stops playing (no kick, so no
+//!   kick report); what its layer tells the team then is the layer's decision.
 //! - **The world** is the in-process game's: outside Playing the ball lies on the centre
 //!   spot and the opponents on their kick-off spots; a penalised robot's body waits on the
 //!   sideline off the field (its program tells its layer where it was put, as the
@@ -45,17 +56,19 @@ use std::time::{Duration, Instant};
 use gamecontroller::{State, StatusMessage};
 use player::behaviour::Position;
 use player::remote::RemoteRobot;
+use player::robot::Order;
 use player::senses::MotionCommand;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use super::daemons::DaemonsError;
-use super::game::OUR_TEAM;
-use super::referee::{GameScript, Referee, RefereeEvent};
+use super::game::{KICK_OFF_WINDOW_S, OUR_TEAM};
+use super::referee::{program_order, GameScript, GcBooks, Referee, RefereeEvent, WhistleHearing};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::World;
 use crate::SimConfig;
+use team::{Whistle, WHISTLE_TRUST_S};
 
 /// A penalised robot's teammates are judged this long after its penalty began (four of
 /// the GC's packets: time for one to reach them through a lossy network), seconds.
@@ -79,35 +92,13 @@ pub struct StatusFigures {
 /// The referee's books of a `--daemons --game` match (in [`super::daemons::DaemonsReport`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DaemonsGameReport {
-    /// Messages that made the team illegal (over 128 B, or counted at a budget of 0).
-    pub game_illegal_messages: u64,
-    /// When it first became illegal, game seconds.
-    pub game_illegal_at_s: Option<f64>,
-    /// Frames the GC counted (heard on the group in Standby, Ready, Set or Playing).
-    pub game_messages_counted: u64,
-    /// Frames heard in states the GC does not count (before, between and after).
-    pub game_messages_uncounted: u64,
-    /// Frames over 128 B.
-    pub game_messages_oversized: u64,
-    /// The GC's `messageBudget` for the team at the end.
-    pub game_budget_left: u16,
-    /// Counted frames as a share of the game's budget, %.
-    pub game_budget_used_pct: f64,
-    /// The score, ours first.
-    pub game_score: [u8; 2],
-    /// Penalties given to our robots.
-    pub game_penalties: u32,
-    /// Seconds of Playing.
-    pub game_playing_s: f64,
-    /// Stretches of Playing (each begins with a kick-off).
-    pub game_kick_offs: u32,
+    /// The referee's books (score, the GC's count, illegal, packets, whistles heard), as
+    /// the in-process report has them.
+    #[serde(flatten)]
+    pub books: GcBooks,
     /// At each kick-off, the farthest any robot on the field stood from its kick-off
     /// spot, m (did they walk there in Ready?).
     pub kick_off_spot_error_m: Vec<f64>,
-    /// GC packets sent (each to every daemon), and the receptions the draw lost.
-    pub game_packets: u64,
-    /// Receptions lost.
-    pub game_packets_lost: u64,
     /// Robot ticks in Playing at which a teammate of a robot penalised more than
     /// [`CLAIM_GRACE_S`] ago was judged (its layer's goer read).
     pub penalised_claims_checked: u64,
@@ -117,34 +108,20 @@ pub struct DaemonsGameReport {
     pub status: Vec<StatusFigures>,
     /// RGrt packets the return port could not read.
     pub status_bad: u64,
+    /// Team frames the GC heard in the first [`KICK_OFF_WINDOW_S`] of each stretch of
+    /// Playing (true time; the in-process report's `game_kick_off.messages`).
+    pub game_kick_off_messages: u64,
 }
 
 impl std::fmt::Display for DaemonsGameReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "{}", self.books)?;
         writeln!(
             f,
-            "game                  score {}–{}, {:.0} s played, {} kick-offs (farthest from its spot at each: {:?} m), {} penalties; {} GC packets ({} receptions lost)",
-            self.game_score[0],
-            self.game_score[1],
-            self.game_playing_s,
-            self.game_kick_offs,
-            self.kick_off_spot_error_m,
-            self.game_penalties,
-            self.game_packets,
-            self.game_packets_lost
-        )?;
-        writeln!(
-            f,
-            "GC's count            {} counted ({:.1}% of the budget, {} left), {} in uncounted states, {} over 128 B; illegal: {}",
-            self.game_messages_counted,
-            self.game_budget_used_pct,
-            self.game_budget_left,
-            self.game_messages_uncounted,
-            self.game_messages_oversized,
-            match self.game_illegal_at_s {
-                Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
-                None => "never".to_string(),
-            }
+            "kick-offs             {} frames in the first {KICK_OFF_WINDOW_S:.0} s of play ({:.2} a kick-off); farthest from its spot at each: {:?} m",
+            self.game_kick_off_messages,
+            self.game_kick_off_messages as f64 / f64::from(self.books.game_kick_offs.max(1)),
+            self.kick_off_spot_error_m
         )?;
         writeln!(
             f,
@@ -165,22 +142,56 @@ impl std::fmt::Display for DaemonsGameReport {
     }
 }
 
-/// What a robot program does now, from what its daemon's listener wrote.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Order {
-    Play,
-    KickOffSpot,
-    Stand,
+/// The state a daemon's listener wrote (`local.var.gc.state`), as a program reads it.
+fn state_named(name: &str) -> Option<State> {
+    [
+        State::Initial,
+        State::Ready,
+        State::Set,
+        State::Playing,
+        State::Finished,
+        State::Standby,
+    ]
+    .into_iter()
+    .find(|s| s.name() == name)
 }
 
-/// The order for a robot whose daemon wrote `state` (`local.var.gc.state`) and `penalty`
-/// (`local.var.gc.penalty`, 0 none).
-pub(crate) fn order(state: Option<&str>, penalty: i64) -> Order {
-    match state {
-        _ if penalty != 0 => Order::Stand,
-        Some("playing") => Order::Play,
-        Some("ready") => Order::KickOffSpot,
-        _ => Order::Stand,
+/// What a robot program makes of the whistles it heard while the GC's packets lag (its
+/// body goes by it; its team layer reads the same whistle from `local.var.robot.whistle`
+/// with the same meaning, `TeamLayer::heard_whistle`): heard in Set, play started; heard
+/// in Playing, or with play's whistle still ahead of the GC, a goal; in Standby, the
+/// half's Ready. The GC's word counts again once it shows what the whistle said (or
+/// anything else after a goal), or [`WHISTLE_TRUST_S`] after the whistle.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct ProgramEars {
+    whistle: Option<Whistle>,
+    standby: bool,
+}
+
+impl ProgramEars {
+    /// At `t_s` the program's daemon says `heard`; `whistled`: it hears a whistle now.
+    fn tick(&mut self, heard: Option<State>, t_s: f64, whistled: bool) {
+        self.whistle = match self.whistle {
+            Some(Whistle::PlayStarted(_)) if heard == Some(State::Playing) => None,
+            Some(Whistle::Goal(_)) if heard != Some(State::Playing) => None,
+            Some(Whistle::PlayStarted(at) | Whistle::Goal(at)) if t_s - at > WHISTLE_TRUST_S => {
+                None
+            }
+            w => w,
+        };
+        self.standby &= heard == Some(State::Standby);
+        if !whistled {
+            return;
+        }
+        self.whistle = match (self.whistle, heard) {
+            (Some(Whistle::Goal(at)), _) => Some(Whistle::Goal(at)),
+            (Some(Whistle::PlayStarted(_)), _) | (None, Some(State::Playing)) => {
+                Some(Whistle::Goal(t_s))
+            }
+            (None, Some(State::Set)) => Some(Whistle::PlayStarted(t_s)),
+            (None, _) => None,
+        };
+        self.standby |= heard == Some(State::Standby);
     }
 }
 
@@ -256,6 +267,17 @@ pub(crate) struct GcSide {
     claims_checked: u64,
     claims_held: u64,
     robots: usize,
+    /// The programs' hearing of the whistle: its draws, when each program will hear the
+    /// whistles it is to hear, what each made of those heard, and the books.
+    whistle_rng: ChaCha8Rng,
+    whistles: Vec<Vec<f64>>,
+    ears: Vec<ProgramEars>,
+    whistles_heard: u32,
+    whistles_missed: u32,
+    /// When the current stretch of Playing began (true time), and the team's frames the
+    /// GC heard in the first [`KICK_OFF_WINDOW_S`] of each.
+    playing_since_s: Option<f64>,
+    kick_off_frames: u64,
 }
 
 impl Drop for GcSide {
@@ -385,6 +407,13 @@ impl GcSide {
             claims_checked: 0,
             claims_held: 0,
             robots: n,
+            whistle_rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x7768_6973_746c_6521),
+            whistles: vec![Vec::new(); n],
+            ears: vec![ProgramEars::default(); n],
+            whistles_heard: 0,
+            whistles_missed: 0,
+            playing_since_s: None,
+            kick_off_frames: 0,
         })
     }
 
@@ -420,7 +449,11 @@ impl GcSide {
     /// (the state it was in when they arrived, within a step).
     pub(crate) fn count_frames(&mut self, t_s: f64) {
         let heard = std::mem::take(&mut *self.frames.lock().unwrap_or_else(|e| e.into_inner()));
+        let kick_off = self
+            .playing_since_s
+            .is_some_and(|since| t_s - since <= KICK_OFF_WINDOW_S);
         for len in heard {
+            self.kick_off_frames += u64::from(kick_off);
             self.referee.team_message(t_s, len);
         }
     }
@@ -472,6 +505,7 @@ impl GcSide {
         match e {
             RefereeEvent::State(State::Playing) => {
                 self.kick_offs += 1;
+                self.playing_since_s = Some(t_s);
                 let far = robots
                     .iter()
                     .enumerate()
@@ -481,9 +515,19 @@ impl GcSide {
                 self.kick_off_spot_error_m
                     .push((far * 1000.0).round() / 1000.0);
             }
-            // The daemons' robot programs here hear no whistle: they go by their
-            // listener's `local.var.gc.state` (GameController3's late word).
-            RefereeEvent::State(_) | RefereeEvent::Whistle => {}
+            RefereeEvent::State(_) => self.playing_since_s = None,
+            RefereeEvent::Whistle => {
+                let hearing: WhistleHearing = self.script.whistle;
+                for due in &mut self.whistles {
+                    match hearing.hear(&mut self.whistle_rng, t_s) {
+                        Some(at) => {
+                            due.push(at);
+                            self.whistles_heard += 1;
+                        }
+                        None => self.whistles_missed += 1,
+                    }
+                }
+            }
             RefereeEvent::Penalised(id) => {
                 let Some(i) = index(id) else { return };
                 self.penalties += 1;
@@ -511,9 +555,49 @@ impl GcSide {
         }
     }
 
-    /// A goal in the world at `t_s` (`for_us`: ours).
-    pub(crate) fn goal(&mut self, t_s: f64, for_us: bool) {
-        let _ = self.referee.goal(t_s, for_us);
+    /// A goal in the world at `t_s` (`for_us`: ours): the referee's events as
+    /// [`GcSide::step`] takes them (its whistle among them).
+    pub(crate) fn goal(
+        &mut self,
+        t_s: f64,
+        for_us: bool,
+        world: &mut World,
+        robots: &[RemoteRobot],
+        homes: &[Vec2],
+        cfg: &SimConfig,
+    ) -> Vec<(usize, Pose)> {
+        let mut placed = Vec::new();
+        for e in self.referee.goal(t_s, for_us) {
+            self.event(e, t_s, world, robots, homes, cfg, &mut placed);
+        }
+        placed
+    }
+
+    /// Robot `i`'s program at `t_s`, its daemon's listener having written `state` and
+    /// `penalty` (`local.var.gc.*`): whether it hears a whistle now (it writes
+    /// `local.var.robot.whistle` then), and its order ([`program_order`], the in-process
+    /// robots' rule). A penalised program (its daemon says so, or it stands on the
+    /// sideline) acts on no whistle.
+    pub(crate) fn program(
+        &mut self,
+        i: usize,
+        t_s: f64,
+        state: Option<&str>,
+        penalty: i64,
+    ) -> (bool, Order) {
+        let heard = state.and_then(state_named);
+        let penalised = penalty != 0 || self.referee.penalised(comms_netsim::robot_id(i));
+        let Some(due) = self.whistles.get_mut(i) else {
+            return (false, program_order(heard, penalised, None, false));
+        };
+        let whistled = due.iter().any(|&at| at <= t_s) && !penalised;
+        due.retain(|&at| at > t_s);
+        let ears = &mut self.ears[i];
+        ears.tick(heard, t_s, whistled);
+        (
+            whistled,
+            program_order(heard, penalised, ears.whistle, ears.standby),
+        )
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their
@@ -558,9 +642,6 @@ impl GcSide {
 
     /// The books at the end.
     pub(crate) fn report(&self) -> DaemonsGameReport {
-        let c = self.referee.count();
-        let d = self.referee.data();
-        let score = |n: u8| d.team(n).map_or(0, |t| t.score);
         let end = Instant::now();
         let start = self.first_packet_at.unwrap_or(end);
         let (books, bad) = self.status.lock().map_or_else(
@@ -588,27 +669,21 @@ impl GcSide {
             })
             .collect();
         DaemonsGameReport {
-            game_illegal_messages: c.illegal,
-            game_illegal_at_s: c.illegal_at_s.map(|t| (t * 1000.0).round() / 1000.0),
-            game_messages_counted: c.counted,
-            game_messages_uncounted: c.uncounted,
-            game_messages_oversized: c.oversized,
-            game_budget_left: self.referee.budget_left(),
-            game_budget_used_pct: (1000.0 * c.counted as f64
-                / f64::from(self.script.messages_per_game.max(1)))
-            .round()
-                / 10.0,
-            game_score: [score(OUR_TEAM), score(OUR_TEAM + 1)],
-            game_penalties: self.penalties,
-            game_playing_s: (self.referee.playing_s() * 1000.0).round() / 1000.0,
-            game_kick_offs: self.kick_offs,
+            books: GcBooks {
+                game_penalties: self.penalties,
+                game_kick_offs: self.kick_offs,
+                game_packets: self.packets,
+                game_packets_lost: self.packets_lost,
+                game_whistles_heard: self.whistles_heard,
+                game_whistles_missed: self.whistles_missed,
+                ..self.referee.books()
+            },
             kick_off_spot_error_m: self.kick_off_spot_error_m.clone(),
-            game_packets: self.packets,
-            game_packets_lost: self.packets_lost,
             penalised_claims_checked: self.claims_checked,
             penalised_claims_held: self.claims_held,
             status,
             status_bad: bad,
+            game_kick_off_messages: self.kick_off_frames,
         }
     }
 }
@@ -629,14 +704,69 @@ mod tests {
 
     #[test]
     fn a_robot_program_follows_the_state_its_daemon_wrote() {
-        assert_eq!(order(Some("playing"), 0), Order::Play);
-        assert_eq!(order(Some("ready"), 0), Order::KickOffSpot);
-        assert_eq!(order(Some("set"), 0), Order::Stand);
-        assert_eq!(order(None, 0), Order::Stand, "nothing heard: it stands");
+        // No whistle heard: the order of the state's name, as the daemon writes it.
+        let order = |state: &str, penalised: bool| {
+            program_order(state_named(state), penalised, None, false)
+        };
+        assert_eq!(order("playing", false), Order::Play);
+        assert_eq!(order("ready", false), Order::KickOffSpot);
+        assert_eq!(order("set", false), Order::Stand);
+        assert_eq!(order("", false), Order::Stand, "nothing heard: it stands");
         assert_eq!(
-            order(Some("playing"), 2),
+            order("playing", true),
             Order::Stand,
             "a penalised robot stands whatever the state"
+        );
+    }
+
+    #[test]
+    fn a_program_plays_from_the_whistle_it_heard_in_set_until_the_gc_catches_up() {
+        // Scenario: the GC shows Set; the program hears play's whistle at 10 s; the GC
+        // shows Set until 25 s (GameController3's 15 s), then Playing; a goal's whistle
+        // at 100 s while it shows Playing, its Ready at 115 s.
+        let mut ears = ProgramEars::default();
+        let set = Some(State::Set);
+        let order = |e: &ProgramEars, heard| program_order(heard, false, e.whistle, e.standby);
+        ears.tick(set, 9.9, false);
+        assert_eq!(order(&ears, set), Order::Stand, "Set, no whistle yet");
+        ears.tick(set, 10.0, true);
+        assert_eq!(
+            order(&ears, set),
+            Order::Play,
+            "play's whistle heard in Set"
+        );
+        ears.tick(set, 24.9, false);
+        assert_eq!(order(&ears, set), Order::Play, "the GC's late Set");
+        ears.tick(Some(State::Playing), 25.0, false);
+        assert_eq!(ears.whistle, None, "the GC caught up");
+        ears.tick(Some(State::Playing), 100.0, true);
+        assert_eq!(
+            order(&ears, Some(State::Playing)),
+            Order::KickOffSpot,
+            "a goal's whistle in Playing: to the kick-off spot"
+        );
+        ears.tick(Some(State::Ready), 115.0, false);
+        assert_eq!(
+            (ears.whistle, order(&ears, Some(State::Ready))),
+            (None, Order::KickOffSpot)
+        );
+        // A whistle the GC never follows stands WHISTLE_TRUST_S at most.
+        ears.tick(set, 200.0, true);
+        ears.tick(set, 200.0 + WHISTLE_TRUST_S + 0.1, false);
+        assert_eq!(
+            order(&ears, set),
+            Order::Stand,
+            "the GC's Set again after the trust"
+        );
+        // In Standby the whistle sends it to Ready's spot until the GC shows Ready.
+        ears.tick(Some(State::Standby), 300.0, true);
+        assert_eq!(order(&ears, Some(State::Standby)), Order::KickOffSpot);
+        ears.tick(Some(State::Ready), 340.0, false);
+        ears.tick(Some(State::Set), 370.0, false);
+        assert_eq!(
+            order(&ears, Some(State::Set)),
+            Order::Stand,
+            "Standby's whistle is done"
         );
     }
 }

@@ -43,8 +43,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::referee::{GameScript, Referee, RefereeEvent};
-use super::robot::{self, Order};
+use super::referee::{program_order, GameScript, GcBooks, Referee, RefereeEvent};
+use super::robot;
 use super::Simulation;
 use crate::field::geometry::{Pose, Vec2};
 use team::Whistle;
@@ -122,34 +122,9 @@ pub struct GameReport {
     /// The world-model figures with the penalised robots' samples counted too (the
     /// report's main figures leave them out, see the module docs).
     pub game_with_penalised: WithPenalised,
-    /// The team became illegal at least once (a message over 128 B or at a budget of 0).
-    pub game_illegal: bool,
-    /// Messages that made the team illegal.
-    pub game_illegal_messages: u64,
-    /// When it first became illegal, simulated seconds.
-    pub game_illegal_at_s: Option<f64>,
-    /// Messages the GC counted (sent in Standby, Ready, Set or Playing).
-    pub game_messages_counted: u64,
-    /// Frames sent in states the GC does not count (Initial, Finished, the break).
-    pub game_messages_uncounted: u64,
-    /// Messages over 128 B.
-    pub game_messages_oversized: u64,
-    /// The GC's `messageBudget` for the team at the end.
-    pub game_budget_left: u16,
-    /// Counted messages as a share of the game's budget, %.
-    pub game_budget_used_pct: f64,
-    /// The score, ours first.
-    pub game_score: [u8; 2],
-    /// Penalties given to our robots.
-    pub game_penalties: u32,
-    /// Seconds of Playing.
-    pub game_playing_s: f64,
-    /// GC packets broadcast, and the robots' receptions lost.
-    pub game_packets: u64,
-    /// Packet receptions lost on the way to the robots.
-    pub game_packets_lost: u64,
-    /// Stretches of Playing (each begins with a kick-off).
-    pub game_kick_offs: u32,
+    /// The referee's books (score, the GC's count, illegal, packets, whistles heard).
+    #[serde(flatten)]
+    pub books: GcBooks,
     /// Arbitration in the first [`KICK_OFF_WINDOW_S`] of each stretch of Playing.
     pub game_kick_off: PlayBreakdown,
     /// Arbitration while one of our robots is penalised (outside kick-off windows).
@@ -165,10 +140,6 @@ pub struct GameReport {
     /// How long after each goal each robot learnt of it (from the GC's packets, or,
     /// since the eleventh session, its program's whistle).
     pub game_goal_news: GoalNews,
-    /// (robot, whistle) pairs the robot programs heard, and missed
-    /// ([`crate::referee::WhistleHearing`]).
-    pub game_whistles_heard: u32,
-    pub game_whistles_missed: u32,
 }
 
 /// Pose, team-ball and blind-robot RMSE over every robot's samples in Playing, penalised
@@ -216,24 +187,7 @@ impl WithPenalised {
 
 impl std::fmt::Display for GameReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(
-            f,
-            "game                  score {}–{}, {:.0} s played, {} penalties; {} GC packets ({} receptions lost)",
-            self.game_score[0], self.game_score[1], self.game_playing_s, self.game_penalties, self.game_packets, self.game_packets_lost
-        )?;
-        write!(
-            f,
-            "GC's count            {} counted ({:.1}% of the budget, {} left), {} in uncounted states, {} over 128 B; illegal: {}",
-            self.game_messages_counted,
-            self.game_budget_used_pct,
-            self.game_budget_left,
-            self.game_messages_uncounted,
-            self.game_messages_oversized,
-            match self.game_illegal_at_s {
-                Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
-                None => "never".to_string(),
-            }
-        )?;
+        write!(f, "{}", self.books)?;
         let share = |b: &PlayBreakdown| {
             let pct = |x: f64| {
                 if b.visible_s > 0.0 {
@@ -253,7 +207,7 @@ impl std::fmt::Display for GameReport {
         write!(
             f,
             "\nball visible in play   {} kick-offs (first {KICK_OFF_WINDOW_S:.0} s): {}; penalised: {}; open play: {}",
-            self.game_kick_offs,
+            self.books.game_kick_offs,
             share(&self.game_kick_off),
             share(&self.game_penalised),
             share(&self.game_open_play)
@@ -409,17 +363,13 @@ impl Game {
     /// The referee whistled at `t_s`: each robot's program is to hear it (or not) as the
     /// script's [`crate::referee::WhistleHearing`] draws.
     fn whistle(&mut self, t_s: f64) {
-        let w = self.script.whistle;
         for heard in &mut self.whistles {
-            // Both draws for every robot, heard or not: one robot's luck leaves the
-            // others' as they were.
-            let hears = self.whistle_rng.random::<f64>() < w.p_heard;
-            let u = self.whistle_rng.random::<f64>();
-            if hears {
-                heard.push(t_s + w.delay_s.0 + u * (w.delay_s.1 - w.delay_s.0).max(0.0));
-                self.whistles_heard += 1;
-            } else {
-                self.whistles_missed += 1;
+            match self.script.whistle.hear(&mut self.whistle_rng, t_s) {
+                Some(at) => {
+                    heard.push(at);
+                    self.whistles_heard += 1;
+                }
+                None => self.whistles_missed += 1,
             }
         }
     }
@@ -586,36 +536,23 @@ impl Game {
 
     /// The referee's books as the report shows them.
     pub(crate) fn report(&self) -> GameReport {
-        let c = self.referee.count();
-        let d = self.referee.data();
-        let score = |n: u8| d.team(n).map_or(0, |t| t.score);
         GameReport {
             game_with_penalised: self.with_penalised.rounded(),
-            game_illegal: c.illegal > 0,
-            game_illegal_messages: c.illegal,
-            game_illegal_at_s: c.illegal_at_s.map(|t| (t * 1000.0).round() / 1000.0),
-            game_messages_counted: c.counted,
-            game_messages_uncounted: c.uncounted,
-            game_messages_oversized: c.oversized,
-            game_budget_left: self.referee.budget_left(),
-            game_budget_used_pct: (1000.0 * c.counted as f64
-                / f64::from(self.script.messages_per_game.max(1)))
-            .round()
-                / 10.0,
-            game_score: [score(OUR_TEAM), score(OUR_TEAM + 1)],
-            game_penalties: self.penalties,
-            game_playing_s: (self.referee.playing_s() * 1000.0).round() / 1000.0,
-            game_packets: self.packets,
-            game_packets_lost: self.packets_lost,
-            game_kick_offs: self.kick_offs,
+            books: GcBooks {
+                game_penalties: self.penalties,
+                game_kick_offs: self.kick_offs,
+                game_packets: self.packets,
+                game_packets_lost: self.packets_lost,
+                game_whistles_heard: self.whistles_heard,
+                game_whistles_missed: self.whistles_missed,
+                ..self.referee.books()
+            },
             game_kick_off: self.kick_off.rounded(),
             game_penalised: self.penalised.rounded(),
             game_open_play: self.open_play.rounded(),
             game_messages_outside_play: self.messages_outside_play,
             game_since_kick_off: self.since_kick_off.iter().map(|b| b.rounded()).collect(),
             game_goal_news: self.goal_news(),
-            game_whistles_heard: self.whistles_heard,
-            game_whistles_missed: self.whistles_missed,
         }
     }
 }
@@ -717,12 +654,7 @@ impl Simulation {
         let Some(game) = &mut self.game else { return };
         let events = game.referee.advance(t_s);
         for e in events {
-            if e == RefereeEvent::Whistle {
-                if let Some(g) = &mut self.game {
-                    g.whistle(t_s);
-                }
-            }
-            self.referee_event(e);
+            self.referee_event(e, t_s);
         }
         let Some(game) = &mut self.game else { return };
         let mut goal_heard = Vec::new();
@@ -827,15 +759,12 @@ impl Simulation {
             // Its body follows its program: the whistle runs ahead of the packets. After
             // a goal's whistle a program walks to its kick-off spot (the goal's Ready,
             // which the GC shows 15 s late), as a robot program that hears it does.
-            self.robots[i].order = match (heard, self.robots[i].whistle()) {
-                _ if penalised => Order::Stand,
-                (_, Some(Whistle::PlayStarted(_))) => Order::Play,
-                (_, Some(Whistle::Goal(_))) => Order::KickOffSpot,
-                (Some(State::Playing), _) => Order::Play,
-                (Some(State::Ready), _) => Order::KickOffSpot,
-                (Some(State::Standby), _) if game.standby_whistle[i] => Order::KickOffSpot,
-                _ => Order::Stand,
-            };
+            self.robots[i].order = program_order(
+                heard,
+                penalised,
+                self.robots[i].whistle(),
+                game.standby_whistle[i],
+            );
         }
         // The delivery references are placed at each robot's next tick, where its team
         // layer places the ball (see `feed_references`).
@@ -874,11 +803,8 @@ impl Simulation {
             if !events.is_empty() {
                 game.goal_times_s.push(t_s);
             }
-            if events.contains(&RefereeEvent::Whistle) {
-                game.whistle(t_s);
-            }
             for e in events {
-                self.referee_event(e);
+                self.referee_event(e, t_s);
             }
         }
     }
@@ -897,9 +823,15 @@ impl Simulation {
         self.game.as_ref().map_or(&[], |g| &g.goals_heard)
     }
 
-    fn referee_event(&mut self, e: RefereeEvent) {
+    /// What the field and the robots' programs make of the referee's event at `t_s`.
+    fn referee_event(&mut self, e: RefereeEvent, t_s: f64) {
         match e {
-            RefereeEvent::State(_) | RefereeEvent::Whistle => {}
+            RefereeEvent::State(_) => {}
+            RefereeEvent::Whistle => {
+                if let Some(g) = &mut self.game {
+                    g.whistle(t_s);
+                }
+            }
             RefereeEvent::Penalised(id) => {
                 let Some(i) = usize::from(id)
                     .checked_sub(1)

@@ -63,10 +63,14 @@
 //! The robots learn it only from those packets, each from the first one with the new
 //! score that reaches it (`TeamLayer::set_scores`), or at Set if none did.
 //!
-//! No clock and no randomness: every call takes the simulated time, seconds.
+//! No clock and no randomness of its own: every call takes the simulated time, seconds
+//! ([`WhistleHearing::hear`] draws from its caller's generator).
 
 use gamecontroller::{GameControlData, SetPlay, State, KICKING_TEAM_NONE};
+use player::robot::Order;
+use rand::RngExt;
 use serde::Serialize;
+use team::Whistle;
 
 /// GameController3's `PENALTY_SPL_PLAYER_PUSHING`: the scripted penalties' code.
 pub const PENALTY_PUSHING: u8 = 2;
@@ -155,6 +159,42 @@ impl WhistleHearing {
             p_heard: 0.0,
             ..WhistleHearing::typical()
         }
+    }
+}
+
+impl WhistleHearing {
+    /// One robot program's hearing of a whistle blown at `t_s`: when it hears it
+    /// (simulated seconds), or `None` if it misses it. Two draws from `rng` whether it
+    /// hears or not, so one robot's luck leaves the others' draws as they were. The
+    /// in-process game and `--daemons --game` both draw with this.
+    pub fn hear(&self, rng: &mut impl rand::Rng, t_s: f64) -> Option<f64> {
+        let hears = rng.random::<f64>() < self.p_heard;
+        let u = rng.random::<f64>();
+        hears.then(|| t_s + self.delay_s.0 + u * (self.delay_s.1 - self.delay_s.0).max(0.0))
+    }
+}
+
+/// What a robot program does on what it heard of the referee: the one rule of the
+/// in-process robots and of the `--daemons` programs. `heard`: the state the GC's
+/// packets show it (`None`: none heard yet); `penalised`: it is (its packets say so, or
+/// it stands on the sideline); `whistle`: a whistle it heard that the GC has not caught
+/// up with (play started: it plays; a goal: it walks to its kick-off spot, the goal's
+/// Ready that the GC shows 15 s late); `standby_whistle`: it heard the whistle that ends
+/// a half's Standby (the half's Ready, which the GC shows up to 45 s late).
+pub fn program_order(
+    heard: Option<State>,
+    penalised: bool,
+    whistle: Option<Whistle>,
+    standby_whistle: bool,
+) -> Order {
+    match (heard, whistle) {
+        _ if penalised => Order::Stand,
+        (_, Some(Whistle::PlayStarted(_))) => Order::Play,
+        (_, Some(Whistle::Goal(_))) => Order::KickOffSpot,
+        (Some(State::Playing), _) => Order::Play,
+        (Some(State::Ready), _) => Order::KickOffSpot,
+        (Some(State::Standby), _) if standby_whistle => Order::KickOffSpot,
+        _ => Order::Stand,
     }
 }
 
@@ -277,6 +317,79 @@ pub struct MessageCount {
     pub illegal_at_s: Option<f64>,
 }
 
+/// The referee's books at a game's end as both reports show them (flattened into the
+/// in-process [`crate::GameReport`] and the `--daemons` one,
+/// [`crate::daemons_game::DaemonsGameReport`]). [`Referee::books`] fills what the
+/// referee keeps; the tallies of what its caller does with it (penalties carried off,
+/// kick-offs, packets sent and lost, whistles heard) come from the caller.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct GcBooks {
+    /// The team became illegal at least once (a message over 128 B or at a budget of 0).
+    pub game_illegal: bool,
+    /// Messages that made the team illegal.
+    pub game_illegal_messages: u64,
+    /// When it first became illegal, game seconds.
+    pub game_illegal_at_s: Option<f64>,
+    /// Messages the GC counted (sent in Standby, Ready, Set or Playing).
+    pub game_messages_counted: u64,
+    /// Frames sent in states the GC does not count (Initial, Finished, the break).
+    pub game_messages_uncounted: u64,
+    /// Messages over 128 B.
+    pub game_messages_oversized: u64,
+    /// The GC's `messageBudget` for the team at the end.
+    pub game_budget_left: u16,
+    /// Counted messages as a share of the game's budget, %.
+    pub game_budget_used_pct: f64,
+    /// The score, ours first.
+    pub game_score: [u8; 2],
+    /// Seconds of Playing.
+    pub game_playing_s: f64,
+    /// Penalties given to our robots (the caller's tally).
+    pub game_penalties: u32,
+    /// Stretches of Playing, each beginning with a kick-off (the caller's tally).
+    pub game_kick_offs: u32,
+    /// GC packets sent (the caller's tally).
+    pub game_packets: u64,
+    /// Packet receptions lost on the way to the robots (the caller's tally).
+    pub game_packets_lost: u64,
+    /// (robot, whistle) pairs the robot programs heard ([`WhistleHearing`]; the
+    /// caller's tally).
+    pub game_whistles_heard: u32,
+    /// … and missed.
+    pub game_whistles_missed: u32,
+}
+
+impl std::fmt::Display for GcBooks {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "game                  score {}–{}, {:.0} s played, {} kick-offs, {} penalties; {} GC packets ({} receptions lost); whistles {} heard, {} missed",
+            self.game_score[0],
+            self.game_score[1],
+            self.game_playing_s,
+            self.game_kick_offs,
+            self.game_penalties,
+            self.game_packets,
+            self.game_packets_lost,
+            self.game_whistles_heard,
+            self.game_whistles_missed
+        )?;
+        write!(
+            f,
+            "GC's count            {} counted ({:.1}% of the budget, {} left), {} in uncounted states, {} over 128 B; illegal: {}",
+            self.game_messages_counted,
+            self.game_budget_used_pct,
+            self.game_budget_left,
+            self.game_messages_uncounted,
+            self.game_messages_oversized,
+            match self.game_illegal_at_s {
+                Some(t) => format!("YES, {} messages, first at {t:.1} s", self.game_illegal_messages),
+                None => "never".to_string(),
+            }
+        )
+    }
+}
+
 /// Where the game is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
@@ -323,7 +436,8 @@ pub struct Referee {
     last_s: f64,
     /// The delayed copy the packets show while a delay runs.
     delayed: Option<Delayed>,
-    /// What the packets show: the delayed copy, or the true game.
+    /// What the packets show: the delayed copy, or the true game, as of the last step
+    /// (read through [`Referee::shown`], which brings its budgets up to date).
     shown: GameControlData,
 }
 
@@ -356,9 +470,17 @@ impl Referee {
     }
 
     /// The game as the packets show it now: GameController3's delayed copy while a delay
-    /// runs (see the module docs), the true game otherwise.
-    pub fn shown(&self) -> &GameControlData {
-        &self.shown
+    /// runs (see the module docs), the true game otherwise; with what every action keeps
+    /// current in the copy, from the true game: the packet's number, the budgets as
+    /// counted up to now (messages come between the referee's steps) and the penalties.
+    pub fn shown(&self) -> GameControlData {
+        let mut shown = self.shown;
+        shown.packet_number = self.data.packet_number;
+        for (s, t) in shown.teams.iter_mut().zip(&self.data.teams) {
+            s.message_budget = t.message_budget;
+            s.players = t.players;
+        }
+        shown
     }
 
     /// Whether a delay runs now: the packets show the game as it was.
@@ -404,6 +526,29 @@ impl Referee {
     /// Seconds of Playing so far.
     pub fn playing_s(&self) -> f64 {
         self.playing_s
+    }
+
+    /// The books as the reports show them, the caller's tallies at 0 (see [`GcBooks`]).
+    pub fn books(&self) -> GcBooks {
+        let c = self.count;
+        let score = |n: u8| self.data.team(n).map_or(0, |t| t.score);
+        let r3 = |x: f64| (x * 1000.0).round() / 1000.0;
+        GcBooks {
+            game_illegal: c.illegal > 0,
+            game_illegal_messages: c.illegal,
+            game_illegal_at_s: c.illegal_at_s.map(r3),
+            game_messages_counted: c.counted,
+            game_messages_uncounted: c.uncounted,
+            game_messages_oversized: c.oversized,
+            game_budget_left: self.budget_left(),
+            game_budget_used_pct: (1000.0 * c.counted as f64
+                / f64::from(self.script.messages_per_game.max(1)))
+            .round()
+                / 10.0,
+            game_score: [score(self.ours), score(self.theirs())],
+            game_playing_s: r3(self.playing_s),
+            ..GcBooks::default()
+        }
     }
 
     /// Runs the game up to `now_s`; returns what happened, in order.
@@ -583,12 +728,7 @@ impl Referee {
         }
         self.next_packet_s += PACKET_PERIOD_S;
         self.data.packet_number = self.data.packet_number.wrapping_add(1);
-        self.shown.packet_number = self.data.packet_number;
-        // The budget as counted up to now (messages come between the referee's steps).
-        for (s, t) in self.shown.teams.iter_mut().zip(&self.data.teams) {
-            s.message_budget = t.message_budget;
-        }
-        Some(self.shown.encode())
+        Some(self.shown().encode())
     }
 
     fn theirs(&self) -> u8 {
@@ -637,16 +777,10 @@ impl Referee {
         }
         self.shown = match &self.delayed {
             None => self.data,
+            // The copy with its own clock ([`Referee::shown`] puts in what is current).
             Some(d) => {
-                // The copy, with what every action keeps current in it: the budgets and
-                // the penalties (and the packet's number).
                 let mut shown = d.data;
                 shown.secs_remaining = d.play_left_s.ceil().clamp(0.0, 32767.0) as i16;
-                shown.packet_number = self.data.packet_number;
-                for (s, t) in shown.teams.iter_mut().zip(&self.data.teams) {
-                    s.message_budget = t.message_budget;
-                    s.players = t.players;
-                }
                 shown
             }
         };
