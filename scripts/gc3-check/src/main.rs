@@ -176,8 +176,9 @@ fn spawn_daemon(a: &Args, id: u8) -> Result<Child> {
         .with_context(|| format!("cannot start {}", a.huddle.display()))
 }
 
-/// A robot program: writes a new small value every `every` through the relay, as a robot
-/// program would, so that the daemon always has news and the budget binds. Each time
+/// A robot program: writes its pose and a new small value every `every` through the
+/// relay, as a robot program would, so that the team layer runs and the daemon always
+/// has news and the budget binds. Each time
 /// `whistles` goes up it writes the whistle, `0.2 · id` s late (a detector's delay).
 async fn writer(
     id: u8,
@@ -216,11 +217,20 @@ async fn writer(
             }
         }
         n += 1;
-        w.write_all(format!("SETV *.var.check.n{id} {n}\n").as_bytes())
-            .await?;
-        let reply = lines.next_line().await?.unwrap_or_default();
-        if !reply.starts_with("OK") {
-            bail!("robot {id}: SETV answered {reply:?}");
+        // Its pose (the team layer runs on it: it reads the whistle at its ticks) and a
+        // new value the team shares.
+        let x = f64::from(id) - 2.0;
+        for line in [
+            format!(
+                "SETV local.var.robot.pose [{x}, -1.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.003]\n"
+            ),
+            format!("SETV *.var.check.n{id} {n}\n"),
+        ] {
+            w.write_all(line.as_bytes()).await?;
+            let reply = lines.next_line().await?.unwrap_or_default();
+            if !reply.starts_with("OK") {
+                bail!("robot {id}: {} answered {reply:?}", line.trim());
+            }
         }
         tokio::time::sleep(every).await;
     }
