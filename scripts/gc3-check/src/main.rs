@@ -27,6 +27,9 @@
 //! Run inside a network namespace (scripts/gc3-check.sh makes one with a veth pair), so
 //! the broadcasts never leave the machine.
 
+// A real-time check: GameController3's runtime and real daemons run on the wall clock.
+#![allow(clippy::disallowed_methods)]
+
 use std::collections::BTreeMap;
 use std::net::IpAddr;
 use std::path::PathBuf;
@@ -444,12 +447,10 @@ async fn main() -> Result<()> {
                     act(VAction::FinishHalf(FinishHalf));
                 }
             }
-            State::Finished => {
-                if game.phase == Phase::SecondHalf {
-                    let at = *finished_at.get_or_insert_with(Instant::now);
-                    if at.elapsed() >= Duration::from_secs(3) {
-                        break;
-                    }
+            State::Finished if game.phase == Phase::SecondHalf => {
+                let at = *finished_at.get_or_insert_with(Instant::now);
+                if at.elapsed() >= Duration::from_secs(3) {
+                    break;
                 }
             }
             _ => {}
