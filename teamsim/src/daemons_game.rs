@@ -20,10 +20,11 @@
 //!   daemon says they are penalised. Nothing else of the game is told to them: their team
 //!   layers learn goals, penalties and Set from the listener themselves.
 //! - **The whistle.** Each program hears each of the referee's whistles as the in-process
-//!   robots do (the script's [`WhistleHearing`], `huddle sim --whistle P`, drawn with
-//!   [`WhistleHearing::hear`] from a generator of its own, so the packets' losses do not
-//!   move) and writes `local.var.robot.whistle true` to its daemon, as the Python
-//!   client's `whistle()` does; its daemon's layer takes it at its next tick
+//!   robots do (the script's [`WhistleHearing`](super::referee::WhistleHearing),
+//!   `huddle sim --whistle P`, drawn by [`GameTally::whistle`] from a generator of its
+//!   own, so the packets' losses do not move) and writes `local.var.robot.whistle true`
+//!   to its daemon, as the Python client's `whistle()` does; its daemon's layer takes it
+//!   at its next tick
 //!   (`TeamLayer::heard_whistle`). Its body follows its own reading of the whistle
 //!   ([`ProgramEars`]) ahead of the GC's late packets: it plays from a whistle heard in Set,
 //!   walks to its kick-off spot from one heard in Playing (a goal) or in Standby.
@@ -64,7 +65,7 @@ use serde::Serialize;
 
 use super::daemons::DaemonsError;
 use super::game::{KICK_OFF_WINDOW_S, OUR_TEAM};
-use super::referee::{program_order, GameScript, GcBooks, Referee, RefereeEvent, WhistleHearing};
+use super::referee::{program_order, GameScript, GameTally, GcBooks, Referee, RefereeEvent};
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::World;
 use crate::SimConfig;
@@ -257,10 +258,8 @@ pub(crate) struct GcSide {
     threads: Vec<JoinHandle<()>>,
     rng: ChaCha8Rng,
     loss: f64,
-    packets: u64,
-    packets_lost: u64,
-    penalties: u32,
-    kick_offs: u32,
+    /// Packets, losses, penalties, kick-offs and whistles, for the books.
+    tally: GameTally,
     kick_off_spot_error_m: Vec<f64>,
     opponent_spots: Vec<Pose>,
     penalised_at: BTreeMap<u8, f64>,
@@ -272,8 +271,6 @@ pub(crate) struct GcSide {
     whistle_rng: ChaCha8Rng,
     whistles: Vec<Vec<f64>>,
     ears: Vec<ProgramEars>,
-    whistles_heard: u32,
-    whistles_missed: u32,
     /// When the current stretch of Playing began (true time), and the team's frames the
     /// GC heard in the first [`KICK_OFF_WINDOW_S`] of each.
     playing_since_s: Option<f64>,
@@ -397,10 +394,7 @@ impl GcSide {
             threads: vec![counter, listener],
             rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x0063_0063_0063_0063),
             loss: cfg.network.mean_loss().clamp(0.0, 1.0),
-            packets: 0,
-            packets_lost: 0,
-            penalties: 0,
-            kick_offs: 0,
+            tally: GameTally::default(),
             kick_off_spot_error_m: Vec::new(),
             opponent_spots: world.opponents.iter().map(|b| b.pose).collect(),
             penalised_at: BTreeMap::new(),
@@ -410,8 +404,6 @@ impl GcSide {
             whistle_rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x7768_6973_746c_6521),
             whistles: vec![Vec::new(); n],
             ears: vec![ProgramEars::default(); n],
-            whistles_heard: 0,
-            whistles_missed: 0,
             playing_since_s: None,
             kick_off_frames: 0,
         })
@@ -475,11 +467,11 @@ impl GcSide {
             self.event(e, t_s, world, robots, homes, cfg, &mut placed);
         }
         if let Some(bytes) = self.referee.packet(t_s) {
-            self.packets += 1;
+            self.tally.packets += 1;
             self.first_packet_at.get_or_insert_with(Instant::now);
             for to in &self.listeners {
                 if self.rng.random::<f64>() < self.loss {
-                    self.packets_lost += 1;
+                    self.tally.packets_lost += 1;
                     continue;
                 }
                 self.sender
@@ -504,7 +496,7 @@ impl GcSide {
         let index = |id: u8| usize::from(id).checked_sub(1).filter(|&i| i < self.robots);
         match e {
             RefereeEvent::State(State::Playing) => {
-                self.kick_offs += 1;
+                self.tally.kick_offs += 1;
                 self.playing_since_s = Some(t_s);
                 let far = robots
                     .iter()
@@ -517,20 +509,16 @@ impl GcSide {
             }
             RefereeEvent::State(_) => self.playing_since_s = None,
             RefereeEvent::Whistle => {
-                let hearing: WhistleHearing = self.script.whistle;
-                for due in &mut self.whistles {
-                    match hearing.hear(&mut self.whistle_rng, t_s) {
-                        Some(at) => {
-                            due.push(at);
-                            self.whistles_heard += 1;
-                        }
-                        None => self.whistles_missed += 1,
-                    }
-                }
+                self.tally.whistle(
+                    self.script.whistle,
+                    &mut self.whistle_rng,
+                    t_s,
+                    &mut self.whistles,
+                );
             }
             RefereeEvent::Penalised(id) => {
                 let Some(i) = index(id) else { return };
-                self.penalties += 1;
+                self.tally.penalties += 1;
                 self.penalised_at.insert(id, t_s);
                 let spot = sideline_spot(cfg, i);
                 world.robots[i].pose = spot;
@@ -669,15 +657,7 @@ impl GcSide {
             })
             .collect();
         DaemonsGameReport {
-            books: GcBooks {
-                game_penalties: self.penalties,
-                game_kick_offs: self.kick_offs,
-                game_packets: self.packets,
-                game_packets_lost: self.packets_lost,
-                game_whistles_heard: self.whistles_heard,
-                game_whistles_missed: self.whistles_missed,
-                ..self.referee.books()
-            },
+            books: self.referee.books_with(&self.tally),
             kick_off_spot_error_m: self.kick_off_spot_error_m.clone(),
             penalised_claims_checked: self.claims_checked,
             penalised_claims_held: self.claims_held,

@@ -43,7 +43,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::referee::{program_order, GameScript, GcBooks, Referee, RefereeEvent};
+use super::referee::{program_order, GameScript, GameTally, GcBooks, Referee, RefereeEvent};
 use super::robot;
 use super::Simulation;
 use crate::field::geometry::{Pose, Vec2};
@@ -241,13 +241,11 @@ pub(crate) struct Game {
     rng: ChaCha8Rng,
     loss: f64,
     gc: SocketAddr,
-    packets: u64,
-    packets_lost: u64,
-    penalties: u32,
+    /// Packets, losses, penalties, kick-offs and whistles, for the books.
+    tally: GameTally,
     opponent_spots: Vec<Pose>,
     /// When the current stretch of Playing began, if play runs.
     playing_since_s: Option<f64>,
-    kick_offs: u32,
     kick_off: PlayBreakdown,
     penalised: PlayBreakdown,
     open_play: PlayBreakdown,
@@ -269,9 +267,6 @@ pub(crate) struct Game {
     whistle_rng: ChaCha8Rng,
     /// When each robot's program will hear the whistles it is to hear, simulated s.
     whistles: Vec<Vec<f64>>,
-    /// Whistles the programs heard, and missed.
-    whistles_heard: u32,
-    whistles_missed: u32,
     /// Each robot's program heard the whistle in Standby: it walks to Ready.
     standby_whistle: Vec<bool>,
 }
@@ -335,12 +330,9 @@ impl Game {
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x0063_0063_0063_0063),
             loss: loss.clamp(0.0, 1.0),
             gc: SocketAddr::from(([10, 0, 0, 1], gamecontroller::GAMECONTROLLER_DATA_PORT)),
-            packets: 0,
-            packets_lost: 0,
-            penalties: 0,
+            tally: GameTally::default(),
             opponent_spots,
             playing_since_s: None,
-            kick_offs: 0,
             kick_off: PlayBreakdown::default(),
             penalised: PlayBreakdown::default(),
             open_play: PlayBreakdown::default(),
@@ -351,8 +343,6 @@ impl Game {
             goals_known: vec![0; robots],
             whistle_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x7768_6973_746c_6521),
             whistles: vec![Vec::new(); robots],
-            whistles_heard: 0,
-            whistles_missed: 0,
             standby_whistle: vec![false; robots],
             goals_told_references: 0,
             goals_heard: Vec::new(),
@@ -363,15 +353,12 @@ impl Game {
     /// The referee whistled at `t_s`: each robot's program is to hear it (or not) as the
     /// script's [`crate::referee::WhistleHearing`] draws.
     fn whistle(&mut self, t_s: f64) {
-        for heard in &mut self.whistles {
-            match self.script.whistle.hear(&mut self.whistle_rng, t_s) {
-                Some(at) => {
-                    heard.push(at);
-                    self.whistles_heard += 1;
-                }
-                None => self.whistles_missed += 1,
-            }
-        }
+        self.tally.whistle(
+            self.script.whistle,
+            &mut self.whistle_rng,
+            t_s,
+            &mut self.whistles,
+        );
     }
 
     /// Robot `i` learnt of every goal up to the `known`-th at `t_s` (`at_set`: at Set, no
@@ -463,7 +450,7 @@ impl Game {
             return;
         }
         let since = *self.playing_since_s.get_or_insert_with(|| {
-            self.kick_offs += 1;
+            self.tally.kick_offs += 1;
             t_s - dt_s
         });
         let penalised =
@@ -538,15 +525,7 @@ impl Game {
     pub(crate) fn report(&self) -> GameReport {
         GameReport {
             game_with_penalised: self.with_penalised.rounded(),
-            books: GcBooks {
-                game_penalties: self.penalties,
-                game_kick_offs: self.kick_offs,
-                game_packets: self.packets,
-                game_packets_lost: self.packets_lost,
-                game_whistles_heard: self.whistles_heard,
-                game_whistles_missed: self.whistles_missed,
-                ..self.referee.books()
-            },
+            books: self.referee.books_with(&self.tally),
             game_kick_off: self.kick_off.rounded(),
             game_penalised: self.penalised.rounded(),
             game_open_play: self.open_play.rounded(),
@@ -660,13 +639,13 @@ impl Simulation {
         let mut goal_heard = Vec::new();
         let mut first_heard = false;
         if let Some(bytes) = game.referee.packet(t_s) {
-            game.packets += 1;
+            game.tally.packets += 1;
             for i in 0..self.robots.len() {
                 // (The draw is made for a deaf robot too: deafening one robot leaves the
                 // others' receptions as they were.)
                 let lost = game.rng.random::<f64>() < game.loss;
                 if lost || game.deaf.get(i).copied().unwrap_or(false) {
-                    game.packets_lost += 1;
+                    game.tally.packets_lost += 1;
                     continue;
                 }
                 let local = self.harness.local_now(i);
@@ -840,7 +819,7 @@ impl Simulation {
                     return;
                 };
                 if let Some(g) = &mut self.game {
-                    g.penalties += 1;
+                    g.tally.penalties += 1;
                 }
                 // Picked up and put on the sideline: it looks around and knows it.
                 let spot = sideline_spot(&self.cfg, i);

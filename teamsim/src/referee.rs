@@ -174,6 +174,40 @@ impl WhistleHearing {
     }
 }
 
+/// What a game's caller tallies of the referee's packets and events: the caller's part
+/// of [`GcBooks`], one struct for the in-process game and the `--daemons` game.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct GameTally {
+    pub(crate) penalties: u32,
+    pub(crate) kick_offs: u32,
+    pub(crate) packets: u64,
+    pub(crate) packets_lost: u64,
+    pub(crate) whistles_heard: u32,
+    pub(crate) whistles_missed: u32,
+}
+
+impl GameTally {
+    /// The referee whistled at `t_s`: each robot's program hears it (when, pushed on its
+    /// list in `due`) or misses it, as `hearing` draws from `rng`.
+    pub(crate) fn whistle(
+        &mut self,
+        hearing: WhistleHearing,
+        rng: &mut impl rand::Rng,
+        t_s: f64,
+        due: &mut [Vec<f64>],
+    ) {
+        for heard in due {
+            match hearing.hear(rng, t_s) {
+                Some(at) => {
+                    heard.push(at);
+                    self.whistles_heard += 1;
+                }
+                None => self.whistles_missed += 1,
+            }
+        }
+    }
+}
+
 /// What a robot program does on what it heard of the referee: the one rule of the
 /// in-process robots and of the `--daemons` programs. `heard`: the state the GC's
 /// packets show it (`None`: none heard yet); `penalised`: it is (its packets say so, or
@@ -526,6 +560,19 @@ impl Referee {
     /// Seconds of Playing so far.
     pub fn playing_s(&self) -> f64 {
         self.playing_s
+    }
+
+    /// The books as the reports show them, with the caller's tallies `t`.
+    pub(crate) fn books_with(&self, t: &GameTally) -> GcBooks {
+        GcBooks {
+            game_penalties: t.penalties,
+            game_kick_offs: t.kick_offs,
+            game_packets: t.packets,
+            game_packets_lost: t.packets_lost,
+            game_whistles_heard: t.whistles_heard,
+            game_whistles_missed: t.whistles_missed,
+            ..self.books()
+        }
     }
 
     /// The books as the reports show them, the caller's tallies at 0 (see [`GcBooks`]).
