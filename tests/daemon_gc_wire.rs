@@ -137,6 +137,17 @@ fn daemon(
     (d, dir)
 }
 
+/// [`daemon`] with `extra` flags on a fresh wire and GC port, its status packets to a
+/// socket of the test's that nothing reads (kept open, with the config directory, for
+/// as long as the test holds them).
+fn gc_daemon(extra: &[&str]) -> (Wire, u16, Daemon, UdpSocket, tempfile::TempDir) {
+    let wire = Wire::new();
+    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let gc_port = free_udp_port();
+    let (d, dir) = daemon(&wire, gc_port, status.local_addr().unwrap().port(), extra);
+    (wire, gc_port, d, status, dir)
+}
+
 /// The floats of a `VAL key floats [...]` answer (empty for anything else).
 fn floats(answer: &str) -> Vec<f32> {
     let Some(b) = comms::relay::Binding::parse(answer) else {
@@ -260,15 +271,7 @@ fn a_gc_gone_quiet_leaves_its_last_figure_in_force_on_the_wire() {
     // GC's first packet on, the daemon sends at most the 3, and after its last packet at
     // most what that one allowed. (Before the fix a silent GC's figure was forgotten
     // after 5 s and the daemon paced by its own share again: frames at the GC's 0.)
-    let mut wire = Wire::new();
-    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let gc_port = free_udp_port();
-    let (d, _dir) = daemon(
-        &wire,
-        gc_port,
-        status.local_addr().unwrap().port(),
-        &["--budget", "spl"],
-    );
+    let (mut wire, gc_port, d, _status, _dir) = gc_daemon(&["--budget", "spl"]);
     let mut c = d.client();
     let mut gc = ScriptedGc::new(gc_port);
     gc.game.state = State::Playing;
@@ -343,15 +346,8 @@ fn a_clients_clok_is_refused_while_the_gcs_figures_set_the_clock() {
     // open the line until the GC's next packet, and the 16 would go at once. It is
     // refused (`ERR 424`), counted, and in the GC's silence that follows (shorter than
     // its `lost_after`) nothing goes on the wire while the program writes.
-    let mut wire = Wire::new();
-    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let gc_port = free_udp_port();
-    let (d, _dir) = daemon(
-        &wire,
-        gc_port,
-        status.local_addr().unwrap().port(),
-        &["--budget", "spl", "--refresh", "50ms"],
-    );
+    let (mut wire, gc_port, d, _status, _dir) =
+        gc_daemon(&["--budget", "spl", "--refresh", "50ms"]);
     let mut c = d.client();
     let answer = c.ask("CLOK 1200");
     assert_eq!(answer, "OK", "no GC heard: the client's clock is taken");
@@ -491,15 +487,7 @@ fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
     // is in play at once and, after the hold's 3 s, goes, while the GC still says Set;
     // its frames on the wire resume then, not when the GC says Playing (it never does
     // here).
-    let mut wire = Wire::new();
-    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let gc_port = free_udp_port();
-    let (d, _dir) = daemon(
-        &wire,
-        gc_port,
-        status.local_addr().unwrap().port(),
-        &["--refresh", "50ms"],
-    );
+    let (mut wire, gc_port, d, _status, _dir) = gc_daemon(&["--refresh", "50ms"]);
     let mut c = d.client();
     let mut gc = ScriptedGc::new(gc_port);
     gc.game.state = State::Set;
@@ -567,15 +555,8 @@ fn a_whistle_the_program_hears_starts_play_while_the_gc_still_says_set() {
 /// its cost and a shared value every 40 ms; the program hears the whistle at the
 /// window's start if `whistle`. The GC counts what it sees on the wire.
 fn frames_in_delayed_set(whistle: bool, window: Duration) -> u64 {
-    let mut wire = Wire::new();
-    let status = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let gc_port = free_udp_port();
-    let (d, _dir) = daemon(
-        &wire,
-        gc_port,
-        status.local_addr().unwrap().port(),
-        &["--budget", "spl", "--team-size", "1", "--refresh", "50ms"],
-    );
+    let (mut wire, gc_port, d, _status, _dir) =
+        gc_daemon(&["--budget", "spl", "--team-size", "1", "--refresh", "50ms"]);
     let mut c = d.client();
     let mut gc = ScriptedGc::new(gc_port);
     gc.game.state = State::Set;
