@@ -458,12 +458,17 @@ fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
 /// shows Set for 15 s after the whistle, and each of its packets would otherwise set the
 /// clock back. Written when it changes (`[t]`, or `[]` once the GC caught up).
 fn publish_play_whistle(replica: &mut Replica, now: Instant, at: Option<f64>) {
-    let value: Vec<f64> = at.into_iter().collect();
     let key = Key::parse(contract::PLAY_WHISTLE_KEY).expect("a valid key");
-    let shown = replica.blackboard().get(&key).map(|e| &e.value);
-    if shown == Some(&Value::Floats(value.clone())) || (shown.is_none() && value.is_empty()) {
+    // Compared in place: the tick runs at 25 Hz and the value rarely changes.
+    let unchanged = match replica.blackboard().get(&key).map(|e| &e.value) {
+        Some(Value::Floats(shown)) => shown.as_slice() == at.as_slice(),
+        None => at.is_none(),
+        Some(_) => false,
+    };
+    if unchanged {
         return;
     }
+    let value: Vec<f64> = at.into_iter().collect();
     if let Err(e) = replica.set(now, contract::PLAY_WHISTLE_KEY, Value::Floats(value)) {
         tracing::warn!(error = %e, "team layer: cannot publish the play whistle");
     }
