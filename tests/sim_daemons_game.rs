@@ -25,43 +25,15 @@ use huddle::sim::SimConfig;
 
 #[test]
 fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
-    let seed = 5;
-    let script = GameScript {
-        halves: 1,
-        half_s: 60.0,
-        break_s: 0.0,
-        initial_s: 3.0,
-        standby_s: 3.0,
-        ready_s: 10.0,
-        set_s: 3.0,
-        finished_s: 3.0,
-        penalty_s: 20.0,
-        messages_per_game: 1200,
-        penalties: vec![ScriptedPenalty {
-            robot: 3,
-            half: 1,
-            after_play_s: 10.0,
-        }],
-        // GameController3's late packets, as on a real field; the robot programs here
-        // hear no whistle (they follow `local.var.gc.state`), so each layer goes by the
-        // GC's delayed word.
-        delays: GcDelays::gc3(),
-        whistle: WhistleHearing::deaf(),
+    let penalty = ScriptedPenalty {
+        robot: 3,
+        half: 1,
+        after_play_s: 10.0,
     };
-    let mut cfg = SimConfig {
-        robots: 3,
-        seed,
-        budget: Some(comms::BudgetSpec::SPL),
-        duration_s: script.length_s() + 600.0,
-        game: Some(script),
-        ..SimConfig::default()
-    };
-    cfg.network.loss = Some(0.0);
-    let opts = DaemonsOptions {
-        exe: env!("CARGO_BIN_EXE_huddle").into(),
-        impair: Some("loss=0".into()),
-        log_dir: None,
-    };
+    // GameController3's late packets, as on a real field; the robot programs here hear no
+    // whistle (they follow `local.var.gc.state`), so each layer goes by the GC's delayed
+    // word.
+    let (cfg, opts) = short_half(5, 60.0, vec![penalty], WhistleHearing::deaf());
     let r = daemons::run(&cfg, &opts, |_| {}).expect("the game is played with daemons");
     let g = r.game.as_ref().expect("a game report under --game");
     let shown = format!("{r}");
@@ -134,35 +106,7 @@ fn three_daemons_play_a_short_half_under_a_gamecontroller_on_loopback() {
 #[test]
 fn daemons_whose_programs_hear_the_whistle_play_from_the_kick_off() {
     let game = |whistle: WhistleHearing| {
-        let script = GameScript {
-            halves: 1,
-            half_s: 90.0,
-            break_s: 0.0,
-            initial_s: 3.0,
-            standby_s: 3.0,
-            ready_s: 10.0,
-            set_s: 3.0,
-            finished_s: 3.0,
-            penalty_s: 20.0,
-            messages_per_game: 1200,
-            penalties: Vec::new(),
-            delays: GcDelays::gc3(),
-            whistle,
-        };
-        let mut cfg = SimConfig {
-            robots: 3,
-            seed: 6,
-            budget: Some(comms::BudgetSpec::SPL),
-            duration_s: script.length_s() + 600.0,
-            game: Some(script),
-            ..SimConfig::default()
-        };
-        cfg.network.loss = Some(0.0);
-        let opts = DaemonsOptions {
-            exe: env!("CARGO_BIN_EXE_huddle").into(),
-            impair: Some("loss=0".into()),
-            log_dir: None,
-        };
+        let (cfg, opts) = short_half(6, 90.0, Vec::new(), whistle);
         std::thread::spawn(move || daemons::run(&cfg, &opts, |_| {}))
     };
     let hearing = WhistleHearing {
@@ -221,4 +165,45 @@ fn daemons_whose_programs_hear_the_whistle_play_from_the_kick_off() {
             "never illegal, every relay write taken (the whistle's too): {shown}"
         );
     }
+}
+
+/// A one-half game of three robots under GameController3's delays, on real daemons with
+/// `--budget spl` over loopback links that lose nothing (so the GC's count can be held to
+/// the daemons' own).
+fn short_half(
+    seed: u64,
+    half_s: f64,
+    penalties: Vec<ScriptedPenalty>,
+    whistle: WhistleHearing,
+) -> (SimConfig, DaemonsOptions) {
+    let script = GameScript {
+        halves: 1,
+        half_s,
+        break_s: 0.0,
+        initial_s: 3.0,
+        standby_s: 3.0,
+        ready_s: 10.0,
+        set_s: 3.0,
+        finished_s: 3.0,
+        penalty_s: 20.0,
+        messages_per_game: 1200,
+        penalties,
+        delays: GcDelays::gc3(),
+        whistle,
+    };
+    let mut cfg = SimConfig {
+        robots: 3,
+        seed,
+        budget: Some(comms::BudgetSpec::SPL),
+        duration_s: script.length_s() + 600.0,
+        game: Some(script),
+        ..SimConfig::default()
+    };
+    cfg.network.loss = Some(0.0);
+    let opts = DaemonsOptions {
+        exe: env!("CARGO_BIN_EXE_huddle").into(),
+        impair: Some("loss=0".into()),
+        log_dir: None,
+    };
+    (cfg, opts)
 }
