@@ -317,6 +317,36 @@ impl Talkers {
     }
 }
 
+/// Seconds of talking the talkers' level is measured on, once the room has filled.
+const CALIBRATION_S: usize = 30;
+
+/// `n` talkers drawn from `rng`, their gain set so that their in-band power while someone
+/// talks is `snr_db` below a message's ([`SIGNAL_POWER`]), measured on a copy of the same
+/// talkers (the same recordings, offsets, levels and positions) over [`CALIBRATION_S`] once
+/// the room has filled.
+///
+/// The copy draws from a clone of `rng` taken *before* the talkers: drawn after them (as up
+/// to round 13), it was other talkers, and a row's babble sat anywhere from 9 dB below to
+/// 9 dB above its stated SNR (rooms seed 993, row 9, "lab-0.5 0 dB": 6.4 dB above).
+fn calibrated_talkers(
+    room: &ExternalRoom,
+    babble: &[Vec<f32>],
+    n: usize,
+    snr_db: f64,
+    rng: &mut ChaCha8Rng,
+) -> Talkers {
+    let rate_f = f64::from(ROOM_SET_RATE_HZ);
+    let mut probe = Talkers::new(room, babble, n, &mut rng.clone());
+    let mut t = Talkers::new(room, babble, n, rng);
+    let warm = (2.0 * room.t60_measured_s.max(0.1) * rate_f) as usize;
+    let mut x = vec![0.0f32; warm + CALIBRATION_S * ROOM_SET_RATE_HZ as usize];
+    probe.add_to(babble, &mut x);
+    let p = talking_power(&x[warm..], rate_f);
+    let target = SIGNAL_POWER / 10f64.powf(snr_db / 10.0);
+    t.gain = (target / p.max(1e-30)).sqrt() as f32;
+    t
+}
+
 /// In-band power of `x` over its 100 ms blocks within 40 dB of the mean block (the
 /// talking, not the pauses).
 fn talking_power(x: &[f32], rate: f64) -> f64 {
@@ -401,18 +431,9 @@ fn scene_trial(
         })
         .collect();
 
-    let mut talkers = trial.snr_db.map(|snr| {
-        let mut t = Talkers::new(room, babble, trial.talkers.max(1), &mut rng);
-        // Calibrate on a copy of the same talkers: 30 s once the room has filled.
-        let mut probe = Talkers::new(room, babble, trial.talkers.max(1), &mut rng.clone());
-        let warm = (2.0 * room.t60_measured_s.max(0.1) * rate_f) as usize;
-        let mut x = vec![0.0f32; warm + 30 * rate as usize];
-        probe.add_to(babble, &mut x);
-        let p = talking_power(&x[warm..], rate_f);
-        let target = SIGNAL_POWER / 10f64.powf(snr / 10.0);
-        t.gain = (target / p.max(1e-30)).sqrt() as f32;
-        t
-    });
+    let mut talkers = trial
+        .snr_db
+        .map(|snr| calibrated_talkers(room, babble, trial.talkers.max(1), snr, &mut rng));
 
     // The schedule: episodes of one message, or of two robots' messages overlapping.
     let mut queue: Vec<Queued> = Vec::new();
@@ -611,4 +632,74 @@ pub fn run_scene_false_alarm_trial(
     decoder.finish();
     out.extend(std::iter::from_fn(|| decoder.poll_message()));
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A room with two robot positions and four talker positions, short echoes.
+    fn small_room() -> ExternalRoom {
+        let h = |d: usize| {
+            let mut h = vec![0.0f32; d + 3];
+            h[d] = 0.8;
+            h[d + 2] = 0.6;
+            h
+        };
+        ExternalRoom {
+            name: "small".into(),
+            t60_nominal_s: 0.0,
+            t60_measured_s: 0.0,
+            senders: vec![h(1), h(5)],
+            talkers: (0..4).map(|k| h(2 * k + 1)).collect(),
+        }
+    }
+
+    /// Eight "recordings" of 3 s whose levels span 42 dB (6 dB apart), each noise bursts
+    /// with pauses of digital silence: talkers drawn at random differ by tens of dB.
+    fn uneven_babble() -> Vec<Vec<f32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(33);
+        (0..8)
+            .map(|k| {
+                let a = 0.01 * 2f32.powi(k);
+                (0..3 * ROOM_SET_RATE_HZ as usize)
+                    .map(|i| {
+                        let talking = (i / 4000) % 3 != 2;
+                        let v: f32 = rng.random_range(-1.0..1.0);
+                        if talking {
+                            a * v
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The talkers a row plays are the talkers its SNR was measured on: over the same
+    /// 30 s the calibration heard, their in-band talking power is the stated SNR below the
+    /// message's, whichever recordings, offsets and levels the seed drew. (Up to round 13
+    /// the probe was drawn after the talkers, i.e. other talkers: rows sat up to ±9 dB
+    /// off their stated SNR.)
+    #[test]
+    fn talkers_sound_at_the_snr_they_were_calibrated_to() {
+        let room = small_room();
+        let babble = uneven_babble();
+        let rate_f = f64::from(ROOM_SET_RATE_HZ);
+        for seed in [1u64, 2, 3, 4, 5, 6] {
+            for snr in [0.0, 10.0] {
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                let mut t = calibrated_talkers(&room, &babble, 4, snr, &mut rng);
+                let warm = (2.0 * 0.1 * rate_f) as usize;
+                let mut x = vec![0.0f32; warm + CALIBRATION_S * ROOM_SET_RATE_HZ as usize];
+                t.add_to(&babble, &mut x);
+                let heard = 10.0 * (SIGNAL_POWER / talking_power(&x[warm..], rate_f)).log10();
+                assert!(
+                    (heard - snr).abs() < 0.1,
+                    "seed {seed}: talkers calibrated to {snr} dB sound at {heard:.2} dB"
+                );
+            }
+        }
+    }
 }
