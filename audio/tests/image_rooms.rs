@@ -90,17 +90,33 @@ fn short_messages_hold_over_talkers_who_pause_into_digital_silence() {
     }
 }
 
+/// Long messages in the image-source rooms, quiet and at 0 dB of talking babble: under the
+/// checked plan (`audio::TeamPlan::Checked`, the format #33 asked for: a long message's
+/// frames use other data basics than a short message) nothing comes out wrong, whatever
+/// frame the room or the babble takes. Under the seed's plan every frame of a long message
+/// is also a valid short one, and a long message whose first frame is lost outright reads
+/// as a short: at the babble's true 0 dB (since the rooms' SNR calibration was mended in
+/// round 14) room set 7's lab-0.5, seed 72, has one, long (RightAttacker, 257) heard as
+/// short 5 at its second frame, with the first frame's sender basic one tone of three
+/// under the babble. No end test can rule that out, which is why the checked plan exists;
+/// the seed's plan is held to it where the room alone (no babble) is the channel.
 #[test]
 fn long_messages_in_image_source_rooms_are_never_cut_to_a_short() {
     let Some(set) = room_set() else { return };
+    let rows = [
+        (audio::TeamPlan::Checked, None),
+        (audio::TeamPlan::Checked, Some(0.0)),
+        (audio::TeamPlan::Three, None),
+    ];
     for room in &set.rooms {
-        for snr in [None, Some(0.0)] {
+        for (team, snr) in rows {
             let mut t = trial(72, snr, 3, 40);
             t.long_share = 1.0;
+            t.team = team;
             let out = run_scene_trial(room, &set.babble, &t).expect("trial runs");
             assert_eq!(
                 out.wrong, 0,
-                "{} ({snr:?} dB): a long message read as something else: {:?}",
+                "{} ({snr:?} dB, plan {team}): a long message read as something else: {:?}",
                 room.name, out.wrong_reports
             );
             // 0 dB of talking babble is the hardest row (77–95% of long messages when the
@@ -109,7 +125,7 @@ fn long_messages_in_image_source_rooms_are_never_cut_to_a_short() {
             let floor = if snr.is_none() { 0.95 } else { 0.7 };
             assert!(
                 out.long_correct as f64 >= floor * out.long_sent as f64,
-                "{} ({snr:?} dB): {}/{} long messages",
+                "{} ({snr:?} dB, plan {team}): {}/{} long messages",
                 room.name,
                 out.long_correct,
                 out.long_sent
