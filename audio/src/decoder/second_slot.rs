@@ -11,7 +11,8 @@ impl Decoder {
     /// (tones `present`, per-window excess `level`): the first frame's data dying away
     /// (see `Decoder::first_data_tail`), and a **lone data tone**, a present tone of a
     /// data basic none of whose two other tones is present, save the first frame's data
-    /// basic. Nothing on a first slot.
+    /// basic. Nothing on a first slot, and no lone tone when the frame decided there
+    /// carries the first frame's data again.
     ///
     /// On a second slot the sender is known: the first slot passed every check, and the
     /// sender must hold its level through this one. What the stray test guards against
@@ -39,6 +40,14 @@ impl Decoder {
         if t.stage != Stage::Slot2 {
             return own;
         }
+        if frame.data == t.data[0] {
+            // The first frame's data again: in a hall its tail sounds through the second
+            // slot with two votes, and a lone loud tone may then be the true second
+            // data's, its other tones in the room's notches (check row 992030 at
+            // 1989.81 s: data 13's tail, k40 at 34 per window, decided, and data 17's k20
+            // at 333, alone, let go: a wrong message). Judged as before.
+            return own;
+        }
         let first_data = SENDER_COUNT + usize::from(t.data[0]);
         let frame_tones = frame.tones();
         for (k, lone) in own.iter_mut().enumerate() {
@@ -61,7 +70,7 @@ impl Decoder {
     /// votes, with the sender's, sound like a transmitter's tones (each vote holds in each
     /// half, stands above its neighbours and sounds steadily: the checks the decided frame
     /// must pass anyway, see `Decoder::sounds_like_tones`). One data basic, or none,
-    /// is returned as it is.
+    /// is returned as it is, and so are all when only the first frame's data would stay.
     ///
     /// A second frame's data tones sound through their slot from its start; in a babble
     /// hall at 0 dB the talkers' harmonics give some other data basic two votes now and
@@ -84,7 +93,10 @@ impl Decoder {
         if data.len() <= 1 {
             return data;
         }
-        data.into_iter()
+        let first_data = SENDER_COUNT + usize::from(t.data[0]);
+        let sounding: Vec<usize> = data
+            .iter()
+            .copied()
             .filter(|&d| {
                 let frame = Frame {
                     sender: t.sender,
@@ -92,6 +104,13 @@ impl Decoder {
                 };
                 self.sounds_like_tones(frame, present, sums, count, t.scale, a, b)
             })
-            .collect()
+            .collect();
+        if sounding == [first_data] {
+            // The first frame's data is never decided by this filter: its tail can sound
+            // steadily enough through a second slot while the true second data, in the
+            // room's notches, does not (see `Decoder::second_slot_own_tones`).
+            return data;
+        }
+        sounding
     }
 }
