@@ -276,7 +276,7 @@ impl Decoder {
             a,
             b,
             clear,
-            &self.first_data_tail(t, a, b, &level),
+            &self.second_slot_own_tones(t, frame, &present, a, b, &level),
         ) {
             self.note(a, || {
                 let own = frame.tones();

@@ -209,6 +209,7 @@ mod onset;
 mod refusals;
 mod rules;
 mod search;
+mod second_slot;
 mod tracking;
 mod windows;
 

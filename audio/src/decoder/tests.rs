@@ -7,6 +7,7 @@ use crate::encoder::{Encoder, EncoderConfig};
 use crate::tones::{basic_tones, tone_frequency_hz, Frame, SENDER_COUNT};
 
 mod room;
+mod second_slot;
 
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();

@@ -535,6 +535,7 @@ impl Decoder {
         let data: Vec<usize> = (SENDER_COUNT..BASIC_COUNT)
             .filter(|&b| votes(&present, b) >= 2)
             .collect();
+        let data = self.second_data_that_sound(t, data, &present, sums, count, a, b);
         let &[d] = data.as_slice() else {
             return None;
         };

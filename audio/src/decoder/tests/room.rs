@@ -6,7 +6,7 @@ use crate::tones::{tone_frequency_hz, Frame, Message, Sender};
 
 /// `seconds` of tones whose amplitudes follow their functions of absolute time, over
 /// white noise of `sigma`.
-fn shaped_scene(
+pub(super) fn shaped_scene(
     tones: &[(usize, &dyn Fn(f64) -> f64)],
     seconds: f64,
     sigma: f64,
