@@ -253,6 +253,15 @@ impl Decoder {
                 format!("basic {basic} sounds like a second transmitter")
             });
             Some("a second transmitter")
+        } else if let Some(why) = (t.stage == super::tracking::Stage::Slot1)
+            .then(|| {
+                self.assembled_by_background(frame, &present, &level, &sums, count, t.scale, a, b)
+            })
+            .flatten()
+        {
+            // A frame of bursts or of weak tones among many (see `bursts.rs`).
+            self.note(a, || why);
+            Some("assembled by the background")
         } else if let Some(share) = (t.stage == super::tracking::Stage::Slot2
             && frame.data != t.data[0])
             .then(|| self.second_data_began_before(t, frame.data, &present, a, b))
@@ -854,7 +863,11 @@ fn votes_ring_clear(frame: Frame, present: &[bool; TONE_COUNT], level: &[f64; TO
 }
 
 /// The median level of the frame's own tones that are present.
-fn typical_level(frame: Frame, present: &[bool; TONE_COUNT], level: &[f64; TONE_COUNT]) -> f64 {
+pub(super) fn typical_level(
+    frame: Frame,
+    present: &[bool; TONE_COUNT],
+    level: &[f64; TONE_COUNT],
+) -> f64 {
     median(
         frame
             .tones()
