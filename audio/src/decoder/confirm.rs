@@ -94,7 +94,7 @@ const BURST_SHARE: f64 = 0.25;
 /// bring a rival along reach 11 dB now and then: at 6 dB one of 11 dB became a false
 /// message in 10 h of dry babble, and one of 8 dB after a failed slot in a T60 2.0 s
 /// hall.
-const HALL_CLEAR_LEVEL: f64 = 31.6;
+pub(super) const HALL_CLEAR_LEVEL: f64 = 31.6;
 
 /// Least typical tone level (10 dB) of a frame whose rivals are judged by the transmitter
 /// test because each of its basics has a tone at the hall level (see [`votes_ring_clear`]).
@@ -254,12 +254,10 @@ impl Decoder {
             });
             Some("a second transmitter")
         } else if let Some(why) = (t.stage == super::tracking::Stage::Slot1)
-            .then(|| {
-                self.assembled_by_background(frame, &present, &level, &sums, count, t.scale, a, b)
-            })
+            .then(|| self.assembled_by_background(frame, &present, &level))
             .flatten()
         {
-            // A frame of bursts or of weak tones among many (see `bursts.rs`).
+            // A weak frame among many tones (see `bursts.rs`).
             self.note(a, || why);
             Some("assembled by the background")
         } else if let Some(share) = (t.stage == super::tracking::Stage::Slot2
