@@ -52,3 +52,23 @@ fn backgrounds_that_stop_and_start_say_nothing() {
 fn ten_hours_of_backgrounds_that_stop_and_start_say_nothing() {
     check(3000.0, 8001);
 }
+
+/// Two talkers pausing into digital silence in a T60 1.2 s hall, the first seconds of
+/// tuning row 19001 (`huddle audio backgrounds --seed 19`): their harmonics assembled
+/// sender 1 with data 0 at 6.08 s, a frame of 8.9 dB typical tone among 14 other tones
+/// present, whose vote tones each passed the per-tone checks (a burst of 316 on one, 94
+/// on another, the floor between). A frame that weak in a band that crowded is the
+/// background's (`decoder/bursts.rs`): nothing is reported.
+#[test]
+fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
+    let out = run_background_false_alarm_trial(Background::Talkers, 9.0, 1.2, 19_001);
+    let heard: Vec<String> = out
+        .detections
+        .iter()
+        .map(|d| format!("{} at {:.2} s", d.message, d.start_s))
+        .collect();
+    assert!(
+        heard.is_empty(),
+        "talkers T60 1.2 s, row 19001, 9 s: false messages {heard:?}"
+    );
+}

@@ -94,7 +94,7 @@ const BURST_SHARE: f64 = 0.25;
 /// bring a rival along reach 11 dB now and then: at 6 dB one of 11 dB became a false
 /// message in 10 h of dry babble, and one of 8 dB after a failed slot in a T60 2.0 s
 /// hall.
-const HALL_CLEAR_LEVEL: f64 = 31.6;
+pub(super) const HALL_CLEAR_LEVEL: f64 = 31.6;
 
 /// Least typical tone level (10 dB) of a frame whose rivals are judged by the transmitter
 /// test because each of its basics has a tone at the hall level (see [`votes_ring_clear`]).
@@ -253,6 +253,13 @@ impl Decoder {
                 format!("basic {basic} sounds like a second transmitter")
             });
             Some("a second transmitter")
+        } else if let Some(why) = (t.stage == super::tracking::Stage::Slot1)
+            .then(|| self.assembled_by_background(frame, &present, &level))
+            .flatten()
+        {
+            // A weak frame among many tones (see `bursts.rs`).
+            self.note(a, || why);
+            Some("assembled by the background")
         } else if let Some(share) = (t.stage == super::tracking::Stage::Slot2
             && frame.data != t.data[0])
             .then(|| self.second_data_began_before(t, frame.data, &present, a, b))
@@ -854,7 +861,11 @@ fn votes_ring_clear(frame: Frame, present: &[bool; TONE_COUNT], level: &[f64; TO
 }
 
 /// The median level of the frame's own tones that are present.
-fn typical_level(frame: Frame, present: &[bool; TONE_COUNT], level: &[f64; TONE_COUNT]) -> f64 {
+pub(super) fn typical_level(
+    frame: Frame,
+    present: &[bool; TONE_COUNT],
+    level: &[f64; TONE_COUNT],
+) -> f64 {
     median(
         frame
             .tones()

@@ -13,6 +13,7 @@
 //! | `confirm.rs`    | the decision on one aligned slot, and the checks a message must pass |
 //! | `off_grid.rs`   | the check that all six tones share one frequency scale               |
 //! | `coherence.rs`  | the check that a frame's two basics begin and end together           |
+//! | `bursts.rs`     | the check that a first frame is not one the background assembled   |
 //! | `refusals.rs`   | first slots refused for a foreign sound, remembered over their span  |
 //! | `tracking.rs`   | following a frame from its first slot to a report                    |
 //! | `end_test.rs`   | the end test after a slot: short or long message                     |
@@ -200,6 +201,7 @@
 //! holding wrong accepts at 1e-3 needs about 7 nats, i.e. more than the half-slot horizon
 //! holds: the lean decides there, about half a tone after the end.
 
+mod bursts;
 mod coherence;
 mod confirm;
 mod end_test;
@@ -213,6 +215,8 @@ mod second_slot;
 mod tracking;
 mod windows;
 
+#[cfg(test)]
+mod bursts_tests;
 #[cfg(test)]
 mod coherence_tests;
 #[cfg(test)]
