@@ -128,16 +128,6 @@ impl Decoder {
     /// sounded before its onset (at [`PART_SHARE`] of its level or more), the onset was
     /// late and the second frame did begin before the slot: no verdict (with this test
     /// alone, the two-robot tuning rows lost 194 messages of 30,000).
-    ///
-    /// The same test runs again on the one window just before the slot (and the one just
-    /// before the first frame's onset): a data basic that began an eighth of a slot
-    /// early or a little more fills too little of the quarter to hold it (tuning row
-    /// 47031, lab T60 0.5 s, at 1066.52 s: sender 1's data 15 began about 0.15 s before
-    /// sender 2's second slot and held 0.40 of its level over the quarter's three
-    /// windows, 1.05 in the last one; sender 2's second data 13 lay in the room's
-    /// notches, and the slot passed as sender 2's long 393, a wrong message). A robot's
-    /// two frames are a slot apart, so a first onset found late shows the same in the
-    /// window before each slot; another robot's data shows only before the second.
     pub(super) fn second_data_began_before(
         &self,
         t: &Tracking,
@@ -152,32 +142,13 @@ impl Decoder {
             .collect();
         let q = self.quarters(&tones, t.scale, a, b)?;
         let quarter = (b - a) / PARTS as f64;
-        let window = self.geometry.window_len as f64;
-        [quarter, window]
-            .into_iter()
-            .find_map(|span| self.data_held_before(t, &tones, &q, a, span))
-    }
-
-    /// Whether `tones` (a second slot's data basic, filling the slot from `a` as `q`
-    /// says) held [`HOLD_SHARE`] of their level, beyond the noise, over the `span`
-    /// before `a`, while the first frame of `t` kept under [`PART_SHARE`] of its level
-    /// over the same span before its onset: the share held, when so (see
-    /// [`Decoder::second_data_began_before`]).
-    fn data_held_before(
-        &self,
-        t: &Tracking,
-        tones: &[usize],
-        q: &Quarters,
-        a: f64,
-        span: f64,
-    ) -> Option<f64> {
-        let (observed, n) = self.part_excess(tones, t.scale, a - span, a)?;
+        let (observed, n) = self.part_excess(&tones, t.scale, a - quarter, a)?;
         let expected = q.mean * n as f64;
         let spread = (OVERLAP_INFLATION * q.variance * n as f64).sqrt();
         if observed < HOLD_SHARE * expected || observed < PART_NOISE_Z * spread {
             return None;
         }
-        // The first frame, over the first slot and the span before it.
+        // The first frame, over the first slot and the quarter before it.
         let first = Frame {
             sender: t.sender,
             data: t.data[0],
@@ -189,7 +160,7 @@ impl Decoder {
             .collect();
         let slot = self.geometry.slot_samples;
         let q1 = self.quarters(&tones, t.scale, t.onset, t.onset + slot)?;
-        let (before, m) = self.part_excess(&tones, t.scale, t.onset - span, t.onset)?;
+        let (before, m) = self.part_excess(&tones, t.scale, t.onset - quarter, t.onset)?;
         (before < PART_SHARE * q1.mean * m as f64).then_some(observed / expected)
     }
 
