@@ -267,3 +267,69 @@ fn a_frame_refused_for_a_foreign_sound_stays_refused_when_found_again_a_few_wind
     e.remember_refusal(frame, a, a, 23, "does not sound through");
     assert!(e.recalled_refusal(frame, later, later, 23).is_none());
 }
+
+#[test]
+#[ignore = "known wrong message, not fixed: the window test that fixed it cost one-robot long \
+            messages (acoustic-round14-wrong.md)"]
+fn a_second_slot_whose_data_began_a_window_before_it_is_another_robots_frame() {
+    // Lab T60 0.5 s, two robots at 10 dB (tuning row 47031, 1066.52 s): sender 2 sent
+    // long (18, 13), its second data (k16, k40, k64) in the room's notches; sender 1
+    // began long (15, 19) about 0.15 s before sender 2's second slot, its data 15 loud
+    // and its sender tones weak. Over the quarter before the slot data 15 held only 0.40
+    // of its level (the quarter's first window was still silent), in the window just
+    // before the slot 1.05; the slot passed as sender 2's long 393, a wrong message.
+    // Amplitudes from the row's per-window levels (amplitude ∝ √level, k26 = 0.02 at 992).
+    // Here sender 1 leads by 0.12 s: with the windows of this synthetic slot, at 0.15 s the
+    // quarter test refuses the slot already; at 0.12 s the decoder reports long 393 on every
+    // seed. Round 14 (audio14w) refused it with the same test on the one window before the
+    // slot (commit 8c5ac84, reverted): that cost 28 right long messages on 36 two-robot
+    // tuning rows and one-robot long messages too (check row 993030 881 -> 877, dry long
+    // -13 dB 99.4% -> 99.0%), so the scenario is kept here, ignored, for the next round;
+    // see acoustic-round14-wrong.md. A lead of 0.10 s or less was not caught by it either.
+    let (s2, s1) = (Sender::RightAttacker, Sender::LeftAttacker);
+    let lead = 0.12;
+    let mut all = Vec::new();
+    // Frame::tones order: sender low, data low, sender mid, data mid, sender high, data high.
+    for (sender, data, amps, from) in [
+        (s2, 18, [0.0082, 0.0055, 0.02, 0.0121, 0.0015, 0.0031], 0.5),
+        (s2, 13, [0.0082, 0.0034, 0.02, 0.0022, 0.0015, 0.001], 1.5),
+        (
+            s1,
+            15,
+            [0.0014, 0.0066, 0.0014, 0.0068, 0.0042, 0.0],
+            1.5 - lead,
+        ),
+        (
+            s1,
+            19,
+            [0.0014, 0.002, 0.0014, 0.0026, 0.0042, 0.0027],
+            2.5 - lead,
+        ),
+    ] {
+        let frame = Frame { sender, data };
+        for (k, amp) in frame.tones().into_iter().zip(amps) {
+            if amp > 0.0 {
+                all.push((k, amp, from, from + 1.0));
+            }
+        }
+    }
+    let sent = [
+        Message::Long {
+            sender: s2,
+            value: 18 * 21 + 13,
+        },
+        Message::Long {
+            sender: s1,
+            value: 15 * 21 + 19,
+        },
+    ];
+    for seed in [47_031u64, 1, 2, 3] {
+        let x = timed_tones(&all, 5.0, 0.5, 0.002, seed);
+        let (got, _, shown) = decode_traced(&x);
+        assert!(
+            got.iter().all(|m| sent.contains(m)),
+            "seed {seed}: decoded {got:?}, sent {sent:?}\n{}",
+            shown.join("\n")
+        );
+    }
+}
