@@ -175,6 +175,8 @@ pub struct DaemonsReport {
     pub pose_rmse_m: f64,
     /// Relay writes the daemons refused (`ERR`): each is a bug in the robot program.
     pub relay_errors: u64,
+    /// The first three refusals' texts (`robot N: ERR text`), so a refusal says what it was.
+    pub relay_refusals: Vec<String>,
     /// Physics steps that started more than one step late (the machine was busy).
     pub late_steps: u64,
     /// Robot ticks that played on the layer's previous outputs (its tick on the new
@@ -378,8 +380,8 @@ impl std::fmt::Display for DaemonsReport {
         )?;
         writeln!(
             f,
-            "relay errors          {}; late physics steps {}; stale views {}",
-            self.relay_errors, self.late_steps, self.stale_views
+            "relay errors          {}{:?}; late physics steps {}; stale views {}",
+            self.relay_errors, self.relay_refusals, self.late_steps, self.stale_views
         )?;
         writeln!(f, "view lag              {}", self.view_lag_ms)?;
         write!(f, "world behind clock    {}", self.behind_ms)?;
@@ -402,6 +404,7 @@ struct Heard {
     /// Each robot's announced pass receiver.
     pass_to: BTreeMap<u8, u8>,
     errors: u64,
+    refusals: Vec<String>,
     /// The daemon's `frames_out` (from `GETV local.var.huddle.stats.frames_out`).
     frames_out: Option<u64>,
     /// Resets told whose marking `GETV` has not come back yet: until it does, every ball
@@ -616,6 +619,7 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
             h.errors += 1;
             if h.errors <= 5 {
                 tracing::warn!(robot = id, "relay refused a write: {text}");
+                h.refusals.push(format!("robot {id}: {text}"));
             }
             continue;
         }
@@ -1073,6 +1077,15 @@ pub fn run(
         .iter()
         .map(|d| d.heard.lock().map_or(0, |h| h.errors))
         .sum();
+    let relay_refusals: Vec<String> = daemons
+        .iter()
+        .flat_map(|d| {
+            d.heard
+                .lock()
+                .map_or_else(|_| Vec::new(), |h| h.refusals.clone())
+        })
+        .take(3)
+        .collect();
     // The frames still in flight when the daemons said what they sent, then the books.
     let game = gc.as_mut().map(|g| {
         std::thread::sleep(Duration::from_millis(50));
@@ -1127,6 +1140,7 @@ pub fn run(
         blind_team_ball_rmse_m: r4(rmse(blind_sq, blind_n)),
         pose_rmse_m: r4(rmse(pose_sq, pose_n)),
         relay_errors,
+        relay_refusals,
         late_steps,
         stale_views,
         view_lag_ms: Spread::of_us(view_lags_us),
