@@ -37,6 +37,7 @@ pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
 pub mod daemons_game;
+mod daemons_in_process;
 pub mod field;
 mod game;
 pub mod metrics;
