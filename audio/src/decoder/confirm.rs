@@ -254,7 +254,7 @@ impl Decoder {
             });
             Some("a second transmitter")
         } else if let Some(why) = (t.stage == super::tracking::Stage::Slot1)
-            .then(|| self.assembled_by_background(frame, &present, &level))
+            .then(|| super::bursts::assembled_by_background(frame, &present, &level))
             .flatten()
         {
             // A weak frame among many tones (see `bursts.rs`).
