@@ -24,7 +24,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub venue: String,
     /// How frames reach the team, as the daemons' --transport. With unicast, list the
-    /// bridge's <iface>:<port> as a --peer of every daemon.
+    /// bridge's `<iface>:<port>` as a `--peer` of every daemon.
     #[arg(long, value_enum, default_value_t = TransportKind::Multicast)]
     pub transport: TransportKind,
     /// Multicast group and port [default: 224.0.0.1:2000].
@@ -124,7 +124,7 @@ pub enum TransportKind {
     Multicast,
     /// UDP broadcast on the interface (RoboCup SPL).
     Broadcast,
-    /// Unicast to <iface>:<port>: the daemons list the bridge as a --peer.
+    /// Unicast to `<iface>:<port>`: the daemons list the bridge as a `--peer`.
     Unicast,
 }
 

@@ -35,7 +35,7 @@
 //! it missed. When the bridge's own session comes back (checked by the publisher thread),
 //! it puts every key's current value once more. On SIGTERM/SIGINT
 //! ([`Bridge::shutdown_flag`]) the datagrams left in the socket are read, the outbox is
-//! handed over, a flush barrier ([`flush_barrier`]) waits until the router has routed
+//! handed over, a flush barrier (`flush_barrier`) waits until the router has routed
 //! every put, and the session is closed.
 
 mod query;

@@ -56,7 +56,7 @@ pub struct DriverConfig {
     /// Values set before the first frame goes out (`config.dat`, `config-<id>.dat`).
     pub start_values: Vec<(Key, Value)>,
     /// Notices an in-process subscriber may leave unread before the oldest are dropped
-    /// (it then gets [`Notice::Lagged`]).
+    /// (it then gets [`crate::Notice::Lagged`]).
     pub subscriber_backlog: usize,
     /// Limits of each relay session.
     pub session_limits: SessionLimits,

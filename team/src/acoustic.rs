@@ -31,7 +31,7 @@
 //! [`COST_BIN_M`] from −0.5 m, 32–62 = "going" with its bin. The robot's (h, going) is what
 //! the radio posts, so the arbitration decides on the same kind of data either way.
 //!
-//! **Channel** ([`AcousticChannel`], the simulator's side; robots never see it). Each robot
+//! **Channel** (`teamsim`'s `AcousticChannel`, the simulator's side; robots never see it). Each robot
 //! has a loudspeaker and a microphone at its true position. For every listener, every
 //! sounding robot's PCM arrives delayed by distance / 343 m/s and attenuated as 1/r (from
 //! 1 m); the room adds a diffuse reverberant field (a Schroeder reverberator, T60

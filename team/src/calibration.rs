@@ -177,7 +177,7 @@ pub const POSE_LOST_AFTER_GATED: u32 = 5;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WorldModelConfig {
     /// The LWM: pose EKF and ball EKF. Q and R of the pose EKF are replaced per reading
-    /// from the field's noise figures ([`super::perception`]).
+    /// from the field's noise figures (`player::perception`).
     pub local: LocalConfig,
     /// The GWM (`transit_s` 0: comms' ages include each frame's transit).
     pub global: GlobalConfig,

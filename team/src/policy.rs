@@ -60,7 +60,7 @@ pub const VOI_RELEASE_REPEAT_S: f64 = 1.0;
 /// 89.5%, 4 1.177 m 88.4%, 5 1.124 m 87.9%, 6 1.154 m 86.8%; the one-goer cost of a larger
 /// spare was claims of robots at the ball dropped by teammates while the heartbeat
 /// waited, so such a claim now goes before it would be dropped whatever the headroom
-/// ([`PolicyState::voi`]): 5 then gives 1.210 m 89.6%, and on seeds 28–51 1.14 m against
+/// (`PolicyState::voi`): 5 then gives 1.210 m 89.6%, and on seeds 28–51 1.14 m against
 /// 1.26 m at 3, one goer unchanged (−0.05 ± 1.2 points).
 pub const VOI_SPARE: i64 = 5;
 /// Ball error teammates tolerate under the VOI policy, metres: a blind robot walks to a

@@ -21,12 +21,12 @@
 //!   layers learn goals, penalties and Set from the listener themselves.
 //! - **The whistle.** Each program hears each of the referee's whistles as the in-process
 //!   robots do (the script's [`WhistleHearing`](super::referee::WhistleHearing),
-//!   `huddle sim --whistle P`, drawn by [`GameTally::whistle`] from a generator of its
+//!   `huddle sim --whistle P`, drawn by `GameTally::whistle` from a generator of its
 //!   own, so the packets' losses do not move) and writes `local.var.robot.whistle true`
 //!   to its daemon, as the Python client's `whistle()` does; its daemon's layer takes it
 //!   at its next tick
 //!   (`TeamLayer::heard_whistle`). Its body follows its own reading of the whistle
-//!   ([`ProgramEars`]) ahead of the GC's late packets: it plays from a whistle heard in Set,
+//!   (`ProgramEars`) ahead of the GC's late packets: it plays from a whistle heard in Set,
 //!   walks to its kick-off spot from one heard in Playing (a goal) or in Standby.
 //! - **Senses.** A program writes what it senses every tick in every state (its pose,
 //!   odometry, landmarks, ball): outside Playing it only stops playing (no kick, so no
@@ -109,7 +109,7 @@ pub struct DaemonsGameReport {
     pub status: Vec<StatusFigures>,
     /// RGrt packets the return port could not read.
     pub status_bad: u64,
-    /// Team frames the GC heard in the first [`KICK_OFF_WINDOW_S`] of each stretch of
+    /// Team frames the GC heard in the first `KICK_OFF_WINDOW_S` (10 s) of each stretch of
     /// Playing (true time; the in-process report's `game_kick_off.messages`).
     pub game_kick_off_messages: u64,
 }

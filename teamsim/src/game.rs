@@ -125,7 +125,7 @@ pub struct GameReport {
     /// The referee's books (score, the GC's count, illegal, packets, whistles heard).
     #[serde(flatten)]
     pub books: GcBooks,
-    /// Arbitration in the first [`KICK_OFF_WINDOW_S`] of each stretch of Playing.
+    /// Arbitration in the first `KICK_OFF_WINDOW_S` (10 s) of each stretch of Playing.
     pub game_kick_off: PlayBreakdown,
     /// Arbitration while one of our robots is penalised (outside kick-off windows).
     pub game_penalised: PlayBreakdown,
@@ -540,7 +540,7 @@ impl Game {
 /// newest ball a teammate told them (seconds; the last bin also holds "never told").
 pub const TOLD_AGE_BINS_S: [f64; 5] = [0.0, 1.0, 2.0, 4.0, 8.0];
 
-/// One bin of [`BlindByToldAge`].
+/// One bin of `BlindByToldAge` (the ball's blindness by the age it was told at).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct ToldAgeBin {
     /// Lower edge, seconds.

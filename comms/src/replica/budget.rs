@@ -84,7 +84,7 @@ impl BudgetSpec {
     };
 
     /// One robot's share in a team of `robots`: an equal part of the messages, pooled
-    /// with the team's (see the module docs and [`TeamPool::priority_ahead`]: the team's
+    /// with the team's (see the module docs and `TeamPool::priority_ahead`: the team's
     /// priority frames share one frame per robot beyond the team's line). Spent alone
     /// ([`Budget::split`]), a fifth of the equal part (at least one) is kept for the
     /// robot's own priority items (`reserve`).
@@ -200,7 +200,7 @@ pub struct Budget {
     pub game: Duration,
     /// Of them, kept for frames with priority items when this robot spends its share
     /// alone (`team` is `None`); a pooled team shares its room for priority frames
-    /// instead ([`TeamPool`]).
+    /// instead (`TeamPool`).
     pub reserve: u64,
     /// The team's budget, when the robots pool their ordinary messages (`None`: this
     /// robot spends its `messages` alone).

@@ -58,7 +58,7 @@ pub struct ReplicaConfig {
     /// application's table, the same on every robot of the team (huddle's team layer
     /// registers its own, `team::known_paths()`). Default: empty.
     pub known_paths: KnownPaths,
-    /// Frames go out in format 3 ([`LEGACY_VERSION`]) while a present teammate's last
+    /// Frames go out in format 3 ([`crate::wire::LEGACY_VERSION`]) while a present teammate's last
     /// frame was in format 3: an older build that cannot read format 4 keeps hearing this
     /// robot during a rolling upgrade (default on). Off: always format 4.
     pub legacy_fallback: bool,

@@ -175,7 +175,7 @@ impl TeamLayer {
     /// robot whose own cost is below [`KICK_OFF_TAKER_COST`] (the kicker the rules put
     /// at the centre spot) may claim the ball; every other robot decides as if it had no
     /// ball, on its own cost, not on a claim it told before the restart. The taker tells
-    /// its claim in Set, with priority, [`KICK_OFF_SET_CLAIMS`] times: so at the end of
+    /// its claim in Set, with priority, `KICK_OFF_SET_CLAIMS` times: so at the end of
     /// the hold its teammates hold it and leave it the ball; the others tell nothing.
     ///
     /// Why: out of play nothing is told, and a goal's Ready and Set last longer than a
@@ -308,7 +308,7 @@ impl TeamLayer {
     /// The game controller says the ball was put back for a kick-off (`now_s` on the
     /// robot's clock): every ball belief goes, and the team ball starts on the kick-off
     /// spot the rules name (the centre spot of the field the robot is calibrated for,
-    /// [`KICK_OFF_SPOT_SIGMA_M`] for the referee's placement), not with the first message
+    /// `KICK_OFF_SPOT_SIGMA_M` (0.1 m) for the referee's placement), not with the first message
     /// a teammate can afford to send. Sightings are gated against it and fused with it;
     /// cameras that see the ball elsewhere restart it (see
     /// [`fusion::GlobalModel::place_ball`]).
