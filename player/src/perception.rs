@@ -49,13 +49,18 @@ pub fn landmark_sighting(
 
 /// A ball sighting as the contract takes it: a robot-frame point (REP-103: x forward,
 /// y left) and its covariance, the range and bearing noise carried through the Jacobian
-/// of the polar → Cartesian map.
+/// of the polar → Cartesian map. The bearing's lever arm is at least the range's σ: a
+/// ball at the robot's feet (a range within its noise of 0, which a camera may report as
+/// 0) is uncertain across the line of sight too, where the bare Jacobian (`r·σ_b` → 0)
+/// gave a singular covariance the contract refuses (`docs/results/sim-daemons.md`,
+/// "The refused ball"). Beyond `σ_r` (0.021 m by default) nothing changes.
 pub fn ball_rep103(cam: &SensorCalibration, s: &Sighting) -> (Vector2<f64>, Matrix2<f64>) {
     let (r, b) = (s.range_m, s.bearing_rad);
     let (sin, cos) = b.sin_cos();
-    // ∂(r cos b, r sin b)/∂(r, b)
-    let j = Matrix2::new(cos, -r * sin, sin, r * cos);
     let sr = range_sigma(cam, r);
+    // ∂(r cos b, r sin b)/∂(r, b), the bearing's column at an arm of at least σ_r.
+    let arm = r.max(sr);
+    let j = Matrix2::new(cos, -arm * sin, sin, arm * cos);
     let d = Matrix2::new(sr * sr, 0.0, 0.0, cam.bearing_noise_rad.powi(2));
     let cov = j * d * j.transpose();
     (

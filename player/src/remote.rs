@@ -462,6 +462,45 @@ mod tests {
     }
 
     #[test]
+    fn a_ball_at_the_robots_feet_is_a_sighting_the_daemon_takes() {
+        // `huddle sim --daemons --game`, seed 6, the deaf game: after a goal the referee
+        // holds the ball on the centre spot while the programs, 15 s behind the GC, still
+        // play and walk onto it. The camera's range noise (σ 0.02 m there) clamps its range
+        // to 0, and the covariance the program wrote had no bearing term left (r·σ_b = 0):
+        // singular, so the daemon refused the write (`ERR 412 … not positive definite`, a
+        // relay error in the test). A real camera sees a ball at its feet too. Every range
+        // from 0 up, at any bearing, is a ball the contract takes, where the camera saw it.
+        let cal = Calibration::default();
+        for range_m in [0.0, 1e-9, 1e-6, 1e-4, 0.005, 0.02, 0.25] {
+            for bearing_rad in [0.0, 0.4, -1.2, std::f64::consts::FRAC_PI_2, 3.0] {
+                let percepts = Percepts {
+                    frame: Frame {
+                        ball: Some(Sighting {
+                            range_m,
+                            bearing_rad,
+                        }),
+                        ..Frame::default()
+                    },
+                    odometry: Odometry::default(),
+                };
+                let writes = contract_inputs(&cal, &percepts);
+                let (_, value) = writes
+                    .iter()
+                    .find(|(k, _)| *k == contract::BALL_KEY)
+                    .expect("a ball write");
+                let b = contract::parse_ball(value).unwrap_or_else(|e| {
+                    panic!("a ball {range_m} m away at {bearing_rad} rad ({value}) is refused: {e}")
+                });
+                let seen = Vector2::new(range_m * bearing_rad.cos(), range_m * bearing_rad.sin());
+                assert!(
+                    (b.local - seen).norm() < 1e-12,
+                    "{range_m} m, {bearing_rad} rad"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn a_team_ball_the_team_is_unsure_of_is_not_played() {
         // Robot 2 goes; it has no ball of its own, and the team ball 2 m ahead has a
         // confidence of 0.1, under the 0.25 the in-process robot needs before it plays on
