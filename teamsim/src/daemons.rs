@@ -299,10 +299,16 @@ impl std::fmt::Display for DaemonsReport {
             self.kick_attempts,
             self.pose_rmse_m
         )?;
+        // The first refusals' texts, if any, beside the count.
+        let refusals = if self.relay_refusals.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", self.relay_refusals.join("; "))
+        };
         writeln!(
             f,
-            "relay errors          {}{:?}; late physics steps {}; stale views {}",
-            self.relay_errors, self.relay_refusals, self.late_steps, self.stale_views
+            "relay errors          {}{refusals}; late physics steps {}; stale views {}",
+            self.relay_errors, self.late_steps, self.stale_views
         )?;
         writeln!(f, "view lag              {}", self.view_lag_ms)?;
         write!(f, "world behind clock    {}", self.behind_ms)?;
