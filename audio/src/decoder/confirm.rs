@@ -176,6 +176,16 @@ impl Decoder {
                 .map_or((None, present), |(f, p)| (Some(f), p)),
             decided => (decided, present),
         };
+        // A first frame whose own tones the room spread too far apart (see `own_tones.rs`).
+        let (frame, present) =
+            match frame {
+                None => Self::own_tones_rules(t, &sums, count, P_TONE_CONFIRM, P_TONE_RIVAL)
+                    .map_or((None, present), |(f, p)| {
+                        self.note(a, || "rules: decided on the frame's own tones".to_string());
+                        (Some(f), p)
+                    }),
+                decided => (decided, present),
+            };
         let Some(frame) = frame else {
             self.note(a, || {
                 let votes: Vec<usize> = (0..crate::tones::BASIC_COUNT)

@@ -208,6 +208,7 @@ mod end_test;
 mod noise_floor;
 mod off_grid;
 mod onset;
+mod own_tones;
 mod refusals;
 mod rules;
 mod search;
@@ -219,6 +220,8 @@ mod windows;
 mod bursts_tests;
 #[cfg(test)]
 mod coherence_tests;
+#[cfg(test)]
+mod own_tones_tests;
 #[cfg(test)]
 mod tests;
 

@@ -27,6 +27,28 @@ const OWN_CROWD_RANGE: f64 = 0.0316;
 /// A rival basic counts only with its vote at least this share of the top basic's (−6 dB).
 const RIVAL_RANGE: f64 = 0.25;
 
+/// The tracked frame's own basics, whose tones [`Decoder::apply_rules_with`] judges more
+/// leniently (see `own_tones.rs`).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct OwnTones {
+    /// The tracked sender's basic.
+    pub(super) sender: Option<usize>,
+    /// The tracked data's basic.
+    pub(super) data: Option<usize>,
+    /// Least share of the loudest tone's excess an own tone keeps to be present.
+    pub(super) dynamic_range: f64,
+}
+
+impl Default for OwnTones {
+    fn default() -> Self {
+        OwnTones {
+            sender: None,
+            data: None,
+            dynamic_range: DYNAMIC_RANGE,
+        }
+    }
+}
+
 /// Whether tone `k` of the integrated sums `sums` (of `n` windows) is leakage of an
 /// adjacent louder tone: its excess below [`NEIGHBOUR_LEAKAGE`] of a neighbour's.
 pub(super) fn is_leakage(sums: &[f64], n: f64, k: usize) -> bool {
@@ -67,15 +89,44 @@ impl Decoder {
         own_sender: Option<usize>,
         is_transmitter: impl Fn(Frame, &[bool; TONE_COUNT]) -> bool,
     ) -> (Option<Frame>, [bool; TONE_COUNT]) {
+        let own = OwnTones {
+            sender: own_sender,
+            ..OwnTones::default()
+        };
+        Self::apply_rules_with(sums, count, p_tone, p_rival, own, is_transmitter)
+    }
+
+    /// [`Decoder::apply_rules`] with the tracked frame's own basics named in `own`: the
+    /// tones of `own.sender` (and of `own.data`) count in a crowd within
+    /// [`OWN_CROWD_RANGE`], and the tones of both within `own.dynamic_range` of the
+    /// loudest tone rather than [`DYNAMIC_RANGE`] (see `own_tones.rs`).
+    pub(super) fn apply_rules_with(
+        sums: &[f64],
+        count: usize,
+        p_tone: f64,
+        p_rival: f64,
+        own: OwnTones,
+        is_transmitter: impl Fn(Frame, &[bool; TONE_COUNT]) -> bool,
+    ) -> (Option<Frame>, [bool; TONE_COUNT]) {
+        let own_basic = |k: usize| {
+            [own.sender, own.data]
+                .into_iter()
+                .flatten()
+                .any(|b| basic_tones(b).contains(&k))
+        };
         let n = count.max(1) as f64;
         let threshold = gamma_upper_quantile(n, p_tone);
         let rival_threshold = gamma_upper_quantile(n, p_rival);
         let mut present = [false; TONE_COUNT];
         let loudest = sums.iter().fold(0.0f64, |m, &s| m.max(s - n));
         for k in 0..TONE_COUNT {
-            present[k] = sums[k] >= threshold
-                && !is_leakage(sums, n, k)
-                && sums[k] - n >= DYNAMIC_RANGE * loudest;
+            let range = if own_basic(k) {
+                own.dynamic_range
+            } else {
+                DYNAMIC_RANGE
+            };
+            present[k] =
+                sums[k] >= threshold && !is_leakage(sums, n, k) && sums[k] - n >= range * loudest;
         }
         // A crowd of present tones is not noise of the kind the thresholds assume: babble's
         // voiced harmonics and formants, or a hall's reverberant smear, lift many tones
@@ -86,9 +137,8 @@ impl Decoder {
             let mut excess: Vec<f64> = (0..TONE_COUNT).map(|k| sums[k] - n).collect();
             excess.sort_unstable_by(|a, b| b.total_cmp(a));
             let reference = excess[3].max(0.0);
-            let own = own_sender.map(basic_tones);
             for k in 0..TONE_COUNT {
-                let range = if own.is_some_and(|t| t.contains(&k)) {
+                let range = if own_basic(k) {
                     OWN_CROWD_RANGE
                 } else {
                     CROWD_RANGE
