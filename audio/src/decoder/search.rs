@@ -104,7 +104,12 @@ impl Decoder {
                 };
                 // Each voted basic's tones: per-window excess (* present).
                 let n = count.max(1) as f64;
-                let detail: Vec<String> = voted(0..BASIC_COUNT)
+                // The sender basics always (a sender with one tone in a notch of the
+                // room has no vote), then every other basic with a vote.
+                let shown: Vec<usize> = (0..SENDER_COUNT)
+                    .chain(voted(SENDER_COUNT..BASIC_COUNT))
+                    .collect();
+                let detail: Vec<String> = shown
                     .iter()
                     .map(|&b| {
                         let t: Vec<String> = basic_tones(b)
