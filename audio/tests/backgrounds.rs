@@ -72,3 +72,24 @@ fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
         "talkers T60 1.2 s, row 19001, 9 s: false messages {heard:?}"
     );
 }
+
+/// Two talkers in a T60 1.2 s hall, the first 350 s of tuning row 24001 (`huddle audio
+/// backgrounds --seed 24`): their harmonics assembled sender 1 with data 1 at 347.51 s,
+/// 11.2 dB typical among 18 other tones, one loud tone per basic (k1 66, k4 36 per
+/// window, each in bursts) with votes completed by tones near the floor (k49 2.3).
+/// Every vote tone passed the per-tone checks, but the four sounded together in only
+/// 4 of the slot's 10 central windows: a transmitter's sound all through
+/// (`decoder/bursts.rs`). Nothing is reported.
+#[test]
+fn vote_tones_that_sound_in_turn_are_not_a_message() {
+    let out = run_background_false_alarm_trial(Background::Talkers, 350.0, 1.2, 24_001);
+    let heard: Vec<String> = out
+        .detections
+        .iter()
+        .map(|d| format!("{} at {:.2} s", d.message, d.start_s))
+        .collect();
+    assert!(
+        heard.is_empty(),
+        "talkers T60 1.2 s, row 24001, 350 s: false messages {heard:?}"
+    );
+}

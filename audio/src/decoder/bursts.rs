@@ -7,7 +7,9 @@
 //! they are, the band around them is empty.
 
 use super::confirm::{typical_level, HALL_CLEAR_LEVEL};
-use crate::tones::{Frame, TONE_COUNT};
+use super::Decoder;
+use crate::significance::hann_share_inside;
+use crate::tones::{basic_tones, Frame, TONE_COUNT};
 
 /// Least typical tone level (per-window excess, 10 dB) of a first frame in a crowded
 /// band (see [`assembled_by_background`]). The messages of the 0 dB babble rows
@@ -51,4 +53,117 @@ pub(super) fn assembled_by_background(
         ));
     }
     None
+}
+
+/// Least share of a slot's central windows in which every tone a frame's votes rest on
+/// sounds (see [`Decoder::votes_sound_apart`]).
+pub(super) const TOGETHER_SHARE: f64 = 0.7;
+/// Share of its own median window below which a vote tone counts as silent in a window
+/// (−7 dB; at least [`SILENT_LEVEL`]).
+const SILENT_SHARE: f64 = 0.2;
+/// Window reading (noise mean 1) under which a vote tone counts as silent whatever its
+/// median: a steady tone of 10 dB per window reads under it about once in a thousand
+/// windows.
+const SILENT_LEVEL: f32 = 2.0;
+/// Share of the slot at each end left out (as for the steadiness test in `confirm.rs`).
+const TOGETHER_EDGE: f64 = 0.1;
+
+impl Decoder {
+    /// Why a first frame below the hall level in a crowded band is one the background
+    /// assembled from bursts, if it is: its vote tones (the two loudest present tones of
+    /// each of its two basics) do not sound together. A transmitter sounds all six tones
+    /// through the slot, so in nearly every central window each vote tone reads near its
+    /// own median; babble, a crowd or music puts each of them there in its own bursts
+    /// (a syllable, a note), and in many windows one of the four is silent (under
+    /// [`SILENT_SHARE`] of its median, or [`SILENT_LEVEL`]). Refused when fewer than
+    /// [`TOGETHER_SHARE`] of the windows hold all four.
+    ///
+    /// The background's frames that passed every other check in 10 h draws (tuning
+    /// seeds 24–27, 21, 23) sat at 10.7–14.1 dB typical with all four together in 20–60%
+    /// of the windows; the real first slots of the 0 dB rooms rows (tuning rows 68015,
+    /// 68018: 1,982 slots) in 60% or fewer only at 16.4 dB and above (3 slots), and in
+    /// 70% or more below it. White noise (the dry rows) has no crowd: weak frames there
+    /// are not asked.
+    pub(super) fn votes_sound_apart(
+        &self,
+        frame: Frame,
+        present: &[bool; TONE_COUNT],
+        level: &[f64; TONE_COUNT],
+        scale: usize,
+        a: f64,
+        b: f64,
+    ) -> Option<String> {
+        let typical = typical_level(frame, present, level);
+        let own = frame.tones();
+        let crowd = (0..TONE_COUNT)
+            .filter(|k| present[*k] && !own.contains(k))
+            .count();
+        if typical >= HALL_CLEAR_LEVEL || crowd < CROWD {
+            return None;
+        }
+        let votes = vote_tones(frame, present, level);
+        let window_len = self.geometry.window_len as f64;
+        let (from, to) = (a + TOGETHER_EDGE * (b - a), b - TOGETHER_EDGE * (b - a));
+        let windows: Vec<&[f32]> = self
+            .history
+            .iter()
+            .filter(|w| hann_share_inside(w.start as f64, window_len, from, to) >= 0.9)
+            .filter_map(|w| w.r.get(scale * TONE_COUNT..(scale + 1) * TONE_COUNT))
+            .collect();
+        let share = together_share(&windows, &votes)?;
+        (share < TOGETHER_SHARE).then(|| {
+            format!(
+                "vote tones {votes:?} together in {:.0}% of the windows ({:.1} dB, {crowd} other tones)",
+                100.0 * share,
+                10.0 * typical.max(1e-12).log10()
+            )
+        })
+    }
+}
+
+/// The tones a frame's 2-of-3 votes rest on: the two loudest `present` tones of each of
+/// its basics (fewer when a basic has fewer present).
+pub(super) fn vote_tones(
+    frame: Frame,
+    present: &[bool; TONE_COUNT],
+    level: &[f64; TONE_COUNT],
+) -> Vec<usize> {
+    let mut votes = Vec::with_capacity(4);
+    for b in frame.basics() {
+        let mut tones: Vec<usize> = basic_tones(b).into_iter().filter(|&k| present[k]).collect();
+        tones.sort_by(|x, y| level[*y].total_cmp(&level[*x]));
+        votes.extend(tones.into_iter().take(2));
+    }
+    votes
+}
+
+/// Share of `windows` (each tone's per-window power, noise mean 1) in which every tone of
+/// `votes` sounds: at least [`SILENT_SHARE`] of its own median window and at least
+/// [`SILENT_LEVEL`]. `None` with fewer than four windows (too few to tell).
+pub(super) fn together_share(windows: &[&[f32]], votes: &[usize]) -> Option<f64> {
+    if windows.len() < 4 || votes.is_empty() {
+        return None;
+    }
+    let floors: Vec<f32> = votes
+        .iter()
+        .map(|&k| {
+            let mut r: Vec<f32> = windows
+                .iter()
+                .map(|w| w.get(k).copied().unwrap_or(0.0))
+                .collect();
+            r.sort_by(f32::total_cmp);
+            let median = r[r.len() / 2];
+            (SILENT_SHARE as f32 * median).max(SILENT_LEVEL)
+        })
+        .collect();
+    let held = windows
+        .iter()
+        .filter(|w| {
+            votes
+                .iter()
+                .zip(&floors)
+                .all(|(&k, &floor)| w.get(k).copied().unwrap_or(0.0) >= floor)
+        })
+        .count();
+    Some(held as f64 / windows.len() as f64)
 }

@@ -54,3 +54,62 @@ fn weak_messages_in_white_noise_are_not_taken_for_the_background() {
         "{weak} of the passing slots under 10 dB: the test asks too little; {shown:#?}"
     );
 }
+
+#[test]
+fn vote_tones_that_sound_in_turn_are_not_together() {
+    // Four vote tones over ten windows (noise mean 1, per-window noise from a fixed
+    // pseudo-random sequence, seed 24). A transmitter's tones at 10 dB each read near
+    // their median in every window: all four sound together throughout. The same four
+    // tones at the same mean level, each in its own bursts (as babble's harmonics and a
+    // talker's syllables put them, tuning row 24001 at 347.51 s: k1 29, 121, 50, 268 …
+    // while k49 read 1–8), leave one of them silent in most windows.
+    use super::bursts::{together_share, TOGETHER_SHARE};
+    let mut state = 24u64;
+    let mut noise = move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        // Exponential (noise mean 1) from the top 53 bits.
+        let u = ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+        -(u.ln()) as f32
+    };
+    let votes = [1usize, 4, 25, 28];
+    let steady: Vec<Vec<f32>> = (0..10)
+        .map(|_| {
+            (0..72)
+                .map(|k| noise() + if votes.contains(&k) { 10.0 } else { 0.0 })
+                .collect()
+        })
+        .collect();
+    let rows: Vec<&[f32]> = steady.iter().map(Vec::as_slice).collect();
+    let share = together_share(&rows, &votes).expect("ten windows");
+    assert!(
+        share >= 0.9,
+        "a steady frame at 10 dB: all four vote tones together in {share:.2} of the windows"
+    );
+    // Each tone on in its own three or four windows at 30 (the same mean of about 10).
+    let bursts: Vec<Vec<f32>> = (0..10)
+        .map(|w| {
+            (0..72)
+                .map(|k| {
+                    let on = votes
+                        .iter()
+                        .position(|&v| v == k)
+                        .is_some_and(|i| (w + i) % 3 == 0);
+                    noise() + if on { 30.0 } else { 0.0 }
+                })
+                .collect()
+        })
+        .collect();
+    let rows: Vec<&[f32]> = bursts.iter().map(Vec::as_slice).collect();
+    let share = together_share(&rows, &votes).expect("ten windows");
+    assert!(
+        share < TOGETHER_SHARE,
+        "four tones in turns: together in {share:.2} of the windows, not under {TOGETHER_SHARE}"
+    );
+    assert_eq!(
+        together_share(&rows[..3], &votes),
+        None,
+        "three windows tell nothing"
+    );
+}

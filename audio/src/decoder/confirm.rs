@@ -264,10 +264,14 @@ impl Decoder {
             });
             Some("a second transmitter")
         } else if let Some(why) = (t.stage == super::tracking::Stage::Slot1)
-            .then(|| super::bursts::assembled_by_background(frame, &present, &level))
+            .then(|| {
+                super::bursts::assembled_by_background(frame, &present, &level)
+                    .or_else(|| self.votes_sound_apart(frame, &present, &level, t.scale, a, b))
+            })
             .flatten()
         {
-            // A weak frame among many tones (see `bursts.rs`).
+            // A weak frame among many tones, or one whose votes sound apart (see
+            // `bursts.rs`).
             self.note(a, || why);
             Some("assembled by the background")
         } else if let Some(share) = (t.stage == super::tracking::Stage::Slot2
