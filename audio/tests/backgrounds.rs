@@ -5,7 +5,15 @@
 //! tuned on). No floor is added anywhere. The 10 h version is `huddle audio backgrounds`
 //! (and, in release, the ignored test below).
 
-use audio::evaluation::{run_background_false_alarm_trial, Background};
+use audio::evaluation::{run_background_false_alarm_trial, Background, FalseAlarmOutcome};
+
+/// What a trial heard, one line per (false) message, for an assertion's text.
+fn heard(out: &FalseAlarmOutcome) -> Vec<String> {
+    out.detections
+        .iter()
+        .map(|d| format!("{} at {:.2} s", d.message, d.start_s))
+        .collect()
+}
 
 fn check(seconds: f64, seed: u64) {
     let mut heard = Vec::new();
@@ -62,11 +70,7 @@ fn ten_hours_of_backgrounds_that_stop_and_start_say_nothing() {
 #[test]
 fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
     let out = run_background_false_alarm_trial(Background::Talkers, 9.0, 1.2, 19_001);
-    let heard: Vec<String> = out
-        .detections
-        .iter()
-        .map(|d| format!("{} at {:.2} s", d.message, d.start_s))
-        .collect();
+    let heard = heard(&out);
     assert!(
         heard.is_empty(),
         "talkers T60 1.2 s, row 19001, 9 s: false messages {heard:?}"
@@ -83,11 +87,7 @@ fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
 #[test]
 fn vote_tones_that_sound_in_turn_are_not_a_message() {
     let out = run_background_false_alarm_trial(Background::Talkers, 350.0, 1.2, 24_001);
-    let heard: Vec<String> = out
-        .detections
-        .iter()
-        .map(|d| format!("{} at {:.2} s", d.message, d.start_s))
-        .collect();
+    let heard = heard(&out);
     assert!(
         heard.is_empty(),
         "talkers T60 1.2 s, row 24001, 350 s: false messages {heard:?}"

@@ -22,6 +22,15 @@ pub(super) const WEAK_LEVEL: f64 = 10.0;
 /// rows at −13 dB (weak frames in white noise) are not touched.
 pub(super) const CROWD: usize = 8;
 
+/// How many tones outside the frame's own six are present: the crowd both checks here
+/// ask about.
+fn crowd_size(frame: Frame, present: &[bool; TONE_COUNT]) -> usize {
+    let own = frame.tones();
+    (0..TONE_COUNT)
+        .filter(|k| present[*k] && !own.contains(k))
+        .count()
+}
+
 /// Why a first frame (its `present` tones at per-window excess `level`) is one the
 /// background assembled rather than a transmitter's, if it is: it is weak
 /// ([`WEAK_LEVEL`]) in a crowded band ([`CROWD`] other tones present), none of its
@@ -33,9 +42,7 @@ pub(super) fn assembled_by_background(
 ) -> Option<String> {
     let typical = typical_level(frame, present, level);
     let own = frame.tones();
-    let crowd = (0..TONE_COUNT)
-        .filter(|k| present[*k] && !own.contains(k))
-        .count();
+    let crowd = crowd_size(frame, present);
     // A frame with a tone at the hall level is not one babble assembled (its frames
     // have no tone at 15 dB): in a hall a message's median tone sits under 10 dB now
     // and then, pulled down by tones in the room's notches, while one of its tones
@@ -94,10 +101,7 @@ impl Decoder {
         b: f64,
     ) -> Option<String> {
         let typical = typical_level(frame, present, level);
-        let own = frame.tones();
-        let crowd = (0..TONE_COUNT)
-            .filter(|k| present[*k] && !own.contains(k))
-            .count();
+        let crowd = crowd_size(frame, present);
         if typical >= HALL_CLEAR_LEVEL || crowd < CROWD {
             return None;
         }
