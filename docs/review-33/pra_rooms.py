@@ -14,7 +14,9 @@ decode --team checked --json`; nothing of the project's harness is used. Babble:
 talkers with their pauses kept as digital silence (no floor anywhere).
 
 SNR: the messages' in-band (500-4000 Hz) power at the microphone while they sound, over the
-babble's in-band power averaged over the whole track, pauses included.
+babble's in-band power averaged over the whole track, pauses included. The three senders stand at
+different distances, so each has its own SNR (rows give `sender_snr` and `dist`); `short_own0` and
+`long_own0` count only the messages of senders whose own SNR is >= 0 dB.
 
 Scoring (per decoded line): right if it equals a message sounding within 0.6 s of it; wrong if it
 is near sent messages and equals none of them; false if it is near none.
@@ -128,7 +130,8 @@ def build_room(name, corners, height, t60):
         scale = float(np.clip(scale * (meas / t60) ** 1.0, 0.005, 0.95))
     hs = rirs(corners, height, scale, senders + talkers, mic)
     meas = float(np.mean([t30(h) for h in hs[:3]]))
-    return dict(name=name, t60=t60, t30=meas, scale=scale, senders=hs[:3], talkers=hs[3:])
+    dist = [round(float(np.hypot(p[0] - mic[0], p[1] - mic[1])), 2) for p in senders]
+    return dict(name=name, t60=t60, t30=meas, scale=scale, senders=hs[:3], talkers=hs[3:], dist=dist)
 
 
 def utterance(k):
@@ -191,21 +194,30 @@ def condition(room, snr, two):
             a = int(t0 * RATE)
             per_sender[s][a:a + len(x)] += x[: max(0, length - a)]
             msgs.append((t0, len(x) / RATE, kind, s, value))
-    wet = sum(signal.fftconvolve(per_sender[s], room["senders"][s])[:length] for s in range(3))
+    wets = [signal.fftconvolve(per_sender[s], room["senders"][s])[:length] for s in range(3)]
+    wet = sum(wets)
     bab = babble(length, room)
     on = np.zeros(length, bool)
-    for (t0, d, *_r) in msgs:
+    on_s = [np.zeros(length, bool) for _ in range(3)]
+    for (t0, d, _k, s, _v) in msgs:
         on[int(t0 * RATE):int((t0 + d) * RATE)] = True
+        on_s[s][int(t0 * RATE):int((t0 + d) * RATE)] = True
     p_msg = float(np.mean(signal.sosfilt(BAND, wet)[on] ** 2))
     p_bab = float(np.mean(signal.sosfilt(BAND, bab) ** 2))
-    mix = wet + np.sqrt(p_msg / (p_bab * 10 ** (snr / 10))) * bab
+    g2 = p_msg / (p_bab * 10 ** (snr / 10))
+    # Each sender's own SNR (its distance and the room's path make it differ from the row's).
+    sender_snr = [round(10 * np.log10(max(1e-30, float(np.mean(signal.sosfilt(BAND, wets[s])[on_s[s]] ** 2)))
+                                      / (g2 * p_bab)), 1) if on_s[s].any() else None for s in range(3)]
+    room["sender_snr"] = sender_snr
+    mix = wet + np.sqrt(g2) * bab
     mix *= 0.5 / max(1e-9, float(np.max(np.abs(mix))))
     path = f"{OUT}/mix-{SEED}-{room['name']}-{snr}-{int(two)}.wav"
     wavfile.write(path, RATE, mix.astype(np.float32))
     rows = [score(room, snr, two, msgs, decode(h, path), b) for b, h in enumerate(HUDDLES)]
     if os.environ.get("KEEPALL") == "1":
         with open(path + ".json", "w") as f:
-            json.dump(dict(room=dict(name=room["name"], t60=room["t60"], t30=room["t30"]), snr=snr, two=two, msgs=msgs), f)
+            json.dump(dict(room=dict(name=room["name"], t60=room["t60"], t30=room["t30"], dist=room["dist"],
+                                     sender_snr=room["sender_snr"]), snr=snr, two=two, msgs=msgs), f)
     elif os.environ.get("KEEP") != f"{room['name']},{snr},{int(two)}":
         os.remove(path)
     return rows
@@ -234,9 +246,15 @@ def decode(huddle, path):
 
 def score(room, snr, two, msgs, dec, b):
     right = {"short": 0, "long": 0}; sent = {"short": 0, "long": 0}
+    right0 = {"short": 0, "long": 0}; sent0 = {"short": 0, "long": 0}  # senders at their own SNR >= 0 dB
+    ssnr = room.get("sender_snr") or [None] * 3
     for (t0, d, kind, s, v) in msgs:
         sent[kind] += 1
-        right[kind] += any(t0 - 0.6 <= x["t"] <= t0 + d + 0.6 and (x["kind"], x["sender"], x["data"]) == (kind, s, v) for x in dec)
+        ok = any(t0 - 0.6 <= x["t"] <= t0 + d + 0.6 and (x["kind"], x["sender"], x["data"]) == (kind, s, v) for x in dec)
+        right[kind] += ok
+        if ssnr[s] is not None and ssnr[s] >= 0:
+            sent0[kind] += 1
+            right0[kind] += ok
     wrong = false = 0
     for x in dec:
         near = [mm for mm in msgs if mm[0] - 0.6 <= x["t"] <= mm[0] + mm[1] + 0.6]
@@ -249,7 +267,8 @@ def score(room, snr, two, msgs, dec, b):
                   f"{[(round(t0, 2), k, s, v) for (t0, _, k, s, v) in near]}", file=sys.stderr)
     return dict(seed=SEED, bin=b, room=room["name"], t60=room["t60"], t30=round(room["t30"], 2), snr=snr, two=two,
                 short=f"{right['short']}/{sent['short']}", long=f"{right['long']}/{sent['long']}",
-                wrong=wrong, false=false, right=right["short"] + right["long"], sent=len(msgs))
+                short_own0=f"{right0['short']}/{sent0['short']}", long_own0=f"{right0['long']}/{sent0['long']}",
+                sender_snr=ssnr, dist=room.get("dist"), wrong=wrong, false=false, right=right["short"] + right["long"], sent=len(msgs))
 
 
 def main():
