@@ -11,7 +11,7 @@ use super::tracking::Tracking;
 use super::windows::SlotSums;
 use super::{median, Decoder};
 use crate::significance::{gamma_upper_quantile, hann_share_inside, ln_tone_likelihood};
-use crate::tones::{basic_tones, Frame, SENDER_COUNT, TONE_COUNT};
+use crate::tones::{basic_tones, Frame, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
 
 /// Per-tone false-alarm probability of "present" when re-deciding an accepted frame on its
 /// aligned slot: a frame is already there, so the threshold trades a missed tone against
@@ -313,11 +313,22 @@ impl Decoder {
                     .filter(|&k| present[k] && !own.contains(&k) && level[k] >= 0.3 * med)
                     .map(|k| {
                         let around = neighbourhood(&own, k, &sums);
+                        let basic: Vec<String> = basic_tones(k % BASIC_COUNT)
+                            .iter()
+                            .map(|&j| {
+                                if present[j] {
+                                    format!("{:.1}", level[j])
+                                } else {
+                                    "-".into()
+                                }
+                            })
+                            .collect();
                         format!(
-                            "k{k} {:.2}x med, local {:.1}, steady {:?}",
+                            "k{k} {:.2}x med, local {:.1}, steady {:?}, basic [{}]",
                             level[k] / med,
                             median(around) / n,
-                            steady.as_ref().map(|s| s(k))
+                            steady.as_ref().map(|s| s(k)),
+                            basic.join(" ")
                         )
                     })
                     .collect();
@@ -337,6 +348,18 @@ impl Decoder {
         } else {
             None
         };
+        if refused == Some("a vote not steady") {
+            self.note(a, || {
+                let steady = self.steadiness(frame, &sums, count, t.scale, a, b);
+                let tones: Vec<String> = frame
+                    .tones()
+                    .iter()
+                    .filter(|&&k| present[k])
+                    .map(|&k| format!("k{k} {:?}", steady.as_ref().map(|s| s(k))))
+                    .collect();
+                format!("steadiness of the frame's tones: {}", tones.join(", "))
+            });
+        }
         let first = t.stage == super::tracking::Stage::Slot1;
         let refused = match refused {
             Some(why) if first => {
