@@ -34,10 +34,12 @@ import pyroomacoustics as pra
 from scipy import signal
 from scipy.io import wavfile
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from wavtools import RATE, read, run  # noqa: E402
+
 HUDDLES, SEED, OUT = sys.argv[1].split(","), int(sys.argv[2]), sys.argv[3]
 HUDDLE = HUDDLES[0]
 PER = int(sys.argv[5]) if len(sys.argv) > 5 and sys.argv[4] == "--per" else 100
-RATE = 16000
 SPACING = 6.0  # s between message starts (a long message is 2 s, plus the tail of a 2 s room)
 os.makedirs(OUT, exist_ok=True)
 rng = random.Random(SEED)
@@ -58,18 +60,6 @@ ROOMS = [
 ]
 # (SNR dB, two senders overlapping?)
 CONDITIONS = [(20, False), (0, False), (10, True)]
-
-
-def run(cmd):
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-
-def read(path):
-    r, x = wavfile.read(path)
-    assert r == RATE, (path, r)
-    if x.dtype == np.int16:
-        x = x.astype(np.float64) / 32768
-    return x.astype(np.float64) if x.ndim == 1 else x[:, 0].astype(np.float64)
 
 
 def inside(corners, p):

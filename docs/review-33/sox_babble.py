@@ -16,9 +16,11 @@ import numpy as np
 from scipy import signal
 from scipy.io import wavfile
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from wavtools import RATE, read, run  # noqa: E402
+
 HUDDLE, SEED, OUT = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 PER = int(sys.argv[5]) if len(sys.argv) > 5 and sys.argv[4] == "--per" else 20
-RATE = 16000
 REVERBS = [0, 30, 50, 70, 90]
 # VARY=1: each hall's damping and room scale drawn, clock errors 0.1-0.5%, a microphone tilt.
 VARY = os.environ.get("VARY") == "1"
@@ -32,18 +34,6 @@ WORDS = ("ball goal robot kick pass left right keeper striker defender field lin
          "the a and but then now here there look go stop wait yes no good bad one two three four five").split()
 VOICES = ["en", "en-us", "en-gb-scotland", "en-gb-x-rp", "en-029", "en+f3", "en-us+f2", "en+m4"]
 BAND = signal.butter(8, [500, 4000], btype="bandpass", fs=RATE, output="sos")
-
-
-def run(cmd):
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-
-def read(path):
-    r, x = wavfile.read(path)
-    assert r == RATE, (path, r)
-    if x.dtype == np.int16:
-        x = x.astype(np.float64) / 32768
-    return x.astype(np.float64) if x.ndim == 1 else x[:, 0].astype(np.float64)
 
 
 def write(path, x):
