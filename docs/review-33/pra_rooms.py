@@ -43,7 +43,6 @@ PER = int(sys.argv[5]) if len(sys.argv) > 5 and sys.argv[4] == "--per" else 100
 SPACING = 6.0  # s between message starts (a long message is 2 s, plus the tail of a 2 s room)
 os.makedirs(OUT, exist_ok=True)
 rng = random.Random(SEED)
-nrng = np.random.default_rng(SEED)
 BAND = signal.butter(8, [500, 4000], btype="bandpass", fs=RATE, output="sos")
 FREQS = [125, 250, 500, 1000, 2000, 4000]
 PROFILE = np.array([0.55, 0.7, 0.85, 1.0, 1.1, 1.2])  # relative absorption per octave band
@@ -163,7 +162,7 @@ def encode(sender, kind, value):
     return read(path)
 
 
-def draw_message(sender):
+def draw_message():
     return ("long", rng.randrange(121)) if rng.random() < 0.5 else ("short", rng.randrange(10))
 
 
@@ -179,7 +178,7 @@ def condition(room, snr, two):
             other = rng.choice([s for s in range(3) if s != sender])
             starts.append((other, starts[0][1] + rng.uniform(-1.5, 1.5)))
         for s, t0 in starts:
-            kind, value = draw_message(s)
+            kind, value = draw_message()
             x = clocked(encode(s, kind, value), speeds[s]) * 10 ** (rng.uniform(-3, 3) / 20)
             a = int(t0 * RATE)
             per_sender[s][a:a + len(x)] += x[: max(0, length - a)]
