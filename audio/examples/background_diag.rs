@@ -17,7 +17,12 @@ fn main() {
     let t60: f64 = a[1].parse().expect("T60");
     let seconds: f64 = a[2].parse().expect("seconds");
     let seed: u64 = a[3].parse().expect("seed");
-    let (out, trace) = run_background_false_alarm_trial_traced(kind, seconds, t60, seed);
+    // The checked plan (as the room rows use) unless a fifth argument names another.
+    let team: audio::TeamPlan = a
+        .get(4)
+        .map_or(Ok(audio::TeamPlan::Checked), |s| s.parse())
+        .expect("a team plan");
+    let (out, trace) = run_background_false_alarm_trial_traced(kind, seconds, t60, seed, team);
     println!(
         "{} T60 {t60}: {} false in {:.2} h",
         kind.name(),

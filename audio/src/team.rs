@@ -120,6 +120,13 @@ impl TeamPlan {
         }
     }
 
+    /// Whether a frame carrying `data` can only be a long message's frame under this plan
+    /// (the checked plan's data 10 … 20): the decoder then knows, on the first slot, that a
+    /// second must follow.
+    pub(crate) fn frame_is_long_only(self, data: u8) -> bool {
+        self == TeamPlan::Checked && data >= BANK_VALUES
+    }
+
     /// Values of a long message (0 … this − 1).
     pub fn long_values(self) -> u16 {
         self.long_frame_values() * self.long_frame_values()

@@ -6,6 +6,7 @@
 //! (and, in release, the ignored test below).
 
 use audio::evaluation::{run_background_false_alarm_trial, Background, FalseAlarmOutcome};
+use audio::TeamPlan;
 
 /// What a trial heard, one line per (false) message, for an assertion's text.
 fn heard(out: &FalseAlarmOutcome) -> Vec<String> {
@@ -15,7 +16,7 @@ fn heard(out: &FalseAlarmOutcome) -> Vec<String> {
         .collect()
 }
 
-fn check(seconds: f64, seed: u64) {
+fn check(seconds: f64, seed: u64, team: TeamPlan) {
     let mut heard = Vec::new();
     for (i, kind) in Background::ALL.into_iter().enumerate() {
         for (j, t60) in [0.0, 1.2].into_iter().enumerate() {
@@ -24,6 +25,7 @@ fn check(seconds: f64, seed: u64) {
                 seconds,
                 t60,
                 seed + 10 * i as u64 + j as u64,
+                team,
             );
             assert_eq!(
                 out.samples,
@@ -50,15 +52,25 @@ fn check(seconds: f64, seed: u64) {
 
 #[test]
 fn backgrounds_that_stop_and_start_say_nothing() {
-    check(150.0, 7001);
+    check(150.0, 7001, TeamPlan::Three);
 }
 
-/// Ten hours in all (50 minutes per row): minutes in release,
+/// The same backgrounds (other seeds, never tuned on) heard by a decoder set to the
+/// checked plan, whose first frame of a long message is decided on the sender's louder
+/// tone (`decoder/confirm.rs`, `Decoder::sender_vote_tones`) and reported only with a
+/// second frame: nothing either.
+#[test]
+fn backgrounds_say_nothing_to_a_decoder_set_to_the_checked_plan() {
+    check(150.0, 7201, TeamPlan::Checked);
+}
+
+/// Ten hours in all (50 minutes per row) under each of the two plans: minutes in release,
 /// `cargo test --release -p audio --test backgrounds -- --ignored`.
 #[test]
 #[ignore = "ten hours of audio (minutes in release); run with --ignored"]
 fn ten_hours_of_backgrounds_that_stop_and_start_say_nothing() {
-    check(3000.0, 8001);
+    check(3000.0, 8001, TeamPlan::Three);
+    check(3000.0, 8201, TeamPlan::Checked);
 }
 
 /// Two talkers pausing into digital silence in a T60 1.2 s hall, the first seconds of
@@ -69,7 +81,8 @@ fn ten_hours_of_backgrounds_that_stop_and_start_say_nothing() {
 /// background's (`decoder/bursts.rs`): nothing is reported.
 #[test]
 fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
-    let out = run_background_false_alarm_trial(Background::Talkers, 9.0, 1.2, 19_001);
+    let out =
+        run_background_false_alarm_trial(Background::Talkers, 9.0, 1.2, 19_001, TeamPlan::Three);
     let heard = heard(&out);
     assert!(
         heard.is_empty(),
@@ -86,7 +99,8 @@ fn a_weak_frame_among_many_talkers_tones_is_not_a_message() {
 /// (`decoder/bursts.rs`). Nothing is reported.
 #[test]
 fn vote_tones_that_sound_in_turn_are_not_a_message() {
-    let out = run_background_false_alarm_trial(Background::Talkers, 350.0, 1.2, 24_001);
+    let out =
+        run_background_false_alarm_trial(Background::Talkers, 350.0, 1.2, 24_001, TeamPlan::Three);
     let heard = heard(&out);
     assert!(
         heard.is_empty(),

@@ -139,6 +139,10 @@ enum AudioCommand {
         /// Reverberation time of the hall rows, s.
         #[arg(long, default_value_t = 1.2)]
         t60: f64,
+        /// Team plan the decoder is set to (`checked`: a first frame only a long message
+        /// carries is decided on the sender's louder tone, and reported only with a second).
+        #[arg(long, default_value_t = TeamPlan::Three)]
+        team: TeamPlan,
         /// Rows run at once, each on its own thread.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
         jobs: u16,
@@ -302,8 +306,9 @@ pub fn run(args: AudioArgs) -> Result<()> {
             time,
             seed,
             t60,
+            team,
             jobs,
-        } => backgrounds(time.as_secs_f64(), seed, t60, usize::from(jobs)),
+        } => backgrounds(time.as_secs_f64(), seed, t60, team, usize::from(jobs)),
     }
 }
 
@@ -948,6 +953,7 @@ fn rooms(
                 8,
                 noise_s,
                 seed.wrapping_mul(1000).wrapping_add(900 + i as u64),
+                team,
             )
         },
         |i, heard| {
@@ -1004,7 +1010,7 @@ fn rooms(
 }
 
 /// `huddle audio backgrounds`: false messages per background, dry and in a hall.
-fn backgrounds(total_s: f64, seed: u64, t60: f64, jobs: usize) -> Result<()> {
+fn backgrounds(total_s: f64, seed: u64, t60: f64, team: TeamPlan, jobs: usize) -> Result<()> {
     anyhow::ensure!(
         (0.0..=5.0).contains(&t60),
         "--t60 {t60} s: a hall of 0 to 5 s"
@@ -1012,7 +1018,7 @@ fn backgrounds(total_s: f64, seed: u64, t60: f64, jobs: usize) -> Result<()> {
     let started = Instant::now();
     let per_row = total_s / (2 * Background::ALL.len()) as f64;
     outln!(
-        "False messages in backgrounds that stop and start; seed {seed}, {:.2} h per row",
+        "False messages in backgrounds that stop and start; seed {seed}, {:.2} h per row, team plan {team}",
         per_row / 3600.0
     );
     outln!(
@@ -1038,7 +1044,7 @@ fn backgrounds(total_s: f64, seed: u64, t60: f64, jobs: usize) -> Result<()> {
         jobs,
         |&(kind, room_t60, row_seed)| {
             let t = Instant::now();
-            let out = run_background_false_alarm_trial(kind, per_row, room_t60, row_seed);
+            let out = run_background_false_alarm_trial(kind, per_row, room_t60, row_seed, team);
             (out, t.elapsed().as_secs_f64().max(1e-9))
         },
         |i, (out, secs)| {

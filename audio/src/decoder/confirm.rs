@@ -29,6 +29,9 @@ pub(super) const P_TONE_RIVAL: f64 = 1e-3;
 /// through the search's coarser gate does not.
 pub(super) const P_FRAME_CONFIRM: f64 = 1e-10;
 
+/// Tones of its basic a 2-of-3 vote rests on.
+const TWO_OF_THREE: usize = 2;
+
 /// Least share of its even-spread energy each half of a slot must hold (see
 /// [`Decoder::sounds_through_slot`]): far below what a real frame's halves hold even at
 /// the lowest operating SNR.
@@ -240,13 +243,23 @@ impl Decoder {
             return None;
         }
         let clear = stands_clear(frame, &present, &level);
+        let sender_tones = self.sender_vote_tones(t, frame);
         let refused = if !self.sounds_through_slot(frame, &present, t.scale, a, b) {
             Some("does not sound through")
-        } else if !self.votes_hold_in_each_half(frame, &present, t.scale, a, b) {
+        } else if !self.votes_hold_in_each_half(frame, &present, t.scale, a, b, sender_tones) {
             Some("a vote misses a half")
         } else if !Self::votes_stand_above_their_neighbours(frame, &present, &sums, count) {
             Some("a vote not above its neighbours")
-        } else if !self.votes_sound_steadily(frame, &present, &sums, count, t.scale, a, b) {
+        } else if !self.votes_sound_steadily(
+            frame,
+            &present,
+            &sums,
+            count,
+            t.scale,
+            a,
+            b,
+            sender_tones,
+        ) {
             Some("a vote not steady")
         } else if let Err(why) = self.basics_sound_together(frame, &present, t.scale, a, b) {
             // Its two basics did not begin and end together (see `coherence.rs`).
@@ -441,9 +454,39 @@ impl Decoder {
         a: f64,
         b: f64,
     ) -> bool {
-        self.votes_hold_in_each_half(frame, present, scale, a, b)
+        self.votes_hold_in_each_half(frame, present, scale, a, b, TWO_OF_THREE)
             && Self::votes_stand_above_their_neighbours(frame, present, sums, count)
-            && self.votes_sound_steadily(frame, present, sums, count, scale, a, b)
+            && self.votes_sound_steadily(frame, present, sums, count, scale, a, b, TWO_OF_THREE)
+    }
+
+    /// How many of its present tones the sender's vote of `frame`, decided on a slot of
+    /// `t`, must hold on in each half of the slot and steadily through it (see
+    /// [`Decoder::votes_hold_in_each_half`], [`Decoder::votes_sound_steadily`]): one on a
+    /// long message's second slot, and on a first slot whose data only a long message of
+    /// the team's plan carries (the checked plan's data 10 … 20); two otherwise. The data's
+    /// vote always needs two, and the sender's vote still needs two tones present over the
+    /// slot (the rules).
+    ///
+    /// A sender in a room's notch sounds one loud tone and a second 15–25 dB under it, and
+    /// that weak tone, a few times the noise per window, misses a half or reads dropouts
+    /// among talkers now and then (long lab-1.2 0 dB, tuning rows 82021–87021: 29 of the
+    /// 101 lost long messages were refused so, the sender's weak tone failing 19 times
+    /// against the data's 4, e.g. LeftAttacker's k49 at 3–12 per window beside k25 at
+    /// 200–400 and k1 in a notch). The two checks are there to refuse frames that babble
+    /// assembled from passing harmonics. On a second slot the sender is no longer in
+    /// question: the first slot decided it, and its tones must keep their first-slot level
+    /// through the slot (`second_frame_holds_its_level`). On a first slot of a frame only
+    /// a long message has, the frame is reported only if a second slot passes too: frames
+    /// of babble would have to do so twice, the sender holding its level through both.
+    fn sender_vote_tones(&self, t: &Tracking, frame: Frame) -> usize {
+        let second = t.stage == super::tracking::Stage::Slot2;
+        let long_only = t.stage == super::tracking::Stage::Slot1
+            && self.config.team.frame_is_long_only(frame.data);
+        if second || long_only {
+            1
+        } else {
+            TWO_OF_THREE
+        }
     }
 
     /// Whether a second slot `[a, b)` is a second frame rather than the first frame's
@@ -635,6 +678,7 @@ impl Decoder {
         scale: usize,
         a: f64,
         b: f64,
+        sender_tones: usize,
     ) -> bool {
         let window_len = self.geometry.window_len as f64;
         if b - a < 4.0 * window_len {
@@ -659,7 +703,7 @@ impl Decoder {
                 .copied()
                 .unwrap_or(0.0);
             let threshold = gamma_upper_quantile(half.count as f64, P_HALF_TONE).max(above_most);
-            each_vote_holds(frame, present, |k| half.sums[k] >= threshold)
+            votes_hold_on(frame, present, sender_tones, |k| half.sums[k] >= threshold)
         })
     }
 
@@ -719,11 +763,12 @@ impl Decoder {
         scale: usize,
         a: f64,
         b: f64,
+        sender_tones: usize,
     ) -> bool {
         let Some(steady) = self.steadiness(frame, sums, count, scale, a, b) else {
             return true;
         };
-        each_vote_holds(frame, present, steady)
+        votes_hold_on(frame, present, sender_tones, steady)
     }
 
     /// The test of [`Decoder::votes_sound_steadily`] for one tone `k` of the slot `[a, b)`
@@ -927,13 +972,25 @@ fn each_vote_holds(
     present: &[bool; TONE_COUNT],
     holds: impl Fn(usize) -> bool,
 ) -> bool {
-    vote_basics(frame).into_iter().all(|basic| {
+    votes_hold_on(frame, present, TWO_OF_THREE, holds)
+}
+
+/// Whether the frame's sender vote rests on `sender_tones` `present` tones that pass
+/// `holds`, and its data vote on two.
+fn votes_hold_on(
+    frame: Frame,
+    present: &[bool; TONE_COUNT],
+    sender_tones: usize,
+    holds: impl Fn(usize) -> bool,
+) -> bool {
+    let [sender, data] = vote_basics(frame);
+    let held = |basic: usize| {
         basic_tones(basic)
             .iter()
             .filter(|&&k| present[k] && holds(k))
             .count()
-            >= 2
-    })
+    };
+    held(sender) >= sender_tones && held(data) >= TWO_OF_THREE
 }
 
 /// `P(r < x)` for the normalised power `r` of a steady tone of excess `lambda` in noise of

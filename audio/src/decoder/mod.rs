@@ -240,6 +240,10 @@ use windows::WindowRecord;
 /// Shortest tone duration the decoder accepts, s (see [`DecoderConfigError::ToneDuration`]).
 pub const MIN_TONE_DURATION_S: f64 = 0.06;
 
+/// Reports the team plan refused that a decoder keeps for [`Decoder::poll_refused`] when
+/// nobody polls them (the oldest go first): the decoder's state stays bounded.
+const REFUSED_KEPT: usize = 64;
+
 /// How to decode.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DecoderConfig {
@@ -351,6 +355,9 @@ pub struct Decoder {
     /// First slots lately refused for a foreign sound under them (see `refusals.rs`).
     refusals: std::cell::Cell<refusals::Refusals>,
     output: VecDeque<Detection>,
+    /// Reports the team plan cannot have sent, dropped from `output` (the newest
+    /// [`REFUSED_KEPT`]; see [`Decoder::poll_refused`]).
+    refused: VecDeque<Detection>,
     scratch_powers: Vec<f32>,
     /// The end test's short window.
     short_window: ShortWindow,
@@ -427,6 +434,7 @@ impl Decoder {
             pending_replay: None,
             refusals: std::cell::Cell::default(),
             output: VecDeque::new(),
+            refused: VecDeque::new(),
             eof: false,
             trace: std::cell::RefCell::new(None),
         })
@@ -506,6 +514,14 @@ impl Decoder {
     /// The next decoded message, in order of decision.
     pub fn poll_message(&mut self) -> Option<Detection> {
         self.output.pop_front()
+    }
+
+    /// The next report the team plan ([`DecoderConfig::team`]) cannot have sent, dropped
+    /// from [`Decoder::poll_message`]: someone else's sound, or a long message cut to one
+    /// frame under the checked plan. For diagnostics and evaluation; never a message. Only
+    /// the newest few are kept when nobody polls.
+    pub fn poll_refused(&mut self) -> Option<Detection> {
+        self.refused.pop_front()
     }
 
     /// Ends the stream: a transmission whose slots are complete is decided on the evidence

@@ -296,11 +296,19 @@ impl Decoder {
         // T60 1.2 s lab at 0 dB a second frame has three loud tones as often as not, the
         // lowest (k1, 549 Hz) pulled 0.5-1.2 Hz by a talker while the other two agreed
         // within 0.1 Hz (tuning row 11021: 5 of 13 lost long messages).
+        // And on a second slot a tone peaking beyond the comb, where its basic's vote holds
+        // without it, is let go beside two loud tones that agree: the sender's scale is
+        // the first slot's, and a talker's harmonic a bin or two beside a tone puts its
+        // loudest bin past the comb's last (long lab-1.2 0 dB, tuning rows 82021–87021:
+        // 7 of the 16 second slots refused as off grid, e.g. 70021 at 236.05 s: k18 past
+        // the comb while k42 and k66 of its basic were present and two loud tones agreed
+        // within 0.5 Hz).
         let pair_agrees = second_slot && rest.len() == 2 && fit(&rest).1 <= PEAK_TOLERANCE_HZ;
+        let beyond_let_go = off.is_infinite() && vote_holds_without(tones, excused);
         let let_go = (rest_worst <= PEAK_TOLERANCE_HZ
             && (vote_holds_without(tones, excused)
                 || (second_slot && off <= PEAK_TOLERANCE_ONE_HZ && rest.len() >= 3)))
-            || (pair_agrees && off <= PEAK_TOLERANCE_ONE_HZ);
+            || (pair_agrees && (off <= PEAK_TOLERANCE_ONE_HZ || beyond_let_go));
         self.note(self.latest_window_end(), || {
             let r: Vec<String> = peaks
                 .iter()

@@ -8,6 +8,7 @@ use crate::tones::{basic_tones, tone_frequency_hz, Frame, SENDER_COUNT};
 
 mod room;
 mod second_slot;
+mod sender_vote;
 
 fn decode_all(config: DecoderConfig, samples: &[f32], block: usize) -> Vec<Detection> {
     let mut d = Decoder::new(config).unwrap();
@@ -34,7 +35,15 @@ fn decode_with(d: &mut Decoder, samples: &[f32], block: usize) -> Vec<Detection>
 /// The default decoder, tracing, over `samples` in blocks of 1,000: the messages, and
 /// its trace outside the search (for an assertion's message).
 pub(super) fn decode_traced(samples: &[f32]) -> (Vec<Message>, Vec<TraceEvent>, Vec<String>) {
-    let mut d = Decoder::new(DecoderConfig::default()).unwrap();
+    decode_traced_with(DecoderConfig::default(), samples)
+}
+
+/// [`decode_traced`] with the decoder set to `config`.
+pub(super) fn decode_traced_with(
+    config: DecoderConfig,
+    samples: &[f32],
+) -> (Vec<Message>, Vec<TraceEvent>, Vec<String>) {
+    let mut d = Decoder::new(config).unwrap();
     d.enable_trace();
     let got = decode_with(&mut d, samples, 1000)
         .into_iter()

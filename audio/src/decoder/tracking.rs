@@ -6,7 +6,7 @@ use super::end_test::{EndTest, EndVerdict, SPRT_HORIZON};
 use super::rules::is_leakage;
 use super::search::{Blocked, Recent};
 use super::{median, Decoder, Detection};
-use crate::significance::gamma_upper_quantile;
+use crate::significance::{gamma_upper_quantile, hann_share_inside};
 use crate::tones::{basic_tones, Frame, Message, Sender, BASIC_COUNT, SENDER_COUNT, TONE_COUNT};
 
 /// Share of a decided frame's level its tail must fall below before the search looks for
@@ -271,6 +271,11 @@ impl Decoder {
         if first {
             next.onset = a;
         }
+        let slot = if first {
+            self.refit_scale(&mut next, slot, a, b)
+        } else {
+            slot
+        };
         next.data[if first { 0 } else { 1 }] = slot.frame.data;
         if first {
             next.data[1] = slot.frame.data;
@@ -435,19 +440,24 @@ impl Decoder {
                 self.config.team.decode(&message).is_some()
             )
         });
-        if self.config.team.decode(&message).is_none() {
-            // Not a message of the team's plan (e.g. data 20, or a long message across
-            // two banks of the six-robot plan): someone else's, or a wrong decision.
-            return;
-        }
-        self.output.push_back(Detection {
+        let detection = Detection {
             message,
             start_s: t.onset / rate,
             end_s: end / rate,
             decided_at_s: decided_at / rate,
             frequency_scale: 1.0 + self.geometry.scales[t.scale],
             tone_snr_db: 10.0 * median.max(1e-12).log10(),
-        });
+        };
+        if self.config.team.decode(&message).is_none() {
+            // Not a message of the team's plan (e.g. data 20, or a long message across
+            // two banks of the six-robot plan): someone else's, or a wrong decision.
+            if self.refused.len() >= super::REFUSED_KEPT {
+                self.refused.pop_front();
+            }
+            self.refused.push_back(detection);
+            return;
+        }
+        self.output.push_back(detection);
     }
 
     /// The rules on a long message's second slot `[a, b)` of `t`, for when the seed's rules
@@ -619,6 +629,70 @@ impl Decoder {
             tail[k] = early.level[k] > 0.0 && late.level[k] < ECHO_HALF_SHARE * early.level[k];
         }
         tail
+    }
+
+    /// Moves the tracked transmission `next` to the frequency scale its decided first slot
+    /// `[a, b)` sounds at (the scale at which the present tones of `slot`'s frame hold the
+    /// most excess power over the slot's windows), re-measuring the slot's levels there;
+    /// the end test and the second slot are then read at that scale. The same scale when
+    /// no other reads more.
+    ///
+    /// The search finds a frame at the scale its coarse sums peak at, and those sums also
+    /// hold whatever sounded before the frame, in a room the tail of the previous message
+    /// (another robot, another clock). The first slot's checks look for a common scale of
+    /// their own (see `Decoder::has_off_grid_tone`), so a first slot passes where its
+    /// tones sit a few scales from the found one; the second slot, read at the found
+    /// scale, then lost a few dB on every tone and failed the off-grid test or a vote
+    /// (long lab-1.2 0 dB, tuning rows 82021–87021: 5 of the 16 second slots refused as
+    /// off grid read 3–40 times more on their tones at another scale, e.g. 85021 at
+    /// 28.59 s: k46 at 197 on the found scale against 5,084 at its best). A sender's clock
+    /// does not move between its two frames.
+    fn refit_scale(
+        &self,
+        next: &mut Tracking,
+        slot: super::confirm::SlotDecision,
+        a: f64,
+        b: f64,
+    ) -> super::confirm::SlotDecision {
+        let window_len = self.geometry.window_len as f64;
+        let tones: Vec<usize> = slot
+            .frame
+            .tones()
+            .into_iter()
+            .filter(|&k| slot.present[k])
+            .collect();
+        let mut totals = vec![0.0f64; self.geometry.scale_count()];
+        for w in &self.history {
+            if hann_share_inside(w.start as f64, window_len, a, b) < 0.9 {
+                continue;
+            }
+            for (j, total) in totals.iter_mut().enumerate() {
+                *total += Self::excess(w, j, &tones);
+            }
+        }
+        let Some(best) = (0..totals.len()).max_by(|&x, &y| totals[x].total_cmp(&totals[y])) else {
+            return slot;
+        };
+        // Neighbouring scales that put every tone in the same bins read alike: only a
+        // scale that reads more moves the tracking.
+        if totals[best] <= totals.get(next.scale).copied().unwrap_or(f64::INFINITY) {
+            return slot;
+        }
+        let Some(sums) = self.integrate_slot(best, a, b) else {
+            return slot;
+        };
+        self.note(a, || {
+            format!(
+                "scale refit {} -> {best} ({:.0} -> {:.0})",
+                next.scale, totals[next.scale], totals[best]
+            )
+        });
+        next.scale = best;
+        super::confirm::SlotDecision {
+            level: sums.level,
+            noise: sums.noise,
+            ..slot
+        }
     }
 
     /// Closes the tracked transmission at `end`; `too_long` blocks its frame until it stops.

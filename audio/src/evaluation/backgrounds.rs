@@ -5,6 +5,7 @@
 
 use crate::channel::{Babble, Convolver, Door, Gated, Melody, RoomSpec, Source, Whistle};
 use crate::decoder::{Decoder, DecoderConfig, TraceEvent};
+use crate::team::TeamPlan;
 
 use super::FalseAlarmOutcome;
 
@@ -91,16 +92,18 @@ impl Background {
     }
 }
 
-/// Streams `seconds` of `kind` (seeded) through a 16 kHz, 1 s tone decoder, dry when
-/// `t60_s` is 0, else through a hall of that reverberation time (which fills the
-/// silences with the background's own tail). Every report is false.
+/// Streams `seconds` of `kind` (seeded) through a 16 kHz, 1 s tone decoder set to the
+/// team plan `team`, dry when `t60_s` is 0, else through a hall of that reverberation
+/// time (which fills the silences with the background's own tail). Every report is
+/// false.
 pub fn run_background_false_alarm_trial(
     kind: Background,
     seconds: f64,
     t60_s: f64,
     seed: u64,
+    team: TeamPlan,
 ) -> FalseAlarmOutcome {
-    background_trial(kind, seconds, t60_s, seed, false).0
+    background_trial(kind, seconds, t60_s, seed, team, false).0
 }
 
 /// [`run_background_false_alarm_trial`] with the decoder's trace (see
@@ -110,8 +113,9 @@ pub fn run_background_false_alarm_trial_traced(
     seconds: f64,
     t60_s: f64,
     seed: u64,
+    team: TeamPlan,
 ) -> (FalseAlarmOutcome, Vec<TraceEvent>) {
-    background_trial(kind, seconds, t60_s, seed, true)
+    background_trial(kind, seconds, t60_s, seed, team, true)
 }
 
 fn background_trial(
@@ -119,10 +123,15 @@ fn background_trial(
     seconds: f64,
     t60_s: f64,
     seed: u64,
+    team: TeamPlan,
     trace: bool,
 ) -> (FalseAlarmOutcome, Vec<TraceEvent>) {
     let rate = 16_000u32;
-    let mut decoder = Decoder::new(DecoderConfig::default()).expect("the default config is valid");
+    let mut decoder = Decoder::new(DecoderConfig {
+        team,
+        ..DecoderConfig::default()
+    })
+    .expect("the default config is valid");
     if trace {
         decoder.enable_trace();
     }

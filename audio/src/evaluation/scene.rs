@@ -217,10 +217,9 @@ pub struct SceneTrial {
     pub two_senders: bool,
     /// Largest sender clock error; each message draws one uniformly in ± this.
     pub max_clock_error: f64,
-    /// The team plan messages are drawn from. The decoder itself runs with the seed's
-    /// plan (which drops nothing), and a report the trial's plan cannot have sent is
-    /// counted as *refused* (a decoder set to the plan drops it, and dropping changes
-    /// none of its state), so one run shows what the plan's check catches.
+    /// The team plan messages are drawn from, and the decoder is set to. A report the plan
+    /// cannot have sent, which the decoder drops, is counted as *refused* (see
+    /// [`Decoder::poll_refused`]), so one run shows what the plan's check catches.
     pub team: TeamPlan,
 }
 
@@ -402,7 +401,10 @@ fn scene_trial(
 ) -> Result<(SceneOutcome, Vec<TraceEvent>, Vec<OracleVerdict>), TrialError> {
     let rate = ROOM_SET_RATE_HZ;
     let rate_f = f64::from(rate);
-    let mut config = DecoderConfig::default();
+    let mut config = DecoderConfig {
+        team: trial.team,
+        ..DecoderConfig::default()
+    };
     let mut encoder_config = EncoderConfig::default();
     if let Some(t) = oracle_tone_s {
         config.tone_duration_s = t;
@@ -554,10 +556,12 @@ fn scene_trial(
             o.push(&mix);
         }
         detections.extend(std::iter::from_fn(|| decoder.poll_message()));
+        detections.extend(std::iter::from_fn(|| decoder.poll_refused()));
         at = end;
     }
     decoder.finish();
     detections.extend(std::iter::from_fn(|| decoder.poll_message()));
+    detections.extend(std::iter::from_fn(|| decoder.poll_refused()));
 
     let mut out = SceneOutcome {
         sent: sent.len(),
@@ -605,17 +609,23 @@ fn scene_trial(
     Ok((out, decoder.take_trace(), verdicts))
 }
 
-/// False messages in `seconds` of `talkers` talkers in `room` with no message.
+/// False messages in `seconds` of `talkers` talkers in `room` with no message, heard by
+/// a decoder set to the team plan `team`.
 pub fn run_scene_false_alarm_trial(
     room: &ExternalRoom,
     babble: &[Vec<f32>],
     talkers: usize,
     seconds: f64,
     seed: u64,
+    team: TeamPlan,
 ) -> Vec<Detection> {
     let rate = ROOM_SET_RATE_HZ;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut decoder = Decoder::new(DecoderConfig::default()).expect("the default config is valid");
+    let mut decoder = Decoder::new(DecoderConfig {
+        team,
+        ..DecoderConfig::default()
+    })
+    .expect("the default config is valid");
     let mut voices = Talkers::new(room, babble, talkers.max(1), &mut rng);
     voices.gain = 0.3;
     let total = (seconds * f64::from(rate)) as u64;
