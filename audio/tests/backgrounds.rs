@@ -107,3 +107,26 @@ fn vote_tones_that_sound_in_turn_are_not_a_message() {
         "talkers T60 1.2 s, row 24001, 350 s: false messages {heard:?}"
     );
 }
+
+/// Every background at once, dry, the first 1,700 s of row 37050 (`huddle audio
+/// backgrounds --seed 37`, a draw nobody had run): two loud tones of something else,
+/// k0 at 33 and k10 at 56 per window, each completed to a vote by a tone near the floor
+/// (k24 at 2.7, k34 at 3.8), at the comb's outermost scale (0.9940), passed every check
+/// as a clear frame and came out as short (0, 7) at 1666.47 s. A frame whose votes both
+/// rest on a faint tone and that peaks at the comb's edge is no message
+/// (`decoder/off_grid.rs`): nothing is reported.
+#[test]
+fn two_loud_tones_completed_by_faint_ones_at_the_combs_edge_are_not_a_message() {
+    let out = run_background_false_alarm_trial(
+        Background::Everything,
+        1700.0,
+        0.0,
+        37_050,
+        TeamPlan::Checked,
+    );
+    let heard = heard(&out);
+    assert!(
+        heard.is_empty(),
+        "everything dry, row 37050, 1,700 s: false messages {heard:?}"
+    );
+}
