@@ -14,7 +14,7 @@ type Amplitude<'a> = &'a dyn Fn(f64) -> f64;
 /// A tone on for an eighth of a second, off for the next, from `from` to `to` s.
 fn pulsing(from: f64, to: f64, a: f64) -> impl Fn(f64) -> f64 {
     move |t: f64| {
-        if (from..to).contains(&t) && ((t - from) / 0.125) as u64 % 2 == 0 {
+        if (from..to).contains(&t) && (((t - from) / 0.125) as u64).is_multiple_of(2) {
             a
         } else {
             0.0
