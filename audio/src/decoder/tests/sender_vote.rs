@@ -133,3 +133,55 @@ fn a_report_the_plan_cannot_have_sent_is_polled_as_refused_not_as_a_message() {
     assert_eq!(refused, Some(cut), "the cut frame, as refused");
     assert_eq!(d.poll_refused(), None, "refused once");
 }
+
+#[test]
+fn a_second_frames_tone_pulled_past_the_comb_beside_two_agreeing_loud_tones_is_let_go() {
+    // Lab T60 1.2 s with four talkers at 0 dB (tuning rows 82021–87021, 70021): 7 of the
+    // 16 second slots refused as off grid had one loud tone whose loudest bin lay past
+    // the comb's edge (a talker's harmonic a bin or two beside it), while the two other
+    // loud tones agreed within 0.5 Hz and the tone's basic held its vote on its two
+    // other tones (e.g. 70021 at 236.05 s: k18 past the comb, k42 and k66 present).
+    // Here the second frame's k19 (1,436.6 Hz) has a louder sound 14 Hz above it, past
+    // the comb's ±0.6%; the loud tones are k19, k25 and k49, the others 10 dB down: the
+    // long message (old code: nothing, "peaks: k19 off inf Hz … off grid"). With the
+    // sound 20 Hz above k43 instead (k43 then loud and k19 faint), the same.
+    let long = Message::long(Sender::LeftAttacker, 21 * 11 + 16).unwrap();
+    let play = |beside: usize, above_hz: f64| -> (Vec<Message>, String) {
+        let rate = 16_000.0;
+        let mut x: Vec<f32> = (0..(4.0 * rate) as usize)
+            .map(|n| {
+                let t = n as f64 / rate;
+                let mut tones: Vec<(f64, f64)> = Vec::new();
+                let f = crate::tones::tone_frequency_hz;
+                if (0.5..2.5).contains(&t) {
+                    tones.extend([(f(1), 0.003), (f(25), 0.01), (f(49), 0.01)]);
+                }
+                if (0.5..1.5).contains(&t) {
+                    tones.extend([(f(14), 0.01), (f(38), 0.01), (f(62), 0.01)]);
+                }
+                if (1.5..2.5).contains(&t) {
+                    for k in [19, 43, 67] {
+                        tones.push((f(k), if k == beside { 0.01 } else { 0.003 }));
+                    }
+                    tones.push((f(beside) + above_hz, 0.015));
+                }
+                tones
+                    .iter()
+                    .map(|&(hz, a)| a * (2.0 * std::f64::consts::PI * hz * t).sin())
+                    .sum::<f64>() as f32
+            })
+            .collect();
+        let mut noise = crate::channel::WhiteNoise::new(70021, 0.002);
+        crate::channel::Source::add_to(&mut noise, &mut x);
+        let (got, _, shown) = decode_traced(&x);
+        (got, shown.join("\n"))
+    };
+    for (beside, above_hz) in [(19, 14.0), (43, 20.0)] {
+        let (got, shown) = play(beside, above_hz);
+        assert_eq!(
+            got,
+            vec![long],
+            "a louder sound {above_hz} Hz above k{beside} on the second slot\n{shown}"
+        );
+    }
+}
