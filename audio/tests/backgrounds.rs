@@ -130,3 +130,25 @@ fn two_loud_tones_completed_by_faint_ones_at_the_combs_edge_are_not_a_message() 
         "everything dry, row 37050, 1,700 s: false messages {heard:?}"
     );
 }
+
+/// Every background at once in a T60 1.2 s hall, the first 2,200 s of tuning row 31051
+/// (`huddle audio backgrounds --seed 31`): k0 at 145 and k10 at 184 per window (the
+/// music's note near 497 Hz and its octave), each completed to a vote by a tone under 3
+/// (k24, k34), came out as short (0, 7) at 2145.84 s, away from the comb's edge (scale
+/// 0.9958). A first frame whose two votes both rest on a faint tone is the background's
+/// (`decoder/bursts.rs`): nothing is reported.
+#[test]
+fn a_note_and_its_octave_completed_by_faint_tones_are_not_a_message() {
+    let out = run_background_false_alarm_trial(
+        Background::Everything,
+        2200.0,
+        1.2,
+        31_051,
+        TeamPlan::Checked,
+    );
+    let heard = heard(&out);
+    assert!(
+        heard.is_empty(),
+        "everything T60 1.2 s, row 31051, 2,200 s: false messages {heard:?}"
+    );
+}

@@ -59,7 +59,47 @@ pub(super) fn assembled_by_background(
             10.0 * typical.max(1e-12).log10()
         ));
     }
+    // Two loud tones of something else, each completed to a vote by a tone near the
+    // floor: the one frame behind three of the four false messages of round 17's
+    // backgrounds (tuning rows 31051 and 37050, Goalkeeper's data 7 from k0 and k10 of a
+    // note and its octave in the music, their vote tones k24, k34, k58 at 2–4 per window).
+    // A transmitter in a room's notches loses one tone of a basic now and then, and
+    // sounds it faint in the other; losing both votes so at once, with their loud tones
+    // loud, the tuning rows never did (S = 88, 89: 0 of 26,000 messages at 10 dB; at
+    // 20 dB, 3 short messages of 89018).
+    let tones: Vec<usize> = own.into_iter().filter(|&k| present[k]).collect();
+    if votes_rest_on_faint_tones(&tones, |i| level[tones[i]], FAINT_VOTE_TONE) {
+        return Some("both votes rest on a faint tone".to_string());
+    }
     None
+}
+
+/// Per-window excess (10 dB) under which the tone a vote rests on beside a louder one is
+/// faint (see [`assembled_by_background`], `Decoder::has_off_grid_tone`).
+pub(super) const FAINT_VOTE_TONE: f64 = 10.0;
+
+/// Whether each of the two basics among a frame's present `tones` (per-window excess
+/// `excess(i)` of `tones[i]`) rests its vote on a tone under `faint`: its second loudest.
+pub(super) fn votes_rest_on_faint_tones(
+    tones: &[usize],
+    excess: impl Fn(usize) -> f64,
+    faint: f64,
+) -> bool {
+    let mut basics: Vec<usize> = tones
+        .iter()
+        .map(|&k| k % crate::tones::BASIC_COUNT)
+        .collect();
+    basics.sort_unstable();
+    basics.dedup();
+    basics.len() == 2
+        && basics.iter().all(|&basic| {
+            let mut levels: Vec<f64> = (0..tones.len())
+                .filter(|&i| tones[i] % crate::tones::BASIC_COUNT == basic)
+                .map(&excess)
+                .collect();
+            levels.sort_by(|x, y| y.total_cmp(x));
+            levels.get(1).is_some_and(|&l| l < faint)
+        })
 }
 
 /// Least share of a slot's central windows in which every tone a frame's votes rest on

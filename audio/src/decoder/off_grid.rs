@@ -105,7 +105,11 @@ impl Decoder {
             // assembled a false message in 10 h of backgrounds (seed 37, row 37050, every
             // background dry, 1666.47 s: k0 at 33 and k10 at 56 per window, k24 at 2.7 and
             // k34 at 3.8, scale 0.9940).
-            let faint_votes = votes_rest_on_faint_tones(&tones, |i| (sums[scale][i] - n) / n);
+            let faint_votes = super::bursts::votes_rest_on_faint_tones(
+                &tones,
+                |i| (sums[scale][i] - n) / n,
+                super::bursts::FAINT_VOTE_TONE,
+            );
             if (!clear || faint_votes) && tones.len() < EDGE_MIN_TONES && edge >= next {
                 self.note(a, || {
                     format!("off grid: a faint frame peaking at the comb's edge ({edge:.0} over {next:.0})")
@@ -331,30 +335,6 @@ impl Decoder {
         });
         !let_go
     }
-}
-
-/// Per-window excess (10 dB) under which the tone a vote rests on beside a louder one is
-/// faint (see [`Decoder::has_off_grid_tone`]).
-const FAINT_VOTE_TONE: f64 = 10.0;
-
-/// Whether each basic of the frame's present `tones` (per-window excess `excess(i)` of
-/// `tones[i]`) rests its vote on a tone under [`FAINT_VOTE_TONE`]: its second loudest.
-fn votes_rest_on_faint_tones(tones: &[usize], excess: impl Fn(usize) -> f64) -> bool {
-    let mut basics: Vec<usize> = tones
-        .iter()
-        .map(|&k| k % crate::tones::BASIC_COUNT)
-        .collect();
-    basics.sort_unstable();
-    basics.dedup();
-    basics.len() == 2
-        && basics.iter().all(|&basic| {
-            let mut levels: Vec<f64> = (0..tones.len())
-                .filter(|&i| tones[i] % crate::tones::BASIC_COUNT == basic)
-                .map(&excess)
-                .collect();
-            levels.sort_by(|x, y| y.total_cmp(x));
-            levels.get(1).is_some_and(|&l| l < FAINT_VOTE_TONE)
-        })
 }
 
 /// Whether the basic of tone `k` keeps two tones among the frame's present `tones` other
