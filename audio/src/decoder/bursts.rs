@@ -9,7 +9,7 @@
 use super::confirm::{typical_level, HALL_CLEAR_LEVEL};
 use super::Decoder;
 use crate::significance::hann_share_inside;
-use crate::tones::{basic_tones, Frame, TONE_COUNT};
+use crate::tones::{basic_tones, Frame, SENDER_COUNT, TONE_COUNT};
 
 /// Least typical tone level (per-window excess, 10 dB) of a first frame in a crowded
 /// band (see [`assembled_by_background`]). The messages of the 0 dB babble rows
@@ -67,9 +67,23 @@ pub(super) fn assembled_by_background(
     // sounds it faint in the other; losing both votes so at once, with their loud tones
     // loud, the tuning rows never did (S = 88, 89: 0 of 26,000 messages at 10 dB; at
     // 20 dB, 3 short messages of 89018).
+    // Each vote's loud tone must be loud (the hall level, 15 dB): a weak message in white
+    // noise at −13 dB has every tone near the floor, faint votes and all, and is a message.
     let tones: Vec<usize> = own.into_iter().filter(|&k| present[k]).collect();
-    if votes_rest_on_faint_tones(&tones, |i| level[tones[i]], FAINT_VOTE_TONE) {
-        return Some("both votes rest on a faint tone".to_string());
+    let loud_beside_faint = [
+        frame.sender.index() as usize,
+        SENDER_COUNT + usize::from(frame.data),
+    ]
+    .into_iter()
+    .all(|basic| {
+        basic_tones(basic)
+            .iter()
+            .filter(|&&k| present[k])
+            .any(|&k| level[k] >= HALL_CLEAR_LEVEL)
+    });
+    if loud_beside_faint && votes_rest_on_faint_tones(&tones, |i| level[tones[i]], FAINT_VOTE_TONE)
+    {
+        return Some("both votes rest on a faint tone beside a loud one".to_string());
     }
     None
 }
