@@ -6,10 +6,10 @@
 //! The messages of the babble rows at 0 dB are not that weak, and in white noise, where
 //! they are, the band around them is empty.
 
-use super::confirm::{typical_level, HALL_CLEAR_LEVEL};
+use super::confirm::{typical_level, vote_basics, HALL_CLEAR_LEVEL};
 use super::Decoder;
 use crate::significance::hann_share_inside;
-use crate::tones::{basic_tones, Frame, SENDER_COUNT, TONE_COUNT};
+use crate::tones::{basic_tones, Frame, TONE_COUNT};
 
 /// Least typical tone level (per-window excess, 10 dB) of a first frame in a crowded
 /// band (see [`assembled_by_background`]). The messages of the 0 dB babble rows
@@ -70,12 +70,7 @@ pub(super) fn assembled_by_background(
     // Each vote's loud tone must be loud (the hall level, 15 dB): a weak message in white
     // noise at −13 dB has every tone near the floor, faint votes and all, and is a message.
     let tones: Vec<usize> = own.into_iter().filter(|&k| present[k]).collect();
-    let loud_beside_faint = [
-        frame.sender.index() as usize,
-        SENDER_COUNT + usize::from(frame.data),
-    ]
-    .into_iter()
-    .all(|basic| {
+    let loud_beside_faint = vote_basics(frame).into_iter().all(|basic| {
         basic_tones(basic)
             .iter()
             .filter(|&&k| present[k])

@@ -959,7 +959,7 @@ pub(super) fn typical_level(
 }
 
 /// The two basics a frame's 2-of-3 votes are taken on: its sender's and its data's.
-fn vote_basics(frame: Frame) -> [usize; 2] {
+pub(super) fn vote_basics(frame: Frame) -> [usize; 2] {
     [
         frame.sender.index() as usize,
         SENDER_COUNT + usize::from(frame.data),
