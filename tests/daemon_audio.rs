@@ -357,3 +357,116 @@ fn garbage_pcm_and_failing_commands_never_stop_the_daemon() {
     assert!(answer.starts_with("ERR 503 "), "{answer}");
     assert_eq!(c.ask("SETV *.var.still \"here\""), "OK");
 }
+
+/// A team on the checked plan (`--audio-team checked`). Robot 8 says `long 2 57` and
+/// `short 1 9` in the plan's terms (a value the plan does not have is `ERR 412`, with
+/// the plan's ranges); robot 9, listening to exactly the PCM robot 8 wrote, writes both
+/// with the plan's robot and value. Then the long message is cut after its first frame,
+/// as a hall's echo or a second robot sounding over it would: under the seed's plan
+/// robot 10 hears that frame alone as the short message "sender 2 data 15", a message
+/// nobody sent; under the checked plan robot 11 writes nothing and counts the drop.
+#[test]
+fn under_the_checked_plan_a_long_message_cut_to_one_frame_is_never_heard_as_a_short_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let said_path = dir.path().join("said.raw");
+    let output = format!("cat > '{}'", said_path.display());
+    let speaker = start(
+        8,
+        &["--audio-out", &output, "--audio-team", "checked"],
+        dir.path(),
+    );
+    let mut c = speaker.client();
+    let refused = c.ask("SETV local.var.audio.say \"short 1 10\"");
+    assert!(
+        refused.starts_with("ERR 412 ") && refused.contains("0..=9"),
+        "a checked short says 0 … 9: {refused}"
+    );
+    assert_eq!(c.ask("SETV local.var.audio.say \"long 2 57\""), "OK");
+    assert_eq!(
+        c.ask("SETV local.var.audio.say \"short left-attacker 9\""),
+        "OK"
+    );
+    wait_stat(&mut c, "audio.said", |n| n == 2);
+    // Gap, long (2 frames), gap, short, gap: 1 s each at the defaults.
+    let said = read_pcm(&said_path, 6 * u64::from(RATE) * 2);
+    drop(speaker);
+
+    // Robot 9's microphone is a FIFO, written once it watches, so no update is missed.
+    let fifo = dir.path().join("mic.fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success(), "mkfifo {}", fifo.display());
+    let input = format!("cat '{}'", fifo.display());
+    let listener = start(
+        9,
+        &["--audio-in", &input, "--audio-team", "checked"],
+        dir.path(),
+    );
+    let mut c = listener.client();
+    assert_eq!(c.ask("ADDW 9.var.audio.#"), "OK");
+    assert_eq!(c.ask("REFR 0"), "OK");
+    let mut mic = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&fifo)
+        .expect("open the FIFO for writing");
+    mic.write_all(&i16_to_s16le(&said)).expect("write PCM");
+    drop(mic);
+    for (robot, kind, value) in [("2", "long", "57"), ("1", "short", "9")] {
+        let line = next_line_starting(&mut c, "UPD 9.var.audio.heard ");
+        let fields = heard_fields(&line);
+        let got = [
+            fields.get("plan").map(String::as_str),
+            fields.get("robot").map(String::as_str),
+            fields.get("kind").map(String::as_str),
+            fields.get("value").map(String::as_str),
+        ];
+        assert_eq!(
+            got,
+            [Some("checked"), Some(robot), Some(kind), Some(value)],
+            "{line}"
+        );
+    }
+
+    // The long message's first frame, and the silence a lost second frame leaves.
+    let frame = RATE as usize; // 1 s frames
+    let long_start = frame; // after the lead-in gap
+    let mut cut = silence(0.5);
+    cut.extend_from_slice(&said[long_start..long_start + frame]);
+    cut.extend(silence(2.5));
+    let cut_path = dir.path().join("cut.raw");
+    std::fs::write(&cut_path, i16_to_s16le(&cut)).unwrap();
+    let input = format!("cat '{}'", cut_path.display());
+
+    let seed_plan = start(10, &["--audio-in", &input], dir.path());
+    let mut c = seed_plan.client();
+    let line = c.wait_for("10.var.audio.heard", PATIENCE, |a| a.starts_with("VAL"));
+    let fields = heard_fields(&line);
+    assert_eq!(
+        (
+            fields["kind"].as_str(),
+            fields["sender"].as_str(),
+            fields["data"].as_str()
+        ),
+        ("short", "2", "15"),
+        "under the seed's plan the first frame alone is a (wrong) short message: {line}"
+    );
+
+    let checked = start(
+        11,
+        &["--audio-in", &input, "--audio-team", "checked"],
+        dir.path(),
+    );
+    let mut c = checked.client();
+    wait_stat(&mut c, "audio.refused", |n| n == 1);
+    assert_eq!(
+        c.stat("audio.heard"),
+        0,
+        "nothing written under the checked plan"
+    );
+    assert!(
+        c.ask("GETV 11.var.audio.heard").starts_with("ERR 404"),
+        "no heard value at all"
+    );
+}

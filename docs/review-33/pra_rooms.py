@@ -16,7 +16,11 @@ talkers with their pauses kept as digital silence (no floor anywhere).
 SNR: the messages' in-band (500-4000 Hz) power at the microphone while they sound, over the
 babble's in-band power averaged over the whole track, pauses included. The three senders stand at
 different distances, so each has its own SNR (rows give `sender_snr` and `dist`); `short_own0` and
-`long_own0` count only the messages of senders whose own SNR is >= 0 dB.
+`long_own0` count only the messages of senders whose own SNR is >= 0 dB. A message's *local* SNR
+(seventeenth session) is its own in-band power over the babble's in-band power during that
+message (its frames): babble that talks through a message and pauses elsewhere makes the local
+SNR lower than the sender's average; `short_loc0`/`long_loc0` count messages whose local SNR is
+>= 0 dB, and `loc_lost` lists the lost messages' local SNRs (one sender's rows only).
 
 Scoring (per decoded line): right if it equals a message sounding within 0.6 s of it; wrong if it
 is near sent messages and equals none of them; false if it is near none.
@@ -198,6 +202,14 @@ def condition(room, snr, two):
     sender_snr = [round(10 * np.log10(max(1e-30, float(np.mean(signal.sosfilt(BAND, wets[s])[on_s[s]] ** 2)))
                                       / (g2 * p_bab)), 1) if on_s[s].any() else None for s in range(3)]
     room["sender_snr"] = sender_snr
+    # Each message's local SNR: its own wet power over the babble's during its frames (one
+    # sender's rows; with two senders the other robot is interference, not counted here).
+    bab_band = signal.sosfilt(BAND, bab) ** 2 * g2
+    wet_band = [signal.sosfilt(BAND, w) ** 2 for w in wets]
+    for i, (t0, d, k, s, v) in enumerate(msgs):
+        a, z = int(t0 * RATE), min(length, int((t0 + d) * RATE))
+        loc = 10 * np.log10(max(1e-30, float(np.mean(wet_band[s][a:z]))) / max(1e-30, float(np.mean(bab_band[a:z]))))
+        msgs[i] = (t0, d, k, s, v, round(float(loc), 1))
     mix = wet + np.sqrt(g2) * bab
     mix *= 0.5 / max(1e-9, float(np.max(np.abs(mix))))
     path = f"{OUT}/mix-{SEED}-{room['name']}-{snr}-{int(two)}.wav"
@@ -236,14 +248,24 @@ def decode(huddle, path):
 def score(room, snr, two, msgs, dec, b):
     right = {"short": 0, "long": 0}; sent = {"short": 0, "long": 0}
     right0 = {"short": 0, "long": 0}; sent0 = {"short": 0, "long": 0}  # senders at their own SNR >= 0 dB
+    rightl = {"short": 0, "long": 0}; sentl = {"short": 0, "long": 0}  # local SNR >= 0 dB
+    loc_lost = []
     ssnr = room.get("sender_snr") or [None] * 3
-    for (t0, d, kind, s, v) in msgs:
+    for m in msgs:
+        (t0, d, kind, s, v), loc = m[:5], (m[5] if len(m) > 5 else None)
         sent[kind] += 1
         ok = any(t0 - 0.6 <= x["t"] <= t0 + d + 0.6 and (x["kind"], x["sender"], x["data"]) == (kind, s, v) for x in dec)
         right[kind] += ok
         if ssnr[s] is not None and ssnr[s] >= 0:
             sent0[kind] += 1
             right0[kind] += ok
+        if loc is not None and not two:
+            if loc >= 0:
+                sentl[kind] += 1
+                rightl[kind] += ok
+            if not ok:
+                loc_lost.append((kind, loc))
+    msgs = [m[:5] for m in msgs]
     wrong = false = 0
     for x in dec:
         near = [mm for mm in msgs if mm[0] - 0.6 <= x["t"] <= mm[0] + mm[1] + 0.6]
@@ -257,6 +279,8 @@ def score(room, snr, two, msgs, dec, b):
     return dict(seed=SEED, bin=b, room=room["name"], t60=room["t60"], t30=round(room["t30"], 2), snr=snr, two=two,
                 short=f"{right['short']}/{sent['short']}", long=f"{right['long']}/{sent['long']}",
                 short_own0=f"{right0['short']}/{sent0['short']}", long_own0=f"{right0['long']}/{sent0['long']}",
+                short_loc0=f"{rightl['short']}/{sentl['short']}", long_loc0=f"{rightl['long']}/{sentl['long']}",
+                loc_lost=loc_lost,
                 sender_snr=ssnr, dist=room.get("dist"), wrong=wrong, false=false, right=right["short"] + right["long"], sent=len(msgs))
 
 

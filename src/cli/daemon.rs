@@ -187,6 +187,15 @@ pub struct AudioFlags {
     /// to 1 s after a run of 30 s). Counters: `huddle stats` (audio.*).
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = RestartFlag::OnFailure)]
     pub audio_in_restart: RestartFlag,
+    /// Team plan every robot of the team speaks, as `huddle audio --team`: `three` (the
+    /// seed's: SENDER 0-2, DATA 0-20 short, 0-440 long), `six` (ROBOT 0-5, VALUE 0-9
+    /// short, 0-99 long) or `checked` (ROBOT 0-2, VALUE 0-9 short, 0-120 long; a long
+    /// message cut to one frame, or two robots' frames run together, is never read as a
+    /// message: it is dropped and counted as audio.refused). Under `six` and `checked`,
+    /// `say` takes `[short|long] ROBOT VALUE` and heard values end with `plan=P robot=R
+    /// value=V`.
+    #[arg(long, value_name = "PLAN", default_value_t = audio::TeamPlan::Three)]
+    pub audio_team: audio::TeamPlan,
 }
 
 /// `--audio-in-restart`.
@@ -220,6 +229,7 @@ impl AudioFlags {
                 RestartFlag::Always => driver::audio::Restart::Always,
                 RestartFlag::Never => driver::audio::Restart::Never,
             },
+            team: self.audio_team,
         })
     }
 }

@@ -246,6 +246,14 @@ impl Thread {
 
     /// Hands every decided message to the driver's thread; false if it is gone.
     fn hand_over(&self, decoder: &mut Decoder, clock: &StreamClock) -> bool {
+        while let Some(refused) = decoder.poll_refused() {
+            tracing::info!(
+                message = %refused.message,
+                plan = %self.config.decoder.team,
+                "audio heard a message the team plan cannot have sent; dropped"
+            );
+            self.shared.count(|c| &c.refused);
+        }
         while let Some(detection) = decoder.poll_message() {
             let heard = Heard {
                 start: clock.at(detection.start_s),

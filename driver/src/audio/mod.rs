@@ -22,6 +22,13 @@
 //! If the command exits or a write fails, the message being written is lost (counted)
 //! and the command restarts for the next one, after the same backoff.
 //!
+//! **Team plan** ([`AudioConfig::team`], `--audio-team`): the robots of a team agree on
+//! how messages map to robots and values ([`audio::TeamPlan`]). The listener's decoder is
+//! set to it, so a message the plan cannot have sent (under `checked`: a long message cut
+//! to one frame, two robots' frames run together) is dropped and counted, never written;
+//! heard values name the plan's robot and value ([`heard_team_value`]) and `say` takes
+//! them ([`parse_team_say`]).
+//!
 //! Nothing the pipes carry stops the daemon: garbage PCM is only noise to the decoder,
 //! an odd byte count is a cut sample, a command that exits is restarted or reported.
 //! The counters are mirrored to `local.var.huddle.stats.audio.*` (see [`Counters`]).
@@ -34,7 +41,7 @@ use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use audio::{DecoderConfig, Detection, EncoderConfig, Message, Sender};
+use audio::{DecoderConfig, Detection, EncoderConfig, Message, Sender, TeamMessage, TeamPlan};
 use comms::relay::{ErrCode, Rejected};
 use comms::{Instant, Key, Value};
 use thiserror::Error;
@@ -76,6 +83,12 @@ pub struct AudioConfig {
     pub say_key: String,
     /// When the listening command runs again.
     pub restart: Restart,
+    /// The team plan every robot of the team speaks (`audio::TeamPlan`): heard messages it
+    /// cannot have sent are dropped and counted (`audio.refused`), heard values carry the
+    /// plan's robot and value, and `say` takes them. `Checked` is the plan under which a
+    /// long message cut to one frame, or two robots' frames run together, is never a
+    /// wrong message.
+    pub team: TeamPlan,
 }
 
 impl Default for AudioConfig {
@@ -90,6 +103,7 @@ impl Default for AudioConfig {
             heard_key: "*.var.audio.heard".into(),
             say_key: "local.var.audio.say".into(),
             restart: Restart::OnFailure,
+            team: TeamPlan::Three,
         }
     }
 }
@@ -137,6 +151,9 @@ pub(crate) const BACKOFF_LAST: Duration = Duration::from_secs(30);
 pub struct Counters {
     /// Messages decoded and written to the blackboard.
     pub heard: AtomicU64,
+    /// Messages decoded that the team plan cannot have sent (a long message cut to one
+    /// frame, frames of two robots run together): dropped, never written.
+    pub refused: AtomicU64,
     /// PCM bytes read from the listening command.
     pub in_bytes: AtomicU64,
     /// Runs of the listening command started.
@@ -164,11 +181,15 @@ pub struct Counters {
 }
 
 impl Counters {
+    /// How many counters [`Counters::snapshot`] gives.
+    pub const COUNT: usize = 14;
+
     /// Every counter with its name under `local.var.huddle.stats.`.
-    pub fn snapshot(&self) -> [(&'static str, u64); 13] {
+    pub fn snapshot(&self) -> [(&'static str, u64); Counters::COUNT] {
         let g = |c: &AtomicU64| c.load(Ordering::Relaxed);
         [
             ("audio.heard", g(&self.heard)),
+            ("audio.refused", g(&self.refused)),
             ("audio.in_bytes", g(&self.in_bytes)),
             ("audio.in_starts", g(&self.in_starts)),
             ("audio.in_failures", g(&self.in_failures)),
@@ -274,6 +295,42 @@ pub fn heard_value(seq: u64, message: &Message, start: Instant, snr_db: f64) -> 
     )
 }
 
+/// The blackboard value of a message heard under team plan `plan`: [`heard_value`]'s
+/// words, and under any plan but the seed's (`three`, where robot and value are the
+/// sender and data) three more at the end: `plan` (its name), `robot` (0 … robots − 1)
+/// and `value` (what the robot said, in the plan's range). A message the plan cannot
+/// have sent gets none of them (the daemon drops those before this).
+///
+/// ```
+/// use audio::{TeamMessage, TeamPlan};
+/// let plan = TeamPlan::Checked;
+/// let m = plan.encode(TeamMessage { robot: 2, long: true, value: 57 }).unwrap();
+/// assert_eq!(
+///     driver::audio::heard_team_value(plan, 4, &m, comms::Instant::from_micros(9), 12.0),
+///     "seq=4 kind=long sender=2 data=327 start_us=9 snr_db=12.0 plan=checked robot=2 value=57"
+/// );
+/// ```
+pub fn heard_team_value(
+    plan: TeamPlan,
+    seq: u64,
+    message: &Message,
+    start: Instant,
+    snr_db: f64,
+) -> String {
+    let mut value = heard_value(seq, message, start, snr_db);
+    if plan != TeamPlan::Three {
+        if let Some(tm) = plan.decode(message) {
+            value.push_str(&format!(
+                " plan={} robot={} value={}",
+                plan.name(),
+                tm.robot,
+                tm.value
+            ));
+        }
+    }
+    value
+}
+
 /// Why a `say` value is not a message.
 #[derive(Clone, Debug, PartialEq, Eq, Error)]
 pub enum SayError {
@@ -290,6 +347,31 @@ pub enum SayError {
     /// Out of range.
     #[error("{0}")]
     Range(#[from] audio::MessageError),
+    /// The words do not make a message of the team plan.
+    #[error(
+        "{text}: expected \"[short|long] ROBOT VALUE\" under the {plan} plan (ROBOT \
+         0-{}, VALUE 0-{} short, 0-{} long) or the heard form \"kind=short robot=1 value=7\"",
+        .plan.robots() - 1,
+        .plan.short_values() - 1,
+        .plan.long_values() - 1
+    )]
+    PlanSyntax {
+        /// What was given.
+        text: String,
+        /// The plan.
+        plan: TeamPlan,
+    },
+    /// A robot or value the plan does not have.
+    #[error("{0}")]
+    Team(#[from] audio::TeamError),
+    /// A message on the air (the heard form's `sender=`/`data=`) the plan cannot send.
+    #[error("{message} is not a message of the {plan} plan")]
+    NotInPlan {
+        /// The message.
+        message: Message,
+        /// The plan.
+        plan: TeamPlan,
+    },
 }
 
 /// Reads a `say` value: a string `"[short|long] SENDER DATA"` (without a kind: short)
@@ -352,6 +434,81 @@ pub fn parse_say(value: &Value) -> Result<Message, SayError> {
     }
 }
 
+/// Reads a `say` value under team plan `plan`: `"[short|long] ROBOT VALUE"` (without a
+/// kind: short; ROBOT 0 … robots − 1, or goalkeeper / left-attacker / right-attacker for
+/// robots 0–2; VALUE in the plan's range), or the [`heard_team_value`] form (`kind=`,
+/// `robot=`, `value=` words; a heard form with only `sender=` and `data=` is the message
+/// on the air, taken if the plan can send it). Under the seed's plan (`three`) this is
+/// [`parse_say`].
+///
+/// ```
+/// use audio::{Message, Sender, TeamPlan};
+/// use comms::Value;
+/// let say = |s: &str| driver::audio::parse_team_say(&Value::String(s.into()), TeamPlan::Checked);
+/// // A checked long message: both frames on data 10 … 20 (57 = 11 · 5 + 2).
+/// assert_eq!(say("long 2 57"), Ok(Message::long(Sender::RightAttacker, 21 * 15 + 12).unwrap()));
+/// assert_eq!(say("1 7"), Ok(Message::short(Sender::LeftAttacker, 7).unwrap()));
+/// assert!(say("short 1 12").is_err(), "a checked short says 0 … 9");
+/// assert!(say("kind=short sender=1 data=15").is_err(), "data 15 is a long message's frame");
+/// ```
+pub fn parse_team_say(value: &Value, plan: TeamPlan) -> Result<Message, SayError> {
+    if plan == TeamPlan::Three {
+        return parse_say(value);
+    }
+    let Value::String(text) = value else {
+        return Err(SayError::NotText(value.value_type().name()));
+    };
+    let syntax = || SayError::PlanSyntax {
+        text: format!("{text:?}"),
+        plan,
+    };
+    let words: Vec<&str> = text.split_whitespace().collect();
+    let (kind, robot, said) = if words.iter().any(|w| w.contains('=')) {
+        let field = |name: &str| {
+            words
+                .iter()
+                .filter_map(|w| w.split_once('='))
+                .find(|(n, _)| *n == name)
+                .map(|(_, v)| v)
+        };
+        match (field("robot"), field("value")) {
+            (Some(robot), Some(said)) => (field("kind").unwrap_or("short"), robot, said),
+            (None, None) => {
+                // The seed's heard form: the message on the air, if this plan sends it.
+                let message = parse_say(value).map_err(|_| syntax())?;
+                return match plan.decode(&message) {
+                    Some(_) => Ok(message),
+                    None => Err(SayError::NotInPlan { message, plan }),
+                };
+            }
+            _ => return Err(syntax()),
+        }
+    } else {
+        match words[..] {
+            [kind, robot, said] => (kind, robot, said),
+            [robot, said] => ("short", robot, said),
+            _ => return Err(syntax()),
+        }
+    };
+    let robot = match robot {
+        "goalkeeper" => 0,
+        "left-attacker" => 1,
+        "right-attacker" => 2,
+        r => r.parse::<u8>().map_err(|_| syntax())?,
+    };
+    let said: u16 = said.parse().map_err(|_| syntax())?;
+    let long = match kind {
+        "short" => false,
+        "long" => true,
+        _ => return Err(syntax()),
+    };
+    Ok(plan.encode(TeamMessage {
+        robot,
+        long,
+        value: said,
+    })?)
+}
+
 /// The audio of a running driver; dropping it stops listening and speaking (the
 /// listening command is killed, the speaking one gets end of input).
 pub struct Audio {
@@ -370,6 +527,7 @@ impl Audio {
         let decoder = DecoderConfig {
             sample_rate_hz: config.sample_rate_hz,
             tone_duration_s: config.tone_duration.as_secs_f64(),
+            team: config.team,
             ..DecoderConfig::default()
         };
         let tone_s = config.tone_duration.as_secs_f64();
@@ -450,6 +608,7 @@ impl Audio {
         let mirror = tokio::task::spawn_local(mirror(
             handle.clone(),
             config.heard_key.clone(),
+            config.team,
             shared.clone(),
             heard_rx,
         ));
@@ -502,6 +661,7 @@ fn say_check(
     shared: Arc<Shared>,
 ) -> impl FnMut(&Value) -> Result<(), Rejected> + 'static {
     let queue = config.queue;
+    let plan = config.team;
     let per_message = config.tone_duration;
     let gap = config.gap;
     let check = move |value: &Value| {
@@ -512,7 +672,7 @@ fn say_check(
                 text: "this daemon does not speak (no --audio-out)".into(),
             });
         };
-        let message = parse_say(value).map_err(|e| {
+        let message = parse_team_say(value, plan).map_err(|e| {
             shared.count(|c| &c.say_invalid);
             Rejected {
                 code: ErrCode::BadValue,
@@ -549,10 +709,11 @@ fn say_check(
 async fn mirror(
     handle: Handle,
     heard_key: String,
+    plan: TeamPlan,
     shared: Arc<Shared>,
     mut heard: tokio::sync::mpsc::Receiver<Heard>,
 ) {
-    let mut last = [u64::MAX; 13];
+    let mut last = [u64::MAX; Counters::COUNT];
     let mut seq = 0u64;
     let mut listening = true;
     loop {
@@ -561,7 +722,7 @@ async fn mirror(
                 Some(h) => {
                     seq += 1;
                     let d = &h.detection;
-                    let value = heard_value(seq, &d.message, h.start, d.tone_snr_db);
+                    let value = heard_team_value(plan, seq, &d.message, h.start, d.tone_snr_db);
                     tracing::info!(message = %d.message, key = %heard_key, "audio heard");
                     if let Err(e) = handle.set(&heard_key, value) {
                         tracing::warn!(error = %e, key = %heard_key, "cannot write a heard message");
@@ -687,6 +848,89 @@ mod tests {
             Err(SayError::NotText("int")),
             "only strings say something"
         );
+    }
+
+    /// Under the checked plan a robot says `[short|long] ROBOT VALUE` in the plan's ranges;
+    /// what the plan cannot send is refused with the plan's ranges in the reason, never
+    /// turned into another message.
+    #[test]
+    fn say_values_under_a_team_plan_are_the_plans_robots_and_values() {
+        let plan = TeamPlan::Checked;
+        let say = |s: &str| parse_team_say(&Value::String(s.into()), plan);
+        let encode = |robot, long, value| plan.encode(TeamMessage { robot, long, value }).unwrap();
+        assert_eq!(say("short 2 9"), Ok(encode(2, false, 9)));
+        assert_eq!(say("goalkeeper 3"), Ok(encode(0, false, 3)));
+        assert_eq!(say("long right-attacker 120"), Ok(encode(2, true, 120)));
+        let err = say("short 1 10").unwrap_err();
+        assert!(
+            matches!(err, SayError::Team(audio::TeamError::Value { .. })),
+            "a checked short says 0 … 9: {err:?}"
+        );
+        assert!(matches!(say("long 1 121"), Err(SayError::Team(_))));
+        assert!(
+            matches!(say("short 3 1"), Err(SayError::Team(_))),
+            "three robots"
+        );
+        for bad in [
+            "",
+            "7",
+            "medium 1 2",
+            "short x 2",
+            "1 2 3 4",
+            "robot=1",
+            "short 1 -2",
+        ] {
+            let err = say(bad).unwrap_err();
+            assert!(
+                matches!(err, SayError::PlanSyntax { .. }),
+                "{bad:?}: {err:?}"
+            );
+            assert!(
+                err.to_string()
+                    .contains("ROBOT 0-2, VALUE 0-9 short, 0-120 long"),
+                "the reason names the plan's ranges: {err}"
+            );
+        }
+        // The seed's heard form is the message on the air: taken if the plan sends it.
+        assert_eq!(say("kind=short sender=1 data=7"), Ok(encode(1, false, 7)));
+        let err = say("kind=short sender=1 data=17").unwrap_err();
+        assert!(
+            matches!(err, SayError::NotInPlan { .. }),
+            "data 17 alone is half a checked long message: {err:?}"
+        );
+        // Six robots: robot 4 is the left attacker's basic in the second bank.
+        let six = parse_team_say(&Value::String("short 4 7".into()), TeamPlan::Six);
+        assert_eq!(six, Ok(Message::short(Sender::LeftAttacker, 17).unwrap()));
+        // The seed's plan is `parse_say`, its errors included.
+        assert_eq!(
+            parse_team_say(&Value::String("short 1 300".into()), TeamPlan::Three),
+            Err(SayError::Range(audio::MessageError::DataOutOfRange(300)))
+        );
+    }
+
+    /// A heard value under any plan says again as the same message; under the seed's plan
+    /// it has no plan words, under the others it names the robot and value.
+    #[test]
+    fn heard_team_values_say_again_as_the_same_message() {
+        for plan in TeamPlan::ALL {
+            for robot in 0..plan.robots() {
+                for (long, value) in [
+                    (false, plan.short_values() - 1),
+                    (true, plan.long_values() - 1),
+                    (true, 0),
+                ] {
+                    let m = plan.encode(TeamMessage { robot, long, value }).unwrap();
+                    let v = heard_team_value(plan, 1, &m, at(5), 3.0);
+                    assert_eq!(
+                        parse_team_say(&Value::String(v.clone()), plan),
+                        Ok(m),
+                        "{plan}: {v}"
+                    );
+                    let words = format!("robot={robot} value={value}");
+                    assert_eq!(v.ends_with(&words), plan != TeamPlan::Three, "{plan}: {v}");
+                }
+            }
+        }
     }
 
     #[test]
