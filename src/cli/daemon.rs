@@ -190,8 +190,9 @@ pub struct AudioFlags {
     /// Team plan every robot of the team speaks, as `huddle audio --team`: `three` (the
     /// seed's: SENDER 0-2, DATA 0-20 short, 0-440 long), `six` (ROBOT 0-5, VALUE 0-9
     /// short, 0-99 long) or `checked` (ROBOT 0-2, VALUE 0-9 short, 0-120 long; a long
-    /// message cut to one frame, or two robots' frames run together, is never read as a
-    /// message: it is dropped and counted as audio.refused). Under `six` and `checked`,
+    /// message cut to one frame, or two short messages run together, is never read as a
+    /// message: it is dropped and counted as audio.refused; two robots sounding at once
+    /// can still, rarely, cross into a valid message). Under `six` and `checked`,
     /// `say` takes `[short|long] ROBOT VALUE` and heard values end with `plan=P robot=R
     /// value=V`.
     #[arg(long, value_name = "PLAN", default_value_t = audio::TeamPlan::Three)]

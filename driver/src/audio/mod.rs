@@ -25,7 +25,7 @@
 //! **Team plan** ([`AudioConfig::team`], `--audio-team`): the robots of a team agree on
 //! how messages map to robots and values ([`audio::TeamPlan`]). The listener's decoder is
 //! set to it, so a message the plan cannot have sent (under `checked`: a long message cut
-//! to one frame, two robots' frames run together) is dropped and counted, never written;
+//! to one frame, two short messages run together) is dropped and counted, never written;
 //! heard values name the plan's robot and value ([`heard_team_value`]) and `say` takes
 //! them ([`parse_team_say`]).
 //!
@@ -86,8 +86,9 @@ pub struct AudioConfig {
     /// The team plan every robot of the team speaks (`audio::TeamPlan`): heard messages it
     /// cannot have sent are dropped and counted (`audio.refused`), heard values carry the
     /// plan's robot and value, and `say` takes them. `Checked` is the plan under which a
-    /// long message cut to one frame, or two robots' frames run together, is never a
-    /// wrong message.
+    /// long message cut to one frame, or two short messages run together, is never a
+    /// wrong message (two robots sounding at once can still, rarely, cross into a valid
+    /// one: one robot's sender with the other's data).
     pub team: TeamPlan,
 }
 
