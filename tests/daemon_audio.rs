@@ -57,6 +57,12 @@ fn heard_fields(line: &str) -> std::collections::BTreeMap<String, String> {
         .collect()
 }
 
+/// The `kind`, `sender` and `data` words of a heard value line (empty when missing).
+fn kind_sender_data(line: &str) -> [String; 3] {
+    let fields = heard_fields(line);
+    ["kind", "sender", "data"].map(|name| fields.get(name).cloned().unwrap_or_default())
+}
+
 /// Reads lines until one starts with `prefix` (other pushes are skipped), or panics.
 fn next_line_starting(c: &mut Client, prefix: &str) -> String {
     let deadline = Instant::now() + PATIENCE;
@@ -178,16 +184,7 @@ fn a_wav_file_through_audio_in_is_heard() {
         line.starts_with("VAL 5.var.audio.heard string "),
         "robot 5 owns it: {line}"
     );
-    let fields = heard_fields(&line);
-    assert_eq!(
-        (
-            fields["kind"].as_str(),
-            fields["sender"].as_str(),
-            fields["data"].as_str()
-        ),
-        ("short", "2", "17"),
-        "{line}"
-    );
+    assert_eq!(kind_sender_data(&line), ["short", "2", "17"], "{line}");
     wait_stat(&mut c, "audio.heard", |n| n == 1);
     assert_eq!(c.stat("audio.in_starts"), 1);
 }
@@ -442,14 +439,9 @@ fn under_the_checked_plan_a_long_message_cut_to_one_frame_is_never_heard_as_a_sh
     let seed_plan = start(10, &["--audio-in", &input], dir.path());
     let mut c = seed_plan.client();
     let line = c.wait_for("10.var.audio.heard", PATIENCE, |a| a.starts_with("VAL"));
-    let fields = heard_fields(&line);
     assert_eq!(
-        (
-            fields["kind"].as_str(),
-            fields["sender"].as_str(),
-            fields["data"].as_str()
-        ),
-        ("short", "2", "15"),
+        kind_sender_data(&line),
+        ["short", "2", "15"],
         "under the seed's plan the first frame alone is a (wrong) short message: {line}"
     );
 

@@ -395,13 +395,7 @@ pub fn parse_say(value: &Value) -> Result<Message, SayError> {
     let syntax = || SayError::Syntax(format!("{text:?}"));
     let words: Vec<&str> = text.split_whitespace().collect();
     let (kind, sender, data) = if words.iter().any(|w| w.contains('=')) {
-        let field = |name: &str| {
-            words
-                .iter()
-                .filter_map(|w| w.split_once('='))
-                .find(|(n, _)| *n == name)
-                .map(|(_, v)| v)
-        };
+        let field = |name: &str| heard_field(&words, name);
         (
             field("kind").unwrap_or("short"),
             field("sender").ok_or_else(syntax)?,
@@ -435,6 +429,15 @@ pub fn parse_say(value: &Value) -> Result<Message, SayError> {
     }
 }
 
+/// The value of the `name=value` word called `name` among `words` (the heard form).
+fn heard_field<'a>(words: &[&'a str], name: &str) -> Option<&'a str> {
+    words
+        .iter()
+        .filter_map(|w| w.split_once('='))
+        .find(|(n, _)| *n == name)
+        .map(|(_, v)| v)
+}
+
 /// Reads a `say` value under team plan `plan`: `"[short|long] ROBOT VALUE"` (without a
 /// kind: short; ROBOT 0 … robots − 1, or goalkeeper / left-attacker / right-attacker for
 /// robots 0–2; VALUE in the plan's range), or the [`heard_team_value`] form (`kind=`,
@@ -465,13 +468,7 @@ pub fn parse_team_say(value: &Value, plan: TeamPlan) -> Result<Message, SayError
     };
     let words: Vec<&str> = text.split_whitespace().collect();
     let (kind, robot, said) = if words.iter().any(|w| w.contains('=')) {
-        let field = |name: &str| {
-            words
-                .iter()
-                .filter_map(|w| w.split_once('='))
-                .find(|(n, _)| *n == name)
-                .map(|(_, v)| v)
-        };
+        let field = |name: &str| heard_field(&words, name);
         match (field("robot"), field("value")) {
             (Some(robot), Some(said)) => (field("kind").unwrap_or("short"), robot, said),
             (None, None) => {
