@@ -97,11 +97,7 @@ fn wait_stat(c: &mut Client, name: &str, ok: impl Fn(i64) -> bool) -> i64 {
 fn messages_played_into_audio_in_appear_on_the_blackboard_once_each_in_order() {
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("mic.fifo");
-    let made = std::process::Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .expect("mkfifo runs");
-    assert!(made.success(), "mkfifo {}", fifo.display());
+    daemon_support::mkfifo(&fifo);
     let input = format!("cat '{}'", fifo.display());
     let daemon = start(3, &["--audio-in", &input], dir.path());
     let mut c = daemon.client();
@@ -390,11 +386,7 @@ fn under_the_checked_plan_a_long_message_cut_to_one_frame_is_never_heard_as_a_sh
 
     // Robot 9's microphone is a FIFO, written once it watches, so no update is missed.
     let fifo = dir.path().join("mic.fifo");
-    let made = std::process::Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .expect("mkfifo runs");
-    assert!(made.success(), "mkfifo {}", fifo.display());
+    daemon_support::mkfifo(&fifo);
     let input = format!("cat '{}'", fifo.display());
     let listener = start(
         9,

@@ -64,11 +64,6 @@ fn refused(dir: &Path, extra: &[&str]) -> String {
     stderr
 }
 
-fn mkfifo(path: &Path) {
-    let status = Command::new("mkfifo").arg(path).status().unwrap();
-    assert!(status.success(), "mkfifo {}", path.display());
-}
-
 #[test]
 fn a_missing_config_dir_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
@@ -83,14 +78,14 @@ fn a_missing_config_dir_is_an_error() {
 #[test]
 fn a_fifo_config_is_refused_instead_of_hanging_the_daemon() {
     let dir = tempfile::tempdir().unwrap();
-    mkfifo(&dir.path().join("config.dat"));
+    daemon_support::mkfifo(&dir.path().join("config.dat"));
     let stderr = refused(dir.path(), &[]);
     assert!(
         stderr.contains("config.dat: not a regular file (it is a FIFO)"),
         "{stderr}"
     );
     let dir = tempfile::tempdir().unwrap();
-    mkfifo(&dir.path().join("config-1.dat"));
+    daemon_support::mkfifo(&dir.path().join("config-1.dat"));
     let stderr = refused(dir.path(), &[]);
     assert!(
         stderr.contains("config-1.dat: not a regular file"),
@@ -107,7 +102,7 @@ fn a_key_file_must_be_a_small_regular_file() {
         "{stderr}"
     );
     let fifo = dir.path().join("fifo.key");
-    mkfifo(&fifo);
+    daemon_support::mkfifo(&fifo);
     let stderr = refused(dir.path(), &["--key-file", fifo.to_str().unwrap()]);
     assert!(stderr.contains("it is a FIFO"), "{stderr}");
     let big = dir.path().join("big.key");

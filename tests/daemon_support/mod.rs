@@ -13,6 +13,12 @@ use std::time::{Duration, Instant};
 
 pub mod netns;
 
+/// Makes a FIFO at `path` (a test's microphone or a config file that never ends).
+pub fn mkfifo(path: &Path) {
+    let status = Command::new("mkfifo").arg(path).status().unwrap();
+    assert!(status.success(), "mkfifo {}", path.display());
+}
+
 /// Waits until the daemon `child` (robot `id`) serves its relay at `relay`: its greeting
 /// names the robot. A bound port alone is not enough (it accepts connections into its
 /// backlog a moment before the daemon serves, and logs that it runs); another robot's

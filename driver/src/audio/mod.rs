@@ -402,22 +402,11 @@ pub fn parse_say(value: &Value) -> Result<Message, SayError> {
             field("data").ok_or_else(syntax)?,
         )
     } else {
-        match words[..] {
-            [kind, sender, data] => (kind, sender, data),
-            [sender, data] => ("short", sender, data),
-            _ => return Err(syntax()),
-        }
+        positional(&words).ok_or_else(syntax)?
     };
-    let sender = match sender {
-        "goalkeeper" => Sender::Goalkeeper,
-        "left-attacker" => Sender::LeftAttacker,
-        "right-attacker" => Sender::RightAttacker,
-        s => s
-            .parse()
-            .ok()
-            .and_then(Sender::from_index)
-            .ok_or_else(syntax)?,
-    };
+    let sender = robot_word(sender)
+        .and_then(Sender::from_index)
+        .ok_or_else(syntax)?;
     let data: u16 = data.parse().map_err(|_| syntax())?;
     match kind {
         "short" => match u8::try_from(data) {
@@ -436,6 +425,25 @@ fn heard_field<'a>(words: &[&'a str], name: &str) -> Option<&'a str> {
         .filter_map(|w| w.split_once('='))
         .find(|(n, _)| *n == name)
         .map(|(_, v)| v)
+}
+
+/// `[KIND] WHO WHAT` as `(kind, who, what)`, the kind `short` when left out.
+fn positional<'a>(words: &[&'a str]) -> Option<(&'a str, &'a str, &'a str)> {
+    match *words {
+        [kind, who, what] => Some((kind, who, what)),
+        [who, what] => Some(("short", who, what)),
+        _ => None,
+    }
+}
+
+/// A robot (sender basic) by number, or by the name its basic has for robots 0–2
+/// (`Sender`'s display: goalkeeper, left-attacker, right-attacker).
+fn robot_word(word: &str) -> Option<u8> {
+    Sender::ALL
+        .iter()
+        .find(|s| s.to_string() == word)
+        .map(|s| s.index())
+        .or_else(|| word.parse().ok())
 }
 
 /// Reads a `say` value under team plan `plan`: `"[short|long] ROBOT VALUE"` (without a
@@ -482,18 +490,9 @@ pub fn parse_team_say(value: &Value, plan: TeamPlan) -> Result<Message, SayError
             _ => return Err(syntax()),
         }
     } else {
-        match words[..] {
-            [kind, robot, said] => (kind, robot, said),
-            [robot, said] => ("short", robot, said),
-            _ => return Err(syntax()),
-        }
+        positional(&words).ok_or_else(syntax)?
     };
-    let robot = match robot {
-        "goalkeeper" => 0,
-        "left-attacker" => 1,
-        "right-attacker" => 2,
-        r => r.parse::<u8>().map_err(|_| syntax())?,
-    };
+    let robot = robot_word(robot).ok_or_else(syntax)?;
     let said: u16 = said.parse().map_err(|_| syntax())?;
     let long = match kind {
         "short" => false,
