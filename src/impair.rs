@@ -75,6 +75,53 @@ impl Impairment for LinkImpairment {
     }
 }
 
+/// A WLAN outage rehearsed on a real daemon (`huddle daemon --outage DURATION@START`):
+/// every outgoing datagram is lost from START to START + DURATION after the daemon's
+/// first datagram (its start), and the rest go through `inner` (`--impair`) or straight
+/// out. With every robot given the same outage, the team's radio is silent both ways,
+/// as in `huddle sim --outage`.
+#[derive(Debug)]
+pub struct Outage {
+    inner: Option<LinkImpairment>,
+    start: std::time::Duration,
+    duration: std::time::Duration,
+    origin: Option<Instant>,
+    /// Datagrams lost to the outage so far.
+    pub lost: u64,
+}
+
+impl Outage {
+    /// An outage of `duration` from `start` after the first datagram, around `inner`.
+    pub fn new(
+        inner: Option<LinkImpairment>,
+        duration: std::time::Duration,
+        start: std::time::Duration,
+    ) -> Outage {
+        Outage {
+            inner,
+            start,
+            duration,
+            origin: None,
+            lost: 0,
+        }
+    }
+}
+
+impl Impairment for Outage {
+    fn judge(&mut self, now: Instant, to: SocketAddr, len: usize, copies: &mut Vec<Instant>) {
+        let origin = *self.origin.get_or_insert(now);
+        let since = now.saturating_duration_since(origin);
+        if since >= self.start && since < self.start + self.duration {
+            self.lost += 1;
+            return;
+        }
+        match &mut self.inner {
+            Some(model) => model.judge(now, to, len, copies),
+            None => copies.push(now),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -107,6 +154,36 @@ mod tests {
         let delays: Vec<u64> = a.iter().flatten().copied().collect();
         let mean_ms = delays.iter().sum::<u64>() as f64 / delays.len() as f64 / 1000.0;
         assert!((mean_ms - 50.0).abs() < 2.0, "mean delay {mean_ms} ms");
+    }
+
+    #[test]
+    fn an_outage_loses_every_datagram_inside_its_window_and_nothing_outside() {
+        let mut m = Outage::new(
+            None,
+            std::time::Duration::from_secs(2),
+            std::time::Duration::from_secs(5),
+        );
+        // The daemon starts at 100 s on its clock; a datagram every 100 ms for 10 s.
+        let mut fates = Vec::new();
+        for k in 0..100u64 {
+            let now = Instant::from_micros(100_000_000 + k * 100_000);
+            let mut copies = Vec::new();
+            m.judge(now, group(), 60, &mut copies);
+            fates.push((k, copies));
+        }
+        for (k, copies) in &fates {
+            let inside = (50..70).contains(k);
+            assert_eq!(
+                copies.is_empty(),
+                inside,
+                "datagram {k} ({} s after start): lost only inside 5–7 s",
+                *k as f64 / 10.0
+            );
+            if !inside {
+                assert_eq!(copies.len(), 1, "outside, it leaves at once");
+            }
+        }
+        assert_eq!(m.lost, 20, "20 datagrams in the 2 s window");
     }
 
     #[test]

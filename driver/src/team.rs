@@ -36,6 +36,10 @@ pub struct TeamLayerConfig {
     /// Under a budget: the interval its pacing allows between this robot's messages
     /// (claims and world models are held that long, see [`team::adapt_to_budget`]).
     pub budget_interval: Option<Duration>,
+    /// The acoustic fallback, when the robot sounds its claims while the radio is silent
+    /// ([`team::acoustic`]; `tone_s` must be the audio's tone duration). Only its slot
+    /// and decision settings are read (the room's are the simulator's).
+    pub acoustic: Option<team::acoustic::AcousticConfig>,
 }
 
 impl TeamLayerConfig {
@@ -55,6 +59,18 @@ impl TeamLayerConfig {
             calibration: Calibration::default(),
             team_size,
             budget_interval,
+            acoustic: None,
+        }
+    }
+
+    /// The acoustic fallback's slots for this team: one per field player, robot 1 (the
+    /// goalkeeper) left out in a team of three or more, as in the simulator.
+    pub fn slot_plan(&self, slot_s: f64) -> team::acoustic::SlotPlan {
+        let with_keeper = self.team_size >= 3;
+        team::acoustic::SlotPlan {
+            first_id: if with_keeper { 2 } else { 1 },
+            slots: (self.team_size - usize::from(with_keeper)).clamp(1, 255) as u8,
+            slot_s,
         }
     }
 }
@@ -88,11 +104,15 @@ pub struct TeamRunner {
     _guards: Vec<Guard>,
     _watches: Vec<Watch>,
     task: tokio::task::JoinHandle<()>,
+    fallback: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl Drop for TeamRunner {
     fn drop(&mut self) {
         self.task.abort();
+        if let Some(f) = &self.fallback {
+            f.abort();
+        }
     }
 }
 
@@ -118,6 +138,18 @@ struct BallsOut {
 /// a reaction to teammates' claims, and a tick every control period. Must run inside a
 /// [`tokio::task::LocalSet`] (the driver's thread).
 pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
+    start_with_fallback(handle, cfg, None)
+}
+
+/// As [`start`], with the acoustic fallback on the daemon's audio (`cfg.acoustic` set,
+/// `audio` from [`crate::audio::Audio::fallback`]): heard messages go to the layer, and a
+/// task wakes at the start of each of this robot's slots (on the team clock) to sound
+/// its claim while the radio is stale.
+pub fn start_with_fallback(
+    handle: &Handle,
+    cfg: TeamLayerConfig,
+    audio: Option<crate::audio::FallbackAudio>,
+) -> TeamRunner {
     let id = handle.robot_id();
     let core = Rc::new(RefCell::new(TeamCore::new(id, cfg)));
     // The robot program's cycle drives the layer: its odometry (or pose) closes a cycle's
@@ -169,6 +201,10 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
             h.with_replica(|replica, now| core.react(replica, now));
         })
         .expect("a valid pattern");
+    let fallback = audio.map(|audio| {
+        let core = Rc::clone(&core);
+        tokio::task::spawn_local(run_fallback(core, handle.clock(), audio))
+    });
     let ticker = handle.clone();
     let period = core.borrow().period();
     let task = tokio::task::spawn_local(async move {
@@ -196,8 +232,61 @@ pub fn start(handle: &Handle, cfg: TeamLayerConfig) -> TeamRunner {
         _guards: guards,
         _watches: vec![react],
         task,
+        fallback,
     }
 }
+
+/// The acoustic fallback on a daemon: hands heard messages to the layer, and sounds the
+/// layer's claim at the start of each of this robot's slots.
+async fn run_fallback(
+    core: Rc<RefCell<TeamCore>>,
+    clock: crate::state::Clock,
+    audio: crate::audio::FallbackAudio,
+) {
+    let crate::audio::FallbackAudio { mut heard, speaker } = audio;
+    let mut listening = true;
+    // The slot last sounded (or passed): never the same slot twice.
+    let mut after = clock.now();
+    loop {
+        let now = clock.now();
+        let next = core
+            .borrow()
+            .next_sound_slot(after.max(now))
+            .unwrap_or(now + Duration::from_secs(1));
+        let wait = next.saturating_duration_since(now);
+        tokio::select! {
+            h = heard.recv(), if listening => match h {
+                Some((message, start)) => core.borrow_mut().hear_sound(&message, start),
+                None => listening = false,
+            },
+            () = tokio::time::sleep(wait) => {
+                let now = clock.now();
+                // The team clock may have moved while asleep: sound only at the start.
+                if now + SLOT_EARLY < next {
+                    continue;
+                }
+                after = next + SLOT_EARLY;
+                if now.saturating_duration_since(next) > SLOT_LATE {
+                    tracing::debug!(late_ms = now.saturating_duration_since(next).as_millis(), "acoustic slot missed");
+                    continue;
+                }
+                let claim = core.borrow_mut().sound_claim(now);
+                if let Some(message) = claim {
+                    if speaker.sound_now(message) {
+                        tracing::debug!(%message, "acoustic fallback: claim sounded");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A slot's start is taken as come this much before it (a timer's rounding).
+const SLOT_EARLY: Duration = Duration::from_millis(2);
+/// A claim later than this into its slot is not sounded: heard that late it could be
+/// taken for the next robot's (the slot is attributed within half a slot, a guard of
+/// 300 ms; the speaking command's own latency comes on top).
+const SLOT_LATE: Duration = Duration::from_millis(50);
 
 /// When the layer ticks: on each cycle the robot program closes, and on a timer standing
 /// in for cycles that do not come. A cycle closing sooner than half a period after the
@@ -264,6 +353,15 @@ impl TeamCore {
             &cfg.team.world_model,
             cfg.team_size.max(usize::from(id)),
         );
+        let mut layer = layer;
+        if let Some(ac) = cfg.acoustic.filter(|a| a.enabled) {
+            layer.sound = Some(team::acoustic::SoundFallback::new(
+                cfg.slot_plan(ac.slot_s()),
+                &ac,
+                cfg.team_size.max(usize::from(id)),
+                cfg.params,
+            ));
+        }
         TeamCore {
             inputs: Inputs::default(),
             shared: Shared {
@@ -314,9 +412,35 @@ impl TeamCore {
 
     /// One control tick on what came since the previous one; nothing while dormant.
     pub fn tick(&mut self, replica: &mut Replica, now: Instant) {
+        if self.shared.layer.sound.is_some() {
+            // The fallback's slots run on the team clock the replica's estimates give.
+            let peers: Vec<comms::PeerInfo> = replica.peers().collect();
+            self.shared.layer.update_team_clock(now, peers);
+        }
         if self.inputs.fed {
             tick(replica, now, &mut self.shared, &mut self.inputs);
         }
+    }
+
+    /// When this robot's next acoustic slot starts, at or after `now` (the driver's
+    /// clock); `None` without the fallback.
+    pub fn next_sound_slot(&self, now: Instant) -> Option<Instant> {
+        let at = self.shared.layer.next_sound_slot(team::seconds(now))?;
+        Some(Instant::from_micros((at.max(0.0) * 1e6).round() as u64))
+    }
+
+    /// The claim to sound in this robot's slot, starting `now`: some while the radio is
+    /// stale, none otherwise (and none while dormant).
+    pub fn sound_claim(&mut self, now: Instant) -> Option<audio::Message> {
+        if !self.inputs.fed {
+            return None;
+        }
+        self.shared.layer.sound_claim(team::seconds(now))
+    }
+
+    /// A message this robot's microphone decoder heard, begun at `start`.
+    pub fn hear_sound(&mut self, message: &audio::Message, start: Instant) {
+        self.shared.layer.hear_sound(message, team::seconds(start));
     }
 
     /// A teammate's claim changed: decide again at once; nothing while dormant.

@@ -123,6 +123,12 @@ pub struct DaemonArgs {
     /// of one team lose different frames and a rerun draws the same fates).
     #[arg(long, value_name = "N")]
     pub impair_seed: Option<u64>,
+    /// Rehearse a WLAN outage: every outgoing datagram is lost for DURATION from START
+    /// after this daemon's start (`30s@20s`), as `huddle sim --outage`. Give every robot
+    /// the same outage and the team's radio is silent both ways (with --audio-fallback,
+    /// the team then decides who goes by sound).
+    #[arg(long, value_name = "DURATION@START", value_parser = crate::cli::sim::parse_outage)]
+    pub outage: Option<(Duration, Duration)>,
     /// For tests and `huddle sim --daemons`: this daemon's clock reads DURATION when it
     /// starts, as if its robot's clock had been set apart from its teammates'. The
     /// replica, the team layer and every age on the relay run on that clock, and the
@@ -187,6 +193,20 @@ pub struct AudioFlags {
     /// to 1 s after a run of 30 s). Counters: `huddle stats` (audio.*).
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = RestartFlag::OnFailure)]
     pub audio_in_restart: RestartFlag,
+    /// The team layer's acoustic fallback: while no teammate's claim has come by radio
+    /// within the arbitration's staleness limit (the WLAN failed), this robot sounds its
+    /// should-I-go claim in its own slot of a cycle on the team clock (one slot per field
+    /// player, robot 1 left out in teams of 3 or more; a slot is --audio-tone +
+    /// --audio-fallback-guard), and the team decides who goes on the claims each robot's
+    /// decoder hears. Needs --audio-in, --audio-out, the team layer and the `three` plan;
+    /// a tone of 400ms suits a hall (1 s works, slower). `say` messages still go out,
+    /// but a slot that comes while one waits or sounds is let go (audio.fallback_busy).
+    #[arg(long)]
+    pub audio_fallback: bool,
+    /// Silence after each fallback claim before the next robot's slot: it must cover the
+    /// room's tail, the decoder's end test and the team clock's error.
+    #[arg(long, value_name = "DURATION", default_value = "300ms", value_parser = duration::parse)]
+    pub audio_fallback_guard: Duration,
     /// Team plan every robot of the team speaks, as `huddle audio --team`: `three` (the
     /// seed's: SENDER 0-2, DATA 0-20 short, 0-440 long), `six` (ROBOT 0-5, VALUE 0-9
     /// short, 0-99 long) or `checked` (ROBOT 0-2, VALUE 0-9 short, 0-120 long; a long
@@ -247,6 +267,29 @@ pub fn impairment(args: &DaemonArgs, robot_id: u8) -> Result<Option<LinkImpairme
     let seed = args.impair_seed.unwrap_or(u64::from(robot_id));
     let model = LinkImpairment::new(config, seed).with_context(|| format!("--impair {spec:?}"))?;
     Ok(Some(model))
+}
+
+/// `--audio-fallback` needs a microphone, a loudspeaker, the team layer and the seed's
+/// plan (a claim uses every sender basic and data value).
+fn check_fallback(args: &DaemonArgs) -> Result<()> {
+    let a = &args.audio;
+    if !a.audio_fallback {
+        return Ok(());
+    }
+    if a.audio_in.is_none() || a.audio_out.is_none() {
+        bail!("--audio-fallback needs --audio-in CMD (to hear claims) and --audio-out CMD (to sound them)");
+    }
+    if args.no_team_layer {
+        bail!("--audio-fallback is the team layer's: it cannot run with --no-team-layer");
+    }
+    if a.audio_team != audio::TeamPlan::Three {
+        bail!(
+            "--audio-fallback sounds claims on the `three` plan (3 x 21 values, the slot names \
+             the robot); --audio-team {} would refuse them",
+            a.audio_team
+        );
+    }
+    Ok(())
 }
 
 /// The GameController listener's settings, if it is on (`--gamecontroller`, or by
@@ -364,6 +407,7 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
 pub fn run(args: DaemonArgs) -> Result<()> {
     let config = driver_config(&args)?;
     let impair = impairment(&args, config.replica.robot_id)?;
+    check_fallback(&args)?;
     // One thread for socket, replica, timers and relay clients: a hand-off between threads
     // costs a full wake-up, several times a loopback round trip, and the driver and its
     // handles are `!Send` for that reason.
@@ -387,12 +431,24 @@ pub fn run(args: DaemonArgs) -> Result<()> {
         relay.set_nonblocking(true)?;
         let relay = tokio::net::TcpListener::from_std(relay)?;
         let driver = Driver::bind(config)?;
-        if let Some(model) = impair {
+        if let Some(model) = &impair {
             tracing::warn!(
                 spec = %model.config(),
                 "--impair: outgoing datagrams pass through netsim's link model"
             );
-            driver.set_impairment(Some(Box::new(model)));
+        }
+        match (impair, args.outage) {
+            (impair, Some((duration, start))) => {
+                tracing::warn!(
+                    ?duration,
+                    ?start,
+                    "--outage: every outgoing datagram is lost in the window"
+                );
+                let outage = huddle::impair::Outage::new(impair, duration, start);
+                driver.set_impairment(Some(Box::new(outage)));
+            }
+            (Some(model), None) => driver.set_impairment(Some(Box::new(model))),
+            (None, None) => {}
         }
         let handle = driver.handle();
         let _gc = match gamecontroller_config(&args, handle.robot_id()) {
@@ -467,7 +523,25 @@ pub fn run(args: DaemonArgs) -> Result<()> {
                 policy = ?cfg.team.send_policy,
                 "team layer: waiting for local.var.robot.pose or .odometry (docs/team-layer.md)"
             );
-            driver::team::start(&handle, cfg)
+            let fallback = if args.audio.audio_fallback {
+                cfg.acoustic = Some(team::acoustic::AcousticConfig {
+                    enabled: true,
+                    tone_s: args.audio.audio_tone.as_secs_f64(),
+                    guard_s: args.audio.audio_fallback_guard.as_secs_f64(),
+                    ..team::acoustic::AcousticConfig::default()
+                });
+                let plan = cfg.slot_plan(cfg.acoustic.map_or(0.0, |a| a.slot_s()));
+                tracing::info!(
+                    slots = plan.slots,
+                    first = plan.first_id,
+                    cycle_s = plan.cycle_s(),
+                    "audio fallback: claims sounded in this robot's slot while the radio is silent"
+                );
+                _audio.as_ref().and_then(driver::audio::Audio::fallback)
+            } else {
+                None
+            };
+            driver::team::start_with_fallback(&handle, cfg, fallback)
         });
         let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let mut relay_stop = stop_rx.clone();

@@ -219,7 +219,7 @@ pub enum GameKind {
 }
 
 /// `30s@120s`: an outage of 30 s starting at 120 s.
-fn parse_outage(s: &str) -> Result<(Duration, Duration), String> {
+pub(crate) fn parse_outage(s: &str) -> Result<(Duration, Duration), String> {
     let (d, at) = s
         .split_once('@')
         .ok_or_else(|| format!("outage {s:?}: expected DURATION@START, e.g. 30s@120s"))?;

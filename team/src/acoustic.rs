@@ -2,9 +2,13 @@
 //! Cerberus tones and each hears what its own microphone's decoder makes of the room.
 //!
 //! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
-//! robot sounds only in its own slot of a repeating cycle on the team's (radio-synchronised)
-//! clock: the slot a message started in says who sent it, and the sender basic is free to
-//! carry data. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
+//! robot sounds only in its own slot of a repeating cycle on the team clock
+//! ([`TeamClock`]: the lowest id's clock as the replica estimates it from the radio's
+//! echoes, kept through an outage): the slot a message started in says who sent it, and
+//! the sender basic is free to carry data. The daemon (`huddle daemon --audio-fallback`)
+//! and the simulator drive the same code: each updates the clock from its replica every
+//! tick ([`SoundFallback::update_clock`]) and sounds the claim at each
+//! [`SoundFallback::next_slot`]. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
 //! set for a hall, not for a dry room: a 100 ms tone in a reverberant hall (critical
 //! distance 8 m, T60 anywhere from 0.6 to 2 s) is almost never decoded, even alone with a
 //! second of silence around it; the decoder needs about 300 ms there, and the previous
@@ -46,6 +50,8 @@ use audio::{Message, Sender};
 use std::time::Duration;
 
 use comms::arbitration::{self, ArbitrationParams, Candidate, Decision, Posted};
+
+pub use crate::team_clock::{TeamClock, WRAP_S};
 use serde::Serialize;
 
 /// Speed of sound, m/s.
@@ -228,6 +234,8 @@ pub struct SoundFallback {
     /// Whether no teammate with a slot had a fresh radio claim at the last decision: the
     /// radio is silent and the fallback decides.
     in_control: bool,
+    /// The team clock the slots run on (this robot's own until [`SoundFallback::set_clock`]).
+    clock: Option<TeamClock>,
 }
 
 impl SoundFallback {
@@ -252,7 +260,74 @@ impl SoundFallback {
             own_radio: None,
             radio_stale: false,
             in_control: false,
+            clock: None,
         }
+    }
+
+    /// Robot `me`'s replica's view of its teammates at `now` (`comms::Replica::peers`):
+    /// the slots run on the team clock it gives ([`TeamClock`]). The daemon's team layer
+    /// and the simulator's robots call it every tick; until the first call, slots run on
+    /// this robot's own clock.
+    pub fn update_clock(
+        &mut self,
+        me: u8,
+        now: comms::Instant,
+        peers: impl IntoIterator<Item = comms::PeerInfo>,
+    ) {
+        self.clock
+            .get_or_insert_with(|| TeamClock::new(me))
+            .update(now, peers);
+    }
+
+    /// The team clock the slots run on, once [`SoundFallback::update_clock`] was called.
+    pub fn clock(&self) -> Option<&TeamClock> {
+        self.clock.as_ref()
+    }
+
+    /// Team time at `local_s` (this robot's clock), s.
+    fn team_s(&self, local_s: f64) -> f64 {
+        self.clock.map_or(local_s, |c| c.team_at_s(local_s))
+    }
+
+    /// A message that started at `local_s` (this robot's clock): the team time it started
+    /// at, brought into the epoch of the slot it belongs to (see [`TeamClock::near`]).
+    fn heard_team_s(&self, local_s: f64) -> f64 {
+        let team = self.team_s(local_s);
+        if self.clock.is_some() && team > WRAP_S - self.plan.slot_s / 2.0 {
+            // Sounded at the start of the new epoch, heard a little early.
+            team - WRAP_S
+        } else {
+            team
+        }
+    }
+
+    /// The end of the slot a message that started at `local_s` was sounded in, on this
+    /// robot's clock.
+    fn slot_end_local(&self, local_s: f64) -> f64 {
+        let team = self.heard_team_s(local_s);
+        local_s + (self.plan.slot_end(team) - team)
+    }
+
+    /// When robot `me`'s next slot starts, at or after `local_s` (this robot's clock, s),
+    /// on this robot's clock; `None` if it has no slot.
+    pub fn next_slot(&self, me: u8, local_s: f64) -> Option<f64> {
+        let k = self.plan.slot_of(me)?;
+        let offset = f64::from(k) * self.plan.slot_s;
+        let (cycle, slot) = (self.plan.cycle_s(), self.plan.slot_s);
+        Some(match self.clock {
+            Some(c) => c.next_slot(local_s, offset, cycle, slot),
+            None => {
+                let n = ((local_s - offset) / cycle).ceil().max(0.0);
+                offset + n * cycle
+            }
+        })
+    }
+
+    /// Whether robot `me`'s slot begins in `[local_s, local_s + dt_s)` (this robot's
+    /// clock).
+    pub fn starts_in(&self, me: u8, local_s: f64, dt_s: f64) -> bool {
+        self.next_slot(me, local_s - 1e-9)
+            .is_some_and(|start| start < local_s + dt_s - 1e-9)
     }
 
     /// The team's slot plan.
@@ -270,7 +345,7 @@ impl SoundFallback {
     /// when every teammate that decodes it has (so the team changes its mind at once).
     /// Its own slot and long messages are ignored.
     pub fn hear(&mut self, me: u8, message: &Message, start_s: f64) {
-        let Some(from) = self.plan.sender_at(start_s) else {
+        let Some(from) = self.plan.sender_at(self.heard_team_s(start_s)) else {
             return;
         };
         let Some(posted) = decode_claim(message, self.params.no_ball_cost) else {
@@ -279,7 +354,7 @@ impl SoundFallback {
         if from == me {
             return;
         }
-        let at_s = self.plan.slot_end(start_s);
+        let at_s = self.slot_end_local(start_s);
         if let Some(slot) = self.pending.get_mut(usize::from(from) - 1) {
             *slot = Some(Told { posted, at_s });
         }
@@ -294,13 +369,14 @@ impl SoundFallback {
             return None;
         }
         let message = encode_claim(posted, self.params.no_ball_cost);
+        let at_s = self.slot_end_local(start_s);
         if let (Some(heard), Some(slot)) = (
             decode_claim(&message, self.params.no_ball_cost),
             self.pending.get_mut(usize::from(me) - 1),
         ) {
             *slot = Some(Told {
                 posted: heard,
-                at_s: self.plan.slot_end(start_s),
+                at_s,
             });
         }
         Some(message)

@@ -873,6 +873,25 @@ impl TeamLayer {
         self.sound.as_mut()?.claim(self.id, posted, t_s)
     }
 
+    /// The replica's view of the teammates at `now` (`comms::Replica::peers`): the acoustic
+    /// fallback's slots run on the team clock it gives (see [`crate::acoustic::TeamClock`]).
+    /// Call it every tick; nothing without the fallback.
+    pub fn update_team_clock(
+        &mut self,
+        now: Instant,
+        peers: impl IntoIterator<Item = comms::PeerInfo>,
+    ) {
+        if let Some(sound) = &mut self.sound {
+            sound.update_clock(self.id, now, peers);
+        }
+    }
+
+    /// When this robot's next acoustic slot starts, at or after `t_s` (its clock, s):
+    /// call [`TeamLayer::sound_claim`] then. `None` without the fallback or a slot.
+    pub fn next_sound_slot(&self, t_s: f64) -> Option<f64> {
+        self.sound.as_ref()?.next_slot(self.id, t_s)
+    }
+
     /// A message this robot's microphone decoder produced, its start on this robot's
     /// clock, s.
     pub fn hear_sound(&mut self, message: &audio::Message, start_s: f64) {

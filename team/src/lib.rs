@@ -42,6 +42,7 @@ pub mod frames;
 pub mod geometry;
 mod layer;
 pub mod policy;
+mod team_clock;
 
 pub use calibration::{Calibration, WorldModelConfig};
 pub use geometry::{Pose, Vec2};

@@ -77,16 +77,21 @@ impl super::Simulation {
             .map(|b| (b.pose.at.x, b.pose.at.y))
             .collect();
         for i in 0..self.robots.len() {
+            // Each robot's slots run on the team clock its own replica's estimates give,
+            // as on a daemon (`team::acoustic::TeamClock`), never on the simulator's time.
+            let now = self.harness.local_at(i, netsim::Time::from_secs_f64(t_s));
             let r = &mut self.robots[i];
+            if let Some(replica) = self.harness.replica(i) {
+                r.update_team_clock(now, replica.peers());
+            }
+            let local = super::robot::seconds(now);
             let due = r
                 .sound
                 .as_ref()
-                .is_some_and(|s| s.plan().starts_in(r.id, t_s, dt));
+                .is_some_and(|s| s.starts_in(r.id, local, dt));
             if !due {
                 continue;
             }
-            let local =
-                super::robot::seconds(self.harness.local_at(i, netsim::Time::from_secs_f64(t_s)));
             if let Some(message) = r.sound_claim(local) {
                 channel.sound(i, &message, &positions);
             }

@@ -179,11 +179,18 @@ pub struct Counters {
     pub out_starts: AtomicU64,
     /// Runs that failed (could not start, exited, broken pipe).
     pub out_failures: AtomicU64,
+    /// Heard messages handed to the team layer's acoustic fallback (`--audio-fallback`).
+    pub fallback_heard: AtomicU64,
+    /// Claims the fallback sounded in this robot's slot.
+    pub fallback_sounded: AtomicU64,
+    /// Slots the fallback let go by because a `say` message still waited or sounded (a
+    /// claim sounded late would be taken for the next robot's).
+    pub fallback_busy: AtomicU64,
 }
 
 impl Counters {
     /// How many counters [`Counters::snapshot`] gives.
-    pub const COUNT: usize = 14;
+    pub const COUNT: usize = 17;
 
     /// Every counter with its name under `local.var.huddle.stats.`.
     pub fn snapshot(&self) -> [(&'static str, u64); Counters::COUNT] {
@@ -203,6 +210,9 @@ impl Counters {
             ("audio.say_lost", g(&self.say_lost)),
             ("audio.out_starts", g(&self.out_starts)),
             ("audio.out_failures", g(&self.out_failures)),
+            ("audio.fallback_heard", g(&self.fallback_heard)),
+            ("audio.fallback_sounded", g(&self.fallback_sounded)),
+            ("audio.fallback_busy", g(&self.fallback_busy)),
         ]
     }
 }
@@ -512,8 +522,57 @@ pub struct Audio {
     shared: Arc<Shared>,
     _guard: Option<Guard>,
     listener: Option<listen::Listener>,
-    _speaker: Option<SyncSender<Message>>,
+    speaker: Option<SyncSender<Message>>,
+    /// Where the mirror also hands each heard message, once [`Audio::fallback`] asked.
+    tap: HeardTap,
     mirror: tokio::task::JoinHandle<()>,
+}
+
+/// The team layer's acoustic fallback's side of the audio (see [`Audio::fallback`]).
+type HeardTap =
+    std::rc::Rc<std::cell::RefCell<Option<tokio::sync::mpsc::UnboundedSender<(Message, Instant)>>>>;
+
+/// What the team layer's acoustic fallback (`--audio-fallback`) takes from the daemon's
+/// audio: every message the listener decodes, with its start on the driver's clock, and
+/// a speaker that sounds a claim at once.
+pub struct FallbackAudio {
+    /// Heard messages and when each began (the driver's clock).
+    pub heard: tokio::sync::mpsc::UnboundedReceiver<(Message, Instant)>,
+    /// Sounds a claim now.
+    pub speaker: Speaker,
+}
+
+/// The speaking thread, for the fallback's claims: one sounds only when nothing else
+/// waits or sounds, so that it goes out in its slot.
+#[derive(Clone)]
+pub struct Speaker {
+    tx: SyncSender<Message>,
+    shared: Arc<Shared>,
+}
+
+impl Speaker {
+    /// Hands `message` to the speaking command now; `false` (counted as
+    /// `audio.fallback_busy`) if a `say` message still waits or is being written, so it
+    /// would go out late, in another robot's slot.
+    pub fn sound_now(&self, message: Message) -> bool {
+        let counters = &self.shared.counters;
+        if counters.say_pending.load(Ordering::Relaxed) > 0 {
+            self.shared.count(|c| &c.fallback_busy);
+            return false;
+        }
+        bump(&counters.say_pending);
+        match self.tx.try_send(message) {
+            Ok(()) => {
+                self.shared.count(|c| &c.fallback_sounded);
+                true
+            }
+            Err(_) => {
+                counters.say_pending.fetch_sub(1, Ordering::Relaxed);
+                self.shared.count(|c| &c.fallback_busy);
+                false
+            }
+        }
+    }
 }
 
 impl Audio {
@@ -602,19 +661,39 @@ impl Audio {
         } else {
             None
         };
+        let tap = HeardTap::default();
         let mirror = tokio::task::spawn_local(mirror(
             handle.clone(),
             config.heard_key.clone(),
             config.team,
             shared.clone(),
             heard_rx,
+            tap.clone(),
         ));
         Ok(Audio {
             shared,
             _guard: guard,
             listener,
-            _speaker: speaker,
+            speaker,
+            tap,
             mirror,
+        })
+    }
+
+    /// The heard messages and the speaker for the team layer's acoustic fallback, if
+    /// this daemon both listens and speaks (`None` otherwise). Heard messages go on being
+    /// written to the blackboard as well.
+    pub fn fallback(&self) -> Option<FallbackAudio> {
+        let speaker = self.speaker.clone()?;
+        self.listener.as_ref()?;
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        *self.tap.borrow_mut() = Some(tx);
+        Some(FallbackAudio {
+            heard: rx,
+            speaker: Speaker {
+                tx: speaker,
+                shared: self.shared.clone(),
+            },
         })
     }
 
@@ -709,6 +788,7 @@ async fn mirror(
     plan: TeamPlan,
     shared: Arc<Shared>,
     mut heard: tokio::sync::mpsc::Receiver<Heard>,
+    tap: HeardTap,
 ) {
     let mut last = [u64::MAX; Counters::COUNT];
     let mut seq = 0u64;
@@ -725,6 +805,11 @@ async fn mirror(
                         tracing::warn!(error = %e, key = %heard_key, "cannot write a heard message");
                     }
                     bump(&shared.counters.heard);
+                    if let Some(tx) = tap.borrow().as_ref() {
+                        if tx.send((d.message, h.start)).is_ok() {
+                            bump(&shared.counters.fallback_heard);
+                        }
+                    }
                 }
                 // The listener has stopped for good; counters may still change.
                 None => listening = false,
