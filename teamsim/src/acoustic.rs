@@ -76,6 +76,7 @@ impl super::Simulation {
             .iter()
             .map(|b| (b.pose.at.x, b.pose.at.y))
             .collect();
+        let mut team_times = Vec::with_capacity(self.robots.len());
         for i in 0..self.robots.len() {
             // Each robot's slots run on the team clock its own replica's estimates give,
             // as on a daemon (`team::acoustic::TeamClock`), never on the simulator's time.
@@ -85,6 +86,9 @@ impl super::Simulation {
                 r.update_team_clock(now, replica.peers());
             }
             let local = super::robot::seconds(now);
+            if let Some(team) = r.sound.as_ref().and_then(|s| s.clock()) {
+                team_times.push(team.team_at_s(local));
+            }
             let due = r
                 .sound
                 .as_ref()
@@ -94,6 +98,19 @@ impl super::Simulation {
             }
             if let Some(message) = r.sound_claim(local) {
                 channel.sound(i, &message, &positions);
+            }
+        }
+        // How far apart the robots' team clocks read at this one instant (the truth, for
+        // the figures only): slots start that far apart.
+        if let (Some(o), Some(&first)) = (self.cfg.outage, team_times.first()) {
+            if o.contains(t_s) {
+                let read: Vec<f64> = team_times.iter().map(|&t| TeamClock::near(t, first)).collect();
+                let spread = read.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+                    - read.iter().copied().fold(f64::INFINITY, f64::min);
+                let m = &mut self.outage_metrics;
+                m.clock_spread_max_s = m.clock_spread_max_s.max(spread);
+                m.clock_spread_sum_s += spread;
+                m.clock_spread_samples += 1;
             }
         }
     }
@@ -161,6 +178,11 @@ impl super::Simulation {
             acoustic_decoded: s.decoded,
             acoustic_wrong: s.wrong,
             acoustic_collided: s.collided,
+            acoustic_team_clock_spread_max_ms: round3(self.outage_metrics.clock_spread_max_s * 1e3),
+            acoustic_team_clock_spread_mean_ms: round3(
+                self.outage_metrics.clock_spread_sum_s * 1e3
+                    / self.outage_metrics.clock_spread_samples.max(1) as f64,
+            ),
         })
     }
 }
@@ -198,6 +220,12 @@ pub struct OutageFigures {
     pub during: WindowFigures,
     /// Just before it, the radio deciding.
     pub before: WindowFigures,
+    /// Inside the outage: the largest spread of the robots' team clocks at one instant, s.
+    pub clock_spread_max_s: f64,
+    /// Their sum over the samples, s, and the samples (for the mean).
+    pub clock_spread_sum_s: f64,
+    /// Samples of the spread.
+    pub clock_spread_samples: u64,
 }
 
 fn round3(x: f64) -> f64 {
@@ -248,6 +276,11 @@ pub struct OutageReport {
     pub acoustic_wrong: u64,
     /// Receptions overlapped by another message at the listener.
     pub acoustic_collided: u64,
+    /// Inside the outage, the largest spread of the robots' team clocks
+    /// ([`TeamClock`]) at one instant, ms: how far apart their slots start.
+    pub acoustic_team_clock_spread_max_ms: f64,
+    /// Its mean over the outage, ms.
+    pub acoustic_team_clock_spread_mean_ms: f64,
 }
 
 impl std::fmt::Display for OutageReport {
@@ -286,6 +319,11 @@ impl std::fmt::Display for OutageReport {
             self.acoustic_receptions,
             self.acoustic_wrong,
             self.acoustic_collided
+        )?;
+        write!(
+            f,
+            "\n  team clock spread   {:>9.3} ms max, {:.3} ms mean (slots start that far apart)",
+            self.acoustic_team_clock_spread_max_ms, self.acoustic_team_clock_spread_mean_ms
         )
     }
 }
