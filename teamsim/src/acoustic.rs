@@ -104,7 +104,10 @@ impl super::Simulation {
         // the figures only): slots start that far apart.
         if let (Some(o), Some(&first)) = (self.cfg.outage, team_times.first()) {
             if o.contains(t_s) {
-                let read: Vec<f64> = team_times.iter().map(|&t| TeamClock::near(t, first)).collect();
+                let read: Vec<f64> = team_times
+                    .iter()
+                    .map(|&t| TeamClock::near(t, first))
+                    .collect();
                 let spread = read.iter().copied().fold(f64::NEG_INFINITY, f64::max)
                     - read.iter().copied().fold(f64::INFINITY, f64::min);
                 let m = &mut self.outage_metrics;

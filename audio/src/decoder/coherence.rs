@@ -21,6 +21,15 @@ const PARTS: usize = 4;
 /// tone in a notch of the room), and far above what a basic that began or ended a
 /// quarter of a slot away from the onset or the end keeps.
 const PART_SHARE: f64 = 0.3;
+
+/// Most share of its level in a second slot another robot's sender may have held in the
+/// quarter before it to have begun with the slot (see `Decoder::sender_began_with_slot`):
+/// a sender that began 0.09 s before the slot (a third of a quarter) holds about 0.4;
+/// one that began earlier sounds its data before the slot too, which
+/// `Decoder::second_data_began_before` catches.
+const BEGAN_SHARE: f64 = 0.7;
+/// ... and under this share of what the tracked sender's own tones held there.
+const OWN_SHARE_RATIO: f64 = 0.5;
 /// Share of its slot-mean excess a basic keeps in a quarter it *holds* (−2 dB).
 const HOLD_SHARE: f64 = 0.6;
 /// Noise allowance of that test, standard deviations of the part's summed excess.
@@ -114,6 +123,50 @@ impl Decoder {
             }
         }
         Ok(())
+    }
+
+    /// Another robot's sender that began with the second slot `[a, b)` of the tracked
+    /// long message `t` and sounds through it: all three of its tones `present` (the
+    /// caller passes every tone out of the noise, not only those within the rules'
+    /// dynamic range), each quarter held, and in the quarter before under [`BEGAN_SHARE`]
+    /// of its slot level and under [`OWN_SHARE_RATIO`] of the share `t`'s own sender
+    /// held there: its basic, when so. (Two tones of three, or no comparison with the own
+    /// sender, let babble and a room's build-up through: one-robot long tuning rows lost
+    /// 16 and 10 messages of 60,000; with these, 1.) A robot that begins with our second slot sounds its
+    /// first frame there, and its data tones then begin with the slot as a second frame's
+    /// do; if ours lies in the room's notches, its data passes for ours (lab T60 0.5 s,
+    /// tuning row 91031 at 612.75 s: sender 1 began about 0.09 s before sender 2's second
+    /// slot, holding 0.37 of its level in the quarter before, its sender tones 10–20 dB
+    /// under its data in the room, its data 11 taken for sender 2's 17, whose tones were
+    /// lost: a wrong long message; report row 1007031 at 1015 s alike). Which data is
+    /// whose cannot be told: nothing is reported.
+    pub(super) fn sender_began_with_slot(
+        &self,
+        t: &Tracking,
+        present: &[bool; TONE_COUNT],
+        a: f64,
+        b: f64,
+    ) -> Option<usize> {
+        let quarter = (b - a) / PARTS as f64;
+        // The share of its slot level `tones` held in the quarter before, and whether
+        // they held their level in each quarter of the slot.
+        let before_share = |tones: &[usize]| -> Option<(f64, bool)> {
+            let q = self.quarters(tones, t.scale, a, b)?;
+            let (before, n) = self.part_excess(tones, t.scale, a - quarter, a)?;
+            Some((before / (q.mean * n as f64), q.held.iter().all(|&h| h)))
+        };
+        // Our own sender sounded through the first slot: a room still building up raises
+        // it into the second, and its leakage onto a neighbouring sender's tones with it
+        // (one-robot long rows at T60 1.2–2 s lost messages to that).
+        let own = t.sender.index() as usize;
+        let own_share = before_share(&basic_tones(own)).map_or(1.0, |(share, _)| share);
+        (0..SENDER_COUNT).filter(|&s| s != own).find(|&s| {
+            let tones: Vec<usize> = basic_tones(s).into_iter().filter(|&k| present[k]).collect();
+            tones.len() == 3
+                && before_share(&tones).is_some_and(|(share, held)| {
+                    held && share < BEGAN_SHARE && share < OWN_SHARE_RATIO * own_share
+                })
+        })
     }
 
     /// Whether the second slot `[a, b)` of the tracked long message `t` decided a data

@@ -269,8 +269,6 @@ fn a_frame_refused_for_a_foreign_sound_stays_refused_when_found_again_a_few_wind
 }
 
 #[test]
-#[ignore = "known wrong message, not fixed: the window test that fixed it cost one-robot long \
-            messages (acoustic-round14-wrong.md)"]
 fn a_second_slot_whose_data_began_a_window_before_it_is_another_robots_frame() {
     // Lab T60 0.5 s, two robots at 10 dB (tuning row 47031, 1066.52 s): sender 2 sent
     // long (18, 13), its second data (k16, k40, k64) in the room's notches; sender 1
@@ -280,14 +278,19 @@ fn a_second_slot_whose_data_began_a_window_before_it_is_another_robots_frame() {
     // before the slot 1.05; the slot passed as sender 2's long 393, a wrong message.
     // Amplitudes from the row's per-window levels (amplitude ∝ √level, k26 = 0.02 at 992).
     // Here sender 1 leads by 0.12 s: with the windows of this synthetic slot, at 0.15 s the
-    // quarter test refuses the slot already; at 0.12 s the decoder reports long 393 on every
-    // seed. Round 14 (audio14w) refused it with the same test on the one window before the
-    // slot (commit 8c5ac84, reverted): that cost 28 right long messages on 36 two-robot
-    // tuning rows and one-robot long messages too (check row 993030 881 -> 877, dry long
-    // -13 dB 99.4% -> 99.0%), so the scenario is kept here, ignored, for the next round;
-    // see acoustic-round14-wrong.md. A lead of 0.10 s or less was not caught by it either.
+    // quarter test on the data refuses the slot already; at 0.12 s the decoder reported
+    // long 393 on every seed, and a test on the one window before the slot (round 14,
+    // reverted) cost right messages and missed leads of 0.10 s or less. What catches it
+    // (round 19) is sender 1's *sender*: weak, but out of the noise, it began with the
+    // slot (`Decoder::sender_began_with_slot`), so the slot's data may be sender 1's.
+    // Leads from 0 (sender 1 begins exactly with the slot) to 0.12 s.
+    for lead in [0.0, 0.04, 0.09, 0.12] {
+        a_robot_beginning_near_a_second_slot(lead);
+    }
+}
+
+fn a_robot_beginning_near_a_second_slot(lead: f64) {
     let (s2, s1) = (Sender::RightAttacker, Sender::LeftAttacker);
-    let lead = 0.12;
     let mut all = Vec::new();
     // Frame::tones order: sender low, data low, sender mid, data mid, sender high, data high.
     for (sender, data, amps, from) in [
@@ -328,7 +331,7 @@ fn a_second_slot_whose_data_began_a_window_before_it_is_another_robots_frame() {
         let (got, _, shown) = decode_traced(&x);
         assert!(
             got.iter().all(|m| sent.contains(m)),
-            "seed {seed}: decoded {got:?}, sent {sent:?}\n{}",
+            "seed {seed}, sender 1 {lead} s ahead of sender 2's second slot: decoded {got:?}, sent {sent:?}\n{}",
             shown.join("\n")
         );
     }
