@@ -664,4 +664,79 @@ mod tests {
     fn claim_message(h: f64, going: bool) -> Message {
         encode_claim(Posted { h, going }, 1000.0)
     }
+
+    /// Robot `robot`'s view of robot 2, whose clock reads `offset_s` ahead of its own.
+    fn peer_two(offset_s: f64, heard_s: f64) -> comms::PeerInfo {
+        comms::PeerInfo {
+            robot: 2,
+            incarnation: 1,
+            last_heard: comms::Instant::from_micros((heard_s * 1e6) as u64),
+            present: true,
+            frames: 100,
+            conflicting: false,
+            clock_offset_us: Some((offset_s * 1e6).round() as i64),
+            clock_drift_ppm: Some(0.0),
+            round_trip: Some(Duration::from_millis(3)),
+            clock_samples: 20,
+        }
+    }
+
+    #[test]
+    fn robots_whose_clocks_are_seconds_apart_sound_and_attribute_on_the_team_clock() {
+        // Robot 2's clock is the team's; robot 4's reads 7.3 s less, robot 5's 13.6 s
+        // more. Each knows robot 2's offset from the replica's echoes.
+        let (plan, _, template) = four_slot_fallback();
+        let mut four = template.clone();
+        let mut five = template;
+        four.update_clock(
+            4,
+            comms::Instant::from_micros(100_000_000),
+            [peer_two(7.3, 99.9)],
+        );
+        five.update_clock(
+            5,
+            comms::Instant::from_micros(120_000_000),
+            [peer_two(-13.6, 119.9)],
+        );
+        // Robot 4's next slot, on its own clock, is a slot start of robot 4 on the team
+        // clock (slot 2 of each cycle).
+        let next = four.next_slot(4, 100.0).expect("robot 4 has a slot");
+        let team = next + 7.3;
+        let k = (team / plan.slot_s).round();
+        assert!(
+            (team - k * plan.slot_s).abs() < 1e-6,
+            "a slot boundary on the team clock"
+        );
+        assert_eq!(plan.sender_at(team + 0.02), Some(4), "and it is robot 4's");
+        assert!(four.starts_in(4, next, 0.01) && !four.starts_in(4, next + 0.05, 0.01));
+        // Robot 5 hears it 30 ms later on its own clock, 20.9 s apart from robot 4's:
+        // the slot still names robot 4, and the claim counts from the slot's end.
+        let heard_at_five = next + 7.3 - (-13.6) + 0.03;
+        five.radio(5, &[], Duration::from_millis(1));
+        five.hear(5, &claim_message(0.5, true), heard_at_five);
+        let end_at_five = heard_at_five - 0.03 + plan.slot_s;
+        let before = five.candidates(5, end_at_five - 0.05, &[]);
+        assert!(
+            before.iter().all(|c| c.robot != 4),
+            "not before the slot ends: {before:?}"
+        );
+        let after = five.candidates(5, end_at_five + 0.01, &[]);
+        let four_said = after.iter().find(|c| c.robot == 4).map(|c| c.posted);
+        assert!(
+            four_said.is_some_and(|p| p.going && (p.h - 0.5).abs() <= COST_BIN_M / 2.0 + 1e-9),
+            "robot 5 holds robot 4's claim (going, h 0.5 m) from the end of its slot: {after:?}"
+        );
+        // On its own clock (no team clock) robot 5 would have put it down to another robot.
+        let own = SoundFallback::new(
+            plan,
+            &AcousticConfig::default(),
+            5,
+            ArbitrationParams::default(),
+        );
+        assert_ne!(
+            own.plan().sender_at(heard_at_five),
+            Some(4),
+            "without the team clock the slot names someone else"
+        );
+    }
 }
