@@ -62,9 +62,15 @@ fn measure() -> Measured {
     let receiver = std::thread::spawn(move || {
         let mut got = Vec::new();
         let mut buf = [0u8; 2048];
-        while !stop_rx.load(Ordering::Relaxed) {
-            if let Ok((n, _)) = listener.recv_from(&mut buf) {
-                got.push((Instant::now(), buf[..n].to_vec()));
+        // Stop only once asked *and* the socket has been empty for a read timeout: on a
+        // loaded machine this thread can fall behind, and datagrams still queued in the
+        // socket when the sender finished were counted as lost (a full suite once saw
+        // 469 of 2,040 "lost" where the model, alone, drops 399-422).
+        loop {
+            match listener.recv_from(&mut buf) {
+                Ok((n, _)) => got.push((Instant::now(), buf[..n].to_vec())),
+                Err(_) if stop_rx.load(Ordering::Relaxed) => break,
+                Err(_) => {}
             }
         }
         got
