@@ -261,15 +261,15 @@ async fn run_fallback(
             },
             () = tokio::time::sleep(wait) => {
                 let now = clock.now();
-                // The team clock may have moved while asleep: sound only at the start.
-                if now + SLOT_EARLY < next {
+                // The team clock may have moved while asleep (a new estimate, a new
+                // reference): ask again which slot start is due, and sound only at one.
+                let due = core
+                    .borrow()
+                    .next_sound_slot(now.saturating_sub(SLOT_LATE).max(after));
+                let Some(due) = due.filter(|&d| d <= now + SLOT_EARLY) else {
                     continue;
-                }
-                after = next + SLOT_EARLY;
-                if now.saturating_duration_since(next) > SLOT_LATE {
-                    tracing::debug!(late_ms = now.saturating_duration_since(next).as_millis(), "acoustic slot missed");
-                    continue;
-                }
+                };
+                after = due + SLOT_EARLY;
                 let claim = core.borrow_mut().sound_claim(now);
                 if let Some(message) = claim {
                     if speaker.sound_now(message) {
