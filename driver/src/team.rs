@@ -62,17 +62,6 @@ impl TeamLayerConfig {
             acoustic: None,
         }
     }
-
-    /// The acoustic fallback's slots for this team: one per field player, robot 1 (the
-    /// goalkeeper) left out in a team of three or more, as in the simulator.
-    pub fn slot_plan(&self, slot_s: f64) -> team::acoustic::SlotPlan {
-        let with_keeper = self.team_size >= 3;
-        team::acoustic::SlotPlan {
-            first_id: if with_keeper { 2 } else { 1 },
-            slots: (self.team_size - usize::from(with_keeper)).clamp(1, 255) as u8,
-            slot_s,
-        }
-    }
 }
 
 /// What the robot program wrote since the previous tick.
@@ -344,7 +333,7 @@ pub struct TeamCore {
 impl TeamCore {
     /// Robot `id`'s layer, dormant until fed.
     pub fn new(id: u8, cfg: TeamLayerConfig) -> TeamCore {
-        let layer = TeamLayer::new(
+        let mut layer = TeamLayer::new(
             id,
             false,
             cfg.params,
@@ -353,10 +342,9 @@ impl TeamCore {
             &cfg.team.world_model,
             cfg.team_size.max(usize::from(id)),
         );
-        let mut layer = layer;
         if let Some(ac) = cfg.acoustic.filter(|a| a.enabled) {
             layer.sound = Some(team::acoustic::SoundFallback::new(
-                cfg.slot_plan(ac.slot_s()),
+                team::acoustic::SlotPlan::for_team(cfg.team_size, ac.slot_s()),
                 &ac,
                 cfg.team_size.max(usize::from(id)),
                 cfg.params,
@@ -414,8 +402,7 @@ impl TeamCore {
     pub fn tick(&mut self, replica: &mut Replica, now: Instant) {
         if self.shared.layer.sound.is_some() {
             // The fallback's slots run on the team clock the replica's estimates give.
-            let peers: Vec<comms::PeerInfo> = replica.peers().collect();
-            self.shared.layer.update_team_clock(now, peers);
+            self.shared.layer.update_team_clock(now, replica.peers());
         }
         if self.inputs.fed {
             tick(replica, now, &mut self.shared, &mut self.inputs);

@@ -524,13 +524,14 @@ pub fn run(args: DaemonArgs) -> Result<()> {
                 "team layer: waiting for local.var.robot.pose or .odometry (docs/team-layer.md)"
             );
             let fallback = if args.audio.audio_fallback {
-                cfg.acoustic = Some(team::acoustic::AcousticConfig {
+                let acoustic = team::acoustic::AcousticConfig {
                     enabled: true,
                     tone_s: args.audio.audio_tone.as_secs_f64(),
                     guard_s: args.audio.audio_fallback_guard.as_secs_f64(),
                     ..team::acoustic::AcousticConfig::default()
-                });
-                let plan = cfg.slot_plan(cfg.acoustic.map_or(0.0, |a| a.slot_s()));
+                };
+                cfg.acoustic = Some(acoustic);
+                let plan = team::acoustic::SlotPlan::for_team(team_size, acoustic.slot_s());
                 tracing::info!(
                     slots = plan.slots,
                     first = plan.first_id,

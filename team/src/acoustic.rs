@@ -155,6 +155,18 @@ pub struct SlotPlan {
 }
 
 impl SlotPlan {
+    /// The slots of a team of `team_size` robots (ids 1 ..= team_size): one per field
+    /// player, robot 1 (the goalkeeper) left out in a team of three or more. The
+    /// simulator and the daemon both take their plan from here.
+    pub fn for_team(team_size: usize, slot_s: f64) -> SlotPlan {
+        let with_keeper = team_size >= 3;
+        SlotPlan {
+            first_id: if with_keeper { 2 } else { 1 },
+            slots: (team_size - usize::from(with_keeper)).clamp(1, 255) as u8,
+            slot_s,
+        }
+    }
+
     /// One cycle, s.
     pub fn cycle_s(&self) -> f64 {
         self.slot_s * f64::from(self.slots)

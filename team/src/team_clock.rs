@@ -42,8 +42,6 @@ pub struct TeamClock {
     reference: u8,
     /// The reference's clock minus this robot's, µs (0 when it is this robot).
     offset_us: i64,
-    /// When the reference was last heard (this robot's clock), if it is a teammate.
-    reference_heard: Option<Instant>,
 }
 
 impl TeamClock {
@@ -53,7 +51,6 @@ impl TeamClock {
             me,
             reference: me,
             offset_us: 0,
-            reference_heard: None,
         }
     }
 
@@ -71,8 +68,8 @@ impl TeamClock {
     /// offsets are extrapolated to the replica's now).
     pub fn update(&mut self, now: Instant, peers: impl IntoIterator<Item = PeerInfo>) {
         let age = |heard: Instant| now.saturating_duration_since(heard).as_secs_f64();
-        let mut best: Option<(u8, i64, Instant)> = None;
-        let mut anyone_recent = false;
+        // The lowest id heard recently, with its offset.
+        let mut best: Option<(u8, i64)> = None;
         let mut current: Option<(i64, Instant)> = None;
         for p in peers {
             if p.robot == self.me {
@@ -84,31 +81,26 @@ impl TeamClock {
             if p.robot == self.reference {
                 current = Some((offset, p.last_heard));
             }
-            if age(p.last_heard) <= RECENT_S {
-                anyone_recent = true;
-                if best.is_none_or(|(id, ..)| p.robot < id) {
-                    best = Some((p.robot, offset, p.last_heard));
-                }
+            if age(p.last_heard) <= RECENT_S && best.is_none_or(|(id, _)| p.robot < id) {
+                best = Some((p.robot, offset));
             }
         }
         // A lower id heard recently (or this robot itself) always wins: every robot that
         // hears the team converges on the same reference.
-        let lowest_recent = best.map_or(self.me, |(id, ..)| id.min(self.me));
+        let lowest_recent = best.map_or(self.me, |(id, _)| id.min(self.me));
         let lost = self.reference != self.me
-            && anyone_recent
+            && best.is_some()
             && current.is_none_or(|(_, heard)| age(heard) > REFERENCE_LOST_S);
         if lowest_recent < self.reference || lost {
             self.reference = lowest_recent;
             self.offset_us = best
-                .filter(|(id, ..)| *id == lowest_recent)
-                .map_or(0, |(_, offset, _)| offset);
-            self.reference_heard = best.map(|(.., heard)| heard);
+                .filter(|(id, _)| *id == lowest_recent)
+                .map_or(0, |(_, offset)| offset);
             return;
         }
-        if let Some((offset, heard)) = current {
+        if let Some((offset, _)) = current {
             // Its estimate, extrapolated by the replica, also while it is not heard.
             self.offset_us = offset;
-            self.reference_heard = Some(heard);
         }
     }
 

@@ -37,13 +37,8 @@ impl super::Simulation {
         if !cfg.enabled {
             return Ok(());
         }
-        let with_keeper = self.robots.len() >= 3;
-        let plan = SlotPlan {
-            first_id: if with_keeper { 2 } else { 1 },
-            slots: (self.robots.len() - usize::from(with_keeper)) as u8,
-            slot_s: cfg.slot_s(),
-        };
         let team = self.robots.len();
+        let plan = SlotPlan::for_team(team, cfg.slot_s());
         for r in &mut self.robots {
             let params = *r.arbiter.params();
             r.sound = Some(SoundFallback::new(plan, &cfg, team, params));

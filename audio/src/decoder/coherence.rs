@@ -6,7 +6,7 @@
 //! slot: the decoder's onset falls between theirs, and one basic fades out before the
 //! slot ends while the other comes in after it begins.
 
-use super::confirm::P_TONE_RIVAL;
+use super::confirm::{P_TONE_CONFIRM, P_TONE_RIVAL};
 use super::tracking::Tracking;
 use super::Decoder;
 use crate::significance::gamma_upper_quantile;
@@ -126,9 +126,11 @@ impl Decoder {
     }
 
     /// Another robot's sender that began with the second slot `[a, b)` of the tracked
-    /// long message `t` and sounds through it: all three of its tones `present` (the
-    /// caller passes every tone out of the noise, not only those within the rules'
-    /// dynamic range), each quarter held, and in the quarter before under [`BEGAN_SHARE`]
+    /// long message `t`, whose decided frame is `frame` (slot sums `sums` over `count`
+    /// windows), and sounds through it: all three of its tones out of the noise (at any
+    /// level, not only within the rules' dynamic range: the room can put a sender 20 dB
+    /// under its data; a tone beside one of `frame`'s data tones is left out, as that
+    /// tone's leakage begins with the slot too), each quarter held, and in the quarter before under [`BEGAN_SHARE`]
     /// of its slot level and under [`OWN_SHARE_RATIO`] of the share `t`'s own sender
     /// held there: its basic, when so. (Two tones of three, or no comparison with the own
     /// sender, let babble and a room's build-up through: one-robot long tuning rows lost
@@ -143,10 +145,17 @@ impl Decoder {
     pub(super) fn sender_began_with_slot(
         &self,
         t: &Tracking,
-        present: &[bool; TONE_COUNT],
+        frame: Frame,
+        sums: &[f64; TONE_COUNT],
+        count: usize,
         a: f64,
         b: f64,
     ) -> Option<usize> {
+        let floor = gamma_upper_quantile(count.max(1) as f64, P_TONE_CONFIRM);
+        let data_tones = basic_tones(SENDER_COUNT + usize::from(frame.data));
+        let beside_data = |k: usize| data_tones.iter().any(|&d| d.abs_diff(k) == 1);
+        let present: [bool; TONE_COUNT] =
+            std::array::from_fn(|k| sums[k] >= floor && !beside_data(k));
         let quarter = (b - a) / PARTS as f64;
         // The share of its slot level `tones` held in the quarter before, and whether
         // they held their level in each quarter of the slot.

@@ -277,19 +277,7 @@ impl Decoder {
             });
             Some("a second transmitter")
         } else if let Some(basic) = (t.stage == super::tracking::Stage::Slot2)
-            .then(|| {
-                // At any level the tones stand out of the noise: the room can put a
-                // sender 20 dB under its data, below the rules' dynamic range. A tone
-                // next to one of the slot's own data tones is left out: that tone's
-                // leakage begins with the slot too (data 0 and 20 neighbour sender
-                // tones; one-robot tuning rows lost 16 long messages of 60,000 to it).
-                let floor = gamma_upper_quantile(count.max(1) as f64, P_TONE_CONFIRM);
-                let data_tones = basic_tones(SENDER_COUNT + usize::from(frame.data));
-                let beside_data = |k: usize| data_tones.iter().any(|&d| d.abs_diff(k) == 1);
-                let audible: [bool; TONE_COUNT] =
-                    std::array::from_fn(|k| sums[k] >= floor && !beside_data(k));
-                self.sender_began_with_slot(t, &audible, a, b)
-            })
+            .then(|| self.sender_began_with_slot(t, frame, &sums, count, a, b))
             .flatten()
         {
             // Another robot began with this second slot: the data may be its first
