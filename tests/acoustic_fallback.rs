@@ -283,20 +283,20 @@ fn a_30_s_outage_keeps_one_goer_with_the_acoustic_fallback_in_a_hall_and_a_dry_r
             let on = outage(seed, Some(room)).outage.expect("an outage report");
             rows.push(format!(
                 "seed {seed} {name}: without {:.1}% (conflict {:.1}%), with {:.1}% (conflict {:.1}%, none {:.1}%; {} handovers, goer near the ball {:.1}% of the time; {}/{} decoded, {} wrong)",
-                off.outage_exactly_one_goer_pct,
-                off.outage_conflict_pct,
-                on.outage_exactly_one_goer_pct,
-                on.outage_conflict_pct,
-                on.outage_no_goer_pct,
-                on.outage_handovers,
-                on.outage_near_goer_pct,
+                off.windows.outage_exactly_one_goer_pct,
+                off.windows.outage_conflict_pct,
+                on.windows.outage_exactly_one_goer_pct,
+                on.windows.outage_conflict_pct,
+                on.windows.outage_no_goer_pct,
+                on.windows.outage_handovers,
+                on.windows.outage_near_goer_pct,
                 on.acoustic_decoded,
                 on.acoustic_receptions,
                 on.acoustic_wrong,
             ));
             let table = rows.join("\n");
             assert!(
-                on.outage_ball_visible_s > 5.0,
+                on.windows.outage_ball_visible_s > 5.0,
                 "seed {seed} {name}: the ball was seen in the outage"
             );
             assert!(
@@ -304,12 +304,13 @@ fn a_30_s_outage_keeps_one_goer_with_the_acoustic_fallback_in_a_hall_and_a_dry_r
                 "seed {seed} {name}: robots sounded their claims during the outage (a 2.8 s cycle of four slots: ~40 in 30 s)"
             );
             assert!(
-                on.outage_exactly_one_goer_pct >= 90.0,
+                on.windows.outage_exactly_one_goer_pct >= 90.0,
                 "seed {seed} {name}: exactly one goer {:.1}% < 90% with the fallback\n{table}",
-                on.outage_exactly_one_goer_pct,
+                on.windows.outage_exactly_one_goer_pct,
             );
             assert!(
-                on.outage_exactly_one_goer_pct >= 2.0 * off.outage_exactly_one_goer_pct,
+                on.windows.outage_exactly_one_goer_pct
+                    >= 2.0 * off.windows.outage_exactly_one_goer_pct,
                 "seed {seed} {name}: the fallback at least doubles it\n{table}"
             );
             assert!(
@@ -317,10 +318,10 @@ fn a_30_s_outage_keeps_one_goer_with_the_acoustic_fallback_in_a_hall_and_a_dry_r
                 "seed {seed} {name}: ≥ 80% of receptions decode\n{table}"
             );
             assert!(
-                on.outage_near_goer_pct >= 60.0,
+                on.windows.outage_near_goer_pct >= 60.0,
                 "seed {seed} {name}: the lone goer is mostly one near the ball, not whoever went when the radio failed\n{table}"
             );
-            handovers += on.outage_handovers;
+            handovers += on.windows.outage_handovers;
         }
     }
     eprintln!("{}", rows.join("\n"));
@@ -361,9 +362,9 @@ fn robots_whose_clocks_are_seconds_apart_take_turns_on_the_team_clock() {
         let on = sim.report(0.0).outage.expect("an outage report");
         rows.push(format!(
             "seed {seed}: one goer {:.2}% (two+ {:.2}%, none {:.2}%), team clocks within {:.3} ms (mean {:.3} ms)",
-            on.outage_exactly_one_goer_pct,
-            on.outage_conflict_pct,
-            on.outage_no_goer_pct,
+            on.windows.outage_exactly_one_goer_pct,
+            on.windows.outage_conflict_pct,
+            on.windows.outage_no_goer_pct,
             on.acoustic_team_clock_spread_max_ms,
             on.acoustic_team_clock_spread_mean_ms,
         ));
@@ -373,7 +374,7 @@ fn robots_whose_clocks_are_seconds_apart_take_turns_on_the_team_clock() {
             "seed {seed}: the robots' team clocks agree to the echo estimate's error, far inside the 300 ms guard (6.4 ms measured on seeds 1–8)\n{table}"
         );
         assert!(
-            on.outage_exactly_one_goer_pct >= 90.0,
+            on.windows.outage_exactly_one_goer_pct >= 90.0,
             "seed {seed}: exactly one goer ≥ 90% of the outage with clocks seconds apart\n{table}"
         );
     }

@@ -119,56 +119,27 @@ impl super::Simulation {
         let Some(o) = self.cfg.outage else {
             return;
         };
-        let dt = self.cfg.physics_dt_s;
-        let before = OutageConfig {
-            start_s: o.start_s - o.duration_s,
-            ..o
-        };
-        let window = if o.contains(t_s - dt) {
-            &mut self.outage_metrics.during
-        } else if before.contains(t_s - dt) {
-            &mut self.outage_metrics.before
-        } else {
-            return;
-        };
-        window.arbitration.sample(t_s, dt, visible, goers);
-        if let ([g], true) = (goers, visible) {
+        let (world, robots) = (&self.world, &self.robots);
+        let near = |g: u8| {
             // The truth, for the figures only: how far the lone goer is from the ball
             // beyond the field player nearest to it.
-            let ball = self.world.ball.at;
-            let distance = |i: usize| self.world.robots[i].pose.at.distance(ball);
-            let nearest = (0..self.robots.len())
-                .filter(|&i| self.robots[i].is_field_player() && self.robots[i].alive)
-                .map(distance)
-                .fold(f64::INFINITY, f64::min);
-            let goer = self.robots.iter().position(|r| r.id == *g).map(distance);
-            window.lone_s += dt;
-            if goer.is_some_and(|d| d <= nearest + NEAR_GOER_M) {
-                window.near_s += dt;
-            }
-        }
+            let ball = world.ball.at;
+            let distance = |i: usize| world.robots[i].pose.at.distance(ball);
+            let nearest = (0..robots.len())
+                .filter(|&i| robots[i].is_field_player() && robots[i].alive)
+                .map(distance);
+            is_near(robots.iter().position(|r| r.id == g).map(distance), nearest)
+        };
+        self.outage_metrics
+            .sample(&o, t_s, self.cfg.physics_dt_s, visible, goers, near);
     }
 
     /// The outage's figures for the report, when there was one.
     pub(super) fn outage_report(&self) -> Option<OutageReport> {
         let o = self.cfg.outage?;
-        let w = &self.outage_metrics.during;
-        let m = &w.arbitration;
-        let b = &self.outage_metrics.before;
         let s = self.acoustic.as_ref().map(|c| c.stats).unwrap_or_default();
         Some(OutageReport {
-            outage_start_s: o.start_s,
-            outage_duration_s: o.duration_s,
-            outage_acoustic: self.cfg.acoustic.enabled,
-            outage_ball_visible_s: round3(m.visible_s),
-            outage_exactly_one_goer_pct: round3(m.exactly_one_pct()),
-            outage_conflict_pct: round3(m.conflict_pct()),
-            outage_no_goer_pct: round3(m.no_goer_pct()),
-            outage_handovers: m.handovers,
-            outage_near_goer_pct: round3(w.near_pct()),
-            before_outage_exactly_one_goer_pct: round3(b.arbitration.exactly_one_pct()),
-            before_outage_handovers: b.arbitration.handovers,
-            before_outage_near_goer_pct: round3(b.near_pct()),
+            windows: self.outage_metrics.windows(&o, self.cfg.acoustic.enabled),
             acoustic_tone_ms: round3(self.cfg.acoustic.tone_s * 1e3),
             acoustic_guard_ms: round3(self.cfg.acoustic.guard_s * 1e3),
             acoustic_sounded: s.sounded,
@@ -226,14 +197,76 @@ pub struct OutageFigures {
     pub clock_spread_samples: u64,
 }
 
+impl OutageFigures {
+    /// One sample at `t_s` (after a step of `dt`) of outage `o`'s window or of as long a
+    /// window just before it; `near(goer)` says whether a lone goer is near the ball (see
+    /// [`NEAR_GOER_M`]), asked only when there is one and the ball is visible.
+    pub fn sample(
+        &mut self,
+        o: &OutageConfig,
+        t_s: f64,
+        dt: f64,
+        visible: bool,
+        goers: &[u8],
+        near: impl FnOnce(u8) -> bool,
+    ) {
+        let before = OutageConfig {
+            start_s: o.start_s - o.duration_s,
+            ..*o
+        };
+        let window = if o.contains(t_s - dt) {
+            &mut self.during
+        } else if before.contains(t_s - dt) {
+            &mut self.before
+        } else {
+            return;
+        };
+        window.arbitration.sample(t_s, dt, visible, goers);
+        if let ([g], true) = (goers, visible) {
+            window.lone_s += dt;
+            if near(*g) {
+                window.near_s += dt;
+            }
+        }
+    }
+
+    /// The two windows' figures for a report.
+    pub fn windows(&self, o: &OutageConfig, acoustic: bool) -> OutageWindows {
+        let (w, b) = (&self.during, &self.before);
+        let m = &w.arbitration;
+        OutageWindows {
+            outage_start_s: round3(o.start_s),
+            outage_duration_s: round3(o.duration_s),
+            outage_acoustic: acoustic,
+            outage_ball_visible_s: round3(m.visible_s),
+            outage_exactly_one_goer_pct: round3(m.exactly_one_pct()),
+            outage_conflict_pct: round3(m.conflict_pct()),
+            outage_no_goer_pct: round3(m.no_goer_pct()),
+            outage_handovers: m.handovers,
+            outage_near_goer_pct: round3(w.near_pct()),
+            before_outage_exactly_one_goer_pct: round3(b.arbitration.exactly_one_pct()),
+            before_outage_handovers: b.arbitration.handovers,
+            before_outage_near_goer_pct: round3(b.near_pct()),
+        }
+    }
+}
+
+/// Whether a lone goer `goer_m` from the ball is near it: within [`NEAR_GOER_M`] of the
+/// nearest of the field players' distances `field_players_m` (`None`: not a field player
+/// on the field, so not near).
+pub fn is_near(goer_m: Option<f64>, field_players_m: impl Iterator<Item = f64>) -> bool {
+    let nearest = field_players_m.fold(f64::INFINITY, f64::min);
+    goer_m.is_some_and(|d| d <= nearest + NEAR_GOER_M)
+}
+
 fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
 }
 
-/// The outage's part of the report (flattened into it; absent without `--outage`).
-/// Percentages are of the ball-visible time inside the outage window.
+/// The outage's arbitration figures: the window and as long a window just before it.
+/// Percentages are of the ball-visible time inside the window.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct OutageReport {
+pub struct OutageWindows {
     /// When the outage started, s.
     pub outage_start_s: f64,
     /// How long it lasted, s.
@@ -260,6 +293,43 @@ pub struct OutageReport {
     pub before_outage_handovers: u64,
     /// Near-goer share in that window, percent.
     pub before_outage_near_goer_pct: f64,
+}
+
+impl std::fmt::Display for OutageWindows {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "outage                {:>9.1} s from {:.1} s, all links down; acoustic fallback {}",
+            self.outage_duration_s,
+            self.outage_start_s,
+            if self.outage_acoustic { "on" } else { "off" }
+        )?;
+        writeln!(
+            f,
+            "  exactly one goer    {:>9.2} %  of {:.1} s ball-visible outage time (two or more {:.2} %, none {:.2} %)",
+            self.outage_exactly_one_goer_pct,
+            self.outage_ball_visible_s,
+            self.outage_conflict_pct,
+            self.outage_no_goer_pct
+        )?;
+        write!(
+            f,
+            "  lone goer near ball {:>9.2} %  of lone-goer time, {} handovers (before the outage, radio: {:.2} % one goer, {:.2} % near, {} handovers)",
+            self.outage_near_goer_pct,
+            self.outage_handovers,
+            self.before_outage_exactly_one_goer_pct,
+            self.before_outage_near_goer_pct,
+            self.before_outage_handovers
+        )
+    }
+}
+
+/// The outage's part of the report (flattened into it; absent without `--outage`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutageReport {
+    /// The arbitration in the outage and before it.
+    #[serde(flatten)]
+    pub windows: OutageWindows,
     /// Tone length of the fallback's messages, ms.
     pub acoustic_tone_ms: f64,
     /// Silence after each tone, ms.
@@ -283,30 +353,7 @@ pub struct OutageReport {
 
 impl std::fmt::Display for OutageReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(
-            f,
-            "outage                {:>9.1} s from {:.1} s, all links down; acoustic fallback {}",
-            self.outage_duration_s,
-            self.outage_start_s,
-            if self.outage_acoustic { "on" } else { "off" }
-        )?;
-        writeln!(
-            f,
-            "  exactly one goer    {:>9.2} %  of {:.1} s ball-visible outage time (two or more {:.2} %, none {:.2} %)",
-            self.outage_exactly_one_goer_pct,
-            self.outage_ball_visible_s,
-            self.outage_conflict_pct,
-            self.outage_no_goer_pct
-        )?;
-        writeln!(
-            f,
-            "  lone goer near ball {:>9.2} %  of lone-goer time, {} handovers (before the outage, radio: {:.2} % one goer, {:.2} % near, {} handovers)",
-            self.outage_near_goer_pct,
-            self.outage_handovers,
-            self.before_outage_exactly_one_goer_pct,
-            self.before_outage_near_goer_pct,
-            self.before_outage_handovers
-        )?;
+        writeln!(f, "{}", self.windows)?;
         write!(
             f,
             "  acoustic            {:>9} sounded ({:.0} ms tones, {:.0} ms guard), {} of {} receptions decoded, {} wrong, {} collided",

@@ -101,42 +101,40 @@ pub struct AcousticStats {
 /// The room: every robot's loudspeaker and microphone, and each microphone's decoder.
 pub struct AcousticChannel {
     encoder: Encoder,
-    listeners: Vec<Listener>,
+    room: Room,
+    decoders: Vec<Decoder>,
     sounded: Vec<Sounded>,
-    /// Samples already pushed to the decoders.
-    cursor: u64,
     /// Decoder's window of start times in which a detection may match a message, samples.
     tolerance: u64,
     /// The figures so far.
     pub stats: AcousticStats,
+}
+
+/// The air between the robots, without decoders: what each robot's loudspeaker puts into
+/// it (direct sound delayed by distance and attenuated 1/r, and a diffuse reverberant
+/// field), and what each microphone picks up, the crowd's babble with it. The in-process
+/// channel sounds encoded messages into it; `huddle sim --daemons` streams each daemon's
+/// loudspeaker into it and each microphone's signal out to its daemon.
+pub struct Room {
+    listeners: Vec<RoomListener>,
+    /// Samples already played out.
+    cursor: u64,
     critical_gain: f32,
 }
 
-struct Listener {
-    decoder: Decoder,
+struct RoomListener {
     /// Direct sound to come, from `cursor` on.
     direct: Vec<f32>,
     /// Input to the reverberator to come, from `cursor` on.
     diffuse: Vec<f32>,
     reverb: Reverb,
     crowd: Babble,
-    /// What the microphone picked up in the last [`AcousticChannel::advance_to`].
+    /// What the microphone picked up in the last [`Room::play`].
     heard: Vec<f32>,
 }
 
-/// Why the channel could not be set up.
-#[derive(Debug, thiserror::Error)]
-pub enum AcousticError {
-    /// The codec refused the tone duration.
-    #[error("acoustic codec: {0}")]
-    Codec(String),
-    /// Too many robots for the statistics' fixed arrays.
-    #[error("the acoustic channel takes at most 16 robots, not {0}")]
-    Robots(usize),
-}
-
-impl AcousticChannel {
-    /// A room with `robots` robots, deterministic for `seed`.
+impl Room {
+    /// A room with `robots` robots (at most 16), its crowd deterministic for `seed`.
     pub fn new(cfg: &AcousticConfig, robots: usize, seed: u64) -> Result<Self, AcousticError> {
         if robots > 16 {
             return Err(AcousticError::Robots(robots));
@@ -147,11 +145,6 @@ impl AcousticChannel {
             ..EncoderConfig::default()
         })
         .map_err(|e| AcousticError::Codec(e.to_string()))?;
-        let dec = DecoderConfig {
-            sample_rate_hz: SAMPLE_RATE_HZ,
-            tone_duration_s: cfg.tone_s,
-            ..DecoderConfig::default()
-        };
         // The crowd level: one robot's sound at 1 m over the babble is the configured SNR
         // (babble is speech, nearly all of its power inside the 500–4000 Hz band).
         let probe = encoder.encode_f32(&encode_claim(
@@ -164,51 +157,40 @@ impl AcousticChannel {
         let signal_power = audio::channel::power(&probe);
         let crowd_rms = (signal_power / 10f64.powf(cfg.crowd_snr_db_at_1m / 10.0)).sqrt();
         let listeners = (0..robots)
-            .map(|i| {
-                Ok(Listener {
-                    decoder: Decoder::new(dec.clone())
-                        .map_err(|e| AcousticError::Codec(e.to_string()))?,
-                    direct: Vec::new(),
-                    diffuse: Vec::new(),
-                    reverb: Reverb::new(cfg.t60_s, 1.0),
-                    crowd: Babble::new(
-                        seed.wrapping_mul(0x9e37_79b9).wrapping_add(i as u64),
-                        SAMPLE_RATE_HZ,
-                        6,
-                        crowd_rms,
-                    ),
-                    heard: Vec::new(),
-                })
+            .map(|i| RoomListener {
+                direct: Vec::new(),
+                diffuse: Vec::new(),
+                reverb: Reverb::new(cfg.t60_s, 1.0),
+                crowd: Babble::new(
+                    seed.wrapping_mul(0x9e37_79b9).wrapping_add(i as u64),
+                    SAMPLE_RATE_HZ,
+                    6,
+                    crowd_rms,
+                ),
+                heard: Vec::new(),
             })
-            .collect::<Result<Vec<_>, AcousticError>>()?;
+            .collect();
         Ok(Self {
-            encoder,
             listeners,
-            sounded: Vec::new(),
             cursor: 0,
-            tolerance: (0.5 * cfg.slot_s() * f64::from(SAMPLE_RATE_HZ)) as u64,
-            stats: AcousticStats::default(),
             critical_gain: (1.0 / cfg.critical_distance_m.max(0.1)) as f32,
         })
     }
 
-    /// Simulated time the decoders have heard up to, s.
-    pub fn time_s(&self) -> f64 {
-        self.cursor as f64 / f64::from(SAMPLE_RATE_HZ)
+    /// Samples played out so far.
+    pub fn cursor(&self) -> u64 {
+        self.cursor
     }
 
-    /// The samples listener `listener`'s microphone picked up in the last
-    /// [`AcousticChannel::advance_to`] (direct sound, reverberation and crowd): the
-    /// channel's received level, which the decoder's tone SNR no longer follows (its noise
-    /// floor is held within 13 dB of the band's tone power). Empty for no such listener.
-    pub fn microphone(&self, listener: usize) -> &[f32] {
-        self.listeners.get(listener).map_or(&[], |l| &l.heard)
-    }
-
-    /// Robot `from` sounds `message` now (at the channel's cursor) from `positions[from]`;
-    /// `positions` are every robot's true positions, m.
-    pub fn sound(&mut self, from: usize, message: &Message, positions: &[(f64, f64)]) {
-        let pcm = self.encoder.encode_f32(message);
+    /// Robot `from`'s loudspeaker plays `pcm` from now (the cursor) at `positions[from]`
+    /// (`positions`: every robot's true position, m). Returns, per listener, the first
+    /// and one-past-last sample of its direct sound.
+    pub fn sound(
+        &mut self,
+        from: usize,
+        pcm: &[f32],
+        positions: &[(f64, f64)],
+    ) -> [(u64, u64); 16] {
         let fs = f64::from(SAMPLE_RATE_HZ);
         let mut arrival = [(0u64, 0u64); 16];
         for (j, l) in self.listeners.iter_mut().enumerate() {
@@ -230,10 +212,104 @@ impl AcousticChannel {
             }
             arrival[j] = (self.cursor + delay as u64, self.cursor + end as u64);
         }
+        arrival
+    }
+
+    /// Plays the next `n` samples: each microphone's signal (direct sound, reverberation,
+    /// crowd), then read with [`Room::microphone`].
+    pub fn play(&mut self, n: usize) {
+        for l in &mut self.listeners {
+            l.heard.clear();
+            l.heard.resize(n, 0.0);
+            l.crowd.add_to(&mut l.heard);
+            let take = n.min(l.direct.len());
+            for (k, x) in l.heard.iter_mut().enumerate() {
+                let (d, w) = if k < take {
+                    (l.direct[k], l.diffuse[k])
+                } else {
+                    (0.0, 0.0)
+                };
+                *x += d + l.reverb.process(w);
+            }
+            l.direct.drain(..take);
+            l.diffuse.drain(..take);
+        }
+        self.cursor += n as u64;
+    }
+
+    /// What listener `listener`'s microphone picked up in the last [`Room::play`]. Empty
+    /// for no such listener.
+    pub fn microphone(&self, listener: usize) -> &[f32] {
+        self.listeners.get(listener).map_or(&[], |l| &l.heard)
+    }
+
+    /// Robots in the room.
+    pub fn robots(&self) -> usize {
+        self.listeners.len()
+    }
+}
+
+/// Why the channel could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum AcousticError {
+    /// The codec refused the tone duration.
+    #[error("acoustic codec: {0}")]
+    Codec(String),
+    /// Too many robots for the statistics' fixed arrays.
+    #[error("the acoustic channel takes at most 16 robots, not {0}")]
+    Robots(usize),
+}
+
+impl AcousticChannel {
+    /// A room with `robots` robots, deterministic for `seed`.
+    pub fn new(cfg: &AcousticConfig, robots: usize, seed: u64) -> Result<Self, AcousticError> {
+        let room = Room::new(cfg, robots, seed)?;
+        let encoder = Encoder::new(EncoderConfig {
+            sample_rate_hz: SAMPLE_RATE_HZ,
+            tone_duration_s: cfg.tone_s,
+            ..EncoderConfig::default()
+        })
+        .map_err(|e| AcousticError::Codec(e.to_string()))?;
+        let dec = DecoderConfig {
+            sample_rate_hz: SAMPLE_RATE_HZ,
+            tone_duration_s: cfg.tone_s,
+            ..DecoderConfig::default()
+        };
+        let decoders = (0..robots)
+            .map(|_| Decoder::new(dec.clone()).map_err(|e| AcousticError::Codec(e.to_string())))
+            .collect::<Result<Vec<_>, AcousticError>>()?;
+        Ok(Self {
+            encoder,
+            room,
+            decoders,
+            sounded: Vec::new(),
+            tolerance: (0.5 * cfg.slot_s() * f64::from(SAMPLE_RATE_HZ)) as u64,
+            stats: AcousticStats::default(),
+        })
+    }
+
+    /// Simulated time the decoders have heard up to, s.
+    pub fn time_s(&self) -> f64 {
+        self.room.cursor() as f64 / f64::from(SAMPLE_RATE_HZ)
+    }
+
+    /// The samples listener `listener`'s microphone picked up in the last
+    /// [`AcousticChannel::advance_to`] (direct sound, reverberation and crowd): the
+    /// channel's received level, which the decoder's tone SNR no longer follows (its noise
+    /// floor is held within 13 dB of the band's tone power). Empty for no such listener.
+    pub fn microphone(&self, listener: usize) -> &[f32] {
+        self.room.microphone(listener)
+    }
+
+    /// Robot `from` sounds `message` now (at the channel's cursor) from `positions[from]`;
+    /// `positions` are every robot's true positions, m.
+    pub fn sound(&mut self, from: usize, message: &Message, positions: &[(f64, f64)]) {
+        let pcm = self.encoder.encode_f32(message);
+        let arrival = self.room.sound(from, &pcm, positions);
         self.stats.sounded += 1;
         // Collisions: receptions whose direct sounds overlap at a listener.
+        let n = self.room.robots();
         for other in &self.sounded {
-            let n = self.listeners.len();
             for (j, (&(a0, a1), &(b0, b1))) in
                 arrival[..n].iter().zip(&other.arrival[..n]).enumerate()
             {
@@ -247,7 +323,7 @@ impl AcousticChannel {
                 }
             }
         }
-        self.stats.receptions += self.listeners.len() as u64 - 1;
+        self.stats.receptions += n as u64 - 1;
         self.sounded.push(Sounded {
             from,
             arrival,
@@ -260,35 +336,19 @@ impl AcousticChannel {
     pub fn advance_to(&mut self, t_s: f64) -> Vec<Heard> {
         let to = (t_s * f64::from(SAMPLE_RATE_HZ)).round() as u64;
         let mut heard = Vec::new();
-        if to <= self.cursor {
+        if to <= self.room.cursor() {
             return heard;
         }
-        let n = (to - self.cursor) as usize;
-        let mut block = vec![0.0f32; n];
-        for (j, l) in self.listeners.iter_mut().enumerate() {
-            block.iter_mut().for_each(|x| *x = 0.0);
-            l.crowd.add_to(&mut block);
-            let take = n.min(l.direct.len());
-            for (k, x) in block.iter_mut().enumerate() {
-                let (d, w) = if k < take {
-                    (l.direct[k], l.diffuse[k])
-                } else {
-                    (0.0, 0.0)
-                };
-                *x += d + l.reverb.process(w);
-            }
-            l.direct.drain(..take);
-            l.diffuse.drain(..take);
-            l.decoder.push_f32(&block);
-            l.heard.clone_from(&block);
-            while let Some(d) = l.decoder.poll_message() {
+        self.room.play((to - self.room.cursor()) as usize);
+        for (j, decoder) in self.decoders.iter_mut().enumerate() {
+            decoder.push_f32(self.room.microphone(j));
+            while let Some(d) = decoder.poll_message() {
                 heard.push(Heard {
                     listener: j,
                     detection: d,
                 });
             }
         }
-        self.cursor = to;
         for h in &heard {
             let start = (h.detection.start_s * f64::from(SAMPLE_RATE_HZ)) as u64;
             let matched = self.sounded.iter().any(|s| {

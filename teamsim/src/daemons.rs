@@ -60,6 +60,8 @@ use player::Percepts;
 use serde::Serialize;
 use team::contract;
 
+use super::daemons_air::{self, Air};
+pub use super::daemons_air::{AirCounts, DaemonsOutage};
 use super::daemons_game::{self, DaemonsGameReport, GcSide};
 pub use super::daemons_in_process::{
     in_process, run_in_process, InProcess, SpreadRun, SPREAD_LATENCY_US,
@@ -68,6 +70,9 @@ use super::references::CentralFusion;
 use super::{Metrics, SimConfig, Simulation, Transport};
 use crate::field::geometry::Pose;
 use crate::field::World;
+
+/// Where a daemon's counters are (`local.var.huddle.stats.NAME`).
+const STATS_PREFIX: &str = "local.var.huddle.stats.";
 
 /// The longest a robot program waits for its layer's tick on the senses it just wrote.
 const FRESH_WAIT: Duration = Duration::from_millis(8);
@@ -200,6 +205,10 @@ pub struct DaemonsReport {
     /// Under `--game`: the referee's books ([`super::daemons_game`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub game: Option<DaemonsGameReport>,
+    /// Under `--outage`: the arbitration while every daemon's radio was down, and with
+    /// `--acoustic` the fallback's counters ([`super::daemons_air`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outage: Option<DaemonsOutage>,
 }
 
 /// A distribution in brief, ms.
@@ -288,6 +297,18 @@ impl std::fmt::Display for DaemonsReport {
                 p.team_ball_rmse_median_m,
                 p.rmse_vs_in_process_median
             )?;
+            if let Some(o) = &p.outage {
+                writeln!(
+                    f,
+                    "in-process outage     exactly one goer {:.2} % of {:.1} s, near {:.2} %, {} handovers ({:.1} s from {:.1} s)",
+                    o.outage_exactly_one_goer_pct,
+                    o.outage_ball_visible_s,
+                    o.outage_near_goer_pct,
+                    o.outage_handovers,
+                    o.outage_duration_s,
+                    o.outage_start_s
+                )?;
+            }
         }
         writeln!(
             f,
@@ -315,6 +336,9 @@ impl std::fmt::Display for DaemonsReport {
         if let Some(g) = &self.game {
             write!(f, "\n{g}")?;
         }
+        if let Some(o) = &self.outage {
+            write!(f, "\n{o}")?;
+        }
         Ok(())
     }
 }
@@ -332,8 +356,9 @@ struct Heard {
     pass_to: BTreeMap<u8, u8>,
     errors: u64,
     refusals: Vec<String>,
-    /// The daemon's `frames_out` (from `GETV local.var.huddle.stats.frames_out`).
-    frames_out: Option<u64>,
+    /// The daemon's counters asked for at the end (`GETV local.var.huddle.stats.NAME`),
+    /// by NAME (`frames_out`, `audio.fallback_heard`, …).
+    stats: BTreeMap<String, u64>,
     /// Resets told whose marking `GETV` has not come back yet: until it does, every ball
     /// heard may be from before the reset, so the robot plays on none.
     resets_pending: u32,
@@ -348,6 +373,8 @@ struct Heard {
 /// A robot's daemon: its process and its relay connection.
 struct Daemon {
     id: u8,
+    /// When its process was started.
+    spawned: Instant,
     child: Child,
     log: PathBuf,
     writer: TcpStream,
@@ -431,6 +458,7 @@ fn start_daemon(
     clock: netsim::NodeClock,
     dir: &Path,
     gc_args: &[String],
+    extra: &[String],
 ) -> Result<Daemon, DaemonsError> {
     let relay: SocketAddr = (Ipv4Addr::LOCALHOST, free_tcp_port()?).into();
     let log = dir.join(format!("daemon-{id}.log"));
@@ -460,7 +488,7 @@ fn start_daemon(
             cmd.arg("--no-gamecontroller");
         }
     }
-    cmd.args(gc_args);
+    cmd.args(gc_args).args(extra);
     let policy = clap::ValueEnum::to_possible_value(&cfg.brain.team.send_policy)
         .map(|v| v.get_name().to_owned())
         .unwrap_or_else(|| "every".into());
@@ -491,6 +519,7 @@ fn start_daemon(
     .stdin(Stdio::null())
     .stdout(Stdio::null())
     .stderr(Stdio::from(log_file));
+    let spawned = Instant::now();
     let mut child = cmd
         .spawn()
         .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
@@ -529,6 +558,7 @@ fn start_daemon(
         .map_err(io("starting a relay reader"))?;
     Ok(Daemon {
         id,
+        spawned,
         child,
         log,
         writer: stream,
@@ -557,9 +587,10 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
             continue;
         };
         let now = Instant::now();
-        if b.key == "local.var.huddle.stats.frames_out" {
+        if let Some(name) = b.key.strip_prefix(STATS_PREFIX) {
             if let Value::Int(n) = value {
-                h.frames_out = u64::try_from(n).ok();
+                h.stats
+                    .insert(name.to_owned(), u64::try_from(n).unwrap_or(0));
             }
             continue;
         }
@@ -651,11 +682,7 @@ pub fn run(
             "--daemons plays over a loopback multicast group: use --transport multicast".into(),
         ));
     }
-    if cfg.outage.is_some() || cfg.acoustic.enabled {
-        return Err(DaemonsError::Config(
-            "--daemons does not model a WLAN outage or the acoustic channel".into(),
-        ));
-    }
+    daemons_air::check(cfg)?;
     // The lineup, the world and each robot's start belief, exactly as in process.
     let setup = Simulation::new(cfg.clone())?;
     let homes = setup.homes().to_vec();
@@ -698,11 +725,26 @@ pub fn run(
         )),
     };
     std::fs::create_dir_all(&dir).map_err(io(format!("creating {}", dir.display())))?;
+    // Under `--acoustic`: the room between the daemons' loudspeakers and microphones,
+    // its FIFOs made before the daemons open them.
+    let positions = |w: &World| {
+        w.robots
+            .iter()
+            .map(|b| (b.pose.at.x, b.pose.at.y))
+            .collect::<Vec<_>>()
+    };
+    let ids: Vec<u8> = robots.iter().map(|r| r.id).collect();
+    let air = if cfg.acoustic.enabled {
+        Some(Air::start(cfg, &dir, &ids, positions(&world))?)
+    } else {
+        None
+    };
     let mut daemons = Vec::with_capacity(robots.len());
     for (i, (r, &clock)) in robots.iter().zip(&clocks).enumerate() {
         let gc_args = gc.as_ref().map_or_else(Vec::new, |g| g.daemon_args(i));
+        let air_args = daemons_air::daemon_args(cfg, &dir, r.id);
         daemons.push(start_daemon(
-            r.id, cfg, opts, group, &spec, clock, &dir, &gc_args,
+            r.id, cfg, opts, group, &spec, clock, &dir, &gc_args, &air_args,
         )?);
     }
     // Each program says who it is and where it was put, then watches its layer.
@@ -752,6 +794,10 @@ pub fn run(
     let mut behind_us: Vec<u64> = Vec::new();
     let steps = (cfg.duration_s / dt).round() as u64;
     let started = Instant::now();
+    // Under `--outage`: the window every daemon's radio is down, on the match's clock.
+    let spawned: Vec<Instant> = daemons.iter().map(|d| d.spawned).collect();
+    let outage_window = daemons_air::outage_window(cfg, &spawned, started);
+    let mut outage_figures = super::acoustic::OutageFigures::default();
     for step in 0..steps {
         let t = step as f64 * dt;
         let due = started + Duration::from_secs_f64(t);
@@ -981,25 +1027,72 @@ pub fn run(
             .map(|r| r.id)
             .collect();
         metrics.sample(t + dt, dt, visible, &goers);
+        if let Some(o) = &outage_window {
+            let near = |g: u8| {
+                // The truth, for the figures only (as in process).
+                let ball = world.ball.at;
+                let distance = |i: usize| world.robots[i].pose.at.distance(ball);
+                let field = (0..n)
+                    .filter(|&i| robots[i].is_field_player() && on_field(&gc, robots[i].id))
+                    .map(distance);
+                let goer = robots.iter().position(|r| r.id == g).map(distance);
+                super::acoustic::is_near(goer, field)
+            };
+            outage_figures.sample(o, t + dt, dt, visible, &goers, near);
+        }
+        if let Some(a) = &air {
+            a.set_positions(world.robots.iter().map(|b| (b.pose.at.x, b.pose.at.y)));
+        }
         progress(t + dt);
     }
     let played_s = started.elapsed().as_secs_f64();
-    // What each daemon sent, from its own counters.
-    for d in &mut daemons {
-        d.send("GETV local.var.huddle.stats.frames_out\n")?;
+    let air = air.map(Air::stop);
+    // What each daemon sent, and under `--outage` what its fallback did, from its own
+    // counters.
+    let mut names = vec!["frames_out"];
+    if outage_window.is_some() {
+        names.push("impair_dropped");
     }
+    if air.is_some() {
+        names.extend([
+            "audio.fallback_sounded",
+            "audio.fallback_heard",
+            "audio.fallback_busy",
+            "audio.heard",
+        ]);
+    }
+    let ask: String = names
+        .iter()
+        .map(|name| format!("GETV {STATS_PREFIX}{name}\n"))
+        .collect();
+    for d in &mut daemons {
+        d.send(&ask)?;
+    }
+    let answered = |d: &Daemon| {
+        d.heard
+            .lock()
+            .is_ok_and(|h| names.iter().all(|name| h.stats.contains_key(*name)))
+    };
     let deadline = Instant::now() + Duration::from_secs(3);
-    while Instant::now() < deadline
-        && daemons
-            .iter()
-            .any(|d| d.heard.lock().map_or(true, |h| h.frames_out.is_none()))
-    {
+    while Instant::now() < deadline && !daemons.iter().all(answered) {
         std::thread::sleep(Duration::from_millis(10));
     }
-    let per_robot: Vec<u64> = daemons
-        .iter()
-        .map(|d| d.heard.lock().map_or(0, |h| h.frames_out.unwrap_or(0)))
-        .collect();
+    let stat = |d: &Daemon, name: &str| {
+        d.heard
+            .lock()
+            .map_or(0, |h| h.stats.get(name).copied().unwrap_or(0))
+    };
+    let total = |name: &str| daemons.iter().map(|d| stat(d, name)).sum::<u64>();
+    let per_robot: Vec<u64> = daemons.iter().map(|d| stat(d, "frames_out")).collect();
+    let outage = outage_window.map(|o| DaemonsOutage {
+        windows: outage_figures.windows(&o, cfg.acoustic.enabled),
+        acoustic_sounded: total("audio.fallback_sounded"),
+        acoustic_heard: total("audio.fallback_heard"),
+        acoustic_busy: total("audio.fallback_busy"),
+        audio_heard: total("audio.heard"),
+        radio_dropped: total("impair_dropped"),
+        air: air.clone(),
+    });
     let relay_errors = daemons
         .iter()
         .map(|d| d.heard.lock().map_or(0, |h| h.errors))
@@ -1078,6 +1171,7 @@ pub fn run(
             .collect(),
         in_process: None,
         game,
+        outage,
     })
 }
 

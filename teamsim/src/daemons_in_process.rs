@@ -30,6 +30,10 @@ pub struct InProcess {
     pub team_ball_rmse_median_m: f64,
     /// Daemons' team-ball RMSE over that median.
     pub rmse_vs_in_process_median: f64,
+    /// Under `--outage`: the in-process match's outage figures (its window is the
+    /// configured one, the daemons' is every daemon's, a little shorter).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outage: Option<super::acoustic::OutageWindows>,
 }
 
 /// One in-process run of the spread.
@@ -88,6 +92,7 @@ pub fn in_process(cfg: &SimConfig, daemons_rmse_m: f64) -> Result<InProcess, Dae
         spread,
         team_ball_rmse_median_m: median,
         rmse_vs_in_process_median: r3(daemons_rmse_m / median),
+        outage: own.outage.map(|o| o.windows),
     })
 }
 

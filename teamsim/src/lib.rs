@@ -36,6 +36,7 @@
 pub mod acoustic;
 mod acoustic_channel;
 pub mod daemons;
+mod daemons_air;
 pub mod daemons_game;
 mod daemons_in_process;
 pub mod field;

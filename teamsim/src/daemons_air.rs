@@ -1,0 +1,404 @@
+//! `huddle sim --daemons --outage DURATION@START [--acoustic]`: the WLAN outage and the
+//! acoustic fallback on real daemons. Each daemon gets the outage as a robot rehearses it
+//! (`huddle daemon --outage`), and with `--acoustic` a loudspeaker and a microphone: its
+//! `--audio-out` command writes into a FIFO the simulator reads, its `--audio-in` command
+//! reads a FIFO the simulator writes, and between them runs the same room the in-process
+//! match uses ([`Room`]: delay by distance, 1/r, the hall's reverberation, the crowd's
+//! babble), at the robots' true positions, paced by the wall clock as a sound card is.
+//! The daemons' team layers do the rest (`--audio-fallback`: slots on the team clock,
+//! claims sounded and decoded): nothing of the fallback runs in the simulator.
+//!
+//! What the simulator cannot see here: which detections were right (the daemons decode),
+//! so the acoustic line gives the daemons' own counters (claims sounded, heard, slots let
+//! go), not the in-process channel's decoded and wrong counts; and the team clocks' spread
+//! (the daemons do not publish their team clock).
+//!
+//! Each daemon's outage starts `START` after its first datagram, and the daemons start
+//! one after another before the match: the window the figures are taken over is the one
+//! in which every daemon is down, on the match's clock (printed).
+
+// A real-time loop over real processes and pipes: it reads the wall clock and sleeps.
+#![allow(clippy::disallowed_methods)]
+
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use super::acoustic::{OutageConfig, OutageWindows, SAMPLE_RATE_HZ};
+use super::acoustic_channel::Room;
+use super::daemons::DaemonsError;
+use super::SimConfig;
+
+/// The room writes this many samples to each microphone at a time (20 ms, a sound
+/// card's period).
+const PERIOD: usize = 320;
+
+/// How long after its start a daemon sends its first datagram, at most, s: its
+/// `--outage` counts from that datagram, so its window may begin this much later than
+/// its start says.
+const FIRST_DATAGRAM_S: f64 = 0.5;
+
+/// `O_NONBLOCK` on Linux (`libc` is not a dependency).
+const O_NONBLOCK: i32 = 0o4000;
+
+/// Whether the match's outage and acoustic settings are ones daemons take.
+pub(super) fn check(cfg: &SimConfig) -> Result<(), DaemonsError> {
+    let a = &cfg.acoustic;
+    if !a.enabled {
+        return Ok(());
+    }
+    let d = team::acoustic::AcousticConfig::default();
+    if a.hysteresis_m != d.hysteresis_m
+        || a.doubt_going != d.doubt_going
+        || a.stale_cycles != d.stale_cycles
+    {
+        return Err(DaemonsError::Config(
+            "--daemons runs the daemon's fallback, which takes only --acoustic-tone and \
+             --acoustic-guard: drop --acoustic-hysteresis and --acoustic-no-doubt"
+                .into(),
+        ));
+    }
+    if cfg.robots > 16 {
+        return Err(DaemonsError::Config(format!(
+            "the acoustic room takes at most 16 robots, not {}",
+            cfg.robots
+        )));
+    }
+    Ok(())
+}
+
+/// A duration as the daemon's flags take it, in whole microseconds.
+fn us(s: f64) -> String {
+    format!("{}us", (s * 1e6).round() as u64)
+}
+
+/// Robot `id`'s daemon flags for the match's outage and, with `--acoustic`, its
+/// loudspeaker and microphone (FIFOs in `dir`, made by [`Air::start`]).
+pub(super) fn daemon_args(cfg: &SimConfig, dir: &Path, id: u8) -> Vec<String> {
+    let mut args = Vec::new();
+    if let Some(o) = cfg.outage {
+        args.push("--outage".into());
+        args.push(format!("{}@{}", us(o.duration_s), us(o.start_s)));
+    }
+    let a = &cfg.acoustic;
+    if a.enabled {
+        let (speaker, mic) = fifos(dir, id);
+        args.extend([
+            "--audio-in".into(),
+            format!("cat '{}'", mic.display()),
+            "--audio-out".into(),
+            format!("cat > '{}'", speaker.display()),
+            "--audio-tone".into(),
+            us(a.tone_s),
+            "--audio-fallback-guard".into(),
+            us(a.guard_s),
+            // Only the pause after a `say`: nothing says here but the fallback, whose
+            // slots pace it; short, so the loudspeaker's first run starts nearly on time.
+            "--audio-gap".into(),
+            "20ms".into(),
+            "--audio-heard".into(),
+            "local.var.audio.heard".into(),
+            "--audio-fallback".into(),
+        ]);
+    }
+    args
+}
+
+fn fifos(dir: &Path, id: u8) -> (PathBuf, PathBuf) {
+    (
+        dir.join(format!("speaker-{id}")),
+        dir.join(format!("microphone-{id}")),
+    )
+}
+
+/// The window in which every daemon's radio is down, on the match's clock (which starts
+/// at `match_start`), from each daemon's start instant.
+pub(super) fn outage_window(
+    cfg: &SimConfig,
+    spawned: &[Instant],
+    match_start: Instant,
+) -> Option<OutageConfig> {
+    let o = cfg.outage?;
+    // Daemon i started b_i before the match and sent its first datagram up to
+    // FIRST_DATAGRAM_S after that: its window is [S - b_i + δ_i, S + D - b_i + δ_i) on the
+    // match's clock. Every daemon is down, whatever the δ_i, from S - min b + FIRST to
+    // S + D - max b.
+    let before: Vec<f64> = spawned
+        .iter()
+        .map(|at| match_start.saturating_duration_since(*at).as_secs_f64())
+        .collect();
+    let min_b = before.iter().copied().reduce(f64::min).unwrap_or(0.0);
+    let max_b = before.iter().copied().fold(0.0, f64::max);
+    let start_s = o.start_s - min_b + FIRST_DATAGRAM_S;
+    let end_s = o.start_s + o.duration_s - max_b;
+    Some(OutageConfig {
+        start_s,
+        duration_s: (end_s - start_s).max(0.0),
+    })
+}
+
+/// What the room counted.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct AirCounts {
+    /// Seconds each robot's loudspeaker played sound (not silence).
+    pub on_air_s: Vec<f64>,
+    /// Periods the room wrote more than 100 ms behind the wall clock (the machine was
+    /// busy; the microphones got them late, in a burst).
+    pub late_periods: u64,
+    /// Microphones whose daemon stopped reading.
+    pub deaf: u64,
+}
+
+/// The room between the daemons: a thread streaming every loudspeaker into every
+/// microphone.
+pub(super) struct Air {
+    positions: Arc<Mutex<Vec<(f64, f64)>>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<AirCounts>>,
+    microphones: Vec<PathBuf>,
+}
+
+impl Air {
+    /// Makes the FIFOs for robots `ids` in `dir` and starts the room (the match's
+    /// acoustic settings, its crowd drawn from `seed`); robots stand at `positions`.
+    pub(super) fn start(
+        cfg: &SimConfig,
+        dir: &Path,
+        ids: &[u8],
+        positions: Vec<(f64, f64)>,
+    ) -> Result<Air, DaemonsError> {
+        let room = Room::new(&cfg.acoustic, ids.len(), cfg.seed)
+            .map_err(|e| DaemonsError::Config(e.to_string()))?;
+        let (mut speakers, mut microphones) = (Vec::new(), Vec::new());
+        for &id in ids {
+            let (s, m) = fifos(dir, id);
+            for p in [&s, &m] {
+                let _ = std::fs::remove_file(p);
+                let made =
+                    Command::new("mkfifo")
+                        .arg(p)
+                        .status()
+                        .map_err(|e| DaemonsError::Io {
+                            what: "running mkfifo".into(),
+                            source: e,
+                        })?;
+                if !made.success() {
+                    return Err(DaemonsError::Config(format!(
+                        "mkfifo {} failed ({made})",
+                        p.display()
+                    )));
+                }
+            }
+            speakers.push(s);
+            microphones.push(m);
+        }
+        let positions = Arc::new(Mutex::new(positions));
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (positions, stop, mics) = (
+                Arc::clone(&positions),
+                Arc::clone(&stop),
+                microphones.clone(),
+            );
+            std::thread::Builder::new()
+                .name("acoustic-room".into())
+                .spawn(move || play(room, &speakers, &mics, &positions, &stop))
+                .map_err(|e| DaemonsError::Io {
+                    what: "starting the acoustic room".into(),
+                    source: e,
+                })?
+        };
+        Ok(Air {
+            positions,
+            stop,
+            thread: Some(thread),
+            microphones,
+        })
+    }
+
+    /// The robots' true positions now, m.
+    pub(super) fn set_positions(&self, positions: impl Iterator<Item = (f64, f64)>) {
+        let mut p = self.positions.lock().unwrap_or_else(|e| e.into_inner());
+        p.clear();
+        p.extend(positions);
+    }
+
+    /// Stops the room and returns its counts.
+    pub(super) fn stop(mut self) -> AirCounts {
+        self.halt().unwrap_or_default()
+    }
+
+    fn halt(&mut self) -> Option<AirCounts> {
+        self.stop.store(true, Ordering::Relaxed);
+        // The room may still wait to open a microphone whose daemon never read it: a
+        // reader of our own lets that open return.
+        let _readers: Vec<_> = self
+            .microphones
+            .iter()
+            .filter_map(|m| {
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(O_NONBLOCK)
+                    .open(m)
+                    .ok()
+            })
+            .collect();
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+}
+
+impl Drop for Air {
+    fn drop(&mut self) {
+        let _ = self.halt();
+    }
+}
+
+/// The room's loop: every period, what each loudspeaker wrote into the room at its
+/// robot's position, and the room's signal at each robot out to its microphone.
+fn play(
+    mut room: Room,
+    speakers: &[PathBuf],
+    microphones: &[PathBuf],
+    positions: &Mutex<Vec<(f64, f64)>>,
+    stop: &AtomicBool,
+) -> AirCounts {
+    let n = speakers.len();
+    let mut counts = AirCounts {
+        on_air_s: vec![0.0; n],
+        ..AirCounts::default()
+    };
+    // Non-blocking: a daemon starts its loudspeaker's command at its first claim.
+    let mut outs: Vec<Option<std::fs::File>> = speakers
+        .iter()
+        .map(|p| {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .custom_flags(O_NONBLOCK)
+                .open(p)
+                .ok()
+        })
+        .collect();
+    // Blocks until each daemon's input command has opened its microphone.
+    let mut mics: Vec<Option<std::fs::File>> = Vec::with_capacity(n);
+    for p in microphones {
+        if stop.load(Ordering::Relaxed) {
+            return counts;
+        }
+        mics.push(std::fs::OpenOptions::new().write(true).open(p).ok());
+    }
+    let mut queued: Vec<VecDeque<i16>> = vec![VecDeque::new(); n];
+    let mut pcms: Vec<audio::S16leDecoder> = (0..n).map(|_| audio::S16leDecoder::new()).collect();
+    let mut buf = vec![0u8; 1 << 16];
+    let mut samples = Vec::new();
+    let mut block = vec![0.0f32; PERIOD];
+    let rate = f64::from(SAMPLE_RATE_HZ);
+    let started = Instant::now();
+    let mut written = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        for (i, out) in outs.iter_mut().enumerate() {
+            let Some(f) = out else { continue };
+            while let Ok(got) = f.read(&mut buf) {
+                if got == 0 {
+                    break;
+                }
+                samples.clear();
+                pcms[i].push(&buf[..got], &mut samples);
+                queued[i].extend(samples.iter().copied());
+            }
+        }
+        let due = (started.elapsed().as_secs_f64() * rate) as u64;
+        if due > written + (0.1 * rate) as u64 + PERIOD as u64 {
+            counts.late_periods += 1;
+        }
+        while written + PERIOD as u64 <= due {
+            let at: Vec<(f64, f64)> = positions.lock().unwrap_or_else(|e| e.into_inner()).clone();
+            for (i, q) in queued.iter_mut().enumerate() {
+                let mut sounding = false;
+                for x in block.iter_mut() {
+                    let s = q.pop_front().unwrap_or(0);
+                    sounding |= s != 0;
+                    *x = audio::i16_to_f32(s);
+                }
+                if sounding && at.len() == n {
+                    room.sound(i, &block, &at);
+                    counts.on_air_s[i] += PERIOD as f64 / rate;
+                }
+            }
+            room.play(PERIOD);
+            for (j, mic) in mics.iter_mut().enumerate() {
+                let Some(f) = mic else { continue };
+                let bytes: Vec<u8> = room
+                    .microphone(j)
+                    .iter()
+                    .flat_map(|&x| audio::f32_to_i16(x).to_le_bytes())
+                    .collect();
+                if f.write_all(&bytes).is_err() {
+                    counts.deaf += 1;
+                    *mic = None;
+                }
+            }
+            written += PERIOD as u64;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    counts
+}
+
+/// The outage's figures from real daemons: the arbitration over the window every
+/// daemon's radio was down (and as long a window before it), and the daemons' own
+/// counters of the fallback.
+#[derive(Debug, Clone, Serialize)]
+pub struct DaemonsOutage {
+    /// The window and the arbitration in it.
+    #[serde(flatten)]
+    pub windows: OutageWindows,
+    /// Claims the daemons sounded (`audio.fallback_sounded`, summed).
+    pub acoustic_sounded: u64,
+    /// Messages their decoders heard and handed to their layers (`audio.fallback_heard`,
+    /// summed; each robot's microphone hears its own claims too).
+    pub acoustic_heard: u64,
+    /// Slots let go because a `say` was pending (`audio.fallback_busy`).
+    pub acoustic_busy: u64,
+    /// Messages their decoders heard in all (`audio.heard`).
+    pub audio_heard: u64,
+    /// Datagrams the outage dropped (`io.impair_dropped`, summed).
+    pub radio_dropped: u64,
+    /// The room's counts (absent without `--acoustic`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub air: Option<AirCounts>,
+}
+
+impl std::fmt::Display for DaemonsOutage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "{}", self.windows)?;
+        write!(
+            f,
+            "  radio               {:>9} datagrams dropped by the daemons' --outage (the window is the one every daemon was down in)",
+            self.radio_dropped
+        )?;
+        if let Some(air) = &self.air {
+            let robots = air.on_air_s.len() as u64;
+            let on_air: Vec<String> = air.on_air_s.iter().map(|s| format!("{s:.1}")).collect();
+            write!(
+                f,
+                "\n  acoustic            {:>9} claims sounded, heard {} times of {} (each claim at every microphone, its sender's too), {} slots let go; on air [{}] s; room late {} periods, deaf microphones {}",
+                self.acoustic_sounded,
+                self.acoustic_heard,
+                self.acoustic_sounded * robots,
+                self.acoustic_busy,
+                on_air.join(", "),
+                air.late_periods,
+                air.deaf
+            )?;
+        }
+        Ok(())
+    }
+}
