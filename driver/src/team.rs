@@ -344,6 +344,7 @@ impl TeamCore {
         );
         if let Some(ac) = cfg.acoustic.filter(|a| a.enabled) {
             layer.sound = Some(team::acoustic::SoundFallback::new(
+                id,
                 team::acoustic::SlotPlan::for_team(cfg.team_size, ac.slot_s()),
                 &ac,
                 cfg.team_size.max(usize::from(id)),

@@ -246,14 +246,16 @@ pub struct SoundFallback {
     /// Whether no teammate with a slot had a fresh radio claim at the last decision: the
     /// radio is silent and the fallback decides.
     in_control: bool,
-    /// The team clock the slots run on (this robot's own until [`SoundFallback::set_clock`]).
-    clock: Option<TeamClock>,
+    /// The team clock the slots run on (this robot's own until
+    /// [`SoundFallback::update_clock`] hears a lower id).
+    clock: TeamClock,
 }
 
 impl SoundFallback {
-    /// The fallback for a team of `team` robots sounding on `plan`, deciding with the
-    /// arbitration's `params` (hysteresis, tie band, no-ball cost).
+    /// Robot `me`'s fallback, in a team of `team` robots sounding on `plan`, deciding with
+    /// the arbitration's `params` (hysteresis, tie band, no-ball cost).
     pub fn new(
+        me: u8,
         plan: SlotPlan,
         cfg: &AcousticConfig,
         team: usize,
@@ -272,40 +274,37 @@ impl SoundFallback {
             own_radio: None,
             radio_stale: false,
             in_control: false,
-            clock: None,
+            clock: TeamClock::new(me),
         }
     }
 
-    /// Robot `me`'s replica's view of its teammates at `now` (`comms::Replica::peers`):
+    /// This robot's replica's view of its teammates at `now` (`comms::Replica::peers`):
     /// the slots run on the team clock it gives ([`TeamClock`]). The daemon's team layer
-    /// and the simulator's robots call it every tick; until the first call, slots run on
-    /// this robot's own clock.
+    /// and the simulator's robots call it every tick; until a teammate with a lower id is
+    /// heard, slots run on this robot's own clock.
     pub fn update_clock(
         &mut self,
-        me: u8,
         now: comms::Instant,
         peers: impl IntoIterator<Item = comms::PeerInfo>,
     ) {
-        self.clock
-            .get_or_insert_with(|| TeamClock::new(me))
-            .update(now, peers);
+        self.clock.update(now, peers);
     }
 
-    /// The team clock the slots run on, once [`SoundFallback::update_clock`] was called.
-    pub fn clock(&self) -> Option<&TeamClock> {
-        self.clock.as_ref()
+    /// The team clock the slots run on.
+    pub fn clock(&self) -> &TeamClock {
+        &self.clock
     }
 
     /// Team time at `local_s` (this robot's clock), s.
     fn team_s(&self, local_s: f64) -> f64 {
-        self.clock.map_or(local_s, |c| c.team_at_s(local_s))
+        self.clock.team_at_s(local_s)
     }
 
     /// A message that started at `local_s` (this robot's clock): the team time it started
     /// at, brought into the epoch of the slot it belongs to (see [`TeamClock::near`]).
     fn heard_team_s(&self, local_s: f64) -> f64 {
         let team = self.team_s(local_s);
-        if self.clock.is_some() && team > WRAP_S - self.plan.slot_s / 2.0 {
+        if team > WRAP_S - self.plan.slot_s / 2.0 {
             // Sounded at the start of the new epoch, heard a little early.
             team - WRAP_S
         } else {
@@ -326,13 +325,7 @@ impl SoundFallback {
         let k = self.plan.slot_of(me)?;
         let offset = f64::from(k) * self.plan.slot_s;
         let (cycle, slot) = (self.plan.cycle_s(), self.plan.slot_s);
-        Some(match self.clock {
-            Some(c) => c.next_slot(local_s, offset, cycle, slot),
-            None => {
-                let n = ((local_s - offset) / cycle).ceil().max(0.0);
-                offset + n * cycle
-            }
-        })
+        Some(self.clock.next_slot(local_s, offset, cycle, slot))
     }
 
     /// Whether robot `me`'s slot begins in `[local_s, local_s + dt_s)` (this robot's
@@ -579,7 +572,7 @@ mod tests {
             slot_s: cfg.slot_s(),
         };
         let stale = ArbitrationParams::default().stale_after;
-        let fb = SoundFallback::new(plan, &cfg, 5, ArbitrationParams::default());
+        let fb = SoundFallback::new(3, plan, &cfg, 5, ArbitrationParams::default());
         (plan, stale, fb)
     }
 
@@ -697,16 +690,18 @@ mod tests {
     fn robots_whose_clocks_are_seconds_apart_sound_and_attribute_on_the_team_clock() {
         // Robot 2's clock is the team's; robot 4's reads 7.3 s less, robot 5's 13.6 s
         // more. Each knows robot 2's offset from the replica's echoes.
-        let (plan, _, template) = four_slot_fallback();
-        let mut four = template.clone();
-        let mut five = template;
+        let (plan, _, _) = four_slot_fallback();
+        let fallback = |me| {
+            let cfg = AcousticConfig::default();
+            SoundFallback::new(me, plan, &cfg, 5, ArbitrationParams::default())
+        };
+        let mut four = fallback(4);
+        let mut five = fallback(5);
         four.update_clock(
-            4,
             comms::Instant::from_micros(100_000_000),
             [peer_two(7.3, 99.9)],
         );
         five.update_clock(
-            5,
             comms::Instant::from_micros(120_000_000),
             [peer_two(-13.6, 119.9)],
         );
@@ -739,12 +734,7 @@ mod tests {
             "robot 5 holds robot 4's claim (going, h 0.5 m) from the end of its slot: {after:?}"
         );
         // On its own clock (no team clock) robot 5 would have put it down to another robot.
-        let own = SoundFallback::new(
-            plan,
-            &AcousticConfig::default(),
-            5,
-            ArbitrationParams::default(),
-        );
+        let own = fallback(5);
         assert_ne!(
             own.plan().sender_at(heard_at_five),
             Some(4),

@@ -882,7 +882,7 @@ impl TeamLayer {
         peers: impl IntoIterator<Item = comms::PeerInfo>,
     ) {
         if let Some(sound) = &mut self.sound {
-            sound.update_clock(self.id, now, peers);
+            sound.update_clock(now, peers);
         }
     }
 

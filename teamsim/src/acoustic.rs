@@ -41,7 +41,7 @@ impl super::Simulation {
         let plan = SlotPlan::for_team(team, cfg.slot_s());
         for r in &mut self.robots {
             let params = *r.arbiter.params();
-            r.sound = Some(SoundFallback::new(plan, &cfg, team, params));
+            r.sound = Some(SoundFallback::new(r.id, plan, &cfg, team, params));
         }
         self.acoustic = Some(
             AcousticChannel::new(&cfg, team, self.cfg.seed)
@@ -81,7 +81,7 @@ impl super::Simulation {
                 r.update_team_clock(now, replica.peers());
             }
             let local = super::robot::seconds(now);
-            if let Some(team) = r.sound.as_ref().and_then(|s| s.clock()) {
+            if let Some(team) = r.sound.as_ref().map(|s| s.clock()) {
                 team_times.push(team.team_at_s(local));
             }
             let due = r
