@@ -371,3 +371,42 @@ impl AcousticChannel {
         heard
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_robot_hears_a_teammate_later_and_softer_by_its_distance() {
+        // A quiet room (crowd 200 dB down, little reverberation): robot 1 stands 6.86 m
+        // from robot 0, 20 ms of sound away.
+        let cfg = AcousticConfig {
+            crowd_snr_db_at_1m: 200.0,
+            t60_s: 0.05,
+            critical_distance_m: 100.0,
+            ..AcousticConfig::default()
+        };
+        let mut room = Room::new(&cfg, 2, 1).expect("a room");
+        let at = [(0.0, 0.0), (2.0 * SPEED_OF_SOUND_MPS * 0.01, 0.0)];
+        let burst = vec![1.0f32; 80];
+        let arrival = room.sound(0, &burst, &at);
+        assert_eq!(arrival[1], (320, 400), "20 ms at 16 kHz, then 80 samples");
+        room.play(1000);
+        let mic = room.microphone(1);
+        let loud: Vec<usize> = (0..mic.len()).filter(|&k| mic[k].abs() > 0.1).collect();
+        assert_eq!(
+            (loud.first(), loud.last()),
+            (Some(&320), Some(&399)),
+            "the burst arrives 320 samples late"
+        );
+        let gain = mic[350];
+        assert!(
+            (gain - 1.0 / 6.86).abs() < 0.01,
+            "1/r attenuation: {gain} at 6.86 m"
+        );
+        assert!(
+            room.microphone(0)[..5].iter().all(|x| x.abs() > 0.5),
+            "its sender hears it at once, at full level"
+        );
+    }
+}

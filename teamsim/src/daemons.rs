@@ -583,6 +583,10 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
         let Some(b) = Binding::parse(&line) else {
             continue;
         };
+        if b.key == "local.var.audio.heard" {
+            eprintln!("heard robot={id} {}", b.value);
+            continue;
+        }
         let Ok(value) = comms::literal::parse_literal(&b.value) else {
             continue;
         };
@@ -765,7 +769,12 @@ pub fn run(
             // The game as its daemon's listener wrote it, as a robot program reads it.
             hello += "ADDW local.var.gc.state\nADDW local.var.gc.penalty\n";
         }
-        hello += "ADDW local.var.team.#\nADDW +.var.machine.pass_to\nREFR 0\n";
+        hello += "ADDW local.var.team.#\nADDW +.var.machine.pass_to\n";
+        if air.is_some() && trace() {
+            // What its microphone's decoder heard, for the trace.
+            hello += "ADDW local.var.audio.heard\n";
+        }
+        hello += "REFR 0\n";
         d.send(&hello)?;
     }
 
@@ -798,6 +807,7 @@ pub fn run(
     let spawned: Vec<Instant> = daemons.iter().map(|d| d.spawned).collect();
     let outage_window = daemons_air::outage_window(cfg, &spawned, started);
     let mut outage_figures = super::acoustic::OutageFigures::default();
+    let mut last_named: Vec<(u8, bool)> = Vec::new();
     for step in 0..steps {
         let t = step as f64 * dt;
         let due = started + Duration::from_secs_f64(t);
@@ -1027,6 +1037,25 @@ pub fn run(
             .map(|r| r.id)
             .collect();
         metrics.sample(t + dt, dt, visible, &goers);
+        if trace() {
+            // Who each robot names and whether it goes, when that changes.
+            let named: Vec<(u8, bool)> =
+                robots.iter().map(|r| (r.view.goer, r.view.going)).collect();
+            if named != last_named {
+                let ball = world.ball.at;
+                let d: Vec<String> = world
+                    .robots
+                    .iter()
+                    .map(|b| format!("{:.2}", b.pose.at.distance(ball)))
+                    .collect();
+                eprintln!(
+                    "goers t={:.2} named={named:?} distance=[{}]",
+                    t + dt,
+                    d.join(", ")
+                );
+                last_named = named;
+            }
+        }
         if let Some(o) = &outage_window {
             let near = |g: u8| {
                 // The truth, for the figures only (as in process).
@@ -1173,6 +1202,11 @@ pub fn run(
         game,
         outage,
     })
+}
+
+/// Whether `HUDDLE_DAEMONS_TRACE` asks for the trace.
+fn trace() -> bool {
+    std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some()
 }
 
 /// Whether robot `id`'s figures are sampled now: always without a referee; under one,

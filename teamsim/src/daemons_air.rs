@@ -402,3 +402,72 @@ impl std::fmt::Display for DaemonsOutage {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_window_is_the_one_every_daemon_is_down_in_on_the_match_clock() {
+        // Three daemons started 1.0, 0.6 and 0.2 s before the match, each told
+        // `--outage 30s@60s` (counted from its first datagram, up to 0.5 s after its start).
+        let cfg = SimConfig {
+            outage: Some(OutageConfig {
+                start_s: 60.0,
+                duration_s: 30.0,
+            }),
+            ..SimConfig::default()
+        };
+        let start = Instant::now() + Duration::from_secs(5);
+        let spawned: Vec<Instant> = [1.0, 0.6, 0.2]
+            .iter()
+            .map(|&b| start - Duration::from_secs_f64(b))
+            .collect();
+        let w = outage_window(&cfg, &spawned, start).expect("an outage");
+        // The last started may begin its outage at 60 - 0.2 + 0.5 s; the first started
+        // ends its own at 90 - 1.0 s.
+        assert!(
+            (w.start_s - 60.3).abs() < 1e-9 && (w.start_s + w.duration_s - 89.0).abs() < 1e-9,
+            "window {w:?}"
+        );
+        let none = SimConfig {
+            outage: None,
+            ..cfg
+        };
+        assert!(outage_window(&none, &spawned, start).is_none());
+    }
+
+    #[test]
+    fn each_daemon_gets_the_outage_and_its_own_loudspeaker_and_microphone() {
+        let mut cfg = SimConfig {
+            outage: Some(OutageConfig {
+                start_s: 60.0,
+                duration_s: 30.0,
+            }),
+            ..SimConfig::default()
+        };
+        let dir = Path::new("/tmp/room");
+        assert_eq!(
+            daemon_args(&cfg, dir, 3),
+            vec!["--outage", "30000000us@60000000us"],
+            "no room without --acoustic"
+        );
+        cfg.acoustic.enabled = true;
+        let args = daemon_args(&cfg, dir, 3).join(" ");
+        for want in [
+            "--audio-in cat '/tmp/room/microphone-3'",
+            "--audio-out cat > '/tmp/room/speaker-3'",
+            "--audio-tone 400000us",
+            "--audio-fallback-guard 300000us",
+            "--audio-fallback",
+        ] {
+            assert!(args.contains(want), "{want:?} in {args}");
+        }
+        assert!(check(&cfg).is_ok());
+        cfg.acoustic.hysteresis_m = Some(0.1);
+        assert!(
+            check(&cfg).is_err(),
+            "a setting the daemon cannot take is refused"
+        );
+    }
+}
