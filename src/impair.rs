@@ -77,37 +77,40 @@ impl Impairment for LinkImpairment {
 
 /// A WLAN outage rehearsed on a real daemon (`huddle daemon --outage DURATION@START`):
 /// every outgoing datagram is lost from START to START + DURATION after the daemon's
-/// first datagram (its start), and the rest go through `inner` (`--impair`) or straight
-/// out. With every robot given the same outage, the team's radio is silent both ways,
-/// as in `huddle sim --outage`.
+/// start, and the rest go through `inner` (`--impair`) or straight out. With every robot
+/// given the same outage, the team's radio is silent both ways, as in `huddle sim
+/// --outage`.
 #[derive(Debug)]
 pub struct Outage {
     inner: Option<LinkImpairment>,
     start: std::time::Duration,
     duration: std::time::Duration,
-    origin: Option<Instant>,
+    /// The daemon's start, on the driver's clock.
+    origin: Instant,
 }
 
 impl Outage {
-    /// An outage of `duration` from `start` after the first datagram, around `inner`.
+    /// An outage of `duration` from `start` after `origin` (the daemon's start on the
+    /// driver's clock), around `inner`. Counted from the start, not from the first
+    /// datagram: robots started together go silent together, whenever each first sends.
     pub fn new(
         inner: Option<LinkImpairment>,
         duration: std::time::Duration,
         start: std::time::Duration,
+        origin: Instant,
     ) -> Outage {
         Outage {
             inner,
             start,
             duration,
-            origin: None,
+            origin,
         }
     }
 }
 
 impl Impairment for Outage {
     fn judge(&mut self, now: Instant, to: SocketAddr, len: usize, copies: &mut Vec<Instant>) {
-        let origin = *self.origin.get_or_insert(now);
-        let since = now.saturating_duration_since(origin);
+        let since = now.saturating_duration_since(self.origin);
         if since >= self.start && since < self.start + self.duration {
             // Lost: the driver counts it (`io.impair_dropped`).
             return;
@@ -159,6 +162,7 @@ mod tests {
             None,
             std::time::Duration::from_secs(2),
             std::time::Duration::from_secs(5),
+            Instant::from_micros(100_000_000),
         );
         // The daemon starts at 100 s on its clock; a datagram every 100 ms for 10 s.
         let mut fates = Vec::new();
@@ -182,6 +186,23 @@ mod tests {
         }
         let lost = fates.iter().filter(|(_, c)| c.is_empty()).count();
         assert_eq!(lost, 20, "20 datagrams in the 2 s window");
+        // Counted from the daemon's start, not its first datagram: a daemon that first
+        // sends 4.9 s after it started still goes silent 5 s after it started.
+        let mut late = Outage::new(
+            None,
+            std::time::Duration::from_secs(2),
+            std::time::Duration::from_secs(5),
+            Instant::from_micros(100_000_000),
+        );
+        for (at_us, lost) in [
+            (104_900_000, false),
+            (105_000_000, true),
+            (107_000_000, false),
+        ] {
+            let mut copies = Vec::new();
+            late.judge(Instant::from_micros(at_us), group(), 60, &mut copies);
+            assert_eq!(copies.is_empty(), lost, "datagram at {at_us} µs");
+        }
     }
 
     #[test]

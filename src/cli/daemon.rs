@@ -444,7 +444,8 @@ pub fn run(args: DaemonArgs) -> Result<()> {
                     ?start,
                     "--outage: every outgoing datagram is lost in the window"
                 );
-                let outage = huddle::impair::Outage::new(impair, duration, start);
+                let origin = driver.handle().now();
+                let outage = huddle::impair::Outage::new(impair, duration, start, origin);
                 driver.set_impairment(Some(Box::new(outage)));
             }
             (Some(model), None) => driver.set_impairment(Some(Box::new(model))),

@@ -373,8 +373,6 @@ struct Heard {
 /// A robot's daemon: its process and its relay connection.
 struct Daemon {
     id: u8,
-    /// When its process was started.
-    spawned: Instant,
     child: Child,
     log: PathBuf,
     writer: TcpStream,
@@ -519,7 +517,6 @@ fn start_daemon(
     .stdin(Stdio::null())
     .stdout(Stdio::null())
     .stderr(Stdio::from(log_file));
-    let spawned = Instant::now();
     let mut child = cmd
         .spawn()
         .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
@@ -558,7 +555,6 @@ fn start_daemon(
         .map_err(io("starting a relay reader"))?;
     Ok(Daemon {
         id,
-        spawned,
         child,
         log,
         writer: stream,
@@ -584,7 +580,11 @@ fn read_relay(id: u8, stream: TcpStream, heard: &Mutex<Heard>, ticked: &Condvar)
             continue;
         };
         if b.key == "local.var.audio.heard" {
-            eprintln!("heard robot={id} {}", b.value);
+            eprintln!(
+                "heard robot={id} wall={:.3} {}",
+                daemons_air::wall_s(),
+                b.value
+            );
             continue;
         }
         let Ok(value) = comms::literal::parse_literal(&b.value) else {
@@ -743,10 +743,17 @@ pub fn run(
     } else {
         None
     };
+    // Under `--outage`: the instant the match will start, fixed now so that every daemon
+    // can be told when the outage begins from its own start (they fail together).
+    let anchor = Instant::now()
+        + cfg
+            .outage
+            .map_or(Duration::ZERO, |_| daemons_air::OUTAGE_LEAD);
     let mut daemons = Vec::with_capacity(robots.len());
     for (i, (r, &clock)) in robots.iter().zip(&clocks).enumerate() {
         let gc_args = gc.as_ref().map_or_else(Vec::new, |g| g.daemon_args(i));
-        let air_args = daemons_air::daemon_args(cfg, &dir, r.id);
+        let match_in = anchor.saturating_duration_since(Instant::now());
+        let air_args = daemons_air::daemon_args(cfg, &dir, r.id, match_in);
         daemons.push(start_daemon(
             r.id, cfg, opts, group, &spec, clock, &dir, &gc_args, &air_args,
         )?);
@@ -802,10 +809,12 @@ pub fn run(
     // Per step: how far behind the wall clock the world ran, µs.
     let mut behind_us: Vec<u64> = Vec::new();
     let steps = (cfg.duration_s / dt).round() as u64;
+    if let Some(wait) = anchor.checked_duration_since(Instant::now()) {
+        std::thread::sleep(wait);
+    }
     let started = Instant::now();
     // Under `--outage`: the window every daemon's radio is down, on the match's clock.
-    let spawned: Vec<Instant> = daemons.iter().map(|d| d.spawned).collect();
-    let outage_window = daemons_air::outage_window(cfg, &spawned, started);
+    let outage_window = daemons_air::outage_window(cfg, anchor, started);
     let mut outage_figures = super::acoustic::OutageFigures::default();
     let mut last_named: Vec<(u8, bool)> = Vec::new();
     for step in 0..steps {

@@ -13,9 +13,12 @@
 //! go), not the in-process channel's decoded and wrong counts; and the team clocks' spread
 //! (the daemons do not publish their team clock).
 //!
-//! Each daemon's outage starts `START` after its first datagram, and the daemons start
-//! one after another before the match: the window the figures are taken over is the one
-//! in which every daemon is down, on the match's clock (printed).
+//! The WLAN fails for every robot at once: each daemon's `--outage` counts from its own
+//! start, so each is told START plus the time from its start to an instant fixed before
+//! the first was started ([`OUTAGE_LEAD`] ahead), and the match begins at that instant.
+//! The figures are taken over the window in which every daemon is down, on the match's
+//! clock (printed): a daemon's start (its driver's bind) comes up to [`START_LAG_S`]
+//! after its process was started.
 
 // A real-time loop over real processes and pipes: it reads the wall clock and sleeps.
 #![allow(clippy::disallowed_methods)]
@@ -41,10 +44,13 @@ use super::SimConfig;
 /// card's period).
 const PERIOD: usize = 320;
 
-/// How long after its start a daemon sends its first datagram, at most, s: its
-/// `--outage` counts from that datagram, so its window may begin this much later than
-/// its start says.
-const FIRST_DATAGRAM_S: f64 = 0.5;
+/// How long after its process is started a daemon's driver binds, at most, s: its
+/// `--outage` counts from then, so its window may begin this much later.
+pub(super) const START_LAG_S: f64 = 0.2;
+
+/// Under `--outage`, the match starts this long after the first daemon is started, so
+/// that every daemon can be told when the outage begins on a common instant.
+pub(super) const OUTAGE_LEAD: Duration = Duration::from_secs(3);
 
 /// `O_NONBLOCK` on Linux (`libc` is not a dependency).
 const O_NONBLOCK: i32 = 0o4000;
@@ -80,13 +86,15 @@ fn us(s: f64) -> String {
     format!("{}us", (s * 1e6).round() as u64)
 }
 
-/// Robot `id`'s daemon flags for the match's outage and, with `--acoustic`, its
-/// loudspeaker and microphone (FIFOs in `dir`, made by [`Air::start`]).
-pub(super) fn daemon_args(cfg: &SimConfig, dir: &Path, id: u8) -> Vec<String> {
+/// Robot `id`'s daemon flags for the match's outage (the match starting `match_in` after
+/// the daemon is started) and, with `--acoustic`, its loudspeaker and microphone (FIFOs in
+/// `dir`, made by [`Air::start`]).
+pub(super) fn daemon_args(cfg: &SimConfig, dir: &Path, id: u8, match_in: Duration) -> Vec<String> {
     let mut args = Vec::new();
     if let Some(o) = cfg.outage {
         args.push("--outage".into());
-        args.push(format!("{}@{}", us(o.duration_s), us(o.start_s)));
+        let start_s = o.start_s + match_in.as_secs_f64();
+        args.push(format!("{}@{}", us(o.duration_s), us(start_s)));
     }
     let a = &cfg.acoustic;
     if a.enabled {
@@ -119,29 +127,20 @@ fn fifos(dir: &Path, id: u8) -> (PathBuf, PathBuf) {
     )
 }
 
-/// The window in which every daemon's radio is down, on the match's clock (which starts
-/// at `match_start`), from each daemon's start instant.
+/// The window in which every daemon's radio is down, on the match's clock: the daemons
+/// were told the outage starts `START` after `anchor`, and the match started at `started`
+/// (at or after it).
 pub(super) fn outage_window(
     cfg: &SimConfig,
-    spawned: &[Instant],
-    match_start: Instant,
+    anchor: Instant,
+    started: Instant,
 ) -> Option<OutageConfig> {
     let o = cfg.outage?;
-    // Daemon i started b_i before the match and sent its first datagram up to
-    // FIRST_DATAGRAM_S after that: its window is [S - b_i + δ_i, S + D - b_i + δ_i) on the
-    // match's clock. Every daemon is down, whatever the δ_i, from S - min b + FIRST to
-    // S + D - max b.
-    let before: Vec<f64> = spawned
-        .iter()
-        .map(|at| match_start.saturating_duration_since(*at).as_secs_f64())
-        .collect();
-    let min_b = before.iter().copied().reduce(f64::min).unwrap_or(0.0);
-    let max_b = before.iter().copied().fold(0.0, f64::max);
-    let start_s = o.start_s - min_b + FIRST_DATAGRAM_S;
-    let end_s = o.start_s + o.duration_s - max_b;
+    let late_s = started.saturating_duration_since(anchor).as_secs_f64();
+    let start_s = o.start_s - late_s + START_LAG_S;
     Some(OutageConfig {
         start_s,
-        duration_s: (end_s - start_s).max(0.0),
+        duration_s: (o.duration_s - START_LAG_S).max(0.0),
     })
 }
 
@@ -300,6 +299,9 @@ fn play(
     let mut samples = Vec::new();
     let mut block = vec![0.0f32; PERIOD];
     let rate = f64::from(SAMPLE_RATE_HZ);
+    let trace = std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some();
+    let mut was_sounding = vec![false; n];
+    let mut held: Vec<Vec<(f64, f64)>> = vec![Vec::new(); n];
     let started = Instant::now();
     let mut written = 0u64;
     while !stop.load(Ordering::Relaxed) {
@@ -327,8 +329,18 @@ fn play(
                     sounding |= s != 0;
                     *x = audio::i16_to_f32(s);
                 }
-                if sounding && at.len() == n {
-                    room.sound(i, &block, &at);
+                if sounding && !was_sounding[i] {
+                    // Where everyone stands when a sound begins holds until it ends: a
+                    // delay rounded anew each period would cut a click into the sound
+                    // wherever it moved by a sample (robots move a few cm in a tone).
+                    held[i].clone_from(&at);
+                    if trace {
+                        eprintln!("sounded speaker={} wall={:.3}", i + 1, wall_s());
+                    }
+                }
+                was_sounding[i] = sounding;
+                if sounding && held[i].len() == n {
+                    room.sound(i, &block, &held[i]);
                     counts.on_air_s[i] += PERIOD as f64 / rate;
                 }
             }
@@ -350,6 +362,13 @@ fn play(
         std::thread::sleep(Duration::from_millis(5));
     }
     counts
+}
+
+/// The wall clock, s since the epoch, for lining up trace lines from several threads.
+pub(super) fn wall_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
 }
 
 /// The outage's figures from real daemons: the arbitration over the window every
@@ -409,8 +428,8 @@ mod tests {
 
     #[test]
     fn the_window_is_the_one_every_daemon_is_down_in_on_the_match_clock() {
-        // Three daemons started 1.0, 0.6 and 0.2 s before the match, each told
-        // `--outage 30s@60s` (counted from its first datagram, up to 0.5 s after its start).
+        // Every daemon told `--outage 30s@60s` from the anchor; the match started 0.3 s
+        // after the anchor (the daemons were slow to start).
         let cfg = SimConfig {
             outage: Some(OutageConfig {
                 start_s: 60.0,
@@ -418,23 +437,19 @@ mod tests {
             }),
             ..SimConfig::default()
         };
-        let start = Instant::now() + Duration::from_secs(5);
-        let spawned: Vec<Instant> = [1.0, 0.6, 0.2]
-            .iter()
-            .map(|&b| start - Duration::from_secs_f64(b))
-            .collect();
-        let w = outage_window(&cfg, &spawned, start).expect("an outage");
-        // The last started may begin its outage at 60 - 0.2 + 0.5 s; the first started
-        // ends its own at 90 - 1.0 s.
+        let anchor = Instant::now();
+        let started = anchor + Duration::from_millis(300);
+        let w = outage_window(&cfg, anchor, started).expect("an outage");
         assert!(
-            (w.start_s - 60.3).abs() < 1e-9 && (w.start_s + w.duration_s - 89.0).abs() < 1e-9,
+            (w.start_s - (59.7 + START_LAG_S)).abs() < 1e-9
+                && (w.start_s + w.duration_s - 89.7).abs() < 1e-9,
             "window {w:?}"
         );
         let none = SimConfig {
             outage: None,
             ..cfg
         };
-        assert!(outage_window(&none, &spawned, start).is_none());
+        assert!(outage_window(&none, anchor, started).is_none());
     }
 
     #[test]
@@ -447,13 +462,14 @@ mod tests {
             ..SimConfig::default()
         };
         let dir = Path::new("/tmp/room");
+        let lead = Duration::from_millis(2500);
         assert_eq!(
-            daemon_args(&cfg, dir, 3),
-            vec!["--outage", "30000000us@60000000us"],
-            "no room without --acoustic"
+            daemon_args(&cfg, dir, 3, lead),
+            vec!["--outage", "30000000us@62500000us"],
+            "the outage from the daemon's start, the match 2.5 s later; no room without --acoustic"
         );
         cfg.acoustic.enabled = true;
-        let args = daemon_args(&cfg, dir, 3).join(" ");
+        let args = daemon_args(&cfg, dir, 3, lead).join(" ");
         for want in [
             "--audio-in cat '/tmp/room/microphone-3'",
             "--audio-out cat > '/tmp/room/speaker-3'",
