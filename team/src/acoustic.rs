@@ -249,7 +249,19 @@ pub struct SoundFallback {
     /// The team clock the slots run on (this robot's own until
     /// [`SoundFallback::update_clock`] hears a lower id).
     clock: TeamClock,
+    /// Per teammate: its replica's count of echo samples of this robot's frames
+    /// (`PeerInfo::clock_samples`) and when it last grew (this robot's clock, s). A
+    /// teammate echoes a frame of ours only if it heard it.
+    echoes: Vec<(u8, u64, f64)>,
+    /// Whether this robot hears teammates but none has echoed its frames for
+    /// [`UNHEARD_AFTER_S`]: its own sends are failing (see [`SoundFallback::claim`]).
+    unheard: bool,
 }
+
+/// A robot that hears its teammates but whose frames none of them has echoed for this
+/// long takes itself to be unheard, s (a teammate echoes each other robot every few of its
+/// frames: about every 0.1–0.2 s at 25 Hz in a team of five).
+pub const UNHEARD_AFTER_S: f64 = 1.0;
 
 impl SoundFallback {
     /// Robot `me`'s fallback, in a team of `team` robots sounding on `plan`, deciding with
@@ -275,6 +287,8 @@ impl SoundFallback {
             radio_stale: false,
             in_control: false,
             clock: TeamClock::new(me),
+            echoes: Vec::new(),
+            unheard: false,
         }
     }
 
@@ -287,7 +301,34 @@ impl SoundFallback {
         now: comms::Instant,
         peers: impl IntoIterator<Item = comms::PeerInfo>,
     ) {
-        self.clock.update(now, peers);
+        let now_s = now.as_micros() as f64 * 1e-6;
+        let Self { clock, echoes, .. } = self;
+        let mut hearing = false;
+        clock.update(
+            now,
+            peers.into_iter().inspect(|p| {
+                hearing |=
+                    now.saturating_duration_since(p.last_heard).as_secs_f64() <= UNHEARD_AFTER_S;
+                match echoes.iter_mut().find(|e| e.0 == p.robot) {
+                    Some(e) if e.1 != p.clock_samples => *e = (p.robot, p.clock_samples, now_s),
+                    Some(_) => {}
+                    None => echoes.push((p.robot, p.clock_samples, now_s)),
+                }
+            }),
+        );
+        // Unheard: teammates are heard, one has echoed before, and none has for a while.
+        let echoed_once = self.echoes.iter().any(|e| e.1 > 0);
+        let echoed_lately = self
+            .echoes
+            .iter()
+            .any(|e| e.1 > 0 && now_s - e.2 <= UNHEARD_AFTER_S);
+        self.unheard = hearing && echoed_once && !echoed_lately;
+    }
+
+    /// Whether this robot hears its teammates but none echoes its frames (see
+    /// [`UNHEARD_AFTER_S`]), as of the last [`SoundFallback::update_clock`].
+    pub fn unheard(&self) -> bool {
+        self.unheard
     }
 
     /// The team clock the slots run on.
@@ -366,11 +407,14 @@ impl SoundFallback {
     }
 
     /// What robot `me` sounds in its slot starting at `start_s` (its clock): `posted`,
-    /// while some teammate's radio claim is stale; nothing otherwise (or when it has no
-    /// slot). What it sounds counts for itself, as its teammates will hear it (quantised),
-    /// from the end of the slot.
+    /// while some teammate's radio claim is stale, or while this robot is unheard (it
+    /// hears its teammates but none echoes its frames: its own sends are failing, and its
+    /// teammates, taking it for gone by radio, count it by what it sounds, see
+    /// [`SoundFallback::sounded_for_stale`]); nothing otherwise (or when it has no slot).
+    /// What it sounds counts for itself, as its teammates will hear it (quantised), from
+    /// the end of the slot.
     pub fn claim(&mut self, me: u8, posted: Posted, start_s: f64) -> Option<Message> {
-        if !(self.radio_stale && self.plan.slot_of(me).is_some()) {
+        if !((self.radio_stale || self.unheard) && self.plan.slot_of(me).is_some()) {
             return None;
         }
         let message = encode_claim(posted, self.params.no_ball_cost);
@@ -416,14 +460,7 @@ impl SoundFallback {
     /// zero), so a missed message leaves the teammate's previous claim standing instead
     /// of making room for a second goer.
     pub fn candidates(&mut self, me: u8, now_s: f64, radio: &[Candidate]) -> Vec<Candidate> {
-        for (pending, sounded) in self.pending.iter_mut().zip(&mut self.sounded) {
-            if let Some(p) = pending.filter(|p| p.at_s <= now_s) {
-                if sounded.is_none_or(|s| s.at_s <= p.at_s) {
-                    *sounded = Some(p);
-                }
-                *pending = None;
-            }
-        }
+        self.promote(now_s);
         let mut out = Vec::new();
         for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
             let by_radio = if id == me {
@@ -440,24 +477,74 @@ impl SoundFallback {
                 (r, s) => r.or(s),
             };
             if let Some(t) = newest.filter(|t| now_s - t.at_s <= self.expire_s) {
-                let mut posted = t.posted;
-                if id != me
-                    && self.doubt_going
-                    && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S
-                {
-                    // Its last slot went by unheard: a claim to be going is in doubt (it
-                    // may have let go in the message this robot missed), so it keeps its
-                    // cost but not the goer's margin.
-                    posted.going = false;
-                }
-                out.push(Candidate {
-                    robot: id,
-                    posted,
-                    age: Duration::ZERO,
-                });
+                out.push(self.candidate(me, id, t, now_s));
             }
         }
         out
+    }
+
+    /// While the radio still decides (some teammate's radio claims are fresh): the claims
+    /// heard by sound of the teammates whose radio claims are stale (older than
+    /// `stale_after`) and older than what they sounded since, as the fallback counts them
+    /// (see [`SoundFallback::candidates`]), to stand in for their radio claims. A robot
+    /// whose own sends fail while it still hears the team is taken for gone by its
+    /// teammates' radio; its claims by sound keep it in their arbitration, so they and it
+    /// decide on the same claims. A teammate that is gone sounds nothing and drops out by
+    /// the radio's rule, as before.
+    pub fn sounded_for_stale(
+        &mut self,
+        me: u8,
+        now_s: f64,
+        radio: &[Candidate],
+        stale_after: Duration,
+    ) -> Vec<Candidate> {
+        self.promote(now_s);
+        let mut out = Vec::new();
+        for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
+            if id == me {
+                continue;
+            }
+            let by_radio = radio.iter().find(|c| c.robot == id);
+            if by_radio.is_some_and(|c| c.age <= stale_after) {
+                continue;
+            }
+            let radio_at = by_radio.map_or(f64::NEG_INFINITY, |c| now_s - c.age.as_secs_f64());
+            if let Some(t) = self.sounded.get(usize::from(id) - 1).copied().flatten() {
+                if t.at_s > radio_at && now_s - t.at_s <= self.expire_s {
+                    out.push(self.candidate(me, id, t, now_s));
+                }
+            }
+        }
+        out
+    }
+
+    /// Claims heard whose slot has ended come into force.
+    fn promote(&mut self, now_s: f64) {
+        for (pending, sounded) in self.pending.iter_mut().zip(&mut self.sounded) {
+            if let Some(p) = pending.filter(|p| p.at_s <= now_s) {
+                if sounded.is_none_or(|s| s.at_s <= p.at_s) {
+                    *sounded = Some(p);
+                }
+                *pending = None;
+            }
+        }
+    }
+
+    /// Robot `id`'s claim `t` as robot `me` counts it at `now_s`: fresh (age zero), a
+    /// claim to be going in doubt once its sender's last slot went by unheard.
+    fn candidate(&self, me: u8, id: u8, t: Told, now_s: f64) -> Candidate {
+        let mut posted = t.posted;
+        if id != me && self.doubt_going && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S {
+            // Its last slot went by unheard: a claim to be going is in doubt (it may have
+            // let go in the message this robot missed), so it keeps its cost but not the
+            // goer's margin.
+            posted.going = false;
+        }
+        Candidate {
+            robot: id,
+            posted,
+            age: Duration::ZERO,
+        }
     }
 
     /// The team's decision on `candidates` (see [`SoundFallback::candidates`]): the

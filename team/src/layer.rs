@@ -627,6 +627,15 @@ impl TeamLayer {
         let (decision, posted) = match fallback {
             None => {
                 self.sound_going = None;
+                if let Some(sound) = &mut self.sound {
+                    // Some teammates' radio is silent, not all: what they sounded stands
+                    // in for their stale radio claims.
+                    let by_sound = sound.sounded_for_stale(self.id, t_s, &heard, stale_after);
+                    if !by_sound.is_empty() {
+                        heard.retain(|c| by_sound.iter().all(|s| s.robot != c.robot));
+                        heard.extend(by_sound);
+                    }
+                }
                 let (decision, posted) = self.arbiter.tick(dt, cost, &heard);
                 if let Some(sound) = &mut self.sound {
                     sound.posted(t_s, posted);
