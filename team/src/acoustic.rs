@@ -828,4 +828,117 @@ mod tests {
             "without the team clock the slot names someone else"
         );
     }
+
+    /// Robot `robot` as a replica sees it at `heard_s`, its echoes of our frames counted
+    /// `samples` times.
+    fn peer(robot: u8, heard_s: f64, samples: u64) -> comms::PeerInfo {
+        comms::PeerInfo {
+            robot,
+            clock_samples: samples,
+            last_heard: comms::Instant::from_micros((heard_s * 1e6) as u64),
+            ..peer_two(0.0, heard_s)
+        }
+    }
+
+    #[test]
+    fn a_robot_that_hears_its_teammates_but_is_not_echoed_sounds_its_claim() {
+        // Robot 3 hears 2, 4 and 5 at 25 Hz; their echoes of its frames grow until 10 s,
+        // then stop (its sends fail); the radio stays fresh at robot 3 all along.
+        let (_, stale, mut fb) = four_slot_fallback();
+        let fresh = || {
+            vec![
+                radio_claim(2, 1.0, true, 0.02),
+                radio_claim(4, 2.0, false, 0.02),
+                radio_claim(5, 3.0, false, 0.02),
+            ]
+        };
+        let mut t: f64 = 5.0;
+        let mut sounded_at = None;
+        while t < 14.0 {
+            let samples = (t.min(10.0) * 10.0) as u64;
+            fb.update_clock(
+                comms::Instant::from_micros((t * 1e6) as u64),
+                [2, 4, 5].map(|id| peer(id, t - 0.01, samples)),
+            );
+            assert!(!fb.radio(3, &fresh(), stale), "the radio decides");
+            if fb.unheard() && sounded_at.is_none() {
+                sounded_at = Some(t);
+                let m = fb.claim(
+                    3,
+                    Posted {
+                        h: 1.5,
+                        going: false,
+                    },
+                    t,
+                );
+                assert!(m.is_some(), "unheard, it sounds its claim at {t} s");
+            }
+            if t < 10.9 {
+                assert!(!fb.unheard(), "echoed lately at {t} s");
+                assert!(
+                    fb.claim(
+                        3,
+                        Posted {
+                            h: 1.5,
+                            going: false
+                        },
+                        t
+                    )
+                    .is_none(),
+                    "heard by radio, nothing to sound at {t} s"
+                );
+            }
+            t += 0.04;
+        }
+        let at = sounded_at.expect("it took itself for unheard");
+        assert!(
+            (11.0..11.1).contains(&at),
+            "unheard {UNHEARD_AFTER_S} s after the last echo (10 s): at {at} s"
+        );
+        // Hearing nobody (a full outage) is not being unheard: the radio is stale anyway.
+        fb.update_clock(
+            comms::Instant::from_micros(20_000_000),
+            [2, 4, 5].map(|id| peer(id, 14.0, 100)),
+        );
+        assert!(!fb.unheard(), "nobody heard for 6 s");
+    }
+
+    #[test]
+    fn a_teammate_stale_by_radio_counts_by_what_it_sounded_and_a_silent_one_drops_out() {
+        // Robot 3's radio: 4 and 5 fresh, 2 stale (its sends failed at 10 s); 5's sound
+        // is ignored.
+        let (plan, stale, mut fb) = four_slot_fallback();
+        let radio = |now: f64| {
+            [
+                radio_claim(2, 1.0, true, now - 10.0),
+                radio_claim(4, 2.0, false, 0.02),
+                radio_claim(5, 3.0, false, 0.02),
+            ]
+        };
+        assert_eq!(
+            fb.sounded_for_stale(3, 12.0, &radio(12.0), stale),
+            vec![],
+            "nothing heard by sound: robot 2 drops out by the radio's rule"
+        );
+        // Robot 2 sounds its claim in its slot (slot 0 of the cycle), robot 5 too.
+        let slot2 = fb.next_slot(2, 12.0).expect("robot 2 has a slot");
+        fb.hear(3, &claim_message(0.9, true), slot2 + 0.02);
+        let slot5 = fb.next_slot(5, 12.0).expect("robot 5 has a slot");
+        fb.hear(3, &claim_message(2.9, false), slot5 + 0.02);
+        let after = slot2.max(slot5) + plan.slot_s + 0.01;
+        let by_sound = fb.sounded_for_stale(3, after, &radio(after), stale);
+        assert_eq!(by_sound.len(), 1, "only the stale robot: {by_sound:?}");
+        assert_eq!(by_sound[0].robot, 2);
+        assert!(
+            by_sound[0].posted.going && (by_sound[0].posted.h - 0.9).abs() <= COST_BIN_M,
+            "robot 2 counts going at about 0.9 m: {by_sound:?}"
+        );
+        // A cycle and more later without a word from robot 2: in doubt, not gone.
+        let later = slot2 + plan.slot_s + plan.cycle_s() + DOUBT_MARGIN_S + 0.1;
+        let doubted = fb.sounded_for_stale(3, later, &radio(later), stale);
+        assert!(
+            doubted.len() == 1 && !doubted[0].posted.going,
+            "its going claim is in doubt: {doubted:?}"
+        );
+    }
 }
