@@ -175,57 +175,96 @@ fn wait_for_goer(clients: &mut [Client], want: u8, within: Duration, what: &str)
     }
 }
 
+/// Four daemons with clocks seconds apart and drifting (as robots switched on at
+/// different times), robot `id` rehearsing `--outage outage(id)`, in one mixed room; robot
+/// 1 the goalkeeper, field players 2, 3 and 4 posting costs 1, 2 and 3. Dropped, it stops
+/// the daemons and the room.
+struct Team {
+    clients: Vec<Client>,
+    /// When the daemons had started.
+    started: Instant,
+    daemons: Vec<Daemon>,
+    stop: Arc<AtomicBool>,
+    mixer: Option<std::thread::JoinHandle<()>>,
+    _dir: tempfile::TempDir,
+}
+
+impl Team {
+    fn start(outage: impl Fn(u8) -> &'static str) -> Team {
+        let dir = tempfile::tempdir().unwrap();
+        let group = scratch_group().to_string();
+        let ids = [1u8, 2, 3, 4];
+        let (mut speakers, mut mics) = (Vec::new(), Vec::new());
+        for id in ids {
+            let s = dir.path().join(format!("speaker{id}"));
+            let m = dir.path().join(format!("mic{id}"));
+            mkfifo(&s);
+            mkfifo(&m);
+            speakers.push(s);
+            mics.push(m);
+        }
+        let stop = Arc::new(AtomicBool::new(false));
+        let mixer = {
+            let stop = stop.clone();
+            std::thread::spawn(move || room(speakers, mics, stop))
+        };
+        let clocks = [
+            ("0s", "0"),
+            ("7.3s", "25"),
+            ("13.6s", "-30"),
+            ("3.1s", "12"),
+        ];
+        let daemons: Vec<Daemon> = ids
+            .iter()
+            .zip(clocks)
+            .map(|(&id, clock)| start(id, &group, dir.path(), clock, outage(id)))
+            .collect();
+        let started = Instant::now();
+        let mut clients: Vec<Client> = daemons.iter().map(Daemon::client).collect();
+        for (i, c) in clients.iter_mut().enumerate() {
+            let id = i + 1;
+            let x = -1.0 - i as f64;
+            assert_eq!(
+                c.ask(&format!("SETV local.var.robot.goalkeeper {}", id == 1)),
+                "OK"
+            );
+            let cost = if id == 1 { 1000.0 } else { (id - 1) as f64 };
+            assert_eq!(c.ask(&format!("SETV local.var.robot.cost {cost:.1}")), "OK");
+            assert_eq!(
+                c.ask(&format!(
+                    "SETV local.var.robot.pose [{x:.1}, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.01]"
+                )),
+                "OK"
+            );
+        }
+        Team {
+            clients,
+            started,
+            daemons,
+            stop,
+            mixer: Some(mixer),
+            _dir: dir,
+        }
+    }
+}
+
+impl Drop for Team {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.clients.clear();
+        self.daemons.clear();
+        if let Some(m) = self.mixer.take() {
+            let _ = m.join();
+        }
+    }
+}
+
 #[test]
 fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
-    let dir = tempfile::tempdir().unwrap();
-    let group = scratch_group().to_string();
-    let ids = [1u8, 2, 3, 4];
-    let (mut speakers, mut mics) = (Vec::new(), Vec::new());
-    for id in ids {
-        let s = dir.path().join(format!("speaker{id}"));
-        let m = dir.path().join(format!("mic{id}"));
-        mkfifo(&s);
-        mkfifo(&m);
-        speakers.push(s);
-        mics.push(m);
-    }
-    let stop = Arc::new(AtomicBool::new(false));
-    let mixer = {
-        let stop = stop.clone();
-        std::thread::spawn(move || room(speakers, mics, stop))
-    };
-    // Clocks seconds apart and drifting, as robots switched on at different times.
-    let clocks = [
-        ("0s", "0"),
-        ("7.3s", "25"),
-        ("13.6s", "-30"),
-        ("3.1s", "12"),
-    ];
-    let daemons: Vec<Daemon> = ids
-        .iter()
-        .zip(clocks)
-        .map(|(&id, clock)| start(id, &group, dir.path(), clock, "30s@5s"))
-        .collect();
-    let started = Instant::now();
-    let mut clients: Vec<Client> = daemons.iter().map(Daemon::client).collect();
-    for (i, c) in clients.iter_mut().enumerate() {
-        let id = i + 1;
-        let x = -1.0 - i as f64;
-        assert_eq!(
-            c.ask(&format!("SETV local.var.robot.goalkeeper {}", id == 1)),
-            "OK"
-        );
-        let cost = if id == 1 { 1000.0 } else { (id - 1) as f64 };
-        assert_eq!(c.ask(&format!("SETV local.var.robot.cost {cost:.1}")), "OK");
-        assert_eq!(
-            c.ask(&format!(
-                "SETV local.var.robot.pose [{x:.1}, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.01]"
-            )),
-            "OK"
-        );
-    }
+    let mut team = Team::start(|_| "30s@5s");
+    let (started, clients) = (team.started, &mut team.clients);
     wait_for_goer(
-        &mut clients,
+        clients,
         2,
         Duration::from_secs(4),
         "by radio, robot 2 (cost 1) goes",
@@ -234,7 +273,7 @@ fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
     // and a cycle of slots (3 x 0.7 s) to take over.
     std::thread::sleep(Duration::from_secs(9).saturating_sub(started.elapsed()));
     wait_for_goer(
-        &mut clients,
+        clients,
         2,
         Duration::from_secs(1),
         "in the outage, the goer the radio agreed keeps the ball",
@@ -250,7 +289,7 @@ fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
     // Robot 2 walks away from the ball: only sound can tell the team.
     assert_eq!(clients[1].ask("SETV local.var.robot.cost 6.0"), "OK");
     wait_for_goer(
-        &mut clients,
+        clients,
         3,
         Duration::from_secs(9),
         "in the outage, robot 2 let go by sound and robot 3 (cost 2) takes the ball",
@@ -263,7 +302,7 @@ fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
     // It holds: two more cycles, exactly one goer, everyone agreeing.
     for _ in 0..10 {
         wait_for_goer(
-            &mut clients,
+            clients,
             3,
             Duration::from_millis(500),
             "the hand-over holds",
@@ -276,10 +315,6 @@ fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
         assert!(heard >= 3, "robot {} heard {heard} claims", i + 1);
         assert_eq!(busy, 0, "robot {}: no slot was let go", i + 1);
     }
-    stop.store(true, Ordering::Relaxed);
-    drop(clients);
-    drop(daemons);
-    let _ = mixer.join();
 }
 
 /// Scenario 2: only robot 2's sends fail (from 5 s after its start, for 30 s); it still
@@ -291,58 +326,11 @@ fn in_a_radio_outage_the_team_hands_the_ball_over_by_sound_on_the_team_clock() {
 /// sounds in place of its stale radio claim; all agree robot 2 goes.
 #[test]
 fn a_robot_whose_own_sends_fail_is_heard_by_sound_and_the_team_keeps_one_goer() {
-    let dir = tempfile::tempdir().unwrap();
-    let group = scratch_group().to_string();
-    let ids = [1u8, 2, 3, 4];
-    let (mut speakers, mut mics) = (Vec::new(), Vec::new());
-    for id in ids {
-        let s = dir.path().join(format!("speaker{id}"));
-        let m = dir.path().join(format!("mic{id}"));
-        mkfifo(&s);
-        mkfifo(&m);
-        speakers.push(s);
-        mics.push(m);
-    }
-    let stop = Arc::new(AtomicBool::new(false));
-    let mixer = {
-        let stop = stop.clone();
-        std::thread::spawn(move || room(speakers, mics, stop))
-    };
-    let clocks = [
-        ("0s", "0"),
-        ("7.3s", "25"),
-        ("13.6s", "-30"),
-        ("3.1s", "12"),
-    ];
-    let daemons: Vec<Daemon> = ids
-        .iter()
-        .zip(clocks)
-        .map(|(&id, clock)| {
-            // Only robot 2's radio fails; the others' outage never comes.
-            let outage = if id == 2 { "30s@5s" } else { "1s@1000s" };
-            start(id, &group, dir.path(), clock, outage)
-        })
-        .collect();
-    let started = Instant::now();
-    let mut clients: Vec<Client> = daemons.iter().map(Daemon::client).collect();
-    for (i, c) in clients.iter_mut().enumerate() {
-        let id = i + 1;
-        let x = -1.0 - i as f64;
-        assert_eq!(
-            c.ask(&format!("SETV local.var.robot.goalkeeper {}", id == 1)),
-            "OK"
-        );
-        let cost = if id == 1 { 1000.0 } else { (id - 1) as f64 };
-        assert_eq!(c.ask(&format!("SETV local.var.robot.cost {cost:.1}")), "OK");
-        assert_eq!(
-            c.ask(&format!(
-                "SETV local.var.robot.pose [{x:.1}, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.01]"
-            )),
-            "OK"
-        );
-    }
+    // Only robot 2's radio fails; the others' outage never comes.
+    let mut team = Team::start(|id| if id == 2 { "30s@5s" } else { "1s@1000s" });
+    let (started, clients) = (team.started, &mut team.clients);
     wait_for_goer(
-        &mut clients,
+        clients,
         2,
         Duration::from_secs(4),
         "by radio, robot 2 (cost 1) goes",
@@ -379,8 +367,4 @@ fn a_robot_whose_own_sends_fail_is_heard_by_sound_and_the_team_keeps_one_goer() 
         "all agree robot 2 goes, and only it, in {one} of {samples} samples from 10 to 25 s; \
          sounded {sounded:?}; first others: {seen:?}"
     );
-    stop.store(true, Ordering::Relaxed);
-    drop(clients);
-    drop(daemons);
-    let _ = mixer.join();
 }
