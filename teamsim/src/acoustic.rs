@@ -65,12 +65,7 @@ impl super::Simulation {
             self.robots[i].hear_sound(&h.detection.message, start);
         }
         let dt = self.cfg.physics_dt_s;
-        let positions: Vec<(f64, f64)> = self
-            .world
-            .robots
-            .iter()
-            .map(|b| (b.pose.at.x, b.pose.at.y))
-            .collect();
+        let positions = self.world.robot_positions();
         let mut team_times = Vec::with_capacity(self.robots.len());
         for i in 0..self.robots.len() {
             // Each robot's slots run on the team clock its own replica's estimates give,

@@ -224,10 +224,8 @@ impl Air {
     }
 
     /// The robots' true positions now, m.
-    pub(super) fn set_positions(&self, positions: impl Iterator<Item = (f64, f64)>) {
-        let mut p = self.positions.lock().unwrap_or_else(|e| e.into_inner());
-        p.clear();
-        p.extend(positions);
+    pub(super) fn set_positions(&self, positions: Vec<(f64, f64)>) {
+        *self.positions.lock().unwrap_or_else(|e| e.into_inner()) = positions;
     }
 
     /// Stops the room and returns its counts.
@@ -299,7 +297,7 @@ fn play(
     let mut samples = Vec::new();
     let mut block = vec![0.0f32; PERIOD];
     let rate = f64::from(SAMPLE_RATE_HZ);
-    let trace = std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some();
+    let trace = super::daemons::trace();
     let mut was_sounding = vec![false; n];
     let mut held: Vec<Vec<(f64, f64)>> = vec![Vec::new(); n];
     let started = Instant::now();

@@ -101,7 +101,7 @@ pub fn in_process(cfg: &SimConfig, daemons_rmse_m: f64) -> Result<InProcess, Dae
 /// (`inproc pose t=… robot=… err=… heading=…`), for comparing the two matches robot by
 /// robot (`scripts/daemons-trace.py --pose`).
 pub fn run_in_process(sim: &mut Simulation) {
-    let trace = std::env::var_os("HUDDLE_DAEMONS_TRACE").is_some();
+    let trace = super::daemons::trace();
     while !sim.finished() {
         let t = sim.time_s();
         sim.step();

@@ -39,6 +39,7 @@ pub mod daemons;
 mod daemons_air;
 pub mod daemons_game;
 mod daemons_in_process;
+mod daemons_report;
 pub mod field;
 mod game;
 pub mod metrics;

@@ -234,6 +234,14 @@ pub struct World {
 }
 
 impl World {
+    /// Where each of our robots stands, m (the truth), in robot order.
+    pub fn robot_positions(&self) -> Vec<(f64, f64)> {
+        self.robots
+            .iter()
+            .map(|b| (b.pose.at.x, b.pose.at.y))
+            .collect()
+    }
+
     /// A world with `robots` robots at `starts` (poses), `opponents` opponents spread over
     /// the opponent half, and the ball at the centre spot; `seed` fixes all noise.
     pub fn new(cfg: FieldConfig, starts: &[Pose], opponents: usize, seed: u64) -> Self {
