@@ -90,7 +90,7 @@ pub struct DaemonsReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub game: Option<DaemonsGameReport>,
     /// Under `--outage`: the arbitration while every daemon's radio was down, and with
-    /// `--acoustic` the fallback's counters ([`super::daemons_air`]).
+    /// `--acoustic` the fallback's counters (`daemons_air`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub outage: Option<DaemonsOutage>,
 }
