@@ -700,7 +700,17 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
         replica.blackboard(),
         replica.is_pending(&claim_key),
     );
+    let before = layer.decision.goer;
     let (_, posted) = layer.decide(replica.blackboard(), now);
+    if layer.decision.goer != before {
+        // For tracing a disagreement: what the fallback held when the goer changed.
+        tracing::debug!(
+            goer = ?layer.decision.goer,
+            going = layer.going(),
+            fallback = ?layer.sound,
+            "team layer: the goer changed"
+        );
+    }
     let (writes, priority) = layer.finish(
         &cfg.team,
         now,

@@ -18,7 +18,10 @@
 //! **Decision.** While the radio is silent (no teammate's radio claim fresher than the
 //! arbitration's staleness limit) the fallback decides, on the claims this robot holds:
 //! each field player's newest, by radio (the last one heard before the outage) or by
-//! sound, its own as the team heard it (what it posted, then what it sounded, quantised).
+//! sound, its own as the team holds it (what it posted when it last heard a teammate by
+//! radio, then what it sounded, quantised), and judged by the same rules as its
+//! teammates judge it: a robot holding the same claims as they do names the goer they
+//! name (`acoustic_agreement_tests.rs` plays 200 such teams).
 //! Every claim counts as fresh until `stale_cycles` cycles old: a missed message leaves
 //! the teammate's previous claim standing rather than making room for a second goer, so
 //! the goer the team agreed by radio keeps the ball until a claim sounded in the room
@@ -47,6 +50,7 @@
 //! slot.
 
 use audio::{Message, Sender};
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use comms::arbitration::{self, ArbitrationParams, Candidate, Decision, Posted};
@@ -239,8 +243,9 @@ pub struct SoundFallback {
     sounded: Vec<Option<Told>>,
     /// Per robot: a claim heard before the end of its slot, waiting to come into force.
     pending: Vec<Option<Told>>,
-    /// What this robot last posted on the radio before the fallback took control.
-    own_radio: Option<Told>,
+    /// What this robot posted on the radio while the radio decided, newest last, over
+    /// the last [`POSTS_KEPT_S`] (see [`SoundFallback::own_as_held`]).
+    posts: VecDeque<Told>,
     /// Whether some teammate with a slot had no fresh radio claim at the last decision.
     radio_stale: bool,
     /// Whether no teammate with a slot had a fresh radio claim at the last decision: the
@@ -263,6 +268,11 @@ pub struct SoundFallback {
 /// frames: about every 0.1–0.2 s at 25 Hz in a team of five).
 pub const UNHEARD_AFTER_S: f64 = 1.0;
 
+/// How long a robot keeps its own radio posts: longer than the radio's staleness limit,
+/// so that when the fallback takes control the post its teammates last heard is still
+/// there, s.
+const POSTS_KEPT_S: f64 = 2.0;
+
 impl SoundFallback {
     /// Robot `me`'s fallback, in a team of `team` robots sounding on `plan`, deciding with
     /// the arbitration's `params` (hysteresis, tie band, no-ball cost).
@@ -283,7 +293,7 @@ impl SoundFallback {
             doubt_going: cfg.doubt_going,
             sounded: vec![None; team],
             pending: vec![None; team],
-            own_radio: None,
+            posts: VecDeque::new(),
             radio_stale: false,
             in_control: false,
             clock: TeamClock::new(me),
@@ -445,13 +455,41 @@ impl SoundFallback {
         self.in_control
     }
 
-    /// What this robot posted on the radio at `now_s` while the radio decided: the claim
-    /// its teammates hold from it when the radio falls silent.
+    /// What this robot posted on the radio at `now_s` while the radio decided: its
+    /// teammates hold the last of these they heard when the radio falls silent.
     pub fn posted(&mut self, now_s: f64, posted: Posted) {
-        self.own_radio = Some(Told {
+        self.posts.push_back(Told {
             posted,
             at_s: now_s,
         });
+        while self.posts.len() > 1 && self.posts[0].at_s < now_s - POSTS_KEPT_S {
+            self.posts.pop_front();
+        }
+    }
+
+    /// This robot's radio claim as its teammates hold it (`radio`: theirs, aged on this
+    /// robot's clock): what it posted when it last heard one of them. Its posts after that
+    /// went into a silent radio (the radio fails both ways at once, or the robot would
+    /// still hear its teammates), so counting them would make it decide on a claim nobody
+    /// else holds: a robot whose cost rose in the moment before the fallback took control
+    /// would yield to a teammate that still held it for the goer (no goer), one whose
+    /// cost fell would go beside the goer (two), until its own sound came into force.
+    fn own_as_held(&self, me: u8, now_s: f64, radio: &[Candidate]) -> Option<Told> {
+        let newest = self.posts.back().copied();
+        let Some(last_heard) = radio
+            .iter()
+            .filter(|c| c.robot != me)
+            .map(|c| now_s - c.age.as_secs_f64())
+            .max_by(f64::total_cmp)
+        else {
+            return newest;
+        };
+        self.posts
+            .iter()
+            .rev()
+            .find(|p| p.at_s <= last_heard + 1e-6)
+            .or(self.posts.front())
+            .copied()
     }
 
     /// The claims robot `me` decides on at `now_s` while the radio is silent: each
@@ -464,7 +502,7 @@ impl SoundFallback {
         let mut out = Vec::new();
         for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
             let by_radio = if id == me {
-                self.own_radio
+                self.own_as_held(me, now_s, radio)
             } else {
                 radio.iter().find(|c| c.robot == id).map(|c| Told {
                     posted: c.posted,
@@ -477,7 +515,7 @@ impl SoundFallback {
                 (r, s) => r.or(s),
             };
             if let Some(t) = newest.filter(|t| now_s - t.at_s <= self.expire_s) {
-                out.push(self.candidate(me, id, t, now_s));
+                out.push(self.candidate(id, t, now_s));
             }
         }
         out
@@ -511,7 +549,7 @@ impl SoundFallback {
             let radio_at = by_radio.map_or(f64::NEG_INFINITY, |c| now_s - c.age.as_secs_f64());
             if let Some(t) = self.sounded.get(usize::from(id) - 1).copied().flatten() {
                 if t.at_s > radio_at && now_s - t.at_s <= self.expire_s {
-                    out.push(self.candidate(me, id, t, now_s));
+                    out.push(self.candidate(id, t, now_s));
                 }
             }
         }
@@ -532,12 +570,14 @@ impl SoundFallback {
 
     /// Robot `id`'s claim `t` as robot `me` counts it at `now_s`: fresh (age zero), a
     /// claim to be going in doubt once its sender's last slot went by unheard.
-    fn candidate(&self, me: u8, id: u8, t: Told, now_s: f64) -> Candidate {
+    fn candidate(&self, id: u8, t: Told, now_s: f64) -> Candidate {
         let mut posted = t.posted;
-        if id != me && self.doubt_going && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S {
+        if self.doubt_going && now_s - t.at_s > self.plan.cycle_s() + DOUBT_MARGIN_S {
             // Its last slot went by unheard: a claim to be going is in doubt (it may have
             // let go in the message this robot missed), so it keeps its cost but not the
-            // goer's margin.
+            // goer's margin. A robot's own claim too: its teammates doubt it when its
+            // radio claim has stood a cycle before its first slot came, and it must
+            // decide as they do, or it goes on beside the robot they now name.
             posted.going = false;
         }
         Candidate {
@@ -588,6 +628,10 @@ pub fn decode_claim(message: &Message, no_ball_cost: f64) -> Option<Posted> {
         going,
     })
 }
+
+#[cfg(test)]
+#[path = "acoustic_agreement_tests.rs"]
+mod agreement_tests;
 
 #[cfg(test)]
 mod tests {

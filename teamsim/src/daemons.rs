@@ -285,17 +285,20 @@ fn start_daemon(
         let l = if l.is_zero() { cfg.expected_delay() } else { l };
         cmd.args(["--latency-compensation", &format!("{}us", l.as_micros())]);
     }
-    cmd.env(
-        "RUST_LOG",
+    // HUDDLE_DAEMONS_LOG overrides the daemons' filter (e.g. `info,driver::team=debug`
+    // with `--daemon-logs`, to trace the team layer's decisions).
+    let filter = std::env::var("HUDDLE_DAEMONS_LOG").unwrap_or_else(|_| {
         if opts.log_dir.is_some() {
             "info"
         } else {
             "warn"
-        },
-    )
-    .stdin(Stdio::null())
-    .stdout(Stdio::null())
-    .stderr(Stdio::from(log_file));
+        }
+        .to_owned()
+    });
+    cmd.env("RUST_LOG", filter)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(log_file));
     let mut child = cmd
         .spawn()
         .map_err(io(format!("starting {} daemon", opts.exe.display())))?;
