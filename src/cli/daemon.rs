@@ -129,6 +129,12 @@ pub struct DaemonArgs {
     /// the team then decides who goes by sound).
     #[arg(long, value_name = "DURATION@START", value_parser = crate::cli::sim::parse_outage)]
     pub outage: Option<(Duration, Duration)>,
+    /// Stop (as on SIGTERM) when process PID, this daemon's parent, exits: for a launcher
+    /// or supervisor that starts the daemon and must not leave it running if it dies
+    /// itself (Linux; `huddle sim --daemons` passes its own). Refused if PID is not the
+    /// parent: it has already exited.
+    #[arg(long, value_name = "PID")]
+    pub parent_pid: Option<u32>,
     /// For tests and `huddle sim --daemons`: this daemon's clock reads DURATION when it
     /// starts, as if its robot's clock had been set apart from its teammates'. The
     /// replica, the team layer and every age on the relay run on that clock, and the
@@ -403,11 +409,33 @@ pub fn driver_config(args: &DaemonArgs) -> Result<DriverConfig> {
     Ok(config)
 }
 
+/// `--parent-pid`: the kernel sends this process SIGTERM when its parent exits
+/// (PR_SET_PDEATHSIG), which the daemon takes as an order to stop.
+#[cfg(target_os = "linux")]
+fn stop_with_parent(pid: u32) -> Result<()> {
+    nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
+        .context("--parent-pid: prctl(PR_SET_PDEATHSIG)")?;
+    // Checked after the prctl: a parent that exited before it would never signal.
+    let parent = nix::unistd::getppid().as_raw();
+    if u32::try_from(parent).ok() != Some(pid) {
+        anyhow::bail!("--parent-pid {pid}: the parent is process {parent} (has {pid} exited?)");
+    }
+    Ok(())
+}
+
+#[cfg(not(target_os = "linux"))]
+fn stop_with_parent(_pid: u32) -> Result<()> {
+    anyhow::bail!("--parent-pid needs Linux (PR_SET_PDEATHSIG)")
+}
+
 /// Runs the daemon until SIGINT or SIGTERM.
 pub fn run(args: DaemonArgs) -> Result<()> {
     let config = driver_config(&args)?;
     let impair = impairment(&args, config.replica.robot_id)?;
     check_fallback(&args)?;
+    if let Some(pid) = args.parent_pid {
+        stop_with_parent(pid)?;
+    }
     // One thread for socket, replica, timers and relay clients: a hand-off between threads
     // costs a full wake-up, several times a loopback round trip, and the driver and its
     // handles are `!Send` for that reason.

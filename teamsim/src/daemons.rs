@@ -295,6 +295,9 @@ fn start_daemon(
         }
         .to_owned()
     });
+    // A simulator stopped by Ctrl-C or killed (a CI timeout) runs no destructors: the
+    // daemon stops with it rather than run on holding its ports and speakers.
+    cmd.args(["--parent-pid", &std::process::id().to_string()]);
     cmd.env("RUST_LOG", filter)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
