@@ -218,4 +218,10 @@ pub struct PeerInfo {
     pub round_trip: Option<Duration>,
     /// Echo samples that went into the estimate (this life of the peer).
     pub clock_samples: u64,
+    /// Its clock minus this robot's from its frames' send stamps alone, µs (modulo 2^32,
+    /// read as signed): the median of its last few frames' stamp − reception, early by
+    /// a typical transit. Coarser than [`PeerInfo::clock_offset_us`] (milliseconds to
+    /// tens of them) but there from its first frame, where echoes are sparse (a
+    /// league's budget); not extrapolated, so it stands still while it is not heard.
+    pub clock_offset_one_way_us: Option<i64>,
 }

@@ -261,6 +261,8 @@ pub struct SoundFallback {
     /// Whether this robot hears teammates but none has echoed its frames for
     /// [`UNHEARD_AFTER_S`]: its own sends are failing (see [`SoundFallback::claim`]).
     unheard: bool,
+    /// Whether echoes come often enough to tell (see [`SoundFallback::new`]).
+    detect_unheard: bool,
 }
 
 /// A robot that hears its teammates but whose frames none of them has echoed for this
@@ -275,7 +277,13 @@ const POSTS_KEPT_S: f64 = 2.0;
 
 impl SoundFallback {
     /// Robot `me`'s fallback, in a team of `team` robots sounding on `plan`, deciding with
-    /// the arbitration's `params` (hysteresis, tie band, no-ball cost).
+    /// the arbitration's `params` (hysteresis, tie band, no-ball cost). A team whose
+    /// claims hold longer than [`UNHEARD_AFTER_S`] (`params.stale_after`, raised under a
+    /// league's budget by `adapt_to_budget`) sends too rarely for echoes to say whether a
+    /// robot is heard (under the SPL's budget an echo needs a teammate's frame within
+    /// 655 ms of one of ours: a few a minute), so it never takes itself for unheard: in
+    /// a 95 s match under the budget every robot did, and sounded a claim every cycle
+    /// while the radio worked.
     pub fn new(
         me: u8,
         plan: SlotPlan,
@@ -299,6 +307,7 @@ impl SoundFallback {
             clock: TeamClock::new(me),
             echoes: Vec::new(),
             unheard: false,
+            detect_unheard: params.stale_after.as_secs_f64() <= UNHEARD_AFTER_S,
         }
     }
 
@@ -332,7 +341,7 @@ impl SoundFallback {
             .echoes
             .iter()
             .any(|e| e.1 > 0 && now_s - e.2 <= UNHEARD_AFTER_S);
-        self.unheard = hearing && echoed_once && !echoed_lately;
+        self.unheard = self.detect_unheard && hearing && echoed_once && !echoed_lately;
     }
 
     /// Whether this robot hears its teammates but none echoes its frames (see
@@ -814,6 +823,7 @@ mod tests {
             clock_drift_ppm: Some(0.0),
             round_trip: Some(Duration::from_millis(3)),
             clock_samples: 20,
+            clock_offset_one_way_us: None,
         }
     }
 

@@ -6,13 +6,20 @@
 //! and drift (`comms::PeerInfo::clock_offset_us`, extrapolated with the fitted drift to
 //! the replica's now). The team clock is the clock of a **reference** robot, modulo
 //! 2^32 µs (71.6 min, the wire's range): the lowest id among this robot and the
-//! teammates heard within [`RECENT_S`] that have an estimate. Robot 1 so reads its own
+//! teammates heard recently (within [`RECENT_S`], or still present to the replica: under
+//! a league's budget, several message intervals) whose clock it knows: by the echo
+//! estimate, or until one exists by the frames' send stamps alone
+//! (`PeerInfo::clock_offset_one_way_us`, early by a typical transit). Under a budget an
+//! echo needs a teammate's frame within 655 ms of one of ours, and in a 95 s match most
+//! robots had an echo estimate of one or two teammates: each read a different reference,
+//! seconds apart, until the stamps gave everyone robot 1's clock. Robot 1 so reads its own
 //! clock, its teammates read robot 1's through their estimates, and they agree to the
 //! estimate's error (the path asymmetry, a few ms on a WLAN: `tests/shared_time.rs`).
 //!
 //! **It does not move when the radio fails.** A reference is only given up for a lower
-//! id heard recently, or when it has not been heard for [`REFERENCE_LOST_S`] while some
-//! other teammate has (the radio works; the reference is gone). In an outage nobody is
+//! id heard recently, or when it has not been heard for [`REFERENCE_LOST_S`], nor is
+//! present, while some other teammate is heard within [`RECENT_S`] (the radio works; the
+//! reference is gone). In an outage nobody is
 //! heard, so every robot keeps the reference it had and extrapolates its estimate with
 //! the fitted drift (tens of ppm: 30 ppm is 1.8 ms a minute, far inside a slot's guard).
 //! Robots that chose different references (one never heard robot 1) disagree by
@@ -30,8 +37,13 @@ pub const WRAP_US: i64 = 1 << 32;
 pub const WRAP_S: f64 = WRAP_US as f64 * 1e-6;
 /// A teammate counts as heard recently for the choice of the reference within this, s.
 pub const RECENT_S: f64 = 2.0;
-/// A reference not heard for this long, while some other teammate is, is given up, s.
-pub const REFERENCE_LOST_S: f64 = 10.0;
+/// A reference not heard for this long (nor present), while some other teammate is, is
+/// given up, s. Long, because robots give it up at different moments (each lost different
+/// frames) and read different clocks until all have: under a league's budget a quiet
+/// goalkeeper's frames come tens of seconds apart, and with 10 s one robot that had
+/// missed two of them gave it up while its teammates kept it (`huddle sim --acoustic
+/// --budget spl`, seed 4).
+pub const REFERENCE_LOST_S: f64 = 60.0;
 
 /// The team's clock as this robot reads it: which robot is the reference and the offset
 /// of its clock from this robot's (see the module docs).
@@ -70,18 +82,27 @@ impl TeamClock {
         let age = |heard: Instant| now.saturating_duration_since(heard).as_secs_f64();
         // The lowest id heard recently, with its offset.
         let mut best: Option<(u8, i64)> = None;
-        let mut current: Option<(i64, Instant)> = None;
+        let mut current: Option<(i64, bool, Instant)> = None;
+        // Whether some teammate's frames arrive now: the radio works.
+        let mut radio_works = false;
         for p in peers {
             if p.robot == self.me {
                 continue;
             }
-            let Some(offset) = p.clock_offset_us else {
+            // The echo estimate, else the send stamps' (a few ms coarser, but there from
+            // the first frame: under a league's budget echoes may take minutes).
+            let Some(offset) = p.clock_offset_us.or(p.clock_offset_one_way_us) else {
                 continue;
             };
+            // Recent: the replica still counts it present (under a budget, three message
+            // intervals and more), or heard within RECENT_S.
+            let heard = age(p.last_heard) <= RECENT_S;
+            radio_works |= heard;
+            let recent = p.present || heard;
             if p.robot == self.reference {
-                current = Some((offset, p.last_heard));
+                current = Some((offset, recent, p.last_heard));
             }
-            if age(p.last_heard) <= RECENT_S && best.is_none_or(|(id, _)| p.robot < id) {
+            if recent && best.is_none_or(|(id, _)| p.robot < id) {
                 best = Some((p.robot, offset));
             }
         }
@@ -89,8 +110,8 @@ impl TeamClock {
         // hears the team converges on the same reference.
         let lowest_recent = best.map_or(self.me, |(id, _)| id.min(self.me));
         let lost = self.reference != self.me
-            && best.is_some()
-            && current.is_none_or(|(_, heard)| age(heard) > REFERENCE_LOST_S);
+            && radio_works
+            && current.is_none_or(|(_, recent, heard)| !recent && age(heard) > REFERENCE_LOST_S);
         if lowest_recent < self.reference || lost {
             self.reference = lowest_recent;
             self.offset_us = best
@@ -98,7 +119,7 @@ impl TeamClock {
                 .map_or(0, |(_, offset)| offset);
             return;
         }
-        if let Some((offset, _)) = current {
+        if let Some((offset, _, _)) = current {
             // Its estimate, extrapolated by the replica, also while it is not heard.
             self.offset_us = offset;
         }
@@ -159,6 +180,15 @@ mod tests {
             clock_drift_ppm: Some(0.0),
             round_trip: Some(Duration::from_millis(2)),
             clock_samples: 5,
+            clock_offset_one_way_us: offset_us.map(|o| o - 2_000),
+        }
+    }
+
+    /// The replica no longer counts it present (silent beyond its departed_after).
+    fn gone(p: PeerInfo) -> PeerInfo {
+        PeerInfo {
+            present: false,
+            ..p
         }
     }
 
@@ -197,14 +227,15 @@ mod tests {
             [peer(2, Some(1_000), 49.95), peer(3, Some(2_000), 49.95)],
         );
         assert_eq!(c.reference(), 2);
-        // The radio fails: nobody is heard any more; the replica still extrapolates.
+        // The radio fails: nobody is heard any more (nor present, to the replica, after
+        // its departed_after); the replica still extrapolates.
         for k in 1..100 {
             let now = 50.0 + f64::from(k);
             c.update(
                 at(now),
                 [
-                    peer(2, Some(1_000 + k as i64), 49.95),
-                    peer(3, Some(2_000), 49.95),
+                    gone(peer(2, Some(1_000 + k as i64), 49.95)),
+                    gone(peer(3, Some(2_000), 49.95)),
                 ],
             );
             assert_eq!(c.reference(), 2, "at {now} s the reference holds");
@@ -214,7 +245,10 @@ mod tests {
         // robot 2 has been missed for REFERENCE_LOST_S while robot 3 is heard.
         c.update(
             at(155.0),
-            [peer(2, Some(1_200), 49.95), peer(3, Some(2_500), 154.9)],
+            [
+                gone(peer(2, Some(1_200), 49.95)),
+                peer(3, Some(2_500), 154.9),
+            ],
         );
         assert_eq!(
             c.reference(),
@@ -234,17 +268,57 @@ mod tests {
         // Robot 1 falls silent for 3 s (lost frames) while robot 2 is heard.
         c.update(
             at(13.0),
-            [peer(1, Some(300), 10.0), peer(2, Some(400), 12.99)],
+            [gone(peer(1, Some(300), 10.0)), peer(2, Some(400), 12.99)],
         );
         assert_eq!(c.reference(), 1, "a short silence is no reason to switch");
-        // Until an estimate exists, a teammate cannot be the reference.
+        // Until an estimate or a stamp exists, a teammate cannot be the reference.
         let mut d = TeamClock::new(3);
-        d.update(at(1.0), [peer(1, None, 0.99)]);
+        let unknown = PeerInfo {
+            clock_offset_one_way_us: None,
+            ..peer(1, None, 0.99)
+        };
+        d.update(at(1.0), [unknown]);
         assert_eq!(
             d.reference(),
             3,
             "no estimate of robot 1 yet: its own clock"
         );
+    }
+
+    #[test]
+    fn under_a_budget_the_send_stamps_and_presence_keep_the_team_on_robot_1() {
+        // A league's budget: frames seconds apart, echoes rarer still. Robot 4 has an
+        // echo estimate of robot 3 only; of robot 1 it has the send stamps (its clock
+        // 7.18 s ahead, less a 20 ms transit). Robot 1 was last heard 8 s ago, but the
+        // replica still counts it present (three message intervals and more).
+        let mut four = TeamClock::new(4);
+        let one = PeerInfo {
+            clock_offset_us: None,
+            clock_offset_one_way_us: Some(7_180_000 - 20_000),
+            ..peer(1, None, 92.0)
+        };
+        four.update(at(100.0), [one.clone(), peer(3, Some(230_000), 99.0)]);
+        assert_eq!(
+            four.reference(),
+            1,
+            "robot 1 by its stamps, though 8 s silent"
+        );
+        // Robot 3 reads robot 1 by an echo estimate: the two agree within the transit.
+        let mut three = TeamClock::new(3);
+        three.update(at(100.0), [peer(1, Some(7_180_000), 99.0)]);
+        let apart = (four.team_s(at(100.0)) - three.team_s(at(100.0))).abs();
+        assert!(
+            apart < 0.05,
+            "robots 3 and 4 read the team clock {apart} s apart"
+        );
+        // Robot 1 stays silent 15 s more, still present: it is not given up.
+        four.update(at(115.0), [one.clone(), peer(3, Some(230_000), 114.0)]);
+        assert_eq!(four.reference(), 1, "a present reference is kept");
+        // The radio fails. Robot 1, silent longest, leaves the replica's present list
+        // first while robot 3 is still counted present: nobody is heard, so it is the
+        // outage, not robot 1 gone, and the reference holds.
+        four.update(at(130.0), [gone(one), peer(3, Some(230_000), 114.0)]);
+        assert_eq!(four.reference(), 1, "in an outage the reference holds");
     }
 
     #[test]

@@ -414,6 +414,45 @@ pub(super) struct PeerClock {
     /// When an echo to the peer last went out.
     pub(super) echoed_at: Option<Instant>,
     pub(super) estimate: ClockEstimate,
+    /// Its last frames' send stamps minus their receptions, µs (newest last, at most
+    /// [`ONE_WAY_SAMPLES`]): its clock minus ours, less each frame's transit.
+    one_way: VecDeque<i64>,
+}
+
+/// One-way samples kept per peer for [`PeerClock::one_way_offset_us`].
+const ONE_WAY_SAMPLES: usize = 9;
+
+impl PeerClock {
+    /// A frame stamped `stamp_us` on the peer's clock arrived at `now`.
+    pub(super) fn note_stamp(&mut self, stamp_us: u32, now: Instant) {
+        if self.one_way.len() == ONE_WAY_SAMPLES {
+            self.one_way.pop_front();
+        }
+        self.one_way
+            .push_back(wrapping_diff(stamp_us, stamp_of(now)));
+    }
+
+    /// The peer's clock minus ours from send stamps alone, µs (modulo 2^32, read as
+    /// signed): the median of its last frames' stamp − reception, so early by a typical
+    /// transit (milliseconds on a WLAN) and unmoved by one odd stamp. Coarse, but there
+    /// from the first frame: under a league's budget echoes need a teammate's frame to
+    /// follow one of ours within 655 ms, and an echo estimate may take minutes to come.
+    pub(super) fn one_way_offset_us(&self) -> Option<i64> {
+        let mut kept = [0i64; ONE_WAY_SAMPLES];
+        let n = self.one_way.len().min(ONE_WAY_SAMPLES);
+        if n == 0 {
+            return None;
+        }
+        for (slot, &v) in kept.iter_mut().zip(&self.one_way) {
+            *slot = v;
+        }
+        // No allocation: `Replica::peers` serves this to the team layer every tick.
+        let v = &mut kept[..n];
+        v.sort_unstable();
+        // The samples are relative to one reading of the wrapping clock: a peer whose
+        // offset sits at the ±35 min seam could straddle it, which no team does.
+        Some(v[v.len() / 2])
+    }
 }
 
 #[cfg(test)]
@@ -446,6 +485,35 @@ mod tests {
             t += 100_000;
         }
         (est, t)
+    }
+
+    #[test]
+    fn send_stamps_alone_give_the_offset_to_a_transit_and_one_odd_stamp_moves_nothing() {
+        // The peer's clock is 7.18 s ahead; its frames take 5-30 ms; one stamp is odd (a
+        // clock jump, or a forged frame).
+        let mut c = PeerClock::default();
+        assert_eq!(
+            c.one_way_offset_us(),
+            None,
+            "nothing before the first frame"
+        );
+        let offset = 7_180_000i64;
+        for k in 0..20u64 {
+            let sent = 1_000_000 + k * 3_000_000;
+            let transit = 5_000 + (k * 7_919) % 25_000;
+            let stamp = if k == 17 {
+                peer_stamp(sent, offset + 900_000_000, 0.0)
+            } else {
+                peer_stamp(sent, offset, 0.0)
+            };
+            c.note_stamp(stamp, Instant::from_micros(sent + transit));
+        }
+        let got = c.one_way_offset_us().expect("an offset");
+        let early = offset - got;
+        assert!(
+            (5_000..=30_000).contains(&early),
+            "stamps give the offset early by a transit: {early} µs"
+        );
     }
 
     #[test]

@@ -236,6 +236,7 @@ impl Replica {
             clock_drift_ppm: p.clock.estimate.drift_ppm(),
             round_trip: p.clock.estimate.min_round_trip(),
             clock_samples: p.clock.estimate.samples(),
+            clock_offset_one_way_us: p.clock.one_way_offset_us(),
         })
     }
 

@@ -177,6 +177,7 @@ impl Replica {
             return self.cfg.default_transit;
         };
         peer.clock.heard = Some((seq, now));
+        peer.clock.note_stamp(clock.stamp_us, now);
         if let Some(echo) = clock.echo.filter(|e| e.target == self.cfg.robot_id) {
             let outcome = match self.sent.sent_at(echo.seq16) {
                 Some(t1) => peer
