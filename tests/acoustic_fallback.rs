@@ -332,6 +332,46 @@ fn a_30_s_outage_keeps_one_goer_with_the_acoustic_fallback_in_a_hall_and_a_dry_r
     );
 }
 
+/// 95 s in the drawn world (every robot's clock its own), under `budget`, every link down
+/// from 60 s to 90 s, the fallback on in the default hall.
+fn drawn_outage(
+    seed: u64,
+    budget: Option<comms::BudgetSpec>,
+) -> huddle::sim::acoustic::OutageReport {
+    let cfg = SimConfig {
+        duration_s: 95.0,
+        seed,
+        snapshot_every_s: 0.0,
+        drawn_world: true,
+        budget,
+        outage: Some(OutageConfig {
+            start_s: 60.0,
+            duration_s: 30.0,
+        }),
+        acoustic: AcousticConfig {
+            enabled: true,
+            ..AcousticConfig::default()
+        },
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::new(cfg).expect("a valid configuration");
+    sim.run(|_| {});
+    sim.report(0.0).outage.expect("an outage report")
+}
+
+/// One seed's line of the team-clock tables.
+fn clock_row(seed: u64, on: &huddle::sim::acoustic::OutageReport) -> String {
+    format!(
+        "seed {seed}: one goer {:.2}% (two+ {:.2}%, none {:.2}%), team clocks within {:.3} ms (mean {:.3} ms), {} collided",
+        on.windows.outage_exactly_one_goer_pct,
+        on.windows.outage_conflict_pct,
+        on.windows.outage_no_goer_pct,
+        on.acoustic_team_clock_spread_max_ms,
+        on.acoustic_team_clock_spread_mean_ms,
+        on.acoustic_collided,
+    )
+}
+
 /// The drawn world gives every robot a clock of its own: up to 20 s apart, tens of ppm of
 /// drift. The slots run on the team clock each robot's replica estimates
 /// (`team::acoustic::TeamClock`), as on a daemon; on the robots' own clocks (before the
@@ -342,32 +382,8 @@ fn a_30_s_outage_keeps_one_goer_with_the_acoustic_fallback_in_a_hall_and_a_dry_r
 fn robots_whose_clocks_are_seconds_apart_take_turns_on_the_team_clock() {
     let mut rows = Vec::new();
     for seed in 1..=3 {
-        let cfg = SimConfig {
-            duration_s: 95.0,
-            seed,
-            snapshot_every_s: 0.0,
-            drawn_world: true,
-            outage: Some(OutageConfig {
-                start_s: 60.0,
-                duration_s: 30.0,
-            }),
-            acoustic: AcousticConfig {
-                enabled: true,
-                ..AcousticConfig::default()
-            },
-            ..SimConfig::default()
-        };
-        let mut sim = Simulation::new(cfg).expect("a valid configuration");
-        sim.run(|_| {});
-        let on = sim.report(0.0).outage.expect("an outage report");
-        rows.push(format!(
-            "seed {seed}: one goer {:.2}% (two+ {:.2}%, none {:.2}%), team clocks within {:.3} ms (mean {:.3} ms)",
-            on.windows.outage_exactly_one_goer_pct,
-            on.windows.outage_conflict_pct,
-            on.windows.outage_no_goer_pct,
-            on.acoustic_team_clock_spread_max_ms,
-            on.acoustic_team_clock_spread_mean_ms,
-        ));
+        let on = drawn_outage(seed, None);
+        rows.push(clock_row(seed, &on));
         let table = rows.join("\n");
         assert!(
             on.acoustic_team_clock_spread_max_ms > 0.0 && on.acoustic_team_clock_spread_max_ms < 30.0,
@@ -386,40 +402,15 @@ fn robots_whose_clocks_are_seconds_apart_take_turns_on_the_team_clock() {
 /// match each robot had an echo estimate of one or two teammates, read a different
 /// reference, and the team clocks were seconds apart (here seed 4: 9.2 s, 230 collisions,
 /// one goer 53% of the outage; `huddle sim --budget spl`, seeds 1–12: 0.45–15.8 s). The
-/// team clock now also reads a teammate's
-/// clock from its send stamps, and keeps a reference the replica still counts present.
+/// team clock now also reads a teammate's clock from its send stamps, and keeps a
+/// reference the replica still counts present.
 /// Seeds 4, 6, 8 (check seeds: the causes were traced on 1, 4 and 6).
 #[test]
 fn under_the_spl_budget_the_team_clocks_still_agree_and_one_robot_goes() {
     let mut rows = Vec::new();
     for seed in [4, 6, 8] {
-        let cfg = SimConfig {
-            duration_s: 95.0,
-            seed,
-            snapshot_every_s: 0.0,
-            drawn_world: true,
-            budget: Some(comms::BudgetSpec::SPL),
-            outage: Some(OutageConfig {
-                start_s: 60.0,
-                duration_s: 30.0,
-            }),
-            acoustic: AcousticConfig {
-                enabled: true,
-                ..AcousticConfig::default()
-            },
-            ..SimConfig::default()
-        };
-        let mut sim = Simulation::new(cfg).expect("a valid configuration");
-        sim.run(|_| {});
-        let on = sim.report(0.0).outage.expect("an outage report");
-        rows.push(format!(
-            "seed {seed}: one goer {:.2}% (two+ {:.2}%, none {:.2}%), team clocks within {:.1} ms, {} collided",
-            on.windows.outage_exactly_one_goer_pct,
-            on.windows.outage_conflict_pct,
-            on.windows.outage_no_goer_pct,
-            on.acoustic_team_clock_spread_max_ms,
-            on.acoustic_collided,
-        ));
+        let on = drawn_outage(seed, Some(comms::BudgetSpec::SPL));
+        rows.push(clock_row(seed, &on));
         let table = rows.join("\n");
         assert!(
             on.acoustic_team_clock_spread_max_ms < 100.0,
