@@ -171,6 +171,12 @@ impl SlotPlan {
         }
     }
 
+    /// The ids of the robots with a slot, in slot order.
+    pub fn ids(&self) -> impl Iterator<Item = u8> {
+        let first = self.first_id;
+        (0..self.slots).map(move |k| first + k)
+    }
+
     /// One cycle, s.
     pub fn cycle_s(&self) -> f64 {
         self.slot_s * f64::from(self.slots)
@@ -254,15 +260,22 @@ pub struct SoundFallback {
     /// The team clock the slots run on (this robot's own until
     /// [`SoundFallback::update_clock`] hears a lower id).
     clock: TeamClock,
-    /// Per teammate: its replica's count of echo samples of this robot's frames
-    /// (`PeerInfo::clock_samples`) and when it last grew (this robot's clock, s). A
-    /// teammate echoes a frame of ours only if it heard it.
-    echoes: Vec<(u8, u64, f64)>,
+    /// Per teammate: how often its replica has echoed this robot's frames. A teammate
+    /// echoes a frame of ours only if it heard it.
+    echoes: Vec<Echoes>,
     /// Whether this robot hears teammates but none has echoed its frames for
     /// [`UNHEARD_AFTER_S`]: its own sends are failing (see [`SoundFallback::claim`]).
     unheard: bool,
-    /// Whether echoes come often enough to tell (see [`SoundFallback::new`]).
-    detect_unheard: bool,
+}
+
+/// A teammate's echoes of this robot's frames, as its replica counts them.
+#[derive(Debug, Clone, Copy)]
+struct Echoes {
+    robot: u8,
+    /// Echo samples so far (`PeerInfo::clock_samples`).
+    samples: u64,
+    /// When `samples` last grew (this robot's clock), s.
+    grew_at_s: f64,
 }
 
 /// A robot that hears its teammates but whose frames none of them has echoed for this
@@ -307,7 +320,6 @@ impl SoundFallback {
             clock: TeamClock::new(me),
             echoes: Vec::new(),
             unheard: false,
-            detect_unheard: params.stale_after.as_secs_f64() <= UNHEARD_AFTER_S,
         }
     }
 
@@ -328,20 +340,31 @@ impl SoundFallback {
             peers.into_iter().inspect(|p| {
                 hearing |=
                     now.saturating_duration_since(p.last_heard).as_secs_f64() <= UNHEARD_AFTER_S;
-                match echoes.iter_mut().find(|e| e.0 == p.robot) {
-                    Some(e) if e.1 != p.clock_samples => *e = (p.robot, p.clock_samples, now_s),
+                let grown = Echoes {
+                    robot: p.robot,
+                    samples: p.clock_samples,
+                    grew_at_s: now_s,
+                };
+                match echoes.iter_mut().find(|e| e.robot == p.robot) {
+                    Some(e) if e.samples != p.clock_samples => *e = grown,
                     Some(_) => {}
-                    None => echoes.push((p.robot, p.clock_samples, now_s)),
+                    None => echoes.push(grown),
                 }
             }),
         );
         // Unheard: teammates are heard, one has echoed before, and none has for a while.
-        let echoed_once = self.echoes.iter().any(|e| e.1 > 0);
+        let echoed_once = self.echoes.iter().any(|e| e.samples > 0);
         let echoed_lately = self
             .echoes
             .iter()
-            .any(|e| e.1 > 0 && now_s - e.2 <= UNHEARD_AFTER_S);
-        self.unheard = self.detect_unheard && hearing && echoed_once && !echoed_lately;
+            .any(|e| e.samples > 0 && now_s - e.grew_at_s <= UNHEARD_AFTER_S);
+        self.unheard = self.detects_unheard() && hearing && echoed_once && !echoed_lately;
+    }
+
+    /// Whether echoes come often enough to tell an unheard robot: not when the team's
+    /// claims hold longer than [`UNHEARD_AFTER_S`] (see [`SoundFallback::new`]).
+    fn detects_unheard(&self) -> bool {
+        self.params.stale_after.as_secs_f64() <= UNHEARD_AFTER_S
     }
 
     /// Whether this robot hears its teammates but none echoes its frames (see
@@ -455,10 +478,7 @@ impl SoundFallback {
     /// decides.
     pub fn radio(&mut self, me: u8, radio: &[Candidate], stale_after: Duration) -> bool {
         let fresh = |id: u8| radio.iter().any(|c| c.robot == id && c.age <= stale_after);
-        let mates: Vec<u8> = (0..self.plan.slots)
-            .map(|k| self.plan.first_id + k)
-            .filter(|&id| id != me)
-            .collect();
+        let mates: Vec<u8> = self.plan.ids().filter(|&id| id != me).collect();
         self.radio_stale = mates.iter().any(|&id| !fresh(id));
         self.in_control = !mates.is_empty() && mates.iter().all(|&id| !fresh(id));
         self.in_control
@@ -509,7 +529,7 @@ impl SoundFallback {
     pub fn candidates(&mut self, me: u8, now_s: f64, radio: &[Candidate]) -> Vec<Candidate> {
         self.promote(now_s);
         let mut out = Vec::new();
-        for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
+        for id in self.plan.ids() {
             let by_radio = if id == me {
                 self.own_as_held(me, now_s, radio)
             } else {
@@ -547,10 +567,7 @@ impl SoundFallback {
     ) -> Vec<Candidate> {
         self.promote(now_s);
         let mut out = Vec::new();
-        for id in (0..self.plan.slots).map(|k| self.plan.first_id + k) {
-            if id == me {
-                continue;
-            }
+        for id in self.plan.ids().filter(|&id| id != me) {
             let by_radio = radio.iter().find(|c| c.robot == id);
             if by_radio.is_some_and(|c| c.age <= stale_after) {
                 continue;

@@ -498,6 +498,8 @@ pub fn run(
     let kick_off: BallEstimate = setup.robots[0].kick_off_ball(0.0);
     drop(setup);
 
+    // Read once: the trace is asked for per robot and per step.
+    let trace = trace();
     let spec = opts.impair.clone().unwrap_or_else(|| impair_spec(cfg));
     let group = driver::scratch_group().map_err(io("picking a scratch group"))?;
     // Under `--game`: the referee, listening to the group before the daemons start.
@@ -556,7 +558,7 @@ pub fn run(
             hello += "ADDW local.var.gc.state\nADDW local.var.gc.penalty\n";
         }
         hello += "ADDW local.var.team.#\nADDW +.var.machine.pass_to\n";
-        if air.is_some() && trace() {
+        if air.is_some() && trace {
             // What its microphone's decoder heard, for the trace.
             hello += "ADDW local.var.audio.heard\n";
         }
@@ -703,7 +705,7 @@ pub fn run(
                 let truth = world.robots[i].pose.at;
                 pose_sq += truth.distance(pose.at).powi(2);
                 pose_n += 1;
-                if trace() {
+                if trace {
                     let layer = robots[i]
                         .view
                         .pose
@@ -760,7 +762,7 @@ pub fn run(
                 let e2 = team.distance(truth).powi(2);
                 let c2 = (c.position() - fusion::nalgebra::Vector2::new(truth.x, truth.y))
                     .norm_squared();
-                if trace() {
+                if trace {
                     eprintln!(
                         "trace t={t:.2} robot={} err={:.3} speed={:.2} team={team:?} truth={truth:?} sees={} behind_ms={:.1}",
                         r.id,
@@ -785,7 +787,7 @@ pub fn run(
         }
         let goal = world.step(dt);
         if let Some(goal) = goal {
-            if trace() {
+            if trace {
                 eprintln!("goal t={t:.2} ball now {:?}", world.ball.at);
             }
             // The referee puts the ball back on the centre spot; each robot program tells
@@ -825,7 +827,7 @@ pub fn run(
             .map(|r| r.id)
             .collect();
         metrics.sample(t + dt, dt, visible, &goers);
-        if trace() {
+        if trace {
             // Who each robot names and whether it goes, when that changes.
             let named: Vec<(u8, bool)> =
                 robots.iter().map(|r| (r.view.goer, r.view.going)).collect();

@@ -438,16 +438,15 @@ impl PeerClock {
     /// from the first frame: under a league's budget echoes need a teammate's frame to
     /// follow one of ours within 655 ms, and an echo estimate may take minutes to come.
     pub(super) fn one_way_offset_us(&self) -> Option<i64> {
-        let mut kept = [0i64; ONE_WAY_SAMPLES];
-        let n = self.one_way.len().min(ONE_WAY_SAMPLES);
-        if n == 0 {
+        if self.one_way.is_empty() {
             return None;
         }
+        // No allocation: `Replica::peers` serves this to the team layer every tick.
+        let mut kept = [0i64; ONE_WAY_SAMPLES];
         for (slot, &v) in kept.iter_mut().zip(&self.one_way) {
             *slot = v;
         }
-        // No allocation: `Replica::peers` serves this to the team layer every tick.
-        let v = &mut kept[..n];
+        let v = &mut kept[..self.one_way.len()];
         v.sort_unstable();
         // The samples are relative to one reading of the wrapping clock: a peer whose
         // offset sits at the ±35 min seam could straddle it, which no team does.
