@@ -558,7 +558,7 @@ impl Written {
     fn stats(&mut self, handle: &mut impl GcBoard, t: &GameTracker, status_sent: u64) {
         let s = t.stats();
         for (key, n) in [
-            ("local.var.huddle.stats.gc.accepted", s.accepted),
+            (crate::team::GC_ACCEPTED_KEY, s.accepted),
             ("local.var.huddle.stats.gc.stale", s.stale),
             ("local.var.huddle.stats.gc.bad_length", s.bad_length),
             ("local.var.huddle.stats.gc.bad_header", s.bad_header),

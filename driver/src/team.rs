@@ -405,6 +405,8 @@ impl TeamCore {
             // The fallback's slots run on the team clock the replica's estimates give.
             self.shared.layer.update_team_clock(now, replica.peers());
         }
+        // Whether the radio works (with the GC's packets, `tick` below).
+        self.shared.layer.heard_teammates(now, replica.peers());
         if self.inputs.fed {
             tick(replica, now, &mut self.shared, &mut self.inputs);
         }
@@ -513,6 +515,10 @@ fn take(inputs: &mut Inputs, key: &str, value: &Value, stamp: Instant) {
     }
 }
 
+/// The GameController listener's count of accepted packets, rewritten (and so stamped)
+/// at each one.
+pub const GC_ACCEPTED_KEY: &str = "local.var.huddle.stats.gc.accepted";
+
 /// The penalised player numbers `local.var.gc.penalized` holds (floats; anything else,
 /// or a number out of 1–255, is nobody).
 fn penalized(board: &comms::Blackboard) -> Vec<u8> {
@@ -603,6 +609,11 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     }
     // The GameController listener's word on who is off the field (none without one).
     layer.set_penalties(&penalized(replica.blackboard()));
+    // Its last accepted packet: the radio's heartbeat for the acoustic fallback.
+    let accepted = Key::parse(GC_ACCEPTED_KEY).expect("a valid key");
+    if let Some(e) = replica.blackboard().get(&accepted) {
+        layer.heard_gamecontroller(team::seconds(e.stamp));
+    }
     // A goal the GameController announces (a score rose in its newest packet: the
     // listener keeps only the newest by `packetNumber`) puts the ball back, with no
     // robot program's ball reset (`TeamLayer::set_scores`).

@@ -55,6 +55,7 @@ use std::time::Duration;
 
 use comms::arbitration::{self, ArbitrationParams, Candidate, Decision, Posted};
 
+pub use crate::heartbeat::{RadioHeartbeat, GC_SILENT_S};
 pub use crate::team_clock::{TeamClock, WRAP_S};
 use serde::Serialize;
 
@@ -266,6 +267,11 @@ pub struct SoundFallback {
     /// Whether this robot hears teammates but none has echoed its frames for
     /// [`UNHEARD_AFTER_S`]: its own sends are failing (see [`SoundFallback::claim`]).
     unheard: bool,
+    /// Whether the radio was dead by the GameController's heartbeat: since when it was
+    /// silent and, once it works again, since when it works (this robot's clock, s). The
+    /// fallback hands back to the radio when every teammate's claim told since the silence
+    /// began has come (see [`SoundFallback::radio`]).
+    dead: Option<(f64, Option<f64>)>,
 }
 
 /// A teammate's echoes of this robot's frames, as its replica counts them.
@@ -320,6 +326,7 @@ impl SoundFallback {
             clock: TeamClock::new(me),
             echoes: Vec::new(),
             unheard: false,
+            dead: None,
         }
     }
 
@@ -473,15 +480,75 @@ impl SoundFallback {
         Some(message)
     }
 
-    /// Robot `me` with the radio claims `radio` it holds: whether the radio is silent (no
-    /// teammate with a slot has a claim fresher than `stale_after`), so that the fallback
-    /// decides.
-    pub fn radio(&mut self, me: u8, radio: &[Candidate], stale_after: Duration) -> bool {
+    /// Robot `me` in play at `now_s` with the radio claims `radio` it holds and the
+    /// radio's heartbeat `beat`: whether the radio is silent, so that the fallback
+    /// decides. Silent: dead by the GameController's heartbeat
+    /// ([`RadioHeartbeat::dead`]), or, with no GameController heard lately and some
+    /// teammate heard once, no teammate with a slot has a claim fresher than
+    /// `stale_after`; and after a dead radio, until every teammate has told a claim since
+    /// it came back. While the GameController is heard the radio works: claims are only
+    /// old (under a budget a claim holds 15 s, out of play nobody tells one).
+    pub fn radio(
+        &mut self,
+        me: u8,
+        radio: &[Candidate],
+        stale_after: Duration,
+        beat: &RadioHeartbeat,
+        now_s: f64,
+    ) -> bool {
         let fresh = |id: u8| radio.iter().any(|c| c.robot == id && c.age <= stale_after);
         let mates: Vec<u8> = self.plan.ids().filter(|&id| id != me).collect();
-        self.radio_stale = mates.iter().any(|&id| !fresh(id));
-        self.in_control = !mates.is_empty() && mates.iter().all(|&id| !fresh(id));
+        let dead = beat.dead(now_s);
+        // Back from the dead: the radio works, but the teammates' claims are still those
+        // from before the outage until each tells a new one. Handing back at once left
+        // robots deciding on different mixes of old radio claims and sounded ones (no
+        // goer for 6.5 s after a 30 s outage); the fallback keeps deciding on the newest
+        // of each (radio or sound) until every teammate's new claim has come, for at most
+        // `stale_after`.
+        let back = match self.dead {
+            _ if dead => {
+                // Claims heard since the last thing the radio carried are new.
+                let silent_from = beat.last_heard_s().unwrap_or(now_s);
+                let since = self.dead.map_or(silent_from, |(s, _)| s.min(silent_from));
+                self.dead = Some((since, None));
+                None
+            }
+            Some((since, None)) => {
+                self.dead = Some((since, Some(now_s)));
+                Some((since, now_s))
+            }
+            Some((since, Some(back_s))) => Some((since, back_s)),
+            None => None,
+        };
+        let handing_back = back.is_some_and(|(since, back_s)| {
+            let told_since = |id: u8| {
+                radio
+                    .iter()
+                    .any(|c| c.robot == id && now_s - c.age.as_secs_f64() > since)
+            };
+            now_s - back_s < stale_after.as_secs_f64() && mates.iter().any(|&id| !told_since(id))
+        });
+        if back.is_some() && !handing_back {
+            self.dead = None;
+        }
+        let by_age = !beat.working(now_s) && beat.heard_a_teammate();
+        let silent = dead || handing_back;
+        self.radio_stale = silent || (by_age && mates.iter().any(|&id| !fresh(id)));
+        self.in_control =
+            !mates.is_empty() && (silent || (by_age && mates.iter().all(|&id| !fresh(id))));
         self.in_control
+    }
+
+    /// Robot out of play (the GameController says anything but Playing, or it is
+    /// penalised): nobody plays the ball and nobody tells a claim, so the fallback neither
+    /// decides nor sounds. Sounding in Set would also sound over the referee's whistle,
+    /// which every team's robots are listening for.
+    pub fn out_of_play(&mut self) {
+        self.radio_stale = false;
+        self.in_control = false;
+        // A restart after an outage: every claim is told again at its kick-off, by radio
+        // if it works.
+        self.dead = None;
     }
 
     /// What this robot posted on the radio at `now_s` while the radio decided: its
@@ -712,6 +779,13 @@ mod tests {
         assert!(!plan.starts_in(1, 0.0, 0.01), "the goalkeeper has no slot");
     }
 
+    /// A robot in a lab: no GameController, teammates heard (claims' age decides).
+    pub(super) fn lab() -> RadioHeartbeat {
+        let mut beat = RadioHeartbeat::default();
+        beat.heard_teammate(0.0);
+        beat
+    }
+
     fn radio_claim(robot: u8, h: f64, going: bool, age_s: f64) -> Candidate {
         Candidate {
             robot,
@@ -746,7 +820,7 @@ mod tests {
             ]
         };
         assert!(
-            !fb.radio(3, &at(11.55), stale),
+            !fb.radio(3, &at(11.55), stale, &lab(), 11.55),
             "fresh radio: the arbiter decides"
         );
         fb.posted(
@@ -758,7 +832,7 @@ mod tests {
         );
         // At 12 s the radio is silent: the fallback keeps the agreed goer.
         assert!(
-            fb.radio(3, &at(12.0), stale),
+            fb.radio(3, &at(12.0), stale, &lab(), 12.0),
             "silent radio: the fallback decides"
         );
         let goer = |fb: &mut SoundFallback, t: f64| {
@@ -789,6 +863,77 @@ mod tests {
     }
 
     #[test]
+    fn under_a_budget_the_gamecontrollers_packets_tell_a_dead_radio_from_a_quiet_one() {
+        // The SPL's budget: claims hold 15 s. Robot 3's teammates last told theirs at 5 s;
+        // the WLAN fails at 10 s and the GameController's packets stop with it.
+        let (plan, _, mut fb) = four_slot_fallback();
+        let stale = Duration::from_secs(15);
+        let told = |t: f64| -> Vec<Candidate> {
+            [2, 4, 5]
+                .map(|id| radio_claim(id, f64::from(id), id == 2, t - 5.0))
+                .to_vec()
+        };
+        let mut beat = RadioHeartbeat::default();
+        let mut t = 0.0;
+        while t <= 10.0 {
+            beat.heard_gamecontroller(t);
+            t += 0.5;
+        }
+        beat.heard_teammate(9.8);
+        let start = |fb: &SoundFallback, t: f64| fb.next_slot(3, t).expect("robot 3 has a slot");
+        let quiet = Posted {
+            h: 3.0,
+            going: false,
+        };
+        assert!(!fb.radio(3, &told(12.9), stale, &beat, 12.9));
+        let s = start(&fb, 12.9);
+        assert_eq!(
+            fb.claim(3, quiet, s),
+            None,
+            "GC heard 2.9 s ago: nothing sounded"
+        );
+        assert!(
+            fb.radio(3, &told(13.1), stale, &beat, 13.1),
+            "neither the GC nor a teammate for 3.1 s: the fallback decides (its claims are \
+             10 s from stale)"
+        );
+        let s = start(&fb, 13.1);
+        assert!(
+            fb.claim(3, quiet, s).is_some(),
+            "and robot 3 sounds its claim"
+        );
+        // The GameController is heard again at 25 s: the radio is back, but the claims
+        // are those from before the outage. The fallback keeps deciding until every
+        // teammate has told one since.
+        beat.heard_gamecontroller(25.0);
+        assert!(fb.radio(3, &told(25.2), stale, &beat, 25.2), "handing back");
+        let mut new = told(25.2);
+        new[0].age = Duration::from_millis(100);
+        new[1].age = Duration::from_millis(50);
+        assert!(
+            fb.radio(3, &new, stale, &beat, 25.2),
+            "robot 5 has not told yet"
+        );
+        new[2].age = Duration::ZERO;
+        assert!(
+            !fb.radio(3, &new, stale, &beat, 25.2),
+            "all told: the radio decides"
+        );
+        let s = start(&fb, 25.2);
+        assert_eq!(fb.claim(3, quiet, s), None, "and nothing is sounded");
+        // A team that never lost its radio: claims 20 s old with the GameController heard
+        // are only old (out of play, or a budget's quiet spell).
+        let (_, _, mut fresh) = four_slot_fallback();
+        assert!(
+            !fresh.radio(3, &told(25.2), stale, &beat, 25.2),
+            "not the fallback's"
+        );
+        // In a lab (no GameController ever) the claims' age decides, as before.
+        assert!(fresh.radio(3, &told(25.2), stale, &lab(), 25.2));
+        assert!(plan.slot_of(3).is_some());
+    }
+
+    #[test]
     fn a_going_claim_whose_slot_went_by_unheard_loses_the_margin() {
         let (plan, stale, mut fb) = four_slot_fallback();
         let at = |t: f64| {
@@ -805,7 +950,7 @@ mod tests {
                 going: false,
             },
         );
-        assert!(fb.radio(3, &at(10.5), stale));
+        assert!(fb.radio(3, &at(10.5), stale, &lab(), 10.5));
         let goer = |fb: &mut SoundFallback, t: f64| {
             let c = fb.candidates(3, t, &at(t));
             fb.decide(&c).goer
@@ -877,7 +1022,7 @@ mod tests {
         // Robot 5 hears it 30 ms later on its own clock, 20.9 s apart from robot 4's:
         // the slot still names robot 4, and the claim counts from the slot's end.
         let heard_at_five = next + 7.3 - (-13.6) + 0.03;
-        five.radio(5, &[], Duration::from_millis(1));
+        five.radio(5, &[], Duration::from_millis(1), &lab(), 0.0);
         five.hear(5, &claim_message(0.5, true), heard_at_five);
         let end_at_five = heard_at_five - 0.03 + plan.slot_s;
         let before = five.candidates(5, end_at_five - 0.05, &[]);
@@ -931,7 +1076,10 @@ mod tests {
                 comms::Instant::from_micros((t * 1e6) as u64),
                 [2, 4, 5].map(|id| peer(id, t - 0.01, samples)),
             );
-            assert!(!fb.radio(3, &fresh(), stale), "the radio decides");
+            assert!(
+                !fb.radio(3, &fresh(), stale, &lab(), t),
+                "the radio decides"
+            );
             if fb.unheard() && sounded_at.is_none() {
                 sounded_at = Some(t);
                 let m = fb.claim(

@@ -72,7 +72,7 @@ fn play(paths: &[Path; 4], outage_at_s: f64) -> (usize, Option<f64>) {
                 .collect();
             let h = paths[i].h(t);
             let fb = &mut robots[i];
-            let decision = if fb.radio(me, &heard, params.stale_after) {
+            let decision = if fb.radio(me, &heard, params.stale_after, &super::tests::lab(), t) {
                 let claims = fb.candidates(me, t, &heard);
                 fb.decide(&claims)
             } else {

@@ -264,6 +264,8 @@ pub struct TeamLayer {
     /// Whether it goes by the fallback's decision while the radio is silent (`None`: the
     /// arbiter decides).
     sound_going: Option<bool>,
+    /// When the GameController and the teammates were last heard: whether the radio works.
+    beat: crate::heartbeat::RadioHeartbeat,
     /// Per robot (index = id − 1): the GameController says it is penalised (this robot
     /// included). See [`TeamLayer::set_penalties`].
     penalized: Vec<bool>,
@@ -370,6 +372,7 @@ impl TeamLayer {
             policy: PolicyState::default(),
             sound: None,
             sound_going: None,
+            beat: crate::heartbeat::RadioHeartbeat::default(),
             penalized: vec![false; team.max(usize::from(id))],
             penalty_told: false,
             in_play: true,
@@ -591,6 +594,9 @@ impl TeamLayer {
     pub fn decide(&mut self, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
         let t_s = seconds(local_now);
         let mut heard = arbitration::heard(board, local_now);
+        // Every claim told, a penalised teammate's "I am out" too: the fallback hands back
+        // to the radio once each teammate has told one since an outage.
+        let told = self.sound.is_some().then(|| heard.clone());
         // A penalised teammate is off the field: its last claim (going, perhaps) no longer
         // counts, by the GameController's word or by its own.
         heard.retain(|c| {
@@ -599,10 +605,27 @@ impl TeamLayer {
         let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
         self.decided_at_s = t_s;
         let stale_after = self.arbiter.params().stale_after;
+        let in_play = self.in_play && !self.penalized();
+        let beat = self.beat;
         let fallback = self.sound.as_mut().and_then(|sound| {
+            if !in_play {
+                sound.out_of_play();
+                return None;
+            }
             sound
-                .radio(self.id, &heard, stale_after)
+                .radio(
+                    self.id,
+                    told.as_deref().unwrap_or(&heard),
+                    stale_after,
+                    &beat,
+                    t_s,
+                )
                 .then(|| sound.candidates(self.id, t_s, &heard))
+        });
+        // A teammate the GameController penalised is off the field, by sound as by radio.
+        let fallback = fallback.map(|mut claims| {
+            claims.retain(|c| c.robot == self.id || !self.is_out(c.robot));
+            claims
         });
         let holding = self.kick_off_hold(t_s);
         if !holding || self.penalized() {
@@ -743,6 +766,12 @@ impl TeamLayer {
         headroom: Option<i64>,
     ) -> (Vec<(Key, Value)>, bool) {
         let t = seconds(local_now);
+        if self.beat.dead(t) {
+            // Nobody would hear it, and a league counts it: the team's frames into a dead
+            // radio left it paced into silence for a minute after a 30 s outage. What
+            // changed meanwhile is told when the radio is back (nothing was told since).
+            return (Vec::new(), false);
+        }
         let mut writes = vec![(arbitration::heuristic_key(), Value::from(posted))];
         if self.penalized() {
             // It tells the team once that it is out (a goer's teammates must not wait
@@ -870,9 +899,10 @@ impl TeamLayer {
     }
 
     /// What this robot sounds if its slot begins now (`t_s`, its clock): its claim while
-    /// the radio is stale.
+    /// the radio is stale, in play (never out of play or penalised: see
+    /// [`crate::acoustic::SoundFallback::out_of_play`]).
     pub fn sound_claim(&mut self, t_s: f64) -> Option<audio::Message> {
-        if !self.alive {
+        if !self.alive || !self.in_play || self.penalized() {
             return None;
         }
         let posted = Posted {
@@ -880,6 +910,32 @@ impl TeamLayer {
             going: self.claims_ball(),
         };
         self.sound.as_mut()?.claim(self.id, posted, t_s)
+    }
+
+    /// This robot accepted a GameController packet at `t_s` (its clock): the radio's
+    /// heartbeat (see [`crate::heartbeat`]).
+    pub fn heard_gamecontroller(&mut self, t_s: f64) {
+        self.beat.heard_gamecontroller(t_s);
+    }
+
+    /// The replica's view of the teammates at `now` (`comms::Replica::peers`): when a
+    /// teammate was last heard, for the radio's heartbeat. Call it every tick.
+    pub fn heard_teammates(
+        &mut self,
+        now: Instant,
+        peers: impl IntoIterator<Item = comms::PeerInfo>,
+    ) {
+        if let Some(last) = peers.into_iter().map(|p| p.last_heard).max() {
+            let ago = now.saturating_duration_since(last);
+            self.beat.heard_teammate(seconds(now) - ago.as_secs_f64());
+        }
+    }
+
+    /// Whether the radio is dead at `t_s` by the GameController's heartbeat (see
+    /// [`crate::heartbeat::RadioHeartbeat::dead`]): the layer then tells the team
+    /// nothing, and the acoustic fallback decides.
+    pub fn radio_dead(&self, t_s: f64) -> bool {
+        self.beat.dead(t_s)
     }
 
     /// The replica's view of the teammates at `now` (`comms::Replica::peers`): the acoustic

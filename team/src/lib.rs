@@ -40,6 +40,7 @@ pub mod calibration;
 pub mod contract;
 pub mod frames;
 pub mod geometry;
+pub mod heartbeat;
 mod layer;
 pub mod policy;
 mod team_clock;

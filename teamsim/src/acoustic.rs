@@ -129,6 +129,12 @@ impl super::Simulation {
             .sample(&o, t_s, self.cfg.physics_dt_s, visible, goers, near);
     }
 
+    /// What the room carried so far (`None` without the fallback): how often robots
+    /// sounded, and what their decoders made of it, outage or not.
+    pub fn acoustic_stats(&self) -> Option<AcousticStats> {
+        self.acoustic.as_ref().map(|c| c.stats)
+    }
+
     /// The outage's figures for the report, when there was one.
     pub(super) fn outage_report(&self) -> Option<OutageReport> {
         let o = self.cfg.outage?;

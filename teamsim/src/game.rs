@@ -644,7 +644,9 @@ impl Simulation {
                 // (The draw is made for a deaf robot too: deafening one robot leaves the
                 // others' receptions as they were.)
                 let lost = game.rng.random::<f64>() < game.loss;
-                if lost || game.deaf.get(i).copied().unwrap_or(false) {
+                // A WLAN outage (`--outage`) takes the GameController's packets too.
+                let outage = self.cfg.outage.is_some_and(|o| o.contains(t_s));
+                if lost || outage || game.deaf.get(i).copied().unwrap_or(false) {
                     game.tally.packets_lost += 1;
                     continue;
                 }
@@ -654,6 +656,9 @@ impl Simulation {
                 if tracker.receive(now, game.gc, &bytes) != Ok(gamecontroller::Received::Accepted) {
                     continue;
                 }
+                // The radio's heartbeat (`team::heartbeat`), as the daemon's layer takes
+                // it from its listener.
+                self.robots[i].heard_gamecontroller(robot::seconds(local));
                 // What the daemon does with each packet (driver::gamecontroller).
                 if let (Some(budget), Some(replica)) = (&game.budget, self.harness.replica_mut(i)) {
                     let whistle = self.robots[i].play_whistle_at();

@@ -618,6 +618,14 @@ impl Simulation {
         self.harness.run_until(Time::from_secs_f64(t));
         self.referee_count(t);
         self.referee_step(t);
+        // Whether the radio works (with the GC's packets in `referee_step`), as a
+        // daemon's layer learns it from its replica every tick.
+        for i in 0..self.robots.len() {
+            if let Some(replica) = self.harness.replica(i) {
+                let now = self.harness.local_now(i);
+                self.robots[i].heard_teammates(now, replica.peers());
+            }
+        }
         self.acoustic_step(t);
         let mut ticked = Vec::new();
         // Built once a step, not per robot and write (each build parses and allocates).
