@@ -25,6 +25,11 @@
 /// GameController within this long takes the radio for working.
 pub const GC_SILENT_S: f64 = 3.0;
 
+/// A teammate heard this long after the GameController's last packet shows the radio
+/// outlived the GameController, s (two of its packet periods: in a real outage the last
+/// frame of each comes within a period or so of the other).
+pub const TEAM_AFTER_GC_S: f64 = 1.0;
+
 /// When this robot last heard the GameController and any teammate (its clock, s).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RadioHeartbeat {
@@ -49,11 +54,21 @@ impl RadioHeartbeat {
         self.gc_heard_s.is_some_and(|t| now_s - t <= GC_SILENT_S)
     }
 
-    /// Whether the radio is dead at `now_s`: the GameController was heard once, and
-    /// neither it nor any teammate has been for [`GC_SILENT_S`].
+    /// Whether the radio is dead at `now_s`: the GameController was heard once, neither it
+    /// nor any teammate has been for [`GC_SILENT_S`], and no teammate was heard after the
+    /// GameController fell silent (more than [`TEAM_AFTER_GC_S`] after its last packet:
+    /// then the GameController went, or this robot stopped hearing it, not the radio).
+    /// Without that last condition a robot deaf to the GameController alone took the
+    /// radio for dead at every 3 s gap in the team's frames, common under a budget, and
+    /// held its own.
     pub fn dead(&self, now_s: f64) -> bool {
-        self.gc_heard_s.is_some_and(|t| now_s - t > GC_SILENT_S)
-            && self.mate_heard_s.is_none_or(|t| now_s - t > GC_SILENT_S)
+        let Some(gc) = self.gc_heard_s else {
+            return false;
+        };
+        now_s - gc > GC_SILENT_S
+            && self
+                .mate_heard_s
+                .is_none_or(|m| now_s - m > GC_SILENT_S && m <= gc + TEAM_AFTER_GC_S)
     }
 
     /// When the radio last carried anything: the GameController or a teammate, s.
@@ -76,20 +91,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_silent_gamecontroller_with_a_teammate_still_heard_is_not_a_dead_radio() {
+    fn the_radio_is_dead_when_the_gamecontroller_and_the_team_fall_silent_together() {
         let mut beat = RadioHeartbeat::default();
         assert!(
             !beat.dead(100.0) && !beat.working(100.0),
             "no GC ever: no answer"
         );
+        // The WLAN fails just after 10.4 s: the GC's last packet at 10 s, a teammate's
+        // last frame at 10.4 s.
         beat.heard_gamecontroller(10.0);
-        beat.heard_teammate(12.5);
+        beat.heard_teammate(10.4);
         assert!(!beat.working(13.1), "the GC silent for 3.1 s");
-        assert!(
-            !beat.dead(13.1),
-            "but a teammate heard 0.6 s ago: the GC went, not the radio"
-        );
-        assert!(beat.dead(15.6), "neither for 3.1 s");
+        assert!(!beat.dead(13.1), "a teammate heard 2.7 s ago");
+        assert!(beat.dead(13.5), "neither for 3.1 s");
         beat.heard_gamecontroller(15.7);
         assert!(
             beat.working(15.8) && !beat.dead(15.8),
@@ -100,5 +114,23 @@ mod tests {
             beat.working(18.6),
             "an older packet does not move the last heard back"
         );
+    }
+
+    #[test]
+    fn a_robot_deaf_to_the_gamecontroller_alone_never_takes_the_radio_for_dead() {
+        // The GC's packets stop reaching this robot at 10 s; its teammates' frames still
+        // come, a few seconds apart as under a budget.
+        let mut beat = RadioHeartbeat::default();
+        beat.heard_gamecontroller(10.0);
+        beat.heard_teammate(9.0);
+        assert!(!beat.dead(12.9));
+        assert!(beat.dead(13.1), "nothing heard since: it cannot tell yet");
+        beat.heard_teammate(13.5);
+        for t in [16.6, 20.0, 60.0] {
+            assert!(
+                !beat.dead(t),
+                "a teammate was heard after the GC fell silent: the radio works ({t} s)"
+            );
+        }
     }
 }
