@@ -613,7 +613,9 @@ pub fn run(
                 break;
             }
             // Robots the referee carried off or back: each program tells its layer where.
-            for (i, spot) in g.step(t, &mut world, &robots, &homes, cfg)? {
+            // The WLAN's outage takes the GameController's packets too.
+            let radio_down = outage_window.is_some_and(|o| o.contains(t));
+            for (i, spot) in g.step(t, &mut world, &robots, &homes, cfg, radio_down)? {
                 place(&mut daemons[i], &spot)?;
             }
         }

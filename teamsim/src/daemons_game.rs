@@ -460,6 +460,7 @@ impl GcSide {
         robots: &[RemoteRobot],
         homes: &[Vec2],
         cfg: &SimConfig,
+        radio_down: bool,
     ) -> Result<Vec<(usize, Pose)>, DaemonsError> {
         self.count_frames(t_s);
         let mut placed = Vec::new();
@@ -470,7 +471,9 @@ impl GcSide {
             self.tally.packets += 1;
             self.first_packet_at.get_or_insert_with(Instant::now);
             for to in &self.listeners {
-                if self.rng.random::<f64>() < self.loss {
+                // (Drawn in an outage too, so that it moves no other draw.)
+                let lost = self.rng.random::<f64>() < self.loss;
+                if lost || radio_down {
                     self.tally.packets_lost += 1;
                     continue;
                 }
