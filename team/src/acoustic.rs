@@ -323,7 +323,7 @@ impl SoundFallback {
             posts: VecDeque::new(),
             radio_stale: false,
             in_control: false,
-            clock: TeamClock::new(me),
+            clock: TeamClock::among(me, plan.first_id),
             echoes: Vec::new(),
             unheard: false,
             dead: None,
