@@ -16,6 +16,11 @@
 //! clock, its teammates read robot 1's through their estimates, and they agree to the
 //! estimate's error (the path asymmetry, a few ms on a WLAN: `tests/shared_time.rs`).
 //!
+//! The acoustic fallback's clock ([`TeamClock::among`]) takes its reference among the
+//! field players only: in a game under a budget the goalkeeper (no slot, little to tell)
+//! can go unheard for over a minute, and the robots gave it up at different moments, one
+//! of them 1.5 s into an outage.
+//!
 //! **It does not move when the radio fails.** A reference is only given up for a lower
 //! id heard recently, or when it has not been heard for [`REFERENCE_LOST_S`], nor is
 //! present, while some other teammate is heard within [`RECENT_S`] (the radio works; the
