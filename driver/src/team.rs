@@ -972,6 +972,55 @@ mod core_tests {
     }
 
     #[test]
+    fn while_the_gamecontroller_and_the_team_are_silent_the_layer_tells_nothing() {
+        // Robot 2 hears the GameController (its listener's accepted counter, rewritten at
+        // each packet) every 0.5 s until 3 s, and no teammate: at 6.1 s the radio is dead
+        // by the heartbeat, and the layer holds its claim (a league would count frames
+        // nobody hears) until the GC is heard again.
+        let key = comms::arbitration::heuristic_key();
+        let accepted = |r: &mut Replica, now, n: i64| {
+            r.set(now, super::GC_ACCEPTED_KEY, Value::Int(n))
+                .expect("a local key");
+        };
+        let version = |r: &Replica| r.blackboard().get(&key).map(|e| e.version);
+        let mut now = Instant::from_micros(1_000_000);
+        let (mut core, mut replica) = robot_2_at_the_origin(now);
+        let mut packets = 0;
+        let mut told_at_6 = None;
+        while now < Instant::from_micros(7_000_000) {
+            if now.as_micros() <= 3_000_000 && now.as_micros().is_multiple_of(500_000) {
+                packets += 1;
+                accepted(&mut replica, now, packets);
+            }
+            cycle(&mut core, &mut replica, now, &[1.5, 0.0, 0.01, 0.0, 0.01]);
+            if now.as_micros() == 6_200_000 {
+                told_at_6 = version(&replica);
+            }
+            now += Duration::from_millis(40);
+        }
+        assert!(
+            core.shared.layer.radio_dead(7.0),
+            "neither the GC nor a teammate since 3 s"
+        );
+        assert!(
+            told_at_6.is_some(),
+            "the claim was told while the GC was heard"
+        );
+        assert_eq!(
+            version(&replica),
+            told_at_6,
+            "nothing told from 6.2 s to 7 s (the radio dead)"
+        );
+        accepted(&mut replica, now, packets + 1);
+        cycle(&mut core, &mut replica, now, &[1.5, 0.0, 0.01, 0.0, 0.01]);
+        assert!(!core.shared.layer.radio_dead(team::seconds(now)));
+        assert!(
+            version(&replica) > told_at_6,
+            "the claim is told again at the GC's next packet"
+        );
+    }
+
+    #[test]
     fn a_goal_the_gamecontroller_announces_puts_the_ball_back_with_no_program_reset() {
         // Robot 2 sees the ball 1.5 m ahead while the GC's packets say 0:0; then a packet
         // says 1:0 (a goal). With no ball reset from the robot program, the layer's team
