@@ -30,6 +30,12 @@ pub const GC_SILENT_S: f64 = 3.0;
 /// frame of each comes within a period or so of the other).
 pub const TEAM_AFTER_GC_S: f64 = 1.0;
 
+/// A GameController silent this long is forgotten, s: the heartbeat gives no answer again
+/// and the claims' age decides, as in a lab. While the radio is dead the layer holds its
+/// frames, so a team that fell quiet when the GameController was closed for good (after a
+/// game, every robot out of play) would otherwise hold them until it heard one again.
+pub const GC_FORGOTTEN_S: f64 = 120.0;
+
 /// When this robot last heard the GameController and any teammate (its clock, s).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RadioHeartbeat {
@@ -60,12 +66,14 @@ impl RadioHeartbeat {
     /// then the GameController went, or this robot stopped hearing it, not the radio).
     /// Without that last condition a robot deaf to the GameController alone took the
     /// radio for dead at every 3 s gap in the team's frames, common under a budget, and
-    /// held its own.
+    /// held its own. A GameController silent for [`GC_FORGOTTEN_S`] is forgotten.
     pub fn dead(&self, now_s: f64) -> bool {
         let Some(gc) = self.gc_heard_s else {
             return false;
         };
-        now_s - gc > GC_SILENT_S
+        let silent_s = now_s - gc;
+        silent_s > GC_SILENT_S
+            && silent_s <= GC_FORGOTTEN_S
             && self
                 .mate_heard_s
                 .is_none_or(|m| now_s - m > GC_SILENT_S && m <= gc + TEAM_AFTER_GC_S)
@@ -113,6 +121,18 @@ mod tests {
         assert!(
             beat.working(18.6),
             "an older packet does not move the last heard back"
+        );
+    }
+
+    #[test]
+    fn a_gamecontroller_silent_for_two_minutes_is_forgotten() {
+        let mut beat = RadioHeartbeat::default();
+        beat.heard_gamecontroller(10.0);
+        beat.heard_teammate(10.2);
+        assert!(beat.dead(129.9), "a long outage is still an outage");
+        assert!(
+            !beat.dead(130.1) && !beat.working(130.1),
+            "then no answer: the claims' age decides, as in a lab"
         );
     }
 
