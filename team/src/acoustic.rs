@@ -4,8 +4,8 @@
 //! **Slots.** The seed's plan has three sender basics; a team has four field players. So a
 //! robot sounds only in its own slot of a repeating cycle on the team clock
 //! ([`TeamClock`]: the lowest field player's clock as the replica estimates it from the
-//! radio's echoes, kept through an outage): the slot a message started in says who sent it, and
-//! the sender basic is free to carry data. The daemon (`huddle daemon --audio-fallback`)
+//! radio's echoes, kept through an outage): the slot a message started in says who sent
+//! it, and the sender basic is free to carry data. The daemon (`huddle daemon --audio-fallback`)
 //! and the simulator drive the same code: each updates the clock from its replica every
 //! tick ([`SoundFallback::update_clock`]) and sounds the claim at each
 //! [`SoundFallback::next_slot`]. A slot is one tone plus a guard ([`AcousticConfig::guard_s`]). Both are
@@ -17,7 +17,8 @@
 //!
 //! **Decision.** While the radio is silent (dead by the GameController's heartbeat,
 //! [`crate::heartbeat`]; without a GameController, no teammate's radio claim fresher than
-//! the arbitration's staleness limit), in play, the fallback decides, on the claims this robot holds:
+//! the arbitration's staleness limit), in play, the fallback decides, on the claims this
+//! robot holds:
 //! each field player's newest, by radio (the last one heard before the outage) or by
 //! sound, its own as the team holds it (what it posted when it last heard a teammate by
 //! radio, then what it sounded, quantised), and judged by the same rules as its
