@@ -87,6 +87,11 @@ impl RadioHeartbeat {
         }
     }
 
+    /// Whether the GameController was heard once, and not since `t_s`.
+    pub fn gc_silent_since(&self, t_s: f64) -> bool {
+        self.gc_heard_s.is_some_and(|g| g <= t_s)
+    }
+
     /// Whether any teammate was ever heard: a radio that never carried a teammate's
     /// frame has not failed (a robot starting up).
     pub fn heard_a_teammate(&self) -> bool {

@@ -207,3 +207,36 @@ fn a_goal_whistle_keeps_the_gc_s_figure_for_the_pacing_clock() {
         "a goal's whistle: the GC's figure"
     );
 }
+
+#[test]
+fn a_kick_off_whistle_stands_while_the_gamecontroller_is_silent() {
+    // Scenario: GameController3 says Set until 15 s after the kick-off's whistle; the
+    // program hears it at 190 s, and the WLAN dies at 200 s with the GC's last word Set.
+    // The whistle stands through the silence (the GC says nothing, not Set), and is
+    // dropped once the GC is heard saying Set past the trust.
+    let (mut r, cfg) = robot(0.5);
+    let board = Blackboard::new(2);
+    let mut t = 180.0;
+    while t <= 200.0 {
+        r.heard_gamecontroller(t);
+        gc_says(&mut r, "set");
+        if (t - 190.0).abs() < 1e-9 {
+            assert_eq!(r.heard_whistle(190.0), Some(Whistle::PlayStarted(190.0)));
+        }
+        t += 0.5;
+    }
+    for t in [211.0, 225.0] {
+        r.sense(&cfg, at(t), &Senses::default(), &board, false);
+        assert!(
+            r.in_play,
+            "the GC silent since 200 s: still in play at {t} s"
+        );
+    }
+    r.heard_gamecontroller(226.0);
+    gc_says(&mut r, "set");
+    r.sense(&cfg, at(226.0), &Senses::default(), &board, false);
+    assert!(
+        !r.in_play,
+        "the GC heard saying Set past the trust: out of play"
+    );
+}
