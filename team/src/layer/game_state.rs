@@ -157,20 +157,26 @@ impl TeamLayer {
     }
 
     /// A whistle older than [`WHISTLE_TRUST_S`] at `now_s` is dropped: the
-    /// GameController's word counts again, if it is current (heard within
-    /// [`crate::heartbeat::GC_SILENT_S`], or never heard at all). Called at each tick.
+    /// GameController's word counts again; a play whistle only on the GC's current word
+    /// (heard within [`crate::heartbeat::GC_SILENT_S`], or never heard at all). Called at
+    /// each tick.
     pub(super) fn whistle_timeout(&mut self, now_s: f64) {
         let at = match self.whistle {
             Some(Whistle::PlayStarted(at) | Whistle::Goal(at)) => at,
             None => return,
         };
-        // Only on the GameController's current word: a GC gone silent (a dead radio)
-        // says nothing. GC3 shows Set for 15 s after the kick-off's whistle; when the
-        // WLAN died in those 15 s the whistle expired and the team went back to the GC's
-        // last Set, out of play until the GC was heard again (`huddle sim --game
-        // restarts --budget spl --outage 30s@200s`, seed 13: no goer for 23 s).
+        // A play whistle stands while the GameController is silent (a dead radio): GC3
+        // shows Set for 15 s after the kick-off's whistle, and when the WLAN died in
+        // those 15 s the whistle expired and the team went back to the GC's last Set,
+        // out of play until the GC was heard again (`huddle sim --game restarts --budget
+        // spl --outage 30s@200s`, seed 13: no goer for 23 s). A goal's whistle still
+        // expires: by then the kick-off after it is near, and the GC's last Playing is
+        // what the team goes back to (kept standing, it left the team out of play for
+        // the rest of the outage on seeds 3, 7 and 9).
         let current = now_s - crate::heartbeat::GC_SILENT_S;
-        if now_s - at > WHISTLE_TRUST_S && !self.beat.gc_silent_since(current) {
+        let stands = matches!(self.whistle, Some(Whistle::PlayStarted(_)))
+            && self.beat.gc_silent_since(current);
+        if now_s - at > WHISTLE_TRUST_S && !stands {
             self.whistle = None;
             self.in_play = self.gc_in_play;
         }
