@@ -594,9 +594,19 @@ impl TeamLayer {
     pub fn decide(&mut self, board: &Blackboard, local_now: Instant) -> (Decision, Posted) {
         let t_s = seconds(local_now);
         let mut heard = arbitration::heard(board, local_now);
-        // Every claim told, a penalised teammate's "I am out" too: the fallback hands back
-        // to the radio once each teammate has told one since an outage.
-        let told = self.sound.is_some().then(|| heard.clone());
+        let stale_after = self.arbiter.params().stale_after;
+        let in_play = self.in_play && !self.penalized();
+        let (id, beat) = (self.id, self.beat);
+        // Whether the fallback decides, on every claim told (a penalised teammate's "I am
+        // out" too: the fallback hands back to the radio once each teammate has told one
+        // since an outage), so before the penalised are dropped below.
+        let silent = self.sound.as_mut().is_some_and(|sound| {
+            if !in_play {
+                sound.out_of_play();
+                return false;
+            }
+            sound.radio(id, &heard, stale_after, &beat, t_s)
+        });
         // A penalised teammate is off the field: its last claim (going, perhaps) no longer
         // counts, by the GameController's word or by its own.
         heard.retain(|c| {
@@ -604,24 +614,11 @@ impl TeamLayer {
         });
         let dt = Duration::from_secs_f64((t_s - self.decided_at_s).max(0.0));
         self.decided_at_s = t_s;
-        let stale_after = self.arbiter.params().stale_after;
-        let in_play = self.in_play && !self.penalized();
-        let beat = self.beat;
-        let fallback = self.sound.as_mut().and_then(|sound| {
-            if !in_play {
-                sound.out_of_play();
-                return None;
-            }
-            sound
-                .radio(
-                    self.id,
-                    told.as_deref().unwrap_or(&heard),
-                    stale_after,
-                    &beat,
-                    t_s,
-                )
-                .then(|| sound.candidates(self.id, t_s, &heard))
-        });
+        let fallback = self
+            .sound
+            .as_mut()
+            .filter(|_| silent)
+            .map(|sound| sound.candidates(id, t_s, &heard));
         // A teammate the GameController penalised is off the field, by sound as by radio.
         let fallback = fallback.map(|mut claims| {
             claims.retain(|c| c.robot == self.id || !self.is_out(c.robot));
