@@ -521,9 +521,16 @@ impl Decoder {
     /// Whether the sender's tones of `t` (as present and measured in its last decided
     /// slot) keep [`SECOND_FRAME_SHARE`] of that level, within the noise, over the windows
     /// wholly inside `[from, to)`: true when none are.
-    fn sender_keeps_level(&self, t: &Tracking, from: f64, to: f64) -> bool {
+    pub(super) fn sender_keeps_level(&self, t: &Tracking, from: f64, to: f64) -> bool {
+        self.basic_keeps_level(t, t.sender.index() as usize, from, to)
+    }
+
+    /// Whether basic `basic`'s tones of `t` (as present and measured in its last decided
+    /// slot) keep [`SECOND_FRAME_SHARE`] of that level, within the noise, over the windows
+    /// wholly inside `[from, to)`: true when none are.
+    pub(super) fn basic_keeps_level(&self, t: &Tracking, basic: usize, from: f64, to: f64) -> bool {
         let window_len = self.geometry.window_len as f64;
-        let tones: Vec<usize> = basic_tones(t.sender.index() as usize)
+        let tones: Vec<usize> = basic_tones(basic)
             .into_iter()
             .filter(|&k| t.present[k] && t.level[k] > 0.0)
             .collect();

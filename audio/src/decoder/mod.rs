@@ -213,6 +213,7 @@ mod refusals;
 mod rules;
 mod search;
 mod second_slot;
+mod second_slot_by_sums;
 mod tracking;
 mod windows;
 

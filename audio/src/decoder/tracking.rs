@@ -178,6 +178,12 @@ impl Decoder {
                 }
             }
         }
+        // A second slot the checks refused, decided by its data basics' median windows
+        // (see `second_slot_by_sums.rs`).
+        let decision = match decision {
+            None if !first => self.second_slot_by_sums(t, a, b),
+            decided => decided,
+        };
         let decision = decision.filter(|_| {
             first || {
                 let holds = self.second_frame_holds_its_level(t, a, b);
@@ -566,7 +572,7 @@ impl Decoder {
     /// `level` over the slot) are the first slot's tail: below
     /// [`SECOND_SLOT_SENDER_SHARE`] of their first-slot level, and falling from the slot's
     /// first half to its second below [`ECHO_HALF_SHARE`].
-    fn dies_away(&self, t: &Tracking, basic: usize, a: f64, b: f64, level: &[f64]) -> bool {
+    pub(super) fn dies_away(&self, t: &Tracking, basic: usize, a: f64, b: f64, level: &[f64]) -> bool {
         let tones = basic_tones(basic);
         let now: f64 = tones.iter().map(|&k| level[k]).sum();
         let before: f64 = tones.iter().map(|&k| t.level[k]).sum();
