@@ -185,3 +185,59 @@ fn a_second_frames_tone_pulled_past_the_comb_beside_two_agreeing_loud_tones_is_l
         );
     }
 }
+
+#[test]
+fn a_second_slot_with_one_steady_data_tone_is_decided_by_its_median_window() {
+    // Lab T60 1.2 s with four talkers at 0 dB (tuning draws S = 94–97, row 21): 43 of 57
+    // lost long messages passed their first slot and lost the second to a check (a vote
+    // not steady, a stray, no data basic with two votes when the data sat in the room's
+    // notches). Here LeftAttacker's long 11 · 21 + 16: the second data's k19 steady, k43
+    // sounding only every other eighth of a second, k67 silent. Under the checked plan
+    // the second frame is one of 11 basics, and the median window of data 16's tones
+    // stands far clear of every other's: the long message. The seed's plan still needs
+    // the vote's two steady tones (nothing), and so does a slot where another long
+    // basic's tone sounds as loud as k19 (no margin: nothing rather than a guess).
+    let long = Message::long(Sender::LeftAttacker, 21 * 11 + 16).unwrap();
+    let checked = DecoderConfig {
+        team: TeamPlan::Checked,
+        ..DecoderConfig::default()
+    };
+    let steady = |t: f64| if (0.5..1.5).contains(&t) { 0.003 } else { 0.0 };
+    let k43 = pulsing(1.5, 2.5, 0.01);
+    let x = notched_long(&steady, &k43, false);
+    let (got, _, shown) = decode_traced_with(checked.clone(), &x);
+    assert_eq!(
+        got,
+        vec![long],
+        "checked plan, k43 pulsing and k67 silent\n{}",
+        shown.join("\n")
+    );
+    assert!(
+        shown.iter().any(|l| l.contains("second slot by sums: data 16")),
+        "decided by its median window\n{}",
+        shown.join("\n")
+    );
+    let (got, _, shown) = decode_traced(&x);
+    assert!(
+        !got.contains(&long),
+        "seed's plan: the data's vote needs two steady tones: {got:?}\n{}",
+        shown.join("\n")
+    );
+    // Another long basic's k21 (data 18) as loud as k19 through the second slot.
+    let mut rival = x.clone();
+    let k21 = super::room::shaped_scene(
+        &[(21, &|t: f64| if (1.5..2.5).contains(&t) { 0.01 } else { 0.0 })],
+        4.0,
+        0.0,
+        1,
+    );
+    for (s, r) in rival.iter_mut().zip(&k21) {
+        *s += r;
+    }
+    let (got, _, shown) = decode_traced_with(checked.clone(), &rival);
+    assert!(
+        got.is_empty(),
+        "a rival long basic's tone as loud as the data's: {got:?}\n{}",
+        shown.join("\n")
+    );
+}
