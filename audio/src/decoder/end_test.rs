@@ -591,6 +591,12 @@ impl Decoder {
     /// [`SPRT_BOUND`]. A long message whose second slot failed keeps its sender sounding
     /// there and is not taken for a short.
     pub(super) fn sender_stopped_late(&self, t: &Tracking, end: f64) -> bool {
+        self.basic_stopped_late(t, t.sender.index() as usize, end)
+    }
+
+    /// [`Decoder::sender_stopped_late`] for any basic's tones of `t` (as present and
+    /// measured in its last decided slot).
+    pub(super) fn basic_stopped_late(&self, t: &Tracking, basic: usize, end: f64) -> bool {
         let window_len = self.geometry.window_len as f64;
         let slot_len = self.geometry.slot_samples;
         if slot_len < 4.0 * window_len {
@@ -624,7 +630,7 @@ impl Decoder {
                 (start + 0.5 * window_len - end) / self.rate(),
                 self.config.tone_duration_s,
             );
-            for k in basic_tones(t.sender.index() as usize) {
+            for k in basic_tones(basic) {
                 if !t.present[k] || t.level[k] <= 0.0 {
                     continue;
                 }
