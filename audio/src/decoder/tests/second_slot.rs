@@ -118,3 +118,64 @@ fn a_first_frames_ringing_data_with_a_lone_loud_tone_beside_it_is_no_second_fram
         shown.join("\n")
     );
 }
+
+#[test]
+fn a_long_message_whose_sender_speaks_again_soon_after_is_still_long() {
+    // Lab T60 1.2 s with four talkers at 0 dB (tuning draws S = 94–97, row 21): 4 of
+    // 33 lost long messages passed both slots, the end test after the second could not
+    // tell (the sender's tones ring on in a room mode), and the late check found the
+    // sender sounding half a slot later: its next message, begun 0.65–0.75 s after (a
+    // robot waits just over half a tone). Here LeftAttacker's long 11 · 21 + 16 from
+    // 0.5 s to 2.5 s, its sender's tones ringing on at 0.7 of their level for 0.45 s
+    // after it (a room mode), and its short message 3 from 3.2 s: both messages (old code: the short
+    // only, "late check after slot 2: stopped false"). A second frame whose data sounds
+    // on through the judged span (to 3.6 s) is a frame that sounded too long: not the
+    // long message.
+    let long = Message::long(Sender::LeftAttacker, 21 * 11 + 16).unwrap();
+    let short = Message::short(Sender::LeftAttacker, 3).unwrap();
+    let ring = |t: f64| {
+        if (0.5..2.5).contains(&t) || (3.2..4.2).contains(&t) {
+            0.01
+        } else if (2.5..2.95).contains(&t) {
+            0.007
+        } else {
+            0.0
+        }
+    };
+    let first = |t: f64| if (0.5..1.5).contains(&t) { 0.01 } else { 0.0 };
+    let second = |t: f64| if (1.5..2.5).contains(&t) { 0.01 } else { 0.0 };
+    let second_on = |t: f64| if (1.5..3.6).contains(&t) { 0.01 } else { 0.0 };
+    let next = |t: f64| if (3.2..4.2).contains(&t) { 0.01 } else { 0.0 };
+    let scene = |data: &dyn Fn(f64) -> f64| {
+        // Sender LeftAttacker: k1, k25, k49; first data 11: k14, k38, k62; second data 16:
+        // k19, k43, k67; the short's data 3: k6, k30, k54.
+        let tones: Vec<(usize, &dyn Fn(f64) -> f64)> = vec![
+            (1, &ring),
+            (25, &ring),
+            (49, &ring),
+            (14, &first),
+            (38, &first),
+            (62, &first),
+            (19, data),
+            (43, data),
+            (67, data),
+            (6, &next),
+            (30, &next),
+            (54, &next),
+        ];
+        shaped_scene(&tones, 6.0, 0.002, 9421)
+    };
+    let (got, _, shown) = decode_traced(&scene(&second));
+    assert_eq!(
+        got,
+        vec![long, short],
+        "the sender rings on, its next message 0.7 s later\n{}",
+        shown.join("\n")
+    );
+    let (got, _, shown) = decode_traced(&scene(&second_on));
+    assert!(
+        !got.contains(&long),
+        "the second data sounds on to 3.6 s: {got:?}\n{}",
+        shown.join("\n")
+    );
+}
