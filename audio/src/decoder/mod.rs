@@ -16,6 +16,7 @@
 //! | `bursts.rs`     | the check that a first frame is not one the background assembled   |
 //! | `refusals.rs`   | first slots refused for a foreign sound, remembered over their span  |
 //! | `tracking.rs`   | following a frame from its first slot to a report                    |
+//! | `second_slot_by_sums.rs` | a refused second slot decided by its data's median windows |
 //! | `end_test.rs`   | the end test after a slot: short or long message                     |
 //!
 //! # How it decides
@@ -74,8 +75,13 @@
 //!    a second slot is decided the same way and the sender must then stop → a long
 //!    message. A frame that keeps sounding past two slots is not a message (and is
 //!    ignored until it stops), unless, half a slot later, the sender is plainly silent
-//!    (the same late test as after an unclear first slot): then what went on was the
-//!    second frame's own tail in a hall, and the two slots are a long message.
+//!    (the same late test as after an unclear first slot), or the second frame's data
+//!    is (the sender's next message may begin there, just over half a tone later): then
+//!    what went on was the second frame's own tail in a hall, and the two slots are a
+//!    long message. A second slot the checks below refuse, its sender holding its level
+//!    through both halves, is decided once more under a plan whose long frames say data
+//!    of their own (`second_slot_by_sums.rs`): the data basic whose three tones' median
+//!    window stands 4 times clear of every other candidate's.
 //!    The test runs on short Hann windows (half an analysis window, 64 ms at 1 s tones)
 //!    from the estimated end on, every quarter of their length, at the frame's exact
 //!    frequencies, each judged as soon as its samples arrive. Overlapping windows do not

@@ -63,7 +63,12 @@ impl Decoder {
         let n = slot.count.max(1) as f64;
         let rival = gamma_upper_quantile(n, P_TONE_RIVAL);
         let own = t.sender.index() as usize;
-        let strong = |s: usize| basic_tones(s).iter().filter(|&&k| slot.sums[k] >= rival).count();
+        let strong = |s: usize| {
+            basic_tones(s)
+                .iter()
+                .filter(|&&k| slot.sums[k] >= rival)
+                .count()
+        };
         if (0..SENDER_COUNT).any(|s| s != own && strong(s) >= 2) {
             return None;
         }
@@ -93,7 +98,8 @@ impl Decoder {
         let next = rest.first().map_or(0.0, |r| r.1).max(BY_SUMS_RIVAL_FLOOR);
         let basic = SENDER_COUNT + usize::from(data);
         let halves = (median_window(basic, a, mid)?, median_window(basic, mid, b)?);
-        let holds_halves = halves.0 >= BY_SUMS_HALF_SHARE * best && halves.1 >= BY_SUMS_HALF_SHARE * best;
+        let holds_halves =
+            halves.0 >= BY_SUMS_HALF_SHARE * best && halves.1 >= BY_SUMS_HALF_SHARE * best;
         let repeat_holds = basic != first || self.basic_keeps_level(t, basic, mid, b);
         let frame = Frame {
             sender: t.sender,

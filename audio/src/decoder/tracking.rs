@@ -580,7 +580,14 @@ impl Decoder {
     /// `level` over the slot) are the first slot's tail: below
     /// [`SECOND_SLOT_SENDER_SHARE`] of their first-slot level, and falling from the slot's
     /// first half to its second below [`ECHO_HALF_SHARE`].
-    pub(super) fn dies_away(&self, t: &Tracking, basic: usize, a: f64, b: f64, level: &[f64]) -> bool {
+    pub(super) fn dies_away(
+        &self,
+        t: &Tracking,
+        basic: usize,
+        a: f64,
+        b: f64,
+        level: &[f64],
+    ) -> bool {
         let tones = basic_tones(basic);
         let now: f64 = tones.iter().map(|&k| level[k]).sum();
         let before: f64 = tones.iter().map(|&k| t.level[k]).sum();

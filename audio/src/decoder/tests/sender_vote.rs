@@ -213,7 +213,9 @@ fn a_second_slot_with_one_steady_data_tone_is_decided_by_its_median_window() {
         shown.join("\n")
     );
     assert!(
-        shown.iter().any(|l| l.contains("second slot by sums: data 16")),
+        shown
+            .iter()
+            .any(|l| l.contains("second slot by sums: data 16")),
         "decided by its median window\n{}",
         shown.join("\n")
     );
@@ -226,7 +228,13 @@ fn a_second_slot_with_one_steady_data_tone_is_decided_by_its_median_window() {
     // Another long basic's k21 (data 18) as loud as k19 through the second slot.
     let mut rival = x.clone();
     let k21 = super::room::shaped_scene(
-        &[(21, &|t: f64| if (1.5..2.5).contains(&t) { 0.01 } else { 0.0 })],
+        &[(21, &|t: f64| {
+            if (1.5..2.5).contains(&t) {
+                0.01
+            } else {
+                0.0
+            }
+        })],
         4.0,
         0.0,
         1,
