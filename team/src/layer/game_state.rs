@@ -90,19 +90,34 @@ impl TeamLayer {
     /// [`TeamLayer::heard_whistle`]): after a goal's whistle the layer is out of play
     /// while the GC still says Playing; after play's whistle it is in play while the GC
     /// still says Set.
+    ///
+    /// Only a word the whistle did not run ahead of undoes it (see `gc_answers`): a silent
+    /// GC's last Playing is not its answer to a kick-off whistled after it.
     pub fn set_in_play(&mut self, in_play: bool) {
         self.gc_in_play = in_play;
-        if !in_play {
+        if !in_play && self.goal_whistle_at.is_some_and(|at| self.gc_answers(at)) {
             // The GC moved on from the Playing a goal's whistle ran ahead of.
             self.goal_whistle_at = None;
         }
         match self.whistle {
             // The GameController caught up (or moved on: Ready, Finished).
-            Some(Whistle::PlayStarted(_)) if in_play => self.whistle = None,
-            Some(Whistle::Goal(_)) if !in_play => self.whistle = None,
+            Some(Whistle::PlayStarted(at)) if in_play && self.gc_answers(at) => {
+                self.whistle = None;
+            }
+            Some(Whistle::Goal(at)) if !in_play && self.gc_answers(at) => self.whistle = None,
             _ => {}
         }
         self.in_play = self.whistled_in_play();
+    }
+
+    /// Whether the GameController's word answers a whistle heard at `at_s`: the GC was
+    /// heard within [`crate::heartbeat::GC_SILENT_S`] before it, or since (or there is no
+    /// heartbeat to tell). A whistle heard while the GC was silent ran ahead of its last
+    /// word, which must not undo it: a kick-off's whistle after a goal's in an outage
+    /// left the team in play by the GC's last Playing, and the GC's delayed Set, once
+    /// heard again, began a kick-off anew (out of play until its Playing).
+    fn gc_answers(&self, at_s: f64) -> bool {
+        !self.gc_silent(at_s)
     }
 
     /// In play by the GameController's word and the whistle that runs ahead of it.
@@ -289,13 +304,12 @@ impl TeamLayer {
     /// delayed word of the kick-off that has started: it begins nothing.
     pub fn set_kick_off_next(&mut self, set: bool) -> bool {
         self.gc_set = set;
-        // Only a word heard after the play whistle counts against it: a silent GC's last
-        // Ready is the one the whistle was heard in (see `heard_whistle`).
-        let newer = match self.whistle {
-            Some(Whistle::PlayStarted(at)) => !self.beat.gc_silent_since(at),
+        // (A silent GC's last Ready is the one a whistle was heard in: see `gc_answers`.)
+        let answers = match self.whistle {
+            Some(Whistle::PlayStarted(at)) => self.gc_answers(at),
             _ => false,
         };
-        if !set && newer && !self.gc_in_play {
+        if !set && answers && !self.gc_in_play {
             // The GC left Set for something else than Playing (Ready, Finished).
             self.whistle = None;
             self.in_play = self.gc_in_play;

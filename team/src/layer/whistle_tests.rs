@@ -430,7 +430,10 @@ fn the_gc_heard_again_corrects_a_kick_off_taken_from_a_dead_radio() {
     // GameController3 says Set until 230 s (15 s after the whistle): its delayed word
     // of the kick-off that started, which begins no kick-off and no hold; then Playing,
     // and the GC has caught up. (b) The GC comes back at 222 s still saying Ready: the
-    // whistle was not the kick-off, and the layer leaves play.
+    // whistle was not the kick-off, and the layer leaves play. (c) A goal in the outage
+    // (the WLAN dead from 100 s, the GC's last word Playing): the kick-off's whistle at
+    // 140 s, and at 150 s the GC is back with its delayed Set (until 155 s): no kick-off
+    // begins, the layer stays in play through it and the GC's Playing.
     let (mut r, cfg) = robot(0.5);
     ticks(&mut r, &cfg, "ready", (190.0, 214.5), 200.0);
     assert_eq!(r.heard_whistle(215.0), Some(Whistle::PlayStarted(215.0)));
@@ -456,4 +459,21 @@ fn the_gc_heard_again_corrects_a_kick_off_taken_from_a_dead_radio() {
         !r.in_play && r.whistle().is_none(),
         "the GC heard saying Ready: out of play"
     );
+
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "playing", (90.0, 105.0), 100.0);
+    assert_eq!(r.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+    ticks(&mut r, &cfg, "playing", (105.5, 139.5), 100.0);
+    assert_eq!(r.heard_whistle(140.0), Some(Whistle::PlayStarted(140.0)));
+    ticks(&mut r, &cfg, "playing", (140.0, 149.5), 100.0);
+    assert!(
+        !ticks(&mut r, &cfg, "set", (150.0, 155.0), 155.0),
+        "the GC's late Set begins no kick-off"
+    );
+    assert!(
+        r.in_play && r.going() && r.kick_off_hold_until_s.is_none(),
+        "in play through the GC's late Set, no hold"
+    );
+    ticks(&mut r, &cfg, "playing", (155.5, 156.0), 156.0);
+    assert!(r.in_play && r.whistle().is_none(), "caught up");
 }
