@@ -160,11 +160,13 @@ impl TeamLayer {
     ///   kick-off that follows the goal. Heard with the GC, nothing while the goal's
     ///   whistle is pending, as before.
     ///
-    /// Without these the team stood out of play for an outage that began in Ready, or
-    /// took the kick-off after a goal for another goal (`huddle sim --game restarts
-    /// --budget spl --acoustic --outage 30s@200s`, seed 4: one goer 20% of the outage). The
-    /// GC's word, once heard again, corrects the layer as after any play whistle: its Set
-    /// is the delayed word of the kick-off, its Playing catches up, its Ready drops it.
+    /// Without these the team stood out of play through the kick-off of an outage that
+    /// began in Ready, or took the kick-off after a goal for another goal (`huddle sim
+    /// --game restarts --budget spl --acoustic --outage 30s@200s`: one goer 0% of the
+    /// outage on seed 16, the GC's last word Ready, 87% with the rule; 20% on seed 4, a
+    /// goal's Ready that GC3 still showed as Playing, 99% with it). The GC's word, once
+    /// heard again, corrects the layer as after any play whistle: its Set is the delayed
+    /// word of the kick-off, its Playing catches up, its Ready drops it.
     ///
     /// A whistle stands [`WHISTLE_TRUST_S`] at most: if the GC still says Set (or Playing)
     /// then, the whistle was not what the layer took it for, and the GC's word counts
