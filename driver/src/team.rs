@@ -635,6 +635,8 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     let board = replica.blackboard();
     let state = gc_text(board, GC_STATE_KEY);
     let gc_playing = state == Some("playing");
+    // Ready: with the radio dead, the next whistle is the one that starts play.
+    layer.set_gc_ready(state == Some("ready"));
     layer.set_in_play(state.is_none_or(|s| s == "playing"));
     let kick_off = state == Some("set") && gc_text(board, GC_SET_PLAY_KEY) != Some("penalty_kick");
     if layer.set_kick_off_next(kick_off) {
@@ -646,7 +648,7 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
     if let Some(at) = inputs.whistle.take() {
         match layer.heard_whistle(team::seconds(at)) {
             Some(team::Whistle::PlayStarted(_)) => {
-                tracing::info!("team layer: whistle heard in Set, play started");
+                tracing::info!("team layer: whistle heard, play started");
             }
             Some(team::Whistle::Goal(_)) => {
                 // Sightings from before the goal are of a ball that is gone.
@@ -1133,6 +1135,10 @@ mod core_tests {
         );
     }
 }
+
+#[cfg(test)]
+#[path = "team_gc_tests.rs"]
+mod gc_tests;
 
 #[cfg(test)]
 #[path = "team_input_tests.rs"]

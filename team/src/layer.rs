@@ -41,8 +41,9 @@ pub use contact::contact_probability;
 #[cfg(test)]
 use game_state::KICK_OFF_SPOT_SIGMA_M;
 pub use game_state::{
-    paced_game_remaining, KickOffPlacement, Whistle, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS,
-    KICK_OFF_SET_CLAIM_GAP_S, KICK_OFF_TAKER_COST, WHISTLE_TRUST_S,
+    paced_game_remaining, KickOffPlacement, Whistle, GOAL_TO_KICK_OFF_MAX_S,
+    GOAL_TO_KICK_OFF_MIN_S, KICK_OFF_HOLD_S, KICK_OFF_SET_CLAIMS, KICK_OFF_SET_CLAIM_GAP_S,
+    KICK_OFF_TAKER_COST, WHISTLE_TRUST_S,
 };
 
 /// Where every robot publishes its LWM (`Bytes`, [`fusion::LWM_WIRE_LEN`] of them).
@@ -299,6 +300,12 @@ pub struct TeamLayer {
     /// [`TeamLayer::heard_whistle`]: a whistle can run ahead of it).
     gc_in_play: bool,
     gc_set: bool,
+    /// … and Ready (see [`TeamLayer::set_gc_ready`]).
+    gc_ready: bool,
+    /// When the robot program last heard a goal's whistle the GameController has not
+    /// answered (robot seconds), kept after the whistle itself expires: with the radio
+    /// dead, the next whistle is the kick-off's (see [`TeamLayer::heard_whistle`]).
+    goal_whistle_at: Option<f64>,
     /// The whistle the robot program heard, while the GameController has not caught up
     /// (see [`TeamLayer::heard_whistle`]).
     whistle: Option<game_state::Whistle>,
@@ -386,6 +393,8 @@ impl TeamLayer {
             scores_heard: None,
             gc_in_play: true,
             gc_set: false,
+            gc_ready: false,
+            goal_whistle_at: None,
             whistle: None,
         }
     }

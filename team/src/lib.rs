@@ -50,8 +50,8 @@ pub use geometry::{Pose, Vec2};
 pub use layer::{
     adapt_to_budget, contact_probability, paced_game_remaining, pass_to_key, seconds,
     world_local_key, world_local_of, BallBelief, KickOffPlacement, Senses, TeamConfig, TeamLayer,
-    Whistle, KICK_OFF_HOLD_S, KICK_OFF_TAKER_COST, PASS_TO_KEY, PENALIZED_COST, WHISTLE_TRUST_S,
-    WORLD_LOCAL_KEY,
+    Whistle, GOAL_TO_KICK_OFF_MAX_S, GOAL_TO_KICK_OFF_MIN_S, KICK_OFF_HOLD_S, KICK_OFF_TAKER_COST,
+    PASS_TO_KEY, PENALIZED_COST, WHISTLE_TRUST_S, WORLD_LOCAL_KEY,
 };
 pub use policy::SendPolicy;
 

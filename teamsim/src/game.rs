@@ -704,6 +704,7 @@ impl Simulation {
             let heard = game.trackers[i].state();
             let penalised = game.trackers[i].penalized() == Some(true)
                 || game.referee.penalised(comms_netsim::robot_id(i));
+            self.robots[i].set_gc_ready(heard == Some(State::Ready));
             self.robots[i].set_in_play(heard.is_none_or(|s| s == State::Playing));
             if self.robots[i].set_kick_off_next(heard == Some(State::Set)) {
                 // A goal it had not heard of (every packet with the new score lost to

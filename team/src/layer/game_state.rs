@@ -44,6 +44,21 @@ pub const KICK_OFF_SPEED_SIGMA_MPS: f64 = 0.05;
 /// the GameController's word again (see [`TeamLayer::heard_whistle`]).
 pub const WHISTLE_TRUST_S: f64 = 20.0;
 
+/// With the radio dead, a whistle heard at least this long after a goal's whistle is the
+/// kick-off's, seconds (see [`TeamLayer::heard_whistle`]). The two cannot come closer:
+/// after a goal the robots walk to their kick-off places in Ready (the head referee ends
+/// it once they make no more progress, after 45 s at the latest: the attackers walk
+/// back metres into their own half, at a NAO's 0.3 m/s), a referee takes the ball out
+/// of the goal to the centre spot, and only then, in Set, comes the kick-off's whistle.
+/// 10 s stays below all that and well above a referee's second blow or a detector
+/// hearing one whistle twice (a second or two apart).
+pub const GOAL_TO_KICK_OFF_MIN_S: f64 = 10.0;
+
+/// … and at most this long after it, seconds: Ready's 45 s at most, Set's few seconds and
+/// the time the referee takes to start Ready after the goal's whistle. A whistle later
+/// than that (the kick-off's unheard) is more likely the next goal's.
+pub const GOAL_TO_KICK_OFF_MAX_S: f64 = 60.0;
+
 /// What a whistle the robot program heard meant to the layer
 /// ([`TeamLayer::heard_whistle`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,15 +90,34 @@ impl TeamLayer {
     /// [`TeamLayer::heard_whistle`]): after a goal's whistle the layer is out of play
     /// while the GC still says Playing; after play's whistle it is in play while the GC
     /// still says Set.
+    ///
+    /// Only a word the whistle did not run ahead of undoes it (see `gc_answers`): a silent
+    /// GC's last Playing is not its answer to a kick-off whistled after it.
     pub fn set_in_play(&mut self, in_play: bool) {
         self.gc_in_play = in_play;
+        if !in_play && self.goal_whistle_at.is_some_and(|at| self.gc_answers(at)) {
+            // The GC moved on from the Playing a goal's whistle ran ahead of.
+            self.goal_whistle_at = None;
+        }
         match self.whistle {
             // The GameController caught up (or moved on: Ready, Finished).
-            Some(Whistle::PlayStarted(_)) if in_play => self.whistle = None,
-            Some(Whistle::Goal(_)) if !in_play => self.whistle = None,
+            Some(Whistle::PlayStarted(at)) if in_play && self.gc_answers(at) => {
+                self.whistle = None;
+            }
+            Some(Whistle::Goal(at)) if !in_play && self.gc_answers(at) => self.whistle = None,
             _ => {}
         }
         self.in_play = self.whistled_in_play();
+    }
+
+    /// Whether the GameController's word answers a whistle heard at `at_s`: the GC was
+    /// heard within [`crate::heartbeat::GC_SILENT_S`] before it, or since (or there is no
+    /// heartbeat to tell). A whistle heard while the GC was silent ran ahead of its last
+    /// word, which must not undo it: a kick-off's whistle after a goal's in an outage
+    /// left the team in play by the GC's last Playing, and the GC's delayed Set, once
+    /// heard again, began a kick-off anew (out of play until its Playing).
+    fn gc_answers(&self, at_s: f64) -> bool {
+        !self.gc_silent(at_s)
     }
 
     /// In play by the GameController's word and the whistle that runs ahead of it.
@@ -114,6 +148,26 @@ impl TeamLayer {
     ///   nothing here: out of play the layer has nothing to start. (A whistle in Standby
     ///   sends the robots to Ready: that is the robot program's walk, not the layer's.)
     ///
+    /// With the radio dead (the GC silent for [`crate::heartbeat::GC_SILENT_S`]) its last
+    /// word can be old news, and two more whistles mean play started:
+    ///
+    /// - **in Ready** (the GC's last word, [`TeamLayer::set_gc_ready`]): under the rules the
+    ///   only whistle that follows Ready is the one that starts play (Set has none before
+    ///   it), so the team has gone through a Set it did not hear. Heard with the GC, a
+    ///   whistle in Ready is another field's: nothing;
+    /// - **after a goal's whistle**, [`GOAL_TO_KICK_OFF_MIN_S`] to [`GOAL_TO_KICK_OFF_MAX_S`]
+    ///   after it (pending or expired, the GC not heard since it could have answered): the
+    ///   kick-off that follows the goal. Heard with the GC, nothing while the goal's
+    ///   whistle is pending, as before.
+    ///
+    /// Without these the team stood out of play through the kick-off of an outage that
+    /// began in Ready, or took the kick-off after a goal for another goal (`huddle sim
+    /// --game restarts --budget spl --acoustic --outage 30s@200s`: one goer 0% of the
+    /// outage on seed 16, the GC's last word Ready, 87% with the rule; 20% on seed 4, a
+    /// goal's Ready that GC3 still showed as Playing, 99% with it). The GC's word, once
+    /// heard again, corrects the layer as after any play whistle: its Set is the delayed
+    /// word of the kick-off, its Playing catches up, its Ready drops it.
+    ///
     /// A whistle stands [`WHISTLE_TRUST_S`] at most: if the GC still says Set (or Playing)
     /// then, the whistle was not what the layer took it for, and the GC's word counts
     /// again. Chosen over trusting it until the GC changes: a goal's whistle the GC never
@@ -123,17 +177,31 @@ impl TeamLayer {
     ///
     /// Returns what it meant (`None`: nothing).
     pub fn heard_whistle(&mut self, now_s: f64) -> Option<Whistle> {
+        let silent = self.gc_silent(now_s);
+        let kick_off_after_goal = silent
+            && self.goal_whistle_at.is_some_and(|at| {
+                (GOAL_TO_KICK_OFF_MIN_S..=GOAL_TO_KICK_OFF_MAX_S).contains(&(now_s - at))
+                    && self.beat.gc_silent_since(at + WHISTLE_TRUST_S)
+            });
         let meant = match self.whistle {
-            Some(Whistle::Goal(_)) => None,
             Some(Whistle::PlayStarted(_)) => Some(Whistle::Goal(now_s)),
+            _ if kick_off_after_goal => Some(Whistle::PlayStarted(now_s)),
+            Some(Whistle::Goal(_)) => None,
             None if self.gc_set => Some(Whistle::PlayStarted(now_s)),
             None if self.gc_in_play => Some(Whistle::Goal(now_s)),
+            None if self.gc_ready && silent => Some(Whistle::PlayStarted(now_s)),
             None => None,
         }?;
         self.whistle = Some(meant);
         match meant {
-            Whistle::PlayStarted(_) => self.kick_off_next = false,
-            Whistle::Goal(_) => self.forget_ball(now_s),
+            Whistle::PlayStarted(_) => {
+                self.kick_off_next = false;
+                self.goal_whistle_at = None;
+            }
+            Whistle::Goal(_) => {
+                self.forget_ball(now_s);
+                self.goal_whistle_at = Some(now_s);
+            }
         }
         self.in_play = self.whistled_in_play();
         Some(meant)
@@ -173,13 +241,27 @@ impl TeamLayer {
         // expires: by then the kick-off after it is near, and the GC's last Playing is
         // what the team goes back to (kept standing, it left the team out of play for
         // the rest of the outage on seeds 3, 7 and 9).
-        let current = now_s - crate::heartbeat::GC_SILENT_S;
-        let stands = matches!(self.whistle, Some(Whistle::PlayStarted(_)))
-            && self.beat.gc_silent_since(current);
+        let stands = matches!(self.whistle, Some(Whistle::PlayStarted(_))) && self.gc_silent(now_s);
         if now_s - at > WHISTLE_TRUST_S && !stands {
             self.whistle = None;
             self.in_play = self.gc_in_play;
         }
+    }
+
+    /// Whether the GameController was heard once and not within
+    /// [`crate::heartbeat::GC_SILENT_S`] of `now_s`: its last word may be old news.
+    fn gc_silent(&self, now_s: f64) -> bool {
+        self.beat
+            .gc_silent_since(now_s - crate::heartbeat::GC_SILENT_S)
+    }
+
+    /// Whether the GameController says Ready: the robots walk to their places for a
+    /// kick-off (or a penalty kick), and the next whistle starts play. Only a whistle heard
+    /// while the GC is silent goes by it (see [`TeamLayer::heard_whistle`]): the daemon's
+    /// tick and the simulator's robots call it with [`TeamLayer::set_in_play`] and
+    /// [`TeamLayer::set_kick_off_next`] on each word of the GC's.
+    pub fn set_gc_ready(&mut self, ready: bool) {
+        self.gc_ready = ready;
     }
 
     /// Whether the GameController says Set: every robot stands on its kick-off spot, the
@@ -224,7 +306,12 @@ impl TeamLayer {
     /// delayed word of the kick-off that has started: it begins nothing.
     pub fn set_kick_off_next(&mut self, set: bool) -> bool {
         self.gc_set = set;
-        if !set && matches!(self.whistle, Some(Whistle::PlayStarted(_))) && !self.gc_in_play {
+        // (A silent GC's last Ready is the one a whistle was heard in: see `gc_answers`.)
+        let answers = match self.whistle {
+            Some(Whistle::PlayStarted(at)) => self.gc_answers(at),
+            _ => false,
+        };
+        if !set && answers && !self.gc_in_play {
             // The GC left Set for something else than Playing (Ready, Finished).
             self.whistle = None;
             self.in_play = self.gc_in_play;

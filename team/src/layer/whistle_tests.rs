@@ -5,7 +5,9 @@ use comms::Blackboard;
 use comms::Instant;
 use std::time::Duration;
 
-use super::{paced_game_remaining, Whistle, KICK_OFF_HOLD_S, WHISTLE_TRUST_S};
+use super::{
+    paced_game_remaining, Whistle, GOAL_TO_KICK_OFF_MIN_S, KICK_OFF_HOLD_S, WHISTLE_TRUST_S,
+};
 use crate::layer::{Senses, TeamConfig, TeamLayer};
 use crate::Pose;
 
@@ -22,8 +24,39 @@ fn at(s: f64) -> Instant {
 
 /// What the daemon's tick does with the GC's word: `state` as the listener keeps it.
 fn gc_says(r: &mut TeamLayer, state: &str) -> bool {
+    r.set_gc_ready(state == "ready");
     r.set_in_play(state == "playing");
     r.set_kick_off_next(state == "set")
+}
+
+/// The daemon's ticks every 0.5 s from `from_s` to `to_s` on the GC's last word `state`,
+/// the GC heard (a packet each tick) until `gc_until_s`: the heartbeat, the GC's word,
+/// the layer's sense and decide, the robot's cost 0.5 (the ball 0.5 m away, no
+/// teammate's claim heard). Returns whether a kick-off began at one of them.
+fn ticks(
+    r: &mut TeamLayer,
+    cfg: &TeamConfig,
+    state: &str,
+    (from_s, to_s): (f64, f64),
+    gc_until_s: f64,
+) -> bool {
+    let board = Blackboard::new(2);
+    let senses = Senses {
+        cost: Some(0.5),
+        ..Senses::default()
+    };
+    let mut began = false;
+    let mut t = from_s;
+    while t <= to_s + 1e-9 {
+        if t <= gc_until_s + 1e-9 {
+            r.heard_gamecontroller(t);
+        }
+        began |= gc_says(r, state);
+        r.sense(cfg, at(t), &senses, &board, false);
+        r.decide(&board, at(t));
+        t += 0.5;
+    }
+    began
 }
 
 #[test]
@@ -239,4 +272,208 @@ fn a_kick_off_whistle_stands_while_the_gamecontroller_is_silent() {
         !r.in_play,
         "the GC heard saying Set past the trust: out of play"
     );
+}
+
+#[test]
+fn with_the_radio_dead_a_whistle_in_ready_is_the_kick_off() {
+    // Scenario: a goal's Ready; the GC's packets say Ready until the WLAN dies at 200 s.
+    // The robots walk to their places, the referee ends Ready at 210 s (Set, which no
+    // robot hears) and whistles the kick-off at 215 s; the program hears it at 215.4 s.
+    // Under the rules only the kick-off's whistle follows Ready: the layer is in play
+    // and robot 2 (0.5 m from the ball, no teammate heard) goes, in no kick-off hold
+    // (it heard no Set to begin one), and stays in play on the GC's last word (Ready)
+    // through the outage.
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "ready", (180.0, 215.0), 200.0);
+    assert!(!r.in_play, "Ready: out of play");
+    assert!(r.radio_dead(215.4));
+    assert_eq!(
+        r.heard_whistle(215.4),
+        Some(Whistle::PlayStarted(215.4)),
+        "the GC silent since 200 s, its last word Ready: the kick-off"
+    );
+    assert!(r.in_play);
+    ticks(&mut r, &cfg, "ready", (215.5, 215.5), 200.0);
+    assert_eq!(
+        r.kick_off_placement(),
+        Some(super::KickOffPlacement::PlayHeard),
+        "the tick hears play"
+    );
+    assert!(
+        r.going() && r.kick_off_hold_until_s.is_none(),
+        "robot 2 goes, no kick-off hold"
+    );
+    ticks(&mut r, &cfg, "ready", (216.0, 229.5), 200.0);
+    assert!(
+        r.in_play && r.going(),
+        "the GC's last Ready does not take it out of play again"
+    );
+}
+
+#[test]
+fn a_whistle_in_ready_means_nothing_while_the_gc_is_heard_and_the_kick_off_once_it_is_silent() {
+    // Scenario: Ready, the GC heard every 0.5 s until 130 s. A whistle from the next
+    // field at 120 s means nothing: the GC would have said Set before a kick-off. The
+    // WLAN dies at 130 s; the kick-off's whistle at 140 s is play.
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "ready", (100.0, 120.0), 130.0);
+    assert_eq!(r.heard_whistle(120.0), None, "the GC heard: nothing");
+    ticks(&mut r, &cfg, "ready", (120.5, 140.0), 130.0);
+    assert!(!r.in_play, "out of play through the start of the outage");
+    assert_eq!(
+        r.heard_whistle(140.0),
+        Some(Whistle::PlayStarted(140.0)),
+        "the GC silent: the kick-off"
+    );
+    assert!(r.in_play);
+}
+
+#[test]
+fn with_the_radio_dead_a_whistle_in_initial_standby_or_finished_means_nothing() {
+    // Scenario: the GC heard until 100 s saying Initial, Standby or Finished, then
+    // silent; a whistle at 110 s. In Standby it is the half's Ready (the program's walk),
+    // in Finished or Initial nobody's kick-off: the layer stays out of play. Only Ready
+    // is followed by the kick-off's whistle.
+    for state in ["initial", "standby", "finished", "ready"] {
+        let (mut r, cfg) = robot(0.5);
+        ticks(&mut r, &cfg, state, (90.0, 110.0), 100.0);
+        let meant = r.heard_whistle(110.0);
+        ticks(&mut r, &cfg, state, (110.5, 112.0), 100.0);
+        if state == "ready" {
+            assert_eq!(meant, Some(Whistle::PlayStarted(110.0)), "{state}");
+            assert!(r.in_play, "{state}: in play");
+        } else {
+            assert_eq!(meant, None, "{state}: nothing");
+            assert!(!r.in_play, "{state}: out of play");
+        }
+    }
+}
+
+#[test]
+fn with_the_radio_dead_the_whistle_after_a_goal_s_is_the_kick_off() {
+    // Scenario: in play, the GC heard saying Playing until the WLAN dies at 100 s. A goal
+    // at 105 s: the program hears its whistle (a goal), and the referee's second blow
+    // 2 s later means nothing. Ready and Set take 35 s (the goal's whistle expires at
+    // 125 s into the GC's last Playing); the kick-off's whistle at 140 s is play, not
+    // another goal: the ball is not forgotten again. The next whistle, at 170 s, is a
+    // goal. A robot that hears the kick-off 15 s after the goal (its whistle still
+    // pending) is in play too; with the GC heard, such a whistle means nothing.
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "playing", (90.0, 105.0), 100.0);
+    assert_eq!(r.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+    assert_eq!(r.heard_whistle(107.0), None, "the second blow: nothing");
+    ticks(&mut r, &cfg, "playing", (105.5, 139.5), 100.0);
+    assert_eq!(
+        r.heard_whistle(140.0),
+        Some(Whistle::PlayStarted(140.0)),
+        "35 s after the goal's whistle: the kick-off"
+    );
+    ticks(&mut r, &cfg, "playing", (140.0, 169.5), 100.0);
+    assert!(r.in_play && r.going(), "in play after the kick-off");
+    assert_eq!(
+        r.heard_whistle(170.0),
+        Some(Whistle::Goal(170.0)),
+        "the next whistle: a goal"
+    );
+
+    let kick_off_s = 105.0 + GOAL_TO_KICK_OFF_MIN_S + 5.0;
+    let (mut pending, cfg) = robot(0.5);
+    ticks(&mut pending, &cfg, "playing", (90.0, 105.0), 100.0);
+    assert_eq!(pending.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+    ticks(&mut pending, &cfg, "playing", (105.5, kick_off_s), 100.0);
+    assert!(!pending.in_play, "the goal's whistle pending: out of play");
+    assert_eq!(
+        pending.heard_whistle(kick_off_s),
+        Some(Whistle::PlayStarted(kick_off_s)),
+        "the goal's whistle pending, the radio dead: the kick-off"
+    );
+    ticks(
+        &mut pending,
+        &cfg,
+        "playing",
+        (kick_off_s + 0.5, 125.0),
+        100.0,
+    );
+    assert!(pending.in_play && pending.going());
+
+    let (mut heard, cfg) = robot(0.5);
+    ticks(&mut heard, &cfg, "playing", (90.0, 105.0), 130.0);
+    assert_eq!(heard.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+    ticks(&mut heard, &cfg, "playing", (105.5, kick_off_s), 130.0);
+    assert_eq!(
+        heard.heard_whistle(kick_off_s),
+        None,
+        "the GC heard: nothing while the goal's whistle is pending, as before"
+    );
+    assert!(!heard.in_play);
+
+    // The bounds: a robot that missed the kick-off's whistle takes one 70 s after the
+    // goal's for the next goal; so does one whose GC said Playing past the goal whistle's
+    // trust (the goal was not given) before the WLAN died at 130 s.
+    for (gc_until_s, next_s) in [(100.0, 175.0), (130.0, 140.0)] {
+        let (mut r, cfg) = robot(0.5);
+        ticks(&mut r, &cfg, "playing", (90.0, 105.0), gc_until_s);
+        assert_eq!(r.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+        ticks(&mut r, &cfg, "playing", (105.5, next_s), gc_until_s);
+        assert_eq!(
+            r.heard_whistle(next_s),
+            Some(Whistle::Goal(next_s)),
+            "the GC heard until {gc_until_s} s, a whistle at {next_s} s: a goal"
+        );
+    }
+}
+
+#[test]
+fn the_gc_heard_again_corrects_a_kick_off_taken_from_a_dead_radio() {
+    // Scenario: the WLAN dies at 200 s in Ready; the program hears the kick-off's
+    // whistle at 215 s and the layer is in play. (a) The WLAN is back at 229.5 s:
+    // GameController3 says Set until 230 s (15 s after the whistle): its delayed word
+    // of the kick-off that started, which begins no kick-off and no hold; then Playing,
+    // and the GC has caught up. (b) The GC comes back at 222 s still saying Ready: the
+    // whistle was not the kick-off, and the layer leaves play. (c) A goal in the outage
+    // (the WLAN dead from 100 s, the GC's last word Playing): the kick-off's whistle at
+    // 140 s, and at 150 s the GC is back with its delayed Set (until 155 s): no kick-off
+    // begins, the layer stays in play through it and the GC's Playing.
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "ready", (190.0, 214.5), 200.0);
+    assert_eq!(r.heard_whistle(215.0), Some(Whistle::PlayStarted(215.0)));
+    ticks(&mut r, &cfg, "ready", (215.0, 229.0), 200.0);
+    assert!(
+        !ticks(&mut r, &cfg, "set", (229.5, 230.0), 230.0),
+        "the GC's late Set begins no kick-off"
+    );
+    assert!(
+        r.in_play && r.going() && r.kick_off_hold_until_s.is_none(),
+        "in play, no hold"
+    );
+    ticks(&mut r, &cfg, "playing", (230.5, 231.0), 231.0);
+    assert!(r.in_play && r.going() && r.whistle().is_none(), "caught up");
+
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "ready", (190.0, 214.5), 200.0);
+    assert_eq!(r.heard_whistle(215.0), Some(Whistle::PlayStarted(215.0)));
+    ticks(&mut r, &cfg, "ready", (215.0, 221.5), 200.0);
+    assert!(r.in_play);
+    ticks(&mut r, &cfg, "ready", (222.0, 222.0), 222.0);
+    assert!(
+        !r.in_play && r.whistle().is_none(),
+        "the GC heard saying Ready: out of play"
+    );
+
+    let (mut r, cfg) = robot(0.5);
+    ticks(&mut r, &cfg, "playing", (90.0, 105.0), 100.0);
+    assert_eq!(r.heard_whistle(105.0), Some(Whistle::Goal(105.0)));
+    ticks(&mut r, &cfg, "playing", (105.5, 139.5), 100.0);
+    assert_eq!(r.heard_whistle(140.0), Some(Whistle::PlayStarted(140.0)));
+    ticks(&mut r, &cfg, "playing", (140.0, 149.5), 100.0);
+    assert!(
+        !ticks(&mut r, &cfg, "set", (150.0, 155.0), 155.0),
+        "the GC's late Set begins no kick-off"
+    );
+    assert!(
+        r.in_play && r.going() && r.kick_off_hold_until_s.is_none(),
+        "in play through the GC's late Set, no hold"
+    );
+    ticks(&mut r, &cfg, "playing", (155.5, 156.0), 156.0);
+    assert!(r.in_play && r.whistle().is_none(), "caught up");
 }

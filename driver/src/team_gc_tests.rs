@@ -1,0 +1,71 @@
+//! The daemon's tick on what its GameController listener wrote (`local.var.gc.state`, the
+//! accepted counter) and a whistle the robot program heard: the team layer's reading of
+//! the whistle (`TeamLayer::heard_whistle`) against the GC's last word.
+
+use super::{TeamCore, TeamLayerConfig, GC_ACCEPTED_KEY, GC_STATE_KEY};
+use comms::{Instant, Replica, ReplicaConfig, Value};
+use std::time::Duration;
+use team::{contract, Whistle};
+
+fn floats(v: &[f64]) -> Value {
+    Value::Floats(v.to_vec())
+}
+
+/// The play whistle the tick published for the listener's pacing clock.
+fn play_whistle(replica: &Replica) -> Option<Value> {
+    replica
+        .get(contract::PLAY_WHISTLE_KEY)
+        .expect("a valid key")
+        .map(|e| e.value.clone())
+}
+
+#[test]
+fn with_the_gamecontroller_silent_in_ready_the_program_s_whistle_starts_play() {
+    // Scenario: robot 2's listener holds the GC's last word, Ready, and its accepted
+    // counter moves every second until 3 s, when the WLAN dies. The program writes a
+    // whistle at 2 s (another field's: the GC heard, nothing) and the kick-off's at 8 s
+    // (the GC silent for 5 s: play started). The tick hands the layer the GC's Ready
+    // and publishes the play whistle for the listener.
+    let mut now = Instant::from_micros(1_000_000);
+    let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+    let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+    let mut replica = Replica::new(config, 7, now).expect("a valid replica");
+    let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+    core.input(contract::POSE_KEY, &pose, now)
+        .expect("a valid pose");
+    replica
+        .set(now, GC_STATE_KEY, Value::String("ready".into()))
+        .expect("a local key");
+    let mut packets = 0;
+    let mut meant = Vec::new();
+    while now <= Instant::from_micros(9_000_000) {
+        let us = now.as_micros();
+        if us <= 3_000_000 && us.is_multiple_of(500_000) {
+            packets += 1;
+            replica
+                .set(now, GC_ACCEPTED_KEY, Value::Int(packets))
+                .expect("a local key");
+        }
+        if us == 2_000_000 || us == 8_000_000 {
+            core.input(contract::WHISTLE_KEY, &Value::Bool(true), now)
+                .expect("a valid whistle");
+        }
+        core.input(contract::ODOMETRY_KEY, &floats(&[0.0, 0.0, 0.0]), now)
+            .expect("valid odometry");
+        core.tick(&mut replica, now);
+        if us == 2_000_000 || us == 8_000_000 {
+            meant.push(core.shared.layer.whistle());
+        }
+        now += Duration::from_millis(40);
+    }
+    assert_eq!(
+        meant,
+        [None, Some(Whistle::PlayStarted(8.0))],
+        "at 2 s (the GC heard) nothing; at 8 s (silent since 3 s) the kick-off"
+    );
+    assert_eq!(
+        play_whistle(&replica),
+        Some(floats(&[8.0])),
+        "the play whistle published"
+    );
+}
