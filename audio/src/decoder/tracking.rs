@@ -35,6 +35,10 @@ const ECHO_HALF_SHARE: f64 = 0.25;
 /// at a 1 s tone), the first that passes standing (see `Decoder::decide_slot`).
 const RETRY_HOPS: usize = 4;
 
+/// A rival sender whose two loudest tones hold less than this share of their slot level
+/// over a retried first slot's first fifth began inside it (see `Decoder::decide_slot`).
+const RIVAL_BEGAN_SHARE: f64 = 0.3;
+
 /// The transmission being followed.
 #[derive(Clone, Debug)]
 pub(super) struct Tracking {
@@ -153,6 +157,15 @@ impl Decoder {
         // earlier slot; the search never offers a frame whose data it did not find.
         if first && decision.is_none() {
             let hop = self.geometry.hop as f64;
+            // Another robot's sender that sounded over the slot at the found onset must
+            // not sound over an earlier one either: the retry is for a frame found late,
+            // not a way past a second robot. Two robots a fraction of a slot apart (report
+            // row 1012031 at 862.52 s: LeftAttacker's long from 862.1 s, Goalkeeper's
+            // short from 862.6 s): the found slot had both senders' votes; three hops
+            // earlier Goalkeeper's sender, begun 0.1 s into that slot, read one empty
+            // window, passed for "not steady", and LeftAttacker's sender was decided with
+            // Goalkeeper's data, a wrong message.
+            let rivals = self.rival_senders(t, a, b);
             for j in 1..=RETRY_HOPS {
                 let a2 = a - j as f64 * hop;
                 if a2 < self.floor as f64 {
@@ -160,7 +173,17 @@ impl Decoder {
                 }
                 let retry = self
                     .confirm_slot(t, a2, a2 + slot_len)
-                    .filter(|s| s.frame.sender == t.sender && s.frame.data == t.data[0]);
+                    .filter(|s| s.frame.sender == t.sender && s.frame.data == t.data[0])
+                    .filter(|_| {
+                        let began = self.rival_senders_beginning(t, &rivals, a2, a2 + slot_len);
+                        let kept = began.first().copied();
+                        if let Some(r) = kept {
+                            self.note(a2, || {
+                                format!("retry slot 1: sender basic {r} of the found slot began inside it")
+                            });
+                        }
+                        kept.is_none()
+                    });
                 self.note(a2, || {
                     format!(
                         "retry slot 1 at -{j} hops: {}",
@@ -359,6 +382,58 @@ impl Decoder {
         self.report(t, message, end, decided_at);
         self.end_transmission(end, false);
         self.pending_replay = Some(end.max(0.0).floor() as u64);
+    }
+
+    /// The sender basics other than `t`'s with two tones present over `[a, b)` (the
+    /// confirming level, leakage from a louder neighbour left out).
+    fn rival_senders(&self, t: &Tracking, a: f64, b: f64) -> Vec<usize> {
+        let Some(slot) = self.integrate_slot(t.scale, a, b) else {
+            return Vec::new();
+        };
+        let n = slot.count.max(1) as f64;
+        let floor = gamma_upper_quantile(n, P_TONE_CONFIRM);
+        let own = t.sender.index() as usize;
+        (0..SENDER_COUNT)
+            .filter(|&s| s != own)
+            .filter(|&s| {
+                basic_tones(s)
+                    .iter()
+                    .filter(|&&k| slot.sums[k] >= floor && !is_leakage(&slot.sums, n, k))
+                    .count()
+                    >= 2
+            })
+            .collect()
+    }
+
+    /// Of the sender basics `rivals`, those that began inside `[a, b)`: their two loudest
+    /// tones over the slot's first fifth below [`RIVAL_BEGAN_SHARE`] of their level over
+    /// the slot.
+    fn rival_senders_beginning(
+        &self,
+        t: &Tracking,
+        rivals: &[usize],
+        a: f64,
+        b: f64,
+    ) -> Vec<usize> {
+        let (Some(slot), Some(early)) = (
+            self.integrate_slot(t.scale, a, b),
+            self.integrate_slot(t.scale, a, a + 0.2 * (b - a)),
+        ) else {
+            return Vec::new();
+        };
+        let began = |basic: usize| {
+            let mut tones = basic_tones(basic);
+            tones.sort_by(|&x, &y| slot.level[y].total_cmp(&slot.level[x]));
+            let level: f64 = tones[..2].iter().map(|&k| slot.level[k]).sum();
+            let before: f64 = tones[..2].iter().map(|&k| early.level[k]).sum();
+            level > 0.0 && before < RIVAL_BEGAN_SHARE * level
+        };
+        // Only where the frame's data began inside the slot with it, and the frame's
+        // sender did not: the data is the other robot's.
+        if !began(SENDER_COUNT + usize::from(t.data[0])) || began(t.sender.index() as usize) {
+            return Vec::new();
+        }
+        rivals.iter().copied().filter(|&r| began(r)).collect()
     }
 
     /// Re-estimates the onset once the whole first slot has been heard. Tracking can start
