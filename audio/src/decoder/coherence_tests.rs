@@ -336,3 +336,51 @@ fn a_robot_beginning_near_a_second_slot(lead: f64) {
         );
     }
 }
+
+#[test]
+fn a_retried_first_slot_takes_no_data_of_a_robot_that_began_inside_it() {
+    // Lab T60 0.5 s, two robots at 10 dB (report row 1012031, 862.52 s): LeftAttacker's long
+    // (13, 20) from 862.1 s, Goalkeeper's short 8 half a tone later. The slot found at
+    // Goalkeeper's onset had both senders' votes (refused); the retry three hops earlier
+    // passed as LeftAttacker's sender with Goalkeeper's data, because Goalkeeper's sender,
+    // begun inside that slot, read one empty window and was "not steady": a wrong short.
+    // Here the tones at the levels the trace read (per window: LeftAttacker k1 49, k25 146,
+    // k49 144; Goalkeeper k0 50, k24 19, k48 68; its data k11 190, k35 843, k59 266).
+    // Whatever is decoded must be a message one of them sent.
+    let a = |level: f64| 0.01 * (level / 230.0f64).sqrt();
+    let long = Message::long(Sender::LeftAttacker, 13 * 21 + 20).unwrap();
+    let short = Message::short(Sender::Goalkeeper, 8).unwrap();
+    let checked = crate::decoder::DecoderConfig {
+        team: crate::team::TeamPlan::Checked,
+        ..crate::decoder::DecoderConfig::default()
+    };
+    for lag in [0.45, 0.5, 0.55] {
+        let b = 0.5 + lag;
+        let tones = [
+            (1, a(49.0), 0.5, 2.5),
+            (25, a(146.0), 0.5, 2.5),
+            (49, a(144.0), 0.5, 2.5),
+            (16, a(78.0), 0.5, 1.5),
+            (40, a(27.0), 0.5, 1.5),
+            (64, a(22.0), 0.5, 1.5),
+            (23, a(25.0), 1.5, 2.5),
+            (47, a(51.0), 1.5, 2.5),
+            (71, a(13.0), 1.5, 2.5),
+            (0, a(50.0), b, b + 1.0),
+            (24, a(19.0), b, b + 1.0),
+            (48, a(68.0), b, b + 1.0),
+            (11, a(190.0), b, b + 1.0),
+            (35, a(843.0), b, b + 1.0),
+            (59, a(266.0), b, b + 1.0),
+        ];
+        for seed in [1012u64, 1, 2] {
+            let x = timed_tones(&tones, 5.0, 0.5, 0.002, seed);
+            let (got, _, shown) = super::tests::decode_traced_with(checked.clone(), &x);
+            assert!(
+                got.iter().all(|m| *m == long || *m == short),
+                "lag {lag}, seed {seed}: decoded {got:?}\n{}",
+                shown.join("\n")
+            );
+        }
+    }
+}
