@@ -838,3 +838,7 @@ impl Decoder {
         self.reset_sliding(end.max(0.0).floor() as u64);
     }
 }
+
+#[cfg(test)]
+#[path = "tests/retry.rs"]
+mod retry_tests;
