@@ -126,9 +126,9 @@ fn a_long_message_whose_sender_speaks_again_soon_after_is_still_long() {
     // tell (the sender's tones ring on in a room mode), and the late check found the
     // sender sounding half a slot later: its next message, begun 0.65–0.75 s after (a
     // robot waits just over half a tone). Here LeftAttacker's long 11 · 21 + 16 from
-    // 0.5 s to 2.5 s, its tones ringing on at 0.7 of their level for 0.25 s after it (a
-    // room mode: the end test cannot tell), and its short message 3 from 3.2 s: both
-    // messages (old code: the short
+    // 0.5 s to 2.5 s, its tones ringing on at their level for 0.3 s after it (a room
+    // mode: the end test cannot tell), then silent for the gap, and its short message 3
+    // from 3.2 s: both messages (old code: the short
     // only, "late check after slot 2: stopped false"). A second frame whose data sounds
     // on through the judged span (to 3.6 s) is a frame that sounded too long: not the
     // long message.
@@ -137,15 +137,15 @@ fn a_long_message_whose_sender_speaks_again_soon_after_is_still_long() {
     let ring = |t: f64| {
         if (0.5..2.5).contains(&t) || (3.2..4.2).contains(&t) {
             0.01
-        } else if (2.5..2.75).contains(&t) {
-            0.007
+        } else if (2.5..2.8).contains(&t) {
+            0.01
         } else {
             0.0
         }
     };
     let first = |t: f64| if (0.5..1.5).contains(&t) { 0.01 } else { 0.0 };
     let second = |t: f64| if (1.5..2.5).contains(&t) { 0.01 } else { 0.0 };
-    let second_ringing = |t: f64| second(t) + if (2.5..2.75).contains(&t) { 0.007 } else { 0.0 };
+    let second_ringing = |t: f64| second(t) + if (2.5..2.8).contains(&t) { 0.01 } else { 0.0 };
     let second_on = |t: f64| if (1.5..3.6).contains(&t) { 0.01 } else { 0.0 };
     let next = |t: f64| if (3.2..4.2).contains(&t) { 0.01 } else { 0.0 };
     let scene = |data: &dyn Fn(f64) -> f64| {
