@@ -134,10 +134,9 @@ fn a_long_message_whose_sender_speaks_again_soon_after_is_still_long() {
     // long message.
     let long = Message::long(Sender::LeftAttacker, 21 * 11 + 16).unwrap();
     let short = Message::short(Sender::LeftAttacker, 3).unwrap();
+    // The sender's tones through the long message and 0.3 s of ringing, and its next one.
     let ring = |t: f64| {
-        if (0.5..2.5).contains(&t) || (3.2..4.2).contains(&t) {
-            0.01
-        } else if (2.5..2.8).contains(&t) {
+        if (0.5..2.8).contains(&t) || (3.2..4.2).contains(&t) {
             0.01
         } else {
             0.0
