@@ -167,8 +167,8 @@ impl Decoder {
             // window, passed for "not steady", and LeftAttacker's sender was decided with
             // Goalkeeper's data, a wrong message. (Refusing every retry such a sender
             // sounds over cost 17 of that row's 658 messages: beside another robot a frame
-            // found late is common, and its data its own.)
-            let rivals = self.rival_senders(t, a, b);
+            // found late is common, and its data its own.) Looked at only for a retry that
+            // passes: most refused first slots have none.
             for j in 1..=RETRY_HOPS {
                 let a2 = a - j as f64 * hop;
                 if a2 < self.floor as f64 {
@@ -178,6 +178,7 @@ impl Decoder {
                     .confirm_slot(t, a2, a2 + slot_len)
                     .filter(|s| s.frame.sender == t.sender && s.frame.data == t.data[0])
                     .filter(|_| {
+                        let rivals = self.rival_senders(t, a, b);
                         let began = self.rival_senders_beginning(t, &rivals, a2, a2 + slot_len);
                         let kept = began.first().copied();
                         if let Some(r) = kept {
