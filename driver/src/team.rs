@@ -912,7 +912,7 @@ mod core_tests {
     use std::time::Duration;
     use team::contract;
 
-    fn floats(v: &[f64]) -> Value {
+    pub(super) fn floats(v: &[f64]) -> Value {
         Value::Floats(v.to_vec())
     }
 
@@ -924,7 +924,7 @@ mod core_tests {
     }
 
     /// Robot 2's layer and replica, the robot standing at the field's origin facing +x.
-    fn robot_2_at_the_origin(now: Instant) -> (TeamCore, Replica) {
+    pub(super) fn robot_2_at_the_origin(now: Instant) -> (TeamCore, Replica) {
         let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
         let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
         let replica = Replica::new(config, 7, now).expect("a valid replica");

@@ -2,14 +2,11 @@
 //! accepted counter) and a whistle the robot program heard: the team layer's reading of
 //! the whistle (`TeamLayer::heard_whistle`) against the GC's last word.
 
-use super::{TeamCore, TeamLayerConfig, GC_ACCEPTED_KEY, GC_STATE_KEY};
-use comms::{Instant, Replica, ReplicaConfig, Value};
+use super::core_tests::{floats, robot_2_at_the_origin};
+use super::{GC_ACCEPTED_KEY, GC_STATE_KEY};
+use comms::{Instant, Replica, Value};
 use std::time::Duration;
 use team::{contract, Whistle};
-
-fn floats(v: &[f64]) -> Value {
-    Value::Floats(v.to_vec())
-}
 
 /// The play whistle the tick published for the listener's pacing clock.
 fn play_whistle(replica: &Replica) -> Option<Value> {
@@ -27,12 +24,7 @@ fn with_the_gamecontroller_silent_in_ready_the_program_s_whistle_starts_play() {
     // (the GC silent for 5 s: play started). The tick hands the layer the GC's Ready
     // and publishes the play whistle for the listener.
     let mut now = Instant::from_micros(1_000_000);
-    let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
-    let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
-    let mut replica = Replica::new(config, 7, now).expect("a valid replica");
-    let pose = floats(&[0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
-    core.input(contract::POSE_KEY, &pose, now)
-        .expect("a valid pose");
+    let (mut core, mut replica) = robot_2_at_the_origin(now);
     replica
         .set(now, GC_STATE_KEY, Value::String("ready".into()))
         .expect("a local key");
