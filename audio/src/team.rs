@@ -127,6 +127,12 @@ impl TeamPlan {
         self == TeamPlan::Checked && data >= BANK_VALUES
     }
 
+    /// Whether a frame carrying `data` can only be a short message under this plan (the
+    /// checked plan's data 0 … 9): no long message begins with it.
+    pub(crate) fn frame_is_short_only(self, data: u8) -> bool {
+        self == TeamPlan::Checked && data < BANK_VALUES
+    }
+
     /// Values of a long message (0 … this − 1).
     pub fn long_values(self) -> u16 {
         self.long_frame_values() * self.long_frame_values()
@@ -349,9 +355,26 @@ mod tests {
                 for f in frames {
                     let cut = Message::short(f.sender, f.data).unwrap();
                     assert_eq!(plan.decode(&cut), None, "{long:?} cut to {cut}");
+                    assert!(
+                        plan.frame_is_long_only(f.data) && !plan.frame_is_short_only(f.data),
+                        "{long:?}: its frame {f:?} must read as a long message's only"
+                    );
                 }
             }
             for a in 0..plan.short_values() {
+                let short = plan
+                    .encode(TeamMessage {
+                        robot,
+                        long: false,
+                        value: a,
+                    })
+                    .unwrap();
+                for f in short.frames() {
+                    assert!(
+                        plan.frame_is_short_only(f.data) && !plan.frame_is_long_only(f.data),
+                        "short {a}: its frame {f:?} must read as a short message's only"
+                    );
+                }
                 for b in 0..plan.short_values() {
                     let sender = Sender::ALL[usize::from(robot)];
                     let together = Message::long(sender, 21 * a + b).unwrap();

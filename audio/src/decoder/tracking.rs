@@ -255,7 +255,7 @@ impl Decoder {
             if first && !tail_of_recent {
                 self.failed_slot = Some((t.sender, b));
             }
-            if !first && self.sender_stopped_late(t, a) {
+            if !first && (self.sender_stopped_late(t, a) || self.short_stopped_late(t, a)) {
                 // The end test took the first frame's tail for a second frame: it was a
                 // short message after all.
                 self.report_late_short(t, a);
