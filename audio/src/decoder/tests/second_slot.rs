@@ -180,3 +180,73 @@ fn a_long_message_whose_sender_speaks_again_soon_after_is_still_long() {
         shown.join("\n")
     );
 }
+
+#[test]
+fn a_checked_short_message_whose_tail_passed_for_a_second_frame_is_still_reported() {
+    // Lab T60 1.2 s with four talkers at 0 dB (short row 15, tuning draws S = 111–122):
+    // 11 of the 86 lost short messages passed their first slot, the end test took the
+    // tail (a tone in a room mode ringing on) for a second frame, and the second slot
+    // failed; the robot's next message, begun 0.6 s after, sounded where the late test
+    // looks for the sender stopping (111015 at 1560.70 s). Under the checked plan data
+    // 0 … 9 begins no long message. Here LeftAttacker's short 3 from 0.5 s to 1.5 s, its
+    // sender's tones ringing on at their level for 0.3 s after it beside two tones of
+    // data 15 (talkers' harmonics: the end test hears a second frame), then silent for
+    // the gap, and its short 7 from 2.2 s: both messages under the checked plan (old
+    // code: the second only). Under the seed's plan the same frame may begin a long message,
+    // and the first is not reported. Tones that go straight on through the gap are a
+    // frame that sounded too long: not the short 3.
+    let first = Message::short(Sender::LeftAttacker, 3).unwrap();
+    let next = Message::short(Sender::LeftAttacker, 7).unwrap();
+    let ring = |t: f64| {
+        if (0.5..1.8).contains(&t) || (2.2..3.2).contains(&t) {
+            0.01
+        } else {
+            0.0
+        }
+    };
+    let on = |t: f64| if (0.5..3.2).contains(&t) { 0.01 } else { 0.0 };
+    let data = |t: f64| if (0.5..1.5).contains(&t) { 0.01 } else { 0.0 };
+    let next_data = |t: f64| if (2.2..3.2).contains(&t) { 0.01 } else { 0.0 };
+    let harmonics = |t: f64| if (1.5..1.8).contains(&t) { 0.01 } else { 0.0 };
+    let scene = |sender: &dyn Fn(f64) -> f64| {
+        // Sender LeftAttacker: k1, k25, k49; data 3: k6, k30, k54; data 7: k10, k34, k58;
+        // data 15: k18, k42, k66.
+        let tones: Vec<(usize, &dyn Fn(f64) -> f64)> = vec![
+            (18, &harmonics),
+            (42, &harmonics),
+            (1, sender),
+            (25, sender),
+            (49, sender),
+            (6, &data),
+            (30, &data),
+            (54, &data),
+            (10, &next_data),
+            (34, &next_data),
+            (58, &next_data),
+        ];
+        shaped_scene(&tones, 5.0, 0.002, 11015)
+    };
+    let checked = crate::DecoderConfig {
+        team: crate::TeamPlan::Checked,
+        ..crate::DecoderConfig::default()
+    };
+    let (got, _, shown) = super::decode_traced_with(checked.clone(), &scene(&ring));
+    assert_eq!(
+        got,
+        vec![first, next],
+        "checked plan: the sender rings on 0.3 s, its next message 0.7 s later\n{}",
+        shown.join("\n")
+    );
+    let (got, _, shown) = decode_traced(&scene(&ring));
+    assert!(
+        !got.contains(&first),
+        "seed's plan: the frame may begin a long message: {got:?}\n{}",
+        shown.join("\n")
+    );
+    let (got, _, shown) = super::decode_traced_with(checked, &scene(&on));
+    assert!(
+        !got.contains(&first),
+        "checked plan, the sender sounds on through the gap: {got:?}\n{}",
+        shown.join("\n")
+    );
+}
