@@ -1088,7 +1088,11 @@ mod collapse_tests {
             671.0, 498.0, 375.0, 357.0, 324.0, 336.0, 366.0, 429.0, 599.0, 0.0, 454.0, 381.0,
         ];
         let middle = super::super::median(k28.to_vec());
-        assert_eq!(isolated_collapse(&k28, middle), Some(9), "the window at 0 is excused");
+        assert_eq!(
+            isolated_collapse(&k28, middle),
+            Some(9),
+            "the window at 0 is excused"
+        );
     }
 
     /// What the dip tests are for stays counted: a warbling note's data tone (seed 13050's
@@ -1100,10 +1104,22 @@ mod collapse_tests {
         let middle = super::super::median(warble.to_vec());
         // Its deepest dip (25) lies between two windows at its level, but 39 and 75 swing
         // far below it too.
-        assert_eq!(isolated_collapse(&warble, middle), None, "a warble is not excused");
+        assert_eq!(
+            isolated_collapse(&warble, middle),
+            None,
+            "a warble is not excused"
+        );
         let edge = [0.0, 300.0, 310.0, 290.0, 305.0, 300.0];
-        assert_eq!(isolated_collapse(&edge, 300.0), None, "an edge is not a collapse");
+        assert_eq!(
+            isolated_collapse(&edge, 300.0),
+            None,
+            "an edge is not a collapse"
+        );
         let faint = [6.0, 0.2, 5.0, 4.0, 7.0, 5.0];
-        assert_eq!(isolated_collapse(&faint, 5.0), None, "a faint tone is not loud enough");
+        assert_eq!(
+            isolated_collapse(&faint, 5.0),
+            None,
+            "a faint tone is not loud enough"
+        );
     }
 }

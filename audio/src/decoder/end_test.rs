@@ -621,7 +621,9 @@ impl Decoder {
         let data_stopped =
             silent_gap && self.basic_stopped_late(t, SENDER_COUNT + usize::from(t.data[0]), end);
         self.note(end, || {
-            format!("late short check: sender fell silent {silent_gap}, data stopped {data_stopped}")
+            format!(
+                "late short check: sender fell silent {silent_gap}, data stopped {data_stopped}"
+            )
         });
         data_stopped
     }

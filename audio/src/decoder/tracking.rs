@@ -319,7 +319,7 @@ impl Decoder {
         // A frame of data no long message begins with (the checked plan's short data) is
         // no second frame whatever sounded before it: what the sender's tones before the
         // onset were is its own previous message's tail (the robot waited half a tone;
-        // short lab T60 1.2 s 0 dB, tuning draws S = 111–122: 8 of the 57 lost short
+        // short lab T60 1.2 s 0 dB, tuning draws S = 111–122: 8 of the 67 lost short
         // messages were dropped so at some onset, e.g. 114015 at 599.69 s), unless its
         // data was sounding at its level there too: a frame that began before its onset.
         let short_only = first && self.config.team.frame_is_short_only(next.data[0]) && {
