@@ -255,7 +255,10 @@ impl Decoder {
             if first && !tail_of_recent {
                 self.failed_slot = Some((t.sender, b));
             }
-            if !first && (self.sender_stopped_late(t, a) || self.short_stopped_late(t, a)) {
+            if !first
+                && !self.second_slot_was_long(t, a, b)
+                && (self.sender_stopped_late(t, a) || self.short_stopped_late(t, a))
+            {
                 // The end test took the first frame's tail for a second frame: it was a
                 // short message after all.
                 self.report_late_short(t, a);
@@ -388,6 +391,43 @@ impl Decoder {
             self.end_transmission(end, went_on);
         }
         Step::Wait
+    }
+
+    /// Under the checked plan, whether the failed second slot `[a, b)` of `t` still read as
+    /// the same sender with data only a long message's frames carry: the sender was in a
+    /// long message, so its first slot, if it decided data of a short, was not the sender's
+    /// frame (another robot's data crossed in), and is no short message either.
+    ///
+    /// Tuning draw 113, row 34 (two robots, hall T60 1.2 s, 10 dB), 735.09 s: the first
+    /// slot decided RightAttacker's sender (its long 245 from 734.72 s) with LeftAttacker's
+    /// data 6 (from 734.91 s); the second slot read RightAttacker's data 14, its true second
+    /// frame, and was refused (not steady); half a slot later the sender had stopped, and
+    /// the first frame came out as a wrong short (main's decoder too).
+    fn second_slot_was_long(&self, t: &Tracking, a: f64, b: f64) -> bool {
+        let plan = self.config.team;
+        if !plan.frame_is_short_only(t.data[0]) {
+            return false;
+        }
+        let Some(slot) = self.integrate_slot(t.scale, a, b) else {
+            return false;
+        };
+        let own = Some(t.sender.index() as usize);
+        let by_rules =
+            Self::apply_rules(&slot.sums, slot.count, P_TONE_CONFIRM, P_TONE_RIVAL, own, |_, _| {
+                true
+            })
+            .0;
+        let frame = by_rules.or_else(|| self.second_slot_rules(t, a, b).map(|(f, _)| f));
+        let long = frame.is_some_and(|f| f.sender == t.sender && plan.frame_is_long_only(f.data));
+        if long {
+            self.note(a, || {
+                format!(
+                    "second slot read data {} of a long message: no late short",
+                    frame.map_or(0, |f| f.data)
+                )
+            });
+        }
+        long
     }
 
     /// Reports the first slot of `t`, ending at `end`, as a short message decided late,
