@@ -250,3 +250,46 @@ fn a_checked_short_message_whose_tail_passed_for_a_second_frame_is_still_reporte
         shown.join("\n")
     );
 }
+
+#[test]
+fn a_checked_first_frame_followed_by_a_long_messages_data_is_no_late_short() {
+    // Tuning draw 113, row 34 (two robots, hall T60 1.2 s, 10 dB), 735.09 s: the first
+    // slot crossed RightAttacker's sender with LeftAttacker's short data 6; the second
+    // slot read RightAttacker's data 14 (its long message's second frame) and was
+    // refused; half a slot later the sender had stopped, and the first frame came out
+    // as a wrong short. Under the checked plan data 14 is a long message's only: the
+    // sender was in a long message, and its first slot's short data was not its own.
+    // Here LeftAttacker's sender from 0.5 s to 2.0 s, data 3 (a short's) through the
+    // first slot and data 14 (a long frame's) through the first half of the second:
+    // nothing under the checked plan (old code: short 3). The same with the second
+    // slot's sound on data 7 (a short's, the robot's next message begun early, or
+    // talkers) is still the late short 3.
+    let short = Message::short(Sender::LeftAttacker, 3).unwrap();
+    let sender = |t: f64| if (0.5..2.0).contains(&t) { 0.01 } else { 0.0 };
+    let data = |t: f64| if (0.5..1.5).contains(&t) { 0.01 } else { 0.0 };
+    let after = |t: f64| if (1.5..2.0).contains(&t) { 0.01 } else { 0.0 };
+    let checked = crate::DecoderConfig {
+        team: crate::TeamPlan::Checked,
+        ..crate::DecoderConfig::default()
+    };
+    // Data 14: k17, k41, k65 (long only); data 7: k10, k34, k58 (short only).
+    for (second, expected) in [([17, 41, 65], vec![]), ([10, 34, 58], vec![short])] {
+        let mut tones: Vec<(usize, &dyn Fn(f64) -> f64)> = vec![
+            (1, &sender),
+            (25, &sender),
+            (49, &sender),
+            (6, &data),
+            (30, &data),
+            (54, &data),
+        ];
+        tones.extend(second.iter().map(|&k| (k, &after as &dyn Fn(f64) -> f64)));
+        let x = shaped_scene(&tones, 4.0, 0.002, 113034);
+        let (got, _, shown) = super::decode_traced_with(checked.clone(), &x);
+        assert_eq!(
+            got,
+            expected,
+            "second slot's first half on {second:?}\n{}",
+            shown.join("\n")
+        );
+    }
+}
