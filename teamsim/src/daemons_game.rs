@@ -933,4 +933,24 @@ mod tests {
             "the kick-off's whistle 20 s later: play, through the GC's late Set"
         );
     }
+
+    #[test]
+    fn a_kick_off_whistled_before_the_wlan_died_keeps_the_program_playing() {
+        // Scenario (round 22's rule): the GC shows Set; the program hears the kick-off's
+        // whistle at 10 s; the WLAN dies at 12 s, the GC's last word Set (GameController3
+        // shows it until 25 s); the radio is back at 45 s showing Playing. The layer's
+        // play whistle stands while the GC is silent, so the body plays throughout: the
+        // old `ProgramEars` dropped it after WHISTLE_TRUST_S (30 s) and stood on the
+        // silent GC's Set until 45 s.
+        let mut robot = ProgramAndDaemon::new();
+        let mut orders = robot.cycles((0.0, 12.0), "set", true, &[10.0]);
+        orders.extend(robot.cycles((12.0, 45.0), "set", false, &[]));
+        orders.extend(robot.cycles((45.0, 50.0), "playing", true, &[]));
+        assert_eq!(first_other(&orders, (0.0, 10.0), Order::Stand), None, "Set");
+        assert_eq!(
+            first_other(&orders, (10.0, 50.0), Order::Play),
+            None,
+            "the kick-off's whistle, the GC silent on its last Set: play until the GC is back"
+        );
+    }
 }
