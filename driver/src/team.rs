@@ -571,14 +571,18 @@ fn gc_text<'a>(board: &'a comms::Blackboard, key: &str) -> Option<&'a str> {
     }
 }
 
-/// The play whistle the layer acts on, for the GameController listener, which paces the
-/// budget's clock from it at its next packet (`driver::budget_figures`): GameController3
-/// shows Set for 15 s after the whistle, and each of its packets would otherwise set the
-/// clock back. Written when it changes (`[t]`, or `[]` once the GC caught up).
-fn publish_play_whistle(replica: &mut Replica, now: Instant, at: Option<f64>) {
-    let key = Key::parse(contract::PLAY_WHISTLE_KEY).expect("a valid key");
+/// The whistle the layer acts on, one key per meaning, each `[t]` or `[]` and written
+/// when it changes: the play whistle (`key` [`contract::PLAY_WHISTLE_KEY`]) for the
+/// GameController listener, which paces the budget's clock from it at its next packet
+/// (`driver::budget_figures`: GameController3 shows Set for 15 s after the whistle, and
+/// each of its packets would otherwise set the clock back); both it and the goal's
+/// ([`contract::GOAL_WHISTLE_KEY`]) for the robot program, whose body follows the layer's
+/// reading of the whistle (it knows what a whistle means with the GC silent; a program's
+/// own reading would not, and its body would stand while the layer plays).
+fn publish_whistle(replica: &mut Replica, now: Instant, key: &'static str, at: Option<f64>) {
+    let parsed = Key::parse(key).expect("a valid key");
     // Compared in place: the tick runs at 25 Hz and the value rarely changes.
-    let unchanged = match replica.blackboard().get(&key).map(|e| &e.value) {
+    let unchanged = match replica.blackboard().get(&parsed).map(|e| &e.value) {
         Some(Value::Floats(shown)) => shown.as_slice() == at.as_slice(),
         None => at.is_none(),
         Some(_) => false,
@@ -587,8 +591,8 @@ fn publish_play_whistle(replica: &mut Replica, now: Instant, at: Option<f64>) {
         return;
     }
     let value: Vec<f64> = at.into_iter().collect();
-    if let Err(e) = replica.set(now, contract::PLAY_WHISTLE_KEY, Value::Floats(value)) {
-        tracing::warn!(error = %e, "team layer: cannot publish the play whistle");
+    if let Err(e) = replica.set(now, key, Value::Floats(value)) {
+        tracing::warn!(key, error = %e, "team layer: cannot publish the whistle");
     }
 }
 
@@ -666,7 +670,21 @@ fn tick(replica: &mut Replica, now: Instant, s: &mut Shared, inputs: &mut Inputs
             contract::WHISTLE_KEY
         );
     }
-    publish_play_whistle(replica, now, layer.play_whistle_at());
+    // Published before the tick's sense, which drops a whistle older than the trust
+    // (`TeamLayer::whistle_timeout`): that shows a tick (40 ms) later; the GC's word and
+    // the program's whistle, taken above, show at this tick.
+    publish_whistle(
+        replica,
+        now,
+        contract::PLAY_WHISTLE_KEY,
+        layer.play_whistle_at(),
+    );
+    publish_whistle(
+        replica,
+        now,
+        contract::GOAL_WHISTLE_KEY,
+        layer.goal_whistle_at(),
+    );
     let balls: Vec<_> = inputs
         .balls
         .drain(..)

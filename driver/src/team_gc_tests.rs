@@ -10,8 +10,13 @@ use team::{contract, Whistle};
 
 /// The play whistle the tick published for the listener's pacing clock.
 fn play_whistle(replica: &Replica) -> Option<Value> {
+    published(replica, contract::PLAY_WHISTLE_KEY)
+}
+
+/// What the tick published at `key`.
+fn published(replica: &Replica, key: &str) -> Option<Value> {
     replica
-        .get(contract::PLAY_WHISTLE_KEY)
+        .get(key)
         .expect("a valid key")
         .map(|e| e.value.clone())
 }
@@ -59,5 +64,61 @@ fn with_the_gamecontroller_silent_in_ready_the_program_s_whistle_starts_play() {
         play_whistle(&replica),
         Some(floats(&[8.0])),
         "the play whistle published"
+    );
+}
+
+#[test]
+fn the_tick_publishes_the_goal_s_whistle_and_the_kick_off_s_after_it_for_the_program() {
+    // Scenario: robot 2's listener shows Playing (GameController3 shows it 15 s past a
+    // goal) and its accepted counter moves every 0.5 s until 105 s, when the WLAN dies.
+    // The program writes the goal's whistle at 100 s (the GC heard: a goal) and the
+    // kick-off's at 120 s, 20 s later (the GC silent for 15 s: play started, by
+    // `GOAL_TO_KICK_OFF_MIN_S..MAX_S`). A program reads the layer's reading from
+    // `local.var.team.goal_whistle` and `local.var.team.play_whistle`, as `huddle sim
+    // --daemons --game`'s programs do: its body walks to its kick-off spot, then plays.
+    let mut now = Instant::from_micros(99_000_000);
+    let (mut core, mut replica) = robot_2_at_the_origin(now);
+    replica
+        .set(now, GC_STATE_KEY, Value::String("playing".into()))
+        .expect("a local key");
+    let mut packets = 0;
+    let mut shown = Vec::new();
+    while now <= Instant::from_micros(121_000_000) {
+        let us = now.as_micros();
+        if us <= 105_000_000 && us.is_multiple_of(500_000) {
+            packets += 1;
+            replica
+                .set(now, GC_ACCEPTED_KEY, Value::Int(packets))
+                .expect("a local key");
+        }
+        let whistled = us == 100_000_000 || us == 120_000_000;
+        if whistled {
+            core.input(contract::WHISTLE_KEY, &Value::Bool(true), now)
+                .expect("a valid whistle");
+        }
+        core.input(contract::ODOMETRY_KEY, &floats(&[0.0, 0.0, 0.0]), now)
+            .expect("valid odometry");
+        core.tick(&mut replica, now);
+        if whistled {
+            shown.push((
+                published(&replica, contract::GOAL_WHISTLE_KEY),
+                play_whistle(&replica),
+            ));
+        }
+        now += Duration::from_millis(40);
+    }
+    assert_eq!(
+        shown,
+        [
+            (Some(floats(&[100.0])), None),
+            (Some(floats(&[])), Some(floats(&[120.0]))),
+        ],
+        "at 100 s the goal's whistle, no play whistle yet; at 120 s the goal's withdrawn \
+         ([]) and the kick-off's published"
+    );
+    assert_eq!(
+        core.shared.layer.whistle(),
+        Some(Whistle::PlayStarted(120.0)),
+        "the layer acts on the kick-off's whistle"
     );
 }

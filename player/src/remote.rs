@@ -45,6 +45,12 @@ pub struct TeamView {
     pub going: bool,
     /// The goer's announced pass receiver (`n.var.machine.pass_to` of the goer).
     pub pass_to: Option<u8>,
+    /// `local.var.team.play_whistle`: the play whistle the layer acts on (when, on the
+    /// daemon's clock), the GameController not yet showing Playing.
+    pub play_whistle_at: Option<f64>,
+    /// `local.var.team.goal_whistle`: the goal's whistle the layer acts on, the
+    /// GameController still showing Playing.
+    pub goal_whistle_at: Option<f64>,
 }
 
 impl TeamView {
@@ -93,7 +99,31 @@ impl TeamView {
                 }
                 _ => false,
             },
+            // A malformed value leaves the reading as it was.
+            contract::PLAY_WHISTLE_KEY => {
+                contract::parse_whistle_at(contract::PLAY_WHISTLE_KEY, value)
+                    .map(|at| self.play_whistle_at = at)
+                    .is_ok()
+            }
+            contract::GOAL_WHISTLE_KEY => {
+                contract::parse_whistle_at(contract::GOAL_WHISTLE_KEY, value)
+                    .map(|at| self.goal_whistle_at = at)
+                    .is_ok()
+            }
             _ => false,
+        }
+    }
+
+    /// The layer's reading of the referee's whistle, as its daemon published it: play
+    /// started (the program plays while the GC still shows its late Set, or its last Ready
+    /// with the radio dead), a goal (it walks to its kick-off spot while the GC still shows
+    /// Playing), or none (the GC's word counts). What a program's body should follow
+    /// rather than a reading of its own: the layer knows the rules for a silent GC.
+    pub fn whistle(&self) -> Option<team::Whistle> {
+        match (self.play_whistle_at, self.goal_whistle_at) {
+            (Some(at), _) => Some(team::Whistle::PlayStarted(at)),
+            (None, Some(at)) => Some(team::Whistle::Goal(at)),
+            (None, None) => None,
         }
     }
 

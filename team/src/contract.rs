@@ -62,6 +62,11 @@ pub const WORLD_OUT_KEY: &str = "local.var.team.world";
 /// (`TeamLayer::play_whistle_at`): the daemon's GC listener paces the budget's clock
 /// from it (`team::paced_game_remaining`).
 pub const PLAY_WHISTLE_KEY: &str = "local.var.team.play_whistle";
+/// The time (as [`PLAY_WHISTLE_KEY`]) of the goal's whistle the layer acts on while the
+/// GameController still says Playing (`TeamLayer::whistle`, `Whistle::Goal`): out of play,
+/// the robots walk to their kick-off places. With [`PLAY_WHISTLE_KEY`] it is the layer's
+/// reading of the whistle, which a robot program's body follows ([`parse_whistle_at`]).
+pub const GOAL_WHISTLE_KEY: &str = "local.var.team.goal_whistle";
 /// The layer's ticks so far (int): it changes every tick, so a program that wrote a
 /// cycle's senses can wait for the tick that took them.
 pub const TICK_KEY: &str = "local.var.team.tick";
@@ -390,6 +395,15 @@ pub fn parse_bool(key: &'static str, value: &comms::Value) -> Result<bool, Contr
             expected: "a bool",
         }),
     }
+}
+
+/// Reads [`PLAY_WHISTLE_KEY`] or [`GOAL_WHISTLE_KEY`] (`key`): `[t]`, the whistle the
+/// layer acts on, heard at `t` (seconds on the daemon's clock); `[]`, none.
+pub fn parse_whistle_at(
+    key: &'static str,
+    value: &comms::Value,
+) -> Result<Option<f64>, ContractError> {
+    Ok(floats(key, value, "0 or 1", &[0, 1])?.first().copied())
 }
 
 /// Parses [`COST_KEY`].

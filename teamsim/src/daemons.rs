@@ -641,14 +641,18 @@ pub fn run(
             // team's decisions each cycle does; a layer slower than a few ms leaves the
             // robot to play on what it last had.
             let clock = |at: Instant| at.saturating_duration_since(started).as_secs_f64();
-            // Under `--game`: the program hears the whistle (it tells its layer, before
-            // the senses its layer ticks on) and takes its order from what it heard.
-            let order = gc.as_mut().map(|g| {
+            // Under `--game`: the program reads the GC's word its daemon's listener wrote
+            // and hears the whistle (it tells its layer, before the senses its layer
+            // ticks on); its order waits for that tick's reading of the whistle.
+            let game = gc.as_mut().map(|g| {
                 let h = daemons[i].heard.lock().unwrap_or_else(|e| e.into_inner());
-                g.program(i, t, h.gc_state.as_deref(), h.gc_penalty)
+                let (state, penalty) = (h.gc_state.clone(), h.gc_penalty);
+                drop(h);
+                let whistled = g.hears_whistle(i, t, state.as_deref(), penalty);
+                (whistled, state, penalty)
             });
-            let mut lines = match order {
-                Some((true, _)) => format!("SETV {} true\n", contract::WHISTLE_KEY),
+            let mut lines = match &game {
+                Some((true, ..)) => format!("SETV {} true\n", contract::WHISTLE_KEY),
                 _ => String::new(),
             };
             let senses = robots[i].sense(clock(Instant::now()), percepts);
@@ -675,9 +679,17 @@ pub fn run(
                     .0;
             };
             drop(heard);
+            // Its body follows its layer's reading of the whistle (the daemon's, with the
+            // rules for a silent GC), read with the tick's outputs.
+            let order = match (&gc, game) {
+                (Some(g), Some((_, state, penalty))) => {
+                    Some(g.order(i, state.as_deref(), penalty, view.whistle()))
+                }
+                _ => None,
+            };
             robots[i].view = view;
             let mut out = robots[i].act(&cfg.brain, clock(now), 0.0, &homes, &holders);
-            if let Some((_, order)) = order.filter(|_| robots[i].view.pose.is_some()) {
+            if let Some(order) = order.filter(|_| robots[i].view.pose.is_some()) {
                 // Outside play it walks or stands: no kick, so no kick's report (its
                 // senses went above, in every state).
                 if let Some(c) = daemons_game::command(order, &robots[i], &out.believed, &homes) {

@@ -24,10 +24,14 @@
 //!   `huddle sim --whistle P`, drawn by `GameTally::whistle` from a generator of its
 //!   own, so the packets' losses do not move) and writes `local.var.robot.whistle true`
 //!   to its daemon, as the Python client's `whistle()` does; its daemon's layer takes it
-//!   at its next tick
-//!   (`TeamLayer::heard_whistle`). Its body follows its own reading of the whistle
-//!   (`ProgramEars`) ahead of the GC's late packets: it plays from a whistle heard in Set,
-//!   walks to its kick-off spot from one heard in Playing (a goal) or in Standby.
+//!   at the tick of the cycle's senses (`TeamLayer::heard_whistle`). Its body follows
+//!   the layer's reading of the whistle, ahead of the GC's late packets, as the daemon
+//!   publishes it with that tick's outputs (`local.var.team.play_whistle`,
+//!   `local.var.team.goal_whistle`; [`player::remote::TeamView::whistle`]): it plays
+//!   from a play whistle, walks to its kick-off spot from a goal's; the program's own
+//!   reading (`ProgramEars`) is only the whistle that ends Standby (the half's Ready),
+//!   which the layer leaves to it. So with the GC silent it plays from the whistle heard
+//!   in Ready and from the kick-off's after a goal, as its layer does.
 //! - **Senses.** A program writes what it senses every tick in every state (its pose,
 //!   odometry, landmarks, ball): outside Playing it only stops playing (no kick, so no
 //!   kick report); what its layer tells the team then is the layer's decision.
@@ -69,7 +73,7 @@ use super::referee::{program_order, GameScript, GameTally, GcBooks, Referee, Ref
 use crate::field::geometry::{Pose, Vec2};
 use crate::field::World;
 use crate::SimConfig;
-use team::{Whistle, WHISTLE_TRUST_S};
+use team::Whistle;
 
 /// A penalised robot's teammates are judged this long after its penalty began (four of
 /// the GC's packets: time for one to reach them through a lossy network), seconds.
@@ -157,42 +161,32 @@ fn state_named(name: &str) -> Option<State> {
     .find(|s| s.name() == name)
 }
 
-/// What a robot program makes of the whistles it heard while the GC's packets lag (its
-/// body goes by it; its team layer reads the same whistle from `local.var.robot.whistle`
-/// with the same meaning, `TeamLayer::heard_whistle`): heard in Set, play started; heard
-/// in Playing, or with play's whistle still ahead of the GC, a goal; in Standby, the
-/// half's Ready. The GC's word counts again once it shows what the whistle said (or
-/// anything else after a goal), or [`WHISTLE_TRUST_S`] after the whistle.
+/// What a robot program makes of the whistles it hears, beyond telling its layer: only
+/// the whistle that ends a half's Standby (the half's Ready, which GameController3 shows
+/// up to 45 s late), which sends its body to its kick-off spot; the layer has nothing to
+/// start there (`TeamLayer::heard_whistle`). Every other whistle's meaning is the layer's,
+/// read back from its daemon ([`player::remote::TeamView::whistle`]): the layer knows what
+/// a whistle means while the GC is silent (play started in its last Ready, the kick-off
+/// 10–60 s after a goal's whistle), and a program with a reading of its own would stand
+/// on its kick-off spot while its layer plays. (Until round 24 this kept a copy of the
+/// layer's older rules, heard in Set: play; in Playing: a goal.)
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct ProgramEars {
-    whistle: Option<Whistle>,
     standby: bool,
 }
 
 impl ProgramEars {
-    /// At `t_s` the program's daemon says `heard`; `whistled`: it hears a whistle now.
-    fn tick(&mut self, heard: Option<State>, t_s: f64, whistled: bool) {
-        self.whistle = match self.whistle {
-            Some(Whistle::PlayStarted(_)) if heard == Some(State::Playing) => None,
-            Some(Whistle::Goal(_)) if heard != Some(State::Playing) => None,
-            Some(Whistle::PlayStarted(at) | Whistle::Goal(at)) if t_s - at > WHISTLE_TRUST_S => {
-                None
-            }
-            w => w,
-        };
+    /// Its daemon says `heard`; `whistled`: it hears a whistle now.
+    fn tick(&mut self, heard: Option<State>, whistled: bool) {
         self.standby &= heard == Some(State::Standby);
-        if !whistled {
-            return;
-        }
-        self.whistle = match (self.whistle, heard) {
-            (Some(Whistle::Goal(at)), _) => Some(Whistle::Goal(at)),
-            (Some(Whistle::PlayStarted(_)), _) | (None, Some(State::Playing)) => {
-                Some(Whistle::Goal(t_s))
-            }
-            (None, Some(State::Set)) => Some(Whistle::PlayStarted(t_s)),
-            (None, _) => None,
-        };
-        self.standby |= heard == Some(State::Standby);
+        self.standby |= whistled && heard == Some(State::Standby);
+    }
+
+    /// Its order ([`program_order`], the in-process robots' rule) on the GC's word
+    /// `heard`, `penalised`, and `told`: the whistle its layer acts on, as its daemon
+    /// published it at the tick that took the program's senses (and whistle).
+    fn order(&self, heard: Option<State>, penalised: bool, told: Option<Whistle>) -> Order {
+        program_order(heard, penalised, told, self.standby)
     }
 }
 
@@ -566,29 +560,52 @@ impl GcSide {
 
     /// Robot `i`'s program at `t_s`, its daemon's listener having written `state` and
     /// `penalty` (`local.var.gc.*`): whether it hears a whistle now (it writes
-    /// `local.var.robot.whistle` then), and its order ([`program_order`], the in-process
-    /// robots' rule). A penalised program (its daemon says so, or it stands on the
-    /// sideline) acts on no whistle.
-    pub(crate) fn program(
+    /// `local.var.robot.whistle` then, before the senses its layer ticks on). A penalised
+    /// program (its daemon says so, or it stands on the sideline) acts on no whistle.
+    pub(crate) fn hears_whistle(
         &mut self,
         i: usize,
         t_s: f64,
         state: Option<&str>,
         penalty: i64,
-    ) -> (bool, Order) {
+    ) -> bool {
         let heard = state.and_then(state_named);
-        let penalised = penalty != 0 || self.referee.penalised(comms_netsim::robot_id(i));
+        let penalised = self.program_penalised(i, penalty);
         let Some(due) = self.whistles.get_mut(i) else {
-            return (false, program_order(heard, penalised, None, false));
+            return false;
         };
         let whistled = due.iter().any(|&at| at <= t_s) && !penalised;
         due.retain(|&at| at > t_s);
-        let ears = &mut self.ears[i];
-        ears.tick(heard, t_s, whistled);
-        (
-            whistled,
-            program_order(heard, penalised, ears.whistle, ears.standby),
-        )
+        if let Some(ears) = self.ears.get_mut(i) {
+            ears.tick(heard, whistled);
+        }
+        whistled
+    }
+
+    /// Robot `i`'s order once its layer ticked on the cycle's senses: on `state` and
+    /// `penalty` as [`GcSide::hears_whistle`] took them, and `told`, the whistle its layer
+    /// acts on ([`player::remote::TeamView::whistle`], read with that tick's outputs).
+    /// When the tick comes too late for the cycle the program goes by the last one it
+    /// read, as a real program would: a tick (40 ms) behind its layer.
+    pub(crate) fn order(
+        &self,
+        i: usize,
+        state: Option<&str>,
+        penalty: i64,
+        told: Option<Whistle>,
+    ) -> Order {
+        let heard = state.and_then(state_named);
+        let penalised = self.program_penalised(i, penalty);
+        match self.ears.get(i) {
+            Some(ears) => ears.order(heard, penalised, told),
+            None => program_order(heard, penalised, None, false),
+        }
+    }
+
+    /// Whether robot `i`'s program takes itself for penalised: its daemon says so
+    /// (`penalty`), or the referee carried its body to the sideline.
+    fn program_penalised(&self, i: usize, penalty: i64) -> bool {
+        penalty != 0 || self.referee.penalised(comms_netsim::robot_id(i))
     }
 
     /// After the world's step: outside Playing the ball and the opponents wait on their
@@ -684,6 +701,10 @@ fn sideline_spot(cfg: &SimConfig, i: usize) -> Pose {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use comms::{Replica, ReplicaConfig, Value};
+    use driver::team::{TeamCore, TeamLayerConfig};
+    use player::remote::TeamView;
+    use team::contract;
 
     #[test]
     fn a_robot_program_follows_the_state_its_daemon_wrote() {
@@ -702,54 +723,234 @@ mod tests {
         );
     }
 
+    /// Robot 2's program and its daemon's team layer: the driver's `TeamCore` on a
+    /// replica, ticked at each of the program's cycles as `huddle daemon` ticks it. The
+    /// program reads the GC's word its daemon's listener wrote, tells its layer the
+    /// whistles it hears, and after the tick reads back the layer's outputs
+    /// (`local.var.team.play_whistle`, `local.var.team.goal_whistle`) into its view, as
+    /// `huddle sim --daemons --game`'s programs do over the relay.
+    struct ProgramAndDaemon {
+        core: TeamCore,
+        replica: Replica,
+        ears: ProgramEars,
+        view: TeamView,
+        packets: i64,
+    }
+
+    /// A program cycle every 40 ms (the layer's control period).
+    const CYCLE_US: u64 = 40_000;
+
+    impl ProgramAndDaemon {
+        fn new() -> Self {
+            let now = comms::Instant::from_micros(0);
+            let mut core = TeamCore::new(2, TeamLayerConfig::new(3, None));
+            let config = ReplicaConfig::new(2, 0).with_known_paths(team::known_paths());
+            let replica = Replica::new(config, 7, now).expect("a valid replica");
+            let pose = Value::Floats(vec![0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.01, 0.0, 0.001]);
+            core.input(contract::POSE_KEY, &pose, now)
+                .expect("a valid pose");
+            ProgramAndDaemon {
+                core,
+                replica,
+                ears: ProgramEars::default(),
+                view: TeamView::default(),
+                packets: 0,
+            }
+        }
+
+        /// The program's cycles from `from_s` to before `to_s`: its daemon's listener
+        /// shows `state` and accepts a GC packet every 0.5 s if `gc_heard` (not during
+        /// an outage); the program hears the referee's whistle at each of `whistles_s`.
+        /// Its order at each cycle, with the cycle's time.
+        fn cycles(
+            &mut self,
+            (from_s, to_s): (f64, f64),
+            state: &str,
+            gc_heard: bool,
+            whistles_s: &[f64],
+        ) -> Vec<(f64, Order)> {
+            let us = |s: f64| (s * 1e6).round() as u64;
+            let whistles_us: Vec<u64> = whistles_s.iter().map(|&s| us(s)).collect();
+            let mut orders = Vec::new();
+            let mut t_us = us(from_s);
+            while t_us < us(to_s) {
+                let now = comms::Instant::from_micros(t_us);
+                let t_s = team::seconds(now);
+                self.replica
+                    .set(now, driver::team::GC_STATE_KEY, Value::String(state.into()))
+                    .expect("a local key");
+                if gc_heard && t_us.is_multiple_of(500_000) {
+                    self.packets += 1;
+                    self.replica
+                        .set(now, driver::team::GC_ACCEPTED_KEY, Value::Int(self.packets))
+                        .expect("a local key");
+                }
+                let heard = state_named(state);
+                let whistled = whistles_us.contains(&t_us);
+                self.ears.tick(heard, whistled);
+                if whistled {
+                    self.core
+                        .input(contract::WHISTLE_KEY, &Value::Bool(true), now)
+                        .expect("a valid whistle");
+                }
+                self.core
+                    .input(contract::ODOMETRY_KEY, &Value::Floats(vec![0.0; 3]), now)
+                    .expect("valid odometry");
+                self.core.tick(&mut self.replica, now);
+                for key in [contract::PLAY_WHISTLE_KEY, contract::GOAL_WHISTLE_KEY] {
+                    if let Some(e) = self.replica.get(key).expect("a valid key") {
+                        self.view.take(key, &e.value, 0.0);
+                    }
+                }
+                orders.push((t_s, self.ears.order(heard, false, self.view.whistle())));
+                t_us += CYCLE_US;
+            }
+            orders
+        }
+    }
+
+    /// The first cycle of `orders` in `[from_s, to_s)` whose order is not `want`.
+    fn first_other(
+        orders: &[(f64, Order)],
+        (from_s, to_s): (f64, f64),
+        want: Order,
+    ) -> Option<(f64, Order)> {
+        orders
+            .iter()
+            .copied()
+            .find(|&(t, o)| (from_s..to_s).contains(&t) && o != want)
+    }
+
     #[test]
-    fn a_program_plays_from_the_whistle_it_heard_in_set_until_the_gc_catches_up() {
-        // Scenario: the GC shows Set; the program hears play's whistle at 10 s; the GC
-        // shows Set until 25 s (GameController3's 15 s), then Playing; a goal's whistle
-        // at 100 s while it shows Playing, its Ready at 115 s.
-        let mut ears = ProgramEars::default();
-        let set = Some(State::Set);
-        let order = |e: &ProgramEars, heard| program_order(heard, false, e.whistle, e.standby);
-        ears.tick(set, 9.9, false);
-        assert_eq!(order(&ears, set), Order::Stand, "Set, no whistle yet");
-        ears.tick(set, 10.0, true);
+    fn a_program_plays_from_the_whistle_its_layer_heard_in_set_until_the_gc_catches_up() {
+        // Scenario (the GC heard all along): the GC shows Set; the program hears play's
+        // whistle at 10 s; the GC shows Set until 25 s (GameController3's 15 s), then
+        // Playing; a goal's whistle at 100 s while it shows Playing, its Ready at 115 s;
+        // a whistle in Set at 200 s the GC never follows; Standby's whistle at 300 s.
+        let mut robot = ProgramAndDaemon::new();
+        let mut orders = robot.cycles((0.0, 25.0), "set", true, &[10.0]);
+        orders.extend(robot.cycles((25.0, 115.0), "playing", true, &[100.0]));
+        orders.extend(robot.cycles((115.0, 130.0), "ready", true, &[]));
+        orders.extend(robot.cycles((130.0, 300.0), "set", true, &[200.0]));
+        orders.extend(robot.cycles((300.0, 340.0), "standby", true, &[300.0]));
+        orders.extend(robot.cycles((340.0, 370.0), "ready", true, &[]));
+        orders.extend(robot.cycles((370.0, 371.0), "set", true, &[]));
+        let cases = [
+            ((0.0, 10.0), Order::Stand, "Set, no whistle yet"),
+            (
+                (10.0, 100.0),
+                Order::Play,
+                "play's whistle heard in Set, the GC's late Set, then its Playing",
+            ),
+            (
+                (100.0, 130.0),
+                Order::KickOffSpot,
+                "a goal's whistle in Playing, then the GC's Ready",
+            ),
+            ((130.0, 200.0), Order::Stand, "Set"),
+            (
+                (200.0, 220.0),
+                Order::Play,
+                "a whistle in Set: play started",
+            ),
+            // The layer drops it after WHISTLE_TRUST_S at its next sense; published a tick later.
+            (
+                (220.2, 300.0),
+                Order::Stand,
+                "the GC's Set again after the trust",
+            ),
+            (
+                (300.0, 370.0),
+                Order::KickOffSpot,
+                "Standby's whistle, then the GC's Ready",
+            ),
+            ((370.0, 371.0), Order::Stand, "Standby's whistle is done"),
+        ];
+        for (window, want, story) in cases {
+            assert_eq!(
+                first_other(&orders, window, want),
+                None,
+                "{story}: {want:?} from {window:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn with_the_gc_silent_in_ready_the_program_plays_from_the_whistle_its_layer_took() {
+        // Scenario: the GC's last word is Ready; the program hears another field's whistle
+        // at 201 s (the GC heard: nothing); the WLAN dies at 203 s; at 210 s the program
+        // hears the kick-off's whistle (under the rules the only one after Ready); the
+        // radio is back at 220 s, the GC showing its delayed Set (GameController3 shows it
+        // for 15 s after the whistle), then Playing at 225 s. Its layer takes the whistle
+        // for play started (`TeamLayer::heard_whistle`) and its body plays with it: the
+        // old `ProgramEars` read a whistle in Ready as nothing and kept it on its kick-off
+        // spot, then standing through the GC's late Set.
+        let mut robot = ProgramAndDaemon::new();
+        let mut orders = robot.cycles((180.0, 203.0), "ready", true, &[201.0]);
+        orders.extend(robot.cycles((203.0, 220.0), "ready", false, &[210.0]));
+        orders.extend(robot.cycles((220.0, 225.0), "set", true, &[]));
+        orders.extend(robot.cycles((225.0, 240.0), "playing", true, &[]));
         assert_eq!(
-            order(&ears, set),
-            Order::Play,
-            "play's whistle heard in Set"
+            first_other(&orders, (180.0, 210.0), Order::KickOffSpot),
+            None,
+            "Ready: to the kick-off spot, another field's whistle (the GC heard) changes nothing"
         );
-        ears.tick(set, 24.9, false);
-        assert_eq!(order(&ears, set), Order::Play, "the GC's late Set");
-        ears.tick(Some(State::Playing), 25.0, false);
-        assert_eq!(ears.whistle, None, "the GC caught up");
-        ears.tick(Some(State::Playing), 100.0, true);
         assert_eq!(
-            order(&ears, Some(State::Playing)),
-            Order::KickOffSpot,
-            "a goal's whistle in Playing: to the kick-off spot"
+            first_other(&orders, (210.0, 240.0), Order::Play),
+            None,
+            "the kick-off's whistle with the GC silent in Ready: play, through the GC's late Set"
         );
-        ears.tick(Some(State::Ready), 115.0, false);
+    }
+
+    #[test]
+    fn a_whistle_20_s_after_a_goal_s_with_the_gc_silent_is_the_kick_off_for_the_program_too() {
+        // Scenario: the GC shows Playing (GameController3 shows it for 15 s after a goal);
+        // the program hears a goal's whistle at 100 s; the WLAN dies at 105 s, the GC's
+        // last word Playing; the kick-off's whistle at 120 s, 20 s after the goal's
+        // (`GOAL_TO_KICK_OFF_MIN_S..MAX_S`); the radio is back at 130 s, the GC showing its
+        // delayed Set until 135 s, then Playing. Its layer takes the second whistle for
+        // the kick-off and its body plays from it: the old `ProgramEars` kept the goal's
+        // whistle pending (its body on the kick-off spot) and then stood through the GC's
+        // late Set, for 15 s of play.
+        let mut robot = ProgramAndDaemon::new();
+        let mut orders = robot.cycles((90.0, 105.0), "playing", true, &[100.0]);
+        orders.extend(robot.cycles((105.0, 130.0), "playing", false, &[120.0]));
+        orders.extend(robot.cycles((130.0, 135.0), "set", true, &[]));
+        orders.extend(robot.cycles((135.0, 150.0), "playing", true, &[]));
         assert_eq!(
-            (ears.whistle, order(&ears, Some(State::Ready))),
-            (None, Order::KickOffSpot)
+            first_other(&orders, (90.0, 100.0), Order::Play),
+            None,
+            "in play"
         );
-        // A whistle the GC never follows stands WHISTLE_TRUST_S at most.
-        ears.tick(set, 200.0, true);
-        ears.tick(set, 200.0 + WHISTLE_TRUST_S + 0.1, false);
         assert_eq!(
-            order(&ears, set),
-            Order::Stand,
-            "the GC's Set again after the trust"
+            first_other(&orders, (100.0, 120.0), Order::KickOffSpot),
+            None,
+            "the goal's whistle: to the kick-off spot while the GC is silent on Playing"
         );
-        // In Standby the whistle sends it to Ready's spot until the GC shows Ready.
-        ears.tick(Some(State::Standby), 300.0, true);
-        assert_eq!(order(&ears, Some(State::Standby)), Order::KickOffSpot);
-        ears.tick(Some(State::Ready), 340.0, false);
-        ears.tick(Some(State::Set), 370.0, false);
         assert_eq!(
-            order(&ears, Some(State::Set)),
-            Order::Stand,
-            "Standby's whistle is done"
+            first_other(&orders, (120.0, 150.0), Order::Play),
+            None,
+            "the kick-off's whistle 20 s later: play, through the GC's late Set"
+        );
+    }
+
+    #[test]
+    fn a_kick_off_whistled_before_the_wlan_died_keeps_the_program_playing() {
+        // Scenario (round 22's rule): the GC shows Set; the program hears the kick-off's
+        // whistle at 10 s; the WLAN dies at 12 s, the GC's last word Set (GameController3
+        // shows it until 25 s); the radio is back at 45 s showing Playing. The layer's
+        // play whistle stands while the GC is silent, so the body plays throughout: the
+        // old `ProgramEars` dropped it after WHISTLE_TRUST_S (30 s) and stood on the
+        // silent GC's Set until 45 s.
+        let mut robot = ProgramAndDaemon::new();
+        let mut orders = robot.cycles((0.0, 12.0), "set", true, &[10.0]);
+        orders.extend(robot.cycles((12.0, 45.0), "set", false, &[]));
+        orders.extend(robot.cycles((45.0, 50.0), "playing", true, &[]));
+        assert_eq!(first_other(&orders, (0.0, 10.0), Order::Stand), None, "Set");
+        assert_eq!(
+            first_other(&orders, (10.0, 50.0), Order::Play),
+            None,
+            "the kick-off's whistle, the GC silent on its last Set: play until the GC is back"
         );
     }
 }

@@ -219,6 +219,19 @@ impl TeamLayer {
         }
     }
 
+    /// The time (s) of the goal's whistle the layer acts on while the GameController
+    /// still says Playing ([`Whistle::Goal`]), `None` otherwise. The daemon's tick
+    /// publishes it at [`crate::contract::GOAL_WHISTLE_KEY`], beside the play whistle, so
+    /// that a robot program's body follows the layer's reading of the whistle (to its
+    /// kick-off spot after a goal, playing after the kick-off's) instead of one of its
+    /// own that knows fewer rules.
+    pub fn goal_whistle_at(&self) -> Option<f64> {
+        match self.whistle {
+            Some(Whistle::Goal(at)) => Some(at),
+            _ => None,
+        }
+    }
+
     /// The whistle the layer acts on, if the GameController has not caught up.
     pub fn whistle(&self) -> Option<Whistle> {
         self.whistle
