@@ -412,11 +412,15 @@ impl Decoder {
             return false;
         };
         let own = Some(t.sender.index() as usize);
-        let by_rules =
-            Self::apply_rules(&slot.sums, slot.count, P_TONE_CONFIRM, P_TONE_RIVAL, own, |_, _| {
-                true
-            })
-            .0;
+        let by_rules = Self::apply_rules(
+            &slot.sums,
+            slot.count,
+            P_TONE_CONFIRM,
+            P_TONE_RIVAL,
+            own,
+            |_, _| true,
+        )
+        .0;
         let frame = by_rules.or_else(|| self.second_slot_rules(t, a, b).map(|(f, _)| f));
         let long = frame.is_some_and(|f| f.sender == t.sender && plan.frame_is_long_only(f.data));
         if long {
