@@ -85,8 +85,8 @@ const DEEP_SHARE: f64 = 0.1;
 /// Least median window (noise mean 1, 13 dB) of a tone one of whose windows may collapse
 /// between two that hold (see [`isolated_collapse`]).
 const COLLAPSE_LOUD: f64 = 20.0;
-/// Least share of the tone's median window the windows either side of a collapse keep
-/// (−5 dB; see [`isolated_collapse`]).
+/// Least share of the tone's median window every window but a collapse keeps (−5 dB; see
+/// [`isolated_collapse`]).
 const COLLAPSE_NEIGHBOUR_SHARE: f64 = 0.3;
 /// Least mean excess per window (noise mean 1, 6 dB) of a tone whose median window is
 /// held to its mean (see [`Decoder::votes_sound_steadily`]): a steady tone of excess 4

@@ -601,8 +601,7 @@ impl Decoder {
     /// tail or the robot's next message; the message ends when the sender fell below the
     /// frame's level over the second quarter of a slot after `end` (the gap a robot
     /// leaves between messages, at least half a tone) and the first frame's data plainly
-    /// stopped over the second half (as [`Decoder::sender_stopped_late`] judges the
-    /// sender).
+    /// stopped over the second half ([`Decoder::data_stopped_after_gap`]).
     ///
     /// Why: on the short lab T60 1.2 s 0 dB row, tuning draws S = 111–122, 11 of the 86
     /// lost short messages were lost on a second slot: the end test took the tail (a
@@ -615,17 +614,23 @@ impl Decoder {
         if !self.config.team.frame_is_short_only(t.data[0]) {
             return false;
         }
-        let slot_len = self.geometry.slot_samples;
-        let gap = (end + 0.25 * slot_len, end + 0.5 * slot_len);
-        let silent_gap = !self.sender_keeps_level(t, gap.0, gap.1);
-        let data_stopped =
-            silent_gap && self.basic_stopped_late(t, SENDER_COUNT + usize::from(t.data[0]), end);
+        let data_stopped = self.data_stopped_after_gap(t, t.data[0], end);
         self.note(end, || {
-            format!(
-                "late short check: sender fell silent {silent_gap}, data stopped {data_stopped}"
-            )
+            format!("late short check: data stopped after the gap {data_stopped}")
         });
         data_stopped
+    }
+
+    /// Whether the frame of `t` whose data is `data`, ending at `end`, ended its message:
+    /// the sender fell below the frame's level over the second quarter of a slot after
+    /// `end` (the gap a robot leaves between messages, at least half a tone, so its next
+    /// message cannot sound there), and the data plainly stopped over the second half (as
+    /// [`Decoder::sender_stopped_late`] judges the sender). Tones that go straight on
+    /// through the gap are a frame that sounded too long, whatever its data.
+    pub(super) fn data_stopped_after_gap(&self, t: &Tracking, data: u8, end: f64) -> bool {
+        let slot_len = self.geometry.slot_samples;
+        !self.sender_keeps_level(t, end + 0.25 * slot_len, end + 0.5 * slot_len)
+            && self.basic_stopped_late(t, SENDER_COUNT + usize::from(data), end)
     }
 
     /// [`Decoder::sender_stopped_late`] for any basic's tones of `t` (as present and

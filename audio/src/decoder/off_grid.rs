@@ -324,16 +324,15 @@ impl Decoder {
         // talker or past the comb) with two other loud tones left; in 11 of them a
         // sender tone and a data tone agreed within 0.3 Hz (114015 at 911.92 s: k29 and
         // k49 at −0.268% and −0.264%, k1 past the comb).
-        let mixed_pair = !second_slot
-            && rest.len() == 2
-            && (rest[0].0 % BASIC_COUNT < SENDER_COUNT) != (rest[1].0 % BASIC_COUNT < SENDER_COUNT)
-            && fit(&rest).1 <= PEAK_TOLERANCE_HZ
-            && vote_holds_without(tones, excused);
-        let pair_agrees = second_slot && rest.len() == 2 && fit(&rest).1 <= PEAK_TOLERANCE_HZ;
-        let beyond_let_go = off.is_infinite() && vote_holds_without(tones, excused);
+        let vote_holds = vote_holds_without(tones, excused);
+        let pair_fits = rest.len() == 2 && fit(&rest).1 <= PEAK_TOLERANCE_HZ;
+        let is_sender = |k: usize| k % BASIC_COUNT < SENDER_COUNT;
+        let mixed_pair =
+            !second_slot && pair_fits && is_sender(rest[0].0) != is_sender(rest[1].0) && vote_holds;
+        let pair_agrees = second_slot && pair_fits;
+        let beyond_let_go = off.is_infinite() && vote_holds;
         let let_go = (rest_worst <= PEAK_TOLERANCE_HZ
-            && (vote_holds_without(tones, excused)
-                || (second_slot && off <= PEAK_TOLERANCE_ONE_HZ && rest.len() >= 3)))
+            && (vote_holds || (second_slot && off <= PEAK_TOLERANCE_ONE_HZ && rest.len() >= 3)))
             || (pair_agrees && (off <= PEAK_TOLERANCE_ONE_HZ || beyond_let_go))
             || mixed_pair;
         self.note(self.latest_window_end(), || {

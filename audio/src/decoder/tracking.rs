@@ -368,10 +368,7 @@ impl Decoder {
         // … once the sender fell silent for the gap a robot leaves between messages (below
         // the second frame's level over the second quarter of a slot after its end):
         // tones that go straight on are a frame that sounded too long, whatever its data.
-        let gap = (end + 0.25 * slot_len, end + 0.5 * slot_len);
-        let data_stopped = !sender_stopped
-            && !self.sender_keeps_level(t, gap.0, gap.1)
-            && self.basic_stopped_late(t, SENDER_COUNT + usize::from(t.data[1]), end);
+        let data_stopped = !sender_stopped && self.data_stopped_after_gap(t, t.data[1], end);
         let stopped = sender_stopped || data_stopped;
         self.note(end, || {
             format!("late check after slot 2: stopped {stopped} (data stopped {data_stopped})")
